@@ -1,0 +1,45 @@
+"""protoduino: drive an Arduino's servos and pins over a reliable, failsafe serial link.
+
+The layers, each a module, data flowing one way::
+
+    bytes -> framing (COBS) -> packets (TYPE/LEN/SEQ/CRC) -> link -> rpc -> board
+
+See README.md for the API and docs/protocol.md for the wire protocol.
+"""
+
+from __future__ import annotations
+
+from ._generated.schema_id import SCHEMA_ID
+from .constants import PROTOCOL_VERSION
+from .errors import (
+    AckTimeoutError,
+    BoardClosedError,
+    CommandRejectedError,
+    HandshakeError,
+    LinkError,
+    PayloadTooLargeError,
+    ProtocolError,
+    ProtoduinoError,
+    SchemaMismatchError,
+    TransportError,
+    VersionMismatchError,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "PROTOCOL_VERSION",
+    "SCHEMA_ID",
+    "AckTimeoutError",
+    "BoardClosedError",
+    "CommandRejectedError",
+    "HandshakeError",
+    "LinkError",
+    "PayloadTooLargeError",
+    "ProtocolError",
+    "ProtoduinoError",
+    "SchemaMismatchError",
+    "TransportError",
+    "VersionMismatchError",
+    "__version__",
+]

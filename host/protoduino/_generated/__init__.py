@@ -1,0 +1,1 @@
+"""Code generated from proto/protoduino.proto by ``protoduino gen``. Do not edit."""

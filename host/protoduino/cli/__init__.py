@@ -1,0 +1,1 @@
+"""The ``protoduino`` command: one module per subcommand, each with ``register`` and ``run``."""

@@ -1,0 +1,90 @@
+"""Every error protoduino raises, as one tree::
+
+    ProtoduinoError
+     +-- ProtocolError            bytes that break the wire protocol (bad control payload, ...)
+     |    +-- PayloadTooLargeError  a message over MAX_PAYLOAD, refused at the sender
+     +-- TransportError           the port could not be opened, or was lost
+     +-- LinkError                the link could not be (re)established
+     |    +-- HandshakeError        the device did not answer RESET in time
+     |    +-- VersionMismatchError  device and host speak different protocol versions
+     |    +-- SchemaMismatchError   firmware generated from another .proto schema
+     +-- CommandRejectedError     the device (or the host, checking first) refused a command
+     +-- AckTimeoutError          no Ack after every retry; also a builtin TimeoutError
+     +-- BoardClosedError         the board was closed while, or before, the call ran
+
+Third-party exceptions (pyserial, protobuf) are wrapped at the boundary with
+``raise ... from error`` so callers need to catch only ``ProtoduinoError``.
+"""
+
+from __future__ import annotations
+
+
+class ProtoduinoError(Exception):
+    """Base class of every error raised by protoduino."""
+
+
+class ProtocolError(ProtoduinoError):
+    """Bytes that violate the wire protocol."""
+
+
+class PayloadTooLargeError(ProtocolError):
+    """A payload longer than MAX_PAYLOAD; version 1 has no fragmentation."""
+
+
+class TransportError(ProtoduinoError):
+    """The serial port could not be opened, or failed while in use."""
+
+
+class LinkError(ProtoduinoError):
+    """The link to the device could not be established."""
+
+
+class HandshakeError(LinkError):
+    """The device did not answer RESET within the handshake timeout."""
+
+
+class VersionMismatchError(LinkError):
+    """Device and host speak different protocol versions."""
+
+    def __init__(self, host_version: int, device_version: int) -> None:
+        super().__init__(
+            f"protocol version mismatch: host speaks {host_version}, device speaks "
+            f"{device_version}; update the host library or flash matching firmware "
+            "(protoduino flash PORT)"
+        )
+        self.host_version = host_version
+        self.device_version = device_version
+
+
+class SchemaMismatchError(LinkError):
+    """Firmware and host were generated from different .proto schemas."""
+
+    def __init__(self, host_schema_id: int, device_schema_id: int) -> None:
+        super().__init__(
+            f"schema mismatch: host SCHEMA_ID 0x{host_schema_id:08X}, device SCHEMA_ID "
+            f"0x{device_schema_id:08X}; rebuild and flash the firmware from this checkout "
+            "(protoduino flash PORT)"
+        )
+        self.host_schema_id = host_schema_id
+        self.device_schema_id = device_schema_id
+
+
+class CommandRejectedError(ProtoduinoError):
+    """The command was refused; ``status`` says why (a ``Status`` enum value).
+
+    ``sent`` is False when the host refused it before sending, with the same
+    status the device would have given.
+    """
+
+    def __init__(self, status: int, message: str, *, sent: bool = True) -> None:
+        super().__init__(message)
+        self.status = status
+        self.sent = sent
+
+
+class AckTimeoutError(ProtoduinoError, TimeoutError):
+    """No Ack arrived after ACK_TIMEOUT x (MAX_RETRIES + 1)."""
+
+
+class BoardClosedError(ProtoduinoError):
+    """The board is closed."""

@@ -1,0 +1,145 @@
+"""COBS framing (PROTOCOL.md section 2) and the incremental stream decoder.
+
+Recovery policy, the same on both ends of the link. The receiver collects
+non-zero bytes and acts only at a 0x00 delimiter, so it needs no timer:
+
+* Garbage before a frame (line noise, a bootloader's chatter, the tail of a
+  frame whose start was lost) ends at the next 0x00 like any frame; it fails
+  COBS decoding or the packet checks and is dropped and counted. The frame
+  after it starts clean.
+* A frame that decodes but whose CRC, LEN or TYPE is wrong is dropped and
+  counted by reason; the next frame is unaffected.
+* Garbage after a frame is the start of the next "frame" and meets the same
+  fate at its delimiter; it never damages a good frame behind it, because
+  that frame's first byte follows a 0x00.
+* A run of more than MAX_ENCODED_FRAME bytes without a 0x00 is an overflow:
+  the buffer is discarded at once (bounded memory), one overflow is counted,
+  and everything up to the next 0x00 is skipped.
+
+Lone 0x00 bytes (empty frames) are ignored: a sender emits one after opening
+the port to flush the receiver's half-filled buffer.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from collections.abc import Iterable
+
+from cobs import cobs as _cobs
+
+from .constants import MAX_ENCODED_FRAME, PacketType
+from .packets import BadFrame, Packet, build_packet, parse_packet
+
+log = logging.getLogger(__name__)
+
+
+def _cobs_is_native() -> bool:
+    try:
+        from cobs.cobs import _cobs_ext  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+COBS_NATIVE = _cobs_is_native()
+if not COBS_NATIVE:  # pragma: no cover - depends on the installed wheel
+    log.warning("cobs C extension unavailable; using the pure-Python fallback (about 25x slower)")
+
+DELIMITER = b"\x00"
+
+
+def cobs_encode(data: bytes) -> bytes:
+    """Standard COBS; the result holds no 0x00."""
+    return bytes(_cobs.encode(data))
+
+
+def cobs_decode(data: bytes) -> bytes | None:
+    """COBS-decode one frame (without its delimiter); None if it is not valid COBS."""
+    try:
+        return bytes(_cobs.decode(data))
+    except _cobs.DecodeError:
+        return None
+
+
+def encode_frame(raw_packet: bytes) -> bytes:
+    """A raw packet as it goes on the wire: COBS plus the 0x00 delimiter."""
+    return cobs_encode(raw_packet) + DELIMITER
+
+
+def frame_packet(ptype: PacketType, seq: int, payload: bytes = b"") -> bytes:
+    """Build, CRC, COBS-encode and delimit one packet."""
+    return encode_frame(build_packet(ptype, seq, payload))
+
+
+def decode_frame(encoded: bytes) -> Packet | BadFrame:
+    """One complete frame (no delimiter) to a packet or the reason it was dropped."""
+    raw = cobs_decode(encoded)
+    if raw is None:
+        return BadFrame("cobs", bytes(encoded))
+    result = parse_packet(raw)
+    if isinstance(result, Packet):
+        return result
+    return BadFrame(result, bytes(encoded))
+
+
+class StreamDecoder:
+    """Incremental decoder: feed it chunks of bytes, get packets and bad frames.
+
+    The output does not depend on how the stream was chunked. Memory is bounded
+    by MAX_ENCODED_FRAME. ``counts`` tallies "packets" and each drop reason.
+    """
+
+    __slots__ = ("_buf", "_skipping", "counts")
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self._skipping = False
+        self.counts: Counter[str] = Counter()
+
+    def reset(self) -> None:
+        """Forget any partial frame (the link was reset)."""
+        self._buf.clear()
+        self._skipping = False
+
+    def feed(self, data: bytes | bytearray | memoryview) -> list[Packet | BadFrame]:
+        out: list[Packet | BadFrame] = []
+        data = bytes(data)
+        start = 0
+        n = len(data)
+        while start < n:
+            end = data.find(0, start)
+            if end < 0:
+                self._append(data[start:], out)
+                break
+            self._append(data[start:end], out)
+            self._end_frame(out)
+            start = end + 1
+        return out
+
+    def feed_all(self, chunks: Iterable[bytes]) -> list[Packet | BadFrame]:
+        out: list[Packet | BadFrame] = []
+        for chunk in chunks:
+            out.extend(self.feed(chunk))
+        return out
+
+    def _append(self, part: bytes, out: list[Packet | BadFrame]) -> None:
+        if self._skipping or not part:
+            return
+        self._buf += part
+        if len(self._buf) > MAX_ENCODED_FRAME:
+            out.append(BadFrame("overflow", bytes(self._buf[: MAX_ENCODED_FRAME + 1])))
+            self.counts["overflow"] += 1
+            self._buf.clear()
+            self._skipping = True
+
+    def _end_frame(self, out: list[Packet | BadFrame]) -> None:
+        if self._skipping:
+            self._skipping = False
+            return
+        if not self._buf:
+            return
+        item = decode_frame(bytes(self._buf))
+        self._buf.clear()
+        self.counts["packets" if isinstance(item, Packet) else item.reason] += 1
+        out.append(item)

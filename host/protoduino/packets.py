@@ -1,0 +1,151 @@
+"""Packets: ``[TYPE][LEN][SEQ][PAYLOAD][CRC16 BE]`` (PROTOCOL.md sections 3 to 5).
+
+Pure functions, no I/O. Building a packet has no side effects, so a frame
+that failed to write can be rebuilt and sent again with the same SEQ.
+"""
+
+from __future__ import annotations
+
+import binascii
+import struct
+from dataclasses import dataclass
+from typing import Literal
+
+from .constants import (
+    CRC_SIZE,
+    HEADER_SIZE,
+    MAX_PAYLOAD,
+    MIN_PACKET,
+    ControlCode,
+    EventCode,
+    PacketType,
+)
+from .errors import PayloadTooLargeError, ProtocolError
+
+#: Why a frame was dropped. "cobs" and "overflow" come from the framing layer.
+ErrorReason = Literal["cobs", "crc", "length", "type", "overflow"]
+
+
+def crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, xorout 0)."""
+    return binascii.crc_hqx(data, 0xFFFF)
+
+
+@dataclass(frozen=True, slots=True)
+class Packet:
+    type: PacketType
+    seq: int
+    payload: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class BadFrame:
+    """A frame that was dropped, with its bytes for diagnostics.
+
+    ``raw`` is the COBS-encoded frame as received (without the delimiter);
+    for "overflow" it is the first MAX_ENCODED_FRAME + 1 bytes.
+    """
+
+    reason: ErrorReason
+    raw: bytes
+
+
+def build_packet(ptype: PacketType, seq: int, payload: bytes = b"") -> bytes:
+    """The raw packet (before COBS), CRC included."""
+    if len(payload) > MAX_PAYLOAD:
+        raise PayloadTooLargeError(
+            f"payload of {len(payload)} bytes exceeds MAX_PAYLOAD ({MAX_PAYLOAD}); "
+            "protocol version 1 has no fragmentation"
+        )
+    if not 0 <= seq <= 0xFF:
+        raise ValueError(f"seq must be 0..255, not {seq}")
+    body = bytes((ptype, len(payload), seq)) + payload
+    return body + crc16(body).to_bytes(2, "big")
+
+
+def parse_packet(raw: bytes) -> Packet | ErrorReason:
+    """A valid packet, or why it is not one: "length", "crc" or "type".
+
+    Checks run in that order: a packet whose LEN disagrees with its size is a
+    length error whatever its CRC says.
+    """
+    if len(raw) < MIN_PACKET or len(raw) != MIN_PACKET + raw[1]:
+        return "length"
+    if crc16(raw) != 0:  # the CRC over data + big-endian CRC is zero
+        return "crc"
+    try:
+        ptype = PacketType(raw[0])
+    except ValueError:
+        return "type"
+    return Packet(ptype, raw[2], raw[HEADER_SIZE:-CRC_SIZE])
+
+
+# --- CONTROL payloads (section 5) -------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Control:
+    """A decoded CONTROL payload; fields not used by ``code`` are None."""
+
+    code: ControlCode
+    version: int | None = None
+    schema_id: int | None = None
+    event: int | None = None  # an EventCode value, or an unknown code to log
+    detail: bytes = b""
+
+    def to_json(self) -> dict[str, object]:
+        out: dict[str, object] = {"code": self.code.name}
+        if self.version is not None:
+            out["version"] = self.version
+        if self.schema_id is not None:
+            out["schema_id"] = f"0x{self.schema_id:08X}"
+        if self.event is not None:
+            try:
+                out["event"] = EventCode(self.event).name
+            except ValueError:
+                out["event"] = self.event
+            if self.detail:
+                out["detail"] = self.detail.hex()
+        return out
+
+
+def reset_payload(version: int) -> bytes:
+    return bytes((ControlCode.RESET, version))
+
+
+def reset_ack_payload(version: int, schema_id: int) -> bytes:
+    return bytes((ControlCode.RESET_ACK, version)) + struct.pack(">I", schema_id)
+
+
+def heartbeat_payload() -> bytes:
+    return bytes((ControlCode.HEARTBEAT,))
+
+
+def event_payload(event: int, detail: bytes = b"") -> bytes:
+    return bytes((ControlCode.EVENT, event)) + detail
+
+
+def parse_control(payload: bytes) -> Control:
+    """Decode a CONTROL payload; raises :class:`ProtocolError` if malformed."""
+    if not payload:
+        raise ProtocolError("empty CONTROL payload")
+    try:
+        code = ControlCode(payload[0])
+    except ValueError:
+        raise ProtocolError(f"unknown CONTROL code 0x{payload[0]:02X}") from None
+    args = payload[1:]
+    if code is ControlCode.RESET:
+        if len(args) != 1:
+            raise ProtocolError(f"RESET takes 1 argument byte, got {len(args)}")
+        return Control(code, version=args[0])
+    if code is ControlCode.RESET_ACK:
+        if len(args) != 5:
+            raise ProtocolError(f"RESET_ACK takes 5 argument bytes, got {len(args)}")
+        return Control(code, version=args[0], schema_id=int.from_bytes(args[1:5], "big"))
+    if code is ControlCode.HEARTBEAT:
+        if args:
+            raise ProtocolError("HEARTBEAT takes no arguments")
+        return Control(code)
+    if not args:
+        raise ProtocolError("EVENT without an event code")
+    return Control(code, event=args[0], detail=bytes(args[1:]))

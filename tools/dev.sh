@@ -1,0 +1,92 @@
+#!/usr/bin/env bash
+# One entry point for a fresh Debian 12 machine (README "Quick start"):
+#
+#   ./tools/dev.sh demo    set up, then run the demo against the simulated board
+#   ./tools/dev.sh test    set up, then run the whole test suite (what CI runs)
+#   ./tools/dev.sh setup   set up only
+#
+# Setup is idempotent: Debian packages (installed only when missing), a
+# virtual environment in .venv with the package and its pinned dev extras,
+# and the nanopb C runtime from Debian's source package (.deps/nanopb).
+set -euo pipefail
+
+root=$(cd "$(dirname "$0")/.." && pwd)
+cd "$root"
+venv="$root/.venv"
+
+APT_PACKAGES=(
+    build-essential python3-venv           # native builds, virtual environment
+    gcc-avr binutils-avr avr-libc          # the Uno firmware
+    arduino-core-avr                       # Optiboot sources for the flashing test
+    simavr libsimavr-dev                   # the emulated Uno
+    avrdude                                # flashing
+    clang libclang-rt-14-dev               # libFuzzer + sanitizers for the C core
+)
+
+log() { printf '\033[1m==> %s\033[0m\n' "$*" >&2; }
+
+as_root() {
+    if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi
+}
+
+setup_apt() {
+    local missing=()
+    for pkg in "${APT_PACKAGES[@]}"; do
+        dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "ok installed" || missing+=("$pkg")
+    done
+    if [ ${#missing[@]} -gt 0 ]; then
+        log "installing Debian packages: ${missing[*]}"
+        as_root apt-get update -q
+        as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"
+    fi
+}
+
+setup_venv() {
+    if [ ! -x "$venv/bin/python" ]; then
+        log "creating $venv"
+        python3 -m venv "$venv"
+    fi
+    # Reinstall only when the dependency declarations changed.
+    local stamp="$venv/.protoduino-deps"
+    local want
+    want=$(cat pyproject.toml constraints.txt | sha256sum | cut -d' ' -f1)
+    if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+        log "installing protoduino and its pinned dev dependencies into $venv"
+        "$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt pip setuptools
+        "$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[dev]"
+        echo "$want" >"$stamp"
+    fi
+}
+
+setup() {
+    setup_apt
+    setup_venv
+    "$root/tools/fetch_nanopb.sh"
+}
+
+cmd=${1:-}
+shift || true
+case "$cmd" in
+    setup)
+        setup
+        ;;
+    demo)
+        setup
+        exec "$venv/bin/protoduino" demo "$@"
+        ;;
+    test)
+        setup
+        export PATH="$venv/bin:$PATH"
+        log "ruff"
+        ruff check .
+        ruff format --check .
+        log "mypy (strict)"
+        mypy
+        log "pytest"
+        exec pytest "$@"
+        ;;
+    *)
+        echo "usage: $0 setup|demo|test [args...]" >&2
+        exit 2
+        ;;
+esac
