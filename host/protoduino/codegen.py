@@ -147,8 +147,10 @@ def _mypy_plugin() -> str:
     """Path of mypy-protobuf's protoc plugin, installed beside this Python."""
     exe = Path(sys.executable).parent / "protoc-gen-mypy"
     if not exe.exists():
-        raise CodegenError(f"protoc-gen-mypy not found next to {sys.executable}; "
-                           "install the dev extras: pip install -e '.[dev]'")
+        raise CodegenError(
+            f"protoc-gen-mypy not found next to {sys.executable}; "
+            "install the dev extras: pip install -e '.[dev]'"
+        )
     return str(exe)
 
 

@@ -7,8 +7,8 @@ import json
 import sys
 from typing import BinaryIO
 
-from ..messages import packet_to_json
 from ..framing import StreamDecoder
+from ..messages import packet_to_json
 from ..packets import Packet
 
 HELP = "decode a capture of wire bytes (raw, or hex text with --hex) into JSON lines"
@@ -42,8 +42,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"protoduino decode: cannot read {args.file}: {error.strerror}", file=sys.stderr)
         return 2
     except (UnicodeDecodeError, ValueError):
-        print(f"protoduino decode: {args.file} is not hex text (drop --hex for raw bytes)",
-              file=sys.stderr)
+        print(
+            f"protoduino decode: {args.file} is not hex text (drop --hex for raw bytes)",
+            file=sys.stderr,
+        )
         return 2
     decoder = StreamDecoder()
     out = sys.stdout

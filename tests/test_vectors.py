@@ -1,0 +1,79 @@
+"""Every vector of the shared wire spec, through the host codec."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import crcmod.predefined
+import pytest
+from protoduino.constants import PacketType
+from protoduino.framing import StreamDecoder, cobs_decode, cobs_encode, frame_packet
+from protoduino.packets import BadFrame, Packet, build_packet, crc16, parse_packet
+from wirevectors import INVALID_FRAME_REASONS, load
+
+V = load()
+
+
+def _id(v: dict[str, Any]) -> str:
+    return str(v.get("name") or v.get("decoded") or v.get("data") or "empty")[:40]
+
+
+@pytest.mark.parametrize("v", V["cobs"], ids=_id)
+def test_cobs_vectors(v: dict[str, str]) -> None:
+    decoded, encoded = bytes.fromhex(v["decoded"]), bytes.fromhex(v["encoded"])
+    assert cobs_encode(decoded) == encoded
+    assert cobs_decode(encoded) == decoded
+
+
+@pytest.mark.parametrize("v", V["crc16_ccitt_false"], ids=_id)
+def test_crc_vectors(v: dict[str, Any]) -> None:
+    assert crc16(bytes.fromhex(v["data"])) == v["crc"]
+
+
+def test_crc_check_value_and_crcmod_cross_check() -> None:
+    assert crc16(b"123456789") == 0x29B1
+    reference = crcmod.predefined.mkCrcFun("crc-ccitt-false")
+    samples = [bytes(i % 256 for i in range(n)) for n in range(0, 300, 7)] + [
+        b"\xff" * 40,
+        b"\x00" * 9,
+    ]
+    for data in samples:
+        assert crc16(data) == reference(data)
+
+
+@pytest.mark.parametrize("v", V["packets"], ids=_id)
+def test_packet_vectors(v: dict[str, Any]) -> None:
+    ptype, seq, payload = PacketType(v["type"]), v["seq"], bytes.fromhex(v["payload"])
+    raw, wire = bytes.fromhex(v["raw"]), bytes.fromhex(v["wire"])
+    assert build_packet(ptype, seq, payload) == raw
+    assert frame_packet(ptype, seq, payload) == wire
+    assert parse_packet(raw) == Packet(ptype, seq, payload)
+    assert StreamDecoder().feed(wire) == [Packet(ptype, seq, payload)]
+
+
+@pytest.mark.parametrize("v", V["invalid_frames"], ids=_id)
+def test_invalid_frames(v: dict[str, str]) -> None:
+    wire = bytes.fromhex(v["wire"])
+    decoder = StreamDecoder()
+    out = decoder.feed(wire)
+    assert out == [BadFrame(INVALID_FRAME_REASONS[v["name"]], wire[:-1])]
+    assert decoder.counts[INVALID_FRAME_REASONS[v["name"]]] == 1
+
+
+def test_every_invalid_vector_has_an_expected_reason() -> None:
+    assert {v["name"] for v in V["invalid_frames"]} == set(INVALID_FRAME_REASONS)
+
+
+def test_whole_vector_stream_in_one_go() -> None:
+    """All packets and invalid frames interleaved: every good packet survives."""
+    stream = b""
+    expected: list[Packet | BadFrame] = []
+    for good, bad in zip(V["packets"], V["invalid_frames"], strict=False):
+        stream += bytes.fromhex(bad["wire"]) + bytes.fromhex(good["wire"])
+        expected.append(
+            BadFrame(INVALID_FRAME_REASONS[bad["name"]], bytes.fromhex(bad["wire"])[:-1])
+        )
+        expected.append(
+            Packet(PacketType(good["type"]), good["seq"], bytes.fromhex(good["payload"]))
+        )
+    assert StreamDecoder().feed(stream) == expected
