@@ -9,6 +9,8 @@ See README.md for the API and docs/protocol.md for the wire protocol.
 
 from __future__ import annotations
 
+import serial as _serial
+
 from ._generated.schema_id import SCHEMA_ID
 from .constants import PROTOCOL_VERSION
 from .errors import (
@@ -26,6 +28,10 @@ from .errors import (
 )
 
 __version__ = "0.1.0"
+
+# Make the faulty:// URL (protoduino.faults) known to serial.serial_for_url.
+if "protoduino.urlhandler" not in _serial.protocol_handler_packages:
+    _serial.protocol_handler_packages.append("protoduino.urlhandler")
 
 __all__ = [
     "PROTOCOL_VERSION",

@@ -1,0 +1,161 @@
+"""pyserial handler for ``faulty://INNER?params``: see :mod:`protoduino.faults`."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter, deque
+from typing import TYPE_CHECKING, Any
+
+import serial
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException
+
+if TYPE_CHECKING:
+    from _typeshed import ReadableBuffer
+
+from ..faults import Cut, FaultConfig, FaultModel, parse_url
+
+#: Longest time one read of the inner port blocks.
+POLL = 0.02
+
+
+class Serial(SerialBase):
+    """A serial port whose bytes are damaged on the way, reproducibly."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self._inner: serial.Serial | None = None
+        self._cfg = FaultConfig()
+        self._rx: FaultModel | None = None
+        self._tx: FaultModel | None = None
+        self._cut: Cut | None = None
+        self._pending = bytearray()
+        self._delayed: deque[tuple[float, bytes]] = deque()
+        self._lock = threading.Lock()
+        self.stats: Counter[str] = Counter()
+        super().__init__(*args, **kwargs)
+
+    # --- pyserial plumbing ---------------------------------------------------
+    def open(self) -> None:
+        if self.port is None:
+            raise SerialException("port must be configured before it can be used")
+        if self.is_open:
+            raise SerialException("port already open")
+        try:
+            inner_url, cfg = parse_url(self.port)
+        except ValueError as error:
+            raise SerialException(str(error)) from error
+        self._cfg = cfg
+        self.stats = Counter()
+        self._rx = FaultModel(cfg, cfg.seed * 2 + 1, self.stats) if cfg.applies_to("rx") else None
+        self._tx = FaultModel(cfg, cfg.seed * 2, self.stats) if cfg.applies_to("tx") else None
+        self._cut = Cut(cfg)
+        self._inner = serial.serial_for_url(
+            inner_url,
+            baudrate=self.baudrate,
+            timeout=self._poll_interval(),
+            write_timeout=self.write_timeout,
+        )
+        self.is_open = True
+
+    def close(self) -> None:
+        self.is_open = False
+        if self._inner is not None:
+            self._inner.close()
+            self._inner = None
+
+    def _reconfigure_port(self) -> None:
+        if self._inner is not None:
+            self._inner.timeout = self._poll_interval()
+            self._inner.write_timeout = self.write_timeout
+
+    def _poll_interval(self) -> float:
+        return POLL if self.timeout is None else min(self.timeout, POLL)
+
+    def from_url(self, url: str) -> str:
+        return url
+
+    def _require(self) -> serial.Serial:
+        if not self.is_open or self._inner is None:
+            raise PortNotOpenError()
+        return self._inner
+
+    # --- faults ---------------------------------------------------------------
+    def cut(self, seconds: float) -> None:
+        """Cut the line in both directions for ``seconds``, from now."""
+        if self._cut is None:
+            raise PortNotOpenError()
+        self._cut.cut(seconds)
+
+    @property
+    def in_waiting(self) -> int:
+        inner = self._require()
+        return len(self._pending) + int(inner.in_waiting)
+
+    def read(self, size: int = 1) -> bytes:
+        """Up to ``size`` bytes, after faults; b"" once the timeout passes."""
+        inner = self._require()
+        deadline = None if self.timeout is None else time.monotonic() + self.timeout
+        while True:
+            with self._lock:
+                self._release_delayed()
+                if self._pending:
+                    out = bytes(self._pending[:size])
+                    del self._pending[:size]
+                    return out
+            if deadline is not None and time.monotonic() >= deadline:
+                return b""
+            # The inner port polls (POLL seconds at most) so delayed bytes and
+            # the caller's own timeout are honoured.
+            data = inner.read(max(1, min(size, int(inner.in_waiting))))
+            if data:
+                self._receive(data)
+
+    def _receive(self, data: bytes) -> None:
+        assert self._cut is not None
+        if self._cut.active():
+            self.stats["cut_bytes"] += len(data)
+            return
+        if self._rx is not None:
+            data = self._rx.apply(data)
+        with self._lock:
+            if self._cfg.delay > 0 and self._cfg.applies_to("rx"):
+                self._delayed.append((time.monotonic() + self._cfg.delay / 1000, data))
+            else:
+                self._pending += data
+
+    def _release_delayed(self) -> None:
+        now = time.monotonic()
+        while self._delayed and self._delayed[0][0] <= now:
+            self._pending += self._delayed.popleft()[1]
+
+    def write(self, data: ReadableBuffer, /) -> int:
+        inner = self._require()
+        raw = bytes(data)
+        assert self._cut is not None
+        if self._cut.active():
+            self.stats["cut_bytes"] += len(raw)
+            return len(raw)
+        if self._cfg.delay > 0 and self._cfg.applies_to("tx"):
+            time.sleep(self._cfg.delay / 1000)
+        out = self._tx.apply(raw) if self._tx is not None else raw
+        if out:
+            inner.write(out)
+        return len(raw)
+
+    def flush(self) -> None:
+        self._require().flush()
+
+    def reset_input_buffer(self) -> None:
+        inner = self._require()
+        with self._lock:
+            self._pending.clear()
+            self._delayed.clear()
+        inner.reset_input_buffer()
+
+    def reset_output_buffer(self) -> None:
+        self._require().reset_output_buffer()
+
+    def cancel_read(self) -> None:
+        inner = self._inner
+        if inner is not None and hasattr(inner, "cancel_read"):
+            inner.cancel_read()
