@@ -12,6 +12,7 @@ from __future__ import annotations
 import serial as _serial
 
 from ._generated.schema_id import SCHEMA_ID
+from .board import Board, DeviceInfo, DigitalOutput, Servo
 from .constants import PROTOCOL_VERSION
 from .errors import (
     AckTimeoutError,
@@ -26,6 +27,7 @@ from .errors import (
     TransportError,
     VersionMismatchError,
 )
+from .events import Event, EventKind, Stats
 
 __version__ = "0.1.0"
 
@@ -37,14 +39,21 @@ __all__ = [
     "PROTOCOL_VERSION",
     "SCHEMA_ID",
     "AckTimeoutError",
+    "Board",
     "BoardClosedError",
     "CommandRejectedError",
+    "DeviceInfo",
+    "DigitalOutput",
+    "Event",
+    "EventKind",
     "HandshakeError",
     "LinkError",
     "PayloadTooLargeError",
     "ProtocolError",
     "ProtoduinoError",
     "SchemaMismatchError",
+    "Servo",
+    "Stats",
     "TransportError",
     "VersionMismatchError",
     "__version__",

@@ -83,7 +83,17 @@ class CommandRejectedError(ProtoduinoError):
 
 
 class AckTimeoutError(ProtoduinoError, TimeoutError):
-    """No Ack arrived after ACK_TIMEOUT x (MAX_RETRIES + 1)."""
+    """No Ack arrived after ACK_TIMEOUT x (MAX_RETRIES + 1).
+
+    ``recent_frames`` holds the last frames sent and received (readable lines,
+    oldest first), also added to the traceback as a note, for diagnosis.
+    """
+
+    def __init__(self, message: str = "", *, recent_frames: tuple[str, ...] = ()) -> None:
+        super().__init__(message)
+        self.recent_frames = recent_frames
+        if recent_frames:
+            self.add_note("recent frames:\n  " + "\n  ".join(recent_frames))
 
 
 class BoardClosedError(ProtoduinoError):

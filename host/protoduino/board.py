@@ -1,0 +1,551 @@
+"""The Board API: servos and digital outputs on a device over a reliable link.
+
+``Board.open(url)`` opens the port, handshakes, asks the device for its
+:class:`DeviceInfo` and starts the 1 Hz Ping. Every command returns once the
+device acknowledged it and raises otherwise:
+
+* arguments are checked first, against the device's own figures, and refused
+  with the :class:`CommandRejectedError` status the device would give
+  (``sent=False``, nothing sent);
+* the device's refusal raises :class:`CommandRejectedError` (``sent=True``);
+* no Ack after every retry raises :class:`AckTimeoutError` (a ``TimeoutError``);
+* a link that is down and does not come back in time raises the link's error
+  (:class:`TransportError`, :class:`HandshakeError`, ...).
+
+Session restore: the board remembers every Init it sent and the last value
+acknowledged for each output. When the device reboots, the request layer
+replays the Inits, then those values, before any held call goes out. A Stop
+or a failsafe forgets the values (the device latched its outputs safe; a
+restore must not undo that).
+
+Threads per board: the transport's I/O thread and one event thread that runs
+the ``on_event`` callbacks. Both stop in :meth:`Board.close`.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from numbers import Integral
+from types import TracebackType
+
+from .constants import (
+    ACK_TIMEOUT,
+    HANDSHAKE_TIMEOUT,
+    MAX_RETRIES,
+    SERVO_DEFAULT_MAX_US,
+    SERVO_DEFAULT_MIN_US,
+    SERVO_LIMIT_MAX_US,
+    SERVO_LIMIT_MIN_US,
+    SERVO_MAX_DEGREES,
+)
+from .errors import BoardClosedError, CommandRejectedError, ProtocolError
+from .events import Event, EventKind, Stats
+from .link import Link
+from .messages import ArduinoIn, ArduinoOut, Status, status_name
+from .rpc import Call, Rpc
+from .transport import FrameMonitor, Transport
+
+log = logging.getLogger(__name__)
+
+#: Ping payloads are bounded by the schema (protoduino.options: 64 bytes).
+MAX_PING_PAYLOAD = 64
+
+EventCallback = Callable[[Event], None]
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceInfo:
+    """What the device says about itself (GetInfo), read once at open."""
+
+    firmware_version: str
+    protocol_version: int
+    schema_id: int
+    board: str
+    num_pins: int
+    max_servos: int
+    reserved_pins: tuple[int, ...]
+
+
+@dataclass(slots=True)
+class _Output:
+    """What the host knows of one configured pin, for checks and session restore."""
+
+    mode: str  # "servo" or "digital"
+    init: bytes  # the Init as sent, without its message_id
+    min_us: int = 0
+    max_us: int = 0
+    last: bytes | None = None  # the last acknowledged Control, if any since init/stop/failsafe
+
+
+def _int(name: str, value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, Integral):
+        raise TypeError(f"{name} must be an int, not {type(value).__name__}")
+    return int(value)
+
+
+def _reject(status: int, text: str) -> CommandRejectedError:
+    return CommandRejectedError(status, f"{text} ({status_name(status)})", sent=False)
+
+
+class Servo:
+    """A servo output; get one from :meth:`Board.servo`."""
+
+    def __init__(self, board: Board, pin: int, min_us: int, max_us: int) -> None:
+        self.board = board
+        self.pin = pin
+        self.min_us = min_us
+        self.max_us = max_us
+
+    def write(self, degrees: int) -> None:
+        """Move to ``degrees`` (0..180, mapped linearly onto [min_us, max_us])."""
+        degrees = _int("degrees", degrees)
+        if not 0 <= degrees <= SERVO_MAX_DEGREES:
+            raise _reject(Status.STATUS_OUT_OF_RANGE, f"{degrees} degrees is outside 0..180")
+        msg = ArduinoIn()
+        msg.servo_control.pin = self.pin
+        msg.servo_control.degrees = degrees
+        self.board._control(self.pin, msg)
+
+    def write_us(self, us: int) -> None:
+        """Set the pulse width in microseconds (within [min_us, max_us])."""
+        us = _int("us", us)
+        if not self.min_us <= us <= self.max_us:
+            raise _reject(
+                Status.STATUS_OUT_OF_RANGE,
+                f"{us} us is outside this servo's [{self.min_us}, {self.max_us}]",
+            )
+        msg = ArduinoIn()
+        msg.servo_control.pin = self.pin
+        msg.servo_control.us = us
+        self.board._control(self.pin, msg)
+
+    def __repr__(self) -> str:
+        return f"Servo(pin={self.pin}, min_us={self.min_us}, max_us={self.max_us})"
+
+
+class DigitalOutput:
+    """A digital output pin; get one from :meth:`Board.digital_output`."""
+
+    def __init__(self, board: Board, pin: int) -> None:
+        self.board = board
+        self.pin = pin
+
+    def write(self, level: bool) -> None:
+        """Drive the pin high (True) or low (False)."""
+        if not isinstance(level, bool | Integral):
+            raise TypeError(f"level must be a bool, not {type(level).__name__}")
+        msg = ArduinoIn()
+        msg.digital_control.pin = self.pin
+        msg.digital_control.level = bool(level)
+        self.board._control(self.pin, msg)
+
+    def on(self) -> None:
+        self.write(True)
+
+    def off(self) -> None:
+        self.write(False)
+
+    def __repr__(self) -> str:
+        return f"DigitalOutput(pin={self.pin})"
+
+
+class Board:
+    """A connected device. Use :meth:`open`; close it (or use ``with``) when done."""
+
+    def __init__(
+        self,
+        url: str,
+        *,
+        baudrate: int = 115200,
+        ack_timeout: float = ACK_TIMEOUT,
+        handshake_timeout: float = HANDSHAKE_TIMEOUT,
+        max_retries: int = MAX_RETRIES,
+        window: int = 4,
+        ping: bool = True,
+    ) -> None:
+        self.url = url
+        self._lock = threading.Lock()
+        self._outputs: dict[int, _Output] = {}
+        self._callbacks: list[EventCallback] = []
+        self._events: queue.Queue[Event | None] = queue.Queue()
+        self._closed = False
+        self._rpc = Rpc(
+            notify=self._notify,
+            ack_timeout=ack_timeout,
+            max_retries=max_retries,
+            window=window,
+            ping=ping,
+            link_wait=handshake_timeout,
+        )
+        self._rpc.message_hook = self._message
+        self._rpc.restore_provider = self._restore_messages
+        self._transport = Transport(url, baudrate=baudrate)
+        self._link = Link(
+            self._transport, self._rpc, handshake_timeout=handshake_timeout, notify=self._notify
+        )
+        self._rpc.attach(self._link)
+        self._event_thread = threading.Thread(
+            target=self._dispatch, name=f"protoduino-events[{url}]", daemon=True
+        )
+        self._event_thread.start()
+        try:
+            self._link.open()
+            self.info = self._get_info()
+        except BaseException:
+            self.close()
+            raise
+
+    @classmethod
+    def open(
+        cls,
+        url: str,
+        *,
+        baudrate: int = 115200,
+        ack_timeout: float = ACK_TIMEOUT,
+        handshake_timeout: float = HANDSHAKE_TIMEOUT,
+        max_retries: int = MAX_RETRIES,
+        window: int = 4,
+        ping: bool = True,
+    ) -> Board:
+        """Open ``url`` (any pyserial URL), handshake and read the device's info.
+
+        Raises :class:`TransportError` if the port cannot be opened,
+        :class:`HandshakeError` if the device does not answer within
+        ``handshake_timeout``, :class:`VersionMismatchError` or
+        :class:`SchemaMismatchError` if it runs incompatible firmware.
+        """
+        return cls(
+            url,
+            baudrate=baudrate,
+            ack_timeout=ack_timeout,
+            handshake_timeout=handshake_timeout,
+            max_retries=max_retries,
+            window=window,
+            ping=ping,
+        )
+
+    # --- context and life cycle -------------------------------------------------------
+
+    def __enter__(self) -> Board:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop pinging, fail outstanding calls, stop every thread, close the port.
+
+        Idempotent. The device is left as it is: with pings gone, its failsafe
+        drives the outputs safe after FAILSAFE_TIMEOUT.
+        """
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        self._rpc.close()
+        self._link.close()
+        self._events.put(None)
+        if self._event_thread is not threading.current_thread():
+            self._event_thread.join(2.0)
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def __repr__(self) -> str:
+        return f"Board({self.url!r}, state={self._link.state.value})"
+
+    # --- outputs ------------------------------------------------------------------------
+
+    def servo(
+        self,
+        pin: int,
+        safe: int | None = None,
+        *,
+        safe_us: int | None = None,
+        min_us: int = SERVO_DEFAULT_MIN_US,
+        max_us: int = SERVO_DEFAULT_MAX_US,
+    ) -> Servo:
+        """Configure ``pin`` as a servo; it moves to its safe position at once.
+
+        ``safe`` is in degrees (90 if neither it nor ``safe_us`` is given);
+        ``safe_us`` gives it in microseconds instead. The failsafe and
+        :meth:`stop` return the servo there. Calling it again for the same pin
+        changes the limits and the safe position.
+        """
+        pin = self._check_pin(pin)
+        min_us = _int("min_us", min_us) or SERVO_DEFAULT_MIN_US
+        max_us = _int("max_us", max_us) or SERVO_DEFAULT_MAX_US
+        if safe is not None and safe_us is not None:
+            raise TypeError("give safe (degrees) or safe_us, not both")
+        if min_us < SERVO_LIMIT_MIN_US or max_us > SERVO_LIMIT_MAX_US or min_us >= max_us:
+            raise _reject(
+                Status.STATUS_INVALID_ARGUMENT,
+                f"servo limits [{min_us}, {max_us}] us must satisfy "
+                f"{SERVO_LIMIT_MIN_US} <= min_us < max_us <= {SERVO_LIMIT_MAX_US}",
+            )
+        msg = ArduinoIn()
+        init = msg.servo_init
+        init.pin, init.min_us, init.max_us = pin, min_us, max_us
+        if safe_us is not None:
+            safe_us = _int("safe_us", safe_us)
+            if not min_us <= safe_us <= max_us:
+                raise _reject(
+                    Status.STATUS_OUT_OF_RANGE, f"safe_us {safe_us} is outside [{min_us}, {max_us}]"
+                )
+            init.safe_us = safe_us
+        else:
+            safe = 90 if safe is None else _int("safe", safe)
+            if not 0 <= safe <= SERVO_MAX_DEGREES:
+                raise _reject(Status.STATUS_OUT_OF_RANGE, f"safe {safe} degrees is outside 0..180")
+            init.safe_degrees = safe
+        with self._lock:
+            current = self._outputs.get(pin)
+            if current is not None and current.mode != "servo":
+                raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a digital output")
+            servos = sum(1 for o in self._outputs.values() if o.mode == "servo")
+            if current is None and servos >= self.info.max_servos:
+                raise _reject(
+                    Status.STATUS_NO_FREE_RESOURCE,
+                    f"all {self.info.max_servos} servo slots are in use",
+                )
+        state = _Output("servo", msg.SerializeToString(), min_us, max_us)
+        self._send(msg, lambda: self._set_output(pin, state))
+        return Servo(self, pin, min_us, max_us)
+
+    def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
+        """Configure ``pin`` as a digital output; it takes its ``safe`` level at once."""
+        pin = self._check_pin(pin)
+        with self._lock:
+            current = self._outputs.get(pin)
+            if current is not None and current.mode != "digital":
+                raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a servo")
+        msg = ArduinoIn()
+        msg.digital_init.pin = pin
+        msg.digital_init.safe_level = bool(safe)
+        state = _Output("digital", msg.SerializeToString())
+        self._send(msg, lambda: self._set_output(pin, state))
+        return DigitalOutput(self, pin)
+
+    # --- board-wide commands -------------------------------------------------------
+
+    def ping(self, payload: bytes = b"") -> float:
+        """Round trip of one Ping (seconds); the device echoes ``payload`` (<= 64 bytes)."""
+        payload = bytes(payload)
+        if len(payload) > MAX_PING_PAYLOAD:
+            raise _reject(
+                Status.STATUS_DECODE_ERROR,
+                f"ping payload of {len(payload)} bytes exceeds {MAX_PING_PAYLOAD}",
+            )
+        msg = ArduinoIn()
+        msg.ping.payload = payload
+        call = self._send(msg)
+        echo = bytes(call.result().ping_echo)
+        if echo != payload:
+            raise ProtocolError(f"ping echo differs: sent {payload.hex()}, got {echo.hex()}")
+        assert call.rtt is not None
+        return call.rtt
+
+    def stop(self) -> None:
+        """Emergency stop: every configured output to its safe value at once, latched."""
+        msg = ArduinoIn()
+        msg.stop.SetInParent()
+        self._send(msg, self._forget_values)
+
+    @property
+    def pinging(self) -> bool:
+        """Whether the automatic 1 Hz Ping runs; set False to let the failsafe fire."""
+        return self._rpc.pinging
+
+    @pinging.setter
+    def pinging(self, on: bool) -> None:
+        self._rpc.pinging = on
+
+    def on_event(self, callback: EventCallback) -> Callable[[], None]:
+        """Call ``callback(event)`` for every :class:`Event`; returns an unsubscribe function.
+
+        Callbacks run on the board's event thread, one at a time; they may
+        command the board.
+        """
+        with self._lock:
+            self._callbacks.append(callback)
+
+        def unsubscribe() -> None:
+            with self._lock:
+                if callback in self._callbacks:
+                    self._callbacks.remove(callback)
+
+        return unsubscribe
+
+    def add_frame_monitor(self, monitor: FrameMonitor) -> None:
+        """See every frame in both directions (runs on the I/O thread: be quick)."""
+        self._transport.add_monitor(monitor)
+
+    @property
+    def stats(self) -> Stats:
+        """A snapshot of the link counters."""
+        link, rpc, tr = self._link, self._rpc, self._transport
+        dropped = tr.decoder_counts
+        dropped.pop("packets", None)
+        if link.direction_drops:
+            dropped["direction"] = link.direction_drops
+        state = link.state.value
+        if not tr.connected and state == "handshaking":
+            state = "disconnected"
+        return Stats(
+            state=state,
+            connected=tr.connected,
+            rx_bytes=tr.rx_bytes,
+            tx_bytes=tr.tx_bytes,
+            rx_packets=link.rx_packets,
+            tx_packets=tr.tx_packets,
+            dropped=dropped,
+            seq_lost=link.seq_lost,
+            seq_desyncs=link.seq_desyncs,
+            handshakes=link.handshakes,
+            reconnects=link.reconnects,
+            reboots=link.reboots,
+            watchdog_resets=link.watchdog_resets,
+            device_desyncs=link.device_events["desync"],
+            device_rx_overflows=link.device_events["rx_overflow"],
+            commands=rpc.commands,
+            acks=rpc.acks,
+            retransmits=rpc.retransmits,
+            timeouts=rpc.timeouts,
+            rejected=rpc.rejected,
+            late_acks=rpc.late_acks,
+            unknown_acks=rpc.unknown_acks,
+            pings=rpc.pings,
+            ping_failures=rpc.ping_failures,
+            rtt=rpc.rtt,
+        )
+
+    # --- internals ------------------------------------------------------------------------
+
+    def _check_pin(self, pin: object) -> int:
+        pin = _int("pin", pin)
+        if self._closed:
+            raise BoardClosedError("the board is closed")
+        if not 0 <= pin < self.info.num_pins:
+            raise _reject(
+                Status.STATUS_INVALID_PIN,
+                f"pin {pin} does not exist ({self.info.board}: 0..{self.info.num_pins - 1})",
+            )
+        if pin in self.info.reserved_pins:
+            raise _reject(Status.STATUS_RESERVED_PIN, f"pin {pin} is reserved")
+        return pin
+
+    def _control(self, pin: int, msg: ArduinoIn) -> None:
+        if self._closed:
+            raise BoardClosedError("the board is closed")
+        payload = msg.SerializeToString()
+        self._send(msg, lambda: self._set_value(pin, payload))
+
+    def _send(self, msg: ArduinoIn, on_ok: Callable[[], None] | None = None) -> Call:
+        """Send and wait; ``on_ok`` runs on the I/O thread right at the OK Ack, in order."""
+
+        def done(call: Call) -> None:
+            if call.error is None and on_ok is not None:
+                with self._lock:
+                    on_ok()
+
+        call = self._rpc.submit(msg, on_done=done)
+        self._rpc.wait(call)
+        return call
+
+    def _set_output(self, pin: int, state: _Output) -> None:
+        self._outputs[pin] = state  # an Init drives the safe value: no value to restore
+
+    def _set_value(self, pin: int, control: bytes) -> None:
+        out = self._outputs.get(pin)
+        if out is not None:
+            out.last = control
+
+    def _forget_values(self) -> None:
+        for out in self._outputs.values():
+            out.last = None
+
+    def _restore_messages(self) -> list[ArduinoIn]:
+        """Every Init, then every last value (called on the I/O thread at a reboot)."""
+        with self._lock:
+            outputs = list(self._outputs.values())
+        msgs = []
+        for blob in [o.init for o in outputs] + [o.last for o in outputs if o.last is not None]:
+            msg = ArduinoIn()
+            msg.ParseFromString(blob)
+            msgs.append(msg)
+        return msgs
+
+    def _get_info(self) -> DeviceInfo:
+        msg = ArduinoIn()
+        msg.get_info.SetInParent()
+        info = self._send(msg).result().info
+        return DeviceInfo(
+            firmware_version=info.firmware_version,
+            protocol_version=info.protocol_version,
+            schema_id=info.schema_id,
+            board=info.board,
+            num_pins=info.num_pins,
+            max_servos=info.max_servos,
+            reserved_pins=tuple(info.reserved_pins),
+        )
+
+    def _message(self, msg: ArduinoOut) -> None:
+        """A DATA message other than an Ack (I/O thread)."""
+        kind = msg.WhichOneof("data")
+        if kind == "failsafe":
+            fs = msg.failsafe
+            cause = {1: "ping_timeout", 2: "stop"}.get(fs.cause, "none")
+            if fs.active:
+                with self._lock:
+                    self._forget_values()
+                text = f"failsafe active ({cause}): outputs at their safe values"
+            else:
+                text = "failsafe cleared (outputs stay safe until commanded)"
+            self._notify(Event(EventKind.FAILSAFE, text, {"active": fs.active, "cause": cause}))
+        elif kind == "log":
+            level = ("debug", "info", "warning", "error")[min(msg.log.level, 3)]
+            self._notify(
+                Event(
+                    EventKind.LOG,
+                    f"device {level}: {msg.log.text}",
+                    {"level": level, "text": msg.log.text},
+                )
+            )
+        elif kind == "decode_error":
+            count = msg.decode_error.count
+            self._notify(
+                Event(
+                    EventKind.DECODE_ERROR,
+                    "the device could not decode a command",
+                    {"count": count},
+                )
+            )
+        else:
+            log.info("%s: unhandled device message %s", self.url, kind)
+
+    def _notify(self, event: Event) -> None:
+        log.debug("%s: event %s", self.url, event)
+        self._events.put(event)
+
+    def _dispatch(self) -> None:
+        while True:
+            event = self._events.get()
+            if event is None:
+                return
+            with self._lock:
+                callbacks = list(self._callbacks)
+            for callback in callbacks:
+                try:
+                    callback(event)
+                except Exception:
+                    log.exception("%s: on_event callback failed", self.url)

@@ -1,0 +1,386 @@
+"""Link layer (PROTOCOL.md sections 5 and 6): handshake, SEQ accounting, watchdog.
+
+States: WAIT_ACK (handshaking, or waiting for the port) -> ACTIVE; FAILED when
+the device speaks another protocol version or schema (nothing can fix that
+but new firmware); CLOSED.
+
+* Handshake: RESET(VERSION) with SEQ 0, resent with a doubling backoff (capped
+  at 1 s) until a RESET_ACK arrives. The first handshake fails after
+  ``handshake_timeout`` with :class:`HandshakeError`; a later one (after a
+  reboot or a lost port) reports the failure as an event and keeps trying.
+* Any RESET_ACK, even while ACTIVE (the twin of a resent RESET), means the
+  device just cleared its link state: the next expected SEQ is 1.
+* EVENT BOOT or NOT_ACTIVE while ACTIVE: the device rebooted. A reopened port
+  is treated the same (opening an Uno's port resets it; a simulated board whose
+  pseudo-terminal vanished was restarted). The next ``link_up`` then says
+  ``rebooted=True`` so that the session is restored above.
+* SEQ jump of more than SEQ_DESYNC_THRESHOLD, or nothing valid received for
+  WATCHDOG_TIMEOUT while traffic is expected: handshake again.
+
+Everything here runs on the transport's I/O thread, except :meth:`open` and
+:meth:`close`. The state is a handful of fields written only by that thread,
+so readers from other threads see a consistent-enough snapshot without locks.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from enum import StrEnum
+from typing import Protocol
+
+from ._generated.schema_id import SCHEMA_ID
+from .constants import (
+    PROTOCOL_VERSION,
+    SEQ_DESYNC_THRESHOLD,
+    SEQ_TOLERANCE,
+    WATCHDOG_TIMEOUT,
+    ControlCode,
+    EventCode,
+    PacketType,
+)
+from .errors import (
+    HandshakeError,
+    LinkError,
+    ProtocolError,
+    ProtoduinoError,
+    SchemaMismatchError,
+    TransportError,
+    VersionMismatchError,
+)
+from .events import Event, EventKind
+from .messages import ArduinoOut, parse_out
+from .packets import BadFrame, Packet, parse_control, reset_payload
+from .transport import Transport
+
+log = logging.getLogger(__name__)
+
+#: First RESET retry delay and the largest one (seconds).
+RESET_FIRST_RETRY = 0.1
+RESET_MAX_RETRY = 1.0
+
+
+class LinkState(StrEnum):
+    WAIT_ACK = "handshaking"
+    ACTIVE = "active"
+    FAILED = "failed"
+    CLOSED = "closed"
+
+
+class LinkListener(Protocol):
+    """What the request layer implements; called on the I/O thread."""
+
+    def link_up(self, rebooted: bool) -> None: ...
+
+    def link_down(self, reason: str) -> None: ...
+
+    def link_message(self, msg: ArduinoOut) -> None: ...
+
+    def link_tick(self, now: float) -> None: ...
+
+
+Notify = Callable[[Event], None]
+
+
+class Link:
+    """The link state machine over one :class:`Transport`; see the module docstring."""
+
+    def __init__(
+        self,
+        transport: Transport,
+        listener: LinkListener,
+        *,
+        handshake_timeout: float,
+        notify: Notify,
+        watchdog_timeout: float = WATCHDOG_TIMEOUT,
+        schema_id: int = SCHEMA_ID,
+        version: int = PROTOCOL_VERSION,
+    ) -> None:
+        self.transport = transport
+        self._listener = listener
+        self._notify = notify
+        self.handshake_timeout = handshake_timeout
+        self.watchdog_timeout = watchdog_timeout
+        self.schema_id = schema_id
+        self.version = version
+        self.state = LinkState.WAIT_ACK
+        #: Set by the request layer: the watchdog runs only while the host
+        #: expects answers (pings on, or commands outstanding); a device left
+        #: alone is legitimately silent.
+        self.expect_traffic: Callable[[], bool] = lambda: True
+        self._rx_expected = 0
+        self._last_rx = 0.0
+        self._hs_started = 0.0
+        self._hs_next = 0.0
+        self._hs_delay = RESET_FIRST_RETRY
+        self._hs_reported = False
+        self._was_active = False
+        self._pending_reboot = False
+        self._opened = threading.Event()
+        #: Why the link is not ACTIVE (what a waiting call should raise), or None.
+        self.down_error: ProtoduinoError | None = None
+        self.device_version: int | None = None
+        self.device_schema_id: int | None = None
+        # Counters
+        self.rx_packets = 0
+        self.direction_drops = 0
+        self.seq_lost = 0
+        self.seq_desyncs = 0
+        self.handshakes = 0
+        self.reconnects = 0
+        self.reboots = 0
+        self.watchdog_resets = 0
+        self.device_events: Counter[str] = Counter()
+
+    # --- called from user threads --------------------------------------------
+
+    def open(self) -> None:
+        """Open the port and handshake; raises if either fails within handshake_timeout."""
+        self.down_error = HandshakeError(self._no_answer_text())
+        self.transport.start(self)  # raises TransportError for a port that cannot open
+        # The I/O thread enforces the deadline; the margin covers scheduling only.
+        if not self._opened.wait(self.handshake_timeout + 2.0):
+            self.down_error = HandshakeError(self._no_answer_text())
+        if self.state is not LinkState.ACTIVE:
+            error = self.down_error or HandshakeError(self._no_answer_text())
+            self.close()
+            raise error
+
+    def close(self) -> None:
+        self.state = LinkState.CLOSED
+        self.transport.close()
+
+    @property
+    def active(self) -> bool:
+        return self.state is LinkState.ACTIVE
+
+    def send_command(self, payload: bytes) -> bool:
+        """Queue one COMMAND; False (nothing queued) unless the link is ACTIVE."""
+        if self.state is not LinkState.ACTIVE:
+            return False
+        self.transport.send(PacketType.COMMAND, payload)
+        return True
+
+    # --- TransportListener (I/O thread) ------------------------------------------
+
+    def transport_opened(self, reopened: bool) -> None:
+        if self.state in (LinkState.CLOSED, LinkState.FAILED):
+            return
+        if reopened:
+            self.reconnects += 1
+            if self._was_active:
+                self._pending_reboot = True
+        self._start_handshake(time.monotonic())
+
+    def transport_lost(self, error: Exception) -> None:
+        if self.state in (LinkState.CLOSED, LinkState.FAILED):
+            return
+        self.down_error = (
+            error if isinstance(error, ProtoduinoError) else TransportError(str(error))
+        )
+        self._go_down("port lost")
+        self.state = LinkState.WAIT_ACK
+        self._hs_next = float("inf")  # no RESET until the port is back
+
+    def transport_received(self, items: list[Packet | BadFrame]) -> None:
+        for item in items:
+            if self.state in (LinkState.CLOSED, LinkState.FAILED):
+                return
+            if isinstance(item, BadFrame):
+                log.debug("%s: dropped frame (%s)", self.transport.name, item.reason)
+                continue
+            self._packet(item)
+
+    def transport_tick(self, now: float) -> None:
+        if self.state is LinkState.WAIT_ACK and self.transport.connected:
+            if now >= self._hs_next:
+                if not self._hs_reported and now - self._hs_started >= self.handshake_timeout:
+                    self._handshake_failed()
+                self._send_reset(now)
+        elif (
+            self.state is LinkState.ACTIVE
+            and now - self._last_rx > self.watchdog_timeout
+            and self.expect_traffic()
+        ):
+            log.warning(
+                "%s: nothing received for %.1f s; handshaking again",
+                self.transport.name,
+                self.watchdog_timeout,
+            )
+            self.watchdog_resets += 1
+            self._restart("watchdog", now)
+        self._listener.link_tick(now)
+
+    # --- internals (I/O thread) -----------------------------------------------
+
+    def _no_answer_text(self) -> str:
+        return (
+            f"the device on {self.transport.url} did not answer RESET within "
+            f"{self.handshake_timeout:g} s; check that the protoduino firmware is flashed, "
+            "the port and baud rate are right, and nothing else holds the port"
+        )
+
+    def _start_handshake(self, now: float) -> None:
+        self.state = LinkState.WAIT_ACK
+        self._hs_started = now
+        self._hs_next = now
+        self._hs_delay = RESET_FIRST_RETRY
+        self._hs_reported = False
+        if not self._opened.is_set():
+            self.down_error = HandshakeError(self._no_answer_text())
+        self._send_reset(now)
+
+    def _send_reset(self, now: float) -> None:
+        self.transport.clear_queue()
+        self.transport.send(PacketType.CONTROL, reset_payload(self.version), reset_seq=True)
+        self._hs_next = now + self._hs_delay
+        self._hs_delay = min(self._hs_delay * 2, RESET_MAX_RETRY)
+
+    def _handshake_failed(self) -> None:
+        self._hs_reported = True
+        self.down_error = HandshakeError(self._no_answer_text())
+        if not self._opened.is_set():
+            self.state = LinkState.FAILED
+            self._opened.set()
+            return
+        log.warning("%s: %s (still trying)", self.transport.name, self.down_error)
+        self._notify(
+            Event(EventKind.DISCONNECTED, str(self.down_error), {"reason": "handshake failed"})
+        )
+
+    def _go_down(self, reason: str) -> None:
+        if self.state is LinkState.ACTIVE:
+            log.info("%s: link down (%s)", self.transport.name, reason)
+            self.state = LinkState.WAIT_ACK
+            self._notify(Event(EventKind.DISCONNECTED, f"link down: {reason}", {"reason": reason}))
+            self._listener.link_down(reason)
+
+    def _restart(self, reason: str, now: float) -> None:
+        self.down_error = LinkError(
+            f"the link to {self.transport.url} is re-handshaking ({reason})"
+        )
+        self._go_down(reason)
+        self._start_handshake(now)
+
+    def _fail(self, error: LinkError) -> None:
+        self.down_error = error
+        was_active = self.state is LinkState.ACTIVE
+        self.state = LinkState.FAILED
+        if self._opened.is_set():
+            log.error("%s: %s", self.transport.name, error)
+            self._notify(Event(EventKind.ERROR, str(error), {"error": str(error)}))
+            if was_active:
+                self._listener.link_down("failed")
+        self._opened.set()
+
+    def _reboot_detected(self, how: str, now: float) -> None:
+        self.reboots += 1
+        self._pending_reboot = True
+        log.warning("%s: device rebooted (%s)", self.transport.name, how)
+        self._notify(Event(EventKind.REBOOTED, f"device rebooted ({how})", {"how": how}))
+        self._restart("device rebooted", now)
+
+    def _packet(self, packet: Packet) -> None:
+        now = time.monotonic()
+        if packet.type is PacketType.CONTROL:
+            try:
+                ctl = parse_control(packet.payload)
+            except ProtocolError as error:
+                log.warning("%s: bad CONTROL packet: %s", self.transport.name, error)
+                return
+            if ctl.code is ControlCode.RESET_ACK:
+                self._reset_ack(ctl.version or 0, ctl.schema_id or 0, now)
+                return
+            if ctl.code is ControlCode.EVENT and ctl.event in (
+                EventCode.BOOT,
+                EventCode.NOT_ACTIVE,
+            ):
+                # Sent from a fresh device state: its SEQ says nothing about ours.
+                self._last_rx = now
+                self.device_events[EventCode(ctl.event).name.lower()] += 1
+                if self.state is LinkState.ACTIVE:
+                    self._reboot_detected(EventCode(ctl.event).name, now)
+                elif self._was_active:
+                    self._pending_reboot = True
+                return
+        if self.state is not LinkState.ACTIVE:
+            return  # stale traffic from before the handshake
+        self.rx_packets += 1
+        self._last_rx = now
+        if not self._check_seq(packet.seq, now):
+            return
+        if packet.type is PacketType.DATA:
+            try:
+                msg = parse_out(packet.payload)
+            except ProtocolError as error:
+                log.warning("%s: %s", self.transport.name, error)
+                return
+            self._listener.link_message(msg)
+        elif packet.type is PacketType.COMMAND:
+            self.direction_drops += 1  # PROTOCOL.md 4: a COMMAND reaching the host
+        else:
+            self._control(packet)
+
+    def _check_seq(self, seq: int, now: float) -> bool:
+        d = (seq - self._rx_expected) & 0xFF
+        self._rx_expected = (seq + 1) & 0xFF
+        if d == 0:
+            return True
+        if d <= SEQ_DESYNC_THRESHOLD:
+            self.seq_lost += d
+            if d > SEQ_TOLERANCE:
+                log.warning("%s: %d packets from the device lost", self.transport.name, d)
+            return True
+        self.seq_desyncs += 1
+        log.warning("%s: SEQ desync (got %d); handshaking again", self.transport.name, seq)
+        self._restart("desync", now)
+        return False
+
+    def _control(self, packet: Packet) -> None:
+        try:
+            ctl = parse_control(packet.payload)
+        except ProtocolError:  # pragma: no cover - parsed once already
+            return
+        if ctl.code is not ControlCode.EVENT:
+            return  # HEARTBEAT: liveness only (already noted); RESET: not ours to answer
+        if ctl.event == EventCode.DESYNC:
+            self.device_events["desync"] += 1
+            self._notify(Event(EventKind.DEVICE_DESYNC, "the device saw a SEQ desync"))
+        elif ctl.event == EventCode.RX_OVERFLOW:
+            self.device_events["rx_overflow"] += 1
+            self._notify(Event(EventKind.RX_OVERFLOW, "the device dropped an over-long frame"))
+        else:
+            log.info("%s: unknown device event %s", self.transport.name, ctl.event)
+
+    def _reset_ack(self, version: int, schema_id: int, now: float) -> None:
+        self.device_version, self.device_schema_id = version, schema_id
+        self._rx_expected = 1
+        self._last_rx = now
+        if self.state is not LinkState.WAIT_ACK:
+            return  # the twin of a resent RESET: SEQ re-synchronised, nothing else
+        if version != self.version:
+            self._fail(VersionMismatchError(self.version, version))
+            return
+        if schema_id != self.schema_id:
+            self._fail(SchemaMismatchError(self.schema_id, schema_id))
+            return
+        self.handshakes += 1
+        self.state = LinkState.ACTIVE
+        self.down_error = None
+        rebooted, self._pending_reboot = self._pending_reboot, False
+        first = not self._was_active
+        self._was_active = True
+        log.info("%s: link active (rebooted=%s)", self.transport.name, rebooted)
+        if not first:
+            self._notify(
+                Event(
+                    EventKind.CONNECTED,
+                    "link up again" + (" (device rebooted)" if rebooted else ""),
+                    {"rebooted": rebooted, "handshakes": self.handshakes},
+                )
+            )
+        self._listener.link_up(rebooted)
+        self._opened.set()

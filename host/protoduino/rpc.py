@@ -1,0 +1,452 @@
+"""Requests (PROTOCOL.md section 7): message ids, Acks, retransmission, window, ping.
+
+One transaction table, one lock. A call is submitted from any thread and
+waited on with a bound; everything timed (retransmission after ACK_TIMEOUT,
+giving up after MAX_RETRIES, the 1 Hz Ping) runs in :meth:`link_tick` on the
+I/O thread.
+
+* Message ids start at a random value, increment, wrap and skip 0. A
+  retransmission reuses its id (the device's dedupe window re-acks it without
+  executing it twice).
+* An Ack is matched by id only. An Ack for a call already finished (the twin
+  of a retransmission, or after the call timed out) is counted as late; one
+  for an id never sent is counted as unknown. Both are dropped: a stale reply
+  never completes the wrong call.
+* Up to ``window`` calls are in flight at once, so a burst is not paced by the
+  round trip; the device answers them in order.
+* While the link is down, nothing is sent: calls wait, bounded by their
+  deadline (``call_timeout``), and fail with the link's own error (port lost,
+  device silent) if it does not come back in time. When it comes back, calls
+  that were in flight are sent again with their ids.
+* Session restore: when the link comes back after a reboot, the messages from
+  ``restore_provider`` are sent first, one at a time and in order (an Init
+  must land before its Control), and user calls are held until they are done.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import secrets
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from .constants import ACK_TIMEOUT, MAX_PAYLOAD, MAX_RETRIES, PING_INTERVAL
+from .errors import (
+    AckTimeoutError,
+    BoardClosedError,
+    CommandRejectedError,
+    PayloadTooLargeError,
+    ProtoduinoError,
+)
+from .events import Event, EventKind
+from .link import Link
+from .messages import ArduinoIn, ArduinoOut, status_name
+
+log = logging.getLogger(__name__)
+
+#: How many finished ids are remembered to tell a late Ack from an unknown one.
+FINISHED_MEMORY = 256
+
+Ack = Any  # protoduino_pb2.Ack (protobuf message classes are dynamic)
+
+
+class Call:
+    """One command on its way; :meth:`wait` for its Ack."""
+
+    __slots__ = (
+        "ack",
+        "attempts",
+        "deadline",
+        "done",
+        "error",
+        "kind",
+        "message_id",
+        "on_done",
+        "payload",
+        "rtt",
+        "sent_at",
+        "submitted",
+    )
+
+    def __init__(
+        self,
+        message_id: int,
+        kind: str,
+        payload: bytes,
+        deadline: float,
+        on_done: Callable[[Call], None] | None,
+    ) -> None:
+        self.message_id = message_id
+        self.kind = kind
+        self.payload = payload
+        self.submitted = time.monotonic()
+        self.deadline = deadline
+        self.on_done = on_done
+        self.attempts = 0
+        self.sent_at = 0.0
+        self.rtt: float | None = None
+        self.ack: Ack | None = None
+        self.error: ProtoduinoError | None = None
+        self.done = threading.Event()
+
+    def result(self) -> Ack:
+        """The Ack (status OK), or raise the call's error. Call after ``done``."""
+        if self.error is not None:
+            raise self.error
+        assert self.ack is not None
+        return self.ack
+
+
+MessageHook = Callable[[ArduinoOut], None]
+RestoreProvider = Callable[[], list[ArduinoIn]]
+
+
+class Rpc:
+    """The transaction table over one :class:`Link`; see the module docstring."""
+
+    def __init__(
+        self,
+        *,
+        notify: Callable[[Event], None],
+        ack_timeout: float = ACK_TIMEOUT,
+        max_retries: int = MAX_RETRIES,
+        window: int = 4,
+        ping: bool = True,
+        ping_interval: float = PING_INTERVAL,
+        link_wait: float = 5.0,
+    ) -> None:
+        if ack_timeout <= 0 or max_retries < 0 or window < 1:
+            raise ValueError("ack_timeout > 0, max_retries >= 0 and window >= 1 are required")
+        self.link: Link | None = None
+        self._notify = notify
+        self.ack_timeout = ack_timeout
+        self.max_retries = max_retries
+        self.window = window
+        self.ping_interval = ping_interval
+        #: Longest a call waits for the link to come back before it fails.
+        self.link_wait = link_wait
+        self.message_hook: MessageHook | None = None
+        self.restore_provider: RestoreProvider | None = None
+        self._lock = threading.Lock()
+        self._next_id = secrets.randbelow(0xFFFFFFFF) + 1
+        self._calls: dict[int, Call] = {}
+        self._inflight: dict[int, Call] = {}
+        self._urgent: collections.deque[Call] = collections.deque()  # pings
+        self._pending: collections.deque[Call] = collections.deque()  # user calls
+        self._restore: collections.deque[ArduinoIn] = collections.deque()
+        self._restore_call: Call | None = None
+        self._restore_failed: list[str] = []
+        self._restore_count = 0
+        self._holding = False
+        self._finished: collections.deque[int] = collections.deque(maxlen=FINISHED_MEMORY)
+        self._finished_set: set[int] = set()
+        self._closed = False
+        self._pinging = ping
+        self._next_ping = 0.0
+        self._ping_call: Call | None = None
+        # Counters
+        self.commands = 0
+        self.acks = 0
+        self.retransmits = 0
+        self.timeouts = 0
+        self.rejected = 0
+        self.late_acks = 0
+        self.unknown_acks = 0
+        self.pings = 0
+        self.ping_failures = 0
+        self.rtt: float | None = None
+
+    def attach(self, link: Link) -> None:
+        self.link = link
+        link.expect_traffic = self._expect_traffic
+
+    @property
+    def call_timeout(self) -> float:
+        """The longest any call may take: every retry plus waiting for the link."""
+        return self.ack_timeout * (self.max_retries + 1) + self.link_wait
+
+    # --- pinging ------------------------------------------------------------------
+
+    @property
+    def pinging(self) -> bool:
+        return self._pinging
+
+    @pinging.setter
+    def pinging(self, on: bool) -> None:
+        with self._lock:
+            self._pinging = bool(on)
+            self._next_ping = 0.0  # resuming: ping at once, the failsafe may be close
+
+    def _expect_traffic(self) -> bool:
+        return self._pinging or bool(self._calls)
+
+    # --- submitting (any thread) ------------------------------------------------------
+
+    def submit(
+        self,
+        msg: ArduinoIn,
+        *,
+        urgent: bool = False,
+        on_done: Callable[[Call], None] | None = None,
+    ) -> Call:
+        """Queue one command (its message_id is assigned here) and return its Call."""
+        with self._lock:
+            if self._closed:
+                raise BoardClosedError("the board is closed")
+            call = self._new_call(msg, on_done)
+            (self._urgent if urgent else self._pending).append(call)
+            self._pump(time.monotonic())
+        return call
+
+    def call(self, msg: ArduinoIn) -> Ack:
+        """Send ``msg`` and wait for its Ack; raises on rejection, timeout or close."""
+        call = self.submit(msg)
+        return self.wait(call)
+
+    def wait(self, call: Call) -> Ack:
+        # The I/O thread fails every call by its deadline; the margin only
+        # guards against that thread having died.
+        bound = call.deadline - time.monotonic() + self.ack_timeout * (self.max_retries + 2) + 1.0
+        if not call.done.wait(max(0.0, bound)):
+            with self._lock:
+                self._finish(
+                    call, error=AckTimeoutError(f"{call.kind} never completed (I/O thread stuck?)")
+                )
+        return call.result()
+
+    def _new_call(self, msg: ArduinoIn, on_done: Callable[[Call], None] | None) -> Call:
+        mid = self._next_id
+        self._next_id = self._next_id % 0xFFFFFFFF + 1  # 1 .. 2**32-1, never 0
+        msg.message_id = mid
+        payload = msg.SerializeToString()
+        if len(payload) > MAX_PAYLOAD:
+            raise PayloadTooLargeError(
+                f"command of {len(payload)} bytes exceeds MAX_PAYLOAD ({MAX_PAYLOAD})"
+            )
+        kind = msg.WhichOneof("data") or "empty"
+        call = Call(mid, kind, payload, time.monotonic() + self.call_timeout, on_done)
+        self._calls[mid] = call
+        self.commands += 1
+        return call
+
+    # --- the I/O thread ---------------------------------------------------------------
+
+    def _transmit(self, call: Call, now: float) -> None:
+        assert self.link is not None
+        if not self.link.send_command(call.payload):
+            return
+        if call.attempts:
+            self.retransmits += 1
+            log.debug("retransmitting %s id=%d", call.kind, call.message_id)
+        call.attempts += 1
+        call.sent_at = now
+        self._inflight[call.message_id] = call
+
+    def _pump(self, now: float) -> None:
+        """Send what may be sent now (lock held)."""
+        link = self.link
+        if link is None or not link.active or self._closed:
+            return
+        if self._holding:
+            if self._restore_call is None and self._restore:
+                msg = self._restore.popleft()
+                self._restore_call = self._new_call(msg, self._restore_step)
+                self._transmit(self._restore_call, now)
+            queues: tuple[collections.deque[Call], ...] = (self._urgent,)
+        else:
+            queues = (self._urgent, self._pending)
+        for queue in queues:
+            while queue and len(self._inflight) < self.window:
+                self._transmit(queue.popleft(), now)
+
+    def _finish(
+        self, call: Call, *, ack: Ack | None = None, error: ProtoduinoError | None = None
+    ) -> None:
+        """Complete a call (lock held); its on_done runs now, on this thread."""
+        if call.done.is_set():
+            return
+        self._calls.pop(call.message_id, None)
+        self._inflight.pop(call.message_id, None)
+        for queue in (self._urgent, self._pending):
+            if call in queue:
+                queue.remove(call)
+        self._finished.append(call.message_id)
+        if len(self._finished_set) >= FINISHED_MEMORY:
+            self._finished_set = set(self._finished)
+        self._finished_set.add(call.message_id)
+        call.ack, call.error = ack, error
+        call.done.set()
+        if call.on_done is not None:
+            try:
+                call.on_done(call)
+            except Exception:
+                log.exception("completion callback failed")
+
+    def _timeout_error(self, call: Call) -> ProtoduinoError:
+        link = self.link
+        if link is not None and not link.active and link.down_error is not None:
+            return link.down_error
+        frames = link.transport.recent_frames() if link is not None else ()
+        return AckTimeoutError(
+            f"no Ack for {call.kind} (message_id {call.message_id}) after {call.attempts} "
+            f"transmissions, {self.ack_timeout:g} s each",
+            recent_frames=frames,
+        )
+
+    def link_tick(self, now: float) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            for call in list(self._inflight.values()):
+                if now - call.sent_at < self.ack_timeout:
+                    continue
+                if call.attempts > self.max_retries or now >= call.deadline:
+                    self.timeouts += 1
+                    self._finish(call, error=self._timeout_error(call))
+                else:
+                    del self._inflight[call.message_id]
+                    self._transmit(call, now)
+            for queue in (self._urgent, self._pending):
+                for call in [c for c in queue if now >= c.deadline]:
+                    self.timeouts += 1
+                    self._finish(call, error=self._timeout_error(call))
+            self._maybe_ping(now)
+            self._pump(now)
+
+    def _maybe_ping(self, now: float) -> None:
+        link = self.link
+        if not self._pinging or link is None or not link.active or self._ping_call is not None:
+            return
+        if now < self._next_ping:
+            return
+        self._next_ping = now + self.ping_interval
+        msg = ArduinoIn()
+        msg.ping.SetInParent()
+        self._ping_call = self._new_call(msg, self._ping_done)
+        self._urgent.append(self._ping_call)
+        self.pings += 1
+
+    def _ping_done(self, call: Call) -> None:
+        self._ping_call = None
+        if call.error is not None:
+            self.ping_failures += 1
+            log.debug("automatic ping failed: %s", call.error)
+
+    def link_message(self, msg: ArduinoOut) -> None:
+        if msg.WhichOneof("data") != "ack":
+            if self.message_hook is not None:
+                self.message_hook(msg)
+            return
+        ack = msg.ack
+        with self._lock:
+            call = self._calls.get(ack.message_id)
+            if call is None or call.done.is_set():
+                if ack.message_id in self._finished_set:
+                    self.late_acks += 1
+                else:
+                    self.unknown_acks += 1
+                    log.debug("Ack for unknown message_id %d dropped", ack.message_id)
+                return
+            self.acks += 1
+            now = time.monotonic()
+            if call.sent_at:
+                call.rtt = now - call.sent_at
+            if ack.status == 0:
+                if call.kind == "ping":
+                    self.rtt = call.rtt
+                self._finish(call, ack=ack)
+            else:
+                self.rejected += 1
+                self._finish(
+                    call,
+                    error=CommandRejectedError(
+                        ack.status,
+                        f"{call.kind} rejected by the device: {status_name(ack.status)}",
+                    ),
+                )
+            self._pump(now)
+
+    def link_up(self, rebooted: bool) -> None:
+        with self._lock:
+            self._requeue_inflight()
+            if rebooted and self.restore_provider is not None:
+                try:
+                    msgs = self.restore_provider()
+                except Exception:
+                    log.exception("restore provider failed")
+                    msgs = []
+                self._restore = collections.deque(msgs)
+                self._restore_failed = []
+                self._restore_count = len(msgs)
+                if self._restore_call is not None:  # an interrupted restore: start over
+                    self._finish(self._restore_call, error=BoardClosedError("restore restarted"))
+                    self._restore_call = None
+                self._holding = bool(msgs)
+                if not msgs:
+                    self._restored()
+            self._next_ping = 0.0
+            self._pump(time.monotonic())
+
+    def link_down(self, reason: str) -> None:
+        with self._lock:
+            self._requeue_inflight()
+
+    def _requeue_inflight(self) -> None:
+        """Calls in flight go back to the front of their queues, oldest first, to be resent."""
+        calls = sorted(self._inflight.values(), key=lambda c: c.submitted, reverse=True)
+        self._inflight.clear()
+        for call in calls:
+            call.attempts = 0  # a fresh set of retries once the link is back
+            if call is self._restore_call:
+                self._restore_call = None
+                self._restore.appendleft(_reparse(call.payload))
+                self._calls.pop(call.message_id, None)
+            elif call.kind == "ping" and call is self._ping_call:
+                self._urgent.appendleft(call)
+            else:
+                self._pending.appendleft(call)
+
+    def _restore_step(self, call: Call) -> None:
+        if call is not self._restore_call:
+            return
+        self._restore_call = None
+        if call.error is not None:
+            self._restore_failed.append(f"{call.kind}: {call.error}")
+        if not self._restore:
+            self._holding = False
+            self._restored()
+
+    def _restored(self) -> None:
+        failed = list(self._restore_failed)
+        text = f"session restored: {self._restore_count} commands replayed"
+        if failed:
+            text += f", {len(failed)} failed ({'; '.join(failed)})"
+            log.warning(text)
+        else:
+            log.info(text)
+        self._notify(
+            Event(EventKind.RESTORED, text, {"replayed": self._restore_count, "failed": failed})
+        )
+
+    # --- closing ------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Fail every outstanding call with BoardClosedError; idempotent."""
+        with self._lock:
+            self._closed = True
+            for call in list(self._calls.values()):
+                self._finish(call, error=BoardClosedError(f"the board was closed ({call.kind})"))
+            self._restore.clear()
+
+    def outstanding(self) -> int:
+        with self._lock:
+            return len(self._calls)
+
+
+def _reparse(payload: bytes) -> ArduinoIn:
+    msg = ArduinoIn()
+    msg.ParseFromString(payload)
+    return msg

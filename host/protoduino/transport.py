@@ -1,0 +1,350 @@
+"""Transport: one pyserial port and the one I/O thread that owns it.
+
+The thread opens the port, reads in bulk and feeds the incremental
+:class:`~protoduino.framing.StreamDecoder`, writes the queued packets
+(CONTROL ahead of COMMAND), and calls its listener's ``transport_tick`` about
+every ``TICK`` seconds so that the layers above can run their timers
+(handshake backoff, watchdog, retransmission, ping) on the same thread,
+without locks around the port and without threads of their own.
+
+Any pyserial URL works (``/dev/ttyACM0``, ``socket://``, ``rfc2217://``,
+``spy://``, ``loop://``). When the port has a file descriptor (serial ports,
+sockets) the thread sleeps in ``select`` on it and on a wake-up pipe, so a
+queued write leaves at once; otherwise it polls with short timeout reads.
+
+If the port disappears (USB unplugged, the simulated board's pseudo-terminal
+gone) the thread closes it, tells the listener, and keeps trying to reopen it
+with a bounded backoff until the transport is closed.
+
+The transmit SEQ counter lives here because PROTOCOL.md section 6 ties it to
+the write itself: it advances only after the whole frame was written, and a
+frame that failed to write keeps its SEQ.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import logging
+import os
+import select
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import serial
+
+from .constants import PacketType
+from .errors import TransportError
+from .framing import DELIMITER, StreamDecoder, frame_packet
+from .packets import BadFrame, Packet
+
+log = logging.getLogger(__name__)
+
+#: Longest the I/O thread sleeps between timer ticks (seconds).
+TICK = 0.02
+#: Bytes asked for per read; reads return whatever is there, up to this.
+READ_CHUNK = 4096
+#: A write that cannot complete within this is abandoned (port stuck).
+WRITE_TIMEOUT = 1.0
+#: Reopen backoff after the port was lost: first and largest delay (seconds).
+REOPEN_FIRST = 0.05
+REOPEN_MAX = 1.0
+#: Frames kept for diagnostics (attached to timeout errors).
+RECENT_FRAMES = 32
+
+
+class TransportListener(Protocol):
+    """What the link implements; every method runs on the I/O thread."""
+
+    def transport_opened(self, reopened: bool) -> None: ...
+
+    def transport_lost(self, error: Exception) -> None: ...
+
+    def transport_received(self, items: list[Packet | BadFrame]) -> None: ...
+
+    def transport_tick(self, now: float) -> None: ...
+
+
+@dataclass(frozen=True, slots=True)
+class FrameRecord:
+    """One frame seen by the transport, for the recent-frames ring buffer and monitors."""
+
+    t: float  # time.monotonic()
+    direction: str  # "tx" or "rx"
+    item: Packet | BadFrame
+
+    def describe(self) -> str:
+        """A short human-readable line (the payload as hex)."""
+        if isinstance(self.item, BadFrame):
+            return f"{self.t:.3f} {self.direction} BAD({self.item.reason}) {self.item.raw.hex()}"
+        p = self.item
+        return f"{self.t:.3f} {self.direction} {p.type.name} seq={p.seq} {p.payload.hex()}"
+
+
+#: A monitor sees every frame in both directions (on the I/O thread: be quick).
+FrameMonitor = Callable[[FrameRecord], None]
+
+
+@dataclass(slots=True)
+class _Outgoing:
+    ptype: PacketType
+    payload: bytes
+    reset_seq: bool  # RESET/RESET_ACK: sent with SEQ 0, the counter is 1 afterwards
+
+
+class Transport:
+    """A pyserial port driven by one I/O thread; see the module docstring."""
+
+    def __init__(self, url: str, *, baudrate: int = 115200, name: str | None = None) -> None:
+        self.url = url
+        self.baudrate = baudrate
+        self.name = name or url
+        self._port: Any = None
+        self._listener: TransportListener | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._qlock = threading.Lock()
+        self._control: collections.deque[_Outgoing] = collections.deque()
+        self._data: collections.deque[_Outgoing] = collections.deque()
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_r, False)
+        os.set_blocking(self._wake_w, False)
+        self._decoder = StreamDecoder()
+        self._tx_seq = 0
+        self._monitors: list[FrameMonitor] = []
+        self._recent: collections.deque[FrameRecord] = collections.deque(maxlen=RECENT_FRAMES)
+        self.connected = False
+        self.last_error: Exception | None = None
+        # Counters (read without a lock: single ints written by the I/O thread).
+        self.rx_bytes = 0
+        self.tx_bytes = 0
+        self.tx_packets = 0
+        self.write_errors = 0
+        self.opens = 0
+
+    # --- life cycle ---------------------------------------------------------
+
+    def start(self, listener: TransportListener) -> None:
+        """Open the port (raising :class:`TransportError` if it cannot) and start the thread."""
+        if self._thread is not None:
+            raise RuntimeError("transport already started")
+        self._listener = listener
+        self._open()  # the first failure is the caller's: a wrong path must not retry forever
+        self._thread = threading.Thread(
+            target=self._run, name=f"protoduino-io[{self.name}]", daemon=True
+        )
+        self._thread.start()
+
+    def close(self, timeout: float = 2.0) -> None:
+        """Stop the thread and close the port; idempotent."""
+        self._stop.set()
+        self._wake()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+            if thread.is_alive():  # pragma: no cover - a wedged driver
+                log.error("%s: I/O thread did not stop within %.1f s", self.name, timeout)
+        if thread is None or not thread.is_alive():
+            self._close_port()
+            for fd in (self._wake_r, self._wake_w):
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+            self._wake_r = self._wake_w = -1
+
+    @property
+    def closed(self) -> bool:
+        return self._stop.is_set()
+
+    # --- sending ------------------------------------------------------------
+
+    def send(self, ptype: PacketType, payload: bytes, *, reset_seq: bool = False) -> None:
+        """Queue one packet; CONTROL packets go ahead of anything queued."""
+        item = _Outgoing(ptype, payload, reset_seq)
+        with self._qlock:
+            (self._control if ptype is PacketType.CONTROL else self._data).append(item)
+        self._wake()
+
+    def clear_queue(self) -> None:
+        """Drop every queued packet (the link was reset; they are stale)."""
+        with self._qlock:
+            self._control.clear()
+            self._data.clear()
+
+    def add_monitor(self, monitor: FrameMonitor) -> None:
+        self._monitors.append(monitor)
+
+    def remove_monitor(self, monitor: FrameMonitor) -> None:
+        with contextlib.suppress(ValueError):
+            self._monitors.remove(monitor)
+
+    def recent_frames(self) -> tuple[str, ...]:
+        """The last frames in both directions, oldest first, as readable lines."""
+        return tuple(r.describe() for r in list(self._recent))
+
+    @property
+    def tx_seq(self) -> int:
+        return self._tx_seq
+
+    @property
+    def decoder_counts(self) -> dict[str, int]:
+        return dict(self._decoder.counts)
+
+    # --- the I/O thread -----------------------------------------------------
+
+    def _wake(self) -> None:
+        if self._wake_w >= 0:
+            with contextlib.suppress(OSError):  # pipe full: the thread is awake anyway
+                os.write(self._wake_w, b"x")
+
+    def _open(self) -> None:
+        try:
+            port = serial.serial_for_url(
+                self.url, baudrate=self.baudrate, timeout=0, write_timeout=WRITE_TIMEOUT
+            )
+            self._port = port
+            # PROTOCOL.md 2: a lone 0x00 flushes the receiver's half-filled buffer.
+            self._write_raw(DELIMITER)
+        except (serial.SerialException, OSError, ValueError) as error:
+            self._close_port()
+            raise TransportError(f"cannot open {self.url}: {error}") from error
+        self._decoder.reset()
+        self.connected = True
+        self.opens += 1
+
+    def _close_port(self) -> None:
+        port, self._port = self._port, None
+        self.connected = False
+        if port is not None:
+            with contextlib.suppress(Exception):
+                port.close()
+
+    def _fileno(self) -> int | None:
+        try:
+            fd = self._port.fileno()
+        except Exception:  # loop://, rfc2217:// and others have none
+            return None
+        return fd if isinstance(fd, int) and fd >= 0 else None
+
+    def _run(self) -> None:
+        listener = self._listener
+        assert listener is not None
+        reopen_delay = REOPEN_FIRST
+        next_reopen = 0.0
+        try:
+            listener.transport_opened(False)
+            while not self._stop.is_set():
+                now = time.monotonic()
+                if self._port is None:
+                    if now >= next_reopen:
+                        try:
+                            self._open()
+                        except TransportError as error:
+                            log.debug("%s: reopen failed: %s", self.name, error)
+                            next_reopen = now + reopen_delay
+                            reopen_delay = min(reopen_delay * 2, REOPEN_MAX)
+                        else:
+                            log.warning("%s: port reopened", self.name)
+                            reopen_delay = REOPEN_FIRST
+                            listener.transport_opened(True)
+                            continue
+                    listener.transport_tick(now)
+                    self._stop.wait(min(TICK * 5, max(0.0, next_reopen - time.monotonic())))
+                    continue
+                try:
+                    self._flush_writes()
+                    data = self._read()
+                except (serial.SerialException, OSError) as error:
+                    self._lost(error)
+                    next_reopen = time.monotonic() + REOPEN_FIRST
+                    reopen_delay = REOPEN_FIRST * 2
+                    continue
+                if data:
+                    self.rx_bytes += len(data)
+                    items = self._decoder.feed(data)
+                    if items:
+                        for item in items:
+                            self._record("rx", item)
+                        listener.transport_received(items)
+                listener.transport_tick(time.monotonic())
+        except Exception:  # pragma: no cover - a bug above must not die silently
+            log.exception("%s: I/O thread crashed", self.name)
+            self.last_error = TransportError(f"{self.name}: I/O thread crashed")
+        finally:
+            self._close_port()
+
+    def _lost(self, error: Exception) -> None:
+        log.warning("%s: port lost: %s", self.name, error)
+        self.last_error = TransportError(f"port {self.url} lost ({error}); reopening")
+        self._close_port()
+        self.clear_queue()
+        assert self._listener is not None
+        self._listener.transport_lost(self.last_error)
+
+    def _read(self) -> bytes:
+        fd = self._fileno()
+        if fd is None:
+            self._port.timeout = TICK / 2
+            return bytes(self._port.read(READ_CHUNK))
+        try:
+            ready, _, _ = select.select([fd, self._wake_r], [], [], TICK)
+        except ValueError as error:  # fd closed under us
+            raise OSError(str(error)) from error
+        if self._wake_r in ready:
+            with contextlib.suppress(OSError):
+                os.read(self._wake_r, 4096)
+        if fd in ready:
+            # timeout=0: one os.read of whatever is there, never byte by byte;
+            # a vanished device raises SerialException here.
+            return bytes(self._port.read(READ_CHUNK))
+        return b""
+
+    def _next(self) -> _Outgoing | None:
+        with self._qlock:
+            if self._control:
+                return self._control[0]
+            if self._data:
+                return self._data[0]
+            return None
+
+    def _pop(self, item: _Outgoing) -> None:
+        with self._qlock:
+            for q in (self._control, self._data):
+                if q and q[0] is item:
+                    q.popleft()
+                    return
+
+    def _flush_writes(self) -> None:
+        while (item := self._next()) is not None:
+            seq = 0 if item.reset_seq else self._tx_seq
+            frame = frame_packet(item.ptype, seq, item.payload)
+            if item.reset_seq:
+                frame = DELIMITER + frame  # flush the device's receiver before a reset
+            try:
+                self._write_raw(frame)
+            except serial.SerialTimeoutException:
+                # Stuck port: drop this packet (the layers above retransmit) but keep
+                # its SEQ for the next one, as PROTOCOL.md 6 asks.
+                self.write_errors += 1
+                log.warning("%s: write timed out; packet dropped", self.name)
+                self._pop(item)
+                return
+            self._pop(item)
+            self._tx_seq = 1 if item.reset_seq else (seq + 1) & 0xFF
+            self.tx_packets += 1
+            self._record("tx", Packet(item.ptype, seq, item.payload))
+
+    def _write_raw(self, data: bytes) -> None:
+        self._port.write(data)
+        self.tx_bytes += len(data)
+
+    def _record(self, direction: str, item: Packet | BadFrame) -> None:
+        rec = FrameRecord(time.monotonic(), direction, item)
+        self._recent.append(rec)
+        for monitor in list(self._monitors):
+            try:
+                monitor(rec)
+            except Exception:
+                log.exception("%s: frame monitor failed", self.name)

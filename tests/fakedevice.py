@@ -1,0 +1,276 @@
+"""A scripted fake device in Python, on a pseudo-terminal, for what the real one won't do.
+
+The host opens ``fake.port``, a symlink to the pty's slave, exactly as it would
+open a real board; the fake speaks the wire protocol on the master side from
+its own thread. It follows the device side of PROTOCOL.md closely enough for
+the host (RESET/RESET_ACK, SEQ, NOT_ACTIVE, one Ack per command, the dedupe
+window, a pin table so that a reboot forgets the configuration), and every
+reply goes through ``handler`` so a test can drop, duplicate, delay or corrupt
+any of them. ``unplug()``/``replug()`` make the pty disappear and come back
+under the same path, as a USB cable or a killed simulator would.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import os
+import select
+import threading
+import time
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from protoduino._generated.schema_id import SCHEMA_ID
+from protoduino.constants import DEDUPE_WINDOW, ControlCode, EventCode, PacketType
+from protoduino.framing import StreamDecoder, frame_packet
+from protoduino.messages import ArduinoIn, ArduinoOut, Status
+from protoduino.packets import Packet, event_payload, parse_control, reset_ack_payload
+
+Reply = list[ArduinoOut]
+
+
+@dataclass
+class Received:
+    """One COMMAND the fake received (decoded), with its SEQ and arrival time."""
+
+    seq: int
+    msg: Any  # ArduinoIn
+    t: float
+
+    @property
+    def kind(self) -> str:
+        return str(self.msg.WhichOneof("data"))
+
+
+def ack(message_id: int, status: int = Status.STATUS_OK) -> Any:
+    out = ArduinoOut()
+    out.ack.message_id = message_id
+    out.ack.status = status  # type: ignore[assignment]
+    return out
+
+
+class FakeDevice:
+    """See the module docstring. Use as a context manager."""
+
+    def __init__(
+        self,
+        directory: Path,
+        *,
+        version: int = 1,
+        schema_id: int = SCHEMA_ID,
+        answer_reset: bool = True,
+    ) -> None:
+        self.port = str(directory / "fake-tty")
+        self.version = version
+        self.schema_id = schema_id
+        self.answer_reset = answer_reset
+        #: Replies to a decoded, active COMMAND; replace to script faults.
+        self.handler: Callable[[Any], Reply] = self.default_reply
+        self.received: list[Received] = []
+        self.resets = 0
+        self.raw_rx = bytearray()
+        self._cond = threading.Condition()
+        self._active = False
+        self._tx_seq = 0
+        self._decoder = StreamDecoder()
+        self._dedupe: collections.OrderedDict[int, int] = collections.OrderedDict()
+        #: pin -> "servo" | "digital"; forgotten on reboot, like a real device.
+        self.pins: dict[int, str] = {}
+        self.values: dict[int, int] = {}
+        self._later: list[tuple[float, bytes]] = []
+        self._master = -1
+        self._slave = -1
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._wlock = threading.Lock()
+
+    # --- life cycle -------------------------------------------------------------
+
+    def __enter__(self) -> FakeDevice:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def start(self) -> None:
+        self.replug()
+        self._thread = threading.Thread(target=self._run, name="fake-device", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        self.unplug()
+
+    def unplug(self) -> None:
+        """The pty disappears: the host's reads fail, the path is gone."""
+        with self._wlock:
+            for fd in (self._master, self._slave):
+                if fd >= 0:
+                    os.close(fd)
+            self._master = self._slave = -1
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.port)
+
+    def replug(self) -> None:
+        """A new pty under the same path; the device boots (configuration forgotten)."""
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        tty.setraw(master)
+        os.set_blocking(master, False)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.port)
+        os.symlink(os.ttyname(slave), self.port)
+        with self._wlock:
+            self._master, self._slave = master, slave
+        self._power_up()
+
+    def reboot(self) -> None:
+        """Restart the device on the same pty: state forgotten, EVENT BOOT sent."""
+        self._power_up()
+
+    def _power_up(self) -> None:
+        with self._cond:
+            self._active = False
+            self._tx_seq = 0
+            self._decoder.reset()
+            self._dedupe.clear()
+            self.pins.clear()
+            self.values.clear()
+        self.send_control(event_payload(EventCode.BOOT))
+
+    # --- sending ------------------------------------------------------------------
+
+    def send_raw(self, data: bytes, delay: float = 0.0) -> None:
+        if delay > 0:
+            with self._cond:
+                self._later.append((time.monotonic() + delay, data))
+            return
+        with self._wlock:
+            if self._master >= 0:
+                with contextlib.suppress(OSError):
+                    os.write(self._master, data)
+
+    def send_control(self, payload: bytes, *, seq: int | None = None) -> None:
+        self.send_raw(frame_packet(PacketType.CONTROL, self._next_seq(seq), payload))
+
+    def send_data(self, msg: Any, *, delay: float = 0.0, seq: int | None = None) -> None:
+        payload = msg.SerializeToString()
+        self.send_raw(frame_packet(PacketType.DATA, self._next_seq(seq), payload), delay)
+
+    def _next_seq(self, seq: int | None) -> int:
+        with self._cond:
+            if seq is not None:
+                return seq
+            seq, self._tx_seq = self._tx_seq, (self._tx_seq + 1) & 0xFF
+            return seq
+
+    # --- observing ------------------------------------------------------------------
+
+    def commands(self, kind: str | None = None) -> list[Received]:
+        with self._cond:
+            return [r for r in self.received if kind is None or r.kind == kind]
+
+    def wait_for(self, predicate: Callable[[], bool], timeout: float = 5.0) -> bool:
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while not predicate():
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(min(left, 0.05))
+            return True
+
+    # --- the device --------------------------------------------------------------------
+
+    def default_reply(self, msg: Any) -> Reply:
+        """Ack OK after a minimal execution (pin table, values, ping echo, info)."""
+        mid = msg.message_id
+        kind = msg.WhichOneof("data")
+        if mid in self._dedupe and kind not in ("ping", "get_info"):
+            return [ack(mid, self._dedupe[mid])]
+        out = ack(mid)
+        if kind == "ping":
+            out.ack.ping_echo = msg.ping.payload
+        elif kind == "get_info":
+            info = out.ack.info
+            info.firmware_version = "0.1.0"
+            info.protocol_version = self.version
+            info.schema_id = self.schema_id
+            info.board = "fake"
+            info.num_pins = 20
+            info.max_servos = 8
+            info.reserved_pins.extend([0, 1])
+        elif kind in ("servo_init", "digital_init"):
+            init = getattr(msg, kind)
+            self.pins[init.pin] = kind.split("_")[0]
+        elif kind in ("servo_control", "digital_control"):
+            ctl = getattr(msg, kind)
+            if self.pins.get(ctl.pin) != kind.split("_")[0]:
+                out.ack.status = Status.STATUS_NOT_INITIALISED
+            else:
+                value = ctl.level if kind == "digital_control" else ctl.WhichOneof("value")
+                self.values[ctl.pin] = int(value if isinstance(value, bool) else getattr(ctl, value))
+        self._dedupe[mid] = out.ack.status
+        while len(self._dedupe) > DEDUPE_WINDOW:
+            self._dedupe.popitem(last=False)
+        return [out]
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with self._wlock:
+                master = self._master
+            now = time.monotonic()
+            with self._cond:
+                due = [d for t, d in self._later if t <= now]
+                self._later = [(t, d) for t, d in self._later if t > now]
+            for data in due:
+                self.send_raw(data)
+            if master < 0:
+                time.sleep(0.01)
+                continue
+            try:
+                ready, _, _ = select.select([master], [], [], 0.01)
+                data = os.read(master, 4096) if ready else b""
+            except (OSError, ValueError):
+                time.sleep(0.01)  # unplugged under us
+                continue
+            if data:
+                with self._cond:
+                    self.raw_rx += data
+                for item in self._decoder.feed(data):
+                    if isinstance(item, Packet):
+                        self._packet(item)
+
+    def _packet(self, packet: Packet) -> None:
+        if packet.type is PacketType.CONTROL:
+            ctl = parse_control(packet.payload)
+            if ctl.code is ControlCode.RESET:
+                with self._cond:
+                    self.resets += 1
+                    self._cond.notify_all()
+                if not self.answer_reset:
+                    return
+                with self._cond:
+                    self._active = True
+                    self._tx_seq = 0
+                self.send_control(reset_ack_payload(self.version, self.schema_id))
+            return
+        if packet.type is not PacketType.COMMAND:
+            return
+        if not self._active:
+            self.send_control(event_payload(EventCode.NOT_ACTIVE))
+            return
+        msg = ArduinoIn()
+        msg.ParseFromString(packet.payload)
+        with self._cond:
+            self.received.append(Received(packet.seq, msg, time.monotonic()))
+            self._cond.notify_all()
+        for out in self.handler(msg):
+            self.send_data(out)
