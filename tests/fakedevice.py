@@ -214,9 +214,10 @@ class FakeDevice:
             ctl = getattr(msg, kind)
             if self.pins.get(ctl.pin) != kind.split("_")[0]:
                 out.ack.status = Status.STATUS_NOT_INITIALISED
+            elif kind == "digital_control":
+                self.values[ctl.pin] = int(ctl.level)
             else:
-                value = ctl.level if kind == "digital_control" else ctl.WhichOneof("value")
-                self.values[ctl.pin] = int(value if isinstance(value, bool) else getattr(ctl, value))
+                self.values[ctl.pin] = getattr(ctl, str(ctl.WhichOneof("value")))
         self._dedupe[mid] = out.ack.status
         while len(self._dedupe) > DEDUPE_WINDOW:
             self._dedupe.popitem(last=False)
