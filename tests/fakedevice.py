@@ -30,7 +30,7 @@ from protoduino.framing import StreamDecoder, frame_packet
 from protoduino.messages import ArduinoIn, ArduinoOut, Status
 from protoduino.packets import Packet, event_payload, parse_control, reset_ack_payload
 
-Reply = list[ArduinoOut]
+Reply = list[Any]
 
 
 @dataclass

@@ -1,0 +1,211 @@
+"""Link layer against the scripted fake device: handshake, checks, SEQ, watchdog, events."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from fakedevice import FakeDevice, ack
+from protoduino import Board, EventKind
+from protoduino.constants import EventCode, PacketType
+from protoduino.framing import cobs_encode, frame_packet
+from protoduino.packets import build_packet, event_payload
+
+
+@pytest.fixture
+def fake(tmp_path: Path) -> Iterator[FakeDevice]:
+    with FakeDevice(tmp_path) as device:
+        yield device
+
+
+def events_of(board: Board) -> tuple[list[protoduino.Event], threading.Event]:
+    seen: list[protoduino.Event] = []
+    flag = threading.Event()
+
+    def callback(event: protoduino.Event) -> None:
+        seen.append(event)
+        flag.set()
+
+    board.on_event(callback)
+    return seen, flag
+
+
+def test_handshake_and_info(fake: FakeDevice) -> None:
+    with Board.open(fake.port) as board:
+        assert board.info.board == "fake"
+        assert board.info.num_pins == 20
+        assert board.info.reserved_pins == (0, 1)
+        assert board.stats.handshakes == 1
+        assert board.stats.state == "active"
+    assert fake.resets >= 1
+    assert fake.commands("get_info")
+
+
+def test_version_mismatch_names_both_versions(tmp_path: Path) -> None:
+    with FakeDevice(tmp_path, version=7), pytest.raises(protoduino.VersionMismatchError) as info:
+        Board.open(str(tmp_path / "fake-tty"))
+    assert info.value.host_version == 1
+    assert info.value.device_version == 7
+    assert "1" in str(info.value) and "7" in str(info.value)
+    assert isinstance(info.value, protoduino.LinkError)
+
+
+def test_schema_mismatch_names_both_fingerprints(tmp_path: Path) -> None:
+    with (
+        FakeDevice(tmp_path, schema_id=0x12345678) as fake,
+        pytest.raises(protoduino.SchemaMismatchError) as info,
+    ):
+        Board.open(fake.port)
+    text = str(info.value)
+    assert "0x12345678" in text
+    assert f"0x{protoduino.SCHEMA_ID:08X}" in text
+    assert "flash" in text
+
+
+def test_silent_device_fails_handshake_in_time_after_retries(tmp_path: Path) -> None:
+    with FakeDevice(tmp_path, answer_reset=False) as fake:
+        start = time.monotonic()
+        with pytest.raises(protoduino.HandshakeError) as info:
+            Board.open(fake.port, handshake_timeout=0.6)
+        elapsed = time.monotonic() - start
+        assert elapsed < 0.6 + 2.0  # bounded, never forever
+        assert fake.resets >= 3  # RESET resent with backoff: t=0, 0.1, 0.3, ...
+    assert "did not answer RESET" in str(info.value)
+
+
+def test_missing_port_is_a_transport_error(tmp_path: Path) -> None:
+    with pytest.raises(protoduino.TransportError) as info:
+        Board.open(str(tmp_path / "nothing-here"))
+    assert "nothing-here" in str(info.value)
+
+
+def test_garbage_and_partial_frames_are_dropped_and_counted(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ping=False) as board:
+
+        def noisy(msg: Any) -> list[Any]:
+            fake.send_raw(b"\x13\x37garbage\x00")  # not COBS-valid or a bad packet
+            good = frame_packet(PacketType.DATA, 5, b"\x08\x01")
+            fake.send_raw(good[: len(good) // 2])  # a partial frame, cut short ...
+            fake.send_raw(b"\x00")  # ... and ended by the delimiter
+            bad_crc = bytearray(build_packet(PacketType.DATA, 9, b"\x01"))
+            bad_crc[-1] ^= 0xFF
+            fake.send_raw(cobs_encode(bytes(bad_crc)) + b"\x00")
+            return fake.default_reply(msg)
+
+        fake.handler = noisy
+        assert board.ping(b"ok") >= 0
+        dropped = board.stats.dropped
+        assert sum(dropped.values()) >= 3
+        assert dropped.get("crc", 0) >= 1
+        # the link carries on
+        fake.handler = fake.default_reply
+        board.ping(b"again")
+
+
+def test_seq_gap_counts_lost_packets(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ping=False) as board:
+
+        def skipping(msg: Any) -> list[Any]:
+            fake._next_seq(None)  # three packets "lost" on the way
+            fake._next_seq(None)
+            fake._next_seq(None)
+            return fake.default_reply(msg)
+
+        fake.handler = skipping
+        board.ping()
+        assert board.stats.seq_lost == 3
+        assert board.stats.seq_desyncs == 0
+
+
+def test_seq_desync_rehandshakes(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ping=False) as board:
+        resets = fake.resets
+        mid = board._rpc._next_id  # the next call's id
+        fake.handler = lambda msg: []
+        out = ack(mid)
+        results: list[float] = []
+        worker = threading.Thread(target=lambda: results.append(board.ping()))
+        worker.start()
+        assert fake.wait_for(lambda: len(fake.commands("ping")) >= 1)
+        fake.send_data(out, seq=(fake._tx_seq + 100) & 0xFF)  # a jump backward/forward
+        assert fake.wait_for(lambda: fake.resets > resets)
+        fake.handler = fake.default_reply
+        worker.join(10)
+        assert board.stats.seq_desyncs == 1
+        assert len(results) == 1  # the call in flight was resent on the new link and answered
+        board.ping()
+
+
+def test_watchdog_rehandshakes_when_device_goes_silent(fake: FakeDevice) -> None:
+    with Board.open(fake.port) as board:
+        board._link.watchdog_timeout = 0.4
+        seen, _ = events_of(board)
+        resets = fake.resets
+        fake.handler = lambda msg: []
+        assert fake.wait_for(lambda: fake.resets > resets, timeout=5)
+        fake.handler = fake.default_reply
+        assert board.stats.watchdog_resets >= 1
+        board.ping()
+        assert any(
+            e.kind is EventKind.DISCONNECTED and e.details["reason"] == "watchdog" for e in seen
+        )
+
+
+def test_no_watchdog_while_pings_are_paused(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ping=False) as board:
+        board._link.watchdog_timeout = 0.2
+        resets = fake.resets
+        time.sleep(0.6)  # a quiet device is fine when the host asks nothing
+        assert fake.resets == resets
+        assert board.stats.watchdog_resets == 0
+
+
+def test_device_events_reach_callbacks(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ping=False) as board:
+        seen, _ = events_of(board)
+        fake.send_control(event_payload(EventCode.DESYNC))
+        fake.send_control(event_payload(EventCode.RX_OVERFLOW))
+        fake.send_control(event_payload(0x7E))  # unknown: logged, ignored
+        fake.send_raw(frame_packet(PacketType.COMMAND, fake._next_seq(None), b"\x08\x01"))
+        board.ping()
+        deadline = time.monotonic() + 2
+        while len(seen) < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        kinds = [e.kind for e in seen]
+        assert EventKind.DEVICE_DESYNC in kinds
+        assert EventKind.RX_OVERFLOW in kinds
+        stats = board.stats
+        assert stats.device_desyncs == 1
+        assert stats.device_rx_overflows == 1
+        assert stats.dropped.get("direction") == 1
+
+
+def test_not_active_means_rebooted(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ping=False) as board:
+        seen, _ = events_of(board)
+        fake.send_control(event_payload(EventCode.NOT_ACTIVE))
+        assert fake.wait_for(lambda: board.stats.reboots == 1)
+        board.ping()
+        assert board.stats.handshakes == 2
+        deadline = time.monotonic() + 2
+        while EventKind.REBOOTED not in [e.kind for e in seen] and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert EventKind.REBOOTED in [e.kind for e in seen]
+
+
+def test_board_close_stops_threads_and_is_idempotent(fake: FakeDevice) -> None:
+    before = {t.name for t in threading.enumerate()}
+    board = Board.open(fake.port)
+    names = {t.name for t in threading.enumerate()} - before
+    assert any(n.startswith("protoduino-io") for n in names)
+    assert any(n.startswith("protoduino-events") for n in names)
+    board.close()
+    board.close()
+    assert board.closed
+    with pytest.raises(protoduino.BoardClosedError):
+        board.ping()
