@@ -1,0 +1,38 @@
+#include "pd_core.h"
+
+void pd_core_init(pd_core_t *core, void *hal)
+{
+    core->hal = hal;
+    core->decode_errors = 0;
+    pd_link_init(&core->link);
+    pd_dedupe_init(&core->dedupe);
+    pd_outputs_init(&core->outputs);
+    pd_failsafe_init(&core->failsafe, pd_hal_millis(hal));
+    pd_link_send_event(core, PD_EVENT_BOOT);
+}
+
+void pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len)
+{
+    for (size_t i = 0; i < len; i++) {
+        pd_link_rx_byte(core, data[i]);
+    }
+}
+
+void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause)
+{
+    pd_outputs_all_safe(&core->outputs, core->hal);
+    pd_failsafe_set(&core->failsafe);
+    pd_dispatch_send_failsafe(core, true, cause);
+}
+
+void pd_core_poll(pd_core_t *core)
+{
+    /*
+     * Outputs can only be configured once ACTIVE, and only a reboot makes the
+     * link IDLE again, so an IDLE device has nothing to make safe and no one to
+     * tell: the timer is checked only while ACTIVE.
+     */
+    if (core->link.active && pd_failsafe_due(&core->failsafe, pd_hal_millis(core->hal))) {
+        pd_core_enter_safe(core, protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT);
+    }
+}

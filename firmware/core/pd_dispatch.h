@@ -1,0 +1,45 @@
+/*
+ * The application layer (PROTOCOL.md section 7): decode one ArduinoIn with
+ * nanopb, execute it, answer exactly one Ack; the dedupe window; events.
+ */
+#ifndef PD_DISPATCH_H
+#define PD_DISPATCH_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "pd_protocol.h"
+#include "protoduino.pb.h"
+
+struct pd_core;
+
+/*
+ * The last PD_DEDUPE_WINDOW (message_id, status) pairs of executed commands.
+ * Ping and GetInfo are neither looked up nor recorded: they change nothing, so
+ * answering a repeat in full is harmless (and a repeated Ping must still count
+ * as liveness), and keeping them out leaves the whole window to commands that
+ * move outputs, which are the ones a duplicate could hurt.
+ */
+typedef struct pd_dedupe {
+    uint32_t id[PD_DEDUPE_WINDOW];
+    uint8_t status[PD_DEDUPE_WINDOW];
+    uint8_t next;  /* slot the next entry overwrites */
+    uint8_t count; /* valid entries, up to PD_DEDUPE_WINDOW */
+} pd_dedupe_t;
+
+void pd_dedupe_init(pd_dedupe_t *dd);
+/* Stored status of `id`, or -1 if it is not in the window. */
+int pd_dedupe_find(const pd_dedupe_t *dd, uint32_t id);
+void pd_dedupe_add(pd_dedupe_t *dd, uint32_t id, uint8_t status);
+
+/* A COMMAND packet's payload, received while ACTIVE. */
+void pd_dispatch_command(struct pd_core *core, const uint8_t *payload, size_t len);
+
+/* Send one ArduinoOut as a DATA packet (only while ACTIVE). */
+bool pd_dispatch_send(struct pd_core *core, const protoduino_ArduinoOut *msg);
+
+/* ArduinoOut.failsafe{active, cause}. */
+bool pd_dispatch_send_failsafe(struct pd_core *core, bool active, protoduino_FailsafeCause cause);
+
+#endif /* PD_DISPATCH_H */

@@ -1,0 +1,52 @@
+/*
+ * The only boundary between the portable core and hardware.
+ *
+ * Each platform (firmware/avr, firmware/posix, the unit tests' fake board in
+ * tests/c) provides these functions at link time. Binding at link time rather
+ * than through a table of function pointers costs the Uno nothing; the `hal`
+ * argument is the opaque pointer given to pd_core_init(), so a test can run
+ * several independent boards in one process.
+ *
+ * Receiving is not part of this header: the platform's main loop reads bytes
+ * however suits it (ISR ring buffer, poll() on a pty, a fuzzer's input) and
+ * pushes them into the core with pd_core_rx().
+ */
+#ifndef PD_HAL_H
+#define PD_HAL_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+/* What the board is; reported in DeviceInfo and used to validate pins. */
+typedef struct pd_board_info {
+    const char *board;            /* "uno", "sim"; at most 15 characters */
+    uint8_t num_pins;             /* pins are 0 .. num_pins - 1, at most PD_MAX_PINS */
+    uint8_t max_servos;           /* at most PD_MAX_SERVOS */
+    uint32_t reserved_pins;       /* bit N set: pin N is reserved (the Uno's UART: 0, 1) */
+} pd_board_info_t;
+
+/*
+ * Write one whole encoded frame. Returns true only if every byte was accepted
+ * for transmission. A false return makes the core keep its SEQ (the next frame
+ * reuses it, PROTOCOL.md section 6) and send a lone 0x00 first, so that a
+ * partly written frame cannot swallow the next one at the receiver.
+ */
+bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len);
+
+/* Milliseconds since an arbitrary origin; wraps modulo 2^32. */
+uint32_t pd_hal_millis(void *hal);
+
+/*
+ * Drive servo channel `channel` (0 .. max_servos - 1, allocated by the core)
+ * on `pin` with pulses of `us` microseconds. The first call for a channel
+ * attaches the pin; later calls change the pulse width only.
+ */
+void pd_hal_servo_write(void *hal, uint8_t channel, uint8_t pin, uint16_t us);
+
+/* Make `pin` a digital output (if it is not yet one) at `level`. */
+void pd_hal_digital_write(void *hal, uint8_t pin, bool level);
+
+/* The board's description; must stay valid for the program's lifetime. */
+const pd_board_info_t *pd_hal_board_info(void *hal);
+
+#endif /* PD_HAL_H */

@@ -1,0 +1,178 @@
+#include "pd_link.h"
+
+#include <string.h>
+
+#include "pd_core.h"
+#include "pd_packet.h"
+#include "pd_schema.h"
+
+typedef char pd_assert_tx_fits_len[(PD_TX_MAX_PAYLOAD <= PD_MAX_PAYLOAD) ? 1 : -1];
+
+void pd_link_init(pd_link_t *link)
+{
+    memset(link, 0, sizeof(*link));
+    /* PROTOCOL.md section 2: flush the receiver before our first frame. */
+    link->tx_flush = true;
+}
+
+bool pd_link_send(pd_core_t *core, uint8_t type, uint8_t *raw, size_t len)
+{
+    pd_link_t *link = &core->link;
+    uint8_t frame[PD_TX_FRAME_MAX];
+    size_t raw_len;
+    size_t pos = 0;
+
+    if (type != PD_PACKET_CONTROL && !link->active) {
+        link->stats.tx_failed++;
+        return false;
+    }
+    if (pd_packet_build(type, link->tx_seq, raw + PD_HEADER_SIZE, len, raw, PD_TX_RAW_MAX,
+                        &raw_len) != PD_PACKET_OK) {
+        link->stats.tx_failed++;
+        return false;
+    }
+    if (link->tx_flush) {
+        frame[pos++] = 0;
+    }
+    size_t enc = pd_cobs_encode(raw, raw_len, frame + pos, sizeof(frame) - pos - 1u);
+    if (enc == 0) {
+        link->stats.tx_failed++;
+        return false;
+    }
+    pos += enc;
+    frame[pos++] = 0;
+    if (!pd_hal_write(core->hal, frame, (uint16_t)pos)) {
+        /* Keep the SEQ (section 6) and flush whatever part of it went out. */
+        link->stats.tx_failed++;
+        link->tx_flush = true;
+        return false;
+    }
+    link->tx_flush = false;
+    link->tx_seq++;
+    link->stats.tx_frames++;
+    return true;
+}
+
+static bool send_control(pd_core_t *core, const uint8_t *payload, size_t len)
+{
+    uint8_t raw[PD_TX_RAW_MAX];
+    memcpy(raw + PD_HEADER_SIZE, payload, len);
+    return pd_link_send(core, PD_PACKET_CONTROL, raw, len);
+}
+
+bool pd_link_send_event(pd_core_t *core, uint8_t event)
+{
+    const uint8_t payload[2] = {PD_CONTROL_EVENT, event};
+    return send_control(core, payload, sizeof(payload));
+}
+
+/* RESET: clear the link state (not the outputs), answer, become ACTIVE. */
+static void handle_reset(pd_core_t *core)
+{
+    pd_link_t *link = &core->link;
+    const uint32_t id = PD_SCHEMA_ID;
+    const uint8_t payload[6] = {
+        PD_CONTROL_RESET_ACK, PD_PROTOCOL_VERSION, (uint8_t)(id >> 24),
+        (uint8_t)(id >> 16),  (uint8_t)(id >> 8),  (uint8_t)id,
+    };
+
+    link->active = true;
+    link->tx_seq = 0;
+    link->rx_seq = 1;
+    link->tx_flush = true; /* the host may hold a partial frame from before */
+    /* A handshake is a sign of a live host: the failsafe counts from here. */
+    pd_failsafe_restart(&core->failsafe, pd_hal_millis(core->hal));
+    send_control(core, payload, sizeof(payload));
+}
+
+static void count_seq(pd_core_t *core, uint8_t seq)
+{
+    pd_link_t *link = &core->link;
+    uint8_t d = (uint8_t)(seq - link->rx_seq);
+
+    link->rx_seq = (uint8_t)(seq + 1u);
+    if (d == 0) {
+        return;
+    }
+    if (d <= PD_SEQ_DESYNC_THRESHOLD) {
+        link->stats.seq_lost = (uint16_t)(link->stats.seq_lost + d);
+    } else {
+        link->stats.seq_desync++;
+        pd_link_send_event(core, PD_EVENT_DESYNC);
+    }
+}
+
+static void handle_frame(pd_core_t *core)
+{
+    pd_link_t *link = &core->link;
+    pd_packet_t pkt;
+    int n = pd_cobs_decode(link->rx_buf, link->rx_len, link->rx_buf, sizeof(link->rx_buf));
+
+    if (n < 0) {
+        link->stats.drop_cobs++;
+        return;
+    }
+    switch (pd_packet_parse(link->rx_buf, (size_t)n, &pkt)) {
+    case PD_PACKET_OK:
+        break;
+    case PD_PACKET_ERR_CRC:
+        link->stats.drop_crc++;
+        return;
+    case PD_PACKET_ERR_TYPE:
+        link->stats.drop_type++;
+        return;
+    default:
+        link->stats.drop_length++;
+        return;
+    }
+    link->stats.packets++;
+
+    if (pkt.type == PD_PACKET_CONTROL && pkt.len >= 2 && pkt.payload[0] == PD_CONTROL_RESET) {
+        /* Answered whatever our state; our VERSION goes back, the host judges. */
+        handle_reset(core);
+        return;
+    }
+    if (link->active) {
+        /* The packet is processed whatever its SEQ says (section 6). */
+        count_seq(core, pkt.seq);
+    }
+    if (pkt.type == PD_PACKET_COMMAND) {
+        if (!link->active) {
+            link->stats.not_active++;
+            pd_link_send_event(core, PD_EVENT_NOT_ACTIVE);
+            return;
+        }
+        pd_dispatch_command(core, pkt.payload, pkt.len);
+        return;
+    }
+    if (pkt.type == PD_PACKET_CONTROL && pkt.len == 1 && pkt.payload[0] == PD_CONTROL_HEARTBEAT) {
+        return; /* liveness of the link only; the failsafe wants Pings */
+    }
+    link->stats.ignored++;
+}
+
+void pd_link_rx_byte(pd_core_t *core, uint8_t byte)
+{
+    pd_link_t *link = &core->link;
+
+    if (byte == 0) {
+        if (link->rx_skipping) {
+            link->rx_skipping = false;
+        } else if (link->rx_len > 0) {
+            handle_frame(core);
+        }
+        link->rx_len = 0;
+        return;
+    }
+    if (link->rx_skipping) {
+        return;
+    }
+    if (link->rx_len >= PD_MAX_ENCODED_FRAME) {
+        link->rx_len = 0;
+        link->rx_skipping = true;
+        link->stats.rx_overflow++;
+        pd_link_send_event(core, PD_EVENT_RX_OVERFLOW);
+        return;
+    }
+    link->rx_buf[link->rx_len++] = byte;
+}

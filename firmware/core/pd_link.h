@@ -1,0 +1,80 @@
+/*
+ * The link layer (PROTOCOL.md sections 2, 5 and 6): the streaming COBS
+ * receiver, packet checks, the IDLE/ACTIVE state machine with RESET/RESET_ACK,
+ * SEQ accounting, link events, and the transmit path.
+ *
+ * Receive recovery policy, the same as the host's framing.py: bytes are
+ * collected until a 0x00; an empty frame is ignored; anything else is COBS
+ * decoded in place and checked (length, CRC, type), and dropped and counted by
+ * reason if it fails. More than PD_MAX_ENCODED_FRAME bytes without a 0x00 is
+ * an overflow: the buffer is discarded, EVENT RX_OVERFLOW is sent and
+ * everything up to the next 0x00 is skipped. So a corrupted frame never
+ * damages the next one, and no timer is needed.
+ *
+ * Transmit: there is no queue. A frame is built on the stack, encoded into a
+ * bounded buffer and handed to the HAL whole, in the order the core produces
+ * them, so a CONTROL frame never waits behind queued DATA (there is none to
+ * clear on RESET either). DATA is sent only while ACTIVE; CONTROL always.
+ */
+#ifndef PD_LINK_H
+#define PD_LINK_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "pd_cobs.h"
+#include "pd_protocol.h"
+#include "protoduino.pb.h"
+
+struct pd_core;
+
+/* Largest payload the device sends: one ArduinoOut (CONTROL payloads are <= 6 B). */
+#define PD_TX_MAX_PAYLOAD protoduino_ArduinoOut_size
+#define PD_TX_RAW_MAX (PD_MIN_PACKET + PD_TX_MAX_PAYLOAD)
+/* Encoded frame plus an optional leading 0x00 and the delimiter. */
+#define PD_TX_FRAME_MAX (PD_COBS_MAX_ENCODED(PD_TX_RAW_MAX) + 2u)
+
+/* Diagnostic counters; they wrap, nothing depends on them. */
+typedef struct pd_link_stats {
+    uint16_t packets;      /* valid packets received */
+    uint16_t drop_cobs;    /* frame was not valid COBS */
+    uint16_t drop_length;  /* packet shorter than 5 bytes or LEN disagrees */
+    uint16_t drop_crc;
+    uint16_t drop_type;
+    uint16_t rx_overflow;  /* frames longer than PD_MAX_ENCODED_FRAME */
+    uint16_t seq_lost;     /* packets lost according to SEQ gaps <= 50 */
+    uint16_t seq_desync;   /* SEQ jumps > 50 (or backwards) */
+    uint16_t not_active;   /* COMMANDs dropped before the handshake */
+    uint16_t ignored;      /* DATA, RESET_ACK, EVENT or unknown CONTROL from the host */
+    uint16_t tx_frames;    /* frames the HAL accepted */
+    uint16_t tx_failed;    /* frames the HAL refused, or DATA while IDLE */
+} pd_link_stats_t;
+
+typedef struct pd_link {
+    uint8_t rx_buf[PD_MAX_ENCODED_FRAME];
+    uint16_t rx_len;
+    bool rx_skipping; /* after an overflow, until the next 0x00 */
+    bool active;      /* IDLE until the first RESET */
+    bool tx_flush;    /* send a lone 0x00 before the next frame */
+    uint8_t tx_seq;   /* SEQ of the next frame we send */
+    uint8_t rx_seq;   /* SEQ we expect next */
+    pd_link_stats_t stats;
+} pd_link_t;
+
+void pd_link_init(pd_link_t *link);
+
+/* Feed one received byte; complete packets are acted upon at once. */
+void pd_link_rx_byte(struct pd_core *core, uint8_t byte);
+
+/*
+ * Send one packet whose payload (`len` bytes) already sits at
+ * raw + PD_HEADER_SIZE, in a buffer of PD_TX_RAW_MAX bytes. Returns whether
+ * the HAL took the whole frame. DATA is refused while IDLE.
+ */
+bool pd_link_send(struct pd_core *core, uint8_t type, uint8_t *raw, size_t len);
+
+/* CONTROL EVENT with the given code (allowed in any state). */
+bool pd_link_send_event(struct pd_core *core, uint8_t event);
+
+#endif /* PD_LINK_H */

@@ -1,0 +1,288 @@
+/*
+ * The simulated board: the portable core behind a POSIX HAL.
+ *
+ *   pd_sim [--trace FILE] [--link PATH]
+ *
+ * Opens a pseudo-terminal in raw mode, prints the slave's path (or PATH when
+ * --link makes a symlink to it) as the first line on stdout, then runs the
+ * core until SIGINT/SIGTERM. SIGUSR1 is a simulated reboot. The pins are
+ * virtual: every change is written to the trace as one JSON object per line,
+ * flushed per line, with t = seconds since the process started (monotonic).
+ *
+ * We keep our own slave fd open for the whole run. Without it the master sees
+ * EIO/POLLHUP whenever the host closes the port, and a host that reopens it
+ * (reconnect tests, session restore) would find a dead board.
+ */
+#define _DEFAULT_SOURCE /* cfmakeraw, posix_openpt & co. */
+#define _XOPEN_SOURCE 700
+
+#include <errno.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "pd_core.h"
+
+/* How long a frame may wait for room in the pty before it is dropped. */
+#define SIM_WRITE_BUDGET_MS 20
+
+enum { SIM_PIN_UNUSED = 0, SIM_PIN_SERVO, SIM_PIN_DIGITAL };
+
+typedef struct sim_hal {
+    int master;
+    FILE *trace;
+    struct timespec start;
+    uint8_t mode[PD_MAX_PINS];
+    uint16_t value[PD_MAX_PINS];
+} sim_hal_t;
+
+static const pd_board_info_t sim_board = {
+    .board = "sim",
+    .num_pins = 20,
+    .max_servos = 8,
+    .reserved_pins = (1UL << 0) | (1UL << 1), /* the Uno's UART, for the same semantics */
+};
+
+static volatile sig_atomic_t sim_stop;
+static volatile sig_atomic_t sim_reboot;
+
+static double sim_elapsed(const sim_hal_t *hal)
+{
+    struct timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    return (double)(now.tv_sec - hal->start.tv_sec) + (double)(now.tv_nsec - hal->start.tv_nsec) / 1e9;
+}
+
+static void sim_trace(sim_hal_t *hal, uint8_t pin, uint8_t mode, uint16_t value)
+{
+    if (pin >= PD_MAX_PINS || (hal->mode[pin] == mode && hal->value[pin] == value)) {
+        return; /* only changes are traced */
+    }
+    hal->mode[pin] = mode;
+    hal->value[pin] = value;
+    if (hal->trace) {
+        fprintf(hal->trace, "{\"t\": %.6f, \"pin\": %u, \"mode\": \"%s\", \"value\": %u}\n",
+                sim_elapsed(hal), (unsigned)pin, mode == SIM_PIN_SERVO ? "servo" : "digital",
+                (unsigned)value);
+        fflush(hal->trace);
+    }
+}
+
+/* Reboot: servo pulses stop and pins are released; each gets a line with 0. */
+static void sim_release_all(sim_hal_t *hal)
+{
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        if (hal->mode[pin] != SIM_PIN_UNUSED) {
+            uint8_t mode = hal->mode[pin];
+            hal->value[pin] = UINT16_MAX; /* force a line even if it was already 0 */
+            sim_trace(hal, pin, mode, 0);
+            hal->mode[pin] = SIM_PIN_UNUSED;
+            hal->value[pin] = 0;
+        }
+    }
+}
+
+/* --- the HAL ------------------------------------------------------------- */
+
+bool pd_hal_write(void *ctx, const uint8_t *data, uint16_t len)
+{
+    sim_hal_t *hal = ctx;
+    size_t done = 0;
+    int budget = SIM_WRITE_BUDGET_MS;
+
+    while (done < len) {
+        ssize_t n = write(hal->master, data + done, len - done);
+        if (n > 0) {
+            done += (size_t)n;
+            continue;
+        }
+        if (n < 0 && errno == EINTR) {
+            continue;
+        }
+        if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK) {
+            return false;
+        }
+        /* The pty is full (nobody reads): wait a little, then give up. */
+        if (budget-- <= 0) {
+            return false;
+        }
+        struct pollfd p = {.fd = hal->master, .events = POLLOUT};
+        poll(&p, 1, 1);
+    }
+    return true;
+}
+
+uint32_t pd_hal_millis(void *ctx)
+{
+    return (uint32_t)(sim_elapsed(ctx) * 1000.0);
+}
+
+void pd_hal_servo_write(void *ctx, uint8_t channel, uint8_t pin, uint16_t us)
+{
+    (void)channel;
+    sim_trace(ctx, pin, SIM_PIN_SERVO, us);
+}
+
+void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
+{
+    sim_trace(ctx, pin, SIM_PIN_DIGITAL, level ? 1u : 0u);
+}
+
+const pd_board_info_t *pd_hal_board_info(void *ctx)
+{
+    (void)ctx;
+    return &sim_board;
+}
+
+/* --- the process --------------------------------------------------------- */
+
+static void on_signal(int sig)
+{
+    if (sig == SIGUSR1) {
+        sim_reboot = 1;
+    } else {
+        sim_stop = 1;
+    }
+}
+
+static int usage(void)
+{
+    fprintf(stderr, "usage: pd_sim [--trace FILE] [--link PATH]\n");
+    return 2;
+}
+
+/* A raw pty whose slave stays open; returns the master fd or -1. */
+static int open_pty(char *slave_name, size_t cap, int *slave_fd)
+{
+    int master = posix_openpt(O_RDWR | O_NOCTTY);
+    if (master < 0 || grantpt(master) != 0 || unlockpt(master) != 0) {
+        perror("pd_sim: posix_openpt");
+        return -1;
+    }
+    const char *name = ptsname(master);
+    if (!name || strlen(name) >= cap) {
+        perror("pd_sim: ptsname");
+        return -1;
+    }
+    strcpy(slave_name, name);
+    *slave_fd = open(slave_name, O_RDWR | O_NOCTTY);
+    if (*slave_fd < 0) {
+        perror("pd_sim: open slave");
+        return -1;
+    }
+    /* PROTOCOL.md section 1: every byte value passes unchanged. */
+    struct termios tio;
+    if (tcgetattr(*slave_fd, &tio) != 0) {
+        perror("pd_sim: tcgetattr");
+        return -1;
+    }
+    cfmakeraw(&tio);
+    cfsetispeed(&tio, B115200);
+    cfsetospeed(&tio, B115200);
+    if (tcsetattr(*slave_fd, TCSANOW, &tio) != 0) {
+        perror("pd_sim: tcsetattr");
+        return -1;
+    }
+    int flags = fcntl(master, F_GETFL);
+    if (flags < 0 || fcntl(master, F_SETFL, flags | O_NONBLOCK) != 0) {
+        perror("pd_sim: fcntl");
+        return -1;
+    }
+    return master;
+}
+
+int main(int argc, char **argv)
+{
+    const char *trace_path = NULL;
+    const char *link_path = NULL;
+    static sim_hal_t hal;
+    static pd_core_t core;
+    char slave_name[128];
+    int slave_fd = -1;
+
+    clock_gettime(CLOCK_MONOTONIC, &hal.start);
+    for (int i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
+            trace_path = argv[++i];
+        } else if (strcmp(argv[i], "--link") == 0 && i + 1 < argc) {
+            link_path = argv[++i];
+        } else {
+            return usage();
+        }
+    }
+
+    struct sigaction sa;
+    memset(&sa, 0, sizeof(sa));
+    sa.sa_handler = on_signal; /* no SA_RESTART: poll() returns at once */
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    sigaction(SIGUSR1, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
+
+    if (trace_path) {
+        hal.trace = fopen(trace_path, "w");
+        if (!hal.trace) {
+            perror("pd_sim: trace file");
+            return 1;
+        }
+    }
+    hal.master = open_pty(slave_name, sizeof(slave_name), &slave_fd);
+    if (hal.master < 0) {
+        return 1;
+    }
+    if (link_path) {
+        struct stat st;
+        if (lstat(link_path, &st) == 0 && S_ISLNK(st.st_mode)) {
+            unlink(link_path); /* a stale link from a board that was killed */
+        }
+        if (symlink(slave_name, link_path) != 0) {
+            perror("pd_sim: --link");
+            return 1;
+        }
+    }
+    printf("%s\n", link_path ? link_path : slave_name);
+    fflush(stdout);
+
+    pd_core_init(&core, &hal);
+    while (!sim_stop) {
+        if (sim_reboot) {
+            sim_reboot = 0;
+            sim_release_all(&hal);
+            pd_core_init(&core, &hal);
+        }
+        struct pollfd p = {.fd = hal.master, .events = POLLIN};
+        int ready = poll(&p, 1, 1);
+        if (ready > 0 && (p.revents & POLLIN)) {
+            uint8_t buf[512];
+            ssize_t n = read(hal.master, buf, sizeof(buf));
+            if (n > 0) {
+                pd_core_rx(&core, buf, (size_t)n);
+            }
+        } else if (ready > 0) {
+            /* POLLHUP/POLLERR should not happen with our slave open; never spin. */
+            struct timespec ms = {0, 1000000};
+            nanosleep(&ms, NULL);
+        }
+        pd_core_poll(&core);
+    }
+
+    if (link_path) {
+        unlink(link_path);
+    }
+    if (hal.trace) {
+        fclose(hal.trace);
+    }
+    close(slave_fd);
+    close(hal.master);
+    return 0;
+}
