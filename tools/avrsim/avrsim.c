@@ -1,0 +1,678 @@
+/*
+ * avrsim.c: an emulated Arduino Uno (ATmega328P, simavr) on a pseudo-terminal.
+ *
+ *   avrsim [--trace FILE] [--link PATH] [--hex FILE]... [--boot ADDR]
+ *          [--auto-reset] [--mcu NAME] [--freq HZ] [FIRMWARE.elf]
+ *
+ * The command-line contract is the native simulated board's (contracts.md):
+ * the first stdout line is the port to open (the pty's slave, or --link),
+ * SIGINT/SIGTERM exit cleanly, SIGUSR1 resets the MCU while keeping the pty,
+ * and --trace writes one JSON line per output change, measured at the pins.
+ *
+ * Why a runner of our own rather than simavr's uart_pty part: uart_pty always
+ * makes the same symlink (parallel boards clobber each other) and its stop
+ * can hang in pthread_join. Here the pty is ours, UART0 is bridged through
+ * simavr's UART IRQs from the one emulation thread, and emulation is paced
+ * against CLOCK_MONOTONIC so that the firmware's millis() is real time.
+ *
+ * Flashing flow (--boot, --auto-reset): the Uno's reset vector points into
+ * the boot section (BOOTRST), power-up shows the external-reset flag so that
+ * Optiboot stays in the bootloader, and every open() of the port by a client
+ * resets the MCU as the DTR auto-reset of a real Uno does.
+ */
+#include <errno.h>
+#include <fcntl.h>
+#include <getopt.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/inotify.h>
+#include <sys/stat.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <avr_ioport.h>
+#include <avr_uart.h>
+#include <sim_avr.h>
+#include <sim_elf.h>
+#include <sim_hex.h>
+#include <sim_regbit.h>
+
+#include "pd_pins.h"
+
+#define PD_DEFAULT_MCU "atmega328p"
+#define PD_DEFAULT_FREQ 16000000U
+#define PD_DEFAULT_BAUD 115200U
+#define PD_MAX_HEX 4
+#define PD_BUF_SIZE 4096U
+#define PD_AHEAD_NS 1000000ULL /* emulate up to 1 ms ahead of the wall clock */
+#define PD_MCUSR_ADDR 0x54     /* ATmega328P MCUSR in data space */
+#define PD_MCUSR_EXTRF 0x02
+
+/* Uno pin numbering: D0..D7 = PD0..7, D8..D13 = PB0..5, A0..A5 = PC0..5. */
+typedef struct {
+    char name;
+    int first_pin; /* Uno pin of bit 0 */
+    int bits;
+    avr_ioport_t *io;
+} pd_port_t;
+
+typedef struct {
+    uint8_t data[PD_BUF_SIZE];
+    size_t head; /* next byte to take */
+    size_t len;
+} pd_fifo_t;
+
+typedef struct {
+    avr_t *avr;
+    avr_uart_t *uart;
+    pd_port_t ports[3];
+    pd_pins_t pins;
+    FILE *trace;
+    int master;
+    int slave;
+    int inotify;
+    char slave_path[128];
+    const char *link;
+    uint32_t boot_addr;
+    int boot;
+    uint64_t cycle_base; /* cycles banked across resets that zero avr->cycle */
+    uint64_t last_cycle;
+    int reset_seen;
+    void (*core_reset)(struct avr_t *avr);
+    pd_fifo_t rx; /* host -> MCU */
+    pd_fifo_t tx; /* MCU -> host */
+    uint64_t next_rx_cycle;
+    int crashed;
+} pd_sim_t;
+
+static pd_sim_t g_sim;
+static uint64_t g_start_ns; /* trace and pacing time zero: the process start */
+static volatile sig_atomic_t g_stop;
+static volatile sig_atomic_t g_reset;
+
+static void pd_on_signal(int sig)
+{
+    if (sig == SIGUSR1) {
+        g_reset = 1;
+    } else {
+        g_stop = 1;
+    }
+}
+
+/* simavr logs through this: everything goes to stderr, so that stdout carries
+ * the port line only. */
+static void pd_logger(avr_t *avr, const int level, const char *format, va_list ap)
+{
+    if (level > LOG_WARNING && (!avr || avr->log < level)) {
+        return;
+    }
+    vfprintf(stderr, format, ap);
+}
+
+static uint64_t pd_now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (uint64_t)ts.tv_sec * 1000000000ULL + (uint64_t)ts.tv_nsec;
+}
+
+/* Emulated cycles since the runner started, monotonic across resets. */
+static uint64_t pd_cycles(const pd_sim_t *sim)
+{
+    return sim->cycle_base + sim->avr->cycle;
+}
+
+static void pd_fifo_push(pd_fifo_t *f, uint8_t b)
+{
+    if (f->len == PD_BUF_SIZE) {
+        return; /* full: dropped, as a UART with nobody listening would */
+    }
+    f->data[(f->head + f->len) % PD_BUF_SIZE] = b;
+    f->len++;
+}
+
+static void pd_trace_emit(void *ctx, uint64_t cycle, int pin, enum pd_pin_mode mode,
+                          unsigned value)
+{
+    pd_sim_t *sim = ctx;
+    if (!sim->trace) {
+        return;
+    }
+    double t = (double)cycle / (double)sim->avr->frequency;
+    fprintf(sim->trace, "{\"t\": %.6f, \"pin\": %d, \"mode\": \"%s\", \"value\": %u}\n", t, pin,
+            mode == PD_PIN_MODE_SERVO ? "servo" : "digital", value);
+    fflush(sim->trace);
+}
+
+static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
+{
+    if (!port->io) {
+        return;
+    }
+    uint8_t out = sim->avr->data[port->io->r_port];
+    uint64_t now = pd_cycles(sim);
+    for (int b = 0; b < port->bits; b++) {
+        int pin = port->first_pin + b;
+        if (pin < 2) {
+            continue; /* D0/D1 are the UART */
+        }
+        pd_pins_sample(&sim->pins, pin, (ddr >> b) & 1, (out >> b) & 1, now);
+    }
+}
+
+/* Any pin IRQ of a port: re-read the registers rather than trusting the IRQ
+ * value, and let pd_pins drop samples that change nothing. */
+static void pd_pin_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    (void)value;
+    pd_port_t *port = param;
+    pd_port_sample(&g_sim, port, g_sim.avr->data[port->io->r_ddr]);
+}
+
+/* The DDR IRQ is raised before the register is written: use its value. */
+static void pd_ddr_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    pd_port_sample(&g_sim, param, (uint8_t)value);
+}
+
+static void pd_uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    pd_sim_t *sim = param;
+    pd_fifo_push(&sim->tx, (uint8_t)value);
+}
+
+/* Wraps the core's reset so that every reset (ours, the watchdog's) is seen. */
+static void pd_core_reset(struct avr_t *avr)
+{
+    if (g_sim.core_reset) {
+        g_sim.core_reset(avr);
+    }
+    g_sim.reset_seen = 1;
+}
+
+static void pd_sleep_hook(avr_t *avr, avr_cycle_count_t how_long)
+{
+    /* The main loop paces emulation; simavr's own usleep() would stall it. */
+    (void)avr;
+    (void)how_long;
+}
+
+static void pd_set_extrf(pd_sim_t *sim)
+{
+    avr_t *avr = sim->avr;
+    if (avr->reset_flags.extrf.reg) {
+        avr_regbit_clear(avr, avr->reset_flags.porf);
+        avr_regbit_set(avr, avr->reset_flags.extrf);
+    } else {
+        avr->data[PD_MCUSR_ADDR] = PD_MCUSR_EXTRF;
+    }
+}
+
+static void pd_after_reset(pd_sim_t *sim)
+{
+    sim->reset_seen = 0;
+    if (sim->avr->cycle < sim->last_cycle) {
+        sim->cycle_base += sim->last_cycle;
+    }
+    sim->last_cycle = sim->avr->cycle;
+    for (int i = 0; i < 3; i++) {
+        if (sim->ports[i].io) {
+            pd_port_sample(sim, &sim->ports[i], sim->avr->data[sim->ports[i].io->r_ddr]);
+        }
+    }
+}
+
+/* Reset as the reset pin does (SIGUSR1, or a client opening the port). */
+static void pd_reset_mcu(pd_sim_t *sim)
+{
+    sim->last_cycle = sim->avr->cycle;
+    avr_reset(sim->avr);
+    if (sim->boot) {
+        sim->avr->pc = sim->boot_addr;
+    }
+    sim->avr->state = cpu_Running;
+    pd_set_extrf(sim);
+    sim->crashed = 0;
+    pd_after_reset(sim);
+}
+
+static int pd_open_pty(pd_sim_t *sim)
+{
+    sim->master = posix_openpt(O_RDWR | O_NOCTTY);
+    if (sim->master < 0 || grantpt(sim->master) < 0 || unlockpt(sim->master) < 0) {
+        perror("avrsim: posix_openpt");
+        return -1;
+    }
+    const char *name = ptsname(sim->master);
+    if (!name || strlen(name) >= sizeof sim->slave_path) {
+        perror("avrsim: ptsname");
+        return -1;
+    }
+    strcpy(sim->slave_path, name);
+    /* Hold the slave open ourselves: the master then never sees EIO or a
+     * hangup when the host closes and reopens the port. */
+    sim->slave = open(sim->slave_path, O_RDWR | O_NOCTTY);
+    if (sim->slave < 0) {
+        perror("avrsim: open slave");
+        return -1;
+    }
+    struct termios tio;
+    if (tcgetattr(sim->slave, &tio) == 0) {
+        cfmakeraw(&tio);
+        cfsetispeed(&tio, B115200);
+        cfsetospeed(&tio, B115200);
+        tcsetattr(sim->slave, TCSANOW, &tio);
+    }
+    int flags = fcntl(sim->master, F_GETFL);
+    fcntl(sim->master, F_SETFL, flags | O_NONBLOCK);
+    return 0;
+}
+
+static avr_io_t *pd_find_io(avr_t *avr, const char *kind, char name)
+{
+    for (avr_io_t *io = avr->io_port; io; io = io->next) {
+        if (!strcmp(io->kind, kind)) {
+            /* Both avr_uart_t and avr_ioport_t start with the io, then name. */
+            char io_name = !strcmp(kind, "uart") ? ((avr_uart_t *)io)->name
+                                                 : ((avr_ioport_t *)io)->name;
+            if (io_name == name) {
+                return io;
+            }
+        }
+    }
+    return NULL;
+}
+
+static void pd_connect(pd_sim_t *sim)
+{
+    avr_t *avr = sim->avr;
+    static const struct {
+        char name;
+        int first_pin;
+        int bits;
+    } layout[3] = {{'D', 0, 8}, {'B', 8, 6}, {'C', 14, 6}};
+    for (int i = 0; i < 3; i++) {
+        pd_port_t *port = &sim->ports[i];
+        port->name = layout[i].name;
+        port->first_pin = layout[i].first_pin;
+        port->bits = layout[i].bits;
+        port->io = (avr_ioport_t *)pd_find_io(avr, "port", port->name);
+        if (!port->io) {
+            continue;
+        }
+        for (int b = 0; b < port->bits; b++) {
+            avr_irq_t *irq = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(port->name), b);
+            if (irq) {
+                avr_irq_register_notify(irq, pd_pin_hook, port);
+            }
+        }
+        avr_irq_t *ddr =
+            avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(port->name), IOPORT_IRQ_DIRECTION_ALL);
+        if (ddr) {
+            avr_irq_register_notify(ddr, pd_ddr_hook, port);
+        }
+    }
+
+    sim->uart = (avr_uart_t *)pd_find_io(avr, "uart", '0');
+    uint32_t flags = 0; /* no stdio echo of the UART, no usleep when polled */
+    avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    avr_irq_t *out = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT);
+    if (out) {
+        avr_irq_register_notify(out, pd_uart_out_hook, sim);
+    }
+}
+
+/* One byte from the host into the UART per byte time, as a wire would. */
+static void pd_feed_uart(pd_sim_t *sim)
+{
+    uint64_t now = pd_cycles(sim);
+    if (!sim->rx.len || now < sim->next_rx_cycle) {
+        return;
+    }
+    if (sim->uart) {
+        /* simavr's receive FIFO (avr_uart.h); full means the firmware lags. */
+        const uart_fifo_t *in = &sim->uart->input;
+        if (((in->write + 1U) & (uart_fifo_fifo_size - 1U)) == in->read) {
+            return;
+        }
+    }
+    avr_irq_t *in = avr_io_getirq(sim->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    uint8_t b = sim->rx.data[sim->rx.head];
+    sim->rx.head = (sim->rx.head + 1) % PD_BUF_SIZE;
+    sim->rx.len--;
+    if (in) {
+        avr_raise_irq(in, b);
+    }
+    uint64_t per_byte = sim->avr->frequency * 10ULL / PD_DEFAULT_BAUD;
+    sim->next_rx_cycle = now + per_byte;
+}
+
+static void pd_pump_pty(pd_sim_t *sim)
+{
+    while (sim->rx.len < PD_BUF_SIZE) {
+        uint8_t buf[256];
+        size_t room = PD_BUF_SIZE - sim->rx.len;
+        ssize_t n = read(sim->master, buf, room < sizeof buf ? room : sizeof buf);
+        if (n <= 0) {
+            break;
+        }
+        for (ssize_t i = 0; i < n; i++) {
+            pd_fifo_push(&sim->rx, buf[i]);
+        }
+    }
+    while (sim->tx.len) {
+        size_t chunk = PD_BUF_SIZE - sim->tx.head;
+        if (chunk > sim->tx.len) {
+            chunk = sim->tx.len;
+        }
+        ssize_t n = write(sim->master, sim->tx.data + sim->tx.head, chunk);
+        if (n <= 0) {
+            break; /* nobody reads: the bytes wait in tx (bounded) */
+        }
+        sim->tx.head = (sim->tx.head + (size_t)n) % PD_BUF_SIZE;
+        sim->tx.len -= (size_t)n;
+    }
+}
+
+/* A client opened the port: the Uno's DTR auto-reset. */
+static void pd_check_opens(pd_sim_t *sim)
+{
+    if (sim->inotify < 0) {
+        return;
+    }
+    char buf[sizeof(struct inotify_event) * 16] __attribute__((aligned(8)));
+    int opened = 0;
+    for (;;) {
+        ssize_t n = read(sim->inotify, buf, sizeof buf);
+        if (n <= 0) {
+            break;
+        }
+        for (char *p = buf; p < buf + n;) {
+            struct inotify_event *ev = (struct inotify_event *)p;
+            if (ev->mask & IN_OPEN) {
+                opened = 1;
+            }
+            p += sizeof *ev + ev->len;
+        }
+    }
+    if (opened) {
+        pd_reset_mcu(sim);
+    }
+}
+
+static int pd_load_hex(pd_sim_t *sim, const char *path)
+{
+    ihex_chunk_p chunks = NULL;
+    int count = read_ihex_chunks(path, &chunks);
+    if (count <= 0) {
+        fprintf(stderr, "avrsim: cannot read Intel hex %s\n", path);
+        return -1;
+    }
+    for (int i = 0; i < count; i++) {
+        if (chunks[i].baseaddr + chunks[i].size > sim->avr->flashend + 1U) {
+            fprintf(stderr, "avrsim: %s: data at 0x%x is outside the flash\n", path,
+                    chunks[i].baseaddr);
+            free_ihex_chunks(chunks);
+            return -1;
+        }
+        avr_loadcode(sim->avr, chunks[i].data, chunks[i].size, chunks[i].baseaddr);
+    }
+    free_ihex_chunks(chunks);
+    return 0;
+}
+
+static void pd_usage(FILE *f)
+{
+    fprintf(f,
+            "usage: avrsim [--trace FILE] [--link PATH] [--hex FILE]... [--boot ADDR]\n"
+            "              [--auto-reset] [--mcu NAME] [--freq HZ] [FIRMWARE.elf]\n"
+            "Runs an emulated Arduino Uno with UART0 on a pseudo-terminal; prints the\n"
+            "port as the first stdout line. SIGUSR1 resets the MCU, SIGINT/SIGTERM exit.\n");
+}
+
+static void pd_cleanup(pd_sim_t *sim)
+{
+    if (sim->link) {
+        unlink(sim->link);
+    }
+    if (sim->trace) {
+        fclose(sim->trace);
+        sim->trace = NULL;
+    }
+}
+
+static void pd_run(pd_sim_t *sim)
+{
+    const uint64_t start_ns = g_start_ns;
+    const double cycles_per_ns = (double)sim->avr->frequency / 1e9;
+    while (!g_stop) {
+        if (g_reset) {
+            g_reset = 0;
+            pd_reset_mcu(sim);
+        }
+        pd_check_opens(sim);
+        pd_pump_pty(sim);
+
+        uint64_t wall_ns = pd_now_ns() - start_ns;
+        uint64_t target = (uint64_t)((double)(wall_ns + PD_AHEAD_NS) * cycles_per_ns);
+        if (!sim->crashed) {
+            while (pd_cycles(sim) < target && !g_stop && !g_reset) {
+                sim->last_cycle = sim->avr->cycle;
+                int state = avr_run(sim->avr);
+                if (sim->reset_seen) {
+                    pd_after_reset(sim);
+                }
+                if (state == cpu_Done || state == cpu_Crashed) {
+                    fprintf(stderr, "avrsim: the MCU stopped (state %d); SIGUSR1 resets it\n",
+                            state);
+                    sim->crashed = 1;
+                    break;
+                }
+                if (sim->rx.len) {
+                    pd_feed_uart(sim);
+                }
+            }
+        } else {
+            /* A stopped MCU still lets time pass, so that deadlines resolve. */
+            sim->cycle_base = target > sim->avr->cycle ? target - sim->avr->cycle : 0;
+        }
+        pd_pins_poll(&sim->pins, pd_cycles(sim));
+        pd_pump_pty(sim);
+
+        /* Wait for host bytes or until emulated time is due again. */
+        uint64_t ahead_ns = (uint64_t)((double)pd_cycles(sim) / cycles_per_ns);
+        uint64_t now_ns = pd_now_ns() - start_ns;
+        int timeout_ms = 0;
+        if (ahead_ns > now_ns + PD_AHEAD_NS / 2) {
+            timeout_ms = (int)((ahead_ns - now_ns) / 1000000ULL);
+            if (timeout_ms < 1) {
+                timeout_ms = 1;
+            }
+        }
+        if (timeout_ms > 0) {
+            struct pollfd fds[2] = {{.fd = sim->master, .events = POLLIN},
+                                    {.fd = sim->inotify, .events = POLLIN}};
+            if (sim->tx.len) {
+                fds[0].events |= POLLOUT;
+            }
+            poll(fds, sim->inotify >= 0 ? 2 : 1, timeout_ms);
+        }
+    }
+}
+
+int main(int argc, char **argv)
+{
+    g_start_ns = pd_now_ns();
+    pd_sim_t *sim = &g_sim;
+    const char *trace_path = NULL;
+    const char *hex[PD_MAX_HEX];
+    int hex_count = 0;
+    const char *mcu = PD_DEFAULT_MCU;
+    uint32_t freq = PD_DEFAULT_FREQ;
+    int auto_reset = 0;
+    sim->inotify = -1;
+    sim->master = -1;
+    sim->slave = -1;
+
+    static const struct option options[] = {
+        {"trace", required_argument, NULL, 't'}, {"link", required_argument, NULL, 'l'},
+        {"hex", required_argument, NULL, 'x'},   {"boot", required_argument, NULL, 'b'},
+        {"mcu", required_argument, NULL, 'm'},   {"freq", required_argument, NULL, 'f'},
+        {"auto-reset", no_argument, NULL, 'r'},  {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
+    };
+    int opt;
+    while ((opt = getopt_long(argc, argv, "h", options, NULL)) != -1) {
+        switch (opt) {
+        case 't':
+            trace_path = optarg;
+            break;
+        case 'l':
+            sim->link = optarg;
+            break;
+        case 'x':
+            if (hex_count == PD_MAX_HEX) {
+                fprintf(stderr, "avrsim: at most %d --hex files\n", PD_MAX_HEX);
+                return 2;
+            }
+            hex[hex_count++] = optarg;
+            break;
+        case 'b':
+            sim->boot = 1;
+            sim->boot_addr = (uint32_t)strtoul(optarg, NULL, 0);
+            break;
+        case 'm':
+            mcu = optarg;
+            break;
+        case 'f':
+            freq = (uint32_t)strtoul(optarg, NULL, 0);
+            break;
+        case 'r':
+            auto_reset = 1;
+            break;
+        case 'h':
+            pd_usage(stdout);
+            return 0;
+        default:
+            pd_usage(stderr);
+            return 2;
+        }
+    }
+    const char *elf = optind < argc ? argv[optind] : NULL;
+    if (optind + 1 < argc || (!elf && hex_count == 0) || freq == 0) {
+        pd_usage(stderr);
+        return 2;
+    }
+
+    /* stdout carries exactly one line, the port: keep the real stdout aside
+     * and send anything else printed there (simavr prints) to stderr. */
+    fflush(stdout);
+    int port_fd = dup(STDOUT_FILENO);
+    dup2(STDERR_FILENO, STDOUT_FILENO);
+    FILE *port_out = port_fd >= 0 ? fdopen(port_fd, "w") : NULL;
+    avr_global_logger_set(pd_logger);
+
+    static elf_firmware_t fw;
+    memset(&fw, 0, sizeof fw);
+    if (elf && elf_read_firmware(elf, &fw) != 0) {
+        fprintf(stderr, "avrsim: cannot read ELF %s\n", elf);
+        return 1;
+    }
+    /* The command line wins over a .mmcu section. */
+    strncpy(fw.mmcu, mcu, sizeof fw.mmcu - 1);
+    fw.frequency = freq;
+
+    sim->avr = avr_make_mcu_by_name(fw.mmcu);
+    if (!sim->avr) {
+        fprintf(stderr, "avrsim: unknown MCU %s\n", fw.mmcu);
+        return 1;
+    }
+    avr_init(sim->avr);
+    sim->avr->log = LOG_WARNING;
+    if (elf) {
+        avr_load_firmware(sim->avr, &fw);
+    }
+    sim->avr->frequency = freq;
+    for (int i = 0; i < hex_count; i++) {
+        if (pd_load_hex(sim, hex[i]) != 0) {
+            return 1;
+        }
+    }
+    sim->avr->sleep = pd_sleep_hook;
+    sim->core_reset = sim->avr->reset;
+    sim->avr->reset = pd_core_reset;
+    if (sim->boot) {
+        /* BOOTRST programmed, 1 KB boot section (BOOTSZ = 10): hfuse 0xDC. */
+        sim->avr->fuse[AVR_FUSE_LOW] = 0xFF;
+        sim->avr->fuse[AVR_FUSE_HIGH] = 0xDC;
+        sim->avr->fuse[AVR_FUSE_EXT] = 0xFD;
+        sim->avr->reset_pc = sim->boot_addr;
+        sim->avr->pc = sim->boot_addr;
+        pd_set_extrf(sim);
+    }
+
+    pd_pins_init(&sim->pins, freq, pd_trace_emit, sim);
+    if (trace_path) {
+        sim->trace = fopen(trace_path, "w");
+        if (!sim->trace) {
+            perror("avrsim: trace file");
+            return 1;
+        }
+    }
+    pd_connect(sim);
+    if (pd_open_pty(sim) != 0) {
+        pd_cleanup(sim);
+        return 1;
+    }
+    if (auto_reset) {
+        sim->inotify = inotify_init1(IN_NONBLOCK | IN_CLOEXEC);
+        if (sim->inotify < 0 || inotify_add_watch(sim->inotify, sim->slave_path, IN_OPEN) < 0) {
+            perror("avrsim: inotify (--auto-reset)");
+            pd_cleanup(sim);
+            return 1;
+        }
+    }
+    const char *port = sim->slave_path;
+    if (sim->link) {
+        struct stat st;
+        if (lstat(sim->link, &st) == 0 && S_ISLNK(st.st_mode)) {
+            unlink(sim->link);
+        }
+        if (symlink(sim->slave_path, sim->link) != 0) {
+            perror("avrsim: --link");
+            sim->link = NULL;
+            pd_cleanup(sim);
+            return 1;
+        }
+        port = sim->link;
+    }
+
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = pd_on_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    sigaction(SIGUSR1, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
+
+    if (port_out) {
+        fprintf(port_out, "%s\n", port);
+        fflush(port_out);
+    }
+    pd_run(sim);
+    pd_cleanup(sim);
+    if (port_out) {
+        fclose(port_out);
+    }
+    return 0;
+}

@@ -1,0 +1,203 @@
+/*
+ * pd_pins.c: classify pin activity into servo pulses and digital levels.
+ *
+ * The rules, all in emulated time:
+ * - A level is the pin's output state (DDR and PORT bits both set). The
+ *   runner samples on every register write; a sample equal to the previous
+ *   level is ignored. This is what makes the measurement immune to
+ *   simavr 1.6 re-raising every output pin of a port whenever any bit of
+ *   that port is written: a re-raise never changes the level.
+ * - A high that ends within max_pulse (3 ms) is a pulse; one that lasts
+ *   longer is a digital 1, reported at the time it rose.
+ * - Pulses whose rising edges are at most max_period (50 ms) apart make a
+ *   servo signal. An isolated pulse is reported as a digital 1 then 0.
+ * - A servo's value is the width of its pulses in microseconds. A pulse that
+ *   differs from the reported width by HYST_US or more becomes a candidate:
+ *   if the next pulse is back at the reported width, the candidate was an
+ *   interrupt-latency outlier and is dropped; otherwise it is reported, with
+ *   the time of its own rising edge (so a change is dated to its first pulse
+ *   even though the line is written one frame later).
+ * - A servo whose pulses stop for more than max_period gets a value-0 line,
+ *   dated to the end of its last pulse (as the native board writes 0 when
+ *   its pulses stop on a reboot).
+ * - A pin that becomes an output at level 0 and shows no pulse within
+ *   low_wait (30 ms, longer than one 20 ms servo frame) is a digital 0.
+ */
+#include "pd_pins.h"
+
+#include <math.h>
+#include <string.h>
+
+#define PD_HYST_US 0.75
+
+static void pd_emit(pd_pins_t *pins, int n, uint64_t cycle, enum pd_pin_mode mode,
+                    unsigned value)
+{
+    pd_pin_t *p = &pins->pin[n];
+    if (p->emitted_mode == (int)mode && p->emitted_value == value) {
+        return;
+    }
+    p->emitted_mode = (int)mode;
+    p->emitted_value = value;
+    pins->emit(pins->ctx, cycle, n, mode, value);
+}
+
+static double pd_width_us(const pd_pins_t *pins, uint64_t rise, uint64_t fall)
+{
+    return (double)(fall - rise) / pins->cycles_per_us;
+}
+
+static void pd_emit_servo(pd_pins_t *pins, int n, uint64_t cycle, double us)
+{
+    pins->pin[n].servo_us = us;
+    pd_emit(pins, n, cycle, PD_PIN_MODE_SERVO, (unsigned)lround(us));
+}
+
+static void pd_set_cand(pd_pin_t *p, uint64_t rise, uint64_t fall, double us)
+{
+    p->cand = 1;
+    p->cand_rise = rise;
+    p->cand_fall = fall;
+    p->cand_us = us;
+}
+
+/* An isolated pulse on a pin that carries no servo: a quick digital 1 then 0. */
+static void pd_cand_as_digital(pd_pins_t *pins, int n)
+{
+    pd_pin_t *p = &pins->pin[n];
+    p->cand = 0;
+    pd_emit(pins, n, p->cand_rise, PD_PIN_MODE_DIGITAL, 1);
+    pd_emit(pins, n, p->cand_fall, PD_PIN_MODE_DIGITAL, 0);
+}
+
+static void pd_servo_stopped(pd_pins_t *pins, int n, uint64_t cycle)
+{
+    pd_pin_t *p = &pins->pin[n];
+    p->servo = 0;
+    p->cand = 0;
+    pd_emit(pins, n, cycle, PD_PIN_MODE_SERVO, 0);
+}
+
+static void pd_pulse(pd_pins_t *pins, int n, uint64_t rise, uint64_t fall)
+{
+    pd_pin_t *p = &pins->pin[n];
+    double us = pd_width_us(pins, rise, fall);
+
+    if (!p->servo) {
+        if (p->cand && rise - p->cand_rise <= pins->max_period) {
+            /* Two pulses close together: this pin carries a servo. */
+            p->servo = 1;
+            p->cand = 0;
+            pd_emit_servo(pins, n, p->cand_rise, p->cand_us);
+            if (fabs(us - p->servo_us) >= PD_HYST_US) {
+                pd_set_cand(p, rise, fall, us);
+            }
+        } else {
+            if (p->cand) {
+                pd_cand_as_digital(pins, n);
+            }
+            pd_set_cand(p, rise, fall, us);
+        }
+    } else if (p->cand) {
+        if (fabs(us - p->servo_us) < PD_HYST_US) {
+            p->cand = 0; /* the candidate was an outlier */
+        } else {
+            double cand_us = p->cand_us;
+            p->cand = 0;
+            pd_emit_servo(pins, n, p->cand_rise, cand_us);
+            if (fabs(us - cand_us) >= PD_HYST_US) {
+                pd_set_cand(p, rise, fall, us);
+            }
+        }
+    } else if (fabs(us - p->servo_us) >= PD_HYST_US) {
+        pd_set_cand(p, rise, fall, us);
+    }
+    p->last_rise = rise;
+    p->last_fall = fall;
+}
+
+/* A high that lasted longer than any pulse: a digital 1 since it rose. */
+static void pd_long_high(pd_pins_t *pins, int n)
+{
+    pd_pin_t *p = &pins->pin[n];
+    p->high_pending = 0;
+    if (p->servo) {
+        pd_servo_stopped(pins, n, p->last_fall);
+    } else if (p->cand) {
+        pd_cand_as_digital(pins, n);
+    }
+    pd_emit(pins, n, p->rise, PD_PIN_MODE_DIGITAL, 1);
+}
+
+void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, void *ctx)
+{
+    memset(pins, 0, sizeof *pins);
+    pins->cycles_per_us = (double)frequency / 1e6;
+    pins->max_pulse = (uint64_t)frequency * 3U / 1000U;
+    pins->max_period = (uint64_t)frequency * 50U / 1000U;
+    pins->low_wait = (uint64_t)frequency * 30U / 1000U;
+    pins->emit = emit;
+    pins->ctx = ctx;
+    for (int n = 0; n < PD_PINS_COUNT; n++) {
+        pins->pin[n].emitted_mode = -1;
+    }
+}
+
+void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint64_t cycle)
+{
+    if (n < 0 || n >= PD_PINS_COUNT) {
+        return;
+    }
+    pd_pin_t *p = &pins->pin[n];
+    uint8_t output = is_output ? 1U : 0U;
+    uint8_t level = (output && port_bit) ? 1U : 0U;
+
+    if (output && !p->output && !level) {
+        p->low_out_pending = 1;
+        p->out_since = cycle;
+    } else if (!output) {
+        p->low_out_pending = 0;
+    }
+    p->output = output;
+    if (level == p->level) {
+        return; /* a re-raise of the same level (simavr) or a pull-up change */
+    }
+    p->level = level;
+    if (level) {
+        p->low_out_pending = 0;
+        p->high_pending = 1;
+        p->rise = cycle;
+    } else if (p->high_pending && cycle - p->rise <= pins->max_pulse) {
+        p->high_pending = 0;
+        pd_pulse(pins, n, p->rise, cycle);
+    } else {
+        if (p->high_pending) {
+            pd_long_high(pins, n);
+        }
+        pd_emit(pins, n, cycle, PD_PIN_MODE_DIGITAL, 0);
+    }
+}
+
+void pd_pins_poll(pd_pins_t *pins, uint64_t cycle)
+{
+    for (int n = 0; n < PD_PINS_COUNT; n++) {
+        pd_pin_t *p = &pins->pin[n];
+        if (p->high_pending && cycle - p->rise > pins->max_pulse) {
+            pd_long_high(pins, n);
+        }
+        if (p->high_pending) {
+            continue;
+        }
+        if (p->servo && cycle - p->last_rise > pins->max_period) {
+            pd_servo_stopped(pins, n, p->last_fall);
+        }
+        if (!p->servo && p->cand && cycle - p->cand_rise > pins->max_period) {
+            pd_cand_as_digital(pins, n);
+        }
+        if (p->low_out_pending && !p->servo && !p->cand &&
+            cycle - p->out_since > pins->low_wait) {
+            p->low_out_pending = 0;
+            pd_emit(pins, n, p->out_since, PD_PIN_MODE_DIGITAL, 0);
+        }
+    }
+}

@@ -1,0 +1,66 @@
+/*
+ * pd_pins.h: turns the level history of the Uno's output pins into the
+ * protoduino trace (servo pulse widths and digital levels).
+ *
+ * It knows nothing about simavr: the runner feeds it (pin, is_output, level,
+ * cycle) samples whenever a port or direction register may have changed, and
+ * calls pd_pins_poll() regularly so that deadlines (a high level that lasted
+ * too long to be a pulse, a pulse train that stopped) are resolved. Every
+ * decision is taken from emulated cycles, never from the wall clock, so the
+ * widths are those of the emulated timer and not of the host's scheduling.
+ */
+#ifndef PD_PINS_H
+#define PD_PINS_H
+
+#include <stdint.h>
+
+#define PD_PINS_COUNT 20 /* Uno: D0..D13, A0..A5 = 14..19 */
+
+enum pd_pin_mode {
+    PD_PIN_MODE_NONE = 0,
+    PD_PIN_MODE_DIGITAL,
+    PD_PIN_MODE_SERVO,
+};
+
+/* Called once per trace line: cycle is the emulated time of the change. */
+typedef void (*pd_pins_emit_fn)(void *ctx, uint64_t cycle, int pin, enum pd_pin_mode mode,
+                                unsigned value);
+
+typedef struct {
+    uint8_t level;  /* effective level: output bit set and PORT bit set */
+    uint8_t output; /* DDR bit */
+    uint8_t high_pending; /* rose, not yet known to be a pulse or a level */
+    uint8_t low_out_pending; /* became an output at level 0, not yet classified */
+    uint8_t cand;            /* a pulse that differs from the reported value */
+    uint8_t servo;           /* pulses are periodic: the pin carries a servo */
+    uint64_t rise;
+    uint64_t out_since;
+    uint64_t cand_rise;
+    uint64_t cand_fall;
+    double cand_us;
+    double servo_us; /* measured width behind the reported servo value */
+    uint64_t last_rise;
+    uint64_t last_fall;
+    int emitted_mode; /* -1: nothing reported yet */
+    unsigned emitted_value;
+} pd_pin_t;
+
+typedef struct {
+    pd_pin_t pin[PD_PINS_COUNT];
+    double cycles_per_us;
+    uint64_t max_pulse;  /* longer highs are digital levels */
+    uint64_t max_period; /* pulses further apart are not one servo signal */
+    uint64_t low_wait;   /* how long an output low waits for a first pulse */
+    pd_pins_emit_fn emit;
+    void *ctx;
+} pd_pins_t;
+
+void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, void *ctx);
+
+/* A possible change of one pin: is_output = DDR bit, level = PORT bit. */
+void pd_pins_sample(pd_pins_t *pins, int pin, int is_output, int port_bit, uint64_t cycle);
+
+/* Resolves the deadlines that have passed at `cycle`. */
+void pd_pins_poll(pd_pins_t *pins, uint64_t cycle);
+
+#endif
