@@ -1,0 +1,224 @@
+"""Request layer against the scripted fake device: ids, retransmission, timeouts, window."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from fakedevice import FakeDevice, ack
+from protoduino import Board
+from protoduino.messages import ArduinoIn, Status
+
+ACK_TIMEOUT = 0.1
+
+
+@pytest.fixture
+def fake(tmp_path: Path) -> Iterator[FakeDevice]:
+    with FakeDevice(tmp_path) as device:
+        yield device
+
+
+@pytest.fixture
+def board(fake: FakeDevice) -> Iterator[Board]:
+    with Board.open(fake.port, ack_timeout=ACK_TIMEOUT, ping=False) as b:
+        yield b
+
+
+def ping_msg(payload: bytes = b"") -> Any:
+    msg = ArduinoIn()
+    msg.ping.payload = payload
+    return msg
+
+
+def test_message_ids_are_nonzero_increment_and_wrap(board: Board, fake: FakeDevice) -> None:
+    board._rpc._next_id = 0xFFFFFFFE
+    for _ in range(3):
+        board.ping()
+    ids = [r.msg.message_id for r in fake.commands("ping")]
+    assert ids == [0xFFFFFFFE, 0xFFFFFFFF, 1]
+
+
+def test_message_ids_start_at_random(tmp_path: Path) -> None:
+    starts = set()
+    for i in range(3):
+        directory = tmp_path / str(i)
+        directory.mkdir()
+        with FakeDevice(directory) as f, Board.open(f.port, ping=False):
+            pass
+        starts.add(f.commands("get_info")[0].msg.message_id)
+    assert 0 not in starts
+    assert len(starts) > 1  # three equal 32-bit random starts: about 1 in 2**64
+
+
+def test_dropped_ack_is_retransmitted_with_the_same_id(board: Board, fake: FakeDevice) -> None:
+    dropped: list[int] = []
+
+    def drop_first(msg: Any) -> list[Any]:
+        if not dropped:
+            dropped.append(msg.message_id)
+            return []
+        return fake.default_reply(msg)
+
+    fake.handler = drop_first
+    board.ping(b"x")
+    pings = fake.commands("ping")
+    assert len(pings) == 2
+    assert pings[0].msg.message_id == pings[1].msg.message_id == dropped[0]
+    assert pings[0].seq != pings[1].seq  # a new packet, a new SEQ
+    assert board.stats.retransmits == 1
+
+
+def test_no_ack_times_out_after_every_retry(board: Board, fake: FakeDevice) -> None:
+    fake.handler = lambda msg: []
+    start = time.monotonic()
+    with pytest.raises(protoduino.AckTimeoutError) as info:
+        board.ping()
+    elapsed = time.monotonic() - start
+    assert isinstance(info.value, TimeoutError)
+    assert isinstance(info.value, protoduino.ProtoduinoError)
+    pings = fake.commands("ping")
+    assert len(pings) == 1 + protoduino.constants.MAX_RETRIES
+    assert len({p.msg.message_id for p in pings}) == 1
+    assert elapsed < board._rpc.call_timeout + 1.0
+    assert info.value.recent_frames  # ring buffer of recent frames attached
+    assert any("COMMAND" in line for line in info.value.recent_frames)
+    assert board.stats.timeouts == 1
+
+
+def test_duplicate_ack_is_counted_late_and_dropped(board: Board, fake: FakeDevice) -> None:
+    fake.handler = lambda msg: fake.default_reply(msg) * 2
+    board.ping(b"a")
+    board.ping(b"b")
+    assert fake.wait_for(lambda: board.stats.late_acks == 2)
+    assert board.stats.acks == 3  # get_info + two pings
+
+
+def test_late_ack_never_completes_the_wrong_call(board: Board, fake: FakeDevice) -> None:
+    first: list[Any] = []
+
+    def handler(msg: Any) -> list[Any]:
+        if not first or msg.message_id == first[0].message_id:
+            first.append(msg)  # never answered in time, nor its retransmissions
+            return []
+        if msg.ping.payload == b"second":
+            # the first call's Ack arrives now, late, before the second's own
+            late = ack(first[0].message_id)
+            late.ack.ping_echo = first[0].ping.payload
+            fake.send_data(late)
+        return fake.default_reply(msg)
+
+    fake.handler = handler
+    with pytest.raises(protoduino.AckTimeoutError):
+        board.ping(b"first")
+    assert board.ping(b"second") >= 0  # an echo mismatch would raise ProtocolError
+    assert board.stats.late_acks >= 1
+
+
+def test_unknown_ack_is_counted_and_dropped(board: Board, fake: FakeDevice) -> None:
+    fake.send_data(ack(board._rpc._next_id + 1000))
+    assert fake.wait_for(lambda: board.stats.unknown_acks == 1)
+    board.ping()
+
+
+def test_rejection_carries_the_status(board: Board, fake: FakeDevice) -> None:
+    fake.handler = lambda msg: [ack(msg.message_id, Status.STATUS_OUT_OF_RANGE)]
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.ping()
+    assert info.value.status == Status.STATUS_OUT_OF_RANGE
+    assert info.value.sent
+    assert "STATUS_OUT_OF_RANGE" in str(info.value)
+    assert board.stats.rejected == 1
+
+
+def test_window_lets_several_calls_fly(fake: FakeDevice) -> None:
+    held: list[Any] = []
+
+    def answer_after_four(msg: Any) -> list[Any]:
+        if msg.WhichOneof("data") != "ping":
+            return fake.default_reply(msg)
+        held.append(msg)
+        if len({m.message_id for m in held}) < 4:
+            return []  # no Ack until four distinct calls are in flight
+        return [r for m in held for r in fake.default_reply(m)]
+
+    with Board.open(fake.port, window=4, ping=False, ack_timeout=0.5) as board:
+        fake.handler = answer_after_four
+        calls = [board._rpc.submit(ping_msg(bytes([i]))) for i in range(4)]
+        for call in calls:
+            board._rpc.wait(call)
+        assert {p.msg.message_id for p in fake.commands("ping")} == {c.message_id for c in calls}
+        assert board.stats.retransmits == 0
+
+
+def test_window_bounds_calls_in_flight(fake: FakeDevice) -> None:
+    with Board.open(fake.port, window=2, ping=False, ack_timeout=ACK_TIMEOUT) as board:
+        fake.handler = lambda msg: []
+        calls = [board._rpc.submit(ping_msg()) for _ in range(4)]
+        assert fake.wait_for(lambda: len(fake.commands("ping")) >= 4)  # with retransmissions
+        first_ids = {p.msg.message_id for p in fake.commands("ping")[:4]}
+        assert len(first_ids) == 2
+        assert first_ids == {calls[0].message_id, calls[1].message_id}
+        board.close()
+        for call in calls:
+            with pytest.raises(protoduino.ProtoduinoError):
+                board._rpc.wait(call)
+
+
+def test_automatic_ping_and_pause(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ping=True) as board:
+        assert fake.wait_for(lambda: len(fake.commands("ping")) >= 2, timeout=3)
+        board.pinging = False
+        time.sleep(0.1)  # a ping already queued may still land
+        count = len(fake.commands("ping"))
+        time.sleep(1.3)
+        assert len(fake.commands("ping")) == count
+        board.pinging = True
+        assert fake.wait_for(lambda: len(fake.commands("ping")) > count, timeout=2)
+        assert board.stats.pings >= 3
+        assert board.stats.rtt is not None
+
+
+def test_close_fails_waiting_calls(board: Board, fake: FakeDevice) -> None:
+    fake.handler = lambda msg: []
+    errors: list[BaseException] = []
+
+    def call() -> None:
+        try:
+            board.ping()
+        except protoduino.ProtoduinoError as error:
+            errors.append(error)
+
+    worker = threading.Thread(target=call)
+    worker.start()
+    assert fake.wait_for(lambda: len(fake.commands("ping")) >= 1)
+    board.close()
+    worker.join(5)
+    assert not worker.is_alive()
+    assert len(errors) == 1
+    assert isinstance(errors[0], protoduino.BoardClosedError | protoduino.AckTimeoutError)
+
+
+def test_calls_fail_in_time_while_the_port_is_gone(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ping=False, handshake_timeout=0.5) as board:
+        fake.unplug()
+        start = time.monotonic()
+        with pytest.raises(protoduino.TransportError) as info:
+            board.ping()
+        assert time.monotonic() - start < board._rpc.call_timeout + 1.0
+        assert "lost" in str(info.value)
+        assert board.stats.state == "disconnected"
+
+
+def test_calls_wait_for_a_reconnect(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ping=False, handshake_timeout=3.0) as board:
+        fake.unplug()
+        assert fake.wait_for(lambda: not board.stats.connected)
+        threading.Timer(0.3, fake.replug).start()
+        assert board.ping(b"back") >= 0
+        assert board.stats.reconnects == 1
+        assert board.stats.state == "active"
