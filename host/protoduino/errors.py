@@ -11,6 +11,8 @@
      +-- CommandRejectedError     the device (or the host, checking first) refused a command
      +-- AckTimeoutError          no Ack after every retry; also a builtin TimeoutError
      +-- BoardClosedError         the board was closed while, or before, the call ran
+     +-- BuildError               a build step (make, avr-objcopy) failed
+     +-- FlashError               avrdude could not upload the firmware
 
 Third-party exceptions (pyserial, protobuf) are wrapped at the boundary with
 ``raise ... from error`` so callers need to catch only ``ProtoduinoError``.
@@ -98,3 +100,11 @@ class AckTimeoutError(ProtoduinoError, TimeoutError):
 
 class BoardClosedError(ProtoduinoError):
     """The board is closed."""
+
+
+class BuildError(ProtoduinoError):
+    """A build step (make, avr-objcopy) failed; the message carries its output."""
+
+
+class FlashError(ProtoduinoError):
+    """Uploading firmware failed: wrong port, no bootloader answering, or avrdude's error."""
