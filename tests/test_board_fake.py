@@ -1,0 +1,292 @@
+"""Board API against the scripted fake device: checks before sending, restore, events, threads."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from fakedevice import FakeDevice, ack
+from protoduino import Board, Event, EventKind
+from protoduino.messages import ArduinoOut, Status
+
+
+@pytest.fixture
+def fake(tmp_path: Path) -> Iterator[FakeDevice]:
+    with FakeDevice(tmp_path) as device:
+        yield device
+
+
+@pytest.fixture
+def board(fake: FakeDevice) -> Iterator[Board]:
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
+        yield b
+
+
+class Recorder:
+    def __init__(self, board: Board) -> None:
+        self.events: list[Event] = []
+        self._cond = threading.Condition()
+        board.on_event(self)
+
+    def __call__(self, event: Event) -> None:
+        with self._cond:
+            self.events.append(event)
+            self._cond.notify_all()
+
+    def wait(self, kind: EventKind, timeout: float = 5.0) -> Event:
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for event in self.events:
+                    if event.kind is kind:
+                        return event
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise AssertionError(f"no {kind} event; got {self.events}")
+                self._cond.wait(left)
+
+
+def log_msg(text: str) -> Any:
+    out = ArduinoOut()
+    out.log.text = text
+    return out
+
+
+REJECTIONS: list[tuple[str, Callable[[Board], object], int]] = [
+    ("pin too high", lambda b: b.servo(20), Status.STATUS_INVALID_PIN),
+    ("negative pin", lambda b: b.digital_output(-1), Status.STATUS_INVALID_PIN),
+    ("reserved pin 0", lambda b: b.digital_output(0), Status.STATUS_RESERVED_PIN),
+    ("reserved pin 1", lambda b: b.servo(1), Status.STATUS_RESERVED_PIN),
+    ("min_us too low", lambda b: b.servo(9, min_us=399), Status.STATUS_INVALID_ARGUMENT),
+    ("max_us too high", lambda b: b.servo(9, max_us=2601), Status.STATUS_INVALID_ARGUMENT),
+    ("min >= max", lambda b: b.servo(9, min_us=1500, max_us=1500), Status.STATUS_INVALID_ARGUMENT),
+    ("safe > 180", lambda b: b.servo(9, safe=181), Status.STATUS_OUT_OF_RANGE),
+    ("safe < 0", lambda b: b.servo(9, safe=-1), Status.STATUS_OUT_OF_RANGE),
+    ("safe_us below", lambda b: b.servo(9, safe_us=543), Status.STATUS_OUT_OF_RANGE),
+    ("safe_us above", lambda b: b.servo(9, safe_us=2401), Status.STATUS_OUT_OF_RANGE),
+    ("ping too long", lambda b: b.ping(bytes(65)), Status.STATUS_DECODE_ERROR),
+]
+
+
+@pytest.mark.parametrize(("why", "action", "status"), REJECTIONS, ids=[r[0] for r in REJECTIONS])
+def test_checked_before_sending(
+    board: Board, fake: FakeDevice, why: str, action: Callable[[Board], object], status: int
+) -> None:
+    before = len(fake.commands())
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        action(board)
+    assert info.value.status == status
+    assert info.value.sent is False
+    assert len(fake.commands()) == before  # nothing went out
+
+
+def test_control_checks(board: Board, fake: FakeDevice) -> None:
+    servo = board.servo(9, min_us=1000, max_us=2000)
+    before = len(fake.commands())
+    bad: list[Callable[[], None]] = [
+        lambda: servo.write(181),
+        lambda: servo.write(-1),
+        lambda: servo.write_us(999),
+    ]
+    for action in bad:
+        with pytest.raises(protoduino.CommandRejectedError) as info:
+            action()
+        assert info.value.status == Status.STATUS_OUT_OF_RANGE and not info.value.sent
+    with pytest.raises(TypeError):
+        servo.write(4.5)  # type: ignore[arg-type]
+    with pytest.raises(TypeError):
+        board.servo("9")  # type: ignore[arg-type]
+    with pytest.raises(TypeError):
+        board.servo(10, safe=90, safe_us=1500)
+    assert len(fake.commands()) == before
+    servo.write_us(2000)
+    servo.write(180)
+    assert fake.values[9] == 180
+
+
+def test_pin_in_use_and_free_slots(board: Board, fake: FakeDevice) -> None:
+    board.digital_output(13)
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.servo(13)
+    assert info.value.status == Status.STATUS_PIN_IN_USE and not info.value.sent
+    board.servo(9)
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.digital_output(9)
+    assert info.value.status == Status.STATUS_PIN_IN_USE
+    for pin in range(2, 9):  # 9 is a servo already: 8 in all
+        board.servo(pin)
+    board.servo(9, safe=10)  # re-init of a servo pin takes no new slot
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.servo(10)
+    assert info.value.status == Status.STATUS_NO_FREE_RESOURCE and not info.value.sent
+
+
+def test_outputs_reach_the_device(board: Board, fake: FakeDevice) -> None:
+    servo = board.servo(9, safe=90)
+    servo.write(45)
+    led = board.digital_output(13, safe=False)
+    led.write(True)
+    assert fake.values == {9: 45, 13: 1}
+    led.off()
+    assert fake.values[13] == 0
+    init = fake.commands("servo_init")[0].msg.servo_init
+    assert (init.pin, init.min_us, init.max_us, init.safe_degrees) == (9, 544, 2400, 90)
+    assert fake.commands("digital_init")[0].msg.digital_init.safe_level is False
+    board.stop()
+    assert fake.commands("stop")
+
+
+def test_device_rejection_is_sent_true(board: Board, fake: FakeDevice) -> None:
+    fake.handler = lambda msg: [ack(msg.message_id, Status.STATUS_PIN_IN_USE)]
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.servo(9)
+    assert info.value.status == Status.STATUS_PIN_IN_USE and info.value.sent
+
+
+def test_session_restore_after_reboot(board: Board, fake: FakeDevice) -> None:
+    rec = Recorder(board)
+    servo = board.servo(9, safe=90)
+    servo.write(45)
+    led = board.digital_output(13)
+    led.write(True)
+    board.servo(10, safe_us=1500)  # an output never commanded: its Init alone is replayed
+    mark = len(fake.commands())
+    fake.reboot()
+    restored = rec.wait(EventKind.RESTORED)
+    assert restored.details["replayed"] == 5 and restored.details["failed"] == []
+    rec.wait(EventKind.REBOOTED)
+    replay = [r.kind for r in fake.commands()[mark:]]
+    assert replay[:5] == ["servo_init", "digital_init", "servo_init", "servo_control",
+                          "digital_control"]  # fmt: skip
+    assert fake.pins == {9: "servo", 13: "digital", 10: "servo"}
+    assert fake.values == {9: 45, 13: 1}
+    servo.write(50)  # and the session goes on
+    assert fake.values[9] == 50
+
+
+def test_held_call_resumes_after_restore(board: Board, fake: FakeDevice) -> None:
+    rec = Recorder(board)
+    servo = board.servo(9)
+    board._rpc.ack_timeout = 0.5  # room for the reboot before retries run out
+    swallowed: list[int] = []
+
+    def reboot_on_write(msg: Any) -> list[Any]:
+        if msg.WhichOneof("data") == "servo_control" and not swallowed:
+            swallowed.append(msg.message_id)
+            threading.Thread(target=fake.reboot).start()  # the device dies mid-command
+            return []
+        return fake.default_reply(msg)
+
+    fake.handler = reboot_on_write
+    servo.write(120)  # returns once executed on the rebooted device
+    rec.wait(EventKind.RESTORED)
+    kinds = [r.kind for r in fake.commands()]
+    last_init = max(i for i, k in enumerate(kinds) if k == "servo_init")
+    assert kinds[last_init + 1 :].count("servo_control") >= 1  # resumed after the restore
+    assert fake.values[9] == 120
+
+
+def test_stop_and_failsafe_forget_values(board: Board, fake: FakeDevice) -> None:
+    rec = Recorder(board)
+    servo = board.servo(9)
+    servo.write(30)
+    board.stop()
+    fake.reboot()
+    rec.wait(EventKind.RESTORED)
+    assert 9 not in fake.values  # the stop latched it safe; the restore keeps it so
+    servo.write(60)
+    failsafe = ArduinoOut()
+    failsafe.failsafe.active = True
+    failsafe.failsafe.cause = 1  # type: ignore[assignment]
+    fake.send_data(failsafe)
+    event = rec.wait(EventKind.FAILSAFE)
+    assert event.details == {"active": True, "cause": "ping_timeout"}
+    assert board._restore_messages()[-1].WhichOneof("data") == "servo_init"
+
+
+def test_log_and_decode_error_events(board: Board, fake: FakeDevice) -> None:
+    rec = Recorder(board)
+    out = ArduinoOut()
+    out.log.level = 2  # type: ignore[assignment]
+    out.log.text = "hello"
+    fake.send_data(out)
+    out = ArduinoOut()
+    out.decode_error.count = 3
+    fake.send_data(out)
+    assert rec.wait(EventKind.LOG).details == {"level": "warning", "text": "hello"}
+    assert rec.wait(EventKind.DECODE_ERROR).details == {"count": 3}
+
+
+def test_callback_errors_do_not_stop_events(board: Board, fake: FakeDevice) -> None:
+    def broken(event: Event) -> None:
+        raise RuntimeError("user bug")
+
+    board.on_event(broken)
+    rec = Recorder(board)
+    fake.send_data(log_msg("x"))
+    rec.wait(EventKind.LOG)
+
+
+def test_unsubscribe(board: Board, fake: FakeDevice) -> None:
+    seen: list[Event] = []
+    unsubscribe = board.on_event(seen.append)
+    unsubscribe()
+    rec = Recorder(board)
+    fake.send_data(log_msg("x"))
+    rec.wait(EventKind.LOG)
+    assert seen == []
+
+
+def test_concurrent_callers(board: Board, fake: FakeDevice) -> None:
+    servos = [board.servo(pin) for pin in range(2, 10)]
+    errors: list[BaseException] = []
+
+    def worker(servo: protoduino.Servo) -> None:
+        try:
+            for degrees in range(0, 181, 6):
+                servo.write(degrees)
+            servo.write(servo.pin)
+        except BaseException as error:
+            errors.append(error)
+
+    threads = [threading.Thread(target=worker, args=(s,)) for s in servos]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    assert errors == []
+    assert fake.values == {pin: pin for pin in range(2, 10)}
+    assert board.stats.timeouts == 0
+
+
+def test_several_boards_at_once(tmp_path: Path) -> None:
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    with (
+        FakeDevice(tmp_path / "a") as fa,
+        FakeDevice(tmp_path / "b") as fb,
+        Board.open(fa.port) as a,
+        Board.open(fb.port) as b,
+    ):
+        a.servo(9).write(10)
+        b.servo(9).write(20)
+        assert (fa.values[9], fb.values[9]) == (10, 20)
+
+
+def test_close_from_an_event_callback(fake: FakeDevice) -> None:
+    board = Board.open(fake.port, ping=False)
+    closed = threading.Event()
+
+    def close_on_log(event: Event) -> None:
+        board.close()
+        closed.set()
+
+    board.on_event(close_on_log)
+    fake.send_data(log_msg("bye"))
+    assert closed.wait(5)
+    assert board.closed
