@@ -166,6 +166,7 @@ class Board:
         max_retries: int = MAX_RETRIES,
         window: int = 4,
         ping: bool = True,
+        monitor: FrameMonitor | None = None,
     ) -> None:
         self.url = url
         self._lock = threading.Lock()
@@ -184,6 +185,8 @@ class Board:
         self._rpc.message_hook = self._message
         self._rpc.restore_provider = self._restore_messages
         self._transport = Transport(url, baudrate=baudrate)
+        if monitor is not None:
+            self._transport.add_monitor(monitor)
         self._link = Link(
             self._transport, self._rpc, handshake_timeout=handshake_timeout, notify=self._notify
         )
@@ -210,6 +213,7 @@ class Board:
         max_retries: int = MAX_RETRIES,
         window: int = 4,
         ping: bool = True,
+        monitor: FrameMonitor | None = None,
     ) -> Board:
         """Open ``url`` (any pyserial URL), handshake and read the device's info.
 
@@ -217,6 +221,12 @@ class Board:
         :class:`HandshakeError` if the device does not answer within
         ``handshake_timeout``, :class:`VersionMismatchError` or
         :class:`SchemaMismatchError` if it runs incompatible firmware.
+
+        ``ack_timeout`` and ``max_retries`` bound each command; ``window`` is
+        how many commands may await their Ack at once; ``ping=False`` starts
+        without the automatic 1 Hz Ping (see :attr:`pinging`); ``monitor`` is
+        called with every frame in both directions from the first one on
+        (on the I/O thread: be quick).
         """
         return cls(
             url,
@@ -226,6 +236,7 @@ class Board:
             max_retries=max_retries,
             window=window,
             ping=ping,
+            monitor=monitor,
         )
 
     # --- context and life cycle -------------------------------------------------------

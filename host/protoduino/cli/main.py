@@ -20,6 +20,12 @@ from .. import __version__
 COMMANDS: dict[str, str] = {
     "gen": "gen",
     "decode": "decode",
+    "ports": "ports",
+    "ping": "ping",
+    "servo": "servo",
+    "pin": "pin",
+    "info": "info",
+    "monitor": "monitor",
 }
 
 

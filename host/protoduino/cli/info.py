@@ -1,0 +1,40 @@
+"""``protoduino info PORT``: what the device says about itself, and the link counters."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+
+from ..board import Board
+from .options import add_port, with_board
+
+HELP = "show the device's firmware, board, pins and protocol, and the link counters"
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    add_port(parser)
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def run(args: argparse.Namespace) -> int:
+    def body(board: Board) -> int:
+        rtt = board.ping()
+        info = dataclasses.asdict(board.info)
+        info["schema_id"] = f"0x{board.info.schema_id:08X}"
+        info["reserved_pins"] = list(board.info.reserved_pins)
+        if args.json:
+            print(
+                json.dumps(
+                    {"port": args.port, "info": info, "rtt": rtt, "stats": board.stats.as_dict()},
+                    default=str,
+                )
+            )
+            return 0
+        print(f"port              {args.port}")
+        for key, value in info.items():
+            print(f"{key:<17} {value}")
+        print(f"rtt               {rtt * 1000:.3f} ms")
+        return 0
+
+    return with_board("info", args, body, ping=False)

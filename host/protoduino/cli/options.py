@@ -1,0 +1,66 @@
+"""Options shared by the commands that talk to a board, and their error handling."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable
+
+from ..board import Board
+from ..constants import ACK_TIMEOUT, HANDSHAKE_TIMEOUT
+from ..errors import ProtoduinoError
+
+
+def add_port(parser: argparse.ArgumentParser) -> None:
+    """PORT plus the link options every board command takes."""
+    parser.add_argument(
+        "port", metavar="PORT", help="serial port or pyserial URL (/dev/ttyACM0, socket://...)"
+    )
+    parser.add_argument("--baud", type=int, default=115200, help="baud rate (default: %(default)s)")
+    parser.add_argument(
+        "--ack-timeout",
+        type=float,
+        default=ACK_TIMEOUT,
+        metavar="S",
+        help="seconds to wait for each Ack before a retry (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--handshake-timeout",
+        type=float,
+        default=HANDSHAKE_TIMEOUT,
+        metavar="S",
+        help="seconds to wait for the device to answer (default: %(default)s)",
+    )
+
+
+def open_board(args: argparse.Namespace, *, ping: bool = True) -> Board:
+    return Board.open(
+        args.port,
+        baudrate=args.baud,
+        ack_timeout=args.ack_timeout,
+        handshake_timeout=args.handshake_timeout,
+        ping=ping,
+    )
+
+
+def error(command: str, message: object) -> int:
+    print(f"protoduino {command}: {message}", file=sys.stderr)
+    return 1
+
+
+def with_board(
+    command: str, args: argparse.Namespace, body: Callable[[Board], int], *, ping: bool = True
+) -> int:
+    """Open the board, run ``body``, close it; a ProtoduinoError becomes exit status 1."""
+    try:
+        with open_board(args, ping=ping) as board:
+            return body(board)
+    except ProtoduinoError as exc:
+        return error(command, exc)
+
+
+def hold(board: Board, seconds: float) -> None:
+    """Keep the link (and its pings) alive for ``seconds``, so the failsafe stays away."""
+    if seconds > 0:
+        time.sleep(seconds)

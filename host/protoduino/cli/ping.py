@@ -1,0 +1,63 @@
+"""``protoduino ping PORT``: round-trip time statistics over the acknowledged link."""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+from ..board import MAX_PING_PAYLOAD, Board
+from ..errors import AckTimeoutError
+from .options import add_port, with_board
+
+HELP = "send Pings and print round-trip time statistics"
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    add_port(parser)
+    parser.add_argument("-c", "--count", type=int, default=10, help="pings (default: 10)")
+    parser.add_argument(
+        "-i", "--interval", type=float, default=0.2, metavar="S", help="seconds between pings"
+    )
+    parser.add_argument(
+        "-s",
+        "--size",
+        type=int,
+        default=0,
+        help=f"payload bytes echoed back (0..{MAX_PING_PAYLOAD}, default 0)",
+    )
+    parser.add_argument("-q", "--quiet", action="store_true", help="print the summary only")
+
+
+def run(args: argparse.Namespace) -> int:
+    payload = bytes(i & 0xFF for i in range(args.size))
+
+    def body(board: Board) -> int:
+        rtts: list[float] = []
+        lost = 0
+        for n in range(args.count):
+            if n:
+                time.sleep(args.interval)
+            try:
+                rtt = board.ping(payload)
+            except AckTimeoutError as error:
+                lost += 1
+                if not args.quiet:
+                    print(f"ping {n + 1}: timeout ({error})")
+                continue
+            rtts.append(rtt)
+            if not args.quiet:
+                print(f"ping {n + 1}: {len(payload)} bytes, rtt {rtt * 1000:.3f} ms")
+        print(f"--- {args.port}: {args.count} sent, {len(rtts)} answered, {lost} lost")
+        if rtts:
+            dev = statistics.pstdev(rtts) if len(rtts) > 1 else 0.0
+            print(
+                f"rtt min/avg/max/stddev = {min(rtts) * 1000:.3f}/"
+                f"{statistics.fmean(rtts) * 1000:.3f}/{max(rtts) * 1000:.3f}/"
+                f"{dev * 1000:.3f} ms"
+            )
+        stats = board.stats
+        print(f"retransmits {stats.retransmits}, timeouts {stats.timeouts}")
+        return 0 if not lost else 1
+
+    return with_board("ping", args, body)
