@@ -122,4 +122,3 @@ def print_stats(board: Board, as_json: bool) -> None:
         print(json.dumps({"stats": board.stats.as_dict()}, default=str), flush=True)
     else:
         print(stats_line(board), flush=True)
-
