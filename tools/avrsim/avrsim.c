@@ -2,7 +2,7 @@
  * avrsim.c: an emulated Arduino Uno (ATmega328P, simavr) on a pseudo-terminal.
  *
  *   avrsim [--trace FILE] [--link PATH] [--hex FILE]... [--boot ADDR]
- *          [--auto-reset] [--mcu NAME] [--freq HZ] [FIRMWARE.elf]
+ *          [--auto-reset] [--glitch PIN] [--mcu NAME] [--freq HZ] [FIRMWARE.elf]
  *
  * The command-line contract is the native simulated board's (contracts.md):
  * the first stdout line is the port to open (the pty's slave, or --link),
@@ -89,6 +89,8 @@ typedef struct {
     pd_fifo_t tx; /* MCU -> host */
     uint64_t next_rx_cycle;
     int crashed;
+    int glitch_pin; /* --glitch: -1 when off */
+    uint64_t next_glitch;
 } pd_sim_t;
 
 static pd_sim_t g_sim;
@@ -409,6 +411,28 @@ static void pd_check_opens(pd_sim_t *sim)
     }
 }
 
+/* --glitch PIN, a test hook: every 50 us of emulated time, raise the pin's
+ * IRQ with the opposite level and then its own level again. That is the shape
+ * of simavr 1.6's re-raise artefact as a naive IRQ listener sees it (a short
+ * pulse that never happened at the pin); the trace must not change. */
+static void pd_glitch(pd_sim_t *sim)
+{
+    int pin = sim->glitch_pin;
+    int port_index = pin < 8 ? 0 : (pin < 14 ? 1 : 2);
+    pd_port_t *port = &sim->ports[port_index];
+    if (!port->io) {
+        return;
+    }
+    int bit = pin - port->first_pin;
+    avr_irq_t *irq = avr_io_getirq(sim->avr, AVR_IOCTL_IOPORT_GETIRQ(port->name), bit);
+    if (irq) {
+        uint32_t level = (sim->avr->data[port->io->r_port] >> bit) & 1U;
+        avr_raise_irq(irq, level ^ 1U);
+        avr_raise_irq(irq, level);
+    }
+    sim->next_glitch = pd_cycles(sim) + sim->avr->frequency / 20000U;
+}
+
 static int pd_load_hex(pd_sim_t *sim, const char *path)
 {
     ihex_chunk_p chunks = NULL;
@@ -434,7 +458,8 @@ static void pd_usage(FILE *f)
 {
     fprintf(f,
             "usage: avrsim [--trace FILE] [--link PATH] [--hex FILE]... [--boot ADDR]\n"
-            "              [--auto-reset] [--mcu NAME] [--freq HZ] [FIRMWARE.elf]\n"
+            "              [--auto-reset] [--glitch PIN] [--mcu NAME] [--freq HZ]\n"
+            "              [FIRMWARE.elf]\n"
             "Runs an emulated Arduino Uno with UART0 on a pseudo-terminal; prints the\n"
             "port as the first stdout line. SIGUSR1 resets the MCU, SIGINT/SIGTERM exit.\n");
 }
@@ -480,6 +505,9 @@ static void pd_run(pd_sim_t *sim)
                 if (sim->rx.len) {
                     pd_feed_uart(sim);
                 }
+                if (sim->glitch_pin >= 0 && pd_cycles(sim) >= sim->next_glitch) {
+                    pd_glitch(sim);
+                }
             }
         } else {
             /* A stopped MCU still lets time pass, so that deadlines resolve. */
@@ -522,12 +550,14 @@ int main(int argc, char **argv)
     sim->inotify = -1;
     sim->master = -1;
     sim->slave = -1;
+    sim->glitch_pin = -1;
 
     static const struct option options[] = {
         {"trace", required_argument, NULL, 't'}, {"link", required_argument, NULL, 'l'},
         {"hex", required_argument, NULL, 'x'},   {"boot", required_argument, NULL, 'b'},
         {"mcu", required_argument, NULL, 'm'},   {"freq", required_argument, NULL, 'f'},
-        {"auto-reset", no_argument, NULL, 'r'},  {"help", no_argument, NULL, 'h'},
+        {"auto-reset", no_argument, NULL, 'r'},  {"glitch", required_argument, NULL, 'g'},
+        {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
     int opt;
@@ -558,6 +588,13 @@ int main(int argc, char **argv)
             break;
         case 'r':
             auto_reset = 1;
+            break;
+        case 'g':
+            sim->glitch_pin = atoi(optarg);
+            if (sim->glitch_pin < 2 || sim->glitch_pin >= PD_PINS_COUNT) {
+                fprintf(stderr, "avrsim: --glitch takes an output pin 2..19\n");
+                return 2;
+            }
             break;
         case 'h':
             pd_usage(stdout);

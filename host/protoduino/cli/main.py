@@ -26,6 +26,7 @@ COMMANDS: dict[str, str] = {
     "pin": "pin",
     "info": "info",
     "monitor": "monitor",
+    "flash": "flash",
 }
 
 

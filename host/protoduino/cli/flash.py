@@ -1,0 +1,49 @@
+"""``protoduino flash``: build the Uno firmware if needed and upload it through the bootloader."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+HELP = "build the Uno firmware if needed and upload it with avrdude through the bootloader"
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("port", help="serial port of the Uno, e.g. /dev/ttyACM0")
+    parser.add_argument(
+        "--hex",
+        type=Path,
+        default=None,
+        help="flash this Intel hex (or ELF, converted) instead of building the firmware",
+    )
+    parser.add_argument(
+        "--baud", type=int, default=115200, help="bootloader baud rate (Optiboot: 115200)"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..emulator import build_firmware_hex, flash, strip_to_hex
+    from ..errors import BuildError, FlashError
+
+    try:
+        with tempfile.TemporaryDirectory(prefix="protoduino-flash-") as tmp:
+            if args.hex is None:
+                print(
+                    "protoduino flash: building the firmware (make -C firmware avr)",
+                    file=sys.stderr,
+                )
+                hex_file = build_firmware_hex()
+            elif args.hex.suffix == ".elf":
+                # An ELF may carry .eeprom or simavr's .mmcu: convert without them.
+                hex_file = strip_to_hex(args.hex, Path(tmp) / "firmware.hex")
+            else:
+                hex_file = args.hex
+            print(f"protoduino flash: uploading {hex_file} to {args.port}", file=sys.stderr)
+            flash(args.port, hex_file, baud=args.baud, progress=sys.stderr)
+    except (BuildError, FlashError) as error:
+        print(f"protoduino flash: {error}", file=sys.stderr)
+        return 1
+    print(f"protoduino flash: done, {args.port} runs the new firmware", file=sys.stderr)
+    return 0
