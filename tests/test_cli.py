@@ -1,0 +1,112 @@
+"""The command line: every command's --help, and each board command end to end."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from fakedevice import FakeDevice
+from protoduino.cli.main import COMMANDS, main
+from protoduino.cli.ports import classify
+
+MINE = ["ports", "ping", "servo", "pin", "info", "monitor", "demo"]
+
+
+@pytest.fixture
+def fake(tmp_path: Path) -> Iterator[FakeDevice]:
+    with FakeDevice(tmp_path) as device:
+        yield device
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_every_command_has_help(command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        main([command, "--help"])
+    assert info.value.code == 0
+    out = capsys.readouterr().out
+    assert f"protoduino {command}" in out
+
+
+def test_host_commands_are_registered() -> None:
+    missing = [c for c in MINE if c not in COMMANDS]
+    assert missing == [] or missing == ["demo"]  # demo needs the simulated board module
+
+
+def test_ports_classifies_usb_ids(capsys: pytest.CaptureFixture[str]) -> None:
+    assert classify(0x2341, 0x0043) == "arduino"
+    assert classify(0x1A86, 0x7523) == "clone?"
+    assert classify(0x1234, 0x0001) == ""
+    assert classify(None, None) == ""
+    assert main(["ports", "--all"]) == 0
+    assert main(["ports", "--json"]) == 0
+    for line in capsys.readouterr().out.splitlines():
+        if line.startswith("{"):
+            assert "device" in json.loads(line)
+
+
+def test_missing_port_is_a_clean_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", str(tmp_path / "no-such-port")]) == 1
+    err = capsys.readouterr().err
+    assert "protoduino info:" in err and "no-such-port" in err
+
+
+def test_info(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", fake.port]) == 0
+    out = capsys.readouterr().out
+    assert "board             fake" in out
+    assert main(["info", fake.port, "--json"]) == 0
+    obj = json.loads(capsys.readouterr().out)
+    assert obj["info"]["num_pins"] == 20
+    assert obj["stats"]["handshakes"] == 1
+
+
+def test_ping(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["ping", fake.port, "-c", "3", "-i", "0.01", "-s", "4"]) == 0
+    out = capsys.readouterr().out
+    assert "3 sent, 3 answered, 0 lost" in out
+    assert "rtt min/avg/max/stddev" in out
+    assert [bytes(p.msg.ping.payload) for p in fake.commands("ping")][-3:] == [b"\0\1\2\3"] * 3
+
+
+def test_ping_counts_losses(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+    fake.handler = lambda msg: [] if msg.WhichOneof("data") == "ping" else fake.default_reply(msg)
+    assert main(["ping", fake.port, "-c", "1", "--ack-timeout", "0.05", "-q"]) == 1
+    assert "1 sent, 0 answered, 1 lost" in capsys.readouterr().out
+
+
+def test_servo_and_pin(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["servo", fake.port, "9", "45"]) == 0
+    assert fake.values[9] == 45
+    assert main(["servo", fake.port, "9", "1500", "--us"]) == 0
+    assert fake.values[9] == 1500
+    assert main(["pin", fake.port, "13", "on"]) == 0
+    assert fake.values[13] == 1
+    assert main(["pin", fake.port, "13", "off", "--safe", "on"]) == 0
+    assert fake.values[13] == 0
+    assert fake.commands("digital_init")[-1].msg.digital_init.safe_level is True
+    out = capsys.readouterr().out
+    assert "servo 9: 45 degrees" in out and "pin 13: on" in out
+
+
+def test_servo_refuses_bad_values_before_sending(
+    fake: FakeDevice, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["servo", fake.port, "9", "200"]) == 1
+    assert "outside 0..180" in capsys.readouterr().err
+    assert main(["servo", fake.port, "0", "90"]) == 1  # reserved pin, refused by the host
+    assert "STATUS_RESERVED_PIN" in capsys.readouterr().err
+    assert fake.commands("servo_init") == []
+
+
+def test_monitor_readable_and_json(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["monitor", fake.port, "--duration", "0.3", "--stats-every", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "tx CONTROL seq=0" in out and '"RESET"' in out
+    assert "rx DATA" in out and "get_info" in out
+    assert "handshakes 1" in out
+    assert main(["monitor", fake.port, "--duration", "0.3", "--json", "--no-ping"]) == 0
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert lines[0]["dir"] == "tx" and lines[0]["message"]["code"] == "RESET"
+    assert lines[-1]["stats"]["handshakes"] == 1
