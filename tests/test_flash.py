@@ -1,0 +1,157 @@
+"""``protoduino flash`` for real: avrdude through Optiboot on the emulated Uno.
+
+The runner starts at Optiboot's address (BOOTRST, 1 KB boot section) on an
+otherwise erased flash and resets the MCU whenever a client opens its port, as
+a real Uno's DTR auto-reset does. ``protoduino flash`` builds the firmware,
+avrdude writes and verifies it through the bootloader, and the test then
+handshakes with the freshly flashed firmware using the host codec.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import protoduino
+import pytest
+import serial
+from protoduino import emulator
+from protoduino.constants import PROTOCOL_VERSION, ControlCode, PacketType
+from protoduino.framing import StreamDecoder, frame_packet
+from protoduino.packets import Packet, parse_control, reset_payload
+
+pytestmark = pytest.mark.avr
+
+FLASH_TIMEOUT = 120.0
+
+
+def _missing_tool() -> str | None:
+    for tool in ("make", "cc", "avr-gcc", "avr-objcopy", "avrdude"):
+        if shutil.which(tool) is None:
+            return tool
+    if not Path("/usr/include/simavr/sim_avr.h").exists():
+        return "libsimavr-dev"
+    if not (Path(emulator.AVRSIM_DIR).exists() and Path("/usr/share/arduino").exists()):
+        return "arduino-core-avr (Optiboot sources)"
+    return None
+
+
+def _protoduino(*args: str, timeout: float = FLASH_TIMEOUT) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "protoduino.cli.main", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+        stdin=subprocess.DEVNULL,
+    )
+
+
+class Board:
+    """An emulated Uno process (runner) and its port."""
+
+    def __init__(self, cmd: list[str]) -> None:
+        self.proc = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL
+        )
+        assert self.proc.stdout is not None
+        ready, _, _ = select.select([self.proc.stdout], [], [], 10.0)
+        if not ready:
+            self.close()
+            raise AssertionError("the runner printed no port")
+        self.port = self.proc.stdout.readline().decode().strip()
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+        try:
+            self.proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        assert self.proc.stdout is not None
+        self.proc.stdout.close()
+
+
+@pytest.fixture(scope="module")
+def tools() -> None:
+    missing = _missing_tool()
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+    emulator.build_runner()
+    emulator.build_optiboot()
+
+
+@pytest.fixture
+def blank_uno(tools: None, tmp_path: Path) -> Iterator[Board]:
+    """Optiboot alone in the flash, started at the bootloader, auto-reset on open."""
+    cmd = emulator.runner_command(
+        hex_files=[emulator.OPTIBOOT_HEX],
+        boot_address=emulator.OPTIBOOT_ADDRESS,
+        auto_reset=True,
+        link=tmp_path / "uno",
+    )
+    board = Board(cmd)
+    yield board
+    board.close()
+
+
+def _handshake(port: str, timeout: float) -> Packet:
+    """RESET until RESET_ACK (covers the ~1 s Optiboot spends after the open's reset)."""
+    decoder = StreamDecoder()
+    reset = b"\x00" + frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION))
+    deadline = time.monotonic() + timeout
+    with serial.Serial(port, 115200, timeout=0.1) as link:
+        while time.monotonic() < deadline:
+            link.write(reset)
+            resend = time.monotonic() + 0.3
+            while time.monotonic() < resend:
+                for item in decoder.feed(link.read(256)):
+                    if (
+                        isinstance(item, Packet)
+                        and item.type == PacketType.CONTROL
+                        and item.payload[:1] == bytes((ControlCode.RESET_ACK,))
+                    ):
+                        return item
+    raise AssertionError(f"no RESET_ACK from {port} within {timeout} s")
+
+
+def test_flash_through_optiboot_then_handshake(blank_uno: Board) -> None:
+    result = _protoduino("flash", blank_uno.port)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    # avrdude's own report, passed through to the user.
+    assert "device signature = 0x1e950f" in output
+    assert "bytes of flash verified" in output
+    assert "Writing | " in output
+    ack = _handshake(blank_uno.port, timeout=10.0)
+    control = parse_control(ack.payload)
+    assert control.version == PROTOCOL_VERSION
+    assert control.schema_id == protoduino.SCHEMA_ID
+
+
+def test_flash_reports_a_port_that_does_not_exist(tools: None, tmp_path: Path) -> None:
+    missing = tmp_path / "ttyACM9"
+    result = _protoduino("flash", str(missing), "--hex", os.devnull)
+    assert result.returncode == 1
+    assert f"serial port {missing} does not exist" in result.stderr
+
+
+def test_flash_reports_when_no_bootloader_answers(tools: None, tmp_path: Path) -> None:
+    """A board running the runner's test program (an echo, no bootloader)."""
+    program = emulator.build_test_program()
+    board = Board(emulator.runner_command(program))
+    try:
+        hex_file = emulator.strip_to_hex(program, tmp_path / "testprog.hex")
+        result = _protoduino("flash", board.port, "--hex", str(hex_file))
+    finally:
+        board.close()
+    assert result.returncode == 1
+    assert f"no bootloader answered on {board.port}" in result.stderr
+    assert "not in sync" in result.stderr  # avrdude's own words are shown too
