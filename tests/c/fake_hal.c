@@ -1,0 +1,128 @@
+#include "fake_hal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "pd_cobs.h"
+#include "pd_packet.h"
+
+static void fake_abort(const char *why)
+{
+    fprintf(stderr, "fake_hal: malformed frame from the core: %s\n", why);
+    abort();
+}
+
+void fake_init(fake_hal_t *hal)
+{
+    memset(hal, 0, sizeof(*hal));
+    for (int pin = 0; pin < PD_MAX_PINS; pin++) {
+        hal->servo_us[pin] = -1;
+        hal->digital[pin] = -1;
+    }
+    hal->info.board = "fake";
+    hal->info.num_pins = 20;
+    hal->info.max_servos = 8;
+    hal->info.reserved_pins = 0x3;
+}
+
+void fake_clear(fake_hal_t *hal)
+{
+    hal->n_frames = 0;
+}
+
+size_t fake_count(const fake_hal_t *hal)
+{
+    return hal->n_frames < FAKE_MAX_FRAMES ? hal->n_frames : FAKE_MAX_FRAMES;
+}
+
+const fake_frame_t *fake_frame(const fake_hal_t *hal, size_t i)
+{
+    size_t kept = fake_count(hal);
+    if (i >= kept) {
+        return NULL;
+    }
+    size_t first = hal->n_frames - kept;
+    return &hal->frames[(first + i) % FAKE_MAX_FRAMES];
+}
+
+bool pd_hal_write(void *ctx, const uint8_t *data, uint16_t len)
+{
+    fake_hal_t *hal = ctx;
+    uint8_t raw[PD_MAX_ENCODED_FRAME];
+    bool flushed = false;
+    pd_packet_t pkt;
+
+    if (len > 0 && data[0] == 0) {
+        flushed = true;
+        data++;
+        len--;
+    }
+    if (len < 2 || data[len - 1] != 0) {
+        fake_abort("no delimiter");
+    }
+    if (memchr(data, 0, len - 1u) != NULL) {
+        fake_abort("0x00 inside the frame");
+    }
+    if (len - 1u > PD_MAX_ENCODED_FRAME) {
+        fake_abort("longer than MAX_ENCODED_FRAME");
+    }
+    int n = pd_cobs_decode(data, len - 1u, raw, sizeof(raw));
+    if (n < 0) {
+        fake_abort("not valid COBS");
+    }
+    if (pd_packet_parse(raw, (size_t)n, &pkt) != PD_PACKET_OK) {
+        fake_abort("not a valid packet");
+    }
+    if (pkt.type == PD_PACKET_COMMAND) {
+        fake_abort("the device sent a COMMAND");
+    }
+    if (hal->fail_writes) {
+        return false;
+    }
+    fake_frame_t *f = &hal->frames[hal->n_frames % FAKE_MAX_FRAMES];
+    f->type = pkt.type;
+    f->seq = pkt.seq;
+    f->len = pkt.len;
+    f->flushed = flushed;
+    memcpy(f->payload, pkt.payload, pkt.len);
+    hal->n_frames++;
+    return true;
+}
+
+uint32_t pd_hal_millis(void *ctx)
+{
+    return ((fake_hal_t *)ctx)->now_ms;
+}
+
+void pd_hal_servo_write(void *ctx, uint8_t channel, uint8_t pin, uint16_t us)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= hal->info.num_pins || (hal->info.reserved_pins >> pin) & 1u) {
+        fprintf(stderr, "fake_hal: servo on invalid pin %u\n", pin);
+        abort();
+    }
+    if (channel >= hal->info.max_servos || us < 400 || us > 2600 || hal->digital[pin] >= 0) {
+        fprintf(stderr, "fake_hal: bad servo write ch %u pin %u us %u\n", channel, pin, us);
+        abort();
+    }
+    hal->servo_us[pin] = us;
+    hal->servo_writes[pin]++;
+}
+
+void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= hal->info.num_pins || (hal->info.reserved_pins >> pin) & 1u ||
+        hal->servo_us[pin] >= 0) {
+        fprintf(stderr, "fake_hal: digital write on invalid pin %u\n", pin);
+        abort();
+    }
+    hal->digital[pin] = level ? 1 : 0;
+    hal->digital_writes[pin]++;
+}
+
+const pd_board_info_t *pd_hal_board_info(void *ctx)
+{
+    return &((fake_hal_t *)ctx)->info;
+}

@@ -1,0 +1,46 @@
+/*
+ * A fake board for the core: a settable clock, virtual pins that count every
+ * write, and a transmit side that checks every frame the core sends is well
+ * formed (optional lone 0x00, valid COBS, delimiter, valid packet) and keeps
+ * the last FAKE_MAX_FRAMES of them, decoded, for the tests to inspect. Any
+ * malformed frame aborts: the fuzzer relies on that to catch encoder bugs.
+ */
+#ifndef FAKE_HAL_H
+#define FAKE_HAL_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "pd_core.h"
+
+#define FAKE_MAX_FRAMES 64
+
+typedef struct fake_frame {
+    uint8_t type;
+    uint8_t seq;
+    uint8_t len;
+    bool flushed; /* a lone 0x00 went out before it */
+    uint8_t payload[PD_MAX_PAYLOAD];
+} fake_frame_t;
+
+typedef struct fake_hal {
+    uint32_t now_ms;
+    bool fail_writes;       /* pd_hal_write refuses every frame */
+    size_t n_frames;        /* frames sent since the last fake_clear() (may exceed the ring) */
+    fake_frame_t frames[FAKE_MAX_FRAMES];
+    int servo_us[PD_MAX_PINS];  /* -1: not a servo */
+    int digital[PD_MAX_PINS];   /* -1: not a digital output, else 0/1 */
+    unsigned servo_writes[PD_MAX_PINS];
+    unsigned digital_writes[PD_MAX_PINS];
+    pd_board_info_t info;
+} fake_hal_t;
+
+void fake_init(fake_hal_t *hal);
+/* Forget the frames sent so far. */
+void fake_clear(fake_hal_t *hal);
+/* Frame i (0 = oldest kept) of those sent since the last clear, or NULL. */
+const fake_frame_t *fake_frame(const fake_hal_t *hal, size_t i);
+size_t fake_count(const fake_hal_t *hal);
+
+#endif /* FAKE_HAL_H */

@@ -1,0 +1,482 @@
+/* Dispatch: one Ack per message, every status, the device semantics, the dedupe window. */
+#include <string.h>
+
+#include <pb_encode.h>
+
+#include "pd_schema.h"
+#include "pd_test.h"
+#include "test_util.h"
+
+#define S(name) protoduino_Status_STATUS_##name
+
+static void test_ack_ok_every_command(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn msgs[] = {
+        m_ping(1, NULL, 0),          m_info(2),          m_servo_init_deg(3, 9, 0, 0, 90),
+        m_servo_deg(4, 9, 45),       m_servo_us(5, 9, 1500), m_digital_init(6, 13, false),
+        m_digital(7, 13, true),      m_stop(8),
+    };
+    for (size_t i = 0; i < sizeof(msgs) / sizeof(msgs[0]); i++) {
+        CHECK_EQ(t_cmd(&d, &msgs[i]), S(OK));
+    }
+}
+
+static void test_servo_init_defaults_and_safe_at_once(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_servo_init_deg(1, 9, 0, 0, 90);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 544 + 90 * (2400 - 544) / 180); /* 1472 */
+    CHECK_EQ(d.core.outputs.servo[0].min_us, 544);
+    CHECK_EQ(d.core.outputs.servo[0].max_us, 2400);
+    in = m_servo_init_us(2, 10, 1000, 2000, 1234);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[10], 1234);
+}
+
+static void test_degrees_to_us(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_servo_init_deg(1, 9, 1000, 2000, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 1000);
+    const uint32_t deg[] = {0, 1, 45, 90, 179, 180};
+    for (size_t i = 0; i < sizeof(deg) / sizeof(deg[0]); i++) {
+        in = m_servo_deg((uint32_t)(10 + i), 9, deg[i]);
+        CHECK_EQ(t_cmd(&d, &in), S(OK));
+        CHECK_EQ(d.hal.servo_us[9], 1000 + deg[i] * 1000 / 180);
+    }
+}
+
+static void test_invalid_pin(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn msgs[] = {
+        m_servo_init_deg(1, 20, 0, 0, 90), m_servo_deg(2, 20, 0), m_digital_init(3, 20, 0),
+        m_digital(4, 99, 1),               m_digital(5, 0xFFFFFFFFu, 1),
+    };
+    for (size_t i = 0; i < sizeof(msgs) / sizeof(msgs[0]); i++) {
+        CHECK_EQ(t_cmd(&d, &msgs[i]), S(INVALID_PIN));
+    }
+    /* The pin check comes first: an invalid pin with bad arguments is still INVALID_PIN. */
+    protoduino_ArduinoIn in = m_servo_init_deg(6, 25, 100, 9000, 999);
+    CHECK_EQ(t_cmd(&d, &in), S(INVALID_PIN));
+    /* pin 19 (A5) is the last valid one */
+    in = m_digital_init(7, 19, 1);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+}
+
+static void test_reserved_pin(void)
+{
+    tdev_t d;
+    t_active(&d);
+    for (uint32_t pin = 0; pin < 2; pin++) {
+        protoduino_ArduinoIn msgs[] = {
+            m_servo_init_deg(10 * pin + 1, pin, 0, 0, 90), m_servo_deg(10 * pin + 2, pin, 0),
+            m_digital_init(10 * pin + 3, pin, 0), m_digital(10 * pin + 4, pin, 1),
+        };
+        for (size_t i = 0; i < sizeof(msgs) / sizeof(msgs[0]); i++) {
+            CHECK_EQ(t_cmd(&d, &msgs[i]), S(RESERVED_PIN));
+        }
+        CHECK_EQ(d.hal.digital[pin], -1);
+        CHECK_EQ(d.hal.servo_us[pin], -1);
+    }
+}
+
+static void test_not_initialised(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_servo_deg(1, 9, 90);
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_INITIALISED));
+    in = m_digital(2, 13, 1);
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_INITIALISED));
+    /* A control of the other kind is not an init either. */
+    in = m_digital_init(3, 13, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_servo_us(4, 13, 1500);
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_INITIALISED));
+    in = m_servo_init_deg(5, 9, 0, 0, 90);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_digital(6, 9, 1);
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_INITIALISED));
+    CHECK_EQ(d.hal.digital[9], -1);
+    CHECK_EQ(d.hal.servo_us[13], -1);
+}
+
+static void test_servo_init_invalid_argument(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn msgs[] = {
+        m_servo_init_deg(1, 9, 399, 2400, 0),  /* min below 400 */
+        m_servo_init_deg(2, 9, 544, 2601, 0),  /* max above 2600 */
+        m_servo_init_deg(3, 9, 1500, 1500, 0), /* min == max */
+        m_servo_init_deg(4, 9, 2000, 1000, 0), /* min > max */
+        m_servo_init_deg(5, 9, 2500, 0, 0),    /* min above the default max */
+        m_servo_init_deg(6, 9, 0x10000u + 544, 2400, 0), /* would wrap in 16 bits */
+    };
+    for (size_t i = 0; i < sizeof(msgs) / sizeof(msgs[0]); i++) {
+        CHECK_EQ(t_cmd(&d, &msgs[i]), S(INVALID_ARGUMENT));
+    }
+    protoduino_ArduinoIn in = m_servo_init_deg(7, 9, 0, 0, 0);
+    in.data.servo_init.which_safe = 0; /* no safe value */
+    CHECK_EQ(t_cmd(&d, &in), S(INVALID_ARGUMENT));
+    CHECK_EQ(d.hal.servo_us[9], -1);
+    CHECK_EQ(d.core.outputs.servo_count, 0);
+    /* The extreme limits themselves are fine. */
+    in = m_servo_init_deg(8, 9, 400, 2600, 180);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 2600);
+}
+
+static void test_servo_control_invalid_argument(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_servo_init_deg(1, 9, 0, 0, 90);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_servo_deg(2, 9, 0);
+    in.data.servo_control.which_value = 0;
+    CHECK_EQ(t_cmd(&d, &in), S(INVALID_ARGUMENT));
+    CHECK_EQ(d.hal.servo_us[9], 1472);
+}
+
+static void test_out_of_range(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_servo_init_deg(1, 9, 0, 0, 181);
+    CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
+    in = m_servo_init_us(2, 9, 1000, 2000, 999);
+    CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
+    in = m_servo_init_us(3, 9, 1000, 2000, 2001);
+    CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
+    CHECK_EQ(d.core.outputs.servo_count, 0);
+    in = m_servo_init_us(4, 9, 1000, 2000, 2000);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    unsigned writes = d.hal.servo_writes[9];
+    in = m_servo_deg(5, 9, 181);
+    CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
+    in = m_servo_us(6, 9, 999);
+    CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
+    in = m_servo_us(7, 9, 2001);
+    CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
+    in = m_servo_us(8, 9, 0xFFFFFFFFu);
+    CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
+    CHECK_EQ(d.hal.servo_writes[9], writes); /* refused, not clamped */
+    CHECK_EQ(d.hal.servo_us[9], 2000);
+    in = m_servo_us(9, 9, 1000);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 1000);
+}
+
+static void test_no_free_resource_and_reinit(void)
+{
+    tdev_t d;
+    t_active(&d);
+    for (uint32_t i = 0; i < 8; i++) {
+        protoduino_ArduinoIn in = m_servo_init_deg(i + 1, 2 + i, 0, 0, 90);
+        CHECK_EQ(t_cmd(&d, &in), S(OK));
+    }
+    protoduino_ArduinoIn in = m_servo_init_deg(20, 12, 0, 0, 90);
+    CHECK_EQ(t_cmd(&d, &in), S(NO_FREE_RESOURCE));
+    CHECK_EQ(d.hal.servo_us[12], -1);
+    /* Re-init of an existing servo takes no new slot and applies the new limits. */
+    in = m_servo_init_us(21, 5, 1000, 2000, 1100);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[5], 1100);
+    CHECK_EQ(d.core.outputs.servo_count, 8);
+    in = m_servo_us(22, 5, 2100);
+    CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
+    /* Digital outputs are not limited by servo slots. */
+    in = m_digital_init(23, 12, 1);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+}
+
+static void test_pin_in_use(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_digital_init(1, 13, 1);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_servo_init_deg(2, 13, 0, 0, 90);
+    CHECK_EQ(t_cmd(&d, &in), S(PIN_IN_USE));
+    in = m_servo_init_deg(3, 9, 0, 0, 90);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_digital_init(4, 9, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(PIN_IN_USE));
+    CHECK_EQ(d.hal.servo_us[13], -1);
+    CHECK_EQ(d.hal.digital[9], -1);
+    /* Re-init as digital is allowed and drives the new safe level. */
+    in = m_digital_init(5, 13, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.digital[13], 0);
+}
+
+static void test_digital_init_and_control(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_digital_init(1, 13, true);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.digital[13], 1); /* safe level at once */
+    in = m_digital(2, 13, false);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.digital[13], 0);
+    in = m_digital(3, 13, true);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.digital[13], 1);
+}
+
+static void test_message_id_zero(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_digital_init(0, 13, true);
+    CHECK_EQ(t_cmd(&d, &in), S(INVALID_ARGUMENT));
+    CHECK_EQ(d.hal.digital[13], -1);
+    in = m_ping(0, NULL, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(INVALID_ARGUMENT));
+}
+
+static void test_unknown_command(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = protoduino_ArduinoIn_init_zero;
+    in.message_id = 42;
+    CHECK_EQ(t_cmd(&d, &in), S(UNKNOWN_COMMAND));
+}
+
+static void test_decode_error(void)
+{
+    tdev_t d;
+    t_active(&d);
+    /* message_id 7, then a servo_init submessage claiming 10 bytes but holding 2. */
+    const uint8_t bad[] = {0x08, 0x07, 0x1a, 0x0a, 0x08, 0x09};
+    fake_clear(&d.hal);
+    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, bad, sizeof(bad));
+    CHECK_EQ(fake_count(&d.hal), 2);
+    protoduino_ArduinoOut out;
+    CHECK(t_out(&d, 0, &out)); /* the event first */
+    CHECK_EQ(out.which_data, protoduino_ArduinoOut_decode_error_tag);
+    CHECK_EQ(out.data.decode_error.count, 1);
+    CHECK_EQ(t_status(&d, 7), S(DECODE_ERROR));
+    CHECK_EQ(d.hal.servo_us[9], -1);
+    /* Without a message_id: only the event, with the running count. */
+    const uint8_t garbage[] = {0xff, 0xff, 0xff};
+    fake_clear(&d.hal);
+    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, garbage, sizeof(garbage));
+    CHECK_EQ(fake_count(&d.hal), 1);
+    CHECK(t_out(&d, 0, &out));
+    CHECK_EQ(out.which_data, protoduino_ArduinoOut_decode_error_tag);
+    CHECK_EQ(out.data.decode_error.count, 2);
+    /* A decode error is not remembered: a good retransmission of id 7 executes. */
+    protoduino_ArduinoIn in = m_servo_init_deg(7, 9, 0, 0, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 544);
+}
+
+static void test_ping_echo_every_byte(void)
+{
+    tdev_t d;
+    t_active(&d);
+    uint8_t payload[64];
+    for (unsigned chunk = 0; chunk < 4; chunk++) {
+        for (unsigned i = 0; i < 64; i++) {
+            payload[i] = (uint8_t)(chunk * 64 + i);
+        }
+        protoduino_ArduinoIn in = m_ping(100 + chunk, payload, sizeof(payload));
+        CHECK_EQ(t_cmd(&d, &in), S(OK));
+        protoduino_Ack ack;
+        CHECK_EQ(t_acks(&d, 100 + chunk, &ack), 1);
+        CHECK_EQ(ack.which_result, protoduino_Ack_ping_echo_tag);
+        CHECK_EQ(ack.result.ping_echo.size, 64);
+        CHECK(memcmp(ack.result.ping_echo.bytes, payload, 64) == 0);
+    }
+    protoduino_ArduinoIn in = m_ping(200, NULL, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+}
+
+static void test_get_info(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_info(9);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    protoduino_Ack ack;
+    CHECK_EQ(t_acks(&d, 9, &ack), 1);
+    CHECK_EQ(ack.which_result, protoduino_Ack_info_tag);
+    const protoduino_DeviceInfo *info = &ack.result.info;
+    CHECK(strcmp(info->firmware_version, "0.1.0") == 0);
+    CHECK(strcmp(info->board, "fake") == 0);
+    CHECK_EQ(info->protocol_version, 1);
+    CHECK_EQ(info->schema_id, PD_SCHEMA_ID);
+    CHECK_EQ(info->num_pins, 20);
+    CHECK_EQ(info->max_servos, 8);
+    CHECK_EQ(info->reserved_pins_count, 2);
+    CHECK_EQ(info->reserved_pins[0], 0);
+    CHECK_EQ(info->reserved_pins[1], 1);
+}
+
+static void test_board_limits_from_hal(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    d.hal.info.num_pins = 10;
+    d.hal.info.max_servos = 2;
+    t_send_reset(&d, 1);
+    protoduino_ArduinoIn in = m_digital_init(1, 10, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(INVALID_PIN));
+    in = m_servo_init_deg(2, 2, 0, 0, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_servo_init_deg(3, 3, 0, 0, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_servo_init_deg(4, 4, 0, 0, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(NO_FREE_RESOURCE));
+}
+
+static void test_one_ack_per_message(void)
+{
+    /* A burst of commands in one stream: exactly one Ack each, in order. */
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn msgs[] = {m_digital_init(11, 13, 0), m_digital(12, 13, 1),
+                                   m_digital(13, 14, 1), m_info(14), m_ping(15, NULL, 0)};
+    for (size_t i = 0; i < 5; i++) {
+        t_send_in(&d, &msgs[i]);
+    }
+    CHECK_EQ(fake_count(&d.hal), 5);
+    for (size_t i = 0; i < 5; i++) {
+        protoduino_ArduinoOut out;
+        CHECK(t_out(&d, i, &out));
+        CHECK_EQ(out.which_data, protoduino_ArduinoOut_ack_tag);
+        CHECK_EQ(out.data.ack.message_id, 11 + i);
+    }
+    CHECK_EQ(t_status(&d, 13), S(NOT_INITIALISED));
+}
+
+/* --- dedupe window ------------------------------------------------------- */
+
+static void test_dedupe_repeat_not_executed(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn init = m_digital_init(1, 13, false);
+    CHECK_EQ(t_cmd(&d, &init), S(OK));
+    protoduino_ArduinoIn on = m_digital(2, 13, true);
+    CHECK_EQ(t_cmd(&d, &on), S(OK));
+    protoduino_ArduinoIn off = m_digital(3, 13, false);
+    CHECK_EQ(t_cmd(&d, &off), S(OK));
+    unsigned writes = d.hal.digital_writes[13];
+    CHECK_EQ(t_cmd(&d, &on), S(OK)); /* retransmission of id 2: acked again... */
+    CHECK_EQ(d.hal.digital[13], 0);  /* ...but not executed */
+    CHECK_EQ(d.hal.digital_writes[13], writes);
+    /* Also the stored status of a refused command is what comes back. */
+    protoduino_ArduinoIn bad = m_digital(4, 14, true);
+    CHECK_EQ(t_cmd(&d, &bad), S(NOT_INITIALISED));
+    protoduino_ArduinoIn init14 = m_digital_init(5, 14, false);
+    CHECK_EQ(t_cmd(&d, &init14), S(OK));
+    CHECK_EQ(t_cmd(&d, &bad), S(NOT_INITIALISED)); /* would be OK if executed again */
+    CHECK_EQ(d.hal.digital[14], 0);
+    /* Even if the content differs, an id is executed once. */
+    protoduino_ArduinoIn other = m_digital(3, 13, true);
+    CHECK_EQ(t_cmd(&d, &other), S(OK));
+    CHECK_EQ(d.hal.digital[13], 0);
+}
+
+static void test_dedupe_window_evicts_after_16(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn init = m_digital_init(1000, 13, false);
+    CHECK_EQ(t_cmd(&d, &init), S(OK));
+    /* id 1 sets the pin, ids 2..16 toggle other things: 16 entries in the window. */
+    protoduino_ArduinoIn first = m_digital(1, 13, true);
+    CHECK_EQ(t_cmd(&d, &first), S(OK));
+    for (uint32_t id = 2; id <= 15; id++) {
+        protoduino_ArduinoIn in = m_servo_deg(id, 9, 0); /* NOT_INITIALISED, still recorded */
+        CHECK_EQ(t_cmd(&d, &in), S(NOT_INITIALISED));
+    }
+    protoduino_ArduinoIn off = m_digital(16, 13, false);
+    CHECK_EQ(t_cmd(&d, &off), S(OK));
+    /* Window holds 1000, 1..16 minus the oldest (1000): id 1 is still there. */
+    CHECK_EQ(d.core.dedupe.count, PD_DEDUPE_WINDOW);
+    CHECK_EQ(t_cmd(&d, &first), S(OK));
+    CHECK_EQ(d.hal.digital[13], 0); /* deduplicated */
+    /* One more entry evicts id 1; now its retransmission executes again. */
+    protoduino_ArduinoIn in = m_servo_deg(17, 9, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_INITIALISED));
+    CHECK_EQ(t_cmd(&d, &first), S(OK));
+    CHECK_EQ(d.hal.digital[13], 1);
+    /* Executed again, id 1 is back in the window as its newest entry. */
+    CHECK_EQ(pd_dedupe_find(&d.core.dedupe, 1), S(OK));
+}
+
+static void test_dedupe_ping_and_info_answered_in_full(void)
+{
+    tdev_t d;
+    t_active(&d);
+    const uint8_t payload[3] = {1, 2, 3};
+    protoduino_ArduinoIn ping = m_ping(50, payload, 3);
+    CHECK_EQ(t_cmd(&d, &ping), S(OK));
+    CHECK_EQ(t_cmd(&d, &ping), S(OK));
+    protoduino_Ack ack;
+    CHECK_EQ(t_acks(&d, 50, &ack), 1);
+    CHECK_EQ(ack.which_result, protoduino_Ack_ping_echo_tag);
+    CHECK_EQ(ack.result.ping_echo.size, 3);
+    protoduino_ArduinoIn info = m_info(51);
+    CHECK_EQ(t_cmd(&d, &info), S(OK));
+    CHECK_EQ(t_cmd(&d, &info), S(OK));
+    CHECK_EQ(t_acks(&d, 51, &ack), 1);
+    CHECK_EQ(ack.which_result, protoduino_Ack_info_tag);
+    CHECK_EQ(d.core.dedupe.count, 0); /* they take no slot */
+}
+
+static void test_dedupe_unit(void)
+{
+    pd_dedupe_t dd;
+    pd_dedupe_init(&dd);
+    CHECK_EQ(pd_dedupe_find(&dd, 0), -1);
+    for (uint32_t id = 1; id <= 40; id++) {
+        pd_dedupe_add(&dd, id, (uint8_t)(id % 10));
+        CHECK_EQ(pd_dedupe_find(&dd, id), id % 10);
+        if (id > PD_DEDUPE_WINDOW) {
+            CHECK_EQ(pd_dedupe_find(&dd, id - PD_DEDUPE_WINDOW), -1);
+            CHECK_EQ(pd_dedupe_find(&dd, id - PD_DEDUPE_WINDOW + 1), (id - PD_DEDUPE_WINDOW + 1) % 10);
+        }
+    }
+}
+
+const pd_test_case_t pd_tests_dispatch[] = {
+    TEST_CASE(test_ack_ok_every_command),
+    TEST_CASE(test_servo_init_defaults_and_safe_at_once),
+    TEST_CASE(test_degrees_to_us),
+    TEST_CASE(test_invalid_pin),
+    TEST_CASE(test_reserved_pin),
+    TEST_CASE(test_not_initialised),
+    TEST_CASE(test_servo_init_invalid_argument),
+    TEST_CASE(test_servo_control_invalid_argument),
+    TEST_CASE(test_out_of_range),
+    TEST_CASE(test_no_free_resource_and_reinit),
+    TEST_CASE(test_pin_in_use),
+    TEST_CASE(test_digital_init_and_control),
+    TEST_CASE(test_message_id_zero),
+    TEST_CASE(test_unknown_command),
+    TEST_CASE(test_decode_error),
+    TEST_CASE(test_ping_echo_every_byte),
+    TEST_CASE(test_get_info),
+    TEST_CASE(test_board_limits_from_hal),
+    TEST_CASE(test_one_ack_per_message),
+    TEST_CASE(test_dedupe_repeat_not_executed),
+    TEST_CASE(test_dedupe_window_evicts_after_16),
+    TEST_CASE(test_dedupe_ping_and_info_answered_in_full),
+    TEST_CASE(test_dedupe_unit),
+    {NULL, NULL},
+};

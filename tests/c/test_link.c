@@ -1,0 +1,351 @@
+/* The link state machine: BOOT, RESET/RESET_ACK, NOT_ACTIVE, SEQ, overflow, TX rules. */
+#include <string.h>
+
+#include <pb_encode.h>
+
+#include "pd_cobs.h"
+#include "pd_packet.h"
+#include "pd_schema.h"
+#include "pd_test.h"
+#include "test_util.h"
+
+static void test_boot_event(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    CHECK_EQ(fake_count(&d.hal), 1);
+    const fake_frame_t *f = fake_frame(&d.hal, 0);
+    CHECK_EQ(f->type, PD_PACKET_CONTROL);
+    CHECK_EQ(f->seq, 0);
+    CHECK_EQ(f->len, 2);
+    CHECK_EQ(f->payload[0], PD_CONTROL_EVENT);
+    CHECK_EQ(f->payload[1], PD_EVENT_BOOT);
+    CHECK(f->flushed); /* a lone 0x00 before the first frame */
+    CHECK(!d.core.link.active);
+}
+
+static void test_reset_ack(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    fake_clear(&d.hal);
+    t_send_reset(&d, PD_PROTOCOL_VERSION);
+    CHECK_EQ(fake_count(&d.hal), 1);
+    const fake_frame_t *f = fake_frame(&d.hal, 0);
+    const uint8_t expect[6] = {PD_CONTROL_RESET_ACK, PD_PROTOCOL_VERSION,
+                               (uint8_t)(PD_SCHEMA_ID >> 24), (uint8_t)(PD_SCHEMA_ID >> 16),
+                               (uint8_t)(PD_SCHEMA_ID >> 8), (uint8_t)PD_SCHEMA_ID};
+    CHECK_EQ(f->type, PD_PACKET_CONTROL);
+    CHECK_EQ(f->seq, 0);
+    CHECK_EQ(f->len, 6);
+    CHECK(memcmp(f->payload, expect, 6) == 0);
+    CHECK(d.core.link.active);
+    /* The next frame we send carries SEQ 1. */
+    protoduino_ArduinoIn in = m_info(5);
+    t_send_in(&d, &in);
+    CHECK_EQ(fake_frame(&d.hal, 1)->seq, 1);
+}
+
+static void test_reset_other_version_still_answered(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    fake_clear(&d.hal);
+    t_send_reset(&d, 7);
+    CHECK_EQ(fake_count(&d.hal), 1);
+    CHECK_EQ(fake_frame(&d.hal, 0)->payload[0], PD_CONTROL_RESET_ACK);
+    CHECK_EQ(fake_frame(&d.hal, 0)->payload[1], PD_PROTOCOL_VERSION); /* ours; the host judges */
+}
+
+static void test_reset_without_version_ignored(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    fake_clear(&d.hal);
+    const uint8_t payload[1] = {PD_CONTROL_RESET};
+    t_send_packet(&d, PD_PACKET_CONTROL, 0, payload, 1);
+    CHECK_EQ(fake_count(&d.hal), 0);
+    CHECK(!d.core.link.active);
+    CHECK_EQ(d.core.link.stats.ignored, 1);
+}
+
+static void test_command_before_reset_not_active(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    fake_clear(&d.hal);
+    protoduino_ArduinoIn in = m_digital_init(9, 13, true);
+    t_send_in(&d, &in);
+    CHECK_EQ(t_events(&d, PD_EVENT_NOT_ACTIVE), 1);
+    CHECK_EQ(t_acks(&d, 9, NULL), 0);
+    CHECK_EQ(d.hal.digital[13], -1); /* nothing executed */
+    CHECK_EQ(d.core.link.stats.not_active, 1);
+    /* After the handshake the same command works. */
+    t_send_reset(&d, PD_PROTOCOL_VERSION);
+    fake_clear(&d.hal);
+    t_send_in(&d, &in);
+    CHECK_EQ(t_status(&d, 9), protoduino_Status_STATUS_OK);
+    CHECK_EQ(d.hal.digital[13], 1);
+}
+
+static void test_reset_again_resets_seq_keeps_outputs(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_servo_init_deg(1, 9, 0, 0, 90);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    in = m_servo_deg(2, 9, 0);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    CHECK_EQ(d.hal.servo_us[9], 544);
+    for (int i = 0; i < 5; i++) {
+        in = m_info((uint32_t)(10 + i));
+        t_send_in(&d, &in);
+    }
+    fake_clear(&d.hal);
+    unsigned writes = d.hal.servo_writes[9];
+    t_send_reset(&d, PD_PROTOCOL_VERSION);
+    CHECK_EQ(fake_count(&d.hal), 1);
+    CHECK_EQ(fake_frame(&d.hal, 0)->seq, 0);
+    CHECK(fake_frame(&d.hal, 0)->flushed);
+    CHECK_EQ(d.hal.servo_us[9], 544);
+    CHECK_EQ(d.hal.servo_writes[9], writes); /* outputs untouched */
+    CHECK_EQ(d.core.outputs.servo_count, 1); /* configuration kept */
+    in = m_info(30);
+    t_send_in(&d, &in);
+    CHECK_EQ(fake_frame(&d.hal, 1)->seq, 1);
+    CHECK_EQ(d.core.link.stats.seq_lost, 0);
+    CHECK_EQ(d.core.link.stats.seq_desync, 0);
+}
+
+static void test_seq_in_order_and_lost(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_info(1);
+    t_send_in(&d, &in); /* SEQ 1: in order */
+    CHECK_EQ(d.core.link.stats.seq_lost, 0);
+    d.host_seq = (uint8_t)(d.host_seq + 3); /* 3 packets "lost" */
+    in = m_info(2);
+    fake_clear(&d.hal);
+    t_send_in(&d, &in);
+    CHECK_EQ(d.core.link.stats.seq_lost, 3);
+    CHECK_EQ(d.core.link.stats.seq_desync, 0);
+    CHECK_EQ(t_status(&d, 2), protoduino_Status_STATUS_OK);
+    CHECK_EQ(t_events(&d, PD_EVENT_DESYNC), 0);
+    /* A gap of exactly SEQ_DESYNC_THRESHOLD is still loss. */
+    d.host_seq = (uint8_t)(d.host_seq + PD_SEQ_DESYNC_THRESHOLD);
+    in = m_info(3);
+    t_send_in(&d, &in);
+    CHECK_EQ(d.core.link.stats.seq_lost, 3 + PD_SEQ_DESYNC_THRESHOLD);
+    CHECK_EQ(d.core.link.stats.seq_desync, 0);
+}
+
+static void test_seq_desync_event_and_still_processed(void)
+{
+    tdev_t d;
+    t_active(&d);
+    d.host_seq = (uint8_t)(d.host_seq + PD_SEQ_DESYNC_THRESHOLD + 1);
+    protoduino_ArduinoIn in = m_digital_init(4, 13, false);
+    t_send_in(&d, &in);
+    CHECK_EQ(d.core.link.stats.seq_desync, 1);
+    CHECK_EQ(t_events(&d, PD_EVENT_DESYNC), 1);
+    CHECK_EQ(t_status(&d, 4), protoduino_Status_STATUS_OK);
+    CHECK_EQ(d.hal.digital[13], 0);
+    /* The event (CONTROL) goes out before the Ack. */
+    CHECK_EQ(fake_frame(&d.hal, 0)->type, PD_PACKET_CONTROL);
+    /* Then the receiver expects SEQ + 1 again: no further counts. */
+    in = m_info(5);
+    t_send_in(&d, &in);
+    CHECK_EQ(d.core.link.stats.seq_desync, 1);
+    /* A step backwards is a desync too. */
+    d.host_seq = (uint8_t)(d.host_seq - 2);
+    in = m_info(6);
+    t_send_in(&d, &in);
+    CHECK_EQ(d.core.link.stats.seq_desync, 2);
+}
+
+static void test_seq_wraps(void)
+{
+    tdev_t d;
+    t_active(&d);
+    for (int i = 0; i < 300; i++) {
+        protoduino_ArduinoIn in = m_info((uint32_t)(i + 1));
+        t_send_in(&d, &in);
+    }
+    CHECK_EQ(d.core.link.stats.seq_lost, 0);
+    CHECK_EQ(d.core.link.stats.seq_desync, 0);
+    /* Our own SEQ wraps too: 300 acks after RESET_ACK(0) end at (300) mod 256. */
+    const fake_frame_t *last = fake_frame(&d.hal, fake_count(&d.hal) - 1u);
+    CHECK_EQ(last->seq, 300 % 256);
+}
+
+static void test_overflow_event_and_recovery(void)
+{
+    tdev_t d;
+    t_active(&d);
+    uint8_t junk[PD_MAX_ENCODED_FRAME + 40];
+    memset(junk, 0x55, sizeof(junk));
+    const uint8_t delimiter = 0;
+    /* Exactly MAX_ENCODED_FRAME bytes is still a frame (a bad one here). */
+    t_feed(&d, junk, PD_MAX_ENCODED_FRAME);
+    t_feed(&d, &delimiter, 1);
+    CHECK_EQ(d.core.link.stats.rx_overflow, 0);
+    CHECK_EQ(d.core.link.stats.drop_cobs + d.core.link.stats.drop_length, 1);
+    CHECK_EQ(fake_count(&d.hal), 0);
+    t_feed(&d, junk, PD_MAX_ENCODED_FRAME + 40);
+    CHECK_EQ(d.core.link.stats.rx_overflow, 1);
+    CHECK_EQ(t_events(&d, PD_EVENT_RX_OVERFLOW), 1);
+    /* A valid frame glued to the end of the run is skipped with it... */
+    protoduino_ArduinoIn in = m_info(8);
+    t_send_in(&d, &in);
+    CHECK_EQ(t_acks(&d, 8, NULL), 0);
+    /* ...and the next one after the 0x00 is received. */
+    in = m_info(9);
+    t_send_in(&d, &in);
+    CHECK_EQ(t_status(&d, 9), protoduino_Status_STATUS_OK);
+    CHECK_EQ(d.core.link.stats.rx_overflow, 1);
+}
+
+static void test_longest_valid_frame_accepted(void)
+{
+    /* A 255-byte payload encodes to exactly MAX_ENCODED_FRAME bytes. */
+    tdev_t d;
+    t_active(&d);
+    uint8_t payload[PD_MAX_PAYLOAD];
+    memset(payload, 0x11, sizeof(payload));
+    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, payload, sizeof(payload));
+    CHECK_EQ(d.core.link.stats.rx_overflow, 0);
+    CHECK_EQ(d.core.link.stats.packets, 2); /* the RESET and this one */
+}
+
+static void test_noise_and_empty_frames_ignored(void)
+{
+    tdev_t d;
+    t_active(&d);
+    const uint8_t noise[] = {0, 0, 0, 0xAA, 0xBB, 0, 0x13, 0x37, 0x42, 0, 0};
+    t_feed(&d, noise, sizeof(noise));
+    CHECK_EQ(fake_count(&d.hal), 0);
+    CHECK_EQ(d.core.link.stats.drop_cobs + d.core.link.stats.drop_length +
+                 d.core.link.stats.drop_crc + d.core.link.stats.drop_type,
+             2);
+    protoduino_ArduinoIn in = m_info(3);
+    t_send_in(&d, &in);
+    CHECK_EQ(t_status(&d, 3), protoduino_Status_STATUS_OK);
+}
+
+static void test_data_and_stray_control_dropped(void)
+{
+    tdev_t d;
+    t_active(&d);
+    const uint8_t data_payload[] = {0x0a, 0x02, 0x08, 0x05};
+    t_send_packet(&d, PD_PACKET_DATA, d.host_seq++, data_payload, sizeof(data_payload));
+    const uint8_t hb[] = {PD_CONTROL_HEARTBEAT};
+    t_send_packet(&d, PD_PACKET_CONTROL, d.host_seq++, hb, 1);
+    const uint8_t ack[] = {PD_CONTROL_RESET_ACK, 1, 0, 0, 0, 0};
+    t_send_packet(&d, PD_PACKET_CONTROL, d.host_seq++, ack, sizeof(ack));
+    const uint8_t unknown[] = {0x7F};
+    t_send_packet(&d, PD_PACKET_CONTROL, d.host_seq++, unknown, 1);
+    t_send_packet(&d, PD_PACKET_CONTROL, d.host_seq++, unknown, 0);
+    CHECK_EQ(fake_count(&d.hal), 0);
+    CHECK_EQ(d.core.link.stats.ignored, 4); /* all but the heartbeat */
+    CHECK_EQ(d.core.link.stats.packets, 6);
+}
+
+static void test_data_only_while_active(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    fake_clear(&d.hal);
+    CHECK(!pd_dispatch_send_failsafe(&d.core, true, protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP));
+    CHECK_EQ(fake_count(&d.hal), 0);
+    CHECK(pd_link_send_event(&d.core, PD_EVENT_DESYNC)); /* CONTROL goes in any state */
+    CHECK_EQ(fake_count(&d.hal), 1);
+}
+
+static void test_failed_write_keeps_seq_and_flushes(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_info(1);
+    t_send_in(&d, &in);
+    CHECK_EQ(fake_frame(&d.hal, 0)->seq, 1);
+    CHECK(!fake_frame(&d.hal, 0)->flushed);
+    d.hal.fail_writes = true;
+    in = m_info(2);
+    t_send_in(&d, &in);
+    CHECK_EQ(fake_count(&d.hal), 1);
+    CHECK_EQ(d.core.link.stats.tx_failed, 1);
+    d.hal.fail_writes = false;
+    in = m_info(3);
+    t_send_in(&d, &in);
+    CHECK_EQ(fake_count(&d.hal), 2);
+    CHECK_EQ(fake_frame(&d.hal, 1)->seq, 2); /* the failed frame's SEQ is reused */
+    CHECK(fake_frame(&d.hal, 1)->flushed);   /* after a lone 0x00 */
+    in = m_info(4);
+    t_send_in(&d, &in);
+    CHECK(!fake_frame(&d.hal, 2)->flushed);
+}
+
+static void test_reboot_returns_to_idle(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_digital_init(1, 13, true);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    fake_clear(&d.hal);
+    pd_core_init(&d.core, &d.hal); /* what SIGUSR1 / a reset does */
+    CHECK_EQ(t_events(&d, PD_EVENT_BOOT), 1);
+    CHECK(!d.core.link.active);
+    CHECK_EQ(d.core.outputs.pin_mode[13], PD_PIN_FREE);
+    in = m_digital(2, 13, false);
+    t_send_in(&d, &in);
+    CHECK_EQ(t_events(&d, PD_EVENT_NOT_ACTIVE), 1);
+}
+
+static void test_fed_in_any_chunking(void)
+{
+    /* pd_core_rx() over a whole buffer equals feeding byte by byte. */
+    tdev_t a, b;
+    t_active(&a);
+    t_active(&b);
+    protoduino_ArduinoIn in = m_digital_init(5, 12, true);
+    t_send_in(&a, &in); /* reference: byte by byte */
+    uint8_t pb[64], raw[80], stream[100];
+    pb_ostream_t os = pb_ostream_from_buffer(pb, sizeof(pb));
+    CHECK(pb_encode(&os, protoduino_ArduinoIn_fields, &in));
+    size_t raw_len = 0;
+    CHECK_EQ(pd_packet_build(PD_PACKET_COMMAND, b.host_seq++, pb, os.bytes_written, raw,
+                             sizeof(raw), &raw_len),
+             PD_PACKET_OK);
+    size_t n = 0;
+    stream[n++] = 0x99; /* noise first */
+    stream[n++] = 0;
+    n += pd_cobs_encode(raw, raw_len, stream + n, sizeof(stream) - n - 1u);
+    stream[n++] = 0;
+    pd_core_rx(&b.core, stream, n);
+    CHECK_EQ(fake_count(&b.hal), 1);
+    CHECK_EQ(t_status(&b, 5), protoduino_Status_STATUS_OK);
+    CHECK_EQ(b.hal.digital[12], a.hal.digital[12]);
+    CHECK_EQ(b.core.link.stats.packets, a.core.link.stats.packets);
+}
+
+const pd_test_case_t pd_tests_link[] = {
+    TEST_CASE(test_boot_event),
+    TEST_CASE(test_reset_ack),
+    TEST_CASE(test_reset_other_version_still_answered),
+    TEST_CASE(test_reset_without_version_ignored),
+    TEST_CASE(test_command_before_reset_not_active),
+    TEST_CASE(test_reset_again_resets_seq_keeps_outputs),
+    TEST_CASE(test_seq_in_order_and_lost),
+    TEST_CASE(test_seq_desync_event_and_still_processed),
+    TEST_CASE(test_seq_wraps),
+    TEST_CASE(test_overflow_event_and_recovery),
+    TEST_CASE(test_longest_valid_frame_accepted),
+    TEST_CASE(test_noise_and_empty_frames_ignored),
+    TEST_CASE(test_data_and_stray_control_dropped),
+    TEST_CASE(test_data_only_while_active),
+    TEST_CASE(test_failed_write_keeps_seq_and_flushes),
+    TEST_CASE(test_reboot_returns_to_idle),
+    TEST_CASE(test_fed_in_any_chunking),
+    {NULL, NULL},
+};
