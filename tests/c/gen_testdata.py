@@ -86,39 +86,31 @@ def write_vectors(vectors: dict[str, Any], out: Path) -> None:
 
 def _sample_commands() -> list[bytes]:
     """Serialized ArduinoIn messages covering every command and its edge values."""
-    from protoduino.messages import ArduinoIn
+    from protoduino._generated import protoduino_pb2 as pb
 
-    msgs: list[ArduinoIn] = []
-
-    def new(mid: int) -> ArduinoIn:
-        msg = ArduinoIn(message_id=mid)
-        msgs.append(msg)
-        return msg
-
-    new(1).ping.payload = b""
-    new(2).ping.payload = bytes(range(64))
-    new(3).get_info.SetInParent()
-    m = new(4).servo_init
-    m.pin, m.safe_degrees = 9, 90
-    m = new(5).servo_init
-    m.pin, m.min_us, m.max_us, m.safe_us = 10, 1000, 2000, 1500
-    m = new(6).servo_init
-    m.pin, m.min_us, m.max_us, m.safe_degrees = 19, 400, 2600, 180
-    m = new(7).servo_control
-    m.pin, m.degrees = 9, 45
-    m = new(8).servo_control
-    m.pin, m.us = 10, 2000
-    m = new(9).digital_init
-    m.pin, m.safe_level = 13, True
-    m = new(10).digital_control
-    m.pin, m.level = 13, False
-    new(11).stop.SetInParent()
-    new(0).ping.payload = b"x"  # message_id 0
-    new(12)  # empty oneof
-    m = new(13).servo_init
-    m.pin = 1  # reserved, no safe value
-    m = new(0xFFFFFFFF).digital_control
-    m.pin = 0xFFFFFFFF
+    msgs = [
+        pb.ArduinoIn(message_id=1, ping=pb.Ping(payload=b"")),
+        pb.ArduinoIn(message_id=2, ping=pb.Ping(payload=bytes(range(64)))),
+        pb.ArduinoIn(message_id=3, get_info=pb.GetInfo()),
+        pb.ArduinoIn(message_id=4, servo_init=pb.ServoInit(pin=9, safe_degrees=90)),
+        pb.ArduinoIn(
+            message_id=5, servo_init=pb.ServoInit(pin=10, min_us=1000, max_us=2000, safe_us=1500)
+        ),
+        pb.ArduinoIn(
+            message_id=6, servo_init=pb.ServoInit(pin=19, min_us=400, max_us=2600, safe_degrees=180)
+        ),
+        pb.ArduinoIn(message_id=7, servo_control=pb.ServoControl(pin=9, degrees=45)),
+        pb.ArduinoIn(message_id=8, servo_control=pb.ServoControl(pin=10, us=2000)),
+        pb.ArduinoIn(message_id=9, digital_init=pb.DigitalInit(pin=13, safe_level=True)),
+        pb.ArduinoIn(message_id=10, digital_control=pb.DigitalControl(pin=13, level=False)),
+        pb.ArduinoIn(message_id=11, stop=pb.Stop()),
+        pb.ArduinoIn(message_id=0, ping=pb.Ping(payload=b"x")),  # message_id 0
+        pb.ArduinoIn(message_id=12),  # empty oneof
+        pb.ArduinoIn(message_id=13, servo_init=pb.ServoInit(pin=1)),  # reserved, no safe
+        pb.ArduinoIn(
+            message_id=0xFFFFFFFF, digital_control=pb.DigitalControl(pin=0xFFFFFFFF, level=True)
+        ),
+    ]
     return [msg.SerializeToString() for msg in msgs]
 
 

@@ -27,6 +27,7 @@ COMMANDS: dict[str, str] = {
     "info": "info",
     "monitor": "monitor",
     "flash": "flash",
+    "sim": "sim",
 }
 
 
