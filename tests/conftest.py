@@ -7,6 +7,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
+from simfixtures import sim_board  # noqa: F401  (the fixture, found by pytest by name)
 
 #: How long a test's threads get to finish after it ends before they count as leaked.
 THREAD_GRACE = 3.0
