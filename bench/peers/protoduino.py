@@ -1,0 +1,267 @@
+"""protoduino: a realistic device-to-host stream, its receive path, and the servo command bytes.
+
+Everything here uses the project's own encoders and decoders (``framing``, ``packets``,
+``messages`` and the generated ``protoduino_pb2``); nothing is built by hand.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Callable, Iterable
+from typing import Protocol
+
+from protoduino._generated import protoduino_pb2 as pb
+from protoduino.constants import ControlCode, PacketType
+from protoduino.errors import ProtocolError
+from protoduino.framing import COBS_NATIVE, StreamDecoder, frame_packet
+from protoduino.messages import parse_out
+from protoduino.packets import BadFrame, Packet, heartbeat_payload, parse_control
+
+from . import RxCase, Slot, WireSample, chunked
+
+#: A message id as the host's random start gives it: uniform 32-bit ids are 4 or 5 varint bytes
+#: (5 for 15 in 16 of them), so the typical wire size is the 5-byte case.
+FIRST_MESSAGE_ID = 0x9E3779B9
+
+#: What a busy link's device-to-host traffic is made of, by weight: one Ack per command or Ping
+#: (some with a non-OK status, Pings echoing 8 bytes), the device's HEARTBEATs, and the occasional
+#: Failsafe or Log event.
+MIX: tuple[tuple[str, int], ...] = (
+    ("Ack OK (command)", 60),
+    ("Ack with a non-OK status", 5),
+    ("Ack echoing an 8-byte Ping", 10),
+    ("CONTROL HEARTBEAT", 15),
+    ("Failsafe event", 4),
+    ("Log event", 6),
+)
+
+_LOG_TEXTS = ("servo 9 -> 90 deg", "ping late 312 ms", "boot", "pin 13 high")
+
+
+class Decoder(Protocol):
+    """What the receive path needs from a stream decoder (``framing.StreamDecoder``'s API)."""
+
+    def feed(self, data: bytes) -> list[Packet | BadFrame]: ...
+
+
+class StandInRequestLayer:
+    """The per-packet work of the link and request layers, without threads or I/O.
+
+    For each packet: SEQ accounting as PROTOCOL.md section 6 asks, then DATA is parsed as
+    ``ArduinoOut`` with the project's ``messages.parse_out`` and an Ack resolves its pending call
+    by ``message_id`` (a dict lookup, as a request layer keyed by id does), while events and
+    CONTROL packets go to a listener. What it leaves out (locks, futures, logging) would cost the
+    same whichever decoder fed it.
+    """
+
+    __slots__ = (
+        "bad",
+        "dispatched",
+        "events",
+        "expected_seq",
+        "listener",
+        "lost",
+        "parse",
+        "pending",
+    )
+
+    def __init__(
+        self,
+        pending: dict[int, Slot],
+        listener: Callable[[object], None] | None = None,
+        parse: Callable[[bytes], pb.ArduinoOut] = parse_out,
+    ) -> None:
+        self.pending = pending
+        self.parse = parse
+        self.listener: Callable[[object], None] = listener or (lambda _event: None)
+        self.expected_seq = 0
+        self.lost = 0
+        self.events = 0
+        self.bad = 0
+        self.dispatched = 0
+
+    def on_items(self, items: Iterable[Packet | BadFrame]) -> None:
+        for item in items:
+            if isinstance(item, Packet):
+                self.on_packet(item)
+            else:
+                self.bad += 1
+
+    def on_packet(self, packet: Packet) -> None:
+        lost = (packet.seq - self.expected_seq) & 0xFF
+        if lost:
+            self.lost += lost
+        self.expected_seq = (packet.seq + 1) & 0xFF
+        if packet.type is PacketType.DATA:
+            try:
+                msg = self.parse(packet.payload)
+            except ProtocolError:
+                self.bad += 1
+                return
+            if msg.WhichOneof("data") == "ack":
+                ack = msg.ack
+                waiter = self.pending.get(ack.message_id)
+                if waiter is not None:
+                    waiter.value = ack
+            else:
+                self.events += 1
+                self.listener(msg)
+        elif packet.type is PacketType.CONTROL:
+            try:
+                control = parse_control(packet.payload)
+            except ProtocolError:
+                self.bad += 1
+                return
+            if control.code is ControlCode.EVENT:
+                self.events += 1
+                self.listener(control)
+        else:  # a COMMAND reaching the host is dropped and counted (section 4)
+            self.bad += 1
+            return
+        self.dispatched += 1
+
+
+def mixed_stream(frames: int, seed: int) -> tuple[bytes, list[int]]:
+    """``frames`` device-to-host frames drawn from :data:`MIX`; returns the bytes and the ids
+    of every Ack (the calls a request layer would have pending)."""
+    rng = random.Random(seed)
+    kinds = [name for name, _ in MIX]
+    weights = [weight for _, weight in MIX]
+    next_id = FIRST_MESSAGE_ID
+    ids: list[int] = []
+    out: list[bytes] = []
+    for seq_count in range(frames):
+        seq = seq_count & 0xFF
+        kind = rng.choices(kinds, weights)[0]
+        if kind == "CONTROL HEARTBEAT":
+            out.append(frame_packet(PacketType.CONTROL, seq, heartbeat_payload()))
+            continue
+        msg = pb.ArduinoOut()
+        if kind.startswith("Ack"):
+            msg.ack.message_id = next_id
+            ids.append(next_id)
+            next_id = (next_id + 1) & 0xFFFFFFFF or 1
+            if kind == "Ack with a non-OK status":
+                msg.ack.status = pb.STATUS_OUT_OF_RANGE
+            elif kind == "Ack echoing an 8-byte Ping":
+                msg.ack.ping_echo = rng.randbytes(8)
+        elif kind == "Failsafe event":
+            msg.failsafe.active = rng.random() < 0.5
+            msg.failsafe.cause = pb.FAILSAFE_CAUSE_PING_TIMEOUT
+        else:
+            msg.log.level = pb.LOG_LEVEL_INFO
+            msg.log.text = rng.choice(_LOG_TEXTS)
+        out.append(frame_packet(PacketType.DATA, seq, msg.SerializeToString()))
+    return b"".join(out), ids
+
+
+def rx_case(
+    frames: int,
+    chunk: int,
+    seed: int,
+    *,
+    decoder: Callable[[], Decoder] = StreamDecoder,
+    parse: Callable[[bytes], pb.ArduinoOut] = parse_out,
+    name: str = "protoduino",
+    stages: str = "",
+) -> RxCase:
+    """The full receive path: StreamDecoder -> packets -> ArduinoOut -> stand-in request layer.
+
+    ``decoder`` and ``parse`` default to the project's own; the proposals swap them.
+    """
+    stream, ids = mixed_stream(frames, seed)
+    chunks = chunked(stream, chunk)
+    pending = {message_id: Slot() for message_id in ids}
+
+    def run() -> int:
+        dec = decoder()
+        layer = StandInRequestLayer(pending, parse=parse)
+        for data in chunks:
+            layer.on_items(dec.feed(data))
+        return layer.dispatched
+
+    cobs = "C extension" if COBS_NATIVE else "pure-Python fallback"
+    return RxCase(
+        name=name,
+        package="protoduino",
+        parser=f"pure Python; COBS from `cobs` ({cobs}), CRC from `binascii.crc_hqx`, protobuf upb",
+        stages=stages
+        or "StreamDecoder.feed -> Packet -> messages.parse_out (ArduinoOut) or parse_control -> "
+        "SEQ check, Ack resolved by message_id in a dict, events to a listener",
+        stream=stream,
+        frames=frames,
+        run=run,
+    )
+
+
+def framing_only_case(
+    frames: int,
+    chunk: int,
+    seed: int,
+    *,
+    decoder: Callable[[], Decoder] = StreamDecoder,
+    name: str = "protoduino, framing only",
+) -> RxCase:
+    """The same stream through the stream decoder alone: the framing layer's share."""
+    stream, _ids = mixed_stream(frames, seed)
+    chunks = chunked(stream, chunk)
+
+    def run() -> int:
+        dec = decoder()
+        good = 0
+        for data in chunks:
+            for item in dec.feed(data):
+                if isinstance(item, Packet):
+                    good += 1
+        return good
+
+    return RxCase(
+        name=name,
+        package="protoduino",
+        parser="as above",
+        stages="stream decoder -> Packet, nothing parsed or dispatched",
+        stream=stream,
+        frames=frames,
+        run=run,
+    )
+
+
+def servo_messages(message_id: int) -> tuple[pb.ArduinoIn, pb.ArduinoIn, pb.ArduinoOut]:
+    """ServoInit (setup), ServoControl to 90 degrees (command) and its Ack, for pin 9."""
+    init = pb.ArduinoIn(message_id=message_id, servo_init=pb.ServoInit(pin=9, safe_degrees=90))
+    command = pb.ArduinoIn(
+        message_id=message_id + 1, servo_control=pb.ServoControl(pin=9, degrees=90)
+    )
+    ack = pb.ArduinoOut(ack=pb.Ack(message_id=message_id + 1, status=pb.STATUS_OK))
+    return init, command, ack
+
+
+def _frames(message_id: int) -> tuple[bytes, bytes, bytes]:
+    init, command, ack = servo_messages(message_id)
+    return (
+        frame_packet(PacketType.COMMAND, 1, init.SerializeToString()),
+        frame_packet(PacketType.COMMAND, 2, command.SerializeToString()),
+        frame_packet(PacketType.DATA, 1, ack.SerializeToString()),
+    )
+
+
+def wire_sample() -> WireSample:
+    setup, command, ack = _frames(FIRST_MESSAGE_ID)
+    _s, small_command, small_ack = _frames(1)
+    return WireSample(
+        library="protoduino",
+        package="protoduino",
+        encoder="protoduino_pb2 + framing.frame_packet (COBS, CRC-16, 0x00 delimiter)",
+        setup=setup,
+        setup_what="COMMAND ServoInit{pin 9, safe 90 deg}",
+        command=command,
+        command_what="COMMAND ServoControl{pin 9, degrees 90}",
+        ack=ack,
+        ack_what="DATA Ack{message_id, STATUS_OK}",
+        check="CRC-16/CCITT-FALSE",
+        notes=(
+            f"message_id 0x{FIRST_MESSAGE_ID:08X} (a typical random start, a 5-byte varint); "
+            f"with an id below 128 the command is {len(small_command)} B and the Ack "
+            f"{len(small_ack)} B"
+        ),
+    )

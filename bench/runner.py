@@ -1,0 +1,101 @@
+"""``python -m bench``: run the benchmarks and write docs/performance.md with its charts.
+
+A full run writes the report into docs/; ``--only`` runs some sections and, unless ``--out``
+says otherwise, writes into build/bench/ so that a partial report never replaces the real one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import shlex
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from . import charts, machine, registry, report
+from .core import Context, MissingDependencyError, Section, SectionResult
+
+log = logging.getLogger(__name__)
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+PARTIAL = ROOT / "build" / "bench"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    keys = [s.key for s in registry.SECTIONS]
+    parser = argparse.ArgumentParser(
+        prog="python -m bench", description="Benchmark protoduino against its peers."
+    )
+    parser.add_argument("--quick", action="store_true", help="2,000 frames and 3 repetitions")
+    parser.add_argument("--frames", type=int, help="frames per receive stream (default 20,000)")
+    parser.add_argument("--reps", type=int, help="timed repetitions (default 7)")
+    parser.add_argument("--chunk", type=int, default=1024, help="bytes per read (default 1024)")
+    parser.add_argument("--seed", type=int, default=7, help="seed of the generated streams")
+    parser.add_argument(
+        "--only", action="append", choices=keys, metavar="SECTION", help=f"one of {keys}"
+    )
+    parser.add_argument("--out", type=Path, help="report path (default docs/performance.md)")
+    parser.add_argument("--no-charts", action="store_true", help="skip the PNG charts")
+    parser.add_argument("--no-profile", action="store_true", help="skip the cProfile dumps")
+    return parser
+
+
+def make_context(args: argparse.Namespace, out: Path) -> Context:
+    frames = args.frames or (2_000 if args.quick else 20_000)
+    reps = args.reps or (3 if args.quick else 7)
+    chart_dir: Path | None = out.parent / "perf"
+    if args.no_charts:
+        chart_dir = None
+    return Context(
+        reps=reps,
+        frames=frames,
+        chunk=args.chunk,
+        seed=args.seed,
+        docs_dir=out.parent,
+        chart_dir=chart_dir,
+        profile=not args.no_profile,
+    )
+
+
+def run_sections(sections: Sequence[Section], ctx: Context) -> list[tuple[Section, SectionResult]]:
+    """Run each section; one whose optional package is missing is reported, not fatal."""
+    results: list[tuple[Section, SectionResult]] = []
+    for section in sections:
+        log.info("section %d: %s", section.number, section.title)
+        try:
+            result = section.run(ctx)
+        except MissingDependencyError as missing:
+            log.warning("section %s not run: %s", section.key, missing)
+            result = SectionResult(f"Not run: `{missing.package}` is not installed.\n")
+        results.append((section, result))
+    return results
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
+    args = build_parser().parse_args(argv)
+    sections = [s for s in registry.SECTIONS if not args.only or s.key in args.only]
+    out: Path = args.out or (PARTIAL if args.only else DOCS) / "performance.md"
+    ctx = make_context(args, out)
+    notes: list[str] = []
+    if ctx.chart_dir is not None:
+        try:
+            charts.pyplot()
+        except MissingDependencyError as missing:
+            log.warning("no charts: %s", missing)
+            notes.append(f"Charts not drawn: `{missing.package}` is not installed.")
+            ctx = make_context(argparse.Namespace(**{**vars(args), "no_charts": True}), out)
+    results = run_sections(sections, ctx)
+    packages: list[str] = []
+    for _section, result in results:
+        packages += result.packages
+    packages += ["matplotlib"] if ctx.chart_dir is not None else []
+    argv_text = " ".join(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))
+    command = f"python -m bench {argv_text}".strip()
+    text = report.render(results, machine.describe(ROOT, packages), ctx, command, notes)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text, encoding="utf-8")
+    log.info("wrote %s", out)
+    return 0

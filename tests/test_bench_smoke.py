@@ -1,0 +1,248 @@
+"""Smoke tests of the benchmarks in bench/: every case runs on a few frames and its output is
+checked (frames dispatched, bytes that decode back). Nothing here asserts on time.
+
+A case whose library is not installed is skipped with the package's name; tools/bench_setup.sh
+installs them all. The protoduino cases, the proposal's equivalence and the report generator
+need only the dev extras.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import random
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # bench/ is a top-level folder of the checkout, not installed
+    sys.path.insert(0, str(ROOT))
+
+from protoduino._generated import protoduino_pb2 as pb  # noqa: E402
+from protoduino.constants import PacketType  # noqa: E402
+from protoduino.framing import StreamDecoder  # noqa: E402
+from protoduino.packets import Packet  # noqa: E402
+
+from bench import receive, runner, wire  # noqa: E402
+from bench.core import MissingDependencyError, measure, require  # noqa: E402
+from bench.peers import RxCase, Slot, WireSample, mavlink, pigweed, protoduino, serialtransfer  # noqa: E402
+from bench.peers import firmata as firmata_peer  # noqa: E402
+from bench.peers import telemetrix as telemetrix_peer  # noqa: E402
+from bench.proposal import FastStreamDecoder, LightPacketDecoder, parse_out_from_string  # noqa: E402
+
+FRAMES = 60
+CHUNK = 37  # odd, so that frames straddle reads
+SEED = 3
+
+
+T = TypeVar("T")
+
+
+def _or_skip(make: Callable[[], T]) -> T:
+    try:
+        return make()
+    except MissingDependencyError as missing:
+        pytest.skip(f"{missing.package} not installed (tools/bench_setup.sh)")
+
+
+def _small(factory: Callable[[int, int, int], RxCase]) -> Callable[[], RxCase]:
+    return lambda: factory(FRAMES, CHUNK, SEED)
+
+
+RX_FACTORIES: dict[str, Callable[[], RxCase]] = {
+    **{label: _small(factory) for label, factory in receive.PEERS},
+    "protoduino framing only": lambda: protoduino.framing_only_case(FRAMES, CHUNK, SEED),
+    "proposal FastStreamDecoder": lambda: protoduino.rx_case(
+        FRAMES, CHUNK, SEED, decoder=FastStreamDecoder
+    ),
+    "proposal LightPacketDecoder + FromString": lambda: protoduino.rx_case(
+        FRAMES, CHUNK, SEED, decoder=LightPacketDecoder, parse=parse_out_from_string
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(RX_FACTORIES))
+def test_receive_case_dispatches_every_frame(name: str) -> None:
+    case = _or_skip(RX_FACTORIES[name])
+    assert case.frames == FRAMES
+    assert case.stream
+    # Twice: each run must start from a fresh parser state.
+    assert case.run() == FRAMES
+    assert case.run() == FRAMES
+
+
+def test_run_case_reports_rates_from_cpu_time() -> None:
+    result = receive.run_case(protoduino.rx_case(FRAMES, CHUNK, SEED), reps=2)
+    assert len(result.timing.samples) == 2
+    assert result.frames_per_s > 0
+    assert result.bytes_per_s == pytest.approx(result.frames_per_s * result.frame_size)
+
+
+def test_run_case_refuses_a_case_that_loses_frames() -> None:
+    good = protoduino.rx_case(FRAMES, CHUNK, SEED)
+    lossy = dataclasses.replace(good, run=lambda: 1)
+    with pytest.raises(RuntimeError, match="dispatched 1 of"):
+        receive.run_case(lossy, reps=1)
+
+
+def test_measure_times_each_repetition() -> None:
+    calls: list[int] = []
+    timing = measure(lambda: calls.append(1), reps=3, warmup=2)
+    assert len(calls) == 5
+    assert len(timing.samples) == 3
+    assert all(s > 0 for s in timing.samples)
+
+
+def test_protoduino_stream_resolves_every_ack() -> None:
+    stream, ids = protoduino.mixed_stream(200, SEED)
+    pending = {i: Slot() for i in ids}
+    layer = protoduino.StandInRequestLayer(pending)
+    layer.on_items(StreamDecoder().feed(stream))
+    assert layer.dispatched == 200
+    assert layer.lost == 0
+    assert layer.bad == 0
+    assert all(isinstance(slot.value, pb.Ack) for slot in pending.values())
+    assert layer.events > 0  # the mix has failsafe and log events
+
+
+def _damaged(stream: bytes, rng: random.Random) -> bytes:
+    """Bit flips, insertions (long runs overflow), deletions and stray delimiters."""
+    data = bytearray(stream)
+    for _ in range(120):
+        i = rng.randrange(len(data))
+        op = rng.random()
+        if op < 0.3:
+            data[i] ^= 1 << rng.randrange(8)
+        elif op < 0.5:
+            data[i:i] = bytes(rng.randrange(1, 256) for _ in range(rng.randrange(1, 600)))
+        elif op < 0.7:
+            del data[i : i + rng.randrange(1, 20)]
+        else:
+            data[i:i] = b"\x00"
+    return bytes(data)
+
+
+@pytest.mark.parametrize("decoder", [FastStreamDecoder, LightPacketDecoder])
+@pytest.mark.parametrize("seed", range(4))
+def test_proposed_decoder_matches_stream_decoder(
+    decoder: Callable[[], FastStreamDecoder], seed: int
+) -> None:
+    rng = random.Random(seed)
+    stream, _ids = protoduino.mixed_stream(600, seed)
+    data = _damaged(stream, rng)
+    for _ in range(5):
+        cuts = sorted(rng.sample(range(1, len(data)), rng.randrange(1, 300)))
+        chunks = [data[a:b] for a, b in zip([0, *cuts], [*cuts, len(data)], strict=True)]
+        ref, new = StreamDecoder(), decoder()
+        expected = [item for chunk in chunks for item in ref.feed(chunk)]
+        got = [item for chunk in chunks for item in new.feed(chunk)]
+        assert got == expected
+        assert new.counts == ref.counts
+    # The damage must have exercised every drop reason, or the comparison proves little.
+    assert {"cobs", "crc", "overflow", "packets"} <= set(ref.counts)
+
+
+def test_parse_out_from_string_wraps_decode_errors() -> None:
+    with pytest.raises(Exception, match="does not decode"):
+        parse_out_from_string(b"\x0a\xff")
+
+
+# --- part 4: the bytes decode back with each library's own decoder -----------------------
+
+
+def _sample(make: Callable[[], WireSample]) -> WireSample:
+    return _or_skip(make)
+
+
+def test_protoduino_wire_sample_decodes() -> None:
+    s = _sample(protoduino.wire_sample)
+    assert s.setup is not None and s.ack is not None
+    dec = StreamDecoder()
+    command, ack = dec.feed(s.command), dec.feed(s.ack)
+    assert len(command) == 1 and isinstance(command[0], Packet)
+    assert len(ack) == 1 and isinstance(ack[0], Packet)
+    assert command[0].type is PacketType.COMMAND and ack[0].type is PacketType.DATA
+    msg = pb.ArduinoIn.FromString(command[0].payload)
+    assert (msg.servo_control.pin, msg.servo_control.degrees) == (9, 90)
+    reply = pb.ArduinoOut.FromString(ack[0].payload)
+    assert reply.ack.message_id == msg.message_id
+    assert reply.ack.status == pb.STATUS_OK
+
+
+def test_mavlink_wire_sample_decodes() -> None:
+    s = _sample(mavlink.wire_sample)
+    mav: Any = _or_skip(mavlink._dialect)
+    parser = mav.MAVLink(None)
+    (command,) = parser.parse_buffer(s.command)
+    assert command.get_type() == "COMMAND_LONG"
+    assert command.command == mav.MAV_CMD_DO_SET_SERVO
+    assert (command.param1, command.param2) == (9.0, float(mavlink.SERVO_9_AT_90_US))
+    assert s.ack is not None
+    (ack,) = parser.parse_buffer(s.ack)
+    assert ack.get_type() == "COMMAND_ACK"
+    assert (ack.command, ack.result) == (mav.MAV_CMD_DO_SET_SERVO, mav.MAV_RESULT_ACCEPTED)
+
+
+def test_pw_rpc_wire_sample_decodes() -> None:
+    s = _sample(pigweed.wire_sample)
+    pw = pigweed._Pigweed()
+    assert s.ack is not None
+    frames = list(pw.decode.FrameDecoder().process(s.command + s.ack))
+    assert [f.ok() for f in frames] == [True, True]
+    assert {f.address for f in frames} == {pigweed.RPC_ADDRESS}
+    request, response = (pw.packets.decode(f.data) for f in frames)
+    body = pw.packets.decode_payload(request, pw.pb.SetAngleRequest)
+    assert (body.pin, body.degrees) == (9, 90)
+    assert request.call_id == response.call_id
+    assert (request.service_id, request.method_id) == (pw.service_id, pw.method_id)
+
+
+def test_firmata_wire_sample_is_an_analog_message() -> None:
+    s = _sample(firmata_peer.wire_sample)
+    # Firmata's ANALOG_MESSAGE: 0xE0 | pin, then the value as two 7-bit bytes, LSB first.
+    assert s.command == bytes((0xE0 | 9, 90 & 0x7F, 90 >> 7))
+    assert s.setup is not None and s.setup.startswith(b"\xf0\x70\x09")  # SERVO_CONFIG pin 9
+    assert s.ack is None
+
+
+def test_telemetrix_wire_sample_is_a_servo_write() -> None:
+    s = _sample(telemetrix_peer.wire_sample)
+    constants: Any = _or_skip(lambda: require("telemetrix.private_constants", "telemetrix"))
+    assert s.command == bytes((3, constants.PrivateConstants.SERVO_WRITE, 9, 90))
+    assert s.ack is None
+
+
+def test_serialtransfer_wire_sample_parses_back() -> None:
+    s = _sample(serialtransfer.wire_sample)
+    port = serialtransfer.MemoryPort()
+    link = serialtransfer._transfer(port)
+    port.load(s.command)
+    assert link.available() == 2
+    assert (link.rx_obj("B", 0), link.rx_obj("B", 1)) == (9, 90)
+
+
+def test_wire_section_lists_every_installed_library() -> None:
+    samples, skipped = wire.collect()
+    names = {s.library for s in samples} | {label for label, _package in skipped}
+    assert names == {label for label, _factory in wire.PEERS}
+    assert samples[0].library == "protoduino"
+
+
+# --- the report generator ----------------------------------------------------------------
+
+
+def test_runner_writes_a_report(tmp_path: Path) -> None:
+    out = tmp_path / "performance.md"
+    assert runner.main(["--frames", "40", "--reps", "1", "--out", str(out)]) == 0
+    text = out.read_text(encoding="utf-8")
+    for heading in ("## Targets", "## Machine", "## 1. Host receive path", "## 4. Bytes on the"):
+        assert heading in text
+    assert "Not measured yet" in text  # parts 2, 3 and 5 are placeholders so far
+    command = protoduino.wire_sample().command
+    assert " ".join(f"{b:02x}" for b in command) in text
+    for link in ("perf/receive.png", "perf/wire.png"):
+        if link in text:
+            assert (tmp_path / link).stat().st_size > 0
