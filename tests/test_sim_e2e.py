@@ -1,0 +1,453 @@
+"""End-to-end: the simulated board's firmware against the host codec, over its pty.
+
+Only the foundation's codec (framing, packets, messages) and pyserial are used
+here, so these tests pin the firmware's behaviour on the wire independently
+of the host library's link and request layers. Outputs are checked in the
+board's own trace, which records what the pins did, not what was asked.
+"""
+
+from __future__ import annotations
+
+import json
+import random
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+import serial
+from protoduino._generated import protoduino_pb2 as pb
+from protoduino.constants import (
+    FAILSAFE_TIMEOUT,
+    MAX_ENCODED_FRAME,
+    PROTOCOL_VERSION,
+    ControlCode,
+    EventCode,
+    PacketType,
+)
+from protoduino.framing import StreamDecoder, frame_packet
+from protoduino.messages import parse_out
+from protoduino.packets import (
+    BadFrame,
+    Control,
+    Packet,
+    parse_control,
+    reset_ack_payload,
+    reset_payload,
+)
+from protoduino.simboard import SimBoard
+
+VECTORS = Path(__file__).parent / "vectors" / "wire_v1.json"
+#: Generous bound for any single reply; the simulated board answers in well under 1 ms.
+REPLY_TIMEOUT = 2.0
+#: The failsafe may fire up to this long after FAILSAFE_TIMEOUT (issue 3: 10.0 s + 20 ms).
+FAILSAFE_SLACK = 0.020
+#: The device's clock counts whole milliseconds, so it may fire up to 1 ms "early"
+#: measured against the trace's microsecond timestamps; allow 2 ms.
+CLOCK_GRANULARITY = 0.002
+
+Status = pb.Status
+
+
+class RawHost:
+    """A minimal host made of the codec only: frames out, packets in, no retries."""
+
+    def __init__(self, port: str) -> None:
+        self.ser = serial.Serial(port, baudrate=115200, timeout=0.01)
+        self.decoder = StreamDecoder()
+        self.seq = 0
+        self.received: list[Packet] = []  # every good packet, in order
+        self.bad: list[BadFrame] = []
+        self._unread: list[Packet] = []
+
+    def close(self) -> None:
+        self.ser.close()
+
+    # -- sending -------------------------------------------------------------
+
+    def frame(self, ptype: PacketType, payload: bytes) -> bytes:
+        """Encode a packet with the next SEQ (without writing it)."""
+        data = frame_packet(ptype, self.seq, payload)
+        self.seq = (self.seq + 1) & 0xFF
+        return data
+
+    def write(self, data: bytes) -> None:
+        self.ser.write(data)
+        self.ser.flush()
+
+    def send(self, msg: pb.ArduinoIn) -> None:
+        self.write(self.frame(PacketType.COMMAND, msg.SerializeToString()))
+
+    def reset(self) -> Control:
+        """Handshake: a lone 0x00, RESET (SEQ 0), then wait for RESET_ACK."""
+        self.write(b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION)))
+        self.seq = 1
+        pkt = self.wait(lambda p: _control_code(p) is ControlCode.RESET_ACK)
+        return parse_control(pkt.payload)
+
+    # -- receiving -----------------------------------------------------------
+
+    def _pump(self) -> None:
+        """Read what is there (or wait up to the port's short timeout for one byte)."""
+        data = self.ser.read(max(1, self.ser.in_waiting))
+        for item in self.decoder.feed(data):
+            if isinstance(item, Packet):
+                self.received.append(item)
+                self._unread.append(item)
+            else:
+                self.bad.append(item)
+
+    def wait(self, match: Callable[[Packet], bool], timeout: float = REPLY_TIMEOUT) -> Packet:
+        """The first unread packet that matches; those before it stay unread."""
+        deadline = time.monotonic() + timeout
+        while True:
+            for i, pkt in enumerate(self._unread):
+                if match(pkt):
+                    del self._unread[i]
+                    return pkt
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise AssertionError(f"no matching packet within {timeout} s")
+            self._pump()
+
+    def drain(self, duration: float) -> list[Packet]:
+        """Everything that arrives within ``duration`` seconds (plus anything unread)."""
+        deadline = time.monotonic() + duration
+        while time.monotonic() < deadline:
+            self._pump()
+        out, self._unread = self._unread, []
+        return out
+
+    def ack(self, message_id: int, timeout: float = REPLY_TIMEOUT) -> pb.Ack:
+        pkt = self.wait(lambda p: _ack_id(p) == message_id, timeout)
+        return parse_out(pkt.payload).ack
+
+    def command(self, msg: pb.ArduinoIn) -> pb.Ack:
+        self.send(msg)
+        return self.ack(msg.message_id)
+
+    def event(self, code: EventCode, timeout: float = REPLY_TIMEOUT) -> Packet:
+        return self.wait(lambda p: _event_code(p) == code, timeout)
+
+
+def _control_code(pkt: Packet) -> ControlCode | None:
+    if pkt.type is not PacketType.CONTROL:
+        return None
+    return parse_control(pkt.payload).code
+
+
+def _event_code(pkt: Packet) -> int | None:
+    if _control_code(pkt) is not ControlCode.EVENT:
+        return None
+    return parse_control(pkt.payload).event
+
+
+def _out(pkt: Packet) -> pb.ArduinoOut | None:
+    return parse_out(pkt.payload) if pkt.type is PacketType.DATA else None
+
+
+def _ack_id(pkt: Packet) -> int | None:
+    out = _out(pkt)
+    return out.ack.message_id if out is not None and out.HasField("ack") else None
+
+
+def _is_failsafe(pkt: Packet) -> bool:
+    out = _out(pkt)
+    return out is not None and out.HasField("failsafe")
+
+
+def _changes(board: SimBoard, pin: int) -> list[Any]:
+    return [c["value"] for c in board.trace() if c["pin"] == pin]
+
+
+def _settle(board: SimBoard, host: RawHost) -> None:
+    """A GetInfo round trip: every earlier command has been executed and traced."""
+    host.command(pb.ArduinoIn(message_id=0xFFFF_FF00 + host.seq, get_info=pb.GetInfo()))
+
+
+@pytest.fixture
+def host(sim_board: SimBoard) -> Iterator[RawHost]:
+    h = RawHost(sim_board.port)
+    try:
+        yield h
+    finally:
+        h.close()
+
+
+@pytest.fixture
+def active(host: RawHost) -> RawHost:
+    host.reset()
+    return host
+
+
+def _servo_init(mid: int, pin: int, **kw: int) -> pb.ArduinoIn:
+    return pb.ArduinoIn(message_id=mid, servo_init=pb.ServoInit(pin=pin, **kw))
+
+
+def _servo(mid: int, pin: int, **kw: int) -> pb.ArduinoIn:
+    return pb.ArduinoIn(message_id=mid, servo_control=pb.ServoControl(pin=pin, **kw))
+
+
+def _digital_init(mid: int, pin: int, safe: bool) -> pb.ArduinoIn:
+    return pb.ArduinoIn(message_id=mid, digital_init=pb.DigitalInit(pin=pin, safe_level=safe))
+
+
+def _digital(mid: int, pin: int, level: bool) -> pb.ArduinoIn:
+    return pb.ArduinoIn(message_id=mid, digital_control=pb.DigitalControl(pin=pin, level=level))
+
+
+def _ping(mid: int, payload: bytes = b"") -> pb.ArduinoIn:
+    return pb.ArduinoIn(message_id=mid, ping=pb.Ping(payload=payload))
+
+
+# --- link ---------------------------------------------------------------------
+
+
+def test_handshake_bytes_and_schema_id(host: RawHost) -> None:
+    host.write(b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION)))
+    expected = b"\0" + frame_packet(
+        PacketType.CONTROL, 0, reset_ack_payload(PROTOCOL_VERSION, protoduino.SCHEMA_ID)
+    )
+    got = b""
+    deadline = time.monotonic() + REPLY_TIMEOUT
+    while len(got) < len(expected) and time.monotonic() < deadline:
+        got += host.ser.read(len(expected) - len(got))
+    assert got == expected
+    (packet,) = StreamDecoder().feed(got)
+    assert isinstance(packet, Packet)
+    ack = parse_control(packet.payload)
+    assert ack.code is ControlCode.RESET_ACK
+    assert ack.version == PROTOCOL_VERSION
+    assert ack.schema_id == protoduino.SCHEMA_ID
+
+
+def test_boot_event_and_reboot(sim_board: SimBoard, active: RawHost) -> None:
+    assert active.command(_digital_init(1, 13, True)).status == Status.STATUS_OK
+    assert active.command(_servo_init(2, 9, safe_us=1500)).status == Status.STATUS_OK
+    sim_board.reboot()
+    boot = active.event(EventCode.BOOT)
+    assert boot.seq == 0
+    # Outputs released: each driven pin gets a line with value 0.
+    deadline = time.monotonic() + REPLY_TIMEOUT
+    while (_changes(sim_board, 13)[-1:], _changes(sim_board, 9)[-1:]) != ([0], [0]):
+        assert time.monotonic() < deadline, sim_board.trace()
+        time.sleep(0.01)
+    # The rebooted device is IDLE until the next handshake, with nothing configured.
+    active.send(_digital(3, 13, True))
+    active.event(EventCode.NOT_ACTIVE)
+    active.reset()
+    assert active.command(_digital(4, 13, True)).status == Status.STATUS_NOT_INITIALISED
+
+
+def test_command_before_reset_is_not_active(sim_board: SimBoard, host: RawHost) -> None:
+    host.send(_digital_init(7, 13, True))
+    host.event(EventCode.NOT_ACTIVE)
+    assert [p for p in host.drain(0.1) if p.type is PacketType.DATA] == []
+    assert sim_board.trace() == []  # nothing executed
+    host.reset()
+    assert host.command(_digital_init(8, 13, True)).status == Status.STATUS_OK
+    _settle(sim_board, host)
+    assert _changes(sim_board, 13) == [1]
+
+
+def test_reset_again_keeps_outputs(sim_board: SimBoard, active: RawHost) -> None:
+    assert active.command(_servo_init(1, 9, safe_degrees=0)).status == Status.STATUS_OK
+    ack = active.reset()
+    assert ack.version == PROTOCOL_VERSION
+    assert active.command(_servo(2, 9, degrees=180)).status == Status.STATUS_OK
+    _settle(sim_board, active)
+    assert _changes(sim_board, 9) == [544, 2400]
+    # After each RESET_ACK the device numbers its packets from 1 again.
+    assert [p.seq for p in active.received if p.type is PacketType.DATA][-2:] == [1, 2]
+
+
+# --- commands -----------------------------------------------------------------
+
+_T = pb.ArduinoIn
+S = Status
+
+#: (message, expected status), sent in this order on one link.
+SCRIPT: list[tuple[pb.ArduinoIn, int]] = [
+    (_ping(1, b"hello"), S.STATUS_OK),
+    (_T(message_id=2, get_info=pb.GetInfo()), S.STATUS_OK),
+    (_servo_init(3, 9, safe_degrees=90), S.STATUS_OK),
+    (_servo_init(4, 10, min_us=1000, max_us=2000, safe_us=1500), S.STATUS_OK),
+    (_servo(5, 9, degrees=180), S.STATUS_OK),
+    (_servo(6, 10, us=1000), S.STATUS_OK),
+    (_digital_init(7, 13, False), S.STATUS_OK),
+    (_digital(8, 13, True), S.STATUS_OK),
+    (_servo_init(9, 20, safe_degrees=0), S.STATUS_INVALID_PIN),
+    (_digital(10, 255, True), S.STATUS_INVALID_PIN),
+    (_digital_init(11, 0, False), S.STATUS_RESERVED_PIN),
+    (_servo_init(12, 1, safe_degrees=0), S.STATUS_RESERVED_PIN),
+    (_servo(13, 11, degrees=10), S.STATUS_NOT_INITIALISED),
+    (_digital(14, 12, True), S.STATUS_NOT_INITIALISED),
+    (_digital(15, 9, True), S.STATUS_NOT_INITIALISED),
+    (_servo(16, 9, degrees=181), S.STATUS_OUT_OF_RANGE),
+    (_servo(17, 10, us=2001), S.STATUS_OUT_OF_RANGE),
+    (_servo_init(18, 11, safe_degrees=200), S.STATUS_OUT_OF_RANGE),
+    (_servo_init(19, 11, min_us=1000, max_us=2000, safe_us=900), S.STATUS_OUT_OF_RANGE),
+    (_servo_init(20, 13, safe_degrees=0), S.STATUS_PIN_IN_USE),
+    (_digital_init(21, 9, True), S.STATUS_PIN_IN_USE),
+    (_servo_init(22, 11, min_us=300, safe_degrees=0), S.STATUS_INVALID_ARGUMENT),
+    (_servo_init(23, 11, max_us=2700, safe_degrees=0), S.STATUS_INVALID_ARGUMENT),
+    (_servo_init(24, 11, min_us=2000, max_us=1000, safe_degrees=0), S.STATUS_INVALID_ARGUMENT),
+    (_servo_init(25, 11), S.STATUS_INVALID_ARGUMENT),  # no safe value
+    (_servo(26, 9), S.STATUS_INVALID_ARGUMENT),  # no value
+    (_T(message_id=0, digital_control=pb.DigitalControl(pin=13)), S.STATUS_INVALID_ARGUMENT),
+    (_T(message_id=27), S.STATUS_UNKNOWN_COMMAND),
+    *[(_servo_init(30 + i, 2 + i, safe_degrees=0), S.STATUS_OK) for i in range(6)],
+    (_servo_init(36, 12, safe_degrees=0), S.STATUS_NO_FREE_RESOURCE),  # the 9th servo
+    (_servo_init(37, 9, min_us=1000, max_us=2000, safe_us=1000), S.STATUS_OK),  # re-init
+    (_T(message_id=38, stop=pb.Stop()), S.STATUS_OK),
+]
+
+
+def test_every_command_acked_with_its_status(sim_board: SimBoard, active: RawHost) -> None:
+    for msg, status in SCRIPT:
+        ack = active.command(msg)
+        assert ack.status == status, (msg, pb.Status.Name(ack.status))
+    # Exactly one Ack per message, and nothing unexpected.
+    acks = [i for i in map(_ack_id, active.received) if i is not None]
+    assert sorted(acks) == sorted(m.message_id for m, _ in SCRIPT)
+    # Only the OK commands moved outputs; Stop put each back to its safe value.
+    assert _changes(sim_board, 9) == [1472, 2400, 1000]
+    assert _changes(sim_board, 10) == [1500, 1000, 1500]
+    assert _changes(sim_board, 13) == [0, 1, 0]
+    assert _changes(sim_board, 11) == _changes(sim_board, 12) == []
+    assert {c["pin"] for c in sim_board.trace()} == {2, 3, 4, 5, 6, 7, 9, 10, 13}
+
+
+def test_get_info(active: RawHost) -> None:
+    ack = active.command(_T(message_id=5, get_info=pb.GetInfo()))
+    info = ack.info
+    assert ack.status == Status.STATUS_OK
+    assert (info.board, info.firmware_version) == ("sim", "0.1.0")
+    assert info.protocol_version == PROTOCOL_VERSION
+    assert info.schema_id == protoduino.SCHEMA_ID
+    assert (info.num_pins, info.max_servos, list(info.reserved_pins)) == (20, 8, [0, 1])
+
+
+def test_decode_error(active: RawHost) -> None:
+    # message_id 7, then a ServoInit claiming 10 bytes but carrying 2.
+    active.write(active.frame(PacketType.COMMAND, bytes.fromhex("08071a0a0809")))
+    event = active.wait(lambda p: (o := _out(p)) is not None and o.HasField("decode_error"))
+    assert parse_out(event.payload).decode_error.count == 1
+    assert active.ack(7).status == Status.STATUS_DECODE_ERROR
+
+
+def test_repeated_id_acked_twice_executed_once(sim_board: SimBoard, active: RawHost) -> None:
+    assert active.command(_digital_init(100, 13, False)).status == Status.STATUS_OK
+    on = _digital(101, 13, True)
+    assert active.command(on).status == Status.STATUS_OK
+    assert active.command(_digital(102, 13, False)).status == Status.STATUS_OK
+    # A retransmission of 101 (new SEQ, same id): acked again, not executed.
+    assert active.command(on).status == Status.STATUS_OK
+    _settle(sim_board, active)
+    assert [_ack_id(p) for p in active.received].count(101) == 2
+    assert _changes(sim_board, 13) == [0, 1, 0]
+
+
+def test_noise_and_invalid_frames_between_commands_ignored(
+    sim_board: SimBoard, active: RawHost
+) -> None:
+    vectors = json.loads(VECTORS.read_text())
+    rng = random.Random(1234)
+    assert active.command(_digital_init(1, 13, False)).status == Status.STATUS_OK
+    level = False
+    for i, bad in enumerate(vectors["invalid_frames"]):
+        noise = bytes(rng.randrange(1, 256) for _ in range(rng.randrange(1, 40)))
+        junk = bytes.fromhex(bad["wire"]) + noise + b"\0"
+        level = not level
+        # noise glued to the front of a frame would merge with it: the 0x00 separates them
+        active.write(
+            junk + active.frame(PacketType.COMMAND, _digital(10 + i, 13, level).SerializeToString())
+        )
+        assert active.ack(10 + i).status == Status.STATUS_OK
+    # An over-long run without a delimiter: RX_OVERFLOW, then business as usual.
+    active.write(b"\x55" * (MAX_ENCODED_FRAME + 50) + b"\0")
+    active.event(EventCode.RX_OVERFLOW)
+    assert active.command(_digital(99, 13, True)).status == Status.STATUS_OK
+    _settle(sim_board, active)
+    expected = [0] + [int(i % 2 == 0) for i in range(len(vectors["invalid_frames"]))] + [1]
+    assert _changes(sim_board, 13) == expected
+    # Every DATA packet the device sent was an Ack to one of our commands.
+    assert all(_ack_id(p) is not None for p in active.received if p.type is PacketType.DATA)
+
+
+def test_ping_payload_every_byte_value(active: RawHost) -> None:
+    everything = bytes(range(256))
+    echoed = b""
+    for i in range(4):  # Ping.payload holds at most 64 bytes (proto/protoduino.options)
+        chunk = everything[64 * i : 64 * (i + 1)]
+        ack = active.command(_ping(200 + i, chunk))
+        assert ack.status == Status.STATUS_OK
+        echoed += ack.ping_echo
+    assert echoed == everything
+
+
+# --- failsafe -------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_failsafe_after_ping_silence(sim_board: SimBoard, active: RawHost) -> None:
+    """One 10 s silence, checked from every side (kept to one run for wall time)."""
+    for msg in (
+        _servo_init(1, 9, safe_degrees=90),  # 1472 us
+        _digital_init(2, 13, False),
+        _digital_init(3, 12, True),
+        _digital(4, 13, True),
+        _digital(5, 12, False),
+    ):
+        assert active.command(msg).status == Status.STATUS_OK
+    # The last Ping goes out in one write right behind a servo move, so the
+    # move's trace line marks the Ping's arrival on the device's clock.
+    active.write(
+        active.frame(PacketType.COMMAND, _servo(6, 9, us=2000).SerializeToString())
+        + active.frame(PacketType.COMMAND, _ping(7).SerializeToString())
+    )
+    assert active.ack(6).status == Status.STATUS_OK
+    assert active.ack(7).status == Status.STATUS_OK
+    sent = time.monotonic()
+    last_ping_t = next(c["t"] for c in sim_board.trace() if c["pin"] == 9 and c["value"] == 2000)
+
+    event = active.wait(_is_failsafe, timeout=FAILSAFE_TIMEOUT + 3.0)
+    waited = time.monotonic() - sent
+    failsafe = parse_out(event.payload).failsafe
+    assert failsafe.active
+    assert failsafe.cause == pb.FAILSAFE_CAUSE_PING_TIMEOUT
+    assert waited >= FAILSAFE_TIMEOUT - CLOCK_GRANULARITY
+
+    # Every output at its safe value, within 10.0 s + 20 ms of the last Ping.
+    safe_lines = [c for c in sim_board.trace() if c["t"] > last_ping_t]
+    assert {(c["pin"], c["value"]) for c in safe_lines} == {(9, 1472), (13, 0), (12, 1)}
+    for line in safe_lines:
+        delay = line["t"] - last_ping_t
+        assert FAILSAFE_TIMEOUT - CLOCK_GRANULARITY <= delay <= FAILSAFE_TIMEOUT + FAILSAFE_SLACK, (
+            line,
+            delay,
+        )
+
+    # Latched: the next Ping clears the flag (event active=false), outputs stay.
+    assert active.command(_ping(8)).status == Status.STATUS_OK
+    cleared = active.wait(_is_failsafe)
+    assert not parse_out(cleared.payload).failsafe.active
+    _settle(sim_board, active)
+    assert [c for c in sim_board.trace() if c["t"] > last_ping_t] == safe_lines
+    # Each output moves again when commanded.
+    assert active.command(_servo(9, 9, degrees=0)).status == Status.STATUS_OK
+    _settle(sim_board, active)
+    assert _changes(sim_board, 9)[-1] == 544
+    assert _changes(sim_board, 13)[-1] == 0
+
+
+def test_stop_is_immediate_and_latched(sim_board: SimBoard, active: RawHost) -> None:
+    assert active.command(_servo_init(1, 9, safe_us=1500)).status == Status.STATUS_OK
+    assert active.command(_servo(2, 9, us=2200)).status == Status.STATUS_OK
+    assert active.command(_T(message_id=3, stop=pb.Stop())).status == Status.STATUS_OK
+    event = parse_out(active.wait(_is_failsafe).payload).failsafe
+    assert (event.active, event.cause) == (True, pb.FAILSAFE_CAUSE_STOP)
+    _settle(sim_board, active)
+    assert _changes(sim_board, 9) == [1500, 2200, 1500]
