@@ -1,0 +1,363 @@
+"""The Board API against the real simulated board (firmware core on a pty), checked in its trace."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from protoduino import Board, Event, EventKind
+from protoduino.messages import ArduinoIn, Status
+from protoduino.simboard import SimBoard
+from simfixtures import SIM_BACKENDS
+
+SAFE_90_US = 544 + 90 * (2400 - 544) // 180  # 1472
+
+
+def us(degrees: int, lo: int = 544, hi: int = 2400) -> int:
+    return lo + degrees * (hi - lo) // 180
+
+
+@pytest.fixture
+def sim(sim_board: SimBoard) -> SimBoard:
+    """The shared fixture (one per backend), started, tracing."""
+    return sim_board
+
+
+@pytest.fixture
+def board(sim: SimBoard) -> Iterator[Board]:
+    with Board.open(sim.port) as b:
+        yield b
+
+
+def wait_until(predicate: Callable[[], bool], timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
+
+
+def pin_values(trace: list[dict[str, Any]], pin: int) -> list[int]:
+    return [int(e["value"]) for e in trace if e["pin"] == pin]
+
+
+class Recorder:
+    def __init__(self, board: Board) -> None:
+        self.events: list[Event] = []
+        board.on_event(self.events.append)
+
+    def wait(self, kind: EventKind, timeout: float = 10.0, count: int = 1) -> list[Event]:
+        ok = wait_until(lambda: len(self.of(kind)) >= count, timeout)
+        assert ok, f"no {kind} event in {timeout} s; got {self.events}"
+        return self.of(kind)
+
+    def of(self, kind: EventKind) -> list[Event]:
+        return [e for e in list(self.events) if e.kind is kind]
+
+
+def test_every_api_call(board: Board, sim: SimBoard) -> None:
+    assert board.info.board == "sim"
+    assert board.info.firmware_version == "0.1.0"
+    assert board.info.protocol_version == protoduino.PROTOCOL_VERSION
+    assert board.info.schema_id == protoduino.SCHEMA_ID
+    assert (board.info.num_pins, board.info.max_servos) == (20, 8)
+    assert board.info.reserved_pins == (0, 1)
+    servo = board.servo(9, safe=90)
+    servo.write(45)
+    servo.write_us(1500)
+    narrow = board.servo(10, safe_us=1200, min_us=1000, max_us=2000)
+    narrow.write(180)
+    led = board.digital_output(13, safe=False)
+    led.write(True)
+    assert board.ping(b"payload") > 0
+    board.stop()
+    trace = sim.trace()
+    assert pin_values(trace, 9) == [SAFE_90_US, us(45), 1500, SAFE_90_US]
+    assert pin_values(trace, 10) == [1200, 2000, 1200]
+    assert pin_values(trace, 13) == [0, 1, 0]  # init (safe), on, stop (safe)
+    assert board.stats.timeouts == 0 and board.stats.rejected == 0
+
+
+def test_stop_latches_until_commanded(board: Board, sim: SimBoard) -> None:
+    servo = board.servo(9)
+    led = board.digital_output(13)
+    servo.write(0)
+    led.on()
+    rec = Recorder(board)
+    board.stop()
+    event = rec.wait(EventKind.FAILSAFE)[0]
+    assert event.details == {"active": True, "cause": "stop"}
+    servo.write(180)  # a control moves it normally again
+    assert pin_values(sim.trace(), 9)[-2:] == [SAFE_90_US, us(180)]
+    assert pin_values(sim.trace(), 13)[-1] == 0  # the LED stays safe until commanded
+
+
+def raw(build: Callable[[Any], None]) -> Any:
+    msg = ArduinoIn()
+    build(msg)
+    return msg
+
+
+# (name, the API call, the same command sent raw past the host's checks)
+CASES: list[tuple[str, Callable[[Board], object], Callable[[Any], None]]] = [
+    ("pin 20", lambda b: b.servo(20), lambda m: m.servo_init.MergeFrom(_si(20))),
+    ("reserved 0", lambda b: b.digital_output(0), lambda m: setattr(m.digital_init, "pin", 0)),
+    ("reserved 1", lambda b: b.servo(1), lambda m: m.servo_init.MergeFrom(_si(1))),
+    (
+        "min_us 399",
+        lambda b: b.servo(9, min_us=399),
+        lambda m: m.servo_init.MergeFrom(_si(9, min_us=399)),
+    ),
+    (
+        "max_us 2601",
+        lambda b: b.servo(9, max_us=2601),
+        lambda m: m.servo_init.MergeFrom(_si(9, max_us=2601)),
+    ),
+    (
+        "min >= max",
+        lambda b: b.servo(9, min_us=2000, max_us=1000),
+        lambda m: m.servo_init.MergeFrom(_si(9, min_us=2000, max_us=1000)),
+    ),
+    ("safe 181", lambda b: b.servo(9, safe=181), lambda m: m.servo_init.MergeFrom(_si(9, 181))),
+    (
+        "safe_us 2401",
+        lambda b: b.servo(9, safe_us=2401),
+        lambda m: m.servo_init.MergeFrom(_si(9, safe_us=2401)),
+    ),
+    ("ping 65 bytes", lambda b: b.ping(bytes(65)), lambda m: setattr(m.ping, "payload", bytes(65))),
+]
+
+
+def _si(pin: int, safe: int = 90, *, safe_us: int = 0, min_us: int = 0, max_us: int = 0) -> Any:
+    init = ArduinoIn().servo_init
+    init.pin, init.min_us, init.max_us = pin, min_us, max_us
+    if safe_us:
+        init.safe_us = safe_us
+    else:
+        init.safe_degrees = safe
+    return init
+
+
+@pytest.mark.parametrize(("name", "api", "build"), CASES, ids=[c[0] for c in CASES])
+def test_host_checks_match_the_device(
+    board: Board, name: str, api: Callable[[Board], object], build: Callable[[Any], None]
+) -> None:
+    with pytest.raises(protoduino.CommandRejectedError) as host:
+        api(board)
+    assert host.value.sent is False
+    with pytest.raises(protoduino.CommandRejectedError) as device:
+        board._rpc.call(raw(build))  # the same command, past the host's checks
+    assert device.value.sent is True
+    assert host.value.status == device.value.status
+
+
+def test_state_dependent_checks_match_the_device(board: Board) -> None:
+    board.digital_output(13)
+    with pytest.raises(protoduino.CommandRejectedError) as host:
+        board.servo(13)
+    with pytest.raises(protoduino.CommandRejectedError) as device:
+        board._rpc.call(raw(lambda m: m.servo_init.MergeFrom(_si(13))))
+    assert host.value.status == device.value.status == Status.STATUS_PIN_IN_USE
+    servo = board.servo(9, min_us=1000, max_us=2000)
+    with pytest.raises(protoduino.CommandRejectedError) as host:
+        servo.write_us(2001)
+    with pytest.raises(protoduino.CommandRejectedError) as device:
+        board._rpc.call(raw(lambda m: m.servo_control.MergeFrom(_sc(9, us_=2001))))
+    assert host.value.status == device.value.status == Status.STATUS_OUT_OF_RANGE
+    for pin in (2, 3, 4, 5, 6, 7, 8):
+        board.servo(pin)
+    with pytest.raises(protoduino.CommandRejectedError) as host:
+        board.servo(10)
+    with pytest.raises(protoduino.CommandRejectedError) as device:
+        board._rpc.call(raw(lambda m: m.servo_init.MergeFrom(_si(10))))
+    assert host.value.status == device.value.status == Status.STATUS_NO_FREE_RESOURCE
+
+
+def _sc(pin: int, *, us_: int) -> Any:
+    ctl = ArduinoIn().servo_control
+    ctl.pin, ctl.us = pin, us_
+    return ctl
+
+
+def test_device_only_rejections(board: Board) -> None:
+    cases: list[tuple[Callable[[Any], None], int]] = [
+        (lambda m: m.servo_control.MergeFrom(_sc(12, us_=1500)), Status.STATUS_NOT_INITIALISED),
+        (lambda m: setattr(m.digital_control, "pin", 12), Status.STATUS_NOT_INITIALISED),
+        (lambda m: setattr(m.servo_init, "pin", 9), Status.STATUS_INVALID_ARGUMENT),  # no safe
+        (lambda m: None, Status.STATUS_UNKNOWN_COMMAND),
+    ]
+    for build, status in cases:
+        with pytest.raises(protoduino.CommandRejectedError) as info:
+            board._rpc.call(raw(build))
+        assert info.value.status == status and info.value.sent
+
+
+def test_session_restore_after_reboot(board: Board, sim: SimBoard) -> None:
+    rec = Recorder(board)
+    board.servo(9).write(30)
+    board.digital_output(13).on()
+    before = len(sim.trace())
+    sim.reboot()
+    rec.wait(EventKind.RESTORED)
+    assert rec.of(EventKind.REBOOTED)
+    after = sim.trace()[before:]
+    # the reboot drops every output (value 0), then the restore brings them back
+    assert pin_values(after, 9) == [0, SAFE_90_US, us(30)]
+    assert pin_values(after, 13) == [0, 0, 1]  # released, init (safe), on
+    assert board.stats.reboots == 1
+
+
+@pytest.mark.parametrize("backend", SIM_BACKENDS)
+def test_reconnect_and_restore_after_the_sim_is_killed(backend: str, tmp_path: Path) -> None:
+    link = tmp_path / "port"  # a stable path: the restarted board's pty appears under it
+    first = SimBoard(backend, trace=tmp_path / "one.jsonl", link=link)
+    second = SimBoard(backend, trace=tmp_path / "two.jsonl", link=link)
+    try:
+        first.start()
+        with Board.open(str(link), handshake_timeout=1.0) as board:
+            rec = Recorder(board)
+            board.servo(9).write(120)
+            board.digital_output(13).on()
+            first.kill()  # the pty disappears
+            assert wait_until(lambda: not board.stats.connected, 5)
+            with pytest.raises(protoduino.ProtoduinoError):
+                board.ping()  # fails within its bound while nothing is there
+            second.start()  # the pty reappears under the same path
+            rec.wait(EventKind.RESTORED, timeout=10)
+            board.ping()
+            assert board.stats.reconnects >= 1
+            trace = second.trace()
+            assert pin_values(trace, 9) == [SAFE_90_US, us(120)]
+            assert pin_values(trace, 13) == [0, 1]
+    finally:
+        first.stop()
+        second.stop()
+
+
+@pytest.mark.parametrize("backend", SIM_BACKENDS)
+def test_call_waits_across_a_short_outage(backend: str, tmp_path: Path) -> None:
+    link = tmp_path / "port"
+    first = SimBoard(backend, link=link)
+    second = SimBoard(backend, trace=tmp_path / "two.jsonl", link=link)
+    try:
+        first.start()
+        with Board.open(str(link), handshake_timeout=5.0) as board:
+            servo = board.servo(9)
+            first.kill()
+            assert wait_until(lambda: not board.stats.connected, 5)
+            restart = threading.Timer(0.5, second.start)
+            restart.start()
+            servo.write(60)  # held until the new board is up and restored
+            restart.join(10)
+            assert pin_values(second.trace(), 9)[-1] == us(60)
+    finally:
+        first.stop()
+        second.stop()
+
+
+CHILD = textwrap.dedent(
+    """
+    import sys, time
+    import protoduino
+    board = protoduino.Board.open(sys.argv[1])
+    board.servo(9, safe=90).write(10)
+    board.digital_output(13, safe=False).on()
+    print("ready", flush=True)
+    time.sleep(60)
+    """
+)
+
+
+@pytest.mark.slow
+def test_failsafe_when_the_host_process_is_killed(sim: SimBoard) -> None:
+    child = subprocess.Popen(
+        [sys.executable, "-c", CHILD, sim.port],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert child.stdout is not None
+        assert child.stdout.readline().strip() == "ready"
+        os.kill(child.pid, signal.SIGKILL)
+        child.wait(5)
+        killed_trace = sim.trace()
+        assert pin_values(killed_trace, 9)[-1] == us(10)
+
+        def failsafe_done() -> bool:
+            trace = sim.trace()
+            return bool(
+                pin_values(trace, 9)[-1:] == [SAFE_90_US] and pin_values(trace, 13)[-1:] == [0]
+            )
+
+        assert wait_until(failsafe_done, 15.0)
+        trace = sim.trace()
+        last_cmd = killed_trace[-1]["t"]
+        fired = trace[-1]["t"]
+        # not before FAILSAFE_TIMEOUT after the last Ping (at most one interval before the kill)
+        assert fired - last_cmd >= protoduino.constants.FAILSAFE_TIMEOUT - 1.1
+    finally:
+        if child.poll() is None:
+            child.kill()
+        child.wait(5)
+        if child.stdout is not None:
+            child.stdout.close()
+
+
+def test_concurrent_callers(board: Board, sim: SimBoard) -> None:
+    servos = [board.servo(pin) for pin in range(2, 10)]
+    led = board.digital_output(13)
+    errors: list[BaseException] = []
+    finals: dict[int, int] = {}
+
+    def sweep(servo: protoduino.Servo) -> None:
+        try:
+            for degrees in range(0, 181, 4):
+                servo.write(degrees)
+            finals[servo.pin] = (servo.pin * 11) % 181
+            servo.write(finals[servo.pin])
+        except BaseException as error:
+            errors.append(error)
+
+    def blink_and_ping() -> None:
+        try:
+            for i in range(40):
+                led.write(bool(i % 2))
+                board.ping(bytes([i]))
+        except BaseException as error:
+            errors.append(error)
+
+    threads = [threading.Thread(target=sweep, args=(s,)) for s in servos]
+    threads.append(threading.Thread(target=blink_and_ping))
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert errors == []
+    trace = sim.trace()
+    for pin, degrees in finals.items():
+        values = pin_values(trace, pin)
+        assert values[-1] == us(degrees)
+        assert len(values) >= 40  # every distinct write reached the device
+    assert pin_values(trace, 13)[-1] == 1
+
+
+def test_lossy_line_is_repaired(sim: SimBoard) -> None:
+    url = f"faulty://{sim.port}?drop=0.002&seed=11"
+    with Board.open(url) as board:
+        servo = board.servo(9)
+        for degrees in range(0, 181, 2):
+            servo.write(degrees)
+        stats = board.stats
+    assert pin_values(sim.trace(), 9)[-1] == us(180)
+    assert stats.retransmits > 0 or stats.seq_lost > 0 or sum(stats.dropped.values()) > 0
