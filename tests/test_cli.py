@@ -10,6 +10,7 @@ import pytest
 from fakedevice import FakeDevice
 from protoduino.cli.main import COMMANDS, main
 from protoduino.cli.ports import classify
+from protoduino.simboard import SimBoard
 
 MINE = ["ports", "ping", "servo", "pin", "info", "monitor", "demo"]
 
@@ -30,8 +31,7 @@ def test_every_command_has_help(command: str, capsys: pytest.CaptureFixture[str]
 
 
 def test_host_commands_are_registered() -> None:
-    missing = [c for c in MINE if c not in COMMANDS]
-    assert missing == [] or missing == ["demo"]  # demo needs the simulated board module
+    assert [c for c in MINE if c not in COMMANDS] == []
 
 
 def test_ports_classifies_usb_ids(capsys: pytest.CaptureFixture[str]) -> None:
@@ -110,3 +110,36 @@ def test_monitor_readable_and_json(fake: FakeDevice, capsys: pytest.CaptureFixtu
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert lines[0]["dir"] == "tx" and lines[0]["message"]["code"] == "RESET"
     assert lines[-1]["stats"]["handshakes"] == 1
+
+
+# --- against the simulated board (the shared sim_board fixture, one per backend) -------------
+
+
+def test_board_commands_against_the_sim(
+    sim_board: SimBoard, capsys: pytest.CaptureFixture[str]
+) -> None:
+    port = sim_board.port
+    assert main(["info", port]) == 0
+    assert "firmware_version  0.1.0" in capsys.readouterr().out
+    assert main(["ping", port, "-c", "2", "-i", "0.01", "-q"]) == 0
+    assert "2 sent, 2 answered, 0 lost" in capsys.readouterr().out
+    assert main(["servo", port, "9", "0"]) == 0
+    assert main(["servo", port, "9", "2000", "--us"]) == 0
+    assert main(["pin", port, "13", "on"]) == 0
+    assert main(["servo", port, "13", "90"]) == 1  # the device refuses: pin in use
+    assert "STATUS_PIN_IN_USE" in capsys.readouterr().err
+    assert main(["monitor", port, "--duration", "0.3", "--json"]) == 0
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert any(line.get("message", {}).get("code") == "RESET_ACK" for line in lines)
+    servo = [e["value"] for e in sim_board.trace() if e["pin"] == 9]
+    assert servo[-1] == 2000 and 544 in servo
+    assert [e["value"] for e in sim_board.trace() if e["pin"] == 13][-1] == 1
+
+
+@pytest.mark.slow
+def test_demo(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo"]) == 0
+    out = capsys.readouterr().out
+    assert "failsafe active (ping_timeout)" in out
+    assert "failsafe in the trace: pin 9 -> 1472 us" in out
+    assert "demo done" in out

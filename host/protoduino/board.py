@@ -438,6 +438,7 @@ class Board:
             pings=rpc.pings,
             ping_failures=rpc.ping_failures,
             rtt=rpc.rtt,
+            last_ping=rpc.last_ping,
         )
 
     # --- internals ------------------------------------------------------------------------

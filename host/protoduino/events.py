@@ -84,6 +84,7 @@ class Stats:
     pings: int
     ping_failures: int
     rtt: float | None  # last Ping round trip (seconds)
+    last_ping: float | None  # time.monotonic() of the last acknowledged automatic Ping
 
     def as_dict(self) -> dict[str, Any]:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}

@@ -158,6 +158,8 @@ class Rpc:
         self.pings = 0
         self.ping_failures = 0
         self.rtt: float | None = None
+        #: time.monotonic() of the last acknowledged automatic Ping.
+        self.last_ping: float | None = None
 
     def attach(self, link: Link) -> None:
         self.link = link
@@ -334,6 +336,8 @@ class Rpc:
         if call.error is not None:
             self.ping_failures += 1
             log.debug("automatic ping failed: %s", call.error)
+        else:
+            self.last_ping = time.monotonic()
 
     def link_message(self, msg: ArduinoOut) -> None:
         if msg.WhichOneof("data") != "ack":

@@ -28,6 +28,7 @@ COMMANDS: dict[str, str] = {
     "monitor": "monitor",
     "flash": "flash",
     "sim": "sim",
+    "demo": "demo",
 }
 
 
