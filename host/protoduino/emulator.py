@@ -51,17 +51,10 @@ _TAIL_CHARS = 4000
 
 
 def _make(directory: Path, *targets: str) -> None:
-    cmd = ["make", "-s", "-C", str(directory), *targets]
-    try:
-        result = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=300)
-    except FileNotFoundError as error:
-        raise BuildError("`make` is not installed (run ./tools/dev.sh setup)") from error
-    except subprocess.TimeoutExpired as error:
-        raise BuildError(f"`{' '.join(cmd)}` did not finish in 300 s") from error
-    if result.returncode != 0:
-        output = (result.stdout + result.stderr).strip()[-_TAIL_CHARS:]
-        raise BuildError(f"`{' '.join(cmd)}` failed (exit {result.returncode}):\n{output}")
-    logger.debug("make -C %s %s: ok", directory, " ".join(targets))
+    # One make helper for the project (with its build lock), from simboard.
+    from .simboard import make
+
+    make(directory, *targets)
 
 
 def build_runner() -> Path:

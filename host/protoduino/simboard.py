@@ -4,6 +4,10 @@ Backends:
 
 * ``native``: the firmware's portable core compiled for this machine with a
   POSIX HAL (``make -C firmware sim`` -> ``build/sim/pd_sim``). Needs only gcc.
+* ``avr``: the firmware's Uno build (``make -C firmware avr``) on an emulated
+  ATmega328P at 16 MHz (simavr, ``tools/avrsim`` -> ``build/avrsim/avrsim``),
+  paced to real time; its trace is measured at the emulated pins. Needs
+  avr-gcc and libsimavr-dev. Reboot = reset of the emulated MCU.
 
 Each backend is one entry in :data:`BACKENDS`: how to build it and the command
 that runs it. Every backend's program takes ``--trace FILE`` and ``--link
@@ -108,9 +112,24 @@ def _native_command(trace: Path | None, link: Path | None) -> list[str]:
     return cmd
 
 
+def _build_avr() -> Path:
+    # The emulated Uno: the simavr runner (tools/avrsim) and the real firmware ELF.
+    from . import emulator
+
+    emulator.build_firmware()
+    return emulator.build_runner()
+
+
+def _avr_command(trace: Path | None, link: Path | None) -> list[str]:
+    from . import emulator
+
+    return emulator.runner_command(emulator.FIRMWARE_ELF, trace=trace, link=link)
+
+
 #: Backend name -> how to build and run it.
 BACKENDS: dict[str, Backend] = {
     "native": Backend(build=_build_native, command=_native_command),
+    "avr": Backend(build=_build_avr, command=_avr_command),
 }
 
 
