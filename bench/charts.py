@@ -27,6 +27,15 @@ def pyplot() -> Any:
     return require("matplotlib.pyplot", "matplotlib")
 
 
+def _short_number(x: float, _pos: object = None) -> str:
+    """Axis labels that do not run into each other: 250k rather than 250,000."""
+    if abs(x) >= 1_000_000:
+        return f"{x / 1_000_000:g}M"
+    if abs(x) >= 1_000:
+        return f"{x / 1_000:g}k"
+    return f"{x:g}"
+
+
 def _save(fig: Any, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
@@ -71,7 +80,7 @@ def hbars(
         if log:
             ax.set_xscale("log")
         ax.grid(axis="x", alpha=0.3)
-        ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda x, _pos: f"{x:,.0f}"))
+        ax.xaxis.set_major_formatter(ticker.FuncFormatter(_short_number))
     if vline is not None:
         ax = axes[0][-1]
         ax.axvline(vline[1], color=_COLORS[6], linestyle="--", linewidth=1)

@@ -14,7 +14,7 @@ import gc
 import importlib
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
@@ -88,6 +88,25 @@ def measure(run: Callable[[], object], reps: int, *, warmup: int = 1) -> Timing:
     return Timing(tuple(samples))
 
 
+def measure_interleaved(
+    runs: Sequence[Callable[[], object]], reps: int, *, warmup: int = 1
+) -> list[Timing]:
+    """Like :func:`measure` for several callables, taking turns: repetition 1 of each, then
+    repetition 2 of each, and so on. On a machine whose speed drifts (a shared virtual
+    machine), a slow spell then lands on every case instead of on one, so the ratios between
+    cases hold better than their absolute rates."""
+    if reps < 1:
+        raise ValueError("reps must be at least 1")
+    for run in runs:
+        for _ in range(warmup):
+            run()
+    samples: list[list[float]] = [[] for _ in runs]
+    for _ in range(reps):
+        for i, run in enumerate(runs):
+            samples[i].append(measure(run, 1, warmup=0).samples[0])
+    return [Timing(tuple(s)) for s in samples]
+
+
 def cpu_share(rate_bytes_per_s: float, throughput_bytes_per_s: float) -> float:
     """Fraction of one core needed to keep up with ``rate`` given a measured throughput."""
     return rate_bytes_per_s / throughput_bytes_per_s
@@ -136,8 +155,8 @@ class Context:
     so that chart links can be made relative to it.
     """
 
-    reps: int = 7
-    frames: int = 20_000
+    reps: int = 21
+    frames: int = 5_000
     chunk: int = 1024
     seed: int = 7
     docs_dir: Path = Path("docs")

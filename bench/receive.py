@@ -6,8 +6,9 @@ where a message reaches the application (a pending call resolved, a handler call
 frames and bytes per CPU second (see :mod:`bench.core`); the CPU share a line rate needs is that
 rate divided by the measured bytes per second.
 
-When a target is missed the section adds a profile of protoduino's path (cProfile) and measures
-the proposals in :mod:`bench.proposal` step by step on the same stream.
+The proposals in :mod:`bench.proposal` are measured step by step in the same run, on the same
+stream; when a target is missed the section shows them with a profile of protoduino's path
+(cProfile).
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ import cProfile
 import io
 import logging
 import pstats
-from collections.abc import Callable
+import statistics
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from . import charts
@@ -33,7 +35,7 @@ from .core import (
     fmt_percent,
     fmt_rate,
     md_table,
-    measure,
+    measure_interleaved,
 )
 from .peers import RxCase, mavlink, pigweed, protoduino, serialtransfer
 from .proposal import FastStreamDecoder, LightPacketDecoder, parse_out_from_string
@@ -76,20 +78,43 @@ class RxResult:
     def us_per_frame(self) -> float:
         return self.timing.median / self.case.frames * 1e6
 
+    def ratio(self, other: RxResult, *, per_byte: bool = False) -> float:
+        """How many times faster this case is than ``other``, in frames (or bytes) per second.
+
+        The median of the ratios within each round of :func:`run_cases`, not the ratio of the
+        medians: both cases of a round ran within a second of each other, so a slow spell of
+        the machine cancels out of their ratio.
+        """
+        mine = len(self.case.stream) if per_byte else self.case.frames
+        theirs = len(other.case.stream) if per_byte else other.case.frames
+        return statistics.median(
+            (mine / t_mine) / (theirs / t_theirs)
+            for t_mine, t_theirs in zip(self.timing.samples, other.timing.samples, strict=True)
+        )
+
+
+def run_cases(cases: Sequence[RxCase], reps: int) -> list[RxResult]:
+    """Check that every case dispatches all its frames (which also warms it up), then time
+    them all, taking turns (:func:`bench.core.measure_interleaved`)."""
+    for case in cases:
+        got = case.run()
+        if got != case.frames:
+            raise RuntimeError(f"{case.name}: dispatched {got} of {case.frames} frames")
+    timings = measure_interleaved([case.run for case in cases], reps, warmup=0)
+    results = [RxResult(case, timing) for case, timing in zip(cases, timings, strict=True)]
+    for r in results:
+        log.info(
+            "receive: %-40s %10s frames/s %8.2f MB/s (spread %s)",
+            r.case.name,
+            fmt_rate(r.frames_per_s),
+            r.bytes_per_s / 1e6,
+            fmt_percent(r.timing.spread),
+        )
+    return results
+
 
 def run_case(case: RxCase, reps: int) -> RxResult:
-    """Check that ``case`` dispatches every frame, then time it (the check is the warm-up)."""
-    got = case.run()
-    if got != case.frames:
-        raise RuntimeError(f"{case.name}: dispatched {got} of {case.frames} frames")
-    result = RxResult(case, measure(case.run, reps, warmup=0))
-    log.info(
-        "receive: %-40s %10s frames/s %8.2f MB/s",
-        case.name,
-        fmt_rate(result.frames_per_s),
-        result.bytes_per_s / 1e6,
-    )
-    return result
+    return run_cases([case], reps)[0]
 
 
 def _profile(case: RxCase, top: int = 14) -> str:
@@ -130,8 +155,8 @@ def _results_table(results: list[RxResult]) -> str:
                 f"{r.frame_size:.1f} B",
                 fmt_rate(r.frames_per_s),
                 f"{r.bytes_per_s / 1e6:.2f}",
-                f"{base.frames_per_s / r.frames_per_s:.2f}x",
-                f"{base.bytes_per_s / r.bytes_per_s:.2f}x",
+                f"{base.ratio(r):.2f}x",
+                f"{base.ratio(r, per_byte=True):.2f}x",
                 *_share_cells(r),
                 fmt_percent(r.timing.spread),
             ]
@@ -148,112 +173,129 @@ def _mix_table(frames: int) -> str:
     )
 
 
+#: The proposal steps, each keeping the previous ones.
+STEP_LABELS = (
+    "+ FastStreamDecoder",
+    "+ Packet built at slots-class cost",
+    "+ ArduinoOut.FromString in parse_out",
+)
+FRAMING_LABELS = ("StreamDecoder (committed)", "FastStreamDecoder", "LightPacketDecoder")
+
+
+def _proposal_cases(ctx: Context) -> list[RxCase]:
+    """The three proposal steps on the whole path, then the three decoders alone."""
+    args = (ctx.frames, ctx.chunk, ctx.seed)
+    return [
+        protoduino.rx_case(*args, decoder=FastStreamDecoder, name=STEP_LABELS[0]),
+        protoduino.rx_case(*args, decoder=LightPacketDecoder, name=STEP_LABELS[1]),
+        protoduino.rx_case(
+            *args, decoder=LightPacketDecoder, parse=parse_out_from_string, name=STEP_LABELS[2]
+        ),
+        protoduino.framing_only_case(*args, name=FRAMING_LABELS[0]),
+        protoduino.framing_only_case(*args, decoder=FastStreamDecoder, name=FRAMING_LABELS[1]),
+        protoduino.framing_only_case(*args, decoder=LightPacketDecoder, name=FRAMING_LABELS[2]),
+    ]
+
+
 def _proposals(
-    ctx: Context, baseline: RxResult, framing: RxResult, pymavlink: RxResult | None
-) -> tuple[str, list[tuple[str, RxResult]]]:
-    steps: list[tuple[str, RxResult]] = [("protoduino as committed", baseline)]
-    variants: list[tuple[str, RxCase]] = [
-        (
-            "+ FastStreamDecoder",
-            protoduino.rx_case(
-                ctx.frames, ctx.chunk, ctx.seed, decoder=FastStreamDecoder, name="proposal 1"
-            ),
-        ),
-        (
-            "+ Packet built at slots-class cost",
-            protoduino.rx_case(
-                ctx.frames, ctx.chunk, ctx.seed, decoder=LightPacketDecoder, name="proposal 2"
-            ),
-        ),
-        (
-            "+ ArduinoOut.FromString in parse_out",
-            protoduino.rx_case(
-                ctx.frames,
-                ctx.chunk,
-                ctx.seed,
-                decoder=LightPacketDecoder,
-                parse=parse_out_from_string,
-                name="proposal 3",
-            ),
-        ),
-    ]
-    steps += [(label, run_case(case, ctx.reps)) for label, case in variants]
-    framing_labels = ["StreamDecoder (committed)", "FastStreamDecoder", "LightPacketDecoder"]
-    framing_results = [
-        framing,
-        run_case(
-            protoduino.framing_only_case(
-                ctx.frames, ctx.chunk, ctx.seed, decoder=FastStreamDecoder, name="fast framing"
-            ),
-            ctx.reps,
-        ),
-        run_case(
-            protoduino.framing_only_case(
-                ctx.frames, ctx.chunk, ctx.seed, decoder=LightPacketDecoder, name="light framing"
-            ),
-            ctx.reps,
-        ),
-    ]
+    baseline: RxResult,
+    step_results: Sequence[RxResult],
+    framing_results: Sequence[RxResult],
+    pymavlink: RxResult | None,
+) -> str:
+    steps = [("protoduino as committed", baseline), *zip(STEP_LABELS, step_results, strict=True)]
+    # Rates below are the committed path's median scaled by each step's paired ratio, so the
+    # columns agree with each other even when the machine's speed drifted during the run.
     rows = []
+    previous = baseline
     for label, r in steps:
+        gain = r.ratio(baseline)
         rows.append(
             [
                 label,
-                fmt_rate(r.frames_per_s),
-                f"{r.us_per_frame:.2f}",
-                f"{r.frames_per_s / baseline.frames_per_s:.2f}x",
-                fmt_percent(cpu_share(1_000_000, r.bytes_per_s)),
+                fmt_rate(baseline.frames_per_s * gain),
+                f"{baseline.us_per_frame / gain:.2f}",
+                f"{gain:.2f}x",
+                f"{r.ratio(previous):.2f}x",
+                fmt_percent(cpu_share(1_000_000, baseline.bytes_per_s * gain)),
             ]
         )
+        previous = r
     table = md_table(
-        ["whole receive path", "frames/s", "us/frame", "vs committed", "CPU at 1 MB/s"], rows
-    )
-    frows = [
         [
-            label,
-            fmt_rate(r.frames_per_s),
-            f"{r.us_per_frame:.2f}",
-            f"{r.frames_per_s / framing_results[0].frames_per_s:.2f}x",
-        ]
-        for label, r in zip(framing_labels, framing_results, strict=True)
-    ]
+            "whole receive path",
+            "frames/s",
+            "us/frame",
+            "vs committed",
+            "vs previous step",
+            "CPU at 1 MB/s",
+        ],
+        rows,
+    )
+    framing_base = framing_results[0]
+    frows = []
+    for label, r in zip(FRAMING_LABELS, framing_results, strict=True):
+        gain = r.ratio(framing_base)
+        frows.append(
+            [
+                label,
+                fmt_rate(framing_base.frames_per_s * gain),
+                f"{framing_base.us_per_frame / gain:.2f}",
+                f"{gain:.2f}x",
+            ]
+        )
     ftable = md_table(["stream decoder alone", "frames/s", "us/frame", "vs committed"], frows)
     best = steps[-1][1]
-    share = cpu_share(1_000_000, best.bytes_per_s)
+    share = cpu_share(1_000_000, baseline.bytes_per_s * best.ratio(baseline))
     verdicts = [
         f"needs {fmt_percent(share)} of a core at 1 MB/s (goal < "
         f"{fmt_percent(GOAL_CPU_AT_1MBPS)}: {'met' if share < GOAL_CPU_AT_1MBPS else 'missed'})"
     ]
     if pymavlink is not None:
-        ratio = best.frames_per_s / pymavlink.frames_per_s
+        ratio = best.ratio(pymavlink)
         verdicts.insert(
             0,
             f"is {ratio:.2f}x pymavlink's frame rate (goal {GOAL_RATIO_TO_PYMAVLINK:.0f}x: "
             f"{'met' if ratio >= GOAL_RATIO_TO_PYMAVLINK else 'missed'})",
         )
+    framing_us = framing_base.us_per_frame / framing_results[-1].ratio(framing_base)
+    budget_us = GOAL_CPU_AT_1MBPS / (1_000_000 / baseline.frame_size) * 1e6
+    over_budget = (
+        f" Framing alone then takes {framing_us:.2f} us per frame, more than the "
+        f"{budget_us:.2f} us that 10 % of a core allows at 1 MB/s: with frames this short, "
+        "that goal stays out of reach of these decoders in pure Python."
+        if framing_us > budget_us
+        else ""
+    )
     summary = (
-        f"With all three, the receive path {' and '.join(verdicts)}. What is left per frame "
-        "is the stream decoder's Python-level work (about "
-        f"{framing_results[-1].us_per_frame:.2f} us above) plus one protobuf parse and the "
+        f"With all three, the receive path {' and '.join(verdicts)}.{over_budget} What is "
+        "left per frame is the stream decoder's Python-level work (about "
+        f"{framing_us:.2f} us above) plus one protobuf parse and the "
         "dispatch. Going further means splitting, COBS-decoding and CRC-checking a whole read "
         "in one C call; neither the `cobs` package (one frame per call) nor the standard "
         "library offers that, so it would be a small C extension of our own (not measured "
         "here).\n"
     )
-    text = (
+    return (
         "Each step keeps the previous ones and is measured on the same stream in the same run. "
         "`FastStreamDecoder` produces exactly what `StreamDecoder` does (items, reasons, raw "
         "bytes, counts; `tests/test_bench_smoke.py` compares them on damaged streams cut at "
         "random), so it can replace it in `framing.py` as is. The Packet step stands for making "
         "`packets.Packet` a plain `__slots__` class or a `NamedTuple` instead of a frozen "
-        "dataclass; the last step is a one-line change in `messages.parse_out`. See "
-        "`bench/proposal.py`.\n\n" + table + "\n" + ftable + "\n" + summary
+        "dataclass; the last step tries `ArduinoOut.FromString` in `messages.parse_out` (one "
+        "line). See "
+        "`bench/proposal.py`. Rates and times in these two tables are the committed "
+        "version's median scaled by each row's paired ratio.\n\n"
+        + table
+        + "\n"
+        + ftable
+        + "\n"
+        + summary
     )
-    return text, steps
 
 
 def run(ctx: Context) -> SectionResult:
-    results: list[RxResult] = []
+    peer_cases: list[RxCase] = []
     skipped: list[tuple[str, str]] = []
     packages = ["protoduino", "protobuf", "cobs"]
     for label, factory in PEERS:
@@ -263,15 +305,24 @@ def run(ctx: Context) -> SectionResult:
             log.warning("receive: %s skipped: %s", label, missing)
             skipped.append((label, missing.package))
             continue
-        results.append(run_case(case, ctx.reps))
+        peer_cases.append(case)
         packages.append(case.package)
+    extra_cases = _proposal_cases(ctx)
+    measured = run_cases([*peer_cases, *extra_cases], ctx.reps)
+    results = measured[: len(peer_cases)]
+    step_results = measured[len(peer_cases) : len(peer_cases) + len(STEP_LABELS)]
+    framing_results = measured[len(peer_cases) + len(STEP_LABELS) :]
     base = results[0]
     by_package = {r.case.package: r for r in results}
 
     parts = [
-        f"Fed from memory in reads of {ctx.chunk} B; {ctx.frames:,} frames per stream; rates "
-        f"are per CPU second of this process, median of {ctx.reps} repetitions (spread = "
-        "(max - min) / median). A CPU share above 100 % means one core cannot keep up.\n",
+        f"Fed from memory in reads of {ctx.chunk} B; {ctx.frames:,} frames per stream. Rates "
+        f"are per CPU second of this process, medians of {ctx.reps} repetitions; the cases "
+        "take turns, one repetition each per round, and a ratio is the median of the ratios "
+        "within a round, which cancels most of the machine's drift (spread = (max - min) / "
+        "median of a case's repetitions; a large one means the machine's speed changed during "
+        "the run, and the absolute rates and CPU shares carry that uncertainty, the ratios "
+        "much less). A CPU share above 100 % means one core cannot keep up.\n",
         _results_table(results),
         "What each row does, from bytes to the application:\n",
     ]
@@ -297,14 +348,14 @@ def run(ctx: Context) -> SectionResult:
             )
         )
     else:
-        ratio = base.frames_per_s / mav.frames_per_s
+        ratio = base.ratio(mav)
         targets.append(
             Target(
                 "receive rate vs pymavlink",
                 f">= {GOAL_RATIO_TO_PYMAVLINK:.0f}x pymavlink's frames/s",
                 f"{ratio:.2f}x ({fmt_rate(base.frames_per_s)} vs "
                 f"{fmt_rate(mav.frames_per_s)} frames/s; "
-                f"{base.bytes_per_s / mav.bytes_per_s:.2f}x in bytes/s)",
+                f"{base.ratio(mav, per_byte=True):.2f}x in bytes/s)",
                 ratio >= GOAL_RATIO_TO_PYMAVLINK,
             )
         )
@@ -318,15 +369,15 @@ def run(ctx: Context) -> SectionResult:
         )
     )
 
-    proposal_steps: list[tuple[str, RxResult]] = []
+    proposal_rows: list[tuple[str, RxResult]] = []
     if any(t.met is False for t in targets):
         parts.append("### Why the targets are missed\n")
-        framing = run_case(protoduino.framing_only_case(ctx.frames, ctx.chunk, ctx.seed), ctx.reps)
+        framing_share = 1 / framing_results[0].ratio(base)
         needed = 1_000_000 / base.frame_size
         parts.append(
             f"protoduino spends {base.us_per_frame:.2f} us of CPU per frame; "
-            f"{framing.us_per_frame:.2f} us of that "
-            f"({framing.timing.median / base.timing.median * 100:.0f} %) is `StreamDecoder` "
+            f"{base.us_per_frame * framing_share:.2f} us of that "
+            f"({framing_share * 100:.0f} %) is `StreamDecoder` "
             "alone, the rest is protobuf parsing and the per-packet work of the layers above "
             f"(SEQ, dispatch). Its frames are short ({base.frame_size:.1f} B on average"
             + (
@@ -342,24 +393,36 @@ def run(ctx: Context) -> SectionResult:
         if ctx.profile:
             parts.append(
                 "Profile of one pass over the stream (cProfile, which inflates the cost of "
-                "each Python call; own time first):\n\n```\n" + _profile(base.case) + "\n```\n"
+                "each Python call; own time first; `<string>:2(__init__)` is the generated "
+                "`__init__` of the frozen dataclasses `Packet` and `Control`):\n\n```\n"
+                + _profile(base.case)
+                + "\n```\n"
             )
         parts.append("### Proposals, measured\n")
-        text, proposal_steps = _proposals(ctx, base, framing, mav)
-        parts.append(text)
+        parts.append(_proposals(base, step_results, framing_results, mav))
+        proposal_rows = list(zip(STEP_LABELS, step_results, strict=True))
 
     chart_list: list[Chart] = []
     if ctx.chart_dir is not None:
-        rows = [(r.case.name, r) for r in results]
-        rows += [(f"proposal {label}", r) for label, r in proposal_steps[1:]]
+        # (label, frames/s, bytes/s) as the tables give them: measured medians for the
+        # libraries, the committed path scaled by the paired ratio for the proposals.
+        rows = [(r.case.name, r.frames_per_s, r.bytes_per_s) for r in results]
+        rows += [
+            (
+                f"proposal {label}",
+                base.frames_per_s * r.ratio(base),
+                base.bytes_per_s * r.ratio(base),
+            )
+            for label, r in proposal_rows
+        ]
         path = charts.hbars(
             ctx.chart_dir / "receive.png",
-            [label for label, _r in rows],
+            [label for label, _f, _b in rows],
             [
-                ("frames per CPU second", [r.frames_per_s for _label, r in rows]),
+                ("frames per CPU second", [fps for _label, fps, _b in rows]),
                 (
                     "% of a core at 1 MB/s",
-                    [cpu_share(1_000_000, r.bytes_per_s) * 100 for _label, r in rows],
+                    [cpu_share(1_000_000, bps) * 100 for _label, _f, bps in rows],
                 ),
             ],
             title="Host receive path, fed from memory",
