@@ -211,15 +211,16 @@ def test_spurious_reraises_leave_the_measurement_alone(board: Runner) -> None:
 
 
 def test_emulated_time_is_paced_to_real_time(board: Runner) -> None:
-    """Timestamps are emulated time; pacing keeps it from running ahead of the wall clock."""
-    sent = time.monotonic()
+    """Timestamps are emulated time, and pacing keeps it from running ahead of the wall clock.
+
+    Free-running, simavr emulates 3 to 6 times faster than real time; paced, a
+    change is never dated later than the wall time since the runner started.
+    (Under CPU contention emulation may lag behind; that is not asserted.)
+    """
     board.command("S9 1234")
     line = board.wait_for(_servo(9, 1234))
     elapsed_wall = time.monotonic() - board.started
-    # The change happened after the command was sent, and emulated time is not
-    # ahead of real time (free-running simavr would be 3 to 6 times ahead).
-    assert line["t"] >= sent - board.started - 0.05
-    assert line["t"] <= elapsed_wall + 0.05
+    assert 0 < line["t"] <= elapsed_wall + 0.01
 
 
 def test_stopped_pulses_give_a_zero_line(board: Runner) -> None:

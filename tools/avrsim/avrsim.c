@@ -53,6 +53,11 @@
 #define PD_AHEAD_NS 1000000ULL /* emulate up to 1 ms ahead of the wall clock */
 #define PD_MCUSR_ADDR 0x54     /* ATmega328P MCUSR in data space */
 #define PD_MCUSR_EXTRF 0x02
+/* The port is announced after this much emulated time: whatever the firmware
+ * sends at power-up (EVENT BOOT) is then already in the pty and is flushed by
+ * the client's open(), as with the native board, instead of being cut in half
+ * by an open() that lands while it is being sent. */
+#define PD_ANNOUNCE_MS 50U
 
 /* Uno pin numbering: D0..D7 = PD0..7, D8..D13 = PB0..5, A0..A5 = PC0..5. */
 typedef struct {
@@ -89,6 +94,8 @@ typedef struct {
     pd_fifo_t tx; /* MCU -> host */
     uint64_t next_rx_cycle;
     int crashed;
+    FILE *port_out; /* the real stdout, for the one port line */
+    const char *port_name;
     int glitch_pin; /* --glitch: -1 when off */
     uint64_t next_glitch;
 } pd_sim_t;
@@ -111,7 +118,7 @@ static void pd_on_signal(int sig)
  * the port line only. */
 static void pd_logger(avr_t *avr, const int level, const char *format, va_list ap)
 {
-    if (level > LOG_WARNING && (!avr || avr->log < level)) {
+    if (level > LOG_ERROR && (!avr || avr->log < level)) {
         return;
     }
     vfprintf(stderr, format, ap);
@@ -515,6 +522,12 @@ static void pd_run(pd_sim_t *sim)
         }
         pd_pins_poll(&sim->pins, pd_cycles(sim));
         pd_pump_pty(sim);
+        if (sim->port_out && !sim->tx.len &&
+            pd_cycles(sim) >= (uint64_t)sim->avr->frequency / 1000U * PD_ANNOUNCE_MS) {
+            fprintf(sim->port_out, "%s\n", sim->port_name);
+            fflush(sim->port_out);
+            sim->port_out = NULL; /* stdout carries nothing else */
+        }
 
         /* Wait for host bytes or until emulated time is due again. */
         uint64_t ahead_ns = (uint64_t)((double)pd_cycles(sim) / cycles_per_ns);
@@ -634,7 +647,7 @@ int main(int argc, char **argv)
         return 1;
     }
     avr_init(sim->avr);
-    sim->avr->log = LOG_WARNING;
+    sim->avr->log = LOG_ERROR; /* simavr warnings are about its own model, not the firmware */
     if (elf) {
         avr_load_firmware(sim->avr, &fw);
     }
@@ -702,10 +715,8 @@ int main(int argc, char **argv)
     sigaction(SIGUSR1, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
 
-    if (port_out) {
-        fprintf(port_out, "%s\n", port);
-        fflush(port_out);
-    }
+    sim->port_out = port_out;
+    sim->port_name = port;
     pd_run(sim);
     pd_cleanup(sim);
     if (port_out) {
