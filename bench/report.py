@@ -46,7 +46,7 @@ def render(
         ]
         missed = [row for row in target_rows if row[4] == "**missed**"]
         if missed:
-            out.append("Each missed target is explained, with a profile, in its section below.\n")
+            out.append("Missed targets are explained in their sections below.\n")
     out += [
         "## Machine",
         "",

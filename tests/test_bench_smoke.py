@@ -246,3 +246,29 @@ def test_runner_writes_a_report(tmp_path: Path) -> None:
     for link in ("perf/receive.png", "perf/wire.png"):
         if link in text:
             assert (tmp_path / link).stat().st_size > 0
+
+
+def test_chart_helpers_for_the_parts_to_come(tmp_path: Path) -> None:
+    """The latency histogram and throughput-vs-window charts parts 2 and 3 will draw."""
+    from bench import charts
+
+    _or_skip(charts.pyplot)
+    hist = charts.histogram(
+        tmp_path / "latency.png",
+        {"simulated": [1.0, 1.2, 1.1, 2.0], "emulated Uno": [3.0, 3.5, 3.2]},
+        title="round trip",
+        xlabel="ms",
+        bins=5,
+        vlines={"wire time": 2.9},
+    )
+    line = charts.lines(
+        tmp_path / "window.png",
+        [1, 2, 4, 8],
+        {"acked commands/s": [100.0, 190.0, 350.0, 420.0]},
+        title="throughput",
+        xlabel="window",
+        ylabel="commands/s",
+        hlines={"line rate": 440.0},
+    )
+    for path in (hist, line):
+        assert path.read_bytes().startswith(b"\x89PNG")
