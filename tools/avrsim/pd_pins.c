@@ -21,7 +21,9 @@
  *   dated to the end of its last pulse (as the native board writes 0 when
  *   its pulses stop on a reboot).
  * - A pin that becomes an output at level 0 and shows no pulse within
- *   low_wait (30 ms, longer than one 20 ms servo frame) is a digital 0.
+ *   low_wait (50 ms) is a digital 0. A Servo-library style driver starts a
+ *   newly attached channel at the frame after next, up to two 20 ms frames
+ *   after the pin became an output.
  */
 #include "pd_pins.h"
 
@@ -135,7 +137,7 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
     pins->cycles_per_us = (double)frequency / 1e6;
     pins->max_pulse = (uint64_t)frequency * 3U / 1000U;
     pins->max_period = (uint64_t)frequency * 50U / 1000U;
-    pins->low_wait = (uint64_t)frequency * 30U / 1000U;
+    pins->low_wait = (uint64_t)frequency * 50U / 1000U;
     pins->emit = emit;
     pins->ctx = ctx;
     for (int n = 0; n < PD_PINS_COUNT; n++) {

@@ -50,7 +50,7 @@ typedef struct {
     double cycles_per_us;
     uint64_t max_pulse;  /* longer highs are digital levels */
     uint64_t max_period; /* pulses further apart are not one servo signal */
-    uint64_t low_wait;   /* how long an output low waits for a first pulse */
+    uint64_t low_wait;   /* how long an output low waits for a first pulse (50 ms) */
     pd_pins_emit_fn emit;
     void *ctx;
 } pd_pins_t;
