@@ -108,7 +108,9 @@ def rx_case(frames: int, chunk: int, seed: int) -> RxCase:
         parser="pure Python, byte by byte (FrameDecoder.process_byte); CRC-32 from zlib; "
         "RpcPacket with the installed protobuf (upb)",
         stages="FrameDecoder.process -> Frame -> pw_rpc.packets.decode (RpcPacket) -> "
-        "pending call by (channel, service, method, call id) -> response payload decoded",
+        "pending call by (channel, service, method, call id) -> response payload decoded "
+        "(the same stand-in as protoduino's: pw_rpc's own client cannot be built on protobuf "
+        "7, see bench/peers/pigweed.py)",
         stream=stream,
         frames=frames,
         run=run,
