@@ -52,6 +52,48 @@ def pin_values(trace: list[dict[str, Any]], pin: int) -> list[int]:
     return [int(e["value"]) for e in trace if e["pin"] == pin]
 
 
+#: The emulated Uno measures pulses on its pins: a few microseconds off, and a pulse
+#: that lasted less than one 20 ms period may never show. The native board is exact.
+PULSE_TOLERANCE_US = 3
+BOARD_NAME = {"native": "sim", "avr": "uno"}
+
+
+def fits(actual: list[int], expected: list[int], tol: int, exact: bool) -> bool:
+    """Exactly ``expected`` (native), or an in-order subsequence of it ending like it."""
+    if exact:
+        return actual == expected
+    if not actual or abs(actual[-1] - expected[-1]) > tol:
+        return False
+    i = 0
+    for value in actual:
+        while i < len(expected) and abs(value - expected[i]) > tol:
+            i += 1
+        if i == len(expected):
+            return False
+    return True
+
+
+def expect_pin(
+    sim: SimBoard,
+    pin: int,
+    expected: list[int],
+    *,
+    since: int = 0,
+    digital: bool = False,
+    timeout: float = 3.0,
+) -> None:
+    """Wait until the trace (from line ``since``) shows ``expected`` for ``pin``."""
+    exact = sim.backend == "native"
+    tol = 0 if digital or exact else PULSE_TOLERANCE_US
+
+    def ok() -> bool:
+        return fits(pin_values(sim.trace()[since:], pin), expected, tol, exact)
+
+    if not wait_until(ok, timeout):
+        actual = pin_values(sim.trace()[since:], pin)
+        raise AssertionError(f"pin {pin}: trace shows {actual}, expected {expected}")
+
+
 class Recorder:
     def __init__(self, board: Board) -> None:
         self.events: list[Event] = []
@@ -67,7 +109,7 @@ class Recorder:
 
 
 def test_every_api_call(board: Board, sim: SimBoard) -> None:
-    assert board.info.board == "sim"
+    assert board.info.board == BOARD_NAME[sim.backend]
     assert board.info.firmware_version == "0.1.0"
     assert board.info.protocol_version == protoduino.PROTOCOL_VERSION
     assert board.info.schema_id == protoduino.SCHEMA_ID
@@ -82,10 +124,9 @@ def test_every_api_call(board: Board, sim: SimBoard) -> None:
     led.write(True)
     assert board.ping(b"payload") > 0
     board.stop()
-    trace = sim.trace()
-    assert pin_values(trace, 9) == [SAFE_90_US, us(45), 1500, SAFE_90_US]
-    assert pin_values(trace, 10) == [1200, 2000, 1200]
-    assert pin_values(trace, 13) == [0, 1, 0]  # init (safe), on, stop (safe)
+    expect_pin(sim, 9, [SAFE_90_US, us(45), 1500, SAFE_90_US])
+    expect_pin(sim, 10, [1200, 2000, 1200])
+    expect_pin(sim, 13, [0, 1, 0], digital=True)  # init (safe), on, stop (safe)
     assert board.stats.timeouts == 0 and board.stats.rejected == 0
 
 
@@ -99,8 +140,8 @@ def test_stop_latches_until_commanded(board: Board, sim: SimBoard) -> None:
     event = rec.wait(EventKind.FAILSAFE)[0]
     assert event.details == {"active": True, "cause": "stop"}
     servo.write(180)  # a control moves it normally again
-    assert pin_values(sim.trace(), 9)[-2:] == [SAFE_90_US, us(180)]
-    assert pin_values(sim.trace(), 13)[-1] == 0  # the LED stays safe until commanded
+    expect_pin(sim, 9, [SAFE_90_US, us(0), SAFE_90_US, us(180)])
+    expect_pin(sim, 13, [0, 1, 0], digital=True)  # the LED stays safe until commanded
 
 
 def raw(build: Callable[[Any], None]) -> Any:
@@ -207,14 +248,14 @@ def test_session_restore_after_reboot(board: Board, sim: SimBoard) -> None:
     rec = Recorder(board)
     board.servo(9).write(30)
     board.digital_output(13).on()
+    expect_pin(sim, 9, [SAFE_90_US, us(30)])
     before = len(sim.trace())
     sim.reboot()
     rec.wait(EventKind.RESTORED)
     assert rec.of(EventKind.REBOOTED)
-    after = sim.trace()[before:]
     # the reboot drops every output (value 0), then the restore brings them back
-    assert pin_values(after, 9) == [0, SAFE_90_US, us(30)]
-    assert pin_values(after, 13) == [0, 0, 1]  # released, init (safe), on
+    expect_pin(sim, 9, [0, SAFE_90_US, us(30)], since=before)
+    expect_pin(sim, 13, [0, 0, 1], since=before, digital=True)  # released, init (safe), on
     assert board.stats.reboots == 1
 
 
@@ -229,7 +270,8 @@ def test_reconnect_and_restore_after_the_sim_is_killed(backend: str, tmp_path: P
             rec = Recorder(board)
             board.servo(9).write(120)
             board.digital_output(13).on()
-            first.kill()  # the pty disappears
+            first.kill()  # the pty disappears ...
+            link.unlink(missing_ok=True)  # ... and its path (a stale link could meet a new pty)
             assert wait_until(lambda: not board.stats.connected, 5)
             with pytest.raises(protoduino.ProtoduinoError):
                 board.ping()  # fails within its bound while nothing is there
@@ -237,9 +279,8 @@ def test_reconnect_and_restore_after_the_sim_is_killed(backend: str, tmp_path: P
             rec.wait(EventKind.RESTORED, timeout=10)
             board.ping()
             assert board.stats.reconnects >= 1
-            trace = second.trace()
-            assert pin_values(trace, 9) == [SAFE_90_US, us(120)]
-            assert pin_values(trace, 13) == [0, 1]
+            expect_pin(second, 9, [SAFE_90_US, us(120)])
+            expect_pin(second, 13, [0, 1], digital=True)
     finally:
         first.stop()
         second.stop()
@@ -255,12 +296,13 @@ def test_call_waits_across_a_short_outage(backend: str, tmp_path: Path) -> None:
         with Board.open(str(link), handshake_timeout=5.0) as board:
             servo = board.servo(9)
             first.kill()
+            link.unlink(missing_ok=True)
             assert wait_until(lambda: not board.stats.connected, 5)
             restart = threading.Timer(0.5, second.start)
             restart.start()
             servo.write(60)  # held until the new board is up and restored
             restart.join(10)
-            assert pin_values(second.trace(), 9)[-1] == us(60)
+            expect_pin(second, 9, [SAFE_90_US, us(60)])
     finally:
         first.stop()
         second.stop()
@@ -292,7 +334,7 @@ def test_failsafe_when_the_host_process_is_killed(sim: SimBoard) -> None:
         os.kill(child.pid, signal.SIGKILL)
         child.wait(5)
         killed_trace = sim.trace()
-        assert pin_values(killed_trace, 9)[-1] == us(10)
+        assert abs(pin_values(killed_trace, 9)[-1] - us(10)) <= PULSE_TOLERANCE_US
 
         def failsafe_done() -> bool:
             trace = sim.trace()
@@ -344,12 +386,9 @@ def test_concurrent_callers(board: Board, sim: SimBoard) -> None:
     for t in threads:
         t.join(60)
     assert errors == []
-    trace = sim.trace()
     for pin, degrees in finals.items():
-        values = pin_values(trace, pin)
-        assert values[-1] == us(degrees)
-        assert len(values) >= 40  # every distinct write reached the device
-    assert pin_values(trace, 13)[-1] == 1
+        expect_pin(sim, pin, [SAFE_90_US, *(us(d) for d in range(0, 181, 4)), us(degrees)])
+    expect_pin(sim, 13, [0, 1] * 20, digital=True)
 
 
 def test_lossy_line_is_repaired(sim: SimBoard) -> None:
@@ -359,5 +398,5 @@ def test_lossy_line_is_repaired(sim: SimBoard) -> None:
         for degrees in range(0, 181, 2):
             servo.write(degrees)
         stats = board.stats
-    assert pin_values(sim.trace(), 9)[-1] == us(180)
+    expect_pin(sim, 9, [SAFE_90_US, *(us(d) for d in range(0, 181, 2))])
     assert stats.retransmits > 0 or stats.seq_lost > 0 or sum(stats.dropped.values()) > 0
