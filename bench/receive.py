@@ -78,6 +78,14 @@ class RxResult:
     def us_per_frame(self) -> float:
         return self.timing.median / self.case.frames * 1e6
 
+    def scaled_to(self, base: RxResult) -> tuple[float, float]:
+        """This case's frames/s and bytes/s as ``base``'s medians times the paired ratios:
+        the figures the report shows, so that rates, ratios and CPU shares agree."""
+        return (
+            base.frames_per_s * self.ratio(base),
+            base.bytes_per_s * self.ratio(base, per_byte=True),
+        )
+
     def ratio(self, other: RxResult, *, per_byte: bool = False) -> float:
         """How many times faster this case is than ``other``, in frames (or bytes) per second.
 
@@ -131,8 +139,8 @@ def _profile(case: RxCase, top: int = 14) -> str:
     return "\n".join(line for line in lines[start:] if line)
 
 
-def _share_cells(result: RxResult) -> list[str]:
-    return [fmt_percent(cpu_share(rate, result.bytes_per_s)) for _name, rate in LINE_RATES]
+def _share_cells(bytes_per_s: float) -> list[str]:
+    return [fmt_percent(cpu_share(rate, bytes_per_s)) for _name, rate in LINE_RATES]
 
 
 def _results_table(results: list[RxResult]) -> str:
@@ -149,15 +157,16 @@ def _results_table(results: list[RxResult]) -> str:
     ]
     rows = []
     for r in results:
+        frames_per_s, bytes_per_s = r.scaled_to(base)
         rows.append(
             [
                 r.case.name,
                 f"{r.frame_size:.1f} B",
-                fmt_rate(r.frames_per_s),
-                f"{r.bytes_per_s / 1e6:.2f}",
+                fmt_rate(frames_per_s),
+                f"{bytes_per_s / 1e6:.2f}",
                 f"{base.ratio(r):.2f}x",
                 f"{base.ratio(r, per_byte=True):.2f}x",
-                *_share_cells(r),
+                *_share_cells(bytes_per_s),
                 fmt_percent(r.timing.spread),
             ]
         )
@@ -319,10 +328,12 @@ def run(ctx: Context) -> SectionResult:
         f"Fed from memory in reads of {ctx.chunk} B; {ctx.frames:,} frames per stream. Rates "
         f"are per CPU second of this process, medians of {ctx.reps} repetitions; the cases "
         "take turns, one repetition each per round, and a ratio is the median of the ratios "
-        "within a round, which cancels most of the machine's drift (spread = (max - min) / "
-        "median of a case's repetitions; a large one means the machine's speed changed during "
-        "the run, and the absolute rates and CPU shares carry that uncertainty, the ratios "
-        "much less). A CPU share above 100 % means one core cannot keep up.\n",
+        "within a round, which cancels most of the machine's drift. protoduino's rate is its "
+        "median; every other rate is that divided by the paired ratio, so that rates, ratios "
+        "and CPU shares agree. Spread = (max - min) / median of a case's repetitions: a large "
+        "one means the machine's speed changed during the run, and the absolute rates and "
+        "CPU shares carry that uncertainty, the ratios much less. A CPU share above 100 % "
+        "means one core cannot keep up.\n",
         _results_table(results),
         "What each row does, from bytes to the application:\n",
     ]
@@ -354,7 +365,7 @@ def run(ctx: Context) -> SectionResult:
                 "receive rate vs pymavlink",
                 f">= {GOAL_RATIO_TO_PYMAVLINK:.0f}x pymavlink's frames/s",
                 f"{ratio:.2f}x ({fmt_rate(base.frames_per_s)} vs "
-                f"{fmt_rate(mav.frames_per_s)} frames/s; "
+                f"{fmt_rate(mav.scaled_to(base)[0])} frames/s; "
                 f"{base.ratio(mav, per_byte=True):.2f}x in bytes/s)",
                 ratio >= GOAL_RATIO_TO_PYMAVLINK,
             )
@@ -404,9 +415,9 @@ def run(ctx: Context) -> SectionResult:
 
     chart_list: list[Chart] = []
     if ctx.chart_dir is not None:
-        # (label, frames/s, bytes/s) as the tables give them: measured medians for the
-        # libraries, the committed path scaled by the paired ratio for the proposals.
-        rows = [(r.case.name, r.frames_per_s, r.bytes_per_s) for r in results]
+        # (label, frames/s, bytes/s) as the tables give them: protoduino's medians scaled by
+        # each row's paired ratio.
+        rows = [(r.case.name, *r.scaled_to(base)) for r in results]
         rows += [
             (
                 f"proposal {label}",

@@ -27,7 +27,7 @@ from protoduino.framing import StreamDecoder  # noqa: E402
 from protoduino.packets import Packet  # noqa: E402
 
 from bench import receive, runner, wire  # noqa: E402
-from bench.core import MissingDependencyError, measure, require  # noqa: E402
+from bench.core import MissingDependencyError, Timing, measure, require  # noqa: E402
 from bench.peers import RxCase, Slot, WireSample, mavlink, pigweed, protoduino, serialtransfer  # noqa: E402
 from bench.peers import firmata as firmata_peer  # noqa: E402
 from bench.peers import telemetrix as telemetrix_peer  # noqa: E402
@@ -272,3 +272,15 @@ def test_chart_helpers_for_the_parts_to_come(tmp_path: Path) -> None:
     )
     for path in (hist, line):
         assert path.read_bytes().startswith(b"\x89PNG")
+
+
+def test_ratio_is_the_median_of_per_round_ratios() -> None:
+    base = protoduino.rx_case(10, CHUNK, SEED)
+    other = dataclasses.replace(base, frames=5)
+    a = receive.RxResult(base, Timing((1.0, 2.0, 4.0)))  # 10, 5, 2.5 frames/s
+    c = receive.RxResult(other, Timing((1.0, 8.0, 4.0)))  # 5, 0.625, 1.25 frames/s
+    assert a.frames_per_s / c.frames_per_s == pytest.approx(4.0)  # ratio of the medians
+    assert a.ratio(c) == pytest.approx(2.0)  # rounds: 2, 8, 2
+    assert c.ratio(a) == pytest.approx(0.5)
+    frames_per_s, _bytes_per_s = c.scaled_to(a)
+    assert frames_per_s == pytest.approx(2.5)
