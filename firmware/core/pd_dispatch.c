@@ -3,9 +3,9 @@
 #include <string.h>
 
 #include <pb_decode.h>
-#include <pb_encode.h>
 
 #include "pd_core.h"
+#include "pd_encode.h"
 #include "pd_link.h"
 #include "pd_schema.h"
 
@@ -37,15 +37,15 @@ void pd_dedupe_add(pd_dedupe_t *dd, uint32_t id, uint8_t status)
 bool pd_dispatch_send(pd_core_t *core, const protoduino_ArduinoOut *msg)
 {
     uint8_t raw[PD_TX_RAW_MAX];
-    pb_ostream_t stream = pb_ostream_from_buffer(raw + PD_HEADER_SIZE, PD_TX_MAX_PAYLOAD);
 
     if (!core->link.active) {
         return false; /* DATA only while ACTIVE; skip the encoding work */
     }
-    if (!pb_encode(&stream, protoduino_ArduinoOut_fields, msg)) {
+    size_t len = pd_encode_out(msg, raw + PD_HEADER_SIZE, PD_TX_MAX_PAYLOAD);
+    if (len == 0) {
         return false; /* cannot happen: PD_TX_MAX_PAYLOAD is the message's max size */
     }
-    return pd_link_send(core, PD_PACKET_DATA, raw, stream.bytes_written);
+    return pd_link_send(core, PD_PACKET_DATA, raw, len);
 }
 
 bool pd_dispatch_send_failsafe(pd_core_t *core, bool active, protoduino_FailsafeCause cause)

@@ -250,10 +250,15 @@ int main(int argc, char **argv)
             return 1;
         }
     }
+    /*
+     * Boot (EVENT BOOT goes into the pty) before the port is announced: a host
+     * can only open the port afterwards, and opening flushes its input, so no
+     * client ever sees a stale BOOT from power-up racing its handshake. A
+     * reboot (SIGUSR1) sends BOOT to whoever is connected.
+     */
+    pd_core_init(&core, &hal);
     printf("%s\n", link_path ? link_path : slave_name);
     fflush(stdout);
-
-    pd_core_init(&core, &hal);
     while (!sim_stop) {
         if (sim_reboot) {
             sim_reboot = 0;

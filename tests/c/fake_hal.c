@@ -4,6 +4,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <pb_decode.h>
+#include <pb_encode.h>
+
 #include "pd_cobs.h"
 #include "pd_packet.h"
 
@@ -76,6 +79,18 @@ bool pd_hal_write(void *ctx, const uint8_t *data, uint16_t len)
     }
     if (pkt.type == PD_PACKET_COMMAND) {
         fake_abort("the device sent a COMMAND");
+    }
+    if (pkt.type == PD_PACKET_DATA) {
+        /* The core's own encoder must produce exactly what pb_encode would. */
+        protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
+        uint8_t canon[PD_MAX_PAYLOAD];
+        pb_istream_t is = pb_istream_from_buffer(pkt.payload, pkt.len);
+        pb_ostream_t os = pb_ostream_from_buffer(canon, sizeof(canon));
+        if (!pb_decode(&is, protoduino_ArduinoOut_fields, &out) ||
+            !pb_encode(&os, protoduino_ArduinoOut_fields, &out) || os.bytes_written != pkt.len ||
+            memcmp(canon, pkt.payload, pkt.len) != 0) {
+            fake_abort("DATA payload is not nanopb's canonical ArduinoOut");
+        }
     }
     if (hal->fail_writes) {
         return false;

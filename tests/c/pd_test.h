@@ -43,5 +43,6 @@ extern const pd_test_case_t pd_tests_codec[];
 extern const pd_test_case_t pd_tests_link[];
 extern const pd_test_case_t pd_tests_dispatch[];
 extern const pd_test_case_t pd_tests_failsafe[];
+extern const pd_test_case_t pd_tests_encode[];
 
 #endif /* PD_TEST_H */

@@ -1,0 +1,42 @@
+/*
+ * ATmega328P (Arduino Uno) drivers behind the core's HAL: an interrupt-driven
+ * UART, a 1 kHz millisecond clock on Timer0, servo pulses from Timer1 compare
+ * interrupts, and the Uno's pin numbering. Plain avr-libc, no Arduino core.
+ */
+#ifndef PD_AVR_H
+#define PD_AVR_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+/* UART ring sizes (powers of two). RX covers ~11 ms of line time at 115200
+ * baud while the core answers; TX holds a typical Ack frame whole. */
+#define PD_AVR_RX_SIZE 128u
+#define PD_AVR_TX_SIZE 64u
+
+void pd_avr_uart_init(uint32_t baud);
+/* Next received byte, or -1 if none. */
+int16_t pd_avr_uart_read(void);
+bool pd_avr_uart_rx_empty(void);
+/* Queue bytes for transmission, waiting for room (interrupts must be on). */
+void pd_avr_uart_write(const uint8_t *data, uint16_t len);
+/* Bytes lost because the RX ring was full (counted, never reported). */
+uint16_t pd_avr_uart_rx_dropped(void);
+
+/* Timer0 in CTC mode at 1 kHz. Not used inside the Arduino IDE build, whose
+ * core owns Timer0 and provides millis(). */
+void pd_avr_clock_init(void);
+uint32_t pd_avr_millis(void);
+
+void pd_avr_servo_init(void);
+/* Start or update pulses on `pin` for `channel`; first call attaches the pin. */
+void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us);
+
+/* Make `pin` an output at `level` (the level is set before the direction). */
+void pd_avr_digital_write(uint8_t pin, bool level);
+
+/* Everything at power-up, then one iteration of the main loop. */
+void pd_avr_setup(void);
+void pd_avr_loop(void);
+
+#endif /* PD_AVR_H */

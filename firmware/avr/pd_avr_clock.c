@@ -1,0 +1,35 @@
+/* millis() on Timer0: CTC mode, 16 MHz / 64 / 250 = exactly 1 kHz. */
+#ifndef ARDUINO /* the Arduino IDE's core owns Timer0 and provides millis() */
+
+#include <avr/interrupt.h>
+#include <avr/io.h>
+#include <util/atomic.h>
+
+#include "pd_avr.h"
+
+static volatile uint32_t ms;
+
+void pd_avr_clock_init(void)
+{
+    TCCR0A = _BV(WGM01);
+    OCR0A = (uint8_t)(F_CPU / 64u / 1000u - 1u);
+    TCCR0B = _BV(CS01) | _BV(CS00);
+    TIMSK0 = _BV(OCIE0A);
+}
+
+ISR(TIMER0_COMPA_vect)
+{
+    ms++;
+}
+
+uint32_t pd_avr_millis(void)
+{
+    uint32_t now;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        now = ms;
+    }
+    return now;
+}
+
+#endif

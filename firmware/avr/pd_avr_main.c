@@ -1,0 +1,104 @@
+/*
+ * The Uno firmware: the portable core behind the ATmega328P HAL.
+ *
+ * The main loop hands every received byte to the core, lets it check the
+ * failsafe, and sleeps (idle mode) until the next interrupt: a received byte
+ * or the 1 kHz clock tick, so the failsafe is checked at least every 1 ms.
+ */
+#include <avr/interrupt.h>
+#include <avr/io.h>
+#include <avr/sleep.h>
+#include <util/atomic.h>
+
+#include "pd_avr.h"
+#include "pd_core.h"
+
+#ifdef ARDUINO
+#include <Arduino.h> /* the IDE's core owns Timer0 and provides millis() */
+#endif
+
+static pd_core_t core;
+
+static const pd_board_info_t uno = {
+    .board = "uno",
+    .num_pins = 20,
+    .max_servos = 8,
+    .reserved_pins = (1UL << 0) | (1UL << 1), /* RX, TX: the link itself */
+};
+
+bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len)
+{
+    (void)hal;
+    pd_avr_uart_write(data, len);
+    return true;
+}
+
+uint32_t pd_hal_millis(void *hal)
+{
+    (void)hal;
+#ifdef ARDUINO
+    return millis();
+#else
+    return pd_avr_millis();
+#endif
+}
+
+void pd_hal_servo_write(void *hal, uint8_t channel, uint8_t pin, uint16_t us)
+{
+    (void)hal;
+    pd_avr_servo_write(channel, pin, us);
+}
+
+void pd_hal_digital_write(void *hal, uint8_t pin, bool level)
+{
+    (void)hal;
+    pd_avr_digital_write(pin, level);
+}
+
+const pd_board_info_t *pd_hal_board_info(void *hal)
+{
+    (void)hal;
+    return &uno;
+}
+
+void pd_avr_setup(void)
+{
+#ifndef ARDUINO
+    pd_avr_clock_init();
+#endif
+    pd_avr_uart_init(115200UL);
+    pd_avr_servo_init();
+    sei();
+    pd_core_init(&core, NULL);
+}
+
+void pd_avr_loop(void)
+{
+    int16_t byte;
+    while ((byte = pd_avr_uart_read()) >= 0) {
+        pd_core_rx_byte(&core, (uint8_t)byte);
+    }
+    pd_core_poll(&core);
+
+    /* Sleep unless a byte slipped in; `sei; sleep` cannot miss the wake-up,
+     * because the instruction after sei always runs before any interrupt. */
+    set_sleep_mode(SLEEP_MODE_IDLE);
+    cli();
+    if (pd_avr_uart_rx_empty()) {
+        sleep_enable();
+        sei();
+        sleep_cpu();
+        sleep_disable();
+    }
+    sei();
+}
+
+#ifndef ARDUINO
+int main(void)
+{
+    pd_avr_setup();
+    for (;;) {
+        pd_avr_loop();
+    }
+}
+#endif

@@ -1,0 +1,143 @@
+/*
+ * Servo pulses the way the Arduino Servo library makes them: Timer1 runs free
+ * at 0.5 us per tick (prescaler 8) and its compare-A interrupt ends one
+ * channel's pulse and starts the next one's, channel after channel, then waits
+ * out the rest of a 20 ms frame. Not hardware PWM: that serves only pins 9
+ * and 10, and simavr does not reflect OCR1A rewrites in PWM mode 14.
+ *
+ * Every compare time is computed from the previous compare time, never from
+ * the counter's current value, so interrupt latency shifts both edges of a
+ * pulse alike and drops out of its width; it adds jitter only when another
+ * interrupt (UART, clock) delays one edge.
+ */
+#include <avr/interrupt.h>
+#include <avr/io.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <util/atomic.h>
+
+#include "pd_avr.h"
+#include "pd_avr_pins.h"
+#include "pd_outputs.h"
+
+#define TICKS_PER_US 2u         /* 16 MHz / 8 */
+#define FRAME_TICKS 40000u      /* 20 ms */
+#define MIN_GAP_TICKS 16u       /* 8 us: the soonest the next compare may be set */
+/* The ISR makes an end edge 10 cycles before a start edge (-O s code,
+ * avr-gcc 5.4): one tick (8 cycles) gives most of it back. */
+#define PULSE_TRIM_TICKS 1u
+
+typedef struct servo_channel {
+    volatile uint8_t *port; /* NULL: channel not attached */
+    uint8_t mask;
+    uint16_t ticks;
+} servo_channel_t;
+
+static servo_channel_t channels[PD_MAX_SERVOS];
+/*
+ * The edges the next compare makes, prepared by the previous one. With no
+ * edge to make they point at `no_pin`, so that the ISR runs the same
+ * instructions every time: no branch shifts one edge against another.
+ */
+static volatile uint8_t no_pin;
+static volatile uint8_t *off_port = &no_pin; /* pulse to end */
+static uint8_t off_mask;
+static volatile uint8_t *on_port = &no_pin; /* pulse to start */
+static uint8_t on_mask;
+static int8_t on_channel = -1; /* the channel on_port belongs to, -1: none */
+static bool in_gap = true;     /* the next compare ends the gap between frames */
+static uint16_t frame_start;   /* compare time at which the current frame began */
+
+void pd_avr_servo_init(void)
+{
+    TCCR1A = 0; /* normal mode: the counter runs free over 16 bits */
+    TCCR1B = _BV(CS11);
+    OCR1A = (uint16_t)(TCNT1 + FRAME_TICKS);
+    TIFR1 = _BV(OCF1A);
+    TIMSK1 |= _BV(OCIE1A);
+}
+
+static int8_t next_attached(int8_t ch)
+{
+    while (ch < (int8_t)PD_MAX_SERVOS && channels[ch].port == NULL) {
+        ch++;
+    }
+    return ch < (int8_t)PD_MAX_SERVOS ? ch : -1;
+}
+
+ISR(TIMER1_COMPA_vect)
+{
+    uint16_t at = OCR1A; /* when this compare was due */
+
+    /* The edges come first, at the same short offset after every compare,
+     * so that a pulse's two edges are equally late and its width exact. */
+    *off_port &= (uint8_t)~off_mask;
+    *on_port |= on_mask;
+
+    if (in_gap) {
+        frame_start = at;
+        in_gap = false;
+    }
+    int8_t ch = on_channel; /* the channel now high, if any */
+    if (ch >= 0) {
+        /* The end edge is made a few cycles before the start edge in the
+         * ISR: PULSE_TRIM_TICKS gives them back. */
+        OCR1A = (uint16_t)(at + channels[ch].ticks + PULSE_TRIM_TICKS);
+        off_port = channels[ch].port;
+        off_mask = channels[ch].mask;
+        ch = next_attached((int8_t)(ch + 1));
+    } else {
+        /* End of the frame: wait out its 20 ms, or start the next at once when
+         * eight 2.6 ms pulses have outlasted it. */
+        off_port = &no_pin;
+        if ((uint16_t)(at - frame_start) <= FRAME_TICKS - MIN_GAP_TICKS) {
+            OCR1A = (uint16_t)(frame_start + FRAME_TICKS);
+        } else {
+            OCR1A = (uint16_t)(TCNT1 + MIN_GAP_TICKS);
+        }
+        in_gap = true;
+        ch = next_attached(0);
+    }
+    on_channel = ch;
+    if (ch >= 0) {
+        on_port = channels[ch].port;
+        on_mask = channels[ch].mask;
+    } else {
+        on_port = &no_pin;
+    }
+}
+
+void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
+{
+    if (channel >= PD_MAX_SERVOS) {
+        return;
+    }
+    uint16_t ticks = (uint16_t)(us * TICKS_PER_US);
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        servo_channel_t *c = &channels[channel];
+        if (c->port == NULL) {
+            /* Attach: output, low, joins the sequence at the next frame. */
+            *pd_avr_port(pin) &= (uint8_t)~pd_avr_mask(pin);
+            *pd_avr_ddr(pin) |= pd_avr_mask(pin);
+            c->mask = pd_avr_mask(pin);
+            c->port = pd_avr_port(pin);
+        }
+        c->ticks = ticks;
+    }
+}
+
+void pd_avr_digital_write(uint8_t pin, bool level)
+{
+    volatile uint8_t *port = pd_avr_port(pin);
+    uint8_t mask = pd_avr_mask(pin);
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        if (level) {
+            *port |= mask;
+        } else {
+            *port &= (uint8_t)~mask;
+        }
+        *pd_avr_ddr(pin) |= mask;
+    }
+}

@@ -1,0 +1,174 @@
+#include "pd_encode.h"
+
+#include <stdbool.h>
+#include <string.h>
+
+/* Protobuf wire types. */
+#define WT_VARINT 0u
+#define WT_LEN 2u
+#define WT_FIXED32 5u
+
+/* Every nested message fits a one-byte length: patched in place afterwards. */
+typedef char pd_assert_out_small[(protoduino_ArduinoOut_size < 128) ? 1 : -1];
+
+typedef struct writer {
+    uint8_t *buf;
+    size_t cap;
+    size_t len;
+    bool ok;
+} writer_t;
+
+static void put(writer_t *w, uint8_t byte)
+{
+    if (w->len < w->cap) {
+        w->buf[w->len++] = byte;
+    } else {
+        w->ok = false;
+    }
+}
+
+static void put_varint(writer_t *w, uint32_t value)
+{
+    while (value >= 0x80u) {
+        put(w, (uint8_t)(value | 0x80u));
+        value >>= 7;
+    }
+    put(w, (uint8_t)value);
+}
+
+static void put_tag(writer_t *w, uint8_t tag, uint8_t wire_type)
+{
+    put(w, (uint8_t)((tag << 3) | wire_type)); /* every tag here is < 16 */
+}
+
+/* A singular proto3 scalar: omitted when zero. */
+static void put_uint(writer_t *w, uint8_t tag, uint32_t value)
+{
+    if (value != 0) {
+        put_tag(w, tag, WT_VARINT);
+        put_varint(w, value);
+    }
+}
+
+static void put_bytes(writer_t *w, uint8_t tag, const void *data, size_t len)
+{
+    put_tag(w, tag, WT_LEN);
+    put_varint(w, (uint32_t)len);
+    for (size_t i = 0; i < len; i++) {
+        put(w, ((const uint8_t *)data)[i]);
+    }
+}
+
+static void put_string(writer_t *w, uint8_t tag, const char *s, size_t max)
+{
+    size_t n = 0;
+    while (n < max && s[n] != '\0') {
+        n++;
+    }
+    if (n == max) {
+        w->ok = false; /* unterminated, as pb_encode would refuse it */
+    } else if (n > 0) {
+        put_bytes(w, tag, s, n);
+    }
+}
+
+/* Start a nested message; returns where its length byte goes. */
+static size_t open_msg(writer_t *w, uint8_t tag)
+{
+    put_tag(w, tag, WT_LEN);
+    size_t at = w->len;
+    put(w, 0);
+    return at;
+}
+
+static void close_msg(writer_t *w, size_t at)
+{
+    if (w->ok) {
+        size_t n = w->len - at - 1u;
+        if (n < 0x80u) {
+            w->buf[at] = (uint8_t)n;
+        } else {
+            w->ok = false;
+        }
+    }
+}
+
+static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
+{
+    put_string(w, protoduino_DeviceInfo_firmware_version_tag, info->firmware_version,
+               sizeof(info->firmware_version));
+    put_uint(w, protoduino_DeviceInfo_protocol_version_tag, info->protocol_version);
+    if (info->schema_id != 0) {
+        uint32_t v = info->schema_id;
+        put_tag(w, protoduino_DeviceInfo_schema_id_tag, WT_FIXED32);
+        put(w, (uint8_t)v); /* little-endian */
+        put(w, (uint8_t)(v >> 8));
+        put(w, (uint8_t)(v >> 16));
+        put(w, (uint8_t)(v >> 24));
+    }
+    put_string(w, protoduino_DeviceInfo_board_tag, info->board, sizeof(info->board));
+    put_uint(w, protoduino_DeviceInfo_num_pins_tag, info->num_pins);
+    put_uint(w, protoduino_DeviceInfo_max_servos_tag, info->max_servos);
+    pb_size_t count = info->reserved_pins_count;
+    if (count > sizeof(info->reserved_pins) / sizeof(info->reserved_pins[0])) {
+        w->ok = false;
+    } else if (count > 0) {
+        size_t at = open_msg(w, protoduino_DeviceInfo_reserved_pins_tag); /* packed */
+        for (pb_size_t i = 0; i < count; i++) {
+            put_varint(w, info->reserved_pins[i]);
+        }
+        close_msg(w, at);
+    }
+}
+
+static void put_ack(writer_t *w, const protoduino_Ack *ack)
+{
+    put_uint(w, protoduino_Ack_message_id_tag, ack->message_id);
+    put_uint(w, protoduino_Ack_status_tag, (uint32_t)ack->status);
+    if (ack->which_result == protoduino_Ack_ping_echo_tag) {
+        if (ack->result.ping_echo.size > sizeof(ack->result.ping_echo.bytes)) {
+            w->ok = false;
+            return;
+        }
+        put_bytes(w, protoduino_Ack_ping_echo_tag, ack->result.ping_echo.bytes,
+                  ack->result.ping_echo.size);
+    } else if (ack->which_result == protoduino_Ack_info_tag) {
+        size_t at = open_msg(w, protoduino_Ack_info_tag);
+        put_info(w, &ack->result.info);
+        close_msg(w, at);
+    }
+}
+
+size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap)
+{
+    writer_t w = {buf, cap, 0, true};
+    size_t at;
+
+    switch (msg->which_data) {
+    case protoduino_ArduinoOut_ack_tag:
+        at = open_msg(&w, protoduino_ArduinoOut_ack_tag);
+        put_ack(&w, &msg->data.ack);
+        close_msg(&w, at);
+        break;
+    case protoduino_ArduinoOut_failsafe_tag:
+        at = open_msg(&w, protoduino_ArduinoOut_failsafe_tag);
+        put_uint(&w, protoduino_Failsafe_active_tag, msg->data.failsafe.active ? 1u : 0u);
+        put_uint(&w, protoduino_Failsafe_cause_tag, (uint32_t)msg->data.failsafe.cause);
+        close_msg(&w, at);
+        break;
+    case protoduino_ArduinoOut_decode_error_tag:
+        at = open_msg(&w, protoduino_ArduinoOut_decode_error_tag);
+        put_uint(&w, protoduino_DecodeError_count_tag, msg->data.decode_error.count);
+        close_msg(&w, at);
+        break;
+    case protoduino_ArduinoOut_log_tag:
+        at = open_msg(&w, protoduino_ArduinoOut_log_tag);
+        put_uint(&w, protoduino_Log_level_tag, (uint32_t)msg->data.log.level);
+        put_string(&w, protoduino_Log_text_tag, msg->data.log.text, sizeof(msg->data.log.text));
+        close_msg(&w, at);
+        break;
+    default:
+        break; /* no member set: the empty message */
+    }
+    return w.ok ? w.len : 0;
+}

@@ -1,0 +1,159 @@
+/* pd_encode_out against nanopb's pb_encode: byte for byte, every shape and edge value. */
+#include <string.h>
+
+#include <pb_decode.h>
+#include <pb_encode.h>
+
+#include "pd_encode.h"
+#include "pd_test.h"
+
+/* 0 if both encoders agree (and every smaller buffer is refused), else the differing length. */
+static int compare(const protoduino_ArduinoOut *msg)
+{
+    uint8_t ours[protoduino_ArduinoOut_size + 8];
+    uint8_t theirs[protoduino_ArduinoOut_size + 8];
+    pb_ostream_t s = pb_ostream_from_buffer(theirs, sizeof(theirs));
+    if (!pb_encode(&s, protoduino_ArduinoOut_fields, msg)) {
+        return -1;
+    }
+    size_t n = pd_encode_out(msg, ours, sizeof(ours));
+    if (n != s.bytes_written || memcmp(ours, theirs, n) != 0) {
+        fprintf(stderr, "  ours %zu bytes, pb_encode %zu bytes\n", n, s.bytes_written);
+        return (int)n + 1000;
+    }
+    for (size_t cap = 0; cap < n; cap++) {
+        if (pd_encode_out(msg, ours, cap) != 0) {
+            return -2;
+        }
+    }
+    return 0;
+}
+
+static protoduino_ArduinoOut ack(uint32_t id, protoduino_Status status)
+{
+    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
+    out.which_data = protoduino_ArduinoOut_ack_tag;
+    out.data.ack.message_id = id;
+    out.data.ack.status = status;
+    return out;
+}
+
+static void test_encode_ack_plain(void)
+{
+    const uint32_t ids[] = {0, 1, 127, 128, 16383, 16384, 0x7FFFFFFFu, 0xFFFFFFFFu};
+    for (size_t i = 0; i < sizeof(ids) / sizeof(ids[0]); i++) {
+        for (int st = _protoduino_Status_MIN; st <= _protoduino_Status_MAX; st++) {
+            protoduino_ArduinoOut out = ack(ids[i], (protoduino_Status)st);
+            CHECK_EQ(compare(&out), 0);
+        }
+    }
+}
+
+static void test_encode_ack_ping_echo(void)
+{
+    for (size_t len = 0; len <= 64; len++) {
+        protoduino_ArduinoOut out = ack(1000 + (uint32_t)len, protoduino_Status_STATUS_OK);
+        out.data.ack.which_result = protoduino_Ack_ping_echo_tag;
+        out.data.ack.result.ping_echo.size = (pb_size_t)len;
+        for (size_t i = 0; i < len; i++) {
+            out.data.ack.result.ping_echo.bytes[i] = (uint8_t)(i * 4u + len); /* incl. 0x00 */
+        }
+        CHECK_EQ(compare(&out), 0);
+    }
+    /* An oversized length is refused, not read past the array. */
+    protoduino_ArduinoOut out = ack(1, protoduino_Status_STATUS_OK);
+    uint8_t buf[200];
+    out.data.ack.which_result = protoduino_Ack_ping_echo_tag;
+    out.data.ack.result.ping_echo.size = 65;
+    CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
+}
+
+static void test_encode_ack_info(void)
+{
+    protoduino_ArduinoOut out = ack(42, protoduino_Status_STATUS_OK);
+    protoduino_DeviceInfo *info = &out.data.ack.result.info;
+    out.data.ack.which_result = protoduino_Ack_info_tag;
+    CHECK_EQ(compare(&out), 0); /* all defaults: an empty nested message */
+    strcpy(info->firmware_version, "0.1.0");
+    strcpy(info->board, "uno");
+    info->protocol_version = 1;
+    info->schema_id = 0x614404ADu;
+    info->num_pins = 20;
+    info->max_servos = 8;
+    info->reserved_pins_count = 2;
+    info->reserved_pins[0] = 0;
+    info->reserved_pins[1] = 1;
+    CHECK_EQ(compare(&out), 0);
+    /* Longest strings, every field at its largest. */
+    strcpy(info->firmware_version, "123456789012345");
+    strcpy(info->board, "abcdefghijklmno");
+    info->protocol_version = 0xFFFFFFFFu;
+    info->schema_id = 0xFFFFFFFFu;
+    info->num_pins = 0xFFFFFFFFu;
+    info->max_servos = 0xFFFFFFFFu;
+    info->reserved_pins_count = 4;
+    for (int i = 0; i < 4; i++) {
+        info->reserved_pins[i] = 0xFFFFFFFFu - (uint32_t)i;
+    }
+    out.data.ack.message_id = 0xFFFFFFFFu;
+    out.data.ack.status = protoduino_Status_STATUS_UNKNOWN_COMMAND;
+    CHECK_EQ(compare(&out), 0);
+    for (pb_size_t count = 0; count <= 4; count++) {
+        info->reserved_pins_count = count;
+        info->schema_id = count; /* including 0: omitted */
+        CHECK_EQ(compare(&out), 0);
+    }
+    uint8_t buf[200];
+    info->reserved_pins_count = 5;
+    CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
+    info->reserved_pins_count = 1;
+    memset(info->board, 'x', sizeof(info->board)); /* unterminated */
+    CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
+}
+
+static void test_encode_failsafe_decode_error_log(void)
+{
+    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
+    out.which_data = protoduino_ArduinoOut_failsafe_tag;
+    for (int active = 0; active < 2; active++) {
+        for (int cause = _protoduino_FailsafeCause_MIN; cause <= _protoduino_FailsafeCause_MAX;
+             cause++) {
+            out.data.failsafe.active = active;
+            out.data.failsafe.cause = (protoduino_FailsafeCause)cause;
+            CHECK_EQ(compare(&out), 0);
+        }
+    }
+    memset(&out, 0, sizeof(out));
+    out.which_data = protoduino_ArduinoOut_decode_error_tag;
+    const uint32_t counts[] = {0, 1, 300, 0xFFFFFFFFu};
+    for (size_t i = 0; i < 4; i++) {
+        out.data.decode_error.count = counts[i];
+        CHECK_EQ(compare(&out), 0);
+    }
+    memset(&out, 0, sizeof(out));
+    out.which_data = protoduino_ArduinoOut_log_tag;
+    for (int level = 0; level < 4; level++) {
+        out.data.log.level = (protoduino_LogLevel)level;
+        memset(out.data.log.text, 0, sizeof(out.data.log.text));
+        CHECK_EQ(compare(&out), 0);
+        memset(out.data.log.text, 'a' + level, sizeof(out.data.log.text) - 1u);
+        CHECK_EQ(compare(&out), 0);
+    }
+}
+
+static void test_encode_empty(void)
+{
+    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
+    uint8_t buf[4];
+    CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
+    CHECK_EQ(compare(&out), 0);
+}
+
+const pd_test_case_t pd_tests_encode[] = {
+    TEST_CASE(test_encode_ack_plain),
+    TEST_CASE(test_encode_ack_ping_echo),
+    TEST_CASE(test_encode_ack_info),
+    TEST_CASE(test_encode_failsafe_decode_error_log),
+    TEST_CASE(test_encode_empty),
+    {NULL, NULL},
+};
