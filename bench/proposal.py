@@ -44,17 +44,12 @@ _OVERFLOW_RAW = MAX_ENCODED_FRAME + 1
 
 
 def _packet_via_slots() -> Callable[[PacketType, int, bytes], Packet]:
-    new = object.__new__
-    set_type = Packet.__dict__["type"].__set__
-    set_seq = Packet.__dict__["seq"].__set__
-    set_payload = Packet.__dict__["payload"].__set__
+    # Packet is now a NamedTuple (the proposal was adopted in framing.py);
+    # tuple.__new__ is how the committed decoder builds one.
+    new = tuple.__new__
 
     def make(ptype: PacketType, seq: int, payload: bytes) -> Packet:
-        packet = new(Packet)
-        set_type(packet, ptype)
-        set_seq(packet, seq)
-        set_payload(packet, payload)
-        return packet
+        return new(Packet, (ptype, seq, payload))
 
     return make
 

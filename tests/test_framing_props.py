@@ -6,7 +6,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from protoduino.constants import MAX_ENCODED_FRAME, MAX_PAYLOAD, PacketType
-from protoduino.framing import StreamDecoder, frame_packet
+from protoduino.framing import StreamDecoder, decode_frame, frame_packet
 from protoduino.packets import BadFrame, Packet
 
 packets = st.builds(
@@ -118,3 +118,44 @@ def test_frame_of_exactly_max_encoded_size_is_accepted() -> None:
 def test_lone_delimiters_are_ignored() -> None:
     p = Packet(PacketType.CONTROL, 0, b"\x02")
     assert StreamDecoder().feed(b"\x00\x00" + _wire(p) + b"\x00") == [p]
+
+
+def _reference_decode(stream: bytes) -> list[Packet | BadFrame]:
+    """The recovery policy written as plainly as possible, one byte at a time."""
+    out: list[Packet | BadFrame] = []
+    buf = bytearray()
+    skipping = False
+    for byte in stream:
+        if byte == 0:
+            if not skipping and buf:
+                out.append(decode_frame(bytes(buf)))
+            buf.clear()
+            skipping = False
+        elif not skipping:
+            buf.append(byte)
+            if len(buf) > MAX_ENCODED_FRAME:
+                out.append(BadFrame("overflow", bytes(buf)))
+                buf.clear()
+                skipping = True
+    return out
+
+
+@given(
+    st.lists(
+        st.one_of(
+            packets.map(_wire),
+            st.binary(max_size=40),
+            st.binary(min_size=250, max_size=600),
+            packets.map(_wire).map(lambda w: w[: len(w) // 2]),
+        ),
+        max_size=10,
+    ),
+    st.data(),
+)
+def test_stream_decoder_matches_the_plain_reference(
+    parts: list[bytes], data: st.DataObject
+) -> None:
+    stream = b"".join(parts)
+    cuts = sorted(data.draw(st.lists(st.integers(0, len(stream)), max_size=10)))
+    chunks = [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)]
+    assert StreamDecoder().feed_all(chunks) == _reference_decode(stream)
