@@ -132,7 +132,8 @@ def test_board_commands_against_the_sim(
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert any(line.get("message", {}).get("code") == "RESET_ACK" for line in lines)
     servo = [e["value"] for e in sim_board.trace() if e["pin"] == 9]
-    assert servo[-1] == 2000 and 544 in servo
+    # the emulated Uno measures its pulses, a few microseconds off
+    assert abs(servo[-1] - 2000) <= 3 and any(abs(v - 544) <= 3 for v in servo)
     assert [e["value"] for e in sim_board.trace() if e["pin"] == 13][-1] == 1
 
 
