@@ -49,11 +49,13 @@ setup_venv() {
     # Reinstall only when the dependency declarations changed.
     local stamp="$venv/.protoduino-deps"
     local want
-    want=$(cat pyproject.toml constraints.txt | sha256sum | cut -d' ' -f1)
+    want=$(cat pyproject.toml constraints.txt tools/bench_setup.sh | sha256sum | cut -d' ' -f1)
     if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
         log "installing protoduino and its pinned dev dependencies into $venv"
         "$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt pip setuptools
         "$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[dev]"
+        # The libraries the benchmarks compare against, so their smoke tests run too.
+        VENV="$venv" "$root/tools/bench_setup.sh" >/dev/null
         echo "$want" >"$stamp"
     fi
 }
