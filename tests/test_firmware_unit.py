@@ -1,0 +1,134 @@
+"""The firmware's C unit tests under ASan/UBSan, a bounded libFuzzer run, and constants.
+
+The C tests live in tests/c/ and are built and run by ``make -C firmware unit``
+(which prints "N passed, M failed" last). The fuzz target feeds arbitrary bytes
+through the whole receive path; here it runs for FUZZ_SECONDS, and for as long
+as you like with ``make -C firmware fuzz-long`` (10 million runs by default).
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+from protoduino import constants
+
+ROOT = Path(__file__).resolve().parents[1]
+FIRMWARE = ROOT / "firmware"
+FUZZ_BIN = ROOT / "build" / "fuzz" / "pd_fuzz"
+FUZZ_CORPUS = ROOT / "build" / "fuzz" / "corpus"
+FUZZ_SECONDS = 20
+#: The C suite has this many tests or more; fewer means some were not run.
+MIN_C_TESTS = 60
+BUILD_TIMEOUT = 300
+
+
+def _need(*tools: str) -> None:
+    for tool in tools:
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} is not installed")
+
+
+def _make(target: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        ["make", "-s", "-C", str(FIRMWARE), target],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=BUILD_TIMEOUT,
+    )
+
+
+def test_c_unit_tests_under_sanitizers() -> None:
+    _need("make", "gcc")
+    result = _make("unit")
+    output = result.stdout + result.stderr
+    summary = re.findall(r"^(\d+) passed, (\d+) failed$", result.stdout, re.MULTILINE)
+    assert summary, f"no test summary from `make -C firmware unit`:\n{output[-4000:]}"
+    passed, failed = (int(n) for n in summary[-1])
+    assert result.returncode == 0 and failed == 0, output[-4000:]
+    assert passed >= MIN_C_TESTS, output[-4000:]
+    assert "runtime error" not in output  # UBSan reports without aborting otherwise
+
+
+def _libfuzzer_available() -> bool:
+    if shutil.which("clang") is None:
+        return False
+    # clang prints the full path of a runtime it has, or just the name back.
+    found = subprocess.run(
+        ["clang", "-print-file-name=libclang_rt.fuzzer-x86_64.a"],
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout.strip()
+    return Path(found).is_absolute() and Path(found).is_file()
+
+
+@pytest.mark.slow
+def test_fuzz_receive_path_bounded(tmp_path: Path) -> None:
+    _need("make", "clang")
+    if not _libfuzzer_available():
+        pytest.skip("the libFuzzer runtime is not installed (Debian package libclang-rt-14-dev)")
+    build = _make("fuzz")
+    assert build.returncode == 0, (build.stdout + build.stderr)[-4000:]
+    work = tmp_path / "corpus"
+    work.mkdir()
+    seeds = sorted(FUZZ_CORPUS.iterdir())
+    assert len(seeds) > 20, "the seed corpus was not generated"
+    result = subprocess.run(
+        [
+            str(FUZZ_BIN),
+            f"-max_total_time={FUZZ_SECONDS}",
+            "-print_final_stats=1",
+            f"-artifact_prefix={tmp_path}/",
+            str(work),  # new inputs go here; the seed corpus stays as generated
+            str(FUZZ_CORPUS),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=FUZZ_SECONDS * 3 + 60,
+    )
+    log = result.stderr[-6000:]
+    runs = re.search(r"stat::number_of_executed_units:\s*(\d+)", result.stderr)
+    assert result.returncode == 0, log
+    assert runs is not None and int(runs.group(1)) > 10_000, log
+    assert not list(tmp_path.glob("crash-*")) and not list(tmp_path.glob("leak-*")), log
+    assert "ERROR:" not in result.stderr, log
+
+
+def _c_constants() -> dict[str, int]:
+    text = (FIRMWARE / "core" / "pd_protocol.h").read_text()
+    found = re.findall(r"^#define (PD_\w+) (0x[0-9A-Fa-f]+|\d+)U?L?\b", text, re.MULTILINE)
+    return {name: int(value, 0) for name, value in found}
+
+
+def test_protocol_constants_match_python() -> None:
+    """pd_protocol.h mirrors constants.py: every value, so they cannot drift."""
+    c = _c_constants()
+    checked = 0
+    for name in dir(constants):
+        value = getattr(constants, name)
+        if not name.isupper() or isinstance(value, bool):
+            continue
+        if isinstance(value, float):  # seconds on the host, milliseconds on the device
+            assert c.get(f"PD_{name}_MS") == round(value * 1000), name
+            checked += 1
+        elif isinstance(value, int):
+            if name in ("MIN_PACKET",):  # an expression in C, checked below
+                continue
+            assert c.get(f"PD_{name}") == value, name
+            checked += 1
+    for enum, prefix in (
+        (constants.PacketType, "PD_PACKET_"),
+        (constants.ControlCode, "PD_CONTROL_"),
+        (constants.EventCode, "PD_EVENT_"),
+    ):
+        for member in enum:
+            assert c.get(prefix + member.name) == member.value, member
+            checked += 1
+    assert c["PD_HEADER_SIZE"] + c["PD_CRC_SIZE"] == constants.MIN_PACKET
+    assert checked >= 25  # the scan found the constants at all
