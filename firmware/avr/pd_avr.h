@@ -9,22 +9,22 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-/* UART ring sizes (powers of two). RX covers ~11 ms of line time at 115200
- * baud while the core answers; TX holds a typical Ack frame whole. */
+/* UART receive ring (a power of two): ~11 ms of line time at 115200 baud,
+ * more than the longest frame the core sends takes to transmit. */
 #define PD_AVR_RX_SIZE 128u
-#define PD_AVR_TX_SIZE 64u
 
 void pd_avr_uart_init(uint32_t baud);
 /* Next received byte, or -1 if none. */
 int16_t pd_avr_uart_read(void);
 bool pd_avr_uart_rx_empty(void);
-/* Queue bytes for transmission, waiting for room (interrupts must be on). */
+/* Transmit bytes, returning when the last one is in the UART. */
 void pd_avr_uart_write(const uint8_t *data, uint16_t len);
 /* Bytes lost because the RX ring was full (counted, never reported). */
 uint16_t pd_avr_uart_rx_dropped(void);
 
 /* Timer0 in CTC mode at 1 kHz. Not used inside the Arduino IDE build, whose
  * core owns Timer0 and provides millis(). */
+#define PD_AVR_T0_TOP ((uint8_t)(F_CPU / 64u / 1000u - 1u)) /* 249: 1 kHz */
 void pd_avr_clock_init(void);
 uint32_t pd_avr_millis(void);
 

@@ -12,7 +12,7 @@ static volatile uint32_t ms;
 void pd_avr_clock_init(void)
 {
     TCCR0A = _BV(WGM01);
-    OCR0A = (uint8_t)(F_CPU / 64u / 1000u - 1u);
+    OCR0A = PD_AVR_T0_TOP;
     TCCR0B = _BV(CS01) | _BV(CS00);
     TIMSK0 = _BV(OCIE0A);
 }

@@ -50,9 +50,23 @@ static uint16_t frame_start;   /* compare time at which the current frame began 
 
 void pd_avr_servo_init(void)
 {
+    uint16_t first = FRAME_TICKS;
+
     TCCR1A = 0; /* normal mode: the counter runs free over 16 bits */
     TCCR1B = _BV(CS11);
-    OCR1A = (uint16_t)(TCNT1 + FRAME_TICKS);
+#ifndef ARDUINO
+    /*
+     * A frame is exactly 20 clock ticks of Timer0 on the same crystal, so the
+     * two stay in phase for good. Left to chance, the 1 kHz clock interrupt
+     * could fall on every frame's first edge and shorten channel 0's pulses by
+     * its 2.5 us. Start the frames half a millisecond away from the clock's
+     * ticks instead (Timer0 counts 4 us, i.e. 8 Timer1 ticks, per step).
+     */
+    uint8_t t0 = TCNT0;
+    first = (uint16_t)(((PD_AVR_T0_TOP + 1u) * 3u / 2u - t0) % (PD_AVR_T0_TOP + 1u) * 8u +
+                       (PD_AVR_T0_TOP + 1u) * 8u);
+#endif
+    OCR1A = (uint16_t)(TCNT1 + first);
     TIFR1 = _BV(OCF1A);
     TIMSK1 |= _BV(OCIE1A);
 }

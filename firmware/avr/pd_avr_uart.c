@@ -1,8 +1,14 @@
 /*
  * USART0 at 115200 baud with U2X (UBRR 16: 2.1 % fast, the Arduino setting,
- * well within what the Uno's USB bridge accepts), both directions through
- * ring buffers filled and drained by interrupts. Our own driver rather than
+ * well within what the Uno's USB bridge accepts). Our own driver rather than
  * the Arduino core's HardwareSerial: the same job in far less flash and RAM.
+ *
+ * Receive: an interrupt fills a ring buffer, so no byte is lost while the
+ * main loop is busy. Transmit: polled. The core hands over whole frames and
+ * the longest (an Ack with a 64-byte ping echo) takes 9 ms on the wire,
+ * during which at most ~100 bytes can arrive: the RX ring holds them. A TX
+ * ring would only let the loop run on while a frame drains, for 64 more bytes
+ * of RAM; at line rate the answers cannot leave any faster either way.
  */
 #include <avr/interrupt.h>
 #include <avr/io.h>
@@ -11,18 +17,13 @@
 #include "pd_avr.h"
 
 #define RX_MASK (PD_AVR_RX_SIZE - 1u)
-#define TX_MASK (PD_AVR_TX_SIZE - 1u)
 
 typedef char pd_assert_rx_pow2[(PD_AVR_RX_SIZE & RX_MASK) == 0 && PD_AVR_RX_SIZE <= 256 ? 1 : -1];
-typedef char pd_assert_tx_pow2[(PD_AVR_TX_SIZE & TX_MASK) == 0 && PD_AVR_TX_SIZE <= 256 ? 1 : -1];
 
 static volatile uint8_t rx_buf[PD_AVR_RX_SIZE];
 static volatile uint8_t rx_head; /* written by the ISR */
 static volatile uint8_t rx_tail; /* written by the main loop */
 static volatile uint16_t rx_dropped;
-static volatile uint8_t tx_buf[PD_AVR_TX_SIZE];
-static volatile uint8_t tx_head; /* written by the main loop */
-static volatile uint8_t tx_tail; /* written by the ISR */
 
 void pd_avr_uart_init(uint32_t baud)
 {
@@ -46,16 +47,6 @@ ISR(USART_RX_vect)
     rx_head = next;
 }
 
-ISR(USART_UDRE_vect)
-{
-    if (tx_head == tx_tail) {
-        UCSR0B &= (uint8_t)~_BV(UDRIE0);
-        return;
-    }
-    UDR0 = tx_buf[tx_tail];
-    tx_tail = (uint8_t)((tx_tail + 1u) & TX_MASK);
-}
-
 int16_t pd_avr_uart_read(void)
 {
     uint8_t tail = rx_tail;
@@ -75,16 +66,10 @@ bool pd_avr_uart_rx_empty(void)
 void pd_avr_uart_write(const uint8_t *data, uint16_t len)
 {
     for (uint16_t i = 0; i < len; i++) {
-        uint8_t next = (uint8_t)((tx_head + 1u) & TX_MASK);
-        while (next == tx_tail) {
-            /* full: the UDRE interrupt drains it */
+        while (!(UCSR0A & _BV(UDRE0))) {
+            /* the RX interrupt keeps receiving meanwhile */
         }
-        tx_buf[tx_head] = data[i];
-        tx_head = next;
-        ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
-        {
-            UCSR0B |= _BV(UDRIE0);
-        }
+        UDR0 = data[i];
     }
 }
 

@@ -23,12 +23,12 @@ bool pd_link_send(pd_core_t *core, uint8_t type, uint8_t *raw, size_t len)
     size_t pos = 0;
 
     if (type != PD_PACKET_CONTROL && !link->active) {
-        link->stats.tx_failed++;
+        PD_STAT_INC(link, tx_failed);
         return false;
     }
     if (pd_packet_build(type, link->tx_seq, raw + PD_HEADER_SIZE, len, raw, PD_TX_RAW_MAX,
                         &raw_len) != PD_PACKET_OK) {
-        link->stats.tx_failed++;
+        PD_STAT_INC(link, tx_failed);
         return false;
     }
     if (link->tx_flush) {
@@ -36,20 +36,20 @@ bool pd_link_send(pd_core_t *core, uint8_t type, uint8_t *raw, size_t len)
     }
     size_t enc = pd_cobs_encode(raw, raw_len, frame + pos, sizeof(frame) - pos - 1u);
     if (enc == 0) {
-        link->stats.tx_failed++;
+        PD_STAT_INC(link, tx_failed);
         return false;
     }
     pos += enc;
     frame[pos++] = 0;
     if (!pd_hal_write(core->hal, frame, (uint16_t)pos)) {
         /* Keep the SEQ (section 6) and flush whatever part of it went out. */
-        link->stats.tx_failed++;
+        PD_STAT_INC(link, tx_failed);
         link->tx_flush = true;
         return false;
     }
     link->tx_flush = false;
     link->tx_seq++;
-    link->stats.tx_frames++;
+    PD_STAT_INC(link, tx_frames);
     return true;
 }
 
@@ -95,9 +95,9 @@ static void count_seq(pd_core_t *core, uint8_t seq)
         return;
     }
     if (d <= PD_SEQ_DESYNC_THRESHOLD) {
-        link->stats.seq_lost = (uint16_t)(link->stats.seq_lost + d);
+        PD_STAT_ADD(link, seq_lost, d);
     } else {
-        link->stats.seq_desync++;
+        PD_STAT_INC(link, seq_desync);
         pd_link_send_event(core, PD_EVENT_DESYNC);
     }
 }
@@ -109,23 +109,23 @@ static void handle_frame(pd_core_t *core)
     int n = pd_cobs_decode(link->rx_buf, link->rx_len, link->rx_buf, sizeof(link->rx_buf));
 
     if (n < 0) {
-        link->stats.drop_cobs++;
+        PD_STAT_INC(link, drop_cobs);
         return;
     }
     switch (pd_packet_parse(link->rx_buf, (size_t)n, &pkt)) {
     case PD_PACKET_OK:
         break;
     case PD_PACKET_ERR_CRC:
-        link->stats.drop_crc++;
+        PD_STAT_INC(link, drop_crc);
         return;
     case PD_PACKET_ERR_TYPE:
-        link->stats.drop_type++;
+        PD_STAT_INC(link, drop_type);
         return;
     default:
-        link->stats.drop_length++;
+        PD_STAT_INC(link, drop_length);
         return;
     }
-    link->stats.packets++;
+    PD_STAT_INC(link, packets);
 
     if (pkt.type == PD_PACKET_CONTROL && pkt.len >= 2 && pkt.payload[0] == PD_CONTROL_RESET) {
         /* Answered whatever our state; our VERSION goes back, the host judges. */
@@ -138,7 +138,7 @@ static void handle_frame(pd_core_t *core)
     }
     if (pkt.type == PD_PACKET_COMMAND) {
         if (!link->active) {
-            link->stats.not_active++;
+            PD_STAT_INC(link, not_active);
             pd_link_send_event(core, PD_EVENT_NOT_ACTIVE);
             return;
         }
@@ -148,7 +148,7 @@ static void handle_frame(pd_core_t *core)
     if (pkt.type == PD_PACKET_CONTROL && pkt.len == 1 && pkt.payload[0] == PD_CONTROL_HEARTBEAT) {
         return; /* liveness of the link only; the failsafe wants Pings */
     }
-    link->stats.ignored++;
+    PD_STAT_INC(link, ignored);
 }
 
 void pd_link_rx_byte(pd_core_t *core, uint8_t byte)
@@ -170,7 +170,7 @@ void pd_link_rx_byte(pd_core_t *core, uint8_t byte)
     if (link->rx_len >= PD_MAX_ENCODED_FRAME) {
         link->rx_len = 0;
         link->rx_skipping = true;
-        link->stats.rx_overflow++;
+        PD_STAT_INC(link, rx_overflow);
         pd_link_send_event(core, PD_EVENT_RX_OVERFLOW);
         return;
     }

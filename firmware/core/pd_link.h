@@ -35,7 +35,21 @@ struct pd_core;
 /* Encoded frame plus an optional leading 0x00 and the delimiter. */
 #define PD_TX_FRAME_MAX (PD_COBS_MAX_ENCODED(PD_TX_RAW_MAX) + 2u)
 
-/* Diagnostic counters; they wrap, nothing depends on them. */
+/*
+ * Diagnostic counters; they wrap, nothing depends on them. No message carries
+ * them to the host, so the Uno build leaves them out (PD_STATS=0) to save RAM;
+ * the unit tests and the simulated board keep them.
+ */
+#ifndef PD_STATS
+#define PD_STATS 1
+#endif
+#if PD_STATS
+#define PD_STAT_ADD(link, counter, n) ((link)->stats.counter = (uint16_t)((link)->stats.counter + (n)))
+#else
+#define PD_STAT_ADD(link, counter, n) ((void)(n))
+#endif
+#define PD_STAT_INC(link, counter) PD_STAT_ADD(link, counter, 1u)
+
 typedef struct pd_link_stats {
     uint16_t packets;      /* valid packets received */
     uint16_t drop_cobs;    /* frame was not valid COBS */
@@ -59,7 +73,9 @@ typedef struct pd_link {
     bool tx_flush;    /* send a lone 0x00 before the next frame */
     uint8_t tx_seq;   /* SEQ of the next frame we send */
     uint8_t rx_seq;   /* SEQ we expect next */
+#if PD_STATS
     pd_link_stats_t stats;
+#endif
 } pd_link_t;
 
 void pd_link_init(pd_link_t *link);

@@ -30,7 +30,6 @@ static protoduino_Status check_pin(void *hal, uint32_t pin)
 
 static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint16_t us)
 {
-    out->servo[channel].us = us;
     pd_hal_servo_write(hal, channel, out->servo[channel].pin, us);
 }
 
@@ -58,7 +57,7 @@ protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
     if (min_us < PD_SERVO_LIMIT_MIN_US || max_us > PD_SERVO_LIMIT_MAX_US || min_us >= max_us) {
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
-    pd_servo_t limits = {0, (uint16_t)min_us, (uint16_t)max_us, 0, 0};
+    pd_servo_t limits = {0, (uint16_t)min_us, (uint16_t)max_us, 0};
     if (msg->which_safe == protoduino_ServoInit_safe_degrees_tag) {
         if (msg->safe.safe_degrees > PD_SERVO_MAX_DEGREES) {
             return protoduino_Status_STATUS_OUT_OF_RANGE;

@@ -31,7 +31,6 @@ typedef struct pd_servo {
     uint16_t min_us;
     uint16_t max_us;
     uint16_t safe_us;
-    uint16_t us; /* last commanded pulse */
 } pd_servo_t;
 
 typedef struct pd_outputs {

@@ -41,7 +41,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     }
     for (uint8_t ch = 0; ch < core.outputs.servo_count; ch++) {
         const pd_servo_t *s = &core.outputs.servo[ch];
-        if (s->us < s->min_us || s->us > s->max_us || s->safe_us < s->min_us ||
+        int us = hal.servo_us[s->pin];
+        if (us < s->min_us || us > s->max_us || s->safe_us < s->min_us ||
             s->safe_us > s->max_us || core.outputs.pin_mode[s->pin] != PD_PIN_SERVO + ch) {
             abort();
         }
