@@ -41,7 +41,11 @@ struct pd_core;
  * the unit tests and the simulated board keep them.
  */
 #ifndef PD_STATS
+#ifdef __AVR__
+#define PD_STATS 0
+#else
 #define PD_STATS 1
+#endif
 #endif
 #if PD_STATS
 #define PD_STAT_ADD(link, counter, n) ((link)->stats.counter = (uint16_t)((link)->stats.counter + (n)))

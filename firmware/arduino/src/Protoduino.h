@@ -1,0 +1,35 @@
+/*
+ * protoduino as an Arduino library: the same firmware as `make -C firmware
+ * avr`, assembled by `make -C firmware arduino-lib` (which adds the core, the
+ * generated messages and the nanopb runtime next to this header).
+ *
+ * It owns the UART (pins 0 and 1: do not use Serial) and Timer1 (servo pulses:
+ * do not use the Servo library); millis() and the rest of the core stay yours.
+ */
+#ifndef PROTODUINO_H
+#define PROTODUINO_H
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+void pd_avr_setup(void);
+void pd_avr_loop(void);
+
+#ifdef __cplusplus
+}
+#endif
+
+/* Call once from setup(): starts the UART at 115200 baud and the servo timer. */
+static inline void protoduino_begin(void)
+{
+    pd_avr_setup();
+}
+
+/* Call from loop() as often as possible (it sleeps until the next interrupt). */
+static inline void protoduino_poll(void)
+{
+    pd_avr_loop();
+}
+
+#endif /* PROTODUINO_H */
