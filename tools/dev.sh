@@ -16,6 +16,7 @@ venv="$root/.venv"
 
 APT_PACKAGES=(
     build-essential python3-venv           # native builds, virtual environment
+    python3-dev                            # headers for the C accelerator protoduino._speedups
     gcc-avr binutils-avr avr-libc          # the Uno firmware
     arduino-core-avr                       # Optiboot sources for the flashing test
     simavr libsimavr-dev                   # the emulated Uno
@@ -49,7 +50,10 @@ setup_venv() {
     # Reinstall only when the dependency declarations changed.
     local stamp="$venv/.protoduino-deps"
     local want
-    want=$(cat pyproject.toml constraints.txt tools/bench_setup.sh | sha256sum | cut -d' ' -f1)
+    # setup.py's sources too: the editable install compiles protoduino._speedups from them.
+    want=$(cat pyproject.toml constraints.txt tools/bench_setup.sh setup.py host/protoduino/_speedups.c \
+        firmware/core/pd_cobs.[ch] firmware/core/pd_crc.[ch] firmware/core/pd_protocol.h |
+        sha256sum | cut -d' ' -f1)
     if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
         log "installing protoduino and its pinned dev dependencies into $venv"
         "$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt pip setuptools

@@ -26,6 +26,7 @@ import binascii
 import logging
 from collections import Counter
 from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
 
 from cobs import cobs as _cobs
 
@@ -89,11 +90,15 @@ def decode_frame(encoded: bytes) -> Packet | BadFrame:
     return BadFrame(result, bytes(encoded))
 
 
-class StreamDecoder:
+class PyStreamDecoder:
     """Incremental decoder: feed it chunks of bytes, get packets and bad frames.
 
     The output does not depend on how the stream was chunked. Memory is bounded
     by MAX_ENCODED_FRAME. ``counts`` tallies "packets" and each drop reason.
+
+    The pure-Python reference: :data:`StreamDecoder` is the C accelerator
+    (``protoduino._speedups``) when it was built, this class otherwise, and the
+    tests hold both to the same results.
 
     This is the host's hot path (about one call per serial read), so the
     COBS, length, CRC and TYPE checks of :func:`decode_frame` are inlined here
@@ -176,3 +181,23 @@ class StreamDecoder:
         for chunk in chunks:
             out.extend(self.feed(chunk))
         return out
+
+
+# The C accelerator (host/protoduino/_speedups.c, built by setup.py where a C
+# compiler and the Python headers exist) does what PyStreamDecoder does, in
+# one C call per read instead of interpreter work per frame.
+if TYPE_CHECKING:
+    StreamDecoder = PyStreamDecoder
+else:
+    try:
+        from ._speedups import StreamDecoder
+    except ImportError as error:  # pragma: no cover - depends on the build
+        log.warning(
+            "protoduino._speedups unavailable (%s); using the pure-Python stream decoder "
+            "(several times slower)",
+            error,
+        )
+        StreamDecoder = PyStreamDecoder
+
+#: True when :data:`StreamDecoder` is the C accelerator.
+ACCELERATED: bool = StreamDecoder is not PyStreamDecoder
