@@ -28,9 +28,12 @@ static volatile uint16_t rx_dropped;
 void pd_avr_uart_init(uint32_t baud)
 {
     uint16_t ubrr = (uint16_t)((F_CPU / 8u + baud / 2u) / baud - 1u);
+    /* U2X before the rate, as the Arduino core does: simavr derives the byte
+     * time from UBRR when UBRR0L is written and reads U2X only then, so the
+     * other order emulates 57600 baud timing (the hardware does not care). */
+    UCSR0A = _BV(U2X0);
     UBRR0H = (uint8_t)(ubrr >> 8);
     UBRR0L = (uint8_t)ubrr;
-    UCSR0A = _BV(U2X0);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00); /* 8N1 */
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }

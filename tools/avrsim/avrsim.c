@@ -36,6 +36,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <avr_extint.h>
 #include <avr_ioport.h>
 #include <avr_uart.h>
 #include <sim_avr.h>
@@ -92,7 +93,7 @@ typedef struct {
     void (*core_reset)(struct avr_t *avr);
     pd_fifo_t rx; /* host -> MCU */
     pd_fifo_t tx; /* MCU -> host */
-    uint64_t next_rx_cycle;
+    int rx_timer; /* pd_rx_timer is registered */
     int crashed;
     FILE *port_out; /* the real stdout, for the one port line */
     const char *port_name;
@@ -101,6 +102,7 @@ typedef struct {
 } pd_sim_t;
 
 static pd_sim_t g_sim;
+static void pd_start_rx(pd_sim_t *sim);
 static uint64_t g_start_ns; /* trace and pacing time zero: the process start */
 static volatile sig_atomic_t g_stop;
 static volatile sig_atomic_t g_reset;
@@ -226,9 +228,24 @@ static void pd_set_extrf(pd_sim_t *sim)
     }
 }
 
+/* simavr 1.6 emulates INT0/INT1's low-level trigger by polling the pin on
+ * every cycle, through a new cycle timer per falling edge, while D2/D3 are
+ * low, enabled or not: a servo on D2 or D3 (low 90 % of the time) made the
+ * emulator slower than real time. Level triggering then acts like a falling
+ * edge, which nothing on protoduino's Uno relies on. extint's reset turns the
+ * polling back on, so this runs after every reset. */
+static void pd_tame_extint(pd_sim_t *sim)
+{
+    avr_extint_set_strict_lvl_trig(sim->avr, 0, 0);
+    avr_extint_set_strict_lvl_trig(sim->avr, 1, 0);
+}
+
 static void pd_after_reset(pd_sim_t *sim)
 {
     sim->reset_seen = 0;
+    pd_tame_extint(sim);
+    sim->rx_timer = 0; /* a reset cancels every cycle timer */
+    pd_start_rx(sim);
     if (sim->avr->cycle < sim->last_cycle) {
         sim->cycle_base += sim->last_cycle;
     }
@@ -340,29 +357,40 @@ static void pd_connect(pd_sim_t *sim)
     }
 }
 
-/* One byte from the host into the UART per byte time, as a wire would. */
-static void pd_feed_uart(pd_sim_t *sim)
+/* One byte from the host into the UART per byte time, as a wire would. It
+ * runs as a simavr cycle timer, so bytes arrive on time even while the MCU
+ * sleeps (a sleeping core skips ahead to its next timer event). */
+static avr_cycle_count_t pd_rx_timer(struct avr_t *avr, avr_cycle_count_t when, void *param)
 {
-    uint64_t now = pd_cycles(sim);
-    if (!sim->rx.len || now < sim->next_rx_cycle) {
-        return;
+    pd_sim_t *sim = param;
+    avr_cycle_count_t per_byte = avr->frequency * 10ULL / PD_DEFAULT_BAUD;
+    if (!sim->rx.len) {
+        sim->rx_timer = 0;
+        return 0;
     }
     if (sim->uart) {
         /* simavr's receive FIFO (avr_uart.h); full means the firmware lags. */
         const uart_fifo_t *in = &sim->uart->input;
         if (((in->write + 1U) & (uart_fifo_fifo_size - 1U)) == in->read) {
-            return;
+            return when + per_byte;
         }
     }
-    avr_irq_t *in = avr_io_getirq(sim->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    avr_irq_t *in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
     uint8_t b = sim->rx.data[sim->rx.head];
     sim->rx.head = (sim->rx.head + 1) % PD_BUF_SIZE;
     sim->rx.len--;
     if (in) {
         avr_raise_irq(in, b);
     }
-    uint64_t per_byte = sim->avr->frequency * 10ULL / PD_DEFAULT_BAUD;
-    sim->next_rx_cycle = now + per_byte;
+    return when + per_byte;
+}
+
+static void pd_start_rx(pd_sim_t *sim)
+{
+    if (sim->rx.len && !sim->rx_timer && !sim->crashed) {
+        sim->rx_timer = 1;
+        avr_cycle_timer_register(sim->avr, 1, pd_rx_timer, sim);
+    }
 }
 
 static void pd_pump_pty(pd_sim_t *sim)
@@ -493,9 +521,16 @@ static void pd_run(pd_sim_t *sim)
         }
         pd_check_opens(sim);
         pd_pump_pty(sim);
+        pd_start_rx(sim);
 
         uint64_t wall_ns = pd_now_ns() - start_ns;
         uint64_t target = (uint64_t)((double)(wall_ns + PD_AHEAD_NS) * cycles_per_ns);
+        /* At most 1 ms of emulated time per batch, so that a board catching up
+         * after a stall (a loaded machine) keeps exchanging bytes meanwhile. */
+        uint64_t batch_end = pd_cycles(sim) + (uint64_t)((double)PD_AHEAD_NS * cycles_per_ns);
+        if (target > batch_end) {
+            target = batch_end;
+        }
         if (!sim->crashed) {
             while (pd_cycles(sim) < target && !g_stop && !g_reset) {
                 sim->last_cycle = sim->avr->cycle;
@@ -509,9 +544,6 @@ static void pd_run(pd_sim_t *sim)
                     sim->crashed = 1;
                     break;
                 }
-                if (sim->rx.len) {
-                    pd_feed_uart(sim);
-                }
                 if (sim->glitch_pin >= 0 && pd_cycles(sim) >= sim->next_glitch) {
                     pd_glitch(sim);
                 }
@@ -522,6 +554,7 @@ static void pd_run(pd_sim_t *sim)
         }
         pd_pins_poll(&sim->pins, pd_cycles(sim));
         pd_pump_pty(sim);
+        pd_start_rx(sim);
         if (sim->port_out && !sim->tx.len &&
             pd_cycles(sim) >= (uint64_t)sim->avr->frequency / 1000U * PD_ANNOUNCE_MS) {
             fprintf(sim->port_out, "%s\n", sim->port_name);
@@ -658,6 +691,7 @@ int main(int argc, char **argv)
         }
     }
     sim->avr->sleep = pd_sleep_hook;
+    pd_tame_extint(sim);
     sim->core_reset = sim->avr->reset;
     sim->avr->reset = pd_core_reset;
     if (sim->boot) {

@@ -137,8 +137,9 @@ static void pd_command(const char *line)
 
 int main(void)
 {
-    UBRR0 = PD_BAUD_UBRR;
+    /* U2X first: simavr computes the byte time when UBRR0L is written. */
     UCSR0A = _BV(U2X0);
+    UBRR0 = PD_BAUD_UBRR;
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
     UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
 
