@@ -10,9 +10,9 @@ Layout, so that a new measurement is a small addition:
                 Firmata, Telemetrix). Each knows how to build a stream for that library, parse it
                 and encode the servo command with the library's own code; a missing library
                 raises :class:`~bench.core.MissingDependencyError` naming the package to install.
-* ``receive``   part 1, the host receive path; ``wire`` part 4, bytes on the wire.
-* ``proposal``  a faster stream decoder, measured as a proposal for ``framing.py`` (which belongs
-                to the foundation and is not changed from here).
+* ``receive``   part 1, the host receive path, with each of protoduino's stream decoders (the C
+                accelerator ``protoduino._speedups`` and the pure-Python ``PyStreamDecoder``);
+                ``wire`` part 4, bytes on the wire.
 * ``machine``, ``charts``, ``report``, ``runner``: machine facts, matplotlib charts, the markdown
                 writer and the command line.
 

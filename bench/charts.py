@@ -96,10 +96,17 @@ def stacked_hbars(
     *,
     title: str,
     xlabel: str,
+    vline: tuple[str, float] | None = None,
+    legend_below: bool = False,
 ) -> Path:
-    """Horizontal bars stacked from (legend label, values) pairs, labels top to bottom."""
+    """Horizontal bars stacked from (legend label, values) pairs, labels top to bottom.
+
+    ``vline`` marks a goal (label, x); ``legend_below`` moves the legend under the axes, for
+    bars long enough to run under it.
+    """
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(7.5, 0.5 * len(labels) + 1.4))
+    extra = 0.9 if legend_below else 0.0
+    fig, ax = plt.subplots(figsize=(7.5, 0.5 * len(labels) + 1.4 + extra))
     ys = list(range(len(labels)))[::-1]
     left = [0.0] * len(labels)
     for i, (name, values) in enumerate(stacks):
@@ -109,7 +116,12 @@ def stacked_hbars(
     ax.set_yticklabels(labels)
     ax.set_xlabel(xlabel)
     ax.grid(axis="x", alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
+    if vline is not None:
+        ax.axvline(vline[1], color=_COLORS[6], linestyle="--", linewidth=1, label=vline[0])
+    if legend_below:
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.25), ncol=2, fontsize=8)
+    else:
+        ax.legend(loc="lower right", fontsize=8)
     ax.set_title(title, fontsize=11)
     return _save(fig, path)
 

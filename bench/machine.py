@@ -56,7 +56,7 @@ def protobuf_backend() -> str:
 
 def describe(root: Path, packages: Iterable[str]) -> list[tuple[str, str]]:
     """(what, value) rows: date, commit, CPU, OS, Python and the versions of ``packages``."""
-    from protoduino.framing import COBS_NATIVE
+    from protoduino.framing import ACCELERATED, COBS_NATIVE
 
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "?"
     rows = [
@@ -68,6 +68,12 @@ def describe(root: Path, packages: Iterable[str]) -> list[tuple[str, str]]:
         ("Python", f"{platform.python_implementation()} {platform.python_version()}"),
         ("protobuf backend", protobuf_backend()),
         ("cobs implementation", "C extension" if COBS_NATIVE else "pure-Python fallback"),
+        (
+            "protoduino stream decoder",
+            "C accelerator (protoduino._speedups) built"
+            if ACCELERATED
+            else "pure Python only (protoduino._speedups not built)",
+        ),
     ]
     seen: set[str] = set()
     for name in packages:

@@ -6,14 +6,17 @@ where a message reaches the application (a pending call resolved, a handler call
 frames and bytes per CPU second (see :mod:`bench.core`); the CPU share a line rate needs is that
 rate divided by the measured bytes per second.
 
-The proposals in :mod:`bench.proposal` are measured step by step in the same run, on the same
-stream; when a target is missed the section shows them with a profile of protoduino's path
-(cProfile).
+protoduino is measured twice, with each of its stream decoders: the C accelerator
+(``protoduino._speedups``, what ``framing.StreamDecoder`` is when it was built) and the pure-Python
+``PyStreamDecoder`` (the reference and fallback). The section then splits protoduino's time per
+frame into its stages, measured in the same run on the same stream, and when a target is missed
+adds a profile of the path (cProfile).
 """
 
 from __future__ import annotations
 
 import cProfile
+import functools
 import io
 import logging
 import pstats
@@ -38,7 +41,6 @@ from .core import (
     measure_interleaved,
 )
 from .peers import RxCase, mavlink, pigweed, protoduino, serialtransfer
-from .proposal import FastStreamDecoder, LightPacketDecoder, parse_out_from_string
 
 log = logging.getLogger(__name__)
 
@@ -48,9 +50,13 @@ GOAL_CPU_AT_1MBPS = 0.10
 
 CaseFactory = Callable[[int, int, int], RxCase]
 
-#: The libraries compared, protoduino first: (label, PyPI package, factory).
+#: The libraries compared, protoduino first (one row per stream decoder, the C accelerator first
+#: when it was built): (label, factory).
 PEERS: tuple[tuple[str, CaseFactory], ...] = (
-    ("protoduino", protoduino.rx_case),
+    *(
+        (label, functools.partial(protoduino.rx_case, decoder=decoder, name=label))
+        for label, decoder in protoduino.DECODERS
+    ),
     ("pymavlink", mavlink.rx_case),
     ("pigweed", pigweed.rx_case),
     ("pySerialTransfer", serialtransfer.rx_case),
@@ -143,15 +149,16 @@ def _share_cells(bytes_per_s: float) -> list[str]:
     return [fmt_percent(cpu_share(rate, bytes_per_s)) for _name, rate in LINE_RATES]
 
 
-def _results_table(results: list[RxResult]) -> str:
+def _results_table(results: list[RxResult], n_protoduino: int) -> str:
     base = results[0]
     header = [
         "library",
         "mean frame",
         "frames/s",
         "MB/s",
-        "protoduino ÷ it, frames/s",
-        "protoduino ÷ it, bytes/s",
+        f"{base.case.name} ÷ it, frames/s",
+        *([f"{results[1].case.name} ÷ it, frames/s"] if n_protoduino > 1 else []),
+        f"{base.case.name} ÷ it, bytes/s",
         *[f"CPU at {name}" for name, _rate in LINE_RATES],
         "spread",
     ]
@@ -165,6 +172,7 @@ def _results_table(results: list[RxResult]) -> str:
                 fmt_rate(frames_per_s),
                 f"{bytes_per_s / 1e6:.2f}",
                 f"{base.ratio(r):.2f}x",
+                *([f"{results[1].ratio(r):.2f}x"] if n_protoduino > 1 else []),
                 f"{base.ratio(r, per_byte=True):.2f}x",
                 *_share_cells(bytes_per_s),
                 fmt_percent(r.timing.spread),
@@ -182,125 +190,124 @@ def _mix_table(frames: int) -> str:
     )
 
 
-#: The proposal steps, each keeping the previous ones.
-STEP_LABELS = (
-    "+ FastStreamDecoder",
-    "+ Packet built at slots-class cost",
-    "+ ArduinoOut.FromString in parse_out",
-)
-FRAMING_LABELS = ("StreamDecoder (committed)", "FastStreamDecoder", "LightPacketDecoder")
+@dataclass(frozen=True, slots=True)
+class Stages:
+    """protoduino's CPU time per frame (us), split by stage, for one stream decoder.
+
+    Each stage is measured on its own in the same interleaved run; ``rest`` is what the whole
+    path costs beyond them: the request layer's loop over the items, SEQ check, reads of the
+    Ack's fields, pending-call lookup and listener calls.
+    """
+
+    label: str
+    decoder: float
+    data: float
+    control: float
+    whole: float
+
+    @property
+    def rest(self) -> float:
+        return self.whole - self.decoder - self.data - self.control
 
 
-def _proposal_cases(ctx: Context) -> list[RxCase]:
-    """The three proposal steps on the whole path, then the three decoders alone."""
+def _stage_cases(ctx: Context) -> list[RxCase]:
+    """The stream decoders alone, then the DATA and CONTROL payload parsing alone."""
     args = (ctx.frames, ctx.chunk, ctx.seed)
+    cases = [
+        protoduino.framing_only_case(*args, decoder=decoder, name=f"{label}, decoder alone")
+        for label, decoder in protoduino.DECODERS
+    ]
+    cases.append(protoduino.payload_case(*args, control=False))
+    cases.append(protoduino.payload_case(*args, control=True))
+    return cases
+
+
+def _stages(base: RxResult, whole: Sequence[RxResult], parts: Sequence[RxResult]) -> list[Stages]:
+    """Per-frame times as ``base``'s median scaled by the paired ratios (all these cases run
+    over the same stream, so a frame-rate ratio is the inverse time ratio)."""
+
+    def us(r: RxResult) -> float:
+        return base.us_per_frame / r.ratio(base)
+
+    decoders, data, control = parts[: len(whole)], parts[-2], parts[-1]
     return [
-        protoduino.rx_case(*args, decoder=FastStreamDecoder, name=STEP_LABELS[0]),
-        protoduino.rx_case(*args, decoder=LightPacketDecoder, name=STEP_LABELS[1]),
-        protoduino.rx_case(
-            *args, decoder=LightPacketDecoder, parse=parse_out_from_string, name=STEP_LABELS[2]
-        ),
-        protoduino.framing_only_case(*args, name=FRAMING_LABELS[0]),
-        protoduino.framing_only_case(*args, decoder=FastStreamDecoder, name=FRAMING_LABELS[1]),
-        protoduino.framing_only_case(*args, decoder=LightPacketDecoder, name=FRAMING_LABELS[2]),
+        Stages(w.case.name, us(d), us(data), us(control), us(w))
+        for w, d in zip(whole, decoders, strict=True)
     ]
 
 
-def _proposals(
-    baseline: RxResult,
-    step_results: Sequence[RxResult],
-    framing_results: Sequence[RxResult],
-    pymavlink: RxResult | None,
-) -> str:
-    steps = [("protoduino as committed", baseline), *zip(STEP_LABELS, step_results, strict=True)]
-    # Rates below are the committed path's median scaled by each step's paired ratio, so the
-    # columns agree with each other even when the machine's speed drifted during the run.
+def _stages_table(stages: Sequence[Stages], budget_us: float) -> str:
+    names = [
+        ("stream decoder: bytes -> Packet", "decoder"),
+        ("DATA payloads: messages.parse_out (protobuf upb)", "data"),
+        ("CONTROL payloads: packets.parse_control", "control"),
+        ("the rest: the request layer's per-packet Python (see below)", "rest"),
+    ]
+    header = ["stage, us of CPU per frame"]
+    for s in stages:
+        header += [s.label, "share"]
     rows = []
-    previous = baseline
-    for label, r in steps:
-        gain = r.ratio(baseline)
-        rows.append(
-            [
-                label,
-                fmt_rate(baseline.frames_per_s * gain),
-                f"{baseline.us_per_frame / gain:.2f}",
-                f"{gain:.2f}x",
-                f"{r.ratio(previous):.2f}x",
-                fmt_percent(cpu_share(1_000_000, baseline.bytes_per_s * gain)),
-            ]
+    for title, attr in names:
+        row = [title]
+        for s in stages:
+            value = getattr(s, attr)
+            row += [f"{value:.2f}", f"{value / s.whole * 100:.0f} %"]
+        rows.append(row)
+    total = ["**whole receive path**"]
+    for s in stages:
+        total += [f"**{s.whole:.2f}**", "100 %"]
+    rows.append(total)
+    budget = ["budget for 10 % of a core at 1 MB/s"]
+    for _s in stages:
+        budget += [f"{budget_us:.2f}", ""]
+    rows.append(budget)
+    return md_table(header, rows)
+
+
+def _verdict(stages: Sequence[Stages], budget_us: float, ratio: float | None, cpu: float) -> str:
+    """Why the targets are met or missed, from the measured stages."""
+    fast = stages[0]
+    above = fast.whole - fast.decoder
+    lines = []
+    if len(stages) > 1:
+        slow = stages[-1]
+        lines.append(
+            f"The C decoder takes {fast.decoder:.2f} us per frame where the pure-Python one "
+            f"takes {slow.decoder:.2f} us ({slow.decoder / fast.decoder:.1f}x); the whole path "
+            f"goes from {slow.whole:.2f} to {fast.whole:.2f} us per frame "
+            f"({slow.whole / fast.whole:.2f}x)."
         )
-        previous = r
-    table = md_table(
-        [
-            "whole receive path",
-            "frames/s",
-            "us/frame",
-            "vs committed",
-            "vs previous step",
-            "CPU at 1 MB/s",
-        ],
-        rows,
+    lines.append(
+        f"With {fast.label}, the decoder is {fast.decoder / fast.whole * 100:.0f} % of the "
+        f"path; the other {above:.2f} us per frame are the layers above it, in Python: "
+        f"protobuf parsing of DATA payloads ({fast.data:.2f} us per stream frame), CONTROL "
+        f"parsing ({fast.control:.2f} us) and the rest of the request layer's per-packet "
+        f"work ({max(fast.rest, 0):.2f} us: the loop over the items, the SEQ check, reading "
+        "the Ack's fields from the upb message, the pending-call lookup, the listener calls)."
     )
-    framing_base = framing_results[0]
-    frows = []
-    for label, r in zip(FRAMING_LABELS, framing_results, strict=True):
-        gain = r.ratio(framing_base)
-        frows.append(
-            [
-                label,
-                fmt_rate(framing_base.frames_per_s * gain),
-                f"{framing_base.us_per_frame / gain:.2f}",
-                f"{gain:.2f}x",
-            ]
+    if cpu >= GOAL_CPU_AT_1MBPS:
+        if above >= budget_us:
+            lines.append(
+                f"10 % of a core at 1 MB/s leaves {budget_us:.2f} us per frame for everything; "
+                f"the layers above the decoder take {above:.2f} us on their own, so no stream "
+                "decoder can meet that goal: it needs the per-packet dispatch (SEQ, Ack "
+                "matching, CONTROL parsing) out of the interpreter as well, or fewer, larger "
+                "frames (the cost is per frame, not per byte)."
+            )
+        else:
+            lines.append(
+                f"10 % of a core at 1 MB/s leaves {budget_us:.2f} us per frame; the path takes "
+                f"{fast.whole:.2f} us."
+            )
+    if ratio is not None and ratio < GOAL_RATIO_TO_PYMAVLINK:
+        bound = ratio * fast.whole / above if above > 0 else float("inf")
+        lines.append(
+            f"Against pymavlink the path is {ratio:.2f}x (goal "
+            f"{GOAL_RATIO_TO_PYMAVLINK:.0f}x). A stream decoder costing nothing would make it "
+            f"at most {bound:.2f}x: what is left is Python per packet above the decoder, the "
+            "same kind of work pymavlink does per message."
         )
-    ftable = md_table(["stream decoder alone", "frames/s", "us/frame", "vs committed"], frows)
-    best = steps[-1][1]
-    share = cpu_share(1_000_000, baseline.bytes_per_s * best.ratio(baseline))
-    verdicts = [
-        f"needs {fmt_percent(share)} of a core at 1 MB/s (goal < "
-        f"{fmt_percent(GOAL_CPU_AT_1MBPS)}: {'met' if share < GOAL_CPU_AT_1MBPS else 'missed'})"
-    ]
-    if pymavlink is not None:
-        ratio = best.ratio(pymavlink)
-        verdicts.insert(
-            0,
-            f"is {ratio:.2f}x pymavlink's frame rate (goal {GOAL_RATIO_TO_PYMAVLINK:.0f}x: "
-            f"{'met' if ratio >= GOAL_RATIO_TO_PYMAVLINK else 'missed'})",
-        )
-    framing_us = framing_base.us_per_frame / framing_results[-1].ratio(framing_base)
-    budget_us = GOAL_CPU_AT_1MBPS / (1_000_000 / baseline.frame_size) * 1e6
-    over_budget = (
-        f" Framing alone then takes {framing_us:.2f} us per frame, more than the "
-        f"{budget_us:.2f} us that 10 % of a core allows at 1 MB/s: with frames this short, "
-        "that goal stays out of reach of these decoders in pure Python."
-        if framing_us > budget_us
-        else ""
-    )
-    summary = (
-        f"With all three, the receive path {' and '.join(verdicts)}.{over_budget} What is "
-        "left per frame is the stream decoder's Python-level work (about "
-        f"{framing_us:.2f} us above) plus one protobuf parse and the "
-        "dispatch. Going further means splitting, COBS-decoding and CRC-checking a whole read "
-        "in one C call; neither the `cobs` package (one frame per call) nor the standard "
-        "library offers that, so it would be a small C extension of our own (not measured "
-        "here).\n"
-    )
-    return (
-        "Each step keeps the previous ones and is measured on the same stream in the same run. "
-        "`FastStreamDecoder` produces exactly what `StreamDecoder` does (items, reasons, raw "
-        "bytes, counts; `tests/test_bench_smoke.py` compares them on damaged streams cut at "
-        "random), so it can replace it in `framing.py` as is. The Packet step stands for making "
-        "`packets.Packet` a plain `__slots__` class or a `NamedTuple` instead of a frozen "
-        "dataclass; the last step tries `ArduinoOut.FromString` in `messages.parse_out` (one "
-        "line). See "
-        "`bench/proposal.py`. Rates and times in these two tables are the committed "
-        "version's median scaled by each row's paired ratio.\n\n"
-        + table
-        + "\n"
-        + ftable
-        + "\n"
-        + summary
-    )
+    return "\n\n".join(lines) + "\n"
 
 
 def run(ctx: Context) -> SectionResult:
@@ -312,43 +319,55 @@ def run(ctx: Context) -> SectionResult:
             case = factory(ctx.frames, ctx.chunk, ctx.seed)
         except MissingDependencyError as missing:
             log.warning("receive: %s skipped: %s", label, missing)
-            skipped.append((label, missing.package))
+            skipped.append((label, f"`{missing.package}` not installed"))
             continue
         peer_cases.append(case)
         packages.append(case.package)
-    extra_cases = _proposal_cases(ctx)
-    measured = run_cases([*peer_cases, *extra_cases], ctx.reps)
+    n_pd = len(protoduino.DECODERS)
+    stage_cases = _stage_cases(ctx)
+    measured = run_cases([*peer_cases, *stage_cases], ctx.reps)
     results = measured[: len(peer_cases)]
-    step_results = measured[len(peer_cases) : len(peer_cases) + len(STEP_LABELS)]
-    framing_results = measured[len(peer_cases) + len(STEP_LABELS) :]
     base = results[0]
-    by_package = {r.case.package: r for r in results}
+    stages = _stages(base, results[:n_pd], measured[len(peer_cases) :])
+    by_package = {r.case.package: r for r in results[n_pd:]}
+    budget_us = GOAL_CPU_AT_1MBPS / (1_000_000 / base.frame_size) * 1e6
 
     parts = [
-        f"Fed from memory in reads of {ctx.chunk} B; {ctx.frames:,} frames per stream. Rates "
-        f"are per CPU second of this process, medians of {ctx.reps} repetitions; the cases "
-        "take turns, one repetition each per round, and a ratio is the median of the ratios "
-        "within a round, which cancels most of the machine's drift. protoduino's rate is its "
-        "median; every other rate is that divided by the paired ratio, so that rates, ratios "
-        "and CPU shares agree. Spread = (max - min) / median of a case's repetitions: a large "
-        "one means the machine's speed changed during the run, and the absolute rates and "
-        "CPU shares carry that uncertainty, the ratios much less. A CPU share above 100 % "
-        "means one core cannot keep up.\n",
-        _results_table(results),
+        f"Fed from memory in reads of {ctx.chunk} B; {ctx.frames:,} frames per stream. "
+        "protoduino runs twice, once with each stream decoder: the C accelerator "
+        "(`protoduino._speedups`, which `framing.StreamDecoder` is wherever it was built) and "
+        "the pure-Python `PyStreamDecoder` (the reference and fallback); everything above the "
+        f"decoder is the same Python. Rates are per CPU second of this process, medians of "
+        f"{ctx.reps} repetitions; the cases take turns, one repetition each per round, and a "
+        "ratio is the median of the ratios within a round, which cancels most of the "
+        "machine's drift. The first row's rate is its median; every other rate is that "
+        "divided by the paired ratio, so that rates, ratios and CPU shares agree. Spread = "
+        "(max - min) / median of a case's repetitions: a large one means the machine's speed "
+        "changed during the run, and the absolute rates and CPU shares carry that "
+        "uncertainty, the ratios much less. A CPU share above 100 % means one core cannot "
+        "keep up.\n",
+        _results_table(results, n_pd),
         "What each row does, from bytes to the application:\n",
     ]
     parts += [f"- **{r.case.name}**: {r.case.stages}. Parser: {r.case.parser}." for r in results]
     parts.append("")
+    if n_pd == 1:
+        skipped.insert(
+            0,
+            (
+                "protoduino (C accelerator)",
+                "`protoduino._speedups` not built: it needs a C compiler and the Python headers",
+            ),
+        )
     if skipped:
         parts.append(
-            "Not run here: "
-            + ", ".join(f"{label} (`{package}` not installed)" for label, package in skipped)
-            + ".\n"
+            "Not run here: " + ", ".join(f"{label} ({why})" for label, why in skipped) + ".\n"
         )
     parts.append(_mix_table(ctx.frames))
 
     targets: list[Target] = []
     mav = by_package.get("pymavlink")
+    ratio: float | None = None
     if mav is None:
         targets.append(
             Target(
@@ -360,72 +379,55 @@ def run(ctx: Context) -> SectionResult:
         )
     else:
         ratio = base.ratio(mav)
+        others = "".join(f"; {r.case.name} {r.ratio(mav):.2f}x" for r in results[1:n_pd])
         targets.append(
             Target(
                 "receive rate vs pymavlink",
                 f">= {GOAL_RATIO_TO_PYMAVLINK:.0f}x pymavlink's frames/s",
-                f"{ratio:.2f}x ({fmt_rate(base.frames_per_s)} vs "
+                f"{ratio:.2f}x with {base.case.name} ({fmt_rate(base.frames_per_s)} vs "
                 f"{fmt_rate(mav.scaled_to(base)[0])} frames/s; "
-                f"{base.ratio(mav, per_byte=True):.2f}x in bytes/s)",
+                f"{base.ratio(mav, per_byte=True):.2f}x in bytes/s){others}",
                 ratio >= GOAL_RATIO_TO_PYMAVLINK,
             )
         )
     share = cpu_share(1_000_000, base.bytes_per_s)
+    others = "".join(
+        f"; {r.case.name} {fmt_percent(cpu_share(1_000_000, r.scaled_to(base)[1]))}"
+        for r in results[1:n_pd]
+    )
     targets.append(
         Target(
             "receive CPU at 1 MB/s",
             f"< {fmt_percent(GOAL_CPU_AT_1MBPS)} of a core",
-            fmt_percent(share),
+            f"{fmt_percent(share)} with {base.case.name}{others}",
             share < GOAL_CPU_AT_1MBPS,
         )
     )
 
-    proposal_rows: list[tuple[str, RxResult]] = []
-    if any(t.met is False for t in targets):
-        parts.append("### Why the targets are missed\n")
-        framing_share = 1 / framing_results[0].ratio(base)
-        needed = 1_000_000 / base.frame_size
+    parts.append("### Where the time goes\n")
+    parts.append(
+        "Each stage measured on its own, in the same run and on the same stream: each stream "
+        "decoder alone, then the stream's DATA and CONTROL payloads (already decoded) through "
+        "the parsing the request layer does; the rest is the whole path minus those. Times are "
+        "per frame of the stream (a stage that handles only DATA frames is spread over all of "
+        f"them). At {base.frame_size:.1f} B per frame, 1 MB/s is "
+        f"{fmt_rate(1_000_000 / base.frame_size)} frames/s, and 10 % of a core leaves "
+        f"{budget_us:.2f} us per frame.\n"
+    )
+    parts.append(_stages_table(stages, budget_us))
+    parts.append(_verdict(stages, budget_us, ratio, share))
+    if any(t.met is False for t in targets) and ctx.profile:
         parts.append(
-            f"protoduino spends {base.us_per_frame:.2f} us of CPU per frame; "
-            f"{base.us_per_frame * framing_share:.2f} us of that "
-            f"({framing_share * 100:.0f} %) is `StreamDecoder` "
-            "alone, the rest is protobuf parsing and the per-packet work of the layers above "
-            f"(SEQ, dispatch). Its frames are short ({base.frame_size:.1f} B on average"
-            + (
-                f", against {mav.frame_size:.1f} B for MAVLink's COMMAND_LONG"
-                if mav is not None
-                else ""
-            )
-            + f"), so 1 MB/s means {fmt_rate(needed)} frames/s, and 10 % of a core leaves "
-            f"{0.1 / needed * 1e6:.2f} us per frame: the cost is per frame (interpreter "
-            "calls and objects), not per byte, so a short-frame protocol pays more per byte "
-            "than MAVLink does.\n"
+            f"Profile of one pass over the stream with {base.case.name} (cProfile, which "
+            "inflates the cost of each Python call; own time first; the C decoder shows as one "
+            "`feed` call per read):\n\n```\n" + _profile(base.case) + "\n```\n"
         )
-        if ctx.profile:
-            parts.append(
-                "Profile of one pass over the stream (cProfile, which inflates the cost of "
-                "each Python call; own time first; `<string>:2(__init__)` is the generated "
-                "`__init__` of the frozen dataclasses `Packet` and `Control`):\n\n```\n"
-                + _profile(base.case)
-                + "\n```\n"
-            )
-        parts.append("### Proposals, measured\n")
-        parts.append(_proposals(base, step_results, framing_results, mav))
-        proposal_rows = list(zip(STEP_LABELS, step_results, strict=True))
 
     chart_list: list[Chart] = []
     if ctx.chart_dir is not None:
-        # (label, frames/s, bytes/s) as the tables give them: protoduino's medians scaled by
-        # each row's paired ratio.
+        # (label, frames/s, bytes/s) as the tables give them: the first row's medians scaled
+        # by each row's paired ratio.
         rows = [(r.case.name, *r.scaled_to(base)) for r in results]
-        rows += [
-            (
-                f"proposal {label}",
-                base.frames_per_s * r.ratio(base),
-                base.bytes_per_s * r.ratio(base),
-            )
-            for label, r in proposal_rows
-        ]
         path = charts.hbars(
             ctx.chart_dir / "receive.png",
             [label for label, _f, _b in rows],
@@ -438,12 +440,27 @@ def run(ctx: Context) -> SectionResult:
             ],
             title="Host receive path, fed from memory",
             highlight=0,
-            secondary=range(len(results), len(rows)),
+            secondary=range(1, n_pd),
             vline=("target 10 %", GOAL_CPU_AT_1MBPS * 100),
         )
         chart_list.append(
             Chart(path, "Receive path: frames per CPU second and the share of a core 1 MB/s needs")
         )
+        path = charts.stacked_hbars(
+            ctx.chart_dir / "receive_stages.png",
+            [s.label for s in stages],
+            [
+                ("stream decoder", [s.decoder for s in stages]),
+                ("DATA: protobuf parse", [s.data for s in stages]),
+                ("CONTROL parse", [s.control for s in stages]),
+                ("request layer (the rest)", [max(s.rest, 0.0) for s in stages]),
+            ],
+            title="protoduino's receive path: CPU time per frame, by stage",
+            xlabel="us of CPU per frame",
+            vline=(f"10 % of a core at 1 MB/s ({budget_us:.2f} us)", budget_us),
+            legend_below=True,
+        )
+        chart_list.append(Chart(path, "protoduino's CPU time per frame, by stage"))
     return SectionResult("\n".join(parts), targets, chart_list, packages)
 
 

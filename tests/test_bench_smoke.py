@@ -2,8 +2,8 @@
 checked (frames dispatched, bytes that decode back). Nothing here asserts on time.
 
 A case whose library is not installed is skipped with the package's name; tools/bench_setup.sh
-installs them all. The protoduino cases, the proposal's equivalence and the report generator
-need only the dev extras.
+installs them all. The protoduino cases and the report generator need only the dev extras (and,
+for the C accelerator's rows, a build of protoduino._speedups).
 """
 
 from __future__ import annotations
@@ -21,9 +21,10 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # bench/ is a top-level folder of the checkout, not installed
     sys.path.insert(0, str(ROOT))
 
+from protoduino import framing  # noqa: E402
 from protoduino._generated import protoduino_pb2 as pb  # noqa: E402
 from protoduino.constants import PacketType  # noqa: E402
-from protoduino.framing import StreamDecoder  # noqa: E402
+from protoduino.framing import PyStreamDecoder, StreamDecoder  # noqa: E402
 from protoduino.packets import Packet  # noqa: E402
 
 from bench import receive, runner, wire  # noqa: E402
@@ -31,7 +32,6 @@ from bench.core import MissingDependencyError, Timing, measure, require  # noqa:
 from bench.peers import RxCase, Slot, WireSample, mavlink, pigweed, protoduino, serialtransfer  # noqa: E402
 from bench.peers import firmata as firmata_peer  # noqa: E402
 from bench.peers import telemetrix as telemetrix_peer  # noqa: E402
-from bench.proposal import FastStreamDecoder, LightPacketDecoder, parse_out_from_string  # noqa: E402
 
 FRAMES = 60
 CHUNK = 37  # odd, so that frames straddle reads
@@ -52,16 +52,23 @@ def _small(factory: Callable[[int, int, int], RxCase]) -> Callable[[], RxCase]:
     return lambda: factory(FRAMES, CHUNK, SEED)
 
 
+def _framing_only(decoder: Callable[[], protoduino.Decoder]) -> Callable[[], RxCase]:
+    return lambda: protoduino.framing_only_case(FRAMES, CHUNK, SEED, decoder=decoder)
+
+
 RX_FACTORIES: dict[str, Callable[[], RxCase]] = {
     **{label: _small(factory) for label, factory in receive.PEERS},
-    "protoduino framing only": lambda: protoduino.framing_only_case(FRAMES, CHUNK, SEED),
-    "proposal FastStreamDecoder": lambda: protoduino.rx_case(
-        FRAMES, CHUNK, SEED, decoder=FastStreamDecoder
-    ),
-    "proposal LightPacketDecoder + FromString": lambda: protoduino.rx_case(
-        FRAMES, CHUNK, SEED, decoder=LightPacketDecoder, parse=parse_out_from_string
-    ),
+    **{f"{label} framing only": _framing_only(decoder) for label, decoder in protoduino.DECODERS},
+    "DATA payload parsing": lambda: protoduino.payload_case(FRAMES, CHUNK, SEED, control=False),
+    "CONTROL payload parsing": lambda: protoduino.payload_case(FRAMES, CHUNK, SEED, control=True),
 }
+
+
+def test_both_protoduino_decoders_are_measured_when_built() -> None:
+    labels = [label for label, _decoder in protoduino.DECODERS]
+    assert labels[-1] == "protoduino (pure Python)"
+    assert ("protoduino (C accelerator)" in labels) == framing.ACCELERATED
+    assert [label for label, _factory in receive.PEERS][: len(labels)] == labels
 
 
 @pytest.mark.parametrize("name", sorted(RX_FACTORIES))
@@ -125,29 +132,27 @@ def _damaged(stream: bytes, rng: random.Random) -> bytes:
     return bytes(data)
 
 
-@pytest.mark.parametrize("decoder", [FastStreamDecoder, LightPacketDecoder])
+@pytest.mark.skipif(
+    not framing.ACCELERATED,
+    reason="protoduino._speedups not built (needs a C compiler and python3-dev)",
+)
 @pytest.mark.parametrize("seed", range(4))
-def test_proposed_decoder_matches_stream_decoder(
-    decoder: Callable[[], FastStreamDecoder], seed: int
-) -> None:
+def test_both_decoders_agree_on_a_damaged_bench_stream(seed: int) -> None:
+    """The two protoduino rows of the report decode the same stream to the same items;
+    tests/test_framing_props.py holds both to the recovery policy in detail."""
     rng = random.Random(seed)
     stream, _ids = protoduino.mixed_stream(600, seed)
     data = _damaged(stream, rng)
     for _ in range(5):
         cuts = sorted(rng.sample(range(1, len(data)), rng.randrange(1, 300)))
         chunks = [data[a:b] for a, b in zip([0, *cuts], [*cuts, len(data)], strict=True)]
-        ref, new = StreamDecoder(), decoder()
+        ref, new = PyStreamDecoder(), StreamDecoder()
         expected = [item for chunk in chunks for item in ref.feed(chunk)]
         got = [item for chunk in chunks for item in new.feed(chunk)]
-        assert got == expected
+        assert [(type(i), *i) for i in got] == [(type(i), *i) for i in expected]
         assert new.counts == ref.counts
     # The damage must have exercised every drop reason, or the comparison proves little.
     assert {"cobs", "crc", "overflow", "packets"} <= set(ref.counts)
-
-
-def test_parse_out_from_string_wraps_decode_errors() -> None:
-    with pytest.raises(Exception, match="does not decode"):
-        parse_out_from_string(b"\x0a\xff")
 
 
 # --- part 4: the bytes decode back with each library's own decoder -----------------------
@@ -241,9 +246,12 @@ def test_runner_writes_a_report(tmp_path: Path) -> None:
     for heading in ("## Targets", "## Machine", "## 1. Host receive path", "## 4. Bytes on the"):
         assert heading in text
     assert "Not measured yet" in text  # parts 2, 3 and 5 are placeholders so far
+    assert "### Where the time goes" in text
+    for label, _decoder in protoduino.DECODERS:
+        assert f"| {label} |" in text
     command = protoduino.wire_sample().command
     assert " ".join(f"{b:02x}" for b in command) in text
-    for link in ("perf/receive.png", "perf/wire.png"):
+    for link in ("perf/receive.png", "perf/receive_stages.png", "perf/wire.png"):
         if link in text:
             assert (tmp_path / link).stat().st_size > 0
 

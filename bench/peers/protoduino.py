@@ -10,10 +10,11 @@ import random
 from collections.abc import Callable, Iterable
 from typing import Protocol
 
+from protoduino import framing
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.constants import ControlCode, PacketType
 from protoduino.errors import ProtocolError
-from protoduino.framing import COBS_NATIVE, StreamDecoder, frame_packet
+from protoduino.framing import COBS_NATIVE, PyStreamDecoder, frame_packet
 from protoduino.messages import parse_out
 from protoduino.packets import BadFrame, Packet, heartbeat_payload, parse_control
 
@@ -42,6 +43,31 @@ class Decoder(Protocol):
     """What the receive path needs from a stream decoder (``framing.StreamDecoder``'s API)."""
 
     def feed(self, data: bytes) -> list[Packet | BadFrame]: ...
+
+
+#: protoduino's two stream decoders, measured side by side: ``framing.StreamDecoder`` is the C
+#: accelerator (``protoduino._speedups``) where it was built, ``PyStreamDecoder`` the pure-Python
+#: reference and fallback. Without a build only the latter is listed.
+DECODERS: tuple[tuple[str, Callable[[], Decoder]], ...] = (
+    *((("protoduino (C accelerator)", framing.StreamDecoder),) if framing.ACCELERATED else ()),
+    ("protoduino (pure Python)", PyStreamDecoder),
+)
+
+
+def parser_kind(decoder: Callable[[], Decoder]) -> str:
+    """How ``decoder`` turns bytes into packets, for the report."""
+    if decoder is PyStreamDecoder:
+        cobs = "C extension" if COBS_NATIVE else "pure-Python fallback"
+        return (
+            f"pure Python (`PyStreamDecoder`); COBS from `cobs` ({cobs}), CRC from "
+            "`binascii.crc_hqx`; protobuf upb"
+        )
+    if framing.ACCELERATED and decoder is framing.StreamDecoder:
+        return (
+            "C (`protoduino._speedups`: one call per read; the firmware's own pd_cobs.c, its "
+            "pd_crc.c through a 256-entry table); protobuf upb"
+        )
+    return getattr(decoder, "__qualname__", repr(decoder))
 
 
 class StandInRequestLayer:
@@ -160,14 +186,14 @@ def rx_case(
     chunk: int,
     seed: int,
     *,
-    decoder: Callable[[], Decoder] = StreamDecoder,
+    decoder: Callable[[], Decoder] = framing.StreamDecoder,
     parse: Callable[[bytes], pb.ArduinoOut] = parse_out,
     name: str = "protoduino",
     stages: str = "",
 ) -> RxCase:
-    """The full receive path: StreamDecoder -> packets -> ArduinoOut -> stand-in request layer.
+    """The full receive path: stream decoder -> packets -> ArduinoOut -> stand-in request layer.
 
-    ``decoder`` and ``parse`` default to the project's own; the proposals swap them.
+    ``decoder`` and ``parse`` default to the project's own.
     """
     stream, ids = mixed_stream(frames, seed)
     chunks = chunked(stream, chunk)
@@ -180,11 +206,10 @@ def rx_case(
             layer.on_items(dec.feed(data))
         return layer.dispatched
 
-    cobs = "C extension" if COBS_NATIVE else "pure-Python fallback"
     return RxCase(
         name=name,
         package="protoduino",
-        parser=f"pure Python; COBS from `cobs` ({cobs}), CRC from `binascii.crc_hqx`, protobuf upb",
+        parser=parser_kind(decoder),
         stages=stages
         or "StreamDecoder.feed -> Packet -> messages.parse_out (ArduinoOut) or parse_control -> "
         "SEQ check, Ack resolved by message_id in a dict, events to a listener",
@@ -199,7 +224,7 @@ def framing_only_case(
     chunk: int,
     seed: int,
     *,
-    decoder: Callable[[], Decoder] = StreamDecoder,
+    decoder: Callable[[], Decoder] = framing.StreamDecoder,
     name: str = "protoduino, framing only",
 ) -> RxCase:
     """The same stream through the stream decoder alone: the framing layer's share."""
@@ -218,8 +243,39 @@ def framing_only_case(
     return RxCase(
         name=name,
         package="protoduino",
-        parser="as above",
+        parser=parser_kind(decoder),
         stages="stream decoder -> Packet, nothing parsed or dispatched",
+        stream=stream,
+        frames=frames,
+        run=run,
+    )
+
+
+def payload_case(frames: int, chunk: int, seed: int, *, control: bool, name: str = "") -> RxCase:
+    """The payloads of the same stream, already out of the decoder, through the parsing the
+    request layer does: ``messages.parse_out`` for DATA (``control=False``) or
+    ``packets.parse_control`` for CONTROL. Timed over the whole stream, so its time per stream
+    frame is that stage's share of the receive path; ``run`` returns ``frames`` once every
+    payload of its kind parsed."""
+    stream, _ids = mixed_stream(frames, seed)
+    packets = [item for item in PyStreamDecoder().feed(stream) if isinstance(item, Packet)]
+    kind = PacketType.CONTROL if control else PacketType.DATA
+    payloads = [p.payload for p in packets if p.type is kind]
+    parse: Callable[[bytes], object] = parse_control if control else parse_out
+
+    def run() -> int:
+        parsed = 0
+        for payload in payloads:
+            parse(payload)
+            parsed += 1
+        return frames if parsed == len(payloads) and len(packets) == frames else parsed
+
+    what = "packets.parse_control" if control else "messages.parse_out (protobuf upb)"
+    return RxCase(
+        name=name or f"{kind.name} payloads through {what}",
+        package="protoduino",
+        parser=what,
+        stages=f"the {len(payloads):,} {kind.name} payloads of the stream, parsed",
         stream=stream,
         frames=frames,
         run=run,
