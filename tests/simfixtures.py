@@ -15,7 +15,7 @@ import pytest
 from protoduino.simboard import SimBoard
 
 #: Every backend the end-to-end tests run against.
-SIM_BACKENDS = ["native"]
+SIM_BACKENDS = ["native", "avr"]
 
 #: Tools each backend needs to be built; a missing one skips its tests.
 _NEEDS = {"native": ("make", "gcc"), "avr": ("make", "gcc", "avr-gcc")}
