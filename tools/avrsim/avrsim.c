@@ -402,6 +402,9 @@ static void pd_pump_pty(pd_sim_t *sim)
         if (n <= 0) {
             break;
         }
+        if (sim->crashed) {
+            continue; /* a stopped MCU drops what arrives, as a real one would */
+        }
         for (ssize_t i = 0; i < n; i++) {
             pd_fifo_push(&sim->rx, buf[i]);
         }
