@@ -31,12 +31,11 @@ def parse_in(payload: bytes) -> pb.ArduinoIn:
 
 
 def parse_out(payload: bytes) -> pb.ArduinoOut:
-    msg = pb.ArduinoOut()
+    # FromString: one protobuf call instead of constructing then parsing (receive hot path).
     try:
-        msg.ParseFromString(payload)
+        return pb.ArduinoOut.FromString(payload)
     except DecodeError as error:
         raise ProtocolError(f"ArduinoOut does not decode: {error}") from error
-    return msg
 
 
 def status_name(status: int) -> str:

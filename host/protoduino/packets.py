@@ -126,14 +126,21 @@ def event_payload(event: int, detail: bytes = b"") -> bytes:
     return bytes((ControlCode.EVENT, event)) + detail
 
 
+_HEARTBEAT = b"\x02"
+#: HEARTBEATs are a large share of idle traffic; one shared, immutable answer.
+_HEARTBEAT_CONTROL = Control(ControlCode.HEARTBEAT)
+_CONTROL_CODES: dict[int, ControlCode] = {int(c): c for c in ControlCode}
+
+
 def parse_control(payload: bytes) -> Control:
     """Decode a CONTROL payload; raises :class:`ProtocolError` if malformed."""
+    if payload == _HEARTBEAT:
+        return _HEARTBEAT_CONTROL
     if not payload:
         raise ProtocolError("empty CONTROL payload")
-    try:
-        code = ControlCode(payload[0])
-    except ValueError:
-        raise ProtocolError(f"unknown CONTROL code 0x{payload[0]:02X}") from None
+    code = _CONTROL_CODES.get(payload[0])
+    if code is None:
+        raise ProtocolError(f"unknown CONTROL code 0x{payload[0]:02X}")
     args = payload[1:]
     if code is ControlCode.RESET:
         if len(args) != 1:
@@ -144,9 +151,7 @@ def parse_control(payload: bytes) -> Control:
             raise ProtocolError(f"RESET_ACK takes 5 argument bytes, got {len(args)}")
         return Control(code, version=args[0], schema_id=int.from_bytes(args[1:5], "big"))
     if code is ControlCode.HEARTBEAT:
-        if args:
-            raise ProtocolError("HEARTBEAT takes no arguments")
-        return Control(code)
+        raise ProtocolError("HEARTBEAT takes no arguments")
     if not args:
         raise ProtocolError("EVENT without an event code")
     return Control(code, event=args[0], detail=bytes(args[1:]))
