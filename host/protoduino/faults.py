@@ -13,16 +13,22 @@ burstlen  length in bits of a burst (first and last bit flipped), <= 16 by defau
 drop      probability that a byte is dropped
 garbage   probability, per frame, that random bytes (1..garbagelen) are inserted before it
 dup       probability that a whole frame (up to its 0x00) is sent twice
-delay     added latency in ms for every chunk read (rx); writes (tx) are held back as well
+delay     added latency in ms, per direction (bytes arrive that much later, in order;
+          the caller is never blocked)
 cutat     seconds after open at which the line is cut (both directions lose everything)
 cutfor    seconds the cut lasts (default 1)
 seed      the seed (default 0)
 dir       both | tx | rx (default both)
+paused    1: open with the random faults paused until ``port.resume()`` (a clean setup)
+name      a name to find the open port by, from code that did not open it: :func:`line`
 ========  ============================================================
 
-The line can also be cut from code: ``port.cut(seconds)``. ``port.stats``
-counts what was injected. The *device reset* fault is not a line fault: the
-board harness (``SimBoard.reboot()``) provides it.
+From code, the port (``line(name)`` for one opened elsewhere, e.g. inside a
+``Board``) can be cut (``port.cut(seconds)``), paused and resumed
+(``port.pause()``, ``port.resume()``) and healed for good (``port.heal()``:
+faults off, cuts cancelled). ``port.stats`` counts what was injected. The
+*device reset* fault is not a line fault: the board harness
+(``SimBoard.reboot()``) provides it.
 
 The inner URL may not carry a query string of its own: the last ``?`` starts
 the fault parameters.
@@ -31,9 +37,12 @@ the fault parameters.
 from __future__ import annotations
 
 import random
+import threading
 import time
+import weakref
 from collections import Counter
 from dataclasses import dataclass, fields
+from typing import Protocol
 from urllib.parse import parse_qsl
 
 SCHEME = "faulty://"
@@ -53,6 +62,8 @@ class FaultConfig:
     cutfor: float = 1.0
     seed: int = 0
     dir: str = "both"
+    paused: int = 0
+    name: str = ""
 
     def applies_to(self, direction: str) -> bool:
         return self.dir in ("both", direction)
@@ -80,6 +91,8 @@ def parse_url(url: str) -> tuple[str, FaultConfig]:
                 if raw not in ("both", "tx", "rx"):
                     raise ValueError
                 values[key] = raw
+            elif key == "name":
+                values[key] = raw
             elif isinstance(default, int) and not isinstance(default, bool):
                 values[key] = int(raw)
             else:
@@ -93,7 +106,40 @@ def parse_url(url: str) -> tuple[str, FaultConfig]:
             raise ValueError(f"faulty:// parameter {name} must be a probability, not {p}")
     if not 1 <= cfg.burstlen <= 64 or cfg.garbagelen < 1:
         raise ValueError("faulty:// burstlen must be 1..64 and garbagelen >= 1")
+    if cfg.delay < 0 or cfg.cutfor < 0:
+        raise ValueError("faulty:// delay and cutfor must not be negative")
     return inner, cfg
+
+
+class FaultyLine(Protocol):
+    """What an open ``faulty://`` port offers to code that drives a scenario."""
+
+    stats: Counter[str]
+
+    def cut(self, seconds: float) -> None: ...
+
+    def pause(self) -> None: ...
+
+    def resume(self) -> None: ...
+
+    def heal(self) -> None: ...
+
+
+_lines: weakref.WeakValueDictionary[str, FaultyLine] = weakref.WeakValueDictionary()
+_lines_lock = threading.Lock()
+
+
+def register(name: str, port: FaultyLine) -> None:
+    """Make ``port`` findable by :func:`line` (the latest port opened under a name wins)."""
+    if name:
+        with _lines_lock:
+            _lines[name] = port
+
+
+def line(name: str) -> FaultyLine | None:
+    """The open ``faulty://`` port whose URL said ``name=NAME``, if it is still alive."""
+    with _lines_lock:
+        return _lines.get(name)
 
 
 class FaultModel:
@@ -173,6 +219,8 @@ class FaultModel:
 class Cut:
     """When the line is cut: a schedule from the URL plus cuts ordered from code."""
 
+    _windows: list[tuple[float, float]]
+
     def __init__(self, cfg: FaultConfig) -> None:
         self._opened = time.monotonic()
         self._windows: list[tuple[float, float]] = []
@@ -183,6 +231,9 @@ class Cut:
     def cut(self, seconds: float) -> None:
         now = time.monotonic()
         self._windows.append((now, now + seconds))
+
+    def cancel(self) -> None:
+        self._windows = []
 
     def active(self) -> bool:
         now = time.monotonic()

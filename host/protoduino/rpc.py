@@ -14,6 +14,16 @@ I/O thread.
   never completes the wrong call.
 * Up to ``window`` calls are in flight at once, so a burst is not paced by the
   round trip; the device answers them in order.
+* Dedupe guard: a retransmission is harmless only while its id is still in
+  the device's window of the last DEDUPE_WINDOW (16) executed ids. So while a
+  call X that changes outputs awaits its Ack, at most DEDUPE_WINDOW - 1
+  distinct other ids may be transmitted after X's first transmission; a NEW
+  id beyond that waits until X is acked or fails. Every id counts, Pings and
+  GetInfo included (a device may store them; counting them costs nothing),
+  and so does the retransmission of an older id (it may execute after X).
+  Without this, a short round trip lets many newer calls complete while X's
+  Ack is lost, and X's retransmission would run a second time. A reboot
+  empties the device's window: the count starts again from there.
 * While the link is down, nothing is sent: calls wait, bounded by their
   deadline (``call_timeout``), and fail with the link's own error (port lost,
   device silent) if it does not come back in time. When it comes back, calls
@@ -33,7 +43,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from .constants import ACK_TIMEOUT, MAX_PAYLOAD, MAX_RETRIES, PING_INTERVAL
+from .constants import ACK_TIMEOUT, DEDUPE_WINDOW, MAX_PAYLOAD, MAX_RETRIES, PING_INTERVAL
 from .errors import (
     AckTimeoutError,
     BoardClosedError,
@@ -50,6 +60,10 @@ log = logging.getLogger(__name__)
 #: How many finished ids are remembered to tell a late Ack from an unknown one.
 FINISHED_MEMORY = 256
 
+#: Calls whose re-execution changes nothing (the device answers their
+#: duplicates in full): they need no protection by the dedupe guard.
+IDEMPOTENT_KINDS = frozenset({"ping", "get_info"})
+
 Ack = Any  # protoduino_pb2.Ack (protobuf message classes are dynamic)
 
 
@@ -62,6 +76,7 @@ class Call:
         "deadline",
         "done",
         "error",
+        "first_tx",
         "kind",
         "message_id",
         "on_done",
@@ -87,6 +102,8 @@ class Call:
         self.on_done = on_done
         self.attempts = 0
         self.sent_at = 0.0
+        #: Serial number of the first transmission to the current device boot (None: not yet).
+        self.first_tx: int | None = None
         self.rtt: float | None = None
         self.ack: Ack | None = None
         self.error: ProtoduinoError | None = None
@@ -143,6 +160,11 @@ class Rpc:
         self._holding = False
         self._finished: collections.deque[int] = collections.deque(maxlen=FINISHED_MEMORY)
         self._finished_set: set[int] = set()
+        # Dedupe guard: id -> serial number of its last transmission, in that order.
+        self._tx_log: collections.OrderedDict[int, int] = collections.OrderedDict()
+        self._tx_serial = 0
+        #: Transmissions of new ids held back by the dedupe guard (a counter, for tests).
+        self.guard_holds = 0
         self._closed = False
         self._pinging = ping
         self._next_ping = 0.0
@@ -246,6 +268,39 @@ class Rpc:
         call.attempts += 1
         call.sent_at = now
         self._inflight[call.message_id] = call
+        self._tx_serial += 1
+        if call.first_tx is None:
+            call.first_tx = self._tx_serial
+        self._tx_log[call.message_id] = self._tx_serial
+        self._tx_log.move_to_end(call.message_id)
+
+    def _guard_allows_new(self) -> bool:
+        """May a NEW id go out without pushing a protected call out of the device's window?
+
+        The protected call X is the one, among calls awaiting their Ack that
+        change outputs, transmitted first; any later one has seen a subset of
+        what X has seen since (plus X itself), so guarding X guards them all.
+        Ids transmitted after X's first transmission may each have been
+        executed after X; with the new one they must stay under DEDUPE_WINDOW.
+        """
+        oldest = min(
+            (
+                c.first_tx
+                for c in self._calls.values()
+                if c.first_tx is not None and c.kind not in IDEMPOTENT_KINDS
+            ),
+            default=None,
+        )
+        if oldest is None:
+            self._tx_log.clear()
+            return True
+        while self._tx_log:  # forget what went out before every protected call
+            mid, serial = next(iter(self._tx_log.items()))
+            if serial >= oldest:
+                break
+            del self._tx_log[mid]
+        # The protected call itself is in the log with a serial >= oldest.
+        return len(self._tx_log) - 1 < DEDUPE_WINDOW - 1
 
     def _pump(self, now: float) -> None:
         """Send what may be sent now (lock held)."""
@@ -253,7 +308,7 @@ class Rpc:
         if link is None or not link.active or self._closed:
             return
         if self._holding:
-            if self._restore_call is None and self._restore:
+            if self._restore_call is None and self._restore and self._guard_allows_new():
                 msg = self._restore.popleft()
                 self._restore_call = self._new_call(msg, self._restore_step)
                 self._transmit(self._restore_call, now)
@@ -262,6 +317,9 @@ class Rpc:
             queues = (self._urgent, self._pending)
         for queue in queues:
             while queue and len(self._inflight) < self.window:
+                if queue[0].first_tx is None and not self._guard_allows_new():
+                    self.guard_holds += 1
+                    return
                 self._transmit(queue.popleft(), now)
 
     def _finish(
@@ -303,7 +361,9 @@ class Rpc:
             if self._closed:
                 return
             for call in list(self._inflight.values()):
-                if now - call.sent_at < self.ack_timeout:
+                # The deadline is checked first: a call never outlives it, even
+                # if its last attempt went out just before.
+                if now < call.deadline and now - call.sent_at < self.ack_timeout:
                     continue
                 if call.attempts > self.max_retries or now >= call.deadline:
                     self.timeouts += 1
@@ -376,6 +436,12 @@ class Rpc:
     def link_up(self, rebooted: bool) -> None:
         with self._lock:
             self._requeue_inflight()
+            if rebooted:
+                # The device's dedupe window died with it: what went out before
+                # is void, and every call still waiting goes out as if new.
+                self._tx_log.clear()
+                for call in self._calls.values():
+                    call.first_tx = None
             if rebooted and self.restore_provider is not None:
                 try:
                     msgs = self.restore_provider()

@@ -29,6 +29,7 @@ COMMANDS: dict[str, str] = {
     "flash": "flash",
     "sim": "sim",
     "demo": "demo",
+    "soak": "soak",
 }
 
 

@@ -13,7 +13,7 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 if TYPE_CHECKING:
     from _typeshed import ReadableBuffer
 
-from ..faults import Cut, FaultConfig, FaultModel, parse_url
+from ..faults import Cut, FaultConfig, FaultModel, parse_url, register
 
 #: Longest time one read of the inner port blocks.
 POLL = 0.02
@@ -30,7 +30,10 @@ class Serial(SerialBase):
         self._cut: Cut | None = None
         self._pending = bytearray()
         self._delayed: deque[tuple[float, bytes]] = deque()
+        self._tx_delayed: deque[tuple[float, bytes]] = deque()
+        self._paused = False
         self._lock = threading.Lock()
+        self._tx_lock = threading.Lock()
         self.stats: Counter[str] = Counter()
         super().__init__(*args, **kwargs)
 
@@ -49,6 +52,7 @@ class Serial(SerialBase):
         self._rx = FaultModel(cfg, cfg.seed * 2 + 1, self.stats) if cfg.applies_to("rx") else None
         self._tx = FaultModel(cfg, cfg.seed * 2, self.stats) if cfg.applies_to("tx") else None
         self._cut = Cut(cfg)
+        self._paused = bool(cfg.paused)
         self._inner = serial.serial_for_url(
             inner_url,
             baudrate=self.baudrate,
@@ -56,6 +60,7 @@ class Serial(SerialBase):
             write_timeout=self.write_timeout,
         )
         self.is_open = True
+        register(cfg.name, self)
 
     def close(self) -> None:
         self.is_open = False
@@ -86,6 +91,20 @@ class Serial(SerialBase):
             raise PortNotOpenError()
         self._cut.cut(seconds)
 
+    def pause(self) -> None:
+        """Stop injecting random faults (cuts still apply; :meth:`heal` cancels them)."""
+        self._paused = True
+
+    def resume(self) -> None:
+        """Inject faults again, where the seeded streams left off."""
+        self._paused = False
+
+    def heal(self) -> None:
+        """Faults off for good: paused and every cut cancelled; delayed bytes still arrive."""
+        self._paused = True
+        if self._cut is not None:
+            self._cut.cancel()
+
     @property
     def in_waiting(self) -> int:
         inner = self._require()
@@ -102,6 +121,7 @@ class Serial(SerialBase):
                     out = bytes(self._pending[:size])
                     del self._pending[:size]
                     return out
+            self._flush_tx()
             if deadline is not None and time.monotonic() >= deadline:
                 return b""
             # The inner port polls (POLL seconds at most) so delayed bytes and
@@ -115,11 +135,16 @@ class Serial(SerialBase):
         if self._cut.active():
             self.stats["cut_bytes"] += len(data)
             return
-        if self._rx is not None:
+        if self._rx is not None and not self._paused:
             data = self._rx.apply(data)
         with self._lock:
-            if self._cfg.delay > 0 and self._cfg.applies_to("rx"):
-                self._delayed.append((time.monotonic() + self._cfg.delay / 1000, data))
+            delay = self._cfg.delay > 0 and self._cfg.applies_to("rx") and not self._paused
+            if delay or self._delayed:
+                # Bytes never overtake delayed ones, even once the faults pause.
+                due = time.monotonic() + (self._cfg.delay / 1000 if delay else 0.0)
+                if self._delayed:
+                    due = max(due, self._delayed[-1][0])
+                self._delayed.append((due, data))
             else:
                 self._pending += data
 
@@ -129,18 +154,38 @@ class Serial(SerialBase):
             self._pending += self._delayed.popleft()[1]
 
     def write(self, data: ReadableBuffer, /) -> int:
+        """Accept every byte at once; damaged, delayed or cut on the way (never blocks longer)."""
         inner = self._require()
         raw = bytes(data)
         assert self._cut is not None
         if self._cut.active():
             self.stats["cut_bytes"] += len(raw)
             return len(raw)
-        if self._cfg.delay > 0 and self._cfg.applies_to("tx"):
-            time.sleep(self._cfg.delay / 1000)
-        out = self._tx.apply(raw) if self._tx is not None else raw
+        active = not self._paused
+        out = self._tx.apply(raw) if self._tx is not None and active else raw
+        if self._cfg.delay > 0 and self._cfg.applies_to("tx") and active:
+            # Latency, not a slower line: the bytes leave later, in order, from
+            # the next read or write (the caller polls reads continuously).
+            with self._tx_lock:
+                self._tx_delayed.append((time.monotonic() + self._cfg.delay / 1000, out))
+            self._flush_tx()
+            return len(raw)
+        self._flush_tx(everything=True)
         if out:
             inner.write(out)
         return len(raw)
+
+    def _flush_tx(self, *, everything: bool = False) -> None:
+        """Write the delayed bytes that are due (all of them to keep the order when asked)."""
+        if not self._tx_delayed:
+            return
+        inner = self._require()
+        now = time.monotonic()
+        with self._tx_lock:
+            while self._tx_delayed and (everything or self._tx_delayed[0][0] <= now):
+                _, chunk = self._tx_delayed.popleft()
+                if chunk:
+                    inner.write(chunk)
 
     def flush(self) -> None:
         self._require().flush()
@@ -153,7 +198,10 @@ class Serial(SerialBase):
         inner.reset_input_buffer()
 
     def reset_output_buffer(self) -> None:
-        self._require().reset_output_buffer()
+        inner = self._require()
+        with self._tx_lock:
+            self._tx_delayed.clear()
+        inner.reset_output_buffer()
 
     def cancel_read(self) -> None:
         inner = self._inner

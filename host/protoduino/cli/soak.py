@@ -1,0 +1,253 @@
+"""``protoduino soak``: long seeded fault scenarios on a simulated board, and their report.
+
+By default: one long scenario (100,000 commands at a bit error rate of 1e-3
+with error bursts, 20 device resets sprinkled in, then the failsafe check),
+then one scenario per fault kind (bit errors, bursts, dropped bytes, garbage,
+duplicated frames, latency, line cuts, device resets). Each prints its figures
+as it ends; ``--report docs/reliability.md`` writes them all as Markdown, with
+the command that reproduces each. The exit status is 1 if any invariant was
+violated (see :mod:`protoduino.soak`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from .. import soak as engine
+from ..errors import ProtoduinoError
+from ..soak import Scenario, SoakResult, fault_scenarios
+from .options import error
+
+HELP = "run seeded fault scenarios on the simulated board and report what happened"
+
+DEFAULT_FAULTS = "ber=1e-3&burst=1e-4"
+#: Everything from this line on in an existing report is kept as it is (the fuzzing record).
+KEEP_MARKER = "<!-- written by hand below this line; protoduino soak keeps it -->"
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--backend", default="native", help="native (default) or avr")
+    parser.add_argument(
+        "--commands",
+        type=int,
+        default=100_000,
+        metavar="N",
+        help="commands in the long scenario; 0 skips it (default: %(default)s)",
+    )
+    parser.add_argument("--seed", type=int, default=1, help="seed of every scenario (default: 1)")
+    parser.add_argument(
+        "--faults",
+        default=DEFAULT_FAULTS,
+        metavar="QUERY",
+        help="faulty:// parameters of the long scenario (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--resets", type=int, default=20, metavar="N", help="device resets in the long scenario"
+    )
+    parser.add_argument("--cuts", type=int, default=0, metavar="N", help="line cuts in it")
+    parser.add_argument("--cut-seconds", type=float, default=1.0, metavar="S", help="cut length")
+    parser.add_argument(
+        "--failsafe",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="end the long scenario by stopping the pings and timing the failsafe",
+    )
+    parser.add_argument(
+        "--kinds",
+        default="all",
+        metavar="LIST",
+        help="fault-kind scenarios to run after it: all, none, or a comma list of "
+        f"{', '.join(fault_scenarios(1))}",
+    )
+    parser.add_argument(
+        "--kind-commands",
+        type=int,
+        default=5000,
+        metavar="N",
+        help="commands in each fault-kind scenario (default: %(default)s)",
+    )
+    parser.add_argument("--report", type=Path, help="write the Markdown report here")
+    parser.add_argument("--json", type=Path, help="write every figure as JSON here")
+    parser.add_argument(
+        "--workdir", type=Path, help="keep the boards' traces here (default: a temporary folder)"
+    )
+
+
+def scenarios(args: argparse.Namespace) -> list[Scenario]:
+    out: list[Scenario] = []
+    if args.commands > 0:
+        out.append(
+            Scenario(
+                "soak",
+                commands=args.commands,
+                seed=args.seed,
+                faults=args.faults,
+                resets=args.resets,
+                cuts=args.cuts,
+                cut_seconds=args.cut_seconds,
+                failsafe=args.failsafe,
+                backend=args.backend,
+                description="the long run: " + describe(args.faults, args.resets, args.cuts),
+            )
+        )
+    kinds = fault_scenarios(args.kind_commands, args.seed, args.backend)
+    wanted = list(kinds) if args.kinds == "all" else []
+    if args.kinds not in ("all", "none"):
+        wanted = [k.strip() for k in args.kinds.split(",") if k.strip()]
+        unknown = [k for k in wanted if k not in kinds]
+        if unknown:
+            raise ValueError(f"unknown fault kind(s) {unknown}; known: {', '.join(kinds)}")
+    out.extend(kinds[k] for k in wanted)
+    return out
+
+
+def describe(faults: str, resets: int, cuts: int) -> str:
+    parts = [faults or "a clean line"]
+    if resets:
+        parts.append(f"{resets} device resets")
+    if cuts:
+        parts.append(f"{cuts} line cuts")
+    return ", ".join(parts)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        todo = scenarios(args)
+    except ValueError as exc:
+        return error("soak", exc)
+    if not todo:
+        return error("soak", "nothing to run (--commands 0 and --kinds none)")
+    results: list[SoakResult] = []
+    with tempfile.TemporaryDirectory(prefix="protoduino-soak-") as tmp:
+        workdir = args.workdir or Path(tmp)
+        for scenario in todo:
+            print(f"== {scenario.name}: {scenario.commands} commands, {scenario.command_line()}")
+            t0 = time.monotonic()
+
+            def progress(n: int, t0: float = t0, total: int = scenario.commands) -> None:
+                rate = n / max(1e-9, time.monotonic() - t0)
+                print(f"   {n}/{total} commands, {rate:.0f}/s", file=sys.stderr, flush=True)
+
+            try:
+                result = engine.run(scenario, workdir, progress=progress)
+            except ProtoduinoError as exc:
+                return error("soak", f"{scenario.name}: {exc}")
+            results.append(result)
+            print(figures(result), flush=True)
+    if args.json is not None:
+        args.json.write_text(json.dumps([r.as_dict() for r in results], indent=2) + "\n")
+    if args.report is not None:
+        write_report(args.report, results, " ".join(sys.argv[1:]) or "soak")
+    failed = [r.scenario.name for r in results if not r.passed]
+    if failed:
+        print(f"INVARIANTS VIOLATED in: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    print(f"all {len(results)} scenarios passed every invariant")
+    return 0
+
+
+def _ms(x: float | None) -> str:
+    return "-" if x is None else f"{x * 1000:.0f} ms"
+
+
+def _dict(d: dict[str, int]) -> str:
+    return ", ".join(f"{k} {v}" for k, v in sorted(d.items())) or "none"
+
+
+def figures(r: SoakResult) -> str:
+    """The figures of one run as a few readable lines."""
+    link = r.link
+    lines = [
+        f"   {r.sent} sent, {r.ok} ok, {r.executed} executed (seen in the trace; "
+        f"{r.executed_after_timeout} of them had timed out), rejected {_dict(r.rejected)}, "
+        f"{r.timed_out} timed out, other errors {_dict(r.errors)}",
+        f"   duplicates {r.duplicates}, corrupted executions {r.corrupted}, hung calls {r.hung} "
+        f"(longest {r.max_call:.3f} s, bound {r.call_bound:g} s), re-run after a reboot "
+        f"{r.reexecuted_after_reboot}",
+        f"   recovery: {len(r.recovery)} disruptions, median {_ms(r.recovery_median)}, "
+        f"max {_ms(r.recovery_max)}; healed line: "
+        + ("all commands ok" if r.recovered else f"{r.recovery_failures} failed"),
+        f"   injected: {_dict(r.faults)}",
+        f"   link: {link.get('retransmits', 0)} retransmits, {link.get('late_acks', 0)} late "
+        f"acks, bad frames {_dict(link.get('bad_frames', {}))}, "
+        f"{link.get('rehandshakes', 0)} re-handshakes, {link.get('reboots_seen', 0)} reboots "
+        f"seen, {link.get('restores', 0)} restores, {link.get('guard_holds', 0)} dedupe-guard "
+        "holds",
+    ]
+    if r.failsafe_checked:
+        lines.append(
+            f"   failsafe: fired {r.failsafe_delay} s after the last Ping: "
+            + ("on time" if r.failsafe_ok else "NOT on time")
+        )
+    lines.append(f"   {r.duration:.1f} s, " + ("PASSED" if r.passed else "FAILED"))
+    lines.extend(f"   ! {v}" for v in r.violations)
+    return "\n".join(lines)
+
+
+def write_report(path: Path, results: list[SoakResult], argv: str) -> None:
+    kept = ""
+    if path.exists():
+        old = path.read_text()
+        if KEEP_MARKER in old:
+            kept = old[old.index(KEEP_MARKER) :]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(render_report(results, argv) + ("\n" + kept if kept else ""))
+
+
+def render_report(results: list[SoakResult], argv: str) -> str:
+    when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d")
+    out = [
+        "# Reliability under faults",
+        "",
+        f"Generated by `protoduino {argv}` on {when} ({platform.machine()}, "
+        f"Python {platform.python_version()}). Each scenario opens a simulated board with a "
+        "trace, talks to it through the seeded `faulty://` line (`protoduino.faults`) and "
+        "checks the board's own record of its outputs against what the host sent "
+        "(`protoduino.soak`): no corrupted command executed, no message id executed twice "
+        "within one boot, every call returned or raised within "
+        "`ACK_TIMEOUT x (MAX_RETRIES + 1) + HANDSHAKE_TIMEOUT`, the link recovered once the "
+        "faults stopped, and (long run) the failsafe fired 10 s after the last Ping.",
+        "",
+        "| scenario | injected | sent | ok | executed | rejected | timed out | duplicates "
+        "| corrupted | hung | recovery median / max | result |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        out.append(
+            f"| {r.scenario.name} | {_dict(r.faults)} | {r.sent} | {r.ok} | {r.executed} | "
+            f"{sum(r.rejected.values())} | {r.timed_out} | {r.duplicates} | {r.corrupted} | "
+            f"{r.hung} | {_ms(r.recovery_median)} / {_ms(r.recovery_max)} | "
+            + ("passed" if r.passed else "**FAILED**")
+            + " |"
+        )
+    out += [
+        "",
+        "*executed*: seen in the board's trace (a call that timed out may still have run: "
+        "its Acks were lost). *recovery*: from the end of each disruption (reset, cut, the "
+        "faults stopping) to the next successful call.",
+        "",
+    ]
+    for r in results:
+        s = r.scenario
+        out += [
+            f"## {s.name}",
+            "",
+            s.description or describe(s.faults, s.resets, s.cuts),
+            "",
+            f"Reproduce: `{s.command_line()}` (seed {s.seed}, {s.backend} board, "
+            f"{s.servos} servos and {s.digitals} digital outputs, {s.workers} calling threads, "
+            f"window {s.window}, ack timeout {s.ack_timeout:g} s, {s.max_retries} retries).",
+            "",
+            "```",
+            figures(r),
+            "```",
+            "",
+        ]
+    return "\n".join(out)

@@ -1,0 +1,1010 @@
+"""Seeded fault scenarios on a simulated board, judged against the board's own trace.
+
+A :class:`Scenario` opens a :class:`~protoduino.simboard.SimBoard` (either
+backend) with a trace file, opens a :class:`~protoduino.Board` over
+``faulty://<port>?...`` and streams commands at it from one thread per output,
+with device resets (``SimBoard.reboot()``) and line cuts sprinkled in. Every
+value is chosen so that its effect is recognisable in the trace: each servo
+cycles through 225 pulse widths in a scrambled order (a re-execution shows as a
+value reappearing out of its turn), each digital output toggles. Then the line
+is healed and the link must recover by itself, and optionally the pings stop
+and the failsafe must fire on time.
+
+What the host sent is taken from the wire, not from the API: a frame monitor
+records every COMMAND transmitted (the session restore's replays and every
+retransmission included) and every Ack received. :func:`run` then checks:
+
+* **no corrupted execution**: every output change in the trace is explained by
+  a command transmitted for that pin with exactly that value (within the
+  emulated Uno's pulse measurement tolerance) shortly before, or is an Init's,
+  a Stop's or the failsafe's safe value, or a reboot's 0;
+* **at most once**: no message id explains two changes within one device boot
+  (a reboot empties the device's dedupe window, see docs/protocol.md 7);
+* **no hung call**: every call returned or raised within
+  ``ack_timeout * (max_retries + 1) + handshake_timeout`` (plus a scheduling
+  slack);
+* **recovery**: once the faults stop, the next commands all succeed;
+* **failsafe on time**: with the pings stopped, the outputs go safe between 10 s
+  and 10 s + 20 ms after the device received the last Ping.
+
+The fault streams are seeded, so a scenario injects the same damage into the
+same byte positions; thread scheduling still varies from run to run, so the
+figures are repeatable in distribution, not to the byte.
+"""
+
+from __future__ import annotations
+
+import logging
+import random
+import statistics
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qsl, urlencode
+
+from .board import Board, DigitalOutput, Servo
+from .constants import (
+    ACK_TIMEOUT,
+    FAILSAFE_TIMEOUT,
+    HANDSHAKE_TIMEOUT,
+    MAX_RETRIES,
+    WATCHDOG_TIMEOUT,
+    PacketType,
+)
+from .errors import AckTimeoutError, CommandRejectedError, ProtoduinoError
+from .events import Event, EventKind
+from .faults import FaultyLine, line, parse_url
+from .messages import ArduinoIn, ArduinoOut, status_name
+from .packets import Packet
+from .simboard import SimBoard
+from .transport import FrameRecord
+
+log = logging.getLogger(__name__)
+
+#: Pins used, in order, for the servos and the digital outputs (never 0 and 1, the UART).
+SERVO_PINS = (3, 5, 6, 9, 10, 11, 2, 4)
+DIGITAL_PINS = (13, 12, 8, 7)
+#: Servo limits and values: every command value is >= VALUE_BASE, every safe value below it,
+#: and the values of one servo are VALUE_STEP apart (far beyond the pulse measurement's error).
+SERVO_MIN_US = 500
+SERVO_MAX_US = 2500
+SAFE_BASE = 520
+VALUE_BASE = 600
+VALUE_STEP = 8
+VALUE_COUNT = 225
+#: Coprime with VALUE_COUNT: consecutive commands on one servo jump by ~800 us.
+VALUE_STRIDE = 97
+
+#: How far the scheduler may separate a frame's write from its record on the host (s).
+SLOP = 0.25
+#: Longest time between a command's last transmission and its effect in the trace (s),
+#: before any configured line delay: the device reading it, a descheduled process.
+LATENCY = 0.5
+#: Failsafe timing tolerance: the contract's 20 ms.
+FAILSAFE_TOLERANCE = 0.020
+#: Extra time a call may take beyond its documented bound before it counts as hung (s).
+HUNG_SLACK = 0.5
+
+
+@dataclass(frozen=True)
+class BackendTraits:
+    """How a backend's trace relates to the commands."""
+
+    #: A servo value in the trace may differ from the commanded one by this much (us).
+    tolerance_us: int
+    #: A measured servo change is dated up to this much after it happened (s).
+    servo_lag: float
+
+
+BACKEND_TRAITS = {
+    "native": BackendTraits(tolerance_us=0, servo_lag=0.0),
+    # The emulated Uno measures pulses at its pins: a few us off, one 20 ms frame late.
+    "avr": BackendTraits(tolerance_us=3, servo_lag=0.06),
+}
+
+
+def servo_value(slot: int, k: int) -> int:
+    """The k-th pulse width commanded to servo number ``slot`` (unique within 225 commands)."""
+    return VALUE_BASE + 2 * slot + VALUE_STEP * ((k * VALUE_STRIDE) % VALUE_COUNT)
+
+
+def servo_safe(slot: int) -> int:
+    return SAFE_BASE + 10 * slot
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One seeded run; see the module docstring. ``faults`` is a faulty:// query string."""
+
+    name: str
+    commands: int = 200
+    seed: int = 1
+    faults: str = ""
+    resets: int = 0
+    cuts: int = 0
+    cut_seconds: float = 1.0
+    servos: int = 4
+    digitals: int = 2
+    window: int = 4
+    #: Threads calling at once (more than ``window`` keeps the window full).
+    workers: int = 8
+    ack_timeout: float = ACK_TIMEOUT
+    max_retries: int = MAX_RETRIES
+    handshake_timeout: float = HANDSHAKE_TIMEOUT
+    recovery_commands: int = 20
+    failsafe: bool = False
+    backend: str = "native"
+    #: What the fault kind is, in words, for the report.
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.servos <= len(SERVO_PINS) or not 0 <= self.digitals <= len(DIGITAL_PINS):
+            raise ValueError(
+                f"servos must be 1..{len(SERVO_PINS)}, digitals 0..{len(DIGITAL_PINS)}"
+            )
+        if self.workers < 1:
+            raise ValueError("workers >= 1")
+        if self.commands < 1 or self.resets < 0 or self.cuts < 0 or self.recovery_commands < 1:
+            raise ValueError("commands and recovery_commands >= 1, resets and cuts >= 0")
+        keys = {k for k, _ in parse_qsl(self.faults)}
+        if keys & {"seed", "name", "paused"}:
+            raise ValueError("seed, name and paused are set by the scenario, not in faults")
+        parse_url(f"faulty://x?{self.faults}")  # raises ValueError on a bad parameter
+
+    @property
+    def call_bound(self) -> float:
+        """The longest any call may take (docs/api.md): every attempt, plus a handshake."""
+        return self.ack_timeout * (self.max_retries + 1) + self.handshake_timeout
+
+    def url(self, port: str, name: str) -> str:
+        params = [*parse_qsl(self.faults), ("seed", str(self.seed)), ("paused", "1")]
+        params.append(("name", name))
+        return f"faulty://{port}?{urlencode(params)}"
+
+    def command_line(self) -> str:
+        """The ``protoduino soak`` command that runs this scenario again."""
+        parts = ["protoduino soak", f"--backend {self.backend}", f"--commands {self.commands}"]
+        parts.append(f"--seed {self.seed}")
+        parts.append(f"--faults '{self.faults}'" if self.faults else "--faults ''")
+        if self.resets:
+            parts.append(f"--resets {self.resets}")
+        if self.cuts:
+            parts.append(f"--cuts {self.cuts} --cut-seconds {self.cut_seconds:g}")
+        if self.failsafe:
+            parts.append("--failsafe")
+        return " ".join(parts)
+
+
+def fault_scenarios(commands: int, seed: int = 1, backend: str = "native") -> dict[str, Scenario]:
+    """One scenario per fault kind, ``commands`` commands each, keyed by the kind."""
+    resets = max(1, min(5, commands // 100))
+    cuts = max(1, min(5, commands // 100))
+    kinds = [
+        Scenario("ber", faults="ber=1e-3", description="random bit flips, bit error rate 1e-3"),
+        Scenario(
+            "burst",
+            faults="burst=2e-3&burstlen=16",
+            description="error bursts of 16 bits (first and last flipped), 2e-3 per byte",
+        ),
+        Scenario("drop", faults="drop=2e-3", description="dropped bytes, 2e-3 per byte"),
+        Scenario(
+            "garbage",
+            faults="garbage=0.05&garbagelen=8",
+            description="1..8 random bytes before 5 % of the frames",
+        ),
+        Scenario("dup", faults="dup=0.02", description="2 % of the frames sent twice"),
+        Scenario(
+            "delay",
+            faults="delay=150",
+            description="150 ms latency each way: every Ack comes after a retransmission",
+        ),
+        Scenario(
+            "cut",
+            cuts=cuts,
+            cut_seconds=1.0,
+            description=f"line cut for 1 s, {cuts} times, then restored",
+        ),
+        Scenario("reset", resets=resets, description=f"device reset {resets} times"),
+    ]
+    return {s.name: replace(s, commands=commands, seed=seed, backend=backend) for s in kinds}
+
+
+# --- what happened ------------------------------------------------------------------------
+
+
+@dataclass
+class CallRecord:
+    """One API call made by the scenario."""
+
+    pin: int
+    kind: str  # "servo" or "digital"
+    value: int
+    start: float
+    end: float = 0.0
+    outcome: str = "pending"  # ok, rejected, timeout, error
+    detail: str = ""
+    phase: str = "faults"  # faults, recovery, failsafe, setup
+
+    @property
+    def duration(self) -> float:
+        return self.end - self.start
+
+
+@dataclass
+class _Sent:
+    """One message id as seen on the wire."""
+
+    message_id: int
+    kind: str
+    pin: int | None
+    value: int | None
+    txs: list[float] = field(default_factory=list)
+    ack: float | None = None
+    status: int | None = None
+
+
+@dataclass(frozen=True)
+class _Cause:
+    """Something that may legitimately change ``pin`` to ``value`` between lo and hi (host time)."""
+
+    pin: int
+    value: int
+    lo: float
+    hi: float
+    what: str  # "command", "init", "stop"
+    message_id: int
+
+
+@dataclass
+class SoakResult:
+    """The figures of one scenario run, and every invariant violation found."""
+
+    scenario: Scenario
+    duration: float = 0.0
+    sent: int = 0
+    ok: int = 0
+    executed: int = 0
+    executed_after_timeout: int = 0
+    rejected: dict[str, int] = field(default_factory=dict)
+    timed_out: int = 0
+    errors: dict[str, int] = field(default_factory=dict)
+    duplicates: int = 0
+    corrupted: int = 0
+    reexecuted_after_reboot: int = 0
+    hung: int = 0
+    max_call: float = 0.0
+    call_bound: float = 0.0
+    recovery: list[float] = field(default_factory=list)
+    recovered: bool = False
+    recovery_failures: int = 0
+    failsafe_checked: bool = False
+    failsafe_delay: tuple[float, float] | None = None
+    failsafe_ok: bool | None = None
+    failsafe_lines: int = 0
+    faults: dict[str, int] = field(default_factory=dict)
+    link: dict[str, Any] = field(default_factory=dict)
+    trace_lines: int = 0
+    violations: list[str] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return not self.violations
+
+    @property
+    def recovery_median(self) -> float | None:
+        return statistics.median(self.recovery) if self.recovery else None
+
+    @property
+    def recovery_max(self) -> float | None:
+        return max(self.recovery) if self.recovery else None
+
+    def as_dict(self) -> dict[str, Any]:
+        s = self.scenario
+        return {
+            "scenario": s.name,
+            "backend": s.backend,
+            "seed": s.seed,
+            "faults": s.faults,
+            "resets": s.resets,
+            "cuts": s.cuts,
+            "command_line": s.command_line(),
+            "duration_s": round(self.duration, 3),
+            "sent": self.sent,
+            "ok": self.ok,
+            "executed": self.executed,
+            "executed_after_timeout": self.executed_after_timeout,
+            "rejected": dict(self.rejected),
+            "timed_out": self.timed_out,
+            "errors": dict(self.errors),
+            "duplicates": self.duplicates,
+            "corrupted": self.corrupted,
+            "reexecuted_after_reboot": self.reexecuted_after_reboot,
+            "hung": self.hung,
+            "max_call_s": round(self.max_call, 4),
+            "call_bound_s": self.call_bound,
+            "recovery_s": [round(r, 4) for r in self.recovery],
+            "recovery_median_s": self.recovery_median,
+            "recovery_max_s": self.recovery_max,
+            "recovered": self.recovered,
+            "failsafe_ok": self.failsafe_ok,
+            "failsafe_delay_s": self.failsafe_delay,
+            "faults_injected": dict(self.faults),
+            "link": dict(self.link),
+            "trace_lines": self.trace_lines,
+            "violations": list(self.violations),
+        }
+
+
+# --- recording the wire --------------------------------------------------------------------
+
+
+class _Wire:
+    """Frame monitor: every COMMAND transmitted and every Ack received, by message id."""
+
+    def __init__(self) -> None:
+        self.sent: dict[int, _Sent] = {}
+        self.order: list[int] = []  # ids in order of first transmission
+        self.ping_txs: list[float] = []
+        self.bad: Counter[str] = Counter()
+
+    def __call__(self, record: FrameRecord) -> None:
+        item = record.item
+        if not isinstance(item, Packet):
+            return
+        try:
+            if record.direction == "tx" and item.type is PacketType.COMMAND:
+                self._command(record.t, item.payload)
+            elif record.direction == "rx" and item.type is PacketType.DATA:
+                out = ArduinoOut()
+                out.ParseFromString(item.payload)
+                if out.WhichOneof("data") == "ack":
+                    sent = self.sent.get(out.ack.message_id)
+                    if sent is not None and sent.ack is None:
+                        sent.ack, sent.status = record.t, int(out.ack.status)
+        except Exception as error:  # a monitor must never take the I/O thread down
+            self.bad[type(error).__name__] += 1
+
+    def _command(self, t: float, payload: bytes) -> None:
+        msg = ArduinoIn()
+        msg.ParseFromString(payload)
+        mid = msg.message_id
+        sent = self.sent.get(mid)
+        if sent is None:
+            kind = msg.WhichOneof("data") or "empty"
+            pin: int | None = None
+            value: int | None = None
+            if kind == "servo_control":
+                ctl = msg.servo_control
+                pin = ctl.pin
+                value = ctl.us if ctl.WhichOneof("value") == "us" else _deg_to_us(ctl.degrees)
+            elif kind == "digital_control":
+                pin, value = msg.digital_control.pin, int(msg.digital_control.level)
+            elif kind == "servo_init":
+                init = msg.servo_init
+                pin = init.pin
+                lo, hi = init.min_us or 544, init.max_us or 2400
+                value = (
+                    init.safe_us
+                    if init.WhichOneof("safe") == "safe_us"
+                    else _deg_to_us(init.safe_degrees, lo, hi)
+                )
+            elif kind == "digital_init":
+                pin, value = msg.digital_init.pin, int(msg.digital_init.safe_level)
+            sent = _Sent(mid, kind, pin, value)
+            self.sent[mid] = sent
+            self.order.append(mid)
+        sent.txs.append(t)
+        if sent.kind == "ping":
+            self.ping_txs.append(t)
+
+
+def _deg_to_us(degrees: int, lo: int = SERVO_MIN_US, hi: int = SERVO_MAX_US) -> int:
+    return lo + degrees * (hi - lo) // 180
+
+
+# --- running ---------------------------------------------------------------------------------
+
+
+class _Outputs:
+    """The scenario's outputs and the per-output command counters."""
+
+    def __init__(self, board: Board, scenario: Scenario) -> None:
+        self.servos: list[Servo] = []
+        self.digitals: list[DigitalOutput] = []
+        for slot in range(scenario.servos):
+            self.servos.append(
+                board.servo(
+                    SERVO_PINS[slot],
+                    safe_us=servo_safe(slot),
+                    min_us=SERVO_MIN_US,
+                    max_us=SERVO_MAX_US,
+                )
+            )
+        for slot in range(scenario.digitals):
+            self.digitals.append(board.digital_output(DIGITAL_PINS[slot], safe=False))
+        self.counters = [0] * (len(self.servos) + len(self.digitals))
+        self._lock = threading.Lock()
+
+    @property
+    def count(self) -> int:
+        return len(self.counters)
+
+    def next_command(self, out: int) -> tuple[str, int, int, Callable[[], None]]:
+        """(kind, pin, value, call) for output number ``out``'s next command."""
+        with self._lock:
+            k = self.counters[out]
+            self.counters[out] += 1
+        if out < len(self.servos):
+            servo = self.servos[out]
+            us = servo_value(out, k)
+            return "servo", servo.pin, us, lambda: servo.write_us(us)
+        dig = self.digitals[out - len(self.servos)]
+        level = k % 2 == 0  # 1, 0, 1, ...
+        return "digital", dig.pin, int(level), lambda: dig.write(level)
+
+
+class _Runner:
+    def __init__(self, scenario: Scenario, sim: SimBoard, board: Board, name: str) -> None:
+        self.s = scenario
+        self.sim = sim
+        self.board = board
+        self.name = name
+        self.calls: list[CallRecord] = []
+        self.reboots: list[float] = []
+        self.cuts: list[tuple[float, float]] = []
+        self.heal_at = 0.0
+        self.events: list[Event] = []
+        self._lock = threading.Lock()
+        self._next = 0
+        rng = random.Random(scenario.seed)
+        n = scenario.commands
+        span = range(n // 10, max(n // 10 + 1, n * 9 // 10))
+        self.disruptions: dict[int, str] = {}
+        for kind, count in (("reset", scenario.resets), ("cut", scenario.cuts)):
+            free = [i for i in span if i not in self.disruptions]
+            for i in rng.sample(free, min(count, len(free))):
+                self.disruptions[i] = kind
+        board.on_event(self.events.append)
+
+    def line(self) -> FaultyLine:
+        port = line(self.name)
+        if port is None:
+            raise ProtoduinoError(f"the faulty line {self.name} is not open")
+        return port
+
+    def call(self, kind: str, pin: int, value: int, fn: Callable[[], None], phase: str) -> bool:
+        rec = CallRecord(pin, kind, value, time.monotonic(), phase=phase)
+        try:
+            fn()
+            rec.outcome = "ok"
+        except CommandRejectedError as error:
+            rec.outcome, rec.detail = "rejected", status_name(error.status)
+        except AckTimeoutError:
+            rec.outcome = "timeout"
+        except ProtoduinoError as error:
+            rec.outcome, rec.detail = "error", type(error).__name__
+        except Exception as error:  # a bug: recorded, and the run goes on
+            log.exception("unexpected error from %s write", kind)
+            rec.outcome, rec.detail = "error", f"unexpected {type(error).__name__}"
+        rec.end = time.monotonic()
+        with self._lock:
+            self.calls.append(rec)
+        return rec.outcome == "ok"
+
+    def disrupt(self, what: str) -> None:
+        if what == "reset":
+            with self._lock:
+                self.reboots.append(time.monotonic())
+            self.sim.reboot()
+        else:
+            start = time.monotonic()
+            self.line().cut(self.s.cut_seconds)
+            with self._lock:
+                self.cuts.append((start, start + self.s.cut_seconds))
+
+    def worker(self, outputs: _Outputs, progress: Callable[[int], None] | None) -> None:
+        """Take the next command index; command i goes to output i mod the output count.
+
+        Several workers write to one output at once, so an output changes while
+        an older command to it still awaits its Ack: were that command run
+        again, its value would come back in the trace, out of its turn.
+        """
+        while True:
+            with self._lock:
+                index = self._next
+                if index >= self.s.commands:
+                    return
+                self._next += 1
+            what = self.disruptions.get(index)
+            if what is not None:
+                self.disrupt(what)
+            kind, pin, value, fn = outputs.next_command(index % outputs.count)
+            self.call(kind, pin, value, fn, "faults")
+            if progress is not None and index % 1000 == 999:
+                progress(index + 1)
+
+    def stream(self, outputs: _Outputs, progress: Callable[[int], None] | None) -> None:
+        threads = [
+            threading.Thread(
+                target=self.worker, args=(outputs, progress), name=f"soak-{i}", daemon=True
+            )
+            for i in range(self.s.workers)
+        ]
+        for t in threads:
+            t.start()
+        # Each call is bounded, so the stream is; the join bound only guards against a bug.
+        limit = self.s.commands * self.s.call_bound + 60.0
+        deadline = time.monotonic() + limit
+        for t in threads:
+            t.join(max(0.0, deadline - time.monotonic()))
+        if any(t.is_alive() for t in threads):
+            raise ProtoduinoError("soak workers did not finish: a call hung")
+
+    def recover(self, outputs: _Outputs) -> int:
+        """Heal the line, then recovery_commands commands, round robin; how many failed."""
+        self.heal_at = time.monotonic()
+        self.line().heal()
+        failed = 0
+        for i in range(self.s.recovery_commands):
+            kind, pin, value, fn = outputs.next_command(i % outputs.count)
+            if not self.call(kind, pin, value, fn, "recovery"):
+                failed += 1
+        return failed
+
+    def stop_pinging(self, outputs: _Outputs) -> float:
+        """Drive every output off its safe value, stop the pings; the time pinging stopped."""
+        for out in range(outputs.count):
+            kind, pin, value, fn = outputs.next_command(out)
+            if kind == "digital" and value == 0:  # end on 1: the failsafe then shows as a 0
+                self.call(kind, pin, value, fn, "failsafe")
+                kind, pin, value, fn = outputs.next_command(out)
+            self.call(kind, pin, value, fn, "failsafe")
+        self.board.pinging = False
+        return time.monotonic()
+
+
+def run(
+    scenario: Scenario,
+    workdir: Path,
+    *,
+    progress: Callable[[int], None] | None = None,
+) -> SoakResult:
+    """Run ``scenario`` on a fresh simulated board; trace and log files go to ``workdir``."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    trace = workdir / f"{scenario.name}-{scenario.backend}-{scenario.seed}.trace.jsonl"
+    trace.unlink(missing_ok=True)
+    name = f"soak-{scenario.name}-{id(scenario):x}-{time.monotonic_ns()}"
+    wire = _Wire()
+    result = SoakResult(scenario, call_bound=scenario.call_bound)
+    t0 = time.monotonic()
+    with SimBoard(scenario.backend, trace=trace) as sim:
+        port = sim.start()
+        with Board.open(
+            scenario.url(port, name),
+            ack_timeout=scenario.ack_timeout,
+            max_retries=scenario.max_retries,
+            handshake_timeout=scenario.handshake_timeout,
+            window=scenario.window,
+            monitor=wire,
+        ) as board:
+            runner = _Runner(scenario, sim, board, name)
+            outputs = _Outputs(board, scenario)
+            _setup_values(runner, outputs)
+            runner.line().resume()
+            runner.stream(outputs, progress)
+            failed = runner.recover(outputs)
+            result.recovered = failed == 0
+            result.recovery_failures = failed
+            fs_stop = runner.stop_pinging(outputs) if scenario.failsafe else None
+            if fs_stop is not None:
+                _wait_for_failsafe(sim, outputs, fs_stop)
+            result.faults = dict(runner.line().stats)
+            result.link = _link_figures(board, runner)
+        result.faults["device_resets"] = len(runner.reboots)
+        result.faults["line_cuts"] = len(runner.cuts)
+        sim.stop()
+        lines = sim.trace()
+    result.duration = time.monotonic() - t0
+    if wire.bad:
+        result.violations.append(f"frames the monitor could not parse: {dict(wire.bad)}")
+    _judge(result, runner, wire, lines, fs_stop)
+    return result
+
+
+def _setup_values(runner: _Runner, outputs: _Outputs) -> None:
+    """On the clean line, one command per output: their trace lines fix the clock offset."""
+    for out in range(outputs.count):
+        kind, pin, value, fn = outputs.next_command(out)
+        if not runner.call(kind, pin, value, fn, "setup"):
+            raise ProtoduinoError(f"setup command failed on a clean line: {runner.calls[-1]}")
+
+
+def _wait_for_failsafe(sim: SimBoard, outputs: _Outputs, since: float) -> None:
+    """Wait (bounded) until every output shows its safe value again after the pings stopped."""
+    deadline = since + FAILSAFE_TIMEOUT + 3.0
+    safe = {s.pin: servo_safe(i) for i, s in enumerate(outputs.servos)}
+    safe.update({d.pin: 0 for d in outputs.digitals})
+    while time.monotonic() < deadline:
+        time.sleep(0.1)
+        last: dict[int, int] = {}
+        for entry in sim.trace():
+            last[int(entry["pin"])] = int(entry["value"])
+        tol = BACKEND_TRAITS[sim.backend].tolerance_us
+        if all(abs(last.get(pin, -100) - v) <= tol for pin, v in safe.items()):
+            return
+
+
+def _link_figures(board: Board, runner: _Runner) -> dict[str, Any]:
+    st = board.stats
+    kinds = Counter(e.kind.value for e in runner.events)
+    return {
+        "retransmits": st.retransmits,
+        "late_acks": st.late_acks,
+        "unknown_acks": st.unknown_acks,
+        "bad_frames": dict(st.dropped),
+        "rehandshakes": max(0, st.handshakes - 1),
+        "reboots_seen": st.reboots,
+        "seq_lost": st.seq_lost,
+        "seq_desyncs": st.seq_desyncs,
+        "watchdog_resets": st.watchdog_resets,
+        "device_desyncs": st.device_desyncs,
+        "device_rx_overflows": st.device_rx_overflows,
+        "timeouts": st.timeouts,
+        "pings": st.pings,
+        "ping_failures": st.ping_failures,
+        "restores": kinds.get(EventKind.RESTORED.value, 0),
+        "failsafe_events": sum(
+            1 for e in runner.events if e.kind is EventKind.FAILSAFE and e.details.get("active")
+        ),
+        "decode_errors": kinds.get(EventKind.DECODE_ERROR.value, 0),
+        "guard_holds": board._rpc.guard_holds,
+    }
+
+
+# --- judging ---------------------------------------------------------------------------------
+
+
+def _judge(
+    result: SoakResult,
+    runner: _Runner,
+    wire: _Wire,
+    lines: list[dict[str, Any]],
+    fs_stop: float | None,
+) -> None:
+    s = runner.s
+    traits = BACKEND_TRAITS.get(s.backend, BACKEND_TRAITS["avr"])
+    result.trace_lines = len(lines)
+    calls = list(runner.calls)
+    stream = [c for c in calls if c.phase in ("faults", "recovery")]
+    result.sent = len(stream)
+    result.ok = sum(c.outcome == "ok" for c in stream)
+    result.timed_out = sum(c.outcome == "timeout" for c in stream)
+    result.rejected = dict(Counter(c.detail for c in stream if c.outcome == "rejected"))
+    result.errors = dict(Counter(c.detail for c in stream if c.outcome == "error"))
+    for c in calls:
+        if c.outcome != "ok" and c.phase in ("setup", "failsafe"):
+            result.violations.append(f"{c.phase} command failed on a clean line: {c}")
+
+    # No hung call.
+    result.max_call = max((c.duration for c in calls), default=0.0)
+    hung = [c for c in calls if c.duration > s.call_bound + HUNG_SLACK]
+    result.hung = len(hung)
+    for c in hung[:5]:
+        result.violations.append(
+            f"hung call: {c.kind} pin {c.pin} = {c.value} took {c.duration:.3f} s "
+            f"(bound {s.call_bound:g} s): {c.outcome} {c.detail}"
+        )
+
+    # The clock offset between the trace and the host, from the setup phase.
+    offset = _offset(calls, wire, lines, traits)
+    if offset is None:
+        result.violations.append("could not relate the trace's clock to the host's")
+        return
+    tx_delay = _tx_delay(s)
+
+    # What may legitimately change each output, and when.
+    causes = _causes(wire, tx_delay)
+    boundaries = _boundaries(runner.reboots, lines, offset, traits)
+    acked_pings = sorted(
+        (sent.txs[0], sent.ack)
+        for sent in wire.sent.values()
+        if sent.kind == "ping" and sent.ack is not None and sent.status == 0
+    )
+
+    used: dict[int, int] = {}  # message id -> the boot it executed in
+    matched_ids: set[int] = set()
+    by_value: dict[tuple[int, int], list[_Cause]] = {}
+    for cause in causes:
+        by_value.setdefault((cause.pin, cause.value), []).append(cause)
+    failsafe_lines: list[float] = []
+    previous: dict[int, int] = {}
+    for entry in lines:
+        pin, value, t = int(entry["pin"]), int(entry["value"]), float(entry["t"])
+        servo = entry["mode"] == "servo"
+        lag = traits.servo_lag if servo else 0.0
+        tol = traits.tolerance_us if servo else 0
+        last, previous[pin] = previous.get(pin), value
+        if tol and last is not None and abs(value - last) <= tol:
+            continue  # a measured pulse's jitter: the same output value measured again
+        h = t + offset  # host time of the line
+        boot = sum(1 for b in boundaries if t >= b)
+        if value == 0 and any(abs(t - b) <= lag + 0.002 for b in boundaries):
+            continue  # a reboot releases every output
+        candidates = [
+            c
+            for v in range(value - tol, value + tol + 1)
+            for c in by_value.get((pin, v), ())
+            if c.lo - SLOP <= h <= c.hi + lag
+        ]
+        fresh = [c for c in candidates if used.get(c.message_id, -1) != boot]
+        # Never-used causes first (a cause used in an earlier boot may run again after a
+        # reboot, but only if nothing else explains the line), commands before safe values.
+        fresh.sort(key=lambda c: (c.message_id in used, c.what != "command", c.lo))
+        if fresh:
+            chosen = fresh[0]
+            if chosen.message_id in used:
+                result.reexecuted_after_reboot += 1
+            used[chosen.message_id] = boot
+            matched_ids.add(chosen.message_id)
+            continue
+        if _failsafe_possible(pin=pin, value=value, h=h, wire=wire, acked_pings=acked_pings):
+            failsafe_lines.append(h)
+            continue
+        if candidates:
+            result.duplicates += 1
+            if result.duplicates <= 5:
+                ids = sorted({c.message_id for c in candidates})
+                result.violations.append(
+                    f"duplicate execution: pin {pin} = {value} at trace t={t:.4f} again "
+                    f"(message ids {ids} already executed in this boot)"
+                )
+        else:
+            result.corrupted += 1
+            if result.corrupted <= 5:
+                result.violations.append(
+                    f"unexplained output change (corrupted command?): pin {pin} = {value} "
+                    f"at trace t={t:.4f} (host {h:.4f}); no command sent with that value then"
+                )
+    result.failsafe_lines = len(failsafe_lines)
+
+    # Executed: the stream's calls whose message id explains a trace line.
+    ids_by_value: dict[tuple[int, int], list[_Sent]] = {}
+    for sent in wire.sent.values():
+        if sent.kind in ("servo_control", "digital_control") and sent.pin is not None:
+            assert sent.value is not None
+            ids_by_value.setdefault((sent.pin, sent.value), []).append(sent)
+    for c in stream:
+        ids = [
+            x.message_id
+            for x in ids_by_value.get((c.pin, c.value), ())
+            if c.start - SLOP <= x.txs[0] <= c.end + SLOP
+        ]
+        seen = any(i in matched_ids for i in ids)
+        if seen:
+            result.executed += 1
+            if c.outcome == "timeout":
+                result.executed_after_timeout += 1
+        elif c.outcome == "ok" and c.kind == "servo" and traits.servo_lag == 0.0:
+            # Exact traces only: an acknowledged pulse width must show (each is new).
+            result.violations.append(
+                f"acknowledged but never executed: pin {c.pin} = {c.value} "
+                f"({c.start:.3f}..{c.end:.3f})"
+            )
+        if c.outcome in ("ok", "timeout", "rejected") and not ids:
+            result.violations.append(f"call never reached the wire: {c}")
+
+    # Recovery times: from each disruption's end to the next successful call.
+    ok_ends = sorted(c.end for c in stream if c.outcome == "ok")
+    marks = [*runner.reboots, *(b for _, b in runner.cuts), runner.heal_at]
+    for mark in sorted(marks):
+        after = next((e for e in ok_ends if e > mark), None)
+        if after is None:
+            result.violations.append(f"no successful call after the disruption at {mark:.3f}")
+        else:
+            result.recovery.append(after - mark)
+    bound = s.call_bound + WATCHDOG_TIMEOUT
+    if not result.recovered:
+        result.violations.append(
+            f"the link did not recover: {result.recovery_failures} of "
+            f"{s.recovery_commands} commands failed on the healed line"
+        )
+    slow = [r for r in result.recovery if r > bound]
+    if slow:
+        result.violations.append(f"recovery slower than {bound:g} s: {max(slow):.3f} s")
+
+    if fs_stop is not None:
+        _judge_failsafe(
+            result, wire=wire, lines=lines, offset=offset, fs_stop=fs_stop, traits=traits
+        )
+
+
+def _tx_delay(s: Scenario) -> float:
+    params = dict(parse_qsl(s.faults))
+    if params.get("dir", "both") in ("both", "tx"):
+        return float(params.get("delay", 0.0)) / 1000
+    return 0.0
+
+
+def _causes(wire: _Wire, tx_delay: float) -> list[_Cause]:
+    """Every output change the transmitted commands may cause, with its time window."""
+    causes: list[_Cause] = []
+    configured: dict[int, int] = {}  # pin -> safe value of its latest Init sent
+    for mid in wire.order:
+        sent = wire.sent[mid]
+        lo, hi = sent.txs[0], sent.txs[-1] + LATENCY + tx_delay
+        if sent.kind in ("servo_control", "digital_control", "servo_init", "digital_init"):
+            assert sent.pin is not None and sent.value is not None
+            what = "command" if sent.kind.endswith("control") else "init"
+            causes.append(_Cause(sent.pin, sent.value, lo, hi, what, mid))
+            if what == "init":
+                configured[sent.pin] = sent.value
+        elif sent.kind == "stop":
+            for pin, safe in configured.items():
+                causes.append(_Cause(pin, safe, lo, hi, "stop", mid))
+    return causes
+
+
+def _boundaries(
+    reboots: list[float], lines: list[dict[str, Any]], offset: float, traits: BackendTraits
+) -> list[float]:
+    """Trace times at which the device rebooted: its servos' 0 lines after each reset."""
+    zeros = sorted(float(e["t"]) for e in lines if e["mode"] == "servo" and int(e["value"]) == 0)
+    out: list[float] = []
+    for r in reboots:
+        start = r - offset - SLOP
+        first = next((z for z in zeros if z >= start), None)
+        out.append(first - traits.servo_lag if first is not None else r - offset)
+    return out
+
+
+def _failsafe_possible(
+    *,
+    pin: int,
+    value: int,
+    h: float,
+    wire: _Wire,
+    acked_pings: list[tuple[float, float]],
+) -> bool:
+    """Could the device's failsafe have driven ``pin`` to ``value`` at host time ``h``?
+
+    Only to the pin's safe value, and only if no Ping the device certainly
+    received (acknowledged) went out less than FAILSAFE_TIMEOUT before.
+    """
+    safe = {
+        s.pin: s.value
+        for s in wire.sent.values()
+        if s.kind in ("servo_init", "digital_init") and s.txs[0] <= h
+    }
+    if pin not in safe or safe[pin] != value:
+        return False
+    return not any(ack <= h and tx > h - FAILSAFE_TIMEOUT + SLOP for tx, ack in acked_pings)
+
+
+def _offset(
+    calls: list[CallRecord],
+    wire: _Wire,
+    lines: list[dict[str, Any]],
+    traits: BackendTraits,
+) -> float | None:
+    """Host time minus trace time, from the setup commands (one unique value each).
+
+    Each setup command executed between its transmission and its Ack; its
+    trace line (a measured servo: up to ``servo_lag`` later) bounds the
+    offset. The answer is the point most of those bounds agree on.
+    """
+    intervals: list[tuple[float, float]] = []
+    for c in calls:
+        if c.phase != "setup" or c.outcome != "ok":
+            continue
+        sent = next(
+            (
+                x
+                for x in wire.sent.values()
+                if x.pin == c.pin
+                and x.value == c.value
+                and x.kind.endswith("control")
+                and x.ack is not None
+                and c.start - SLOP <= x.txs[0] <= c.end
+            ),
+            None,
+        )
+        if sent is None or sent.ack is None:
+            continue
+        servo = c.kind == "servo"
+        tol = traits.tolerance_us if servo else 0
+        lag = traits.servo_lag if servo else 0.0
+        for e in lines:
+            if int(e["pin"]) == c.pin and abs(int(e["value"]) - c.value) <= tol:
+                t = float(e["t"])
+                intervals.append((sent.txs[0] - t - 0.002, sent.ack + lag - t + 0.002))
+                break
+    if not intervals:
+        return None
+    # The point covered by most intervals (ties: the middle of the tightest overlap).
+    best, best_count = intervals[0][0], 0
+    for lo, _ in intervals:
+        count = sum(1 for a, b in intervals if a <= lo <= b)
+        if count > best_count:
+            best, best_count = lo, count
+    covering = [(a, b) for a, b in intervals if a <= best <= b]
+    lo = max(a for a, _ in covering)
+    hi = min(b for _, b in covering)
+    return (lo + hi) / 2
+
+
+def _judge_failsafe(
+    result: SoakResult,
+    *,
+    wire: _Wire,
+    lines: list[dict[str, Any]],
+    offset: float,
+    fs_stop: float,
+    traits: BackendTraits,
+) -> None:
+    """The first safe value after the last Ping, against that Ping's reception."""
+    result.failsafe_checked = True
+    pings = [s for s in wire.sent.values() if s.kind == "ping" and s.txs[0] <= fs_stop + 0.5]
+    if not pings:
+        result.violations.append("failsafe check: no Ping was ever sent")
+        result.failsafe_ok = False
+        return
+    last = max(pings, key=lambda s: s.txs[-1])
+    rx_lo = last.txs[-1]  # the device received it after this transmission...
+    rx_hi = last.ack if last.ack is not None else last.txs[-1] + 0.05  # ...and before its Ack
+    digital_pins = {
+        s.pin for s in wire.sent.values() if s.kind == "digital_init" and s.pin is not None
+    }
+    servo_safe_by_pin = {
+        s.pin: s.value
+        for s in wire.sent.values()
+        if s.kind == "servo_init" and s.pin is not None and s.value is not None
+    }
+    edges = [
+        float(e["t"]) + offset
+        for e in lines
+        if float(e["t"]) + offset > max(rx_lo, fs_stop)  # after the last write was acked
+        and (
+            (int(e["pin"]) in digital_pins and int(e["value"]) == 0)
+            or (
+                int(e["pin"]) in servo_safe_by_pin
+                and abs(int(e["value"]) - servo_safe_by_pin[int(e["pin"])]) <= traits.tolerance_us
+            )
+        )
+    ]
+    if not edges:
+        result.violations.append("failsafe never fired after the pings stopped")
+        result.failsafe_ok = False
+        return
+    fired = min(edges)
+    low, high = fired - rx_hi, fired - rx_lo
+    result.failsafe_delay = (round(low, 4), round(high, 4))
+    # Fires at >= 10 s after the last Ping received, within 20 ms (+ the clock fit's error).
+    ok = high >= FAILSAFE_TIMEOUT - 0.003 and low <= FAILSAFE_TIMEOUT + FAILSAFE_TOLERANCE
+    result.failsafe_ok = ok
+    if not ok:
+        result.violations.append(
+            f"failsafe fired {low:.4f}..{high:.4f} s after the last Ping "
+            f"(expected {FAILSAFE_TIMEOUT:g} s + {FAILSAFE_TOLERANCE * 1000:g} ms)"
+        )
+
+
+def run_many(
+    scenarios: Iterable[Scenario],
+    workdir: Path,
+    *,
+    progress: Callable[[str, int], None] | None = None,
+) -> Iterator[SoakResult]:
+    """Run each scenario in turn, yielding its result as soon as it is judged."""
+    for scenario in scenarios:
+        hook = None
+        if progress is not None:
+            name = scenario.name
+
+            def hook(n: int, name: str = name) -> None:
+                progress(name, n)
+
+        yield run(scenario, workdir, progress=hook)
