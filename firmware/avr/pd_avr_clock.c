@@ -17,7 +17,8 @@ void pd_avr_clock_init(void)
     TIMSK0 = _BV(OCIE0A);
 }
 
-ISR(TIMER0_COMPA_vect)
+/* Interruptible (its flag clears on entry): a servo edge never waits for it. */
+ISR(TIMER0_COMPA_vect, ISR_NOBLOCK)
 {
     ms++;
 }
