@@ -2,7 +2,8 @@
  * avrsim.c: an emulated Arduino Uno (ATmega328P, simavr) on a pseudo-terminal.
  *
  *   avrsim [--trace FILE] [--link PATH] [--hex FILE]... [--boot ADDR]
- *          [--auto-reset] [--glitch PIN] [--mcu NAME] [--freq HZ] [FIRMWARE.elf]
+ *          [--auto-reset] [--glitch PIN] [--stats FILE] [--mcu NAME] [--freq HZ]
+ *          [FIRMWARE.elf]
  *
  * The command-line contract is the native simulated board's (contracts.md):
  * the first stdout line is the port to open (the pty's slave, or --link),
@@ -14,6 +15,12 @@
  * can hang in pthread_join. Here the pty is ours, UART0 is bridged through
  * simavr's UART IRQs from the one emulation thread, and emulation is paced
  * against CLOCK_MONOTONIC so that the firmware's millis() is real time.
+ *
+ * --stats FILE (for the benchmarks): on SIGUSR2 and at exit, append one JSON
+ * line of counters to FILE: emulated cycles, the cycles the MCU spent asleep
+ * (simavr skips a sleeping core ahead to its next timer and reports the jump
+ * to the sleep callback), and the UART bytes each way. Awake cycles divided
+ * by the commands sent in between is the firmware's cost per command.
  *
  * Flashing flow (--boot, --auto-reset): the Uno's reset vector points into
  * the boot section (BOOTRST), power-up shows the external-reset flag so that
@@ -99,6 +106,10 @@ typedef struct {
     const char *port_name;
     int glitch_pin; /* --glitch: -1 when off */
     uint64_t next_glitch;
+    FILE *stats;           /* --stats: NULL when off */
+    uint64_t sleep_cycles; /* cycles skipped while the MCU slept, across resets */
+    uint64_t uart_rx;      /* bytes fed into UART0 */
+    uint64_t uart_tx;      /* bytes UART0 sent */
 } pd_sim_t;
 
 static pd_sim_t g_sim;
@@ -106,11 +117,14 @@ static void pd_start_rx(pd_sim_t *sim);
 static uint64_t g_start_ns; /* trace and pacing time zero: the process start */
 static volatile sig_atomic_t g_stop;
 static volatile sig_atomic_t g_reset;
+static volatile sig_atomic_t g_dump_stats;
 
 static void pd_on_signal(int sig)
 {
     if (sig == SIGUSR1) {
         g_reset = 1;
+    } else if (sig == SIGUSR2) {
+        g_dump_stats = 1;
     } else {
         g_stop = 1;
     }
@@ -198,6 +212,7 @@ static void pd_uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
     pd_sim_t *sim = param;
+    sim->uart_tx++;
     pd_fifo_push(&sim->tx, (uint8_t)value);
 }
 
@@ -212,9 +227,29 @@ static void pd_core_reset(struct avr_t *avr)
 
 static void pd_sleep_hook(avr_t *avr, avr_cycle_count_t how_long)
 {
-    /* The main loop paces emulation; simavr's own usleep() would stall it. */
+    /* The main loop paces emulation; simavr's own usleep() would stall it.
+     * simavr then advances the clock by 1 + how_long cycles of sleep. */
     (void)avr;
-    (void)how_long;
+    g_sim.sleep_cycles += 1U + how_long;
+}
+
+/* One line of counters for --stats. A stopped (crashed) MCU's time counts as
+ * awake: it is not asleep, and nothing measures a crashed board's cost. */
+static void pd_write_stats(pd_sim_t *sim)
+{
+    if (!sim->stats) {
+        return;
+    }
+    uint64_t cycles = pd_cycles(sim);
+    uint64_t sleep = sim->sleep_cycles < cycles ? sim->sleep_cycles : cycles;
+    fprintf(sim->stats,
+            "{\"t\": %.6f, \"freq\": %u, \"cycles\": %llu, \"sleep_cycles\": %llu, "
+            "\"awake_cycles\": %llu, \"uart_rx_bytes\": %llu, \"uart_tx_bytes\": %llu}\n",
+            (double)cycles / (double)sim->avr->frequency, (unsigned)sim->avr->frequency,
+            (unsigned long long)cycles, (unsigned long long)sleep,
+            (unsigned long long)(cycles - sleep), (unsigned long long)sim->uart_rx,
+            (unsigned long long)sim->uart_tx);
+    fflush(sim->stats);
 }
 
 static void pd_set_extrf(pd_sim_t *sim)
@@ -381,6 +416,7 @@ static avr_cycle_count_t pd_rx_timer(struct avr_t *avr, avr_cycle_count_t when, 
     sim->rx.len--;
     if (in) {
         avr_raise_irq(in, b);
+        sim->uart_rx++;
     }
     return when + per_byte;
 }
@@ -496,10 +532,11 @@ static void pd_usage(FILE *f)
 {
     fprintf(f,
             "usage: avrsim [--trace FILE] [--link PATH] [--hex FILE]... [--boot ADDR]\n"
-            "              [--auto-reset] [--glitch PIN] [--mcu NAME] [--freq HZ]\n"
-            "              [FIRMWARE.elf]\n"
+            "              [--auto-reset] [--glitch PIN] [--stats FILE] [--mcu NAME]\n"
+            "              [--freq HZ] [FIRMWARE.elf]\n"
             "Runs an emulated Arduino Uno with UART0 on a pseudo-terminal; prints the\n"
-            "port as the first stdout line. SIGUSR1 resets the MCU, SIGINT/SIGTERM exit.\n");
+            "port as the first stdout line. SIGUSR1 resets the MCU, SIGINT/SIGTERM exit;\n"
+            "with --stats, SIGUSR2 and the exit append cycle and UART counters to FILE.\n");
 }
 
 static void pd_cleanup(pd_sim_t *sim)
@@ -511,6 +548,10 @@ static void pd_cleanup(pd_sim_t *sim)
         fclose(sim->trace);
         sim->trace = NULL;
     }
+    if (sim->stats) {
+        fclose(sim->stats);
+        sim->stats = NULL;
+    }
 }
 
 static void pd_run(pd_sim_t *sim)
@@ -521,6 +562,10 @@ static void pd_run(pd_sim_t *sim)
         if (g_reset) {
             g_reset = 0;
             pd_reset_mcu(sim);
+        }
+        if (g_dump_stats) {
+            g_dump_stats = 0;
+            pd_write_stats(sim);
         }
         pd_check_opens(sim);
         pd_pump_pty(sim);
@@ -591,6 +636,7 @@ int main(int argc, char **argv)
     g_start_ns = pd_now_ns();
     pd_sim_t *sim = &g_sim;
     const char *trace_path = NULL;
+    const char *stats_path = NULL;
     const char *hex[PD_MAX_HEX];
     int hex_count = 0;
     const char *mcu = PD_DEFAULT_MCU;
@@ -606,7 +652,7 @@ int main(int argc, char **argv)
         {"hex", required_argument, NULL, 'x'},   {"boot", required_argument, NULL, 'b'},
         {"mcu", required_argument, NULL, 'm'},   {"freq", required_argument, NULL, 'f'},
         {"auto-reset", no_argument, NULL, 'r'},  {"glitch", required_argument, NULL, 'g'},
-        {"help", no_argument, NULL, 'h'},
+        {"stats", required_argument, NULL, 's'}, {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
     int opt;
@@ -644,6 +690,9 @@ int main(int argc, char **argv)
                 fprintf(stderr, "avrsim: --glitch takes an output pin 2..19\n");
                 return 2;
             }
+            break;
+        case 's':
+            stats_path = optarg;
             break;
         case 'h':
             pd_usage(stdout);
@@ -715,6 +764,14 @@ int main(int argc, char **argv)
             return 1;
         }
     }
+    if (stats_path) {
+        sim->stats = fopen(stats_path, "a");
+        if (!sim->stats) {
+            perror("avrsim: stats file");
+            pd_cleanup(sim);
+            return 1;
+        }
+    }
     pd_connect(sim);
     if (pd_open_pty(sim) != 0) {
         pd_cleanup(sim);
@@ -750,11 +807,15 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     sigaction(SIGUSR1, &sa, NULL);
+    if (sim->stats) {
+        sigaction(SIGUSR2, &sa, NULL); /* otherwise SIGUSR2 keeps its default */
+    }
     signal(SIGPIPE, SIG_IGN);
 
     sim->port_out = port_out;
     sim->port_name = port;
     pd_run(sim);
+    pd_write_stats(sim);
     pd_cleanup(sim);
     if (port_out) {
         fclose(port_out);
