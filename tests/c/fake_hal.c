@@ -1,5 +1,6 @@
 #include "fake_hal.h"
 
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -18,7 +19,10 @@ static void fake_abort(const char *why)
 
 void fake_init(fake_hal_t *hal)
 {
-    memset(hal, 0, sizeof(*hal));
+    /* Everything but the frame log (written before it is read): the fuzzer
+     * calls this once per input, and clearing 16 KB each time halves its speed. */
+    memset(hal, 0, offsetof(fake_hal_t, frames));
+    memset(&hal->servo_us, 0, sizeof(*hal) - offsetof(fake_hal_t, servo_us));
     for (int pin = 0; pin < PD_MAX_PINS; pin++) {
         hal->servo_us[pin] = -1;
         hal->digital[pin] = -1;

@@ -115,23 +115,42 @@ def _sample_commands() -> list[bytes]:
 
 
 def write_corpus(vectors: dict[str, Any], out: Path) -> None:
+    """Seeds in the fuzz target's two modes (see tests/c/fuzz_rx.c)."""
     from protoduino.constants import PacketType
     from protoduino.framing import frame_packet
     from protoduino.packets import reset_payload
 
+    raw_mode, structured, no_handshake = b"\x01", b"\x00", b"\x02"
     out.mkdir(parents=True, exist_ok=True)
-    seeds: list[bytes] = [bytes.fromhex(v["wire"]) for v in vectors["packets"]]
-    seeds += [bytes.fromhex(v["wire"]) for v in vectors["invalid_frames"]]
-    seeds += [bytes.fromhex(v["encoded"]) + b"\0" for v in vectors["cobs"]]
-    # The fuzz target feeds its input to a freshly booted (IDLE) device, so a
-    # seed that should reach the dispatcher starts with the handshake.
+    commands = _sample_commands()
+
+    # Raw byte streams: every wire vector, then whole sessions.
+    seeds: list[bytes] = [raw_mode + bytes.fromhex(v["wire"]) for v in vectors["packets"]]
+    seeds += [raw_mode + bytes.fromhex(v["wire"]) for v in vectors["invalid_frames"]]
+    seeds += [raw_mode + bytes.fromhex(v["encoded"]) + b"\0" for v in vectors["cobs"]]
     reset = b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(1))
     session = reset
-    for seq, payload in enumerate(_sample_commands(), start=1):
-        frame = frame_packet(PacketType.COMMAND, seq, payload)
-        seeds.append(reset + frame_packet(PacketType.COMMAND, 1, payload))
-        session += frame
-    seeds.append(session)
+    for seq, payload in enumerate(commands, start=1):
+        seeds.append(raw_mode + reset + frame_packet(PacketType.COMMAND, 1, payload))
+        session += frame_packet(PacketType.COMMAND, seq, payload)
+    seeds.append(raw_mode + session)
+
+    # Structured: records [hdr][len][payload] that the harness frames itself.
+    def record(payload: bytes, ptype: int = PacketType.COMMAND, clock_steps: int = 0) -> bytes:
+        return bytes((ptype | clock_steps << 5, len(payload))) + payload
+
+    for payload in commands:
+        seeds.append(structured + record(payload))
+        seeds.append(no_handshake + record(payload))
+    seeds.append(structured + b"".join(record(p) for p in commands))
+    # Outputs configured, then silence long enough for the failsafe, then a Ping.
+    seeds.append(
+        structured
+        + b"".join(record(p) for p in commands[3:10])
+        + record(b"", PacketType.CONTROL, 7)
+        + record(b"", PacketType.CONTROL, 7)
+        + record(commands[0])
+    )
     for seed in seeds:
         name = hashlib.sha1(seed).hexdigest()
         (out / name).write_bytes(seed)
