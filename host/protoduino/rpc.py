@@ -31,6 +31,8 @@ I/O thread.
 * Session restore: when the link comes back after a reboot, the messages from
   ``restore_provider`` are sent first, one at a time and in order (an Init
   must land before its Control), and user calls are held until they are done.
+  A restore message that times out is sent again (RESTORE_RETRIES times): a
+  restore that skipped an Init would leave that output dead on the device.
 """
 
 from __future__ import annotations
@@ -59,6 +61,10 @@ log = logging.getLogger(__name__)
 
 #: How many finished ids are remembered to tell a late Ack from an unknown one.
 FINISHED_MEMORY = 256
+
+#: A restore message that gets no Ack is sent again (a new call) this many more times:
+#: a restore left half done would leave an output unconfigured on the device.
+RESTORE_RETRIES = 3
 
 #: Calls whose re-execution changes nothing (the device answers their
 #: duplicates in full): they need no protection by the dedupe guard.
@@ -157,6 +163,7 @@ class Rpc:
         self._restore_call: Call | None = None
         self._restore_failed: list[str] = []
         self._restore_count = 0
+        self._restore_tries = 0
         self._holding = False
         self._finished: collections.deque[int] = collections.deque(maxlen=FINISHED_MEMORY)
         self._finished_set: set[int] = set()
@@ -451,6 +458,7 @@ class Rpc:
                 self._restore = collections.deque(msgs)
                 self._restore_failed = []
                 self._restore_count = len(msgs)
+                self._restore_tries = 0
                 if self._restore_call is not None:  # an interrupted restore: start over
                     self._finish(self._restore_call, error=BoardClosedError("restore restarted"))
                     self._restore_call = None
@@ -483,6 +491,13 @@ class Rpc:
         if call is not self._restore_call:
             return
         self._restore_call = None
+        if isinstance(call.error, AckTimeoutError) and self._restore_tries < RESTORE_RETRIES:
+            # A lossy line, not a refusal: the same message again (Inits and values are
+            # absolute, so running one twice changes nothing).
+            self._restore_tries += 1
+            self._restore.appendleft(_reparse(call.payload))
+            return
+        self._restore_tries = 0
         if call.error is not None:
             self._restore_failed.append(f"{call.kind}: {call.error}")
         if not self._restore:

@@ -742,8 +742,10 @@ def _judge(
         ]
         fresh = [c for c in candidates if used.get(c.message_id, -1) != boot]
         # Never-used causes first (a cause used in an earlier boot may run again after a
-        # reboot, but only if nothing else explains the line), commands before safe values.
-        fresh.sort(key=lambda c: (c.message_id in used, c.what != "command", c.lo))
+        # reboot, but only if nothing else explains the line), commands before safe values,
+        # then the one whose window closes first (lines come in time order: this matches as
+        # many lines as can be matched).
+        fresh.sort(key=lambda c: (c.message_id in used, c.what != "command", c.hi))
         if fresh:
             chosen = fresh[0]
             if chosen.message_id in used:

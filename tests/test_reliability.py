@@ -1,0 +1,359 @@
+"""Reliability under faults: exactly-once across lost Acks, and seeded fault scenarios.
+
+Part one drives the request layer against the scripted fake device, whose
+dedupe window behaves like the firmware's (the last 16 ids), to pin down the
+dedupe guard in ``protoduino.rpc``: a retransmission must still find its id in
+the device's window. Part two runs short seeded scenarios of every fault kind
+on the simulated board (``protoduino.soak``), each judged against the board's
+own trace, on every backend of ``SIM_BACKENDS``. Part three makes sure the
+judge itself can fail.
+"""
+
+from __future__ import annotations
+
+import collections
+import shutil
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from fakedevice import FakeDevice
+from protoduino import Board, soak
+from protoduino.constants import DEDUPE_WINDOW, FAILSAFE_TIMEOUT
+from protoduino.rpc import Rpc
+from simfixtures import SIM_BACKENDS
+
+# --- exactly once: the dedupe guard -----------------------------------------------------
+
+
+class Executions:
+    """Wraps the fake's reply: counts real executions (not dedupe hits) and drops replies."""
+
+    def __init__(self, fake: FakeDevice, drop: Callable[[Any, int], bool]) -> None:
+        self.fake = fake
+        self.drop = drop  # (msg, how many times this id arrived) -> drop the reply?
+        self.count: collections.Counter[int] = collections.Counter()
+        self.arrivals: collections.Counter[int] = collections.Counter()
+        self.order: list[int] = []  # ids in the order they arrived
+        self.evicted_retransmissions: list[int] = []
+        fake.handler = self
+
+    def __call__(self, msg: Any) -> list[Any]:
+        mid = msg.message_id
+        self.arrivals[mid] += 1
+        self.order.append(mid)
+        kind = msg.WhichOneof("data")
+        if kind not in ("ping", "get_info") and mid not in self.fake._dedupe:
+            if self.count[mid]:
+                self.evicted_retransmissions.append(mid)
+            self.count[mid] += 1
+        replies = self.fake.default_reply(msg)
+        return [] if self.drop(msg, self.arrivals[mid]) else replies
+
+
+def stream_writes(board: Board, threads: int = 4, per_thread: int = 15) -> None:
+    servo = board.servo(9, min_us=500, max_us=2500)
+
+    def worker(k: int) -> None:
+        for i in range(per_thread):
+            servo.write_us(600 + 20 * i + k)
+
+    workers = [threading.Thread(target=worker, args=(k,)) for k in range(threads)]
+    for t in workers:
+        t.start()
+    for t in workers:
+        t.join(30)
+    assert not any(t.is_alive() for t in workers)
+
+
+@pytest.fixture
+def fake(tmp_path: Path) -> Iterator[FakeDevice]:
+    with FakeDevice(tmp_path) as device:
+        yield device
+
+
+def test_fake_device_window_is_the_firmwares() -> None:
+    assert DEDUPE_WINDOW == 16  # the figure the guard and these tests are built on
+
+
+def test_lost_ack_while_later_commands_stream_executes_once(fake: FakeDevice) -> None:
+    """The hazard: X's Ack is lost, newer calls complete quickly, X is retransmitted.
+
+    Without the guard dozens of newer ids run in the 0.2 s before X's
+    retransmission, X leaves the device's 16-id window and runs twice.
+    """
+    first: list[int] = []
+
+    def drop_first_servo_ack(msg: Any, arrival: int) -> bool:
+        if msg.WhichOneof("data") != "servo_control":
+            return False
+        if not first:
+            first.append(msg.message_id)
+        return msg.message_id == first[0] and arrival == 1
+
+    with Board.open(fake.port, ack_timeout=0.2, ping=False) as board:
+        ex = Executions(fake, drop_first_servo_ack)
+        stream_writes(board)
+        assert ex.arrivals[first[0]] == 2  # X was retransmitted once ...
+        assert ex.count[first[0]] == 1  # ... and answered from the window, not run again
+        assert max(ex.count.values()) == 1, ex.evicted_retransmissions
+        assert board._rpc.guard_holds > 0  # the guard did hold newer ids back
+        # Between X's first arrival and its retransmission, at most 15 other ids.
+        i, j = (k for k, mid in enumerate(ex.order) if mid == first[0])
+        assert len(set(ex.order[i + 1 : j])) <= DEDUPE_WINDOW - 1
+        assert board.stats.retransmits == 1 and board.stats.timeouts == 0
+
+
+def test_an_older_id_retransmitted_after_x_counts_against_xs_window(fake: FakeDevice) -> None:
+    """Y goes out before X but is lost; X runs, its Acks are lost twice; Y's retransmission runs.
+
+    Y then sits in the device's window after X, so the guard must count it:
+    a guard that only measured id distances from X would let 15 newer ids
+    through as well and push X out before its second retransmission.
+    """
+    ids: list[int] = []
+
+    def drop(msg: Any, arrival: int) -> bool:
+        if msg.WhichOneof("data") != "servo_control":
+            return False
+        if msg.message_id not in ids:
+            ids.append(msg.message_id)
+        if msg.message_id == ids[0]:  # Y: lost entirely the first time
+            return arrival == 1
+        if len(ids) > 1 and msg.message_id == ids[1]:  # X: runs, two Acks lost
+            return arrival <= 2
+        return False
+
+    with Board.open(fake.port, ack_timeout=0.2, ping=False) as board:
+        servo = board.servo(9, min_us=500, max_us=2500)
+        ex = Executions(fake, drop)
+        original = ex.__call__
+
+        def lose_first_y(msg: Any) -> list[Any]:
+            # Y's first copy never reaches the device: not executed, not acked.
+            if msg.WhichOneof("data") == "servo_control" and not ids:
+                ids.append(msg.message_id)
+                ex.arrivals[msg.message_id] += 1
+                return []
+            return original(msg)
+
+        fake.handler = lose_first_y
+        y = threading.Thread(target=servo.write_us, args=(700,))
+        y.start()
+        assert fake.wait_for(lambda: len(ids) == 1)
+        stream_writes(board, threads=4, per_thread=12)
+        y.join(10)
+        assert ex.count[ids[1]] == 1 and ex.arrivals[ids[1]] == 3
+        assert ex.count[ids[0]] == 1
+        assert max(ex.count.values()) == 1, ex.evicted_retransmissions
+
+
+def test_many_lost_acks_under_load_never_execute_twice(fake: FakeDevice) -> None:
+    """Seeded random loss of Acks with eight threads calling: every id runs at most once."""
+    import random
+
+    rng = random.Random(6)
+
+    def drop(msg: Any, arrival: int) -> bool:
+        return msg.WhichOneof("data") == "servo_control" and rng.random() < 0.1
+
+    with Board.open(fake.port, ack_timeout=0.15, ping=True) as board:
+        ex = Executions(fake, drop)
+        stream_writes(board, threads=8, per_thread=25)
+        assert board.stats.retransmits >= 5  # the loss did happen
+        assert max(ex.count.values()) == 1, ex.evicted_retransmissions
+
+
+def test_reboot_empties_the_window_and_the_guard_starts_again(fake: FakeDevice) -> None:
+    """A call in flight across a reboot is sent again after the restore (docs/protocol.md 7)."""
+    swallowed: list[int] = []
+
+    def reboot_on_first_write(msg: Any) -> list[Any]:
+        if msg.WhichOneof("data") == "servo_control" and not swallowed:
+            swallowed.append(msg.message_id)
+            fake.default_reply(msg)  # executed on the old boot; its Ack is lost
+            threading.Thread(target=fake.reboot).start()
+            return []
+        return fake.default_reply(msg)
+
+    with Board.open(fake.port, ack_timeout=0.4, ping=False) as board:
+        servo = board.servo(9)
+        fake.handler = reboot_on_first_write
+        servo.write(120)  # returns once it ran on the new boot, after the restore
+        assert fake.values == {9: 120}
+        assert board.stats.reboots == 1
+        again = [r for r in fake.commands("servo_control") if r.msg.message_id == swallowed[0]]
+        assert len(again) == 2  # the same id, once per boot
+        servo.write(60)
+        assert fake.values == {9: 60}
+
+
+def test_a_restore_message_without_ack_is_sent_again(fake: FakeDevice) -> None:
+    """Every Ack of the replayed Init lost (four attempts): the restore must not skip it."""
+    events: list[protoduino.Event] = []
+    lost: list[int] = []
+
+    def lose_replayed_init(msg: Any) -> list[Any]:
+        replies = fake.default_reply(msg)
+        if msg.WhichOneof("data") == "servo_init" and len(lost) < 4:
+            lost.append(msg.message_id)
+            return []
+        return replies
+
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
+        board.on_event(events.append)
+        board.servo(9).write(45)
+        fake.handler = lose_replayed_init
+        fake.reboot()
+        assert fake.wait_for(
+            lambda: any(e.kind is protoduino.EventKind.RESTORED for e in events), timeout=10
+        )
+        restored = next(e for e in events if e.kind is protoduino.EventKind.RESTORED)
+        assert restored.details["failed"] == []
+        assert len(lost) == 4 and len(set(lost)) == 1  # one call's every attempt, then anew
+        assert fake.pins == {9: "servo"} and fake.values == {9: 45}
+
+
+# --- seeded fault scenarios on the simulated board ------------------------------------
+
+#: Commands per scenario in the test suite: a few seconds each.
+TEST_COMMANDS = {"delay": 60, "reset": 150, "cut": 120}
+DEFAULT_COMMANDS = 150
+
+
+def _skip_without_tools(backend: str) -> None:
+    for tool in ("make", "gcc", *(("avr-gcc",) if backend == "avr" else ())):
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} is not installed (needed to build the {backend} board)")
+
+
+def _scenario(kind: str, backend: str) -> soak.Scenario:
+    scenario = soak.fault_scenarios(TEST_COMMANDS.get(kind, DEFAULT_COMMANDS), 7, backend)[kind]
+    if kind == "cut":
+        scenario = replace(scenario, cuts=1)
+    return replace(scenario, recovery_commands=12)
+
+
+def _explain(result: soak.SoakResult) -> str:
+    return "\n".join([result.scenario.command_line(), *result.violations])
+
+
+@pytest.mark.parametrize("backend", SIM_BACKENDS)
+@pytest.mark.parametrize("kind", list(soak.fault_scenarios(1)))
+def test_fault_kind(kind: str, backend: str, tmp_path: Path) -> None:
+    _skip_without_tools(backend)
+    scenario = _scenario(kind, backend)
+    result = soak.run(scenario, tmp_path)
+    assert result.passed, _explain(result)
+    assert (result.duplicates, result.corrupted, result.hung) == (0, 0, 0)
+    assert result.recovered
+    assert result.sent == scenario.commands + scenario.recovery_commands
+    # The fault really was injected, and the link really had to work around it.
+    injected = {
+        "ber": "flipped_bits",
+        "burst": "bursts",
+        "drop": "dropped_bytes",
+        "garbage": "garbage_bytes",
+        "dup": "duplicated_frames",
+        "cut": "cut_bytes",
+        "reset": "device_resets",
+    }
+    if kind in injected:
+        assert result.faults.get(injected[kind], 0) > 0, result.faults
+    if kind in ("ber", "burst", "drop", "delay", "cut"):
+        assert result.link["retransmits"] > 0
+    if kind == "delay":
+        assert result.link["late_acks"] > 0  # Acks after the retransmission: both were sent
+    if kind == "reset":
+        assert result.link["restores"] >= 1 and result.link["reboots_seen"] >= 1
+    if kind == "garbage":
+        assert sum(result.link["bad_frames"].values()) > 0
+    # Whatever did not time out was acknowledged, and what the trace shows was sent.
+    assert result.ok + result.timed_out + sum(result.rejected.values()) == result.sent, (
+        result.errors
+    )
+    assert result.executed > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", SIM_BACKENDS)
+def test_failsafe_fires_on_time_after_a_faulty_run(backend: str, tmp_path: Path) -> None:
+    _skip_without_tools(backend)
+    scenario = soak.Scenario(
+        "failsafe", commands=60, seed=3, faults="ber=1e-3", failsafe=True, backend=backend
+    )
+    result = soak.run(scenario, tmp_path)
+    assert result.passed, _explain(result)
+    assert result.failsafe_ok is True and result.failsafe_delay is not None
+    low, high = result.failsafe_delay
+    assert low <= FAILSAFE_TIMEOUT + soak.FAILSAFE_TOLERANCE
+    assert high >= FAILSAFE_TIMEOUT - 0.003
+
+
+def test_scenario_urls_and_command_lines() -> None:
+    s = soak.Scenario("x", commands=10, seed=5, faults="ber=1e-4&dir=rx", resets=2)
+    url = s.url("/dev/pts/9", "line-1")
+    assert url.startswith("faulty:///dev/pts/9?ber=1e-4&dir=rx&seed=5&paused=1&name=line-1")
+    assert "--resets 2" in s.command_line() and "--seed 5" in s.command_line()
+    with pytest.raises(ValueError, match="seed, name and paused"):
+        soak.Scenario("x", faults="seed=3")
+    with pytest.raises(ValueError, match="unknown faulty:// parameter"):
+        soak.Scenario("x", faults="bogus=1")
+    with pytest.raises(ValueError):
+        soak.Scenario("x", servos=0)
+    values = [soak.servo_value(3, k) for k in range(soak.VALUE_COUNT)]
+    assert len(set(values)) == soak.VALUE_COUNT  # each value once per cycle
+    assert min(values) > max(soak.servo_safe(i) for i in range(len(soak.SERVO_PINS)))
+    assert max(soak.servo_value(7, k) for k in range(soak.VALUE_COUNT)) <= soak.SERVO_MAX_US
+
+
+# --- the judge must be able to fail ----------------------------------------------------
+
+
+def test_judge_sees_duplicates_without_the_guard(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Turn the guard off: lost Acks on a fast line then do re-run commands, in the trace."""
+    monkeypatch.setattr(Rpc, "_guard_allows_new", lambda self: True)
+    scenario = soak.Scenario("noguard", commands=300, seed=4, faults="ber=3e-4&dir=rx")
+    result = soak.run(scenario, tmp_path)
+    assert result.duplicates > 0, result.as_dict()
+    assert any("duplicate execution" in v for v in result.violations)
+    assert not result.passed
+
+
+def test_judge_sees_a_change_nobody_commanded(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Hide one command from the wire record: its effect must count as corrupted."""
+    hidden: list[int] = []
+    real = soak._Wire._command
+
+    def forget_one(self: soak._Wire, t: float, payload: bytes) -> None:
+        msg = protoduino.messages.ArduinoIn()
+        msg.ParseFromString(payload)
+        if msg.WhichOneof("data") == "servo_control" and msg.servo_control.us == soak.servo_value(
+            0, 5
+        ):
+            hidden.append(msg.message_id)
+            return
+        real(self, t, payload)
+
+    monkeypatch.setattr(soak._Wire, "_command", forget_one)
+    result = soak.run(soak.Scenario("hidden", commands=60, seed=2), tmp_path)
+    assert hidden
+    assert result.corrupted == 1, result.as_dict()
+    assert any("unexplained output change" in v for v in result.violations)
+
+
+def test_judge_sees_hung_calls(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    scenario = soak.Scenario("hung", commands=30, seed=2)
+    monkeypatch.setattr(soak, "HUNG_SLACK", -scenario.call_bound)  # any call is "too long"
+    result = soak.run(scenario, tmp_path)
+    calls = scenario.commands + scenario.recovery_commands + scenario.servos + scenario.digitals
+    assert result.hung == calls  # the setup writes too
+    assert any("hung call" in v for v in result.violations)
