@@ -10,6 +10,10 @@ from __future__ import annotations
 
 import json
 import random
+import select
+import signal
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -39,6 +43,7 @@ from protoduino.packets import (
     reset_payload,
 )
 from protoduino.simboard import SimBoard
+from simfixtures import SIM_BACKENDS
 
 VECTORS = Path(__file__).parent / "vectors" / "wire_v1.json"
 #: Generous bound for any single reply; the simulated board answers in well under 1 ms.
@@ -310,6 +315,60 @@ def test_command_before_reset_is_not_active(sim_board: SimBoard, host: RawHost) 
     host.reset()
     assert host.command(_digital_init(8, 13, True)).status == Status.STATUS_OK
     _expect(sim_board, 13, [1])
+
+
+def test_port_closed_and_reopened(sim_board: SimBoard, active: RawHost) -> None:
+    """The board holds its own end of the pty: a host may go away and come back."""
+    assert active.command(_digital_init(1, 13, True)).status == Status.STATUS_OK
+    active.close()
+    again = RawHost(sim_board.port)
+    try:
+        again.reset()
+        assert again.command(_digital(2, 13, False)).status == Status.STATUS_OK
+    finally:
+        again.close()
+    _expect(sim_board, 13, [1, 0])
+
+
+@pytest.mark.parametrize("backend", SIM_BACKENDS)
+def test_protoduino_sim_command(backend: str, tmp_path: Path) -> None:
+    """`protoduino sim`: the port first on stdout, a working board, clean exit on SIGINT."""
+    link = tmp_path / "board"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "protoduino.cli.main",
+            "sim",
+            "--backend",
+            backend,
+            "--link",
+            str(link),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        ready, _, _ = select.select([proc.stdout], [], [], 120)
+        assert ready, "protoduino sim printed nothing"
+        assert proc.stdout.readline().strip() == str(link)
+        assert link.is_symlink()
+        host = RawHost(str(link))
+        try:
+            host.reset()
+            assert host.command(_ping(1, b"sim")).ping_echo == b"sim"
+        finally:
+            host.close()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=10) == 0
+        assert not link.exists() and not link.is_symlink()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        if proc.stdout is not None:
+            proc.stdout.close()
 
 
 def test_reset_again_keeps_outputs(sim_board: SimBoard, active: RawHost) -> None:
