@@ -19,7 +19,8 @@ struct pd_core;
  * Ping and GetInfo are neither looked up nor recorded: they change nothing, so
  * answering a repeat in full is harmless (and a repeated Ping must still count
  * as liveness), and keeping them out leaves the whole window to commands that
- * move outputs, which are the ones a duplicate could hurt.
+ * move outputs, which are the ones a duplicate could hurt. The window survives
+ * a RESET (a retransmission may straddle a new handshake); a reboot clears it.
  */
 typedef struct pd_dedupe {
     uint32_t id[PD_DEDUPE_WINDOW];

@@ -439,6 +439,23 @@ static void test_dedupe_ping_and_info_answered_in_full(void)
     CHECK_EQ(d.core.dedupe.count, 0); /* they take no slot */
 }
 
+static void test_dedupe_survives_reset_not_reboot(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn init = m_digital_init(1, 13, false);
+    CHECK_EQ(t_cmd(&d, &init), S(OK));
+    protoduino_ArduinoIn on = m_digital(2, 13, true);
+    CHECK_EQ(t_cmd(&d, &on), S(OK));
+    protoduino_ArduinoIn off = m_digital(3, 13, false);
+    CHECK_EQ(t_cmd(&d, &off), S(OK));
+    t_send_reset(&d, PD_PROTOCOL_VERSION); /* the host handshakes again, then retransmits */
+    CHECK_EQ(t_cmd(&d, &on), S(OK));
+    CHECK_EQ(d.hal.digital[13], 0);
+    pd_core_init(&d.core, &d.hal); /* a reboot forgets everything */
+    CHECK_EQ(d.core.dedupe.count, 0);
+}
+
 static void test_dedupe_unit(void)
 {
     pd_dedupe_t dd;
@@ -477,6 +494,7 @@ const pd_test_case_t pd_tests_dispatch[] = {
     TEST_CASE(test_dedupe_repeat_not_executed),
     TEST_CASE(test_dedupe_window_evicts_after_16),
     TEST_CASE(test_dedupe_ping_and_info_answered_in_full),
+    TEST_CASE(test_dedupe_survives_reset_not_reboot),
     TEST_CASE(test_dedupe_unit),
     {NULL, NULL},
 };
