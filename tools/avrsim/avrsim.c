@@ -2,8 +2,8 @@
  * avrsim.c: an emulated Arduino Uno (ATmega328P, simavr) on a pseudo-terminal.
  *
  *   avrsim [--trace FILE] [--link PATH] [--hex FILE]... [--boot ADDR]
- *          [--auto-reset] [--glitch PIN] [--stats FILE] [--mcu NAME] [--freq HZ]
- *          [FIRMWARE.elf]
+ *          [--auto-reset] [--glitch PIN] [--stats FILE] [--profile FILE]
+ *          [--mcu NAME] [--freq HZ] [FIRMWARE.elf]
  *
  * The command-line contract is the native simulated board's (contracts.md):
  * the first stdout line is the port to open (the pty's slave, or --link),
@@ -21,6 +21,9 @@
  * (simavr skips a sleeping core ahead to its next timer and reports the jump
  * to the sleep callback), and the UART bytes each way. Awake cycles divided
  * by the commands sent in between is the firmware's cost per command.
+ * --profile FILE: each SIGUSR2 also replaces FILE with the awake cycles spent
+ * at each flash address since the previous SIGUSR2 (a flat profile the
+ * benchmarks map to the ELF's symbols), written before the --stats line.
  *
  * Flashing flow (--boot, --auto-reset): the Uno's reset vector points into
  * the boot section (BOOTRST), power-up shows the external-reset flag so that
@@ -110,6 +113,9 @@ typedef struct {
     uint64_t sleep_cycles; /* cycles skipped while the MCU slept, across resets */
     uint64_t uart_rx;      /* bytes fed into UART0 */
     uint64_t uart_tx;      /* bytes UART0 sent */
+    const char *profile_path; /* --profile: NULL when off */
+    uint64_t *profile;        /* awake cycles per flash word */
+    size_t profile_words;
 } pd_sim_t;
 
 static pd_sim_t g_sim;
@@ -250,6 +256,55 @@ static void pd_write_stats(pd_sim_t *sim)
             (unsigned long long)(cycles - sleep), (unsigned long long)sim->uart_rx,
             (unsigned long long)sim->uart_tx);
     fflush(sim->stats);
+}
+
+/* --profile: replace the file (atomically, by rename) and start counting again. */
+static void pd_write_profile(pd_sim_t *sim)
+{
+    if (!sim->profile) {
+        return;
+    }
+    char tmp[4096];
+    if (snprintf(tmp, sizeof tmp, "%s.tmp", sim->profile_path) >= (int)sizeof tmp) {
+        return;
+    }
+    FILE *f = fopen(tmp, "w");
+    if (!f) {
+        perror("avrsim: profile file");
+        return;
+    }
+    for (size_t i = 0; i < sim->profile_words; i++) {
+        if (sim->profile[i]) {
+            fprintf(f, "0x%05zx %llu\n", i * 2U, (unsigned long long)sim->profile[i]);
+        }
+    }
+    if (fclose(f) == 0) {
+        rename(tmp, sim->profile_path);
+    }
+    memset(sim->profile, 0, sim->profile_words * sizeof *sim->profile);
+}
+
+/* One avr_run; with --profile, its awake cycles go to the address it ran
+ * (an interrupt taken meanwhile is charged its entry there, its body at its
+ * own addresses; the cycles of a sleep are not awake). */
+static int pd_run_one(pd_sim_t *sim)
+{
+    avr_t *avr = sim->avr;
+    if (!sim->profile) {
+        return avr_run(avr);
+    }
+    avr_flashaddr_t pc = avr->pc; /* a byte address */
+    int running = avr->state == cpu_Running;
+    uint64_t cycle = avr->cycle;
+    uint64_t slept = sim->sleep_cycles;
+    int state = avr_run(avr);
+    uint64_t spent = avr->cycle >= cycle ? avr->cycle - cycle : 0; /* 0: a reset */
+    uint64_t asleep = sim->sleep_cycles - slept;
+    spent = spent > asleep ? spent - asleep : 0;
+    if (running && pc / 2U < sim->profile_words) {
+        sim->profile[pc / 2U] += spent;
+    }
+    return state;
 }
 
 static void pd_set_extrf(pd_sim_t *sim)
@@ -532,11 +587,12 @@ static void pd_usage(FILE *f)
 {
     fprintf(f,
             "usage: avrsim [--trace FILE] [--link PATH] [--hex FILE]... [--boot ADDR]\n"
-            "              [--auto-reset] [--glitch PIN] [--stats FILE] [--mcu NAME]\n"
-            "              [--freq HZ] [FIRMWARE.elf]\n"
+            "              [--auto-reset] [--glitch PIN] [--stats FILE] [--profile FILE]\n"
+            "              [--mcu NAME] [--freq HZ] [FIRMWARE.elf]\n"
             "Runs an emulated Arduino Uno with UART0 on a pseudo-terminal; prints the\n"
             "port as the first stdout line. SIGUSR1 resets the MCU, SIGINT/SIGTERM exit;\n"
-            "with --stats, SIGUSR2 and the exit append cycle and UART counters to FILE.\n");
+            "with --stats, SIGUSR2 and the exit append cycle and UART counters to FILE;\n"
+            "with --profile, SIGUSR2 writes awake cycles per flash address to FILE.\n");
 }
 
 static void pd_cleanup(pd_sim_t *sim)
@@ -552,6 +608,8 @@ static void pd_cleanup(pd_sim_t *sim)
         fclose(sim->stats);
         sim->stats = NULL;
     }
+    free(sim->profile);
+    sim->profile = NULL;
 }
 
 static void pd_run(pd_sim_t *sim)
@@ -565,6 +623,7 @@ static void pd_run(pd_sim_t *sim)
         }
         if (g_dump_stats) {
             g_dump_stats = 0;
+            pd_write_profile(sim);
             pd_write_stats(sim);
         }
         pd_check_opens(sim);
@@ -582,7 +641,7 @@ static void pd_run(pd_sim_t *sim)
         if (!sim->crashed) {
             while (pd_cycles(sim) < target && !g_stop && !g_reset) {
                 sim->last_cycle = sim->avr->cycle;
-                int state = avr_run(sim->avr);
+                int state = pd_run_one(sim);
                 if (sim->reset_seen) {
                     pd_after_reset(sim);
                 }
@@ -652,7 +711,8 @@ int main(int argc, char **argv)
         {"hex", required_argument, NULL, 'x'},   {"boot", required_argument, NULL, 'b'},
         {"mcu", required_argument, NULL, 'm'},   {"freq", required_argument, NULL, 'f'},
         {"auto-reset", no_argument, NULL, 'r'},  {"glitch", required_argument, NULL, 'g'},
-        {"stats", required_argument, NULL, 's'}, {"help", no_argument, NULL, 'h'},
+        {"stats", required_argument, NULL, 's'}, {"profile", required_argument, NULL, 'p'},
+        {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
     int opt;
@@ -693,6 +753,9 @@ int main(int argc, char **argv)
             break;
         case 's':
             stats_path = optarg;
+            break;
+        case 'p':
+            sim->profile_path = optarg;
             break;
         case 'h':
             pd_usage(stdout);
@@ -764,6 +827,15 @@ int main(int argc, char **argv)
             return 1;
         }
     }
+    if (sim->profile_path) {
+        sim->profile_words = ((size_t)sim->avr->flashend + 1U) / 2U;
+        sim->profile = calloc(sim->profile_words, sizeof *sim->profile);
+        if (!sim->profile) {
+            perror("avrsim: profile");
+            pd_cleanup(sim);
+            return 1;
+        }
+    }
     if (stats_path) {
         sim->stats = fopen(stats_path, "a");
         if (!sim->stats) {
@@ -807,7 +879,7 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     sigaction(SIGUSR1, &sa, NULL);
-    if (sim->stats) {
+    if (sim->stats || sim->profile) {
         sigaction(SIGUSR2, &sa, NULL); /* otherwise SIGUSR2 keeps its default */
     }
     signal(SIGPIPE, SIG_IGN);
