@@ -256,6 +256,10 @@ class Transport:
                 try:
                     self._flush_writes()
                     data = self._read()
+                    # A packet queued while select slept (its wake-up ended the
+                    # sleep) leaves now, not after the timer tick below: that
+                    # tick is on no request's critical path.
+                    self._flush_writes()
                 except (serial.SerialException, OSError) as error:
                     self._lost(error)
                     next_reopen = time.monotonic() + REOPEN_FIRST
