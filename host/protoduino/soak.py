@@ -34,6 +34,8 @@ figures are repeatable in distribution, not to the byte.
 
 from __future__ import annotations
 
+import bisect
+import collections
 import logging
 import random
 import statistics
@@ -86,6 +88,8 @@ SLOP = 0.25
 LATENCY = 0.5
 #: Failsafe timing tolerance: the contract's 20 ms.
 FAILSAFE_TOLERANCE = 0.020
+#: How far apart (s) the 0 lines of one reboot may be dated, beyond a servo's measuring lag.
+REBOOT_SPREAD = 0.005
 #: Extra time a call may take beyond its documented bound before it counts as hung (s).
 HUNG_SLACK = 0.5
 
@@ -699,16 +703,17 @@ def _judge(
             f"(bound {s.call_bound:g} s): {c.outcome} {c.detail}"
         )
 
-    # The clock offset between the trace and the host, from the setup phase.
-    offset = _offset(calls, wire, lines, traits)
-    if offset is None:
+    # The trace's clock against the host's.
+    lines = sorted(lines, key=lambda e: float(e["t"]))  # a measured pulse is written late
+    clock = _clock_map(calls, wire, lines, traits)
+    if clock is None:
         result.violations.append("could not relate the trace's clock to the host's")
         return
     tx_delay = _tx_delay(s)
 
     # What may legitimately change each output, and when.
     causes = _causes(wire, tx_delay)
-    boundaries = _boundaries(runner.reboots, lines, offset, traits)
+    boundaries = _boundaries(runner.reboots, lines, clock, traits)
     acked_pings = sorted(
         (sent.txs[0], sent.ack)
         for sent in wire.sent.values()
@@ -730,9 +735,9 @@ def _judge(
         last, previous[pin] = previous.get(pin), value
         if tol and last is not None and abs(value - last) <= tol:
             continue  # a measured pulse's jitter: the same output value measured again
-        h = t + offset  # host time of the line
-        boot = sum(1 for b in boundaries if t >= b)
-        if value == 0 and any(abs(t - b) <= lag + 0.002 for b in boundaries):
+        h = clock.host(t)  # host time of the line
+        boot = sum(1 for b in boundaries if t >= b - REBOOT_SPREAD)
+        if value == 0 and any(-REBOOT_SPREAD <= t - b <= lag + REBOOT_SPREAD for b in boundaries):
             continue  # a reboot releases every output
         candidates = [
             c
@@ -742,10 +747,10 @@ def _judge(
         ]
         fresh = [c for c in candidates if used.get(c.message_id, -1) != boot]
         # Never-used causes first (a cause used in an earlier boot may run again after a
-        # reboot, but only if nothing else explains the line), commands before safe values,
-        # then the one whose window closes first (lines come in time order: this matches as
-        # many lines as can be matched).
-        fresh.sort(key=lambda c: (c.message_id in used, c.what != "command", c.hi))
+        # reboot, but only if nothing else explains the line), then the one whose window
+        # closes first: lines come in time order, so this earliest-deadline choice
+        # explains as many lines as can be explained.
+        fresh.sort(key=lambda c: (c.message_id in used, c.hi))
         if fresh:
             chosen = fresh[0]
             if chosen.message_id in used:
@@ -819,9 +824,7 @@ def _judge(
         result.violations.append(f"recovery slower than {bound:g} s: {max(slow):.3f} s")
 
     if fs_stop is not None:
-        _judge_failsafe(
-            result, wire=wire, lines=lines, offset=offset, fs_stop=fs_stop, traits=traits
-        )
+        _judge_failsafe(result, wire=wire, lines=lines, clock=clock, fs_stop=fs_stop, traits=traits)
 
 
 def _tx_delay(s: Scenario) -> float:
@@ -851,15 +854,35 @@ def _causes(wire: _Wire, tx_delay: float) -> list[_Cause]:
 
 
 def _boundaries(
-    reboots: list[float], lines: list[dict[str, Any]], offset: float, traits: BackendTraits
+    reboots: list[float], lines: list[dict[str, Any]], clock: _ClockMap, traits: BackendTraits
 ) -> list[float]:
-    """Trace times at which the device rebooted: its servos' 0 lines after each reset."""
-    zeros = sorted(float(e["t"]) for e in lines if e["mode"] == "servo" and int(e["value"]) == 0)
+    """Trace times at which the device rebooted, from the 0 lines each reset leaves.
+
+    A reboot releases every output: each servo that was driven shows 0, which
+    no command can ask for (a measured pulse: up to ``servo_lag`` after the
+    reset). The first such line after the reset was ordered dates it; a
+    digital output's 0 (dated exactly) within that lag dates it more closely.
+    Without a servo's 0, the host's own clock does.
+    """
+    servo_zeros = sorted(
+        float(e["t"]) for e in lines if e["mode"] == "servo" and int(e["value"]) == 0
+    )
+    digital_zeros = sorted(
+        float(e["t"]) for e in lines if e["mode"] == "digital" and int(e["value"]) == 0
+    )
     out: list[float] = []
-    for r in reboots:
-        start = r - offset - SLOP
-        first = next((z for z in zeros if z >= start), None)
-        out.append(first - traits.servo_lag if first is not None else r - offset)
+    for r in sorted(reboots):
+        # The reset follows the signal within a few ms; resets may come 0.1 s apart.
+        start = clock.trace(r) - 0.05
+        if out:
+            start = max(start, out[-1] + traits.servo_lag + REBOOT_SPREAD)
+        first = next((z for z in servo_zeros if z >= start), None)
+        if first is None or first > start + 2.0:
+            out.append(clock.trace(r))
+            continue
+        lo = first - traits.servo_lag - REBOOT_SPREAD
+        exact = [z for z in digital_zeros if lo <= z <= first + REBOOT_SPREAD]
+        out.append(min(exact) if exact and traits.servo_lag else first - traits.servo_lag)
     return out
 
 
@@ -886,19 +909,48 @@ def _failsafe_possible(
     return not any(ack <= h and tx > h - FAILSAFE_TIMEOUT + SLOP for tx, ack in acked_pings)
 
 
-def _offset(
-    calls: list[CallRecord],
-    wire: _Wire,
-    lines: list[dict[str, Any]],
-    traits: BackendTraits,
-) -> float | None:
-    """Host time minus trace time, from the setup commands (one unique value each).
+class _ClockMap:
+    """Host time of a trace time, and back.
 
-    Each setup command executed between its transmission and its Ack; its
-    trace line (a measured servo: up to ``servo_lag`` later) bounds the
-    offset. The answer is the point most of those bounds agree on.
+    The trace's clock may drift against the host's: the emulated Uno counts
+    emulated cycles and falls behind real time when the machine is busy. So
+    the offset is estimated locally, as the median over the nearest anchors:
+    trace lines whose command is known (a unique pulse width, sent once,
+    acknowledged quickly), each bounding the offset by its command's
+    transmission and Ack.
     """
-    intervals: list[tuple[float, float]] = []
+
+    #: Anchors on each side of a time that the local estimate uses.
+    NEIGHBOURS = 15
+
+    def __init__(self, anchors: list[tuple[float, float]]) -> None:
+        anchors = sorted(anchors)
+        self._t = [a for a, _ in anchors]
+        self._o = [b for _, b in anchors]
+        self._median = statistics.median(self._o)
+
+    def offset(self, t: float) -> float:
+        i = bisect.bisect(self._t, t)
+        window = self._o[max(0, i - self.NEIGHBOURS) : i + self.NEIGHBOURS]
+        return statistics.median(window)
+
+    def host(self, t: float) -> float:
+        return t + self.offset(t)
+
+    def trace(self, h: float) -> float:
+        return h - self.offset(h - self._median)
+
+
+def _setup_offset(
+    calls: list[CallRecord], wire: _Wire, lines: list[dict[str, Any]], traits: BackendTraits
+) -> float | None:
+    """A first offset from the setup commands (one unique value per output, clean line).
+
+    Digital edges are dated exactly on every backend, so they are preferred;
+    a measured servo pulse may come up to ``servo_lag`` late.
+    """
+    exact: list[tuple[float, float]] = []
+    measured: list[tuple[float, float]] = []
     for c in calls:
         if c.phase != "setup" or c.outcome != "ok":
             continue
@@ -909,7 +961,6 @@ def _offset(
                 if x.pin == c.pin
                 and x.value == c.value
                 and x.kind.endswith("control")
-                and x.ack is not None
                 and c.start - SLOP <= x.txs[0] <= c.end
             ),
             None,
@@ -922,20 +973,54 @@ def _offset(
         for e in lines:
             if int(e["pin"]) == c.pin and abs(int(e["value"]) - c.value) <= tol:
                 t = float(e["t"])
-                intervals.append((sent.txs[0] - t - 0.002, sent.ack + lag - t + 0.002))
+                (measured if lag else exact).append((sent.txs[0] - t, sent.ack + lag - t))
                 break
+    intervals = exact or measured
     if not intervals:
         return None
-    # The point covered by most intervals (ties: the middle of the tightest overlap).
-    best, best_count = intervals[0][0], 0
-    for lo, _ in intervals:
-        count = sum(1 for a, b in intervals if a <= lo <= b)
-        if count > best_count:
-            best, best_count = lo, count
-    covering = [(a, b) for a, b in intervals if a <= best <= b]
-    lo = max(a for a, _ in covering)
-    hi = min(b for _, b in covering)
-    return (lo + hi) / 2
+    return statistics.median((a + b) / 2 for a, b in intervals)
+
+
+def _clock_map(
+    calls: list[CallRecord], wire: _Wire, lines: list[dict[str, Any]], traits: BackendTraits
+) -> _ClockMap | None:
+    """Anchor every servo line whose command is unambiguous, walking forward in time."""
+    first = _setup_offset(calls, wire, lines, traits)
+    if first is None:
+        return None
+    by_value: dict[tuple[int, int], list[_Sent]] = {}
+    for x in wire.sent.values():
+        if (
+            x.kind == "servo_control"
+            and x.pin is not None
+            and x.value is not None
+            and len(x.txs) == 1
+            and x.ack is not None
+            and x.ack - x.txs[0] < 0.1
+        ):
+            by_value.setdefault((x.pin, x.value), []).append(x)
+    anchors: list[tuple[float, float]] = []
+    recent: collections.deque[float] = collections.deque([first], maxlen=_ClockMap.NEIGHBOURS)
+    for e in lines:
+        if e["mode"] != "servo":
+            continue
+        t, pin, value = float(e["t"]), int(e["pin"]), int(e["value"])
+        guess = t + statistics.median(recent)
+        found = [
+            x
+            for v in range(value - traits.tolerance_us, value + traits.tolerance_us + 1)
+            for x in by_value.get((pin, v), ())
+        ]
+        if not found:
+            continue
+        best = min(found, key=lambda x: abs(x.txs[0] - guess))
+        assert best.ack is not None
+        lo, hi = best.txs[0] - t, best.ack + traits.servo_lag - t
+        if abs(t + (lo + hi) / 2 - guess) > 1.0:
+            continue  # far from where the clock was: a value of another cycle, not an anchor
+        anchors.append((t, (lo + hi) / 2))
+        recent.append((lo + hi) / 2)
+    return _ClockMap(anchors or [(0.0, first)])
 
 
 def _judge_failsafe(
@@ -943,7 +1028,7 @@ def _judge_failsafe(
     *,
     wire: _Wire,
     lines: list[dict[str, Any]],
-    offset: float,
+    clock: _ClockMap,
     fs_stop: float,
     traits: BackendTraits,
 ) -> None:
@@ -966,9 +1051,9 @@ def _judge_failsafe(
         if s.kind == "servo_init" and s.pin is not None and s.value is not None
     }
     edges = [
-        float(e["t"]) + offset
+        clock.host(float(e["t"]))
         for e in lines
-        if float(e["t"]) + offset > max(rx_lo, fs_stop)  # after the last write was acked
+        if clock.host(float(e["t"])) > max(rx_lo, fs_stop)  # after the last write was acked
         and (
             (int(e["pin"]) in digital_pins and int(e["value"]) == 0)
             or (
