@@ -14,17 +14,20 @@ from __future__ import annotations
 import collections
 import shutil
 import threading
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import fakedevice
 import protoduino
 import pytest
 from fakedevice import FakeDevice
-from protoduino import Board, soak
-from protoduino.constants import DEDUPE_WINDOW, FAILSAFE_TIMEOUT
+from protoduino import Board, faults, soak
+from protoduino.constants import DEDUPE_WINDOW, FAILSAFE_TIMEOUT, WATCHDOG_TIMEOUT
 from protoduino.rpc import Rpc
+from protoduino.simboard import SimBoard
 from simfixtures import SIM_BACKENDS
 
 # --- exactly once: the dedupe guard -----------------------------------------------------
@@ -216,6 +219,73 @@ def test_a_restore_message_without_ack_is_sent_again(fake: FakeDevice) -> None:
         assert restored.details["failed"] == []
         assert len(lost) == 4 and len(set(lost)) == 1  # one call's every attempt, then anew
         assert fake.pins == {9: "servo"} and fake.values == {9: 45}
+
+
+def test_a_device_that_lost_its_configuration_unseen_is_restored(fake: FakeDevice) -> None:
+    """No EVENT BOOT reached the host, yet the device forgot everything (rebooted unseen).
+
+    Its STATUS_NOT_INITIALISED for a configured output triggers the restore,
+    and the refused call runs once, afterwards, under a new id (the old one is
+    in the device's window with the refusal).
+    """
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
+        events: list[protoduino.Event] = []
+        board.on_event(events.append)
+        servo = board.servo(9)
+        servo.write(45)
+        led = board.digital_output(13)
+        with fake._cond:  # a reset whose BOOT was lost: state gone, link still up
+            fake.pins.clear()
+            fake.values.clear()
+            fake._dedupe.clear()
+        servo.write(120)
+        assert fake.pins == {9: "servo", 13: "digital"}
+        assert fake.values == {9: 120}
+        refused, again = [
+            r for r in fake.commands("servo_control") if r.msg.servo_control.degrees == 120
+        ]
+        assert refused.msg.message_id != again.msg.message_id
+        assert board.stats.reboots == 1 and board.stats.rejected == 0
+        assert any(e.kind is protoduino.EventKind.REBOOTED for e in events)
+        led.on()  # and the session goes on
+        assert fake.values == {9: 120, 13: 1}
+
+
+def test_a_refusal_on_an_unconfigured_output_is_still_a_refusal(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
+        servo = board.servo(9)
+        fake.handler = lambda msg: (
+            [fakedevice.ack(msg.message_id, protoduino.messages.Status.STATUS_NOT_INITIALISED)]
+            if msg.WhichOneof("data") == "servo_control"
+            else fake.default_reply(msg)
+        )
+        with pytest.raises(protoduino.CommandRejectedError) as info:
+            servo.write(10)  # restored once, refused again: the refusal stands
+        assert info.value.status == protoduino.messages.Status.STATUS_NOT_INITIALISED
+        assert len(fake.commands("servo_control")) == 2
+        assert board.stats.reboots == 1
+
+
+@pytest.mark.slow
+def test_a_reboot_during_a_long_cut_is_noticed(tmp_path: Path) -> None:
+    """The line is cut past the watchdog, the board reboots meanwhile: BOOT never arrives."""
+    _skip_without_tools("native")
+    with SimBoard("native", trace=tmp_path / "trace.jsonl") as sim:
+        port = sim.start()
+        with Board.open(f"faulty://{port}?name=long-cut", handshake_timeout=2.0) as board:
+            servo = board.servo(9)
+            servo.write(30)
+            line = faults.line("long-cut")
+            assert line is not None
+            line.cut(WATCHDOG_TIMEOUT + 1.5)
+            time.sleep(0.3)
+            sim.reboot()
+            time.sleep(WATCHDOG_TIMEOUT + 2.5)  # the watchdog re-handshake, unaware
+            servo.write(60)
+            assert board.stats.watchdog_resets >= 1 and board.stats.reboots == 1
+        values = [e["value"] for e in sim.trace() if e["pin"] == 9]
+        assert values[-1] == 544 + 60 * (2400 - 544) // 180
+        assert 0 in values  # the reboot released it
 
 
 # --- seeded fault scenarios on the simulated board ------------------------------------

@@ -33,6 +33,10 @@ I/O thread.
   must land before its Control), and user calls are held until they are done.
   A restore message that times out is sent again (RESTORE_RETRIES times): a
   restore that skipped an Init would leave that output dead on the device.
+* A device that refuses a Control with STATUS_NOT_INITIALISED for an output
+  the board configured has restarted unseen (its EVENT BOOT lost, then a
+  re-handshake found it again): the restore runs, and that call is sent again
+  after it (once). It had not run, so this cannot run it twice.
 """
 
 from __future__ import annotations
@@ -55,7 +59,7 @@ from .errors import (
 )
 from .events import Event, EventKind
 from .link import Link
-from .messages import ArduinoIn, ArduinoOut, status_name
+from .messages import ArduinoIn, ArduinoOut, Status, status_name
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +91,7 @@ class Call:
         "message_id",
         "on_done",
         "payload",
+        "restored",
         "rtt",
         "sent_at",
         "submitted",
@@ -110,6 +115,8 @@ class Call:
         self.sent_at = 0.0
         #: Serial number of the first transmission to the current device boot (None: not yet).
         self.first_tx: int | None = None
+        #: Sent again after a restore the device's refusal started (at most once).
+        self.restored = False
         self.rtt: float | None = None
         self.ack: Ack | None = None
         self.error: ProtoduinoError | None = None
@@ -248,9 +255,13 @@ class Rpc:
                 )
         return call.result()
 
-    def _new_call(self, msg: ArduinoIn, on_done: Callable[[Call], None] | None) -> Call:
+    def _allocate_id(self) -> int:
         mid = self._next_id
         self._next_id = self._next_id % 0xFFFFFFFF + 1  # 1 .. 2**32-1, never 0
+        return mid
+
+    def _new_call(self, msg: ArduinoIn, on_done: Callable[[Call], None] | None) -> Call:
+        mid = self._allocate_id()
         msg.message_id = mid
         payload = msg.SerializeToString()
         if len(payload) > MAX_PAYLOAD:
@@ -429,6 +440,13 @@ class Rpc:
                 if call.kind == "ping":
                     self.rtt = call.rtt
                 self._finish(call, ack=ack)
+            elif self._lost_session(call, ack.status):
+                if not self._holding:  # the first such answer: restore, then send again
+                    self._session_lost(call)
+                else:  # another call sent before the restore began: it goes again after it
+                    self._renumber(call)
+                    if call not in self._pending:
+                        self._pending.appendleft(call)
             else:
                 self.rejected += 1
                 self._finish(
@@ -440,6 +458,69 @@ class Rpc:
                 )
             self._pump(now)
 
+    def _lost_session(self, call: Call, status: int) -> bool:
+        """Did the device refuse ``call`` because it lost what the board configured?
+
+        STATUS_NOT_INITIALISED for a Control on an output the board did
+        configure (its Init is among the restore messages) means the device
+        restarted without the host seeing it: its EVENT BOOT was lost and a
+        re-handshake (watchdog, desync) found it answering again. Once per call,
+        and never for the restore's own messages.
+        """
+        if (
+            status != Status.STATUS_NOT_INITIALISED
+            or call.kind not in ("servo_control", "digital_control")
+            or call.restored
+            or call is self._restore_call
+            or self.restore_provider is None
+        ):
+            return False
+        pin = getattr(_reparse(call.payload), call.kind).pin
+        init = call.kind.replace("control", "init")
+        try:
+            msgs = self.restore_provider()
+        except Exception:
+            log.exception("restore provider failed")
+            return False
+        return any(m.WhichOneof("data") == init and getattr(m, init).pin == pin for m in msgs)
+
+    def _session_lost(self, call: Call) -> None:
+        log.warning(
+            "the device answered %s for a configured output: it restarted unseen; restoring",
+            status_name(Status.STATUS_NOT_INITIALISED),
+        )
+        if self.link is not None:
+            self.link.reboots += 1
+        self._notify(
+            Event(
+                EventKind.REBOOTED,
+                "device rebooted (it lost its configuration unseen)",
+                {"how": "NOT_INITIALISED"},
+            )
+        )
+        self._requeue_inflight()  # this call and every other one in flight, oldest first
+        self._renumber(call)
+        self._begin_restore()
+
+    def _renumber(self, call: Call) -> None:
+        """Give a refused call a new id, to be sent again after the restore (lock held).
+
+        The device stored the refusal under the old id in its dedupe window and
+        would only repeat it; the call did not run, so a new id runs it once.
+        """
+        self._calls.pop(call.message_id, None)
+        self._inflight.pop(call.message_id, None)
+        self._finished_set.add(call.message_id)  # a late answer to it is late, not unknown
+        self._finished.append(call.message_id)
+        msg = _reparse(call.payload)
+        msg.message_id = self._allocate_id()
+        call.message_id = msg.message_id
+        call.payload = msg.SerializeToString()
+        call.first_tx = None
+        call.attempts = 0
+        call.restored = True
+        self._calls[call.message_id] = call
+
     def link_up(self, rebooted: bool) -> None:
         with self._lock:
             self._requeue_inflight()
@@ -450,23 +531,32 @@ class Rpc:
                 for call in self._calls.values():
                     call.first_tx = None
             if rebooted and self.restore_provider is not None:
-                try:
-                    msgs = self.restore_provider()
-                except Exception:
-                    log.exception("restore provider failed")
-                    msgs = []
-                self._restore = collections.deque(msgs)
-                self._restore_failed = []
-                self._restore_count = len(msgs)
-                self._restore_tries = 0
-                if self._restore_call is not None:  # an interrupted restore: start over
-                    self._finish(self._restore_call, error=BoardClosedError("restore restarted"))
-                    self._restore_call = None
-                self._holding = bool(msgs)
-                if not msgs:
-                    self._restored()
+                self._begin_restore()
             self._next_ping = 0.0
             self._pump(time.monotonic())
+
+    def _begin_restore(self) -> None:
+        """Replay the board's session (lock held); user calls wait until it is done."""
+        assert self.restore_provider is not None
+        # The device's dedupe window is empty: what went out before is void.
+        self._tx_log.clear()
+        for call in self._calls.values():
+            call.first_tx = None
+        try:
+            msgs = self.restore_provider()
+        except Exception:
+            log.exception("restore provider failed")
+            msgs = []
+        self._restore = collections.deque(msgs)
+        self._restore_failed = []
+        self._restore_count = len(msgs)
+        self._restore_tries = 0
+        if self._restore_call is not None:  # an interrupted restore: start over
+            self._finish(self._restore_call, error=BoardClosedError("restore restarted"))
+            self._restore_call = None
+        self._holding = bool(msgs)
+        if not msgs:
+            self._restored()
 
     def link_down(self, reason: str) -> None:
         with self._lock:
