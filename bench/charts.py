@@ -139,8 +139,13 @@ def histogram(
     (e.g. the wire-time lower bound)."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    # One set of bin edges for every series (and the markers), so their bars line up.
+    every = [v for values in series.values() for v in values] + list((vlines or {}).values())
+    low, high = (min(every), max(every)) if every else (0.0, 1.0)
+    step = (high - low) / bins if high > low else 1.0
+    edges = [low + k * step for k in range(bins + 1)]
     for i, (name, values) in enumerate(series.items()):
-        ax.hist(values, bins=bins, alpha=0.6, color=_COLORS[i % len(_COLORS)], label=name)
+        ax.hist(values, bins=edges, alpha=0.6, color=_COLORS[i % len(_COLORS)], label=name)
     for i, (name, x) in enumerate((vlines or {}).items()):
         ax.axvline(x, color=_COLORS[(i + 3) % len(_COLORS)], linestyle="--", label=name)
     ax.set_xlabel(xlabel)

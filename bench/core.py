@@ -150,7 +150,8 @@ class Context:
     """Run-wide settings every section receives.
 
     ``frames`` is the number of frames each receive-path stream holds, ``chunk`` the size of the
-    reads it is fed in, ``reps`` the timed repetitions per measurement. ``chart_dir`` is where
+    reads it is fed in, ``reps`` the timed repetitions per measurement. ``samples`` and
+    ``commands`` size the measurements against boards (parts 2, 3 and 5). ``chart_dir`` is where
     PNGs go, or None to make no charts (the smoke test); ``docs_dir`` is where the report goes,
     so that chart links can be made relative to it.
     """
@@ -162,6 +163,10 @@ class Context:
     docs_dir: Path = Path("docs")
     chart_dir: Path | None = Path("docs/perf")
     profile: bool = True
+    #: Parts 2 and 5: timed calls per case against a board.
+    samples: int = 300
+    #: Part 3: acknowledged commands per throughput point.
+    commands: int = 600
 
     def link(self, path: Path) -> str:
         """``path`` as a link target relative to the report."""

@@ -52,7 +52,8 @@ def render(
         "",
         md_table(["", ""], [[k, v] for k, v in machine], "ll"),
         f"Settings: {ctx.frames:,} frames per receive stream, reads of {ctx.chunk} B, "
-        f"{ctx.reps} timed repetitions, seed {ctx.seed}.",
+        f"{ctx.reps} timed repetitions, seed {ctx.seed}; against boards, {ctx.samples} samples "
+        f"per round-trip or cycle case and {ctx.commands} commands per throughput point.",
         "",
     ]
     for section, result in sorted(results, key=lambda item: item[0].number):

@@ -28,10 +28,20 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m bench", description="Benchmark protoduino against its peers."
     )
-    parser.add_argument("--quick", action="store_true", help="1,000 frames and 5 repetitions")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="1,000 frames, 5 repetitions, 60 samples and 200 commands per board case",
+    )
     parser.add_argument("--frames", type=int, help="frames per receive stream (default 5,000)")
     parser.add_argument("--reps", type=int, help="timed repetitions (default 21)")
     parser.add_argument("--chunk", type=int, default=1024, help="bytes per read (default 1024)")
+    parser.add_argument(
+        "--samples", type=int, help="round trips and cycle counts per board case (default 300)"
+    )
+    parser.add_argument(
+        "--commands", type=int, help="acknowledged commands per throughput point (default 600)"
+    )
     parser.add_argument("--seed", type=int, default=7, help="seed of the generated streams")
     parser.add_argument(
         "--only", action="append", choices=keys, metavar="SECTION", help=f"one of {keys}"
@@ -50,7 +60,11 @@ def make_context(args: argparse.Namespace, out: Path) -> Context:
     chart_dir: Path | None = out.parent / "perf"
     if args.no_charts:
         chart_dir = None
+    samples = args.samples or (60 if args.quick else 300)
+    commands = args.commands or (200 if args.quick else 600)
     return Context(
+        samples=samples,
+        commands=commands,
         reps=reps,
         frames=frames,
         chunk=args.chunk,

@@ -3,14 +3,19 @@ checked (frames dispatched, bytes that decode back). Nothing here asserts on tim
 
 A case whose library is not installed is skipped with the package's name; tools/bench_setup.sh
 installs them all. The protoduino cases and the report generator need only the dev extras (and,
-for the C accelerator's rows, a build of protoduino._speedups).
+for the C accelerator's rows, a build of protoduino._speedups). Parts 2, 3 and 5 run against the
+simulated board and the emulated Uno with a handful of calls; the emulator's counters are checked
+exactly (bytes) or against each other (cycles), never against a clock.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import random
+import shutil
+import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -24,10 +29,11 @@ if str(ROOT) not in sys.path:  # bench/ is a top-level folder of the checkout, n
 from protoduino import framing  # noqa: E402
 from protoduino._generated import protoduino_pb2 as pb  # noqa: E402
 from protoduino.constants import PacketType  # noqa: E402
+from protoduino.errors import CommandRejectedError  # noqa: E402
 from protoduino.framing import PyStreamDecoder, StreamDecoder  # noqa: E402
 from protoduino.packets import Packet  # noqa: E402
 
-from bench import receive, runner, wire  # noqa: E402
+from bench import boards, firmware, receive, roundtrip, runner, throughput, wire  # noqa: E402
 from bench.core import MissingDependencyError, Timing, measure, require  # noqa: E402
 from bench.peers import RxCase, Slot, WireSample, mavlink, pigweed, protoduino, serialtransfer  # noqa: E402
 from bench.peers import firmata as firmata_peer  # noqa: E402
@@ -241,11 +247,12 @@ def test_wire_section_lists_every_installed_library() -> None:
 
 def test_runner_writes_a_report(tmp_path: Path) -> None:
     out = tmp_path / "performance.md"
-    assert runner.main(["--frames", "40", "--reps", "1", "--out", str(out)]) == 0
+    args = ["--frames", "40", "--reps", "1", "--only", "receive", "--only", "wire"]
+    assert runner.main([*args, "--out", str(out)]) == 0
     text = out.read_text(encoding="utf-8")
     for heading in ("## Targets", "## Machine", "## 1. Host receive path", "## 4. Bytes on the"):
         assert heading in text
-    assert "Not measured yet" in text  # parts 2, 3 and 5 are placeholders so far
+    assert "## 2. Round trip" not in text  # --only leaves the other sections out
     assert "### Where the time goes" in text
     for label, _decoder in protoduino.DECODERS:
         assert f"| {label} |" in text
@@ -256,8 +263,8 @@ def test_runner_writes_a_report(tmp_path: Path) -> None:
             assert (tmp_path / link).stat().st_size > 0
 
 
-def test_chart_helpers_for_the_parts_to_come(tmp_path: Path) -> None:
-    """The latency histogram and throughput-vs-window charts parts 2 and 3 will draw."""
+def test_chart_helpers_for_latency_and_throughput(tmp_path: Path) -> None:
+    """The latency histogram and throughput-vs-window charts of parts 2 and 3."""
     from bench import charts
 
     _or_skip(charts.pyplot)
@@ -292,3 +299,157 @@ def test_ratio_is_the_median_of_per_round_ratios() -> None:
     assert c.ratio(a) == pytest.approx(0.5)
     frames_per_s, _bytes_per_s = c.scaled_to(a)
     assert frames_per_s == pytest.approx(2.5)
+
+
+# --- parts 2, 3 and 5: boards ------------------------------------------------------------
+
+
+def _need(backend: str) -> None:
+    missing = boards.missing_tool(backend)
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed (needed for the {backend} board)")
+
+
+def test_percentiles_by_nearest_rank() -> None:
+    p = boards.Percentiles.of([float(x) for x in range(100, 0, -1)])  # 1..100, shuffled order
+    assert (p.n, p.low, p.high) == (100, 1.0, 100.0)
+    assert p.p50 == pytest.approx(50.5)
+    assert (p.p90, p.p99) == (90.0, 99.0)
+    with pytest.raises(ValueError):
+        boards.Percentiles.of([])
+
+
+def test_line_rates_come_from_the_frames() -> None:
+    command, ack = roundtrip.wire_frames("servo")
+    line = throughput.servo_line()
+    assert (line.command_bytes, line.ack_bytes) == (len(command), len(ack))
+    assert line.both == pytest.approx(11_520 / (len(command) + len(ack)))
+    assert line.duplex == pytest.approx(11_520 / max(len(command), len(ack)))
+    assert line.duplex > line.both
+
+
+@pytest.mark.parametrize("make", [roundtrip.ping_frames, throughput.ping_frames_64])
+def test_ping_frames_decode_to_a_ping_and_its_echo(make: Callable[[], tuple[bytes, bytes]]) -> None:
+    command, ack = make()
+    dec = StreamDecoder()
+    (cmd_packet,), (ack_packet,) = dec.feed(command), dec.feed(ack)
+    assert isinstance(cmd_packet, Packet) and isinstance(ack_packet, Packet)
+    msg = pb.ArduinoIn.FromString(cmd_packet.payload)
+    reply = pb.ArduinoOut.FromString(ack_packet.payload)
+    assert msg.WhichOneof("data") == "ping"
+    assert reply.ack.message_id == msg.message_id
+    # The firmware always answers a Ping with the echo field set, empty or not.
+    assert reply.ack.WhichOneof("result") == "ping_echo"
+    assert reply.ack.ping_echo == msg.ping.payload
+
+
+def test_drive_makes_every_call_and_counts_failures() -> None:
+    calls: list[int] = []
+
+    def op(i: int) -> None:
+        calls.append(i)
+        if i % 3 == 0:
+            raise CommandRejectedError(1, "refused")
+
+    seconds, ok, failed = throughput.drive(op, window=4, total=10)
+    # 10 calls over 4 threads: 3, 3, 2, 2; in each thread i = 0, 1, ...
+    assert sorted(calls) == [0, 0, 0, 0, 1, 1, 1, 1, 2, 2]
+    assert (ok, failed) == (6, 4)
+    assert seconds > 0
+
+
+def test_profile_names_and_groups() -> None:
+    assert firmware.clean_name("pd_link_send.constprop.41") == "pd_link_send"
+    assert firmware.clean_name("drive_digital.isra.0.lto_priv.53") == "drive_digital"
+    assert firmware.clean_name("main") == "main"
+    assert firmware.group_of("load_descriptor_values").startswith("nanopb")
+    assert firmware.group_of("pb_decode_tag").startswith("nanopb")
+    assert firmware.group_of("pd_crc16_update").startswith("CRC")
+    assert firmware.group_of("__vector_18") == "interrupt handlers"
+    assert firmware.group_of("pd_link_send").startswith("frame transmit")
+    assert firmware.group_of("something_new") == "everything else"
+
+
+def test_stats_only_on_the_emulated_uno(tmp_path: Path) -> None:
+    with pytest.raises(ValueError), boards.started("native", stats=tmp_path / "s.jsonl"):
+        pass
+
+
+def test_raw_client_round_trip_on_the_simulated_board() -> None:
+    _need("native")
+    with boards.started("native") as sim, boards.RawClient(sim.port) as raw:
+        msg = pb.ArduinoIn()
+        msg.ping.payload = b"bench"
+        assert raw.call(msg) > 0
+        assert raw.call(roundtrip.RAW_MESSAGES["ping"](0)) > 0
+
+
+def _built_elf() -> Path:
+    _need("avr")
+    from protoduino import emulator
+
+    return emulator.build_firmware()
+
+
+@pytest.mark.avr
+def test_footprint_agrees_with_avr_size_berkeley() -> None:
+    elf = _built_elf()
+    size = firmware.footprint(elf)
+    out = subprocess.run(
+        [shutil.which("avr-size") or "avr-size", "-B", str(elf)],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    ).stdout
+    text, data, bss = (int(x) for x in out.splitlines()[1].split()[:3])
+    assert (size.text, size.data, size.bss) == (text, data, bss)
+    assert (size.flash, size.ram) == (text + data, data + bss)
+
+
+@pytest.mark.avr
+def test_emulator_counters_count_uart_bytes_and_agree_with_the_profile(tmp_path: Path) -> None:
+    """--stats counts every UART byte exactly; --profile charges the same awake cycles."""
+    elf = _built_elf()
+    stats, profile = tmp_path / "stats.jsonl", tmp_path / "profile.txt"
+    command, ack = roundtrip.ping_frames()  # the raw client's ids are 5-byte varints too
+    n = 6
+    with boards.started("avr", stats=stats, profile=profile) as sim:
+        counter = boards.CycleCounter(sim, stats)
+        with boards.RawClient(sim.port) as raw:
+            before = counter.snapshot()
+            for i in range(n):
+                raw.call(roundtrip.RAW_MESSAGES["ping"](i))
+            time.sleep(0.05)  # the last Ack's final byte leaves the UART after it was read
+            delta = counter.snapshot() - before
+        by_function = firmware.read_profile(profile, firmware.Symbols.of(elf))
+    assert (delta.uart_rx, delta.uart_tx) == (n * len(command), n * len(ack))
+    assert 0 < delta.awake < delta.cycles
+    profiled = sum(by_function.values())
+    # Interrupt entries taken while asleep count as awake but have no address to go to.
+    assert 0.9 * delta.awake <= profiled <= delta.awake
+    assert by_function["pd_link_send"] > 0
+    assert any(name.startswith("pb_") for name in by_function)
+
+
+@pytest.mark.avr
+def test_runner_writes_the_board_sections(tmp_path: Path) -> None:
+    _need("native")
+    _need("avr")
+    out = tmp_path / "performance.md"
+    sections = ["--only", "roundtrip", "--only", "throughput", "--only", "firmware"]
+    assert runner.main([*sections, "--samples", "3", "--commands", "8", "--out", str(out)]) == 0
+    text = out.read_text(encoding="utf-8")
+    for heading in ("## 2. Round trip", "## 3. Throughput", "## 5. Firmware"):
+        assert heading in text
+    assert "## 1. Host receive path" not in text
+    for label, _ in boards.BACKENDS:
+        assert f"| {boards.LABELS[label]} | servo write |" in text
+    assert "### Where the emulated Uno's round trip goes" in text
+    assert "### Profile of a servo write on the Uno" in text
+    assert "`pd_link_send`" in text
+    assert "not measured" not in text  # every target of parts 2, 3 and 5 has a verdict
+    for chart in ("roundtrip_avr", "roundtrip_native", "throughput_avr", "throughput_native"):
+        link = f"perf/{chart}.png"
+        if link in text:
+            assert (tmp_path / link).read_bytes().startswith(b"\x89PNG")

@@ -1,0 +1,284 @@
+"""The boards parts 2, 3 and 5 measure against, and the tools to look inside them.
+
+* :func:`started` builds and starts a simulated board (``native``: the firmware core on a pty,
+  no baud rate) or the emulated Uno (``avr``: the real Uno firmware on simavr, paced to real
+  time, its UART timed at 115200 baud), optionally with the runner's ``--stats`` file.
+* :class:`CycleCounter` reads the emulated Uno's cycle counters (``tools/avrsim --stats``:
+  SIGUSR2 appends one JSON line): total, asleep and awake cycles, UART bytes.
+* :class:`RawClient` talks to a board with pyserial and the project's framing only, no I/O
+  thread and no request layer: the same round trip without the host library, so that the
+  library's own share of a round trip can be told apart from the board's.
+
+Every wait here is bounded; every process and port is closed by a context manager.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import select
+import shutil
+import signal
+import statistics
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+
+import serial
+from protoduino.constants import PROTOCOL_VERSION, ControlCode, PacketType
+from protoduino.errors import ProtoduinoError
+from protoduino.framing import DELIMITER, StreamDecoder, frame_packet
+from protoduino.messages import ArduinoIn, ArduinoOut
+from protoduino.packets import Packet, parse_control, reset_payload
+from protoduino.simboard import Backend, SimBoard
+
+#: The boards, in report order: (backend, label).
+BACKENDS: tuple[tuple[str, str], ...] = (
+    ("native", "simulated board (native)"),
+    ("avr", "emulated Uno (avr, 115200 baud)"),
+)
+LABELS = dict(BACKENDS)
+
+#: Tools each backend needs; a missing one makes the backend "not run" with its name.
+NEEDS: dict[str, tuple[str, ...]] = {
+    "native": ("make", "gcc"),
+    "avr": ("make", "gcc", "avr-gcc", "avr-size"),
+}
+SIMAVR_HEADER = Path("/usr/include/simavr/sim_avr.h")
+
+#: The Uno's clock, for turning cycles into time.
+UNO_HZ = 16_000_000
+#: How long a --stats line may take to appear (the runner writes it within ~1 ms).
+STATS_TIMEOUT = 3.0
+#: Bound on every raw read.
+RAW_TIMEOUT = 2.0
+
+
+class BoardUnavailableError(Exception):
+    """A board cannot be built or started here; the message says what is missing."""
+
+
+def missing_tool(backend: str) -> str | None:
+    """The first tool ``backend`` needs that is not installed, or None."""
+    for tool in NEEDS[backend]:
+        if shutil.which(tool) is None:
+            return tool
+    if backend == "avr" and not SIMAVR_HEADER.exists():
+        return "libsimavr-dev"
+    return None
+
+
+class _StatsSimBoard(SimBoard):
+    """The avr backend with the runner's ``--stats FILE`` (and ``--profile FILE``); SimBoard
+    has no option for them, so the command line is the backend's own with the options added
+    before the firmware."""
+
+    def __init__(self, stats: Path, profile: Path | None) -> None:
+        super().__init__("avr")
+        base = self._backend
+        extra = ["--stats", str(stats)]
+        if profile is not None:
+            extra += ["--profile", str(profile)]
+
+        def command(trace: Path | None, link: Path | None) -> list[str]:
+            cmd = base.command(trace, link)
+            return [*cmd[:-1], *extra, cmd[-1]]
+
+        self._backend = Backend(build=base.build, command=command)
+
+
+@contextlib.contextmanager
+def started(
+    backend: str, *, stats: Path | None = None, profile: Path | None = None
+) -> Iterator[SimBoard]:
+    """A started board of ``backend``, stopped on exit. ``stats`` and ``profile`` (avr only)
+    are the runner's --stats and --profile files.
+
+    Raises :class:`BoardUnavailableError` when a tool is missing or the build fails.
+    """
+    tool = missing_tool(backend)
+    if tool is not None:
+        raise BoardUnavailableError(f"`{tool}` is not installed")
+    if (stats is not None or profile is not None) and backend != "avr":
+        raise ValueError("cycle statistics exist only on the emulated Uno (avr)")
+    if profile is not None and stats is None:
+        raise ValueError("a profile is written with the statistics: give stats= too")
+    sim = _StatsSimBoard(stats, profile) if stats is not None else SimBoard(backend)
+    try:
+        sim.start()
+    except ProtoduinoError as error:  # BuildError, TransportError
+        sim.stop()
+        raise BoardUnavailableError(str(error).splitlines()[0]) from error
+    try:
+        yield sim
+    finally:
+        sim.stop()
+
+
+@dataclass(frozen=True, slots=True)
+class CycleStats:
+    """One line of the runner's --stats file, and the host's clock when it was read."""
+
+    t: float  # emulated seconds
+    cycles: int
+    awake: int
+    uart_rx: int
+    uart_tx: int
+    wall: float  # time.perf_counter() when the line appeared
+
+    def __sub__(self, other: CycleStats) -> CycleStats:
+        return CycleStats(
+            self.t - other.t,
+            self.cycles - other.cycles,
+            self.awake - other.awake,
+            self.uart_rx - other.uart_rx,
+            self.uart_tx - other.uart_tx,
+            self.wall - other.wall,
+        )
+
+    @property
+    def awake_share(self) -> float:
+        return self.awake / self.cycles if self.cycles else 0.0
+
+    @property
+    def pace(self) -> float:
+        """Emulated time over wall time (of a difference): 1.0 when the emulator keeps up."""
+        return self.t / self.wall if self.wall > 0 else 0.0
+
+
+class CycleCounter:
+    """Snapshots of an emulated Uno's cycle counters (its runner started with --stats)."""
+
+    def __init__(self, sim: SimBoard, path: Path) -> None:
+        self.sim = sim
+        self.path = path
+
+    def _lines(self) -> list[str]:
+        try:
+            text = self.path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            return []
+        return [line for line in text.splitlines(keepends=True) if line.endswith("\n")]
+
+    def snapshot(self) -> CycleStats:
+        before = len(self._lines())
+        os.kill(self.sim.pid, signal.SIGUSR2)
+        deadline = time.monotonic() + STATS_TIMEOUT
+        while time.monotonic() < deadline:
+            lines = self._lines()
+            if len(lines) > before:
+                row = json.loads(lines[-1])
+                return CycleStats(
+                    float(row["t"]),
+                    int(row["cycles"]),
+                    int(row["awake_cycles"]),
+                    int(row["uart_rx_bytes"]),
+                    int(row["uart_tx_bytes"]),
+                    time.perf_counter(),
+                )
+            time.sleep(0.002)
+        raise TimeoutError(f"the runner wrote no statistics to {self.path} in time")
+
+
+@dataclass(frozen=True, slots=True)
+class Percentiles:
+    """Summary of latency samples, in seconds."""
+
+    n: int
+    p50: float
+    p90: float
+    p99: float
+    low: float
+    high: float
+
+    @classmethod
+    def of(cls, samples: Sequence[float]) -> Percentiles:
+        if not samples:
+            raise ValueError("no samples")
+        s = sorted(samples)
+
+        def pct(q: float) -> float:
+            # Nearest rank: with a few hundred samples p99 is one of the slowest few.
+            return s[min(len(s) - 1, max(0, round(q * len(s)) - 1))]
+
+        return cls(len(s), statistics.median(s), pct(0.90), pct(0.99), s[0], s[-1])
+
+
+class RawClient:
+    """A board driven directly: pyserial, ``framing`` and hand-kept SEQ and message ids.
+
+    No thread: :meth:`call` writes one COMMAND and reads until its Ack arrives, in the caller's
+    thread. It is what a round trip costs without the host library; it does no retransmission
+    and is only for a quiet, healthy link.
+    """
+
+    def __init__(self, port: str) -> None:
+        self._serial = serial.Serial(port, 115200, timeout=0)
+        self._fd: int = self._serial.fileno()
+        self._decoder = StreamDecoder()
+        self._seq = 1
+        self._next_id = 0x9E3779B9  # a 5-byte varint, as the Board's random ids mostly are
+        try:
+            self._handshake()
+        except BaseException:
+            self._serial.close()
+            raise
+
+    def close(self) -> None:
+        self._serial.close()
+
+    def __enter__(self) -> RawClient:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def _read_until(self, want: Callable[[Packet], bool]) -> Packet:
+        deadline = time.perf_counter() + RAW_TIMEOUT
+        while (remaining := deadline - time.perf_counter()) > 0:
+            ready, _, _ = select.select([self._fd], [], [], remaining)
+            if not ready:
+                continue
+            for item in self._decoder.feed(os.read(self._fd, 4096)):
+                if isinstance(item, Packet) and want(item):
+                    return item
+        raise TimeoutError("the board did not answer in time")
+
+    def _handshake(self) -> None:
+        frame = frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION))
+        self._serial.write(DELIMITER + frame)
+
+        def is_reset_ack(p: Packet) -> bool:
+            return (
+                p.type is PacketType.CONTROL
+                and parse_control(p.payload).code is ControlCode.RESET_ACK
+            )
+
+        self._read_until(is_reset_ack)
+
+    def call(self, msg: ArduinoIn) -> float:
+        """Send ``msg`` with the next id; return the seconds until its Ack was decoded."""
+        mid = self._next_id
+        self._next_id += 1
+        msg.message_id = mid
+        frame = frame_packet(PacketType.COMMAND, self._seq, msg.SerializeToString())
+        self._seq = (self._seq + 1) & 0xFF
+
+        def is_ack(p: Packet) -> bool:
+            if p.type is not PacketType.DATA:
+                return False
+            out = ArduinoOut.FromString(p.payload)
+            return out.WhichOneof("data") == "ack" and out.ack.message_id == mid
+
+        start = time.perf_counter()
+        self._serial.write(frame)
+        self._read_until(is_ack)
+        return time.perf_counter() - start

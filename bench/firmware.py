@@ -1,0 +1,471 @@
+"""Part 5 of issue 7: the Uno firmware's flash and static RAM, and its cycles per command.
+
+* Footprint: ``make -C firmware avr`` builds ``build/avr/protoduino.elf``; ``avr-size -A``
+  gives its sections. Flash = .text + .data (the initial values of .data live in flash),
+  static RAM = .data + .bss, as the firmware's Makefile and tests/test_footprint.py count them.
+* Cycles per command: the emulated Uno runs with the runner's ``--stats`` and ``--profile``
+  (tools/avrsim). The firmware sleeps whenever it has nothing to do, so its awake cycles are
+  its CPU use; between two snapshots, ``N`` commands are sent one at a time through the public
+  API, and the awake cycles the idle board spends in the same emulated time (its 1 kHz clock and
+  servo interrupts, measured first) are subtracted. The profile of the servo-write block, mapped
+  to the ELF's symbols with ``avr-nm``, says where those cycles go.
+* CPU share at the highest command rate: a window of 4 servo writes in flight (part 3's best
+  window), the awake share measured over it.
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+import os
+import re
+import shutil
+import subprocess
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from tempfile import TemporaryDirectory
+
+from protoduino import Board, emulator
+from protoduino.errors import BuildError
+
+from . import charts
+from .boards import UNO_HZ, BoardUnavailableError, CycleCounter, CycleStats, started
+from .core import Chart, Context, Section, SectionResult, Target, fmt_rate, md_table
+from .peers import protoduino as protoduino_peer
+from .throughput import drive, servo_line
+
+log = logging.getLogger(__name__)
+
+FLASH_GOAL = 12_000
+RAM_GOAL = 800
+#: The ATmega328P: 32 KB flash of which Optiboot keeps 0.5 KB (1 KB here, see tools/avrsim), 2 KB
+#: RAM.
+FLASH_TOTAL = 32_768
+RAM_TOTAL = 2_048
+IDLE_SECONDS = 0.5
+MAX_RATE_WINDOW = 4
+PROFILE_ROWS = 14
+#: Cycles one UART byte takes on the emulated Uno (U2X, UBRR 16: see bench.roundtrip).
+UART_BYTE_CYCLES = 10 * 8 * 17
+
+#: ATmega328P interrupt vectors the firmware uses.
+VECTORS = {
+    "__vector_11": "TIMER1_COMPA: servo pulse edges",
+    "__vector_14": "TIMER0_COMPA: 1 kHz clock",
+    "__vector_18": "USART_RX: byte into the receive ring",
+}
+
+#: Groups of functions for the profile summary: (group, rule), first match wins.
+GROUPS: tuple[tuple[str, Callable[[str], bool]], ...] = (
+    (
+        "frame transmit: COBS encoding and the polled UART write (inlined into pd_link_send)",
+        lambda n: n.startswith("pd_link_send"),
+    ),
+    (
+        "nanopb decoding (pb_decode and its field iterator)",
+        lambda n: (
+            n.startswith("pb_")
+            or n
+            in {
+                "load_descriptor_values",
+                "advance_iterator",
+                "decode_basic_field",
+                "decode_field",
+                "decode_static_field",
+                "decode_pointer_field",
+                "decode_callback_field",
+                "buf_read",
+                "read_raw_value",
+            }
+        ),
+    ),
+    ("CRC-16, bit by bit (pd_crc16_update)", lambda n: n.startswith("pd_crc16")),
+    (
+        "Ack encoding (pd_encode.c)",
+        lambda n: n.startswith(("put", "open_msg", "close_msg", "pd_encode", "pd_dispatch_send")),
+    ),
+    ("interrupt handlers", lambda n: n.startswith("__vector_")),
+    (
+        "register save/restore (-mcall-prologues) and libgcc arithmetic",
+        lambda n: n.startswith("__"),
+    ),
+    (
+        "main loop: receive ring, COBS decoding, packet checks, dispatch, outputs (inlined "
+        "into main by LTO)",
+        lambda n: n == "main",
+    ),
+)
+
+#: Chart labels for the groups above.
+SHORT = {
+    GROUPS[0][0]: "transmit (polled UART)",
+    GROUPS[1][0]: "nanopb decoding",
+    GROUPS[2][0]: "CRC-16",
+    GROUPS[3][0]: "Ack encoding",
+    GROUPS[4][0]: "interrupts",
+    GROUPS[5][0]: "prologues, libgcc",
+    GROUPS[6][0]: "main loop (inlined)",
+}
+
+KINDS: tuple[tuple[str, str], ...] = (
+    ("servo", "servo write"),
+    ("digital", "digital write"),
+    ("ping", "Ping, empty"),
+    ("ping64", "Ping, 64-byte payload"),
+)
+
+
+@dataclass(frozen=True, slots=True)
+class Footprint:
+    text: int
+    data: int
+    bss: int
+
+    @property
+    def flash(self) -> int:
+        return self.text + self.data
+
+    @property
+    def ram(self) -> int:
+        return self.data + self.bss
+
+
+def _tool(name: str) -> str:
+    path = shutil.which(name)
+    if path is None:
+        raise BoardUnavailableError(f"`{name}` is not installed (Debian package binutils-avr)")
+    return path
+
+
+def footprint(elf: Path) -> Footprint:
+    """The ELF's sections as ``avr-size -A`` reports them."""
+    out = subprocess.run(
+        [_tool("avr-size"), "-A", str(elf)], capture_output=True, text=True, check=True, timeout=60
+    ).stdout
+    sizes: dict[str, int] = {}
+    for line in out.splitlines():
+        fields = line.split()
+        if len(fields) >= 2 and fields[0].startswith(".") and fields[1].isdigit():
+            sizes[fields[0]] = int(fields[1])
+    return Footprint(sizes.get(".text", 0), sizes.get(".data", 0), sizes.get(".bss", 0))
+
+
+@dataclass(frozen=True, slots=True)
+class Symbols:
+    """Function address ranges of an ELF, for mapping a flat profile."""
+
+    starts: list[int]
+    ends: list[int]
+    names: list[str]
+
+    @classmethod
+    def of(cls, elf: Path) -> Symbols:
+        out = subprocess.run(
+            [_tool("avr-nm"), "-n", "-S", "--defined-only", str(elf)],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=60,
+        ).stdout
+        rows = []
+        for line in out.splitlines():
+            fields = line.split()
+            if len(fields) == 4 and fields[2] in "tTwW":
+                start, size = int(fields[0], 16), int(fields[1], 16)
+                rows.append((start, start + size, fields[3]))
+        rows.sort()
+        return cls([r[0] for r in rows], [r[1] for r in rows], [r[2] for r in rows])
+
+    def name(self, address: int) -> str:
+        i = bisect.bisect_right(self.starts, address) - 1
+        if i >= 0 and address < self.ends[i]:
+            return self.names[i]
+        return "(no symbol)"
+
+
+def clean_name(name: str) -> str:
+    """A symbol without GCC's clone suffixes: ``pd_link_send.constprop.41`` -> ``pd_link_send``."""
+    return re.sub(r"(\.(constprop|isra|part|lto_priv|cold)(\.\d+)?)+$", "", name)
+
+
+def read_profile(path: Path, symbols: Symbols) -> Counter[str]:
+    """Awake cycles by function from a --profile file."""
+    by_function: Counter[str] = Counter()
+    for line in path.read_text(encoding="utf-8").splitlines():
+        address, cycles = line.split()
+        by_function[clean_name(symbols.name(int(address, 16)))] += int(cycles)
+    return by_function
+
+
+def group_of(function: str) -> str:
+    for group, rule in GROUPS:
+        if rule(function):
+            return group
+    return "everything else"
+
+
+@dataclass(slots=True)
+class CycleRun:
+    idle_share: float
+    per_command: dict[str, float]
+    bytes_per_command: dict[str, tuple[float, float]]  # (into the Uno, out of it)
+    profile: Counter[str]
+    profile_commands: int
+    max_rate: float
+    max_rate_share: float
+
+    def tx_wait(self, kind: str) -> float:
+        """Cycles of polled transmit: one byte time for each answer byte after the first."""
+        return max(0.0, (self.bytes_per_command[kind][1] - 1) * UART_BYTE_CYCLES)
+
+
+def servo_payload_bytes() -> int:
+    """The ArduinoIn payload of the benchmarks' servo write (5-byte message id)."""
+    _init, command, _ack = protoduino_peer.servo_messages(protoduino_peer.FIRST_MESSAGE_ID)
+    return len(command.SerializeToString())
+
+
+def _busy(delta: CycleStats, idle_share: float) -> float:
+    return delta.awake - idle_share * delta.cycles
+
+
+def measure_cycles(samples: int, commands: int) -> CycleRun:
+    symbols = Symbols.of(emulator.FIRMWARE_ELF)
+    with TemporaryDirectory(prefix="bench-fw-") as tmp:
+        stats = Path(tmp) / "stats.jsonl"
+        profile_path = Path(tmp) / "profile.txt"
+        with started("avr", stats=stats, profile=profile_path) as sim:
+            counter = CycleCounter(sim, stats)
+            with Board.open(sim.port, ping=False) as board:
+                servo = board.servo(9)
+                led = board.digital_output(13)
+                payload = bytes(range(64))
+                ops: dict[str, Callable[[int], object]] = {
+                    "servo": lambda i: servo.write(80 + 20 * (i & 1)),
+                    "digital": lambda i: led.write(bool(i & 1)),
+                    "ping": lambda _i: board.ping(),
+                    "ping64": lambda _i: board.ping(payload),
+                }
+                a = counter.snapshot()
+                time.sleep(IDLE_SECONDS)
+                idle_share = (counter.snapshot() - a).awake_share
+                per_command: dict[str, float] = {}
+                io: dict[str, tuple[float, float]] = {}
+                profile: Counter[str] = Counter()
+                for kind, _label in KINDS:
+                    board.ping()  # the failsafe counts from the last Ping: keep it far away
+                    before = counter.snapshot()
+                    for i in range(samples):
+                        ops[kind](i)
+                    delta = counter.snapshot() - before
+                    per_command[kind] = _busy(delta, idle_share) / samples
+                    io[kind] = (delta.uart_rx / samples, delta.uart_tx / samples)
+                    if kind == "servo":
+                        profile = read_profile(profile_path, symbols)
+            with Board.open(sim.port, window=MAX_RATE_WINDOW, ping=False) as board:
+                servo = board.servo(9)
+                before = counter.snapshot()
+                seconds, ok, _failed = drive(
+                    lambda i: servo.write(80 + 20 * (i & 1)), MAX_RATE_WINDOW, commands
+                )
+                delta = counter.snapshot() - before
+    return CycleRun(
+        idle_share,
+        per_command,
+        io,
+        profile,
+        samples,
+        ok / seconds if seconds > 0 else 0.0,
+        delta.awake_share,
+    )
+
+
+def run(ctx: Context) -> SectionResult:
+    load = os.getloadavg()[0]
+    try:
+        elf = emulator.build_firmware()
+        size = footprint(elf)
+    except (BuildError, BoardUnavailableError, subprocess.SubprocessError, OSError) as error:
+        reason = str(error).splitlines()[0]
+        log.warning("firmware: not built: %s", reason)
+        return SectionResult(
+            f"Not run: the Uno firmware could not be built here ({reason}).\n",
+            [
+                Target("firmware flash", f"<= {FLASH_GOAL:,} B", "not run", None),
+                Target("firmware static RAM", f"<= {RAM_GOAL:,} B", "not run", None),
+            ],
+        )
+    targets = [
+        Target(
+            "firmware flash", f"<= {FLASH_GOAL:,} B", f"{size.flash:,} B", size.flash <= FLASH_GOAL
+        ),
+        Target(
+            "firmware static RAM", f"<= {RAM_GOAL:,} B", f"{size.ram:,} B", size.ram <= RAM_GOAL
+        ),
+    ]
+    parts = [
+        "`make -C firmware avr` (avr-gcc -Os, LTO, nanopb with `PB_NO_ERRMSG`, "
+        "`PB_WITHOUT_64BIT`, `PB_BUFFER_ONLY`), sections from `avr-size -A "
+        "build/avr/protoduino.elf`:\n",
+        md_table(
+            ["", ".text", ".data", ".bss", "total", "goal", "of the ATmega328P"],
+            [
+                [
+                    "flash (.text + .data)",
+                    f"{size.text:,}",
+                    f"{size.data:,}",
+                    "",
+                    f"{size.flash:,} B",
+                    f"{FLASH_GOAL:,} B",
+                    f"{size.flash / FLASH_TOTAL * 100:.0f} % of 32 KB",
+                ],
+                [
+                    "static RAM (.data + .bss)",
+                    "",
+                    f"{size.data:,}",
+                    f"{size.bss:,}",
+                    f"{size.ram:,} B",
+                    f"{RAM_GOAL:,} B",
+                    f"{size.ram / RAM_TOTAL * 100:.0f} % of 2 KB (the stack takes the rest)",
+                ],
+            ],
+        ),
+    ]
+    try:
+        cycles = measure_cycles(ctx.samples, ctx.commands)
+    except BoardUnavailableError as error:
+        parts.append(f"Cycles per command not measured: {error}.\n")
+        return SectionResult("\n".join(parts), targets)
+    parts.append(_cycles_markdown(cycles, ctx, load))
+    chart_list: list[Chart] = []
+    if ctx.chart_dir is not None and cycles.profile:
+        groups = _groups(cycles)
+        path = charts.hbars(
+            ctx.chart_dir / "firmware_profile.png",
+            [SHORT.get(g, g) for g, _c in groups],
+            [("awake cycles per servo write", [c for _g, c in groups])],
+            title="Where a servo write's cycles go on the Uno (16 MHz)",
+            highlight=0,
+        )
+        chart_list.append(Chart(path, "Awake cycles per servo write on the Uno, by part"))
+    return SectionResult("\n".join(parts), targets, chart_list)
+
+
+def _cycles_markdown(c: CycleRun, ctx: Context, load: float) -> str:
+    line = servo_line()
+    rows = []
+    for kind, label in KINDS:
+        cycles = c.per_command[kind]
+        rx, tx = c.bytes_per_command[kind]
+        tx_wait = c.tx_wait(kind)
+        rows.append(
+            [
+                label,
+                f"{rx:.1f} / {tx:.1f}",
+                f"{cycles:,.0f}",
+                f"{cycles / UNO_HZ * 1e6:,.0f}",
+                f"{tx_wait:,.0f}",
+                f"{cycles - tx_wait:,.0f}",
+                fmt_rate(UNO_HZ / cycles),
+            ]
+        )
+    servo = c.per_command["servo"]
+    computed_share = servo * c.max_rate / UNO_HZ
+    out = [
+        f"### Cycles per received command\n\nOn the emulated Uno (16 MHz), {ctx.samples} "
+        "commands of each kind one at a time through the public API; awake cycles between "
+        f"two snapshots of the runner's counters, minus the idle board's awake share "
+        f"({c.idle_share * 100:.2f} % of the cycles: clock tick and servo interrupts) over the "
+        "same emulated time. Transmit is polled (firmware/avr/pd_avr_uart.c): the MCU stays "
+        "awake while an answer goes out, one byte time "
+        f"({UART_BYTE_CYCLES:,} cycles) for every byte after the first; that wait is shown "
+        f"apart. Load average at the start of this section: {load:.2f}.\n",
+        md_table(
+            [
+                "command",
+                "UART bytes in / out",
+                "awake cycles",
+                "us at 16 MHz",
+                "of which transmit wait",
+                "work",
+                "commands/s if never asleep",
+            ],
+            rows,
+        ),
+        f"At the highest rate measured here ({MAX_RATE_WINDOW} servo writes in flight, "
+        f"{fmt_rate(c.max_rate)} commands/s, {c.max_rate / line.both * 100:.0f} % of the "
+        f"line rate counting command and Ack), the Uno was awake "
+        f"{c.max_rate_share * 100:.0f} % of the time (the one-at-a-time cycles above times "
+        f"that rate give {computed_share * 100:.0f} %). A command costs the firmware about as "
+        "long as its bytes take on the line: at that rate the Uno has almost nothing left for "
+        "anything else.\n",
+    ]
+    if c.profile:
+        out.append(_profile_markdown(c))
+    return "\n".join(out)
+
+
+def _groups(c: CycleRun) -> list[tuple[str, float]]:
+    """(group, cycles per command), largest first."""
+    groups: Counter[str] = Counter()
+    for function, cycles in c.profile.items():
+        groups[group_of(function)] += cycles
+    return [(g, cycles / c.profile_commands) for g, cycles in groups.most_common()]
+
+
+def _profile_markdown(c: CycleRun) -> str:
+    total = sum(c.profile.values())
+    n = c.profile_commands
+    groups = dict(_groups(c))
+    group_rows = [
+        [group, f"{cycles:,.0f}", f"{cycles * n / total * 100:.0f} %"]
+        for group, cycles in groups.items()
+    ]
+    function_rows = [
+        [
+            f"`{function}`" + (f" ({VECTORS[function]})" if function in VECTORS else ""),
+            f"{cycles / n:,.0f}",
+            f"{cycles / total * 100:.1f} %",
+        ]
+        for function, cycles in c.profile.most_common(PROFILE_ROWS)
+    ]
+    nanopb = groups.get(GROUPS[1][0], 0.0)
+    crc = groups.get(GROUPS[2][0], 0.0)
+    send = groups.get(GROUPS[0][0], 0.0)
+    servo = c.per_command["servo"]
+    work = max(1.0, servo - c.tx_wait("servo"))
+    return "\n".join(
+        [
+            "### Profile of a servo write on the Uno\n",
+            f"Awake cycles by function over the {n} servo writes above (the runner's "
+            "`--profile`: cycles charged to the flash address that spent them, mapped with "
+            "`avr-nm`; LTO inlines most of the firmware's own code into `main`). Per command, "
+            "the idle load included:\n",
+            md_table(["where", "cycles per command", "share"], group_rows, "lrr"),
+            md_table(["function", "cycles per command", "share"], function_rows, "lrr"),
+            f"The hot path has three parts. Sending the Ack ({send:,.0f} cycles) is mostly the "
+            "polled UART write waiting for each byte to leave. An interrupt-driven transmit "
+            "ring would not make an Ack leave sooner (the bytes go at line rate either way), "
+            "but it would free those cycles to decode the next command meanwhile: with "
+            f"{work:,.0f} cycles of work left per servo write the ceiling would be about "
+            f"{fmt_rate(UNO_HZ / work)} commands/s instead of {fmt_rate(UNO_HZ / servo)} "
+            "(the full-duplex line allows "
+            f"{fmt_rate(servo_line().duplex)}), though its ring costs RAM the "
+            f"{RAM_GOAL} B goal has little room for. nanopb's decoder takes {nanopb:,.0f} "
+            f"cycles for a {servo_payload_bytes()}-byte message, most of it walking the "
+            "field descriptors (`load_descriptor_values`, `advance_iterator`) of ArduinoIn's "
+            "oneof; a "
+            "hand-written decoder for these few messages, as `pd_encode.c` is for Acks, would "
+            f"take a fraction of that. The bit-by-bit CRC-16 takes {crc:,.0f} cycles for "
+            "command and Ack; a 16-entry table (32 B of flash) handles 4 bits a step (a "
+            "256-entry table would not fit the flash goal). Every cycle between the command's "
+            "last byte and the Ack's first adds to the round trip (part 2); every awake cycle "
+            "counts against the throughput ceiling (part 3).\n",
+        ]
+    )
+
+
+SECTION = Section(5, "firmware", "Firmware", run)

@@ -1,0 +1,453 @@
+"""Part 2 of issue 7: command -> Ack round trip, next to the wire-time lower bound.
+
+Wall-clock latency (``time.perf_counter``) of one call through the public API, from the call to
+its return with the Ack: ``Servo.write`` (ServoControl) and ``Board.ping()`` (an empty Ping),
+one at a time, against the simulated board (native, no baud rate) and the emulated Uno (avr:
+the real firmware on simavr, its UART at 115200 baud, paced to real time).
+
+The lower bound is the time the command's and the Ack's bytes take on a 115200-baud 8N1 line
+(10 bits a byte), for the frames :mod:`bench.peers.protoduino` builds with the project's encoders
+(a 5-byte message id, as the Board's random ids mostly are).
+
+To say where the time goes, the same board is also driven by :class:`bench.boards.RawClient`
+(pyserial and the framing only, no I/O thread): the difference is the host library's share. On
+the emulated Uno the runner's cycle counters give the firmware's awake time per command. The
+cases take turns in rounds (library, then raw client) so that a slow spell of the shared machine
+lands on both.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from tempfile import TemporaryDirectory
+
+from protoduino import Board
+from protoduino._generated import protoduino_pb2 as pb
+from protoduino.board import Servo
+from protoduino.constants import PacketType
+from protoduino.framing import frame_packet
+from protoduino.simboard import SimBoard
+
+from . import charts
+from .boards import (
+    BACKENDS,
+    LABELS,
+    UNO_HZ,
+    BoardUnavailableError,
+    CycleCounter,
+    CycleStats,
+    Percentiles,
+    RawClient,
+    started,
+)
+from .core import Chart, Context, Section, SectionResult, Target, md_table
+from .peers import protoduino as protoduino_peer
+from .wire import BAUD, wire_time_us
+
+log = logging.getLogger(__name__)
+
+#: The goal: p50 on the emulated Uno at most this many times the wire time.
+TARGET_RATIO = 1.3
+#: Rounds the samples are split into (library, then raw client, each round).
+ROUNDS = 3
+#: Untimed calls at the start of every block.
+WARMUP = 5
+#: The emulated Uno's UART: U2X with UBRR 16 (firmware/avr/pd_avr_uart.c), so one 10-bit byte
+#: is 10 * 8 * 17 cycles; polled transmit waits that long for each byte after the first.
+UART_BYTE_CYCLES = 10 * 8 * 17
+#: Idle time over which the Uno's background load (clock tick, servo interrupts) is measured.
+IDLE_SECONDS = 0.3
+
+KINDS: tuple[tuple[str, str], ...] = (
+    ("servo", "servo write"),
+    ("ping", "Ping, empty"),
+)
+
+
+def ping_frames(message_id: int = protoduino_peer.FIRST_MESSAGE_ID) -> tuple[bytes, bytes]:
+    """An empty Ping and its Ack as frames (the Ack carries the empty echo, as the firmware's)."""
+    msg = pb.ArduinoIn(message_id=message_id + 1)
+    msg.ping.SetInParent()
+    ack = pb.ArduinoOut()
+    ack.ack.message_id = message_id + 1
+    ack.ack.ping_echo = b""
+    return (
+        frame_packet(PacketType.COMMAND, 2, msg.SerializeToString()),
+        frame_packet(PacketType.DATA, 1, ack.SerializeToString()),
+    )
+
+
+def wire_frames(kind: str) -> tuple[bytes, bytes]:
+    """(command, Ack) frames of ``kind`` as they go on the wire."""
+    if kind == "servo":
+        sample = protoduino_peer.wire_sample()
+        assert sample.ack is not None
+        return sample.command, sample.ack
+    return ping_frames()
+
+
+def _servo_msg(i: int) -> pb.ArduinoIn:
+    msg = pb.ArduinoIn()
+    msg.servo_control.pin = 9
+    msg.servo_control.degrees = 80 + 20 * (i & 1)
+    return msg
+
+
+def _ping_msg(_i: int) -> pb.ArduinoIn:
+    msg = pb.ArduinoIn()
+    msg.ping.SetInParent()
+    return msg
+
+
+RAW_MESSAGES: dict[str, Callable[[int], pb.ArduinoIn]] = {"servo": _servo_msg, "ping": _ping_msg}
+
+
+@dataclass(slots=True)
+class BoardRun:
+    """Everything measured on one board."""
+
+    backend: str
+    library: dict[str, list[float]] = field(default_factory=dict)  # kind -> seconds
+    raw: dict[str, list[float]] = field(default_factory=dict)
+    #: avr only: awake cycles per command (idle load removed) and the idle awake share.
+    cycles: dict[str, float] = field(default_factory=dict)
+    idle_share: float | None = None
+    #: avr only: emulated time over wall time across the timed library blocks.
+    pace: float | None = None
+    error: str | None = None
+
+
+def _timed(op: Callable[[int], object], n: int) -> list[float]:
+    for i in range(WARMUP):
+        op(i)
+    out: list[float] = []
+    for i in range(n):
+        start = time.perf_counter()
+        op(i)
+        out.append(time.perf_counter() - start)
+    return out
+
+
+def busy_cycles(delta: CycleStats, idle_share: float) -> float:
+    """Awake cycles over ``delta`` minus what the idle board spends in the same time (its
+    clock tick and servo interrupts): the cycles the commands cost."""
+    return delta.awake - idle_share * delta.cycles
+
+
+def _library_ops(board: Board, servo: Servo) -> dict[str, Callable[[int], object]]:
+    """The public API's calls, by kind; servo writes alternate so every one moves it."""
+    return {
+        "servo": lambda i: servo.write(80 + 20 * (i & 1)),
+        "ping": lambda _i: board.ping(),
+    }
+
+
+def _raw_op(raw: RawClient, make: Callable[[int], pb.ArduinoIn]) -> Callable[[int], float]:
+    return lambda i: raw.call(make(i))
+
+
+def measure_board(
+    sim: SimBoard, backend: str, samples: int, counter: CycleCounter | None
+) -> BoardRun:
+    run = BoardRun(backend)
+    per_round = max(1, samples // ROUNDS)
+    for kind, _label in KINDS:
+        run.library[kind] = []
+        run.raw[kind] = []
+    awake: dict[str, list[tuple[CycleStats, int]]] = {kind: [] for kind, _ in KINDS}
+    for _round in range(ROUNDS):
+        with Board.open(sim.port, ping=False) as board:
+            servo = board.servo(9)
+            if counter is not None and run.idle_share is None:
+                a = counter.snapshot()
+                time.sleep(IDLE_SECONDS)
+                run.idle_share = (counter.snapshot() - a).awake_share
+            ops = _library_ops(board, servo)
+            for kind, _label in KINDS:
+                before = counter.snapshot() if counter is not None else None
+                run.library[kind] += _timed(ops[kind], per_round)
+                if counter is not None and before is not None:
+                    awake[kind].append((counter.snapshot() - before, per_round + WARMUP))
+        with RawClient(sim.port) as raw:
+            init = pb.ArduinoIn()
+            init.servo_init.pin = 9
+            init.servo_init.safe_degrees = 90
+            raw.call(init)
+            for kind, _label in KINDS:
+                run.raw[kind] += _timed(_raw_op(raw, RAW_MESSAGES[kind]), per_round)
+    if run.idle_share is not None:
+        deltas = [d for blocks in awake.values() for d, _n in blocks]
+        wall = sum(d.wall for d in deltas)
+        run.pace = sum(d.t for d in deltas) / wall if wall > 0 else None
+        for kind, blocks in awake.items():
+            total = sum(n for _d, n in blocks)
+            run.cycles[kind] = sum(busy_cycles(d, run.idle_share) for d, _n in blocks) / total
+    return run
+
+
+def collect(samples: int) -> list[BoardRun]:
+    runs: list[BoardRun] = []
+    for backend, _label in BACKENDS:
+        log.info("round trip: %s board, %d samples per case", backend, samples)
+        try:
+            with TemporaryDirectory(prefix="bench-rt-") as tmp:
+                stats = Path(tmp) / "stats.jsonl" if backend == "avr" else None
+                with started(backend, stats=stats) as sim:
+                    counter = CycleCounter(sim, stats) if stats is not None else None
+                    runs.append(measure_board(sim, backend, samples, counter))
+        except BoardUnavailableError as error:
+            log.warning("round trip: %s board not run: %s", backend, error)
+            runs.append(BoardRun(backend, error=str(error)))
+    return runs
+
+
+def _us(seconds: float) -> str:
+    return f"{seconds * 1e6:,.0f}"
+
+
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1e3:.2f}"
+
+
+@dataclass(frozen=True, slots=True)
+class Budget:
+    """Where a median round trip on the emulated Uno goes, in microseconds.
+
+    The host library's share is measured on the simulated board (library minus raw client
+    there), where nothing else moves: on the emulated Uno the difference of two medians drowns
+    in the emulator's 1 ms modes.
+    """
+
+    command_bytes: int
+    ack_bytes: int
+    wire: float
+    awake: float  # the firmware's awake time per command
+    awake_cycles: float
+    tx_wait: float  # of which polled transmit, waiting on the Ack's bytes (overlaps the wire)
+    host: float  # the host library's own time (simulated board: library p50 - raw p50)
+    library: float  # Board p50 on the emulated Uno
+
+    @property
+    def work(self) -> float:
+        """Firmware time outside the wire time."""
+        return self.awake - self.tx_wait
+
+    @property
+    def rest(self) -> float:
+        """The pty, the emulator's pacing and scheduling: what the others leave."""
+        return self.library - self.wire - self.work - self.host
+
+    def rows(self) -> list[list[str]]:
+        return [
+            [
+                f"command + Ack on the wire ({self.command_bytes} + {self.ack_bytes} B)",
+                f"{self.wire:,.0f}",
+            ],
+            [
+                f"firmware work outside the wire time: awake {self.awake:,.0f} us "
+                f"({self.awake_cycles:,.0f} cycles) minus {self.tx_wait:,.0f} us of polled "
+                "transmit waiting on the Ack's bytes",
+                f"{self.work:,.0f}",
+            ],
+            [
+                "host library (on the simulated board: Board p50 minus raw client p50)",
+                f"{self.host:,.0f}",
+            ],
+            [
+                "the rest: the pty, the emulator's pacing (bytes cross between batches of up "
+                "to 1 ms, emulation up to 1 ms ahead of the wall clock), scheduling",
+                f"{self.rest:,.0f}",
+            ],
+            ["= Board p50 on the emulated Uno", f"{self.library:,.0f}"],
+        ]
+
+
+def host_overhead(run: BoardRun, kind: str) -> float:
+    """The host library's share of a round trip on ``run``'s board, in us."""
+    lib = Percentiles.of(run.library[kind]).p50
+    raw = Percentiles.of(run.raw[kind]).p50
+    return (lib - raw) * 1e6
+
+
+def budget(run: BoardRun, kind: str, host: float) -> Budget | None:
+    """The median round trip of ``kind`` on the emulated Uno, split (None without cycles);
+    ``host`` is the host library's share in us."""
+    if kind not in run.cycles:
+        return None
+    command, ack = wire_frames(kind)
+    cycles = run.cycles[kind]
+    return Budget(
+        command_bytes=len(command),
+        ack_bytes=len(ack),
+        wire=wire_time_us(len(command) + len(ack)),
+        awake=cycles / UNO_HZ * 1e6,
+        awake_cycles=cycles,
+        tx_wait=(len(ack) - 1) * UART_BYTE_CYCLES / UNO_HZ * 1e6,
+        host=host,
+        library=Percentiles.of(run.library[kind]).p50 * 1e6,
+    )
+
+
+def run(ctx: Context) -> SectionResult:
+    load = os.getloadavg()[0]
+    runs = collect(ctx.samples)
+    rows: list[list[str]] = []
+    targets: list[Target] = []
+    hist_series: dict[str, dict[str, list[float]]] = {}
+    notes: list[str] = []
+    for board_run in runs:
+        label = LABELS[board_run.backend]
+        if board_run.error is not None:
+            notes.append(f"The {label} was not run: {board_run.error}.")
+            continue
+        for kind, kind_label in KINDS:
+            command, ack = wire_frames(kind)
+            wire_s = wire_time_us(len(command) + len(ack)) / 1e6
+            lib = Percentiles.of(board_run.library[kind])
+            raw = Percentiles.of(board_run.raw[kind])
+            rows.append(
+                [
+                    label,
+                    kind_label,
+                    f"{len(command)} + {len(ack)}",
+                    _us(wire_s),
+                    _us(lib.p50),
+                    _us(lib.p90),
+                    _us(lib.p99),
+                    f"{lib.p50 / wire_s:.2f}x",
+                    _us(raw.p50),
+                    _us(lib.p50 - raw.p50),
+                    str(lib.n),
+                ]
+            )
+            scale = 1e3 if board_run.backend == "avr" else 1e6
+            hist_series.setdefault(board_run.backend, {})[kind_label] = [
+                x * scale for x in board_run.library[kind]
+            ]
+            if board_run.backend == "avr" and kind == "servo":
+                ratio = lib.p50 / wire_s
+                targets.append(
+                    Target(
+                        "round trip p50, emulated Uno",
+                        f"<= {TARGET_RATIO}x its wire time",
+                        f"{ratio:.2f}x (servo write: p50 {_ms(lib.p50)} ms, wire {_ms(wire_s)} ms)",
+                        ratio <= TARGET_RATIO,
+                    )
+                )
+    if not targets:
+        targets.append(
+            Target(
+                "round trip p50, emulated Uno", f"<= {TARGET_RATIO}x its wire time", "not run", None
+            )
+        )
+
+    parts = [
+        f"Wall-clock time of one call through the public API (`Servo.write`, `Board.ping()`), "
+        f"one at a time, {ctx.samples} samples per case after {WARMUP} untimed ones; "
+        f"percentiles by nearest rank. The wire time is the lower bound: the command's and the "
+        f"Ack's bytes at {BAUD} baud, 8N1. The simulated board has no baud rate (a pty at "
+        "memory speed), so its wire time is only for scale. *Raw client*: the same command "
+        "from pyserial and the framing alone, no I/O thread (bench/boards.py), in turns with "
+        f"the library ({ROUNDS} rounds); the difference is the host library's own cost, "
+        "clear on the simulated board and lost in the emulated Uno's 1 ms modes (there it can "
+        "even come out negative). "
+        f"Load average at the start of this section: {load:.2f} (2 cores, shared).\n",
+        md_table(
+            [
+                "board",
+                "command",
+                "bytes (cmd + Ack)",
+                "wire time us",
+                "p50 us",
+                "p90 us",
+                "p99 us",
+                "p50 / wire",
+                "raw client p50 us",
+                "host library us",
+                "samples",
+            ],
+            rows,
+            "llrrrrrrrrr",
+        ),
+    ]
+    parts += [note + "\n" for note in notes]
+    avr = next((r for r in runs if r.backend == "avr" and r.error is None), None)
+    native = next((r for r in runs if r.backend == "native" and r.error is None), None)
+    if avr is not None:
+        parts.append(_explain(avr, native or avr, targets[0]))
+
+    chart_list: list[Chart] = []
+    if ctx.chart_dir is not None:
+        for backend, series in hist_series.items():
+            avr_board = backend == "avr"
+            unit = "ms" if avr_board else "us"
+            scale = 1e3 if avr_board else 1e6
+            command, ack = wire_frames("servo")
+            wire = wire_time_us(len(command) + len(ack)) / 1e6 * scale
+            vlines = {f"servo wire time {wire:.2f} {unit}": wire} if avr_board else {}
+            if avr_board:
+                vlines[f"target {TARGET_RATIO}x wire"] = wire * TARGET_RATIO
+            path = charts.histogram(
+                ctx.chart_dir / f"roundtrip_{backend}.png",
+                series,
+                title=f"Round trip, {LABELS[backend]}",
+                xlabel=f"command -> Ack, {unit}",
+                bins=60,
+                vlines=vlines,
+            )
+            chart_list.append(Chart(path, f"Round-trip latency histogram, {LABELS[backend]}"))
+    return SectionResult("\n".join(parts), targets, chart_list, ["pyserial"])
+
+
+def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
+    out = ["### Where the emulated Uno's round trip goes\n"]
+    for kind, kind_label in KINDS:
+        split = budget(avr, kind, host_overhead(host_board, kind))
+        if split is not None:
+            out += [f"Median {kind_label}:\n", md_table(["", "us"], split.rows())]
+    servo = budget(avr, "servo", host_overhead(host_board, "servo"))
+    if servo is None:
+        return "\n".join(out)
+    allowed = servo.wire * (TARGET_RATIO - 1)
+    shares = (
+        ("the firmware's work", servo.work),
+        ("the pty, the emulator's pacing and scheduling", servo.rest),
+        ("the host library", servo.host),
+    )
+    biggest = max(shares, key=lambda item: item[1])
+    verdict = "met" if target.met else "missed"
+    out.append(
+        f"The target is {verdict}: {TARGET_RATIO}x the servo write's wire time leaves "
+        f"{allowed:,.0f} us above the wire for everything else, and the largest share is "
+        f"{biggest[0]} ({biggest[1]:,.0f} us). The firmware handles a frame only when its "
+        "final delimiter arrives: COBS decoding, the CRC check, nanopb's decode, the command, "
+        "the Ack's encoding, its CRC and COBS all happen between the command's last byte and "
+        "the Ack's first, so that work adds to the wire time in full (part 5 counts its "
+        "cycles and profiles them). The rest is the emulated Uno's own: its runner "
+        "exchanges bytes with the pty between batches of up to 1 ms of emulated time and "
+        "sleeps in whole milliseconds, so round trips fall into modes about 1 ms apart (see "
+        "the histogram), and on a loaded machine it waits for a core; it also runs up to "
+        "1 ms ahead of the wall clock, which hides some latency. "
+        f"{_pace_text(avr.pace)}The host library adds "
+        f"{servo.host:,.0f} us (its I/O thread wakes up to write the command, and the caller "
+        f"wakes up at the Ack), {servo.host / servo.library * 100:.0f} % of the round trip. "
+        "Without the firmware's work the median would be about "
+        f"{(servo.library - servo.work) / servo.wire:.2f}x the wire time.\n"
+    )
+    return "\n".join(out)
+
+
+def _pace_text(pace: float | None) -> str:
+    if pace is None:
+        return ""
+    return (
+        f"Over the timed calls, emulated time ran at {pace * 100:.1f} % of the wall clock's pace. "
+    )
+
+
+SECTION = Section(2, "roundtrip", "Round trip", run)
