@@ -336,6 +336,8 @@ class Board:
     def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
         """Configure ``pin`` as a digital output; it takes its ``safe`` level at once."""
         pin = self._check_pin(pin)
+        if not isinstance(safe, bool | Integral):  # bool("no") is True: no guessing
+            raise TypeError(f"safe must be a bool, not {type(safe).__name__}")
         with self._lock:
             current = self._outputs.get(pin)
             if current is not None and current.mode != "digital":
@@ -351,6 +353,8 @@ class Board:
 
     def ping(self, payload: bytes = b"") -> float:
         """Round trip of one Ping (seconds); the device echoes ``payload`` (<= 64 bytes)."""
+        if not isinstance(payload, bytes | bytearray | memoryview):  # bytes(5) is 5 zeros
+            raise TypeError(f"payload must be bytes, not {type(payload).__name__}")
         payload = bytes(payload)
         if len(payload) > MAX_PING_PAYLOAD:
             raise _reject(

@@ -1,0 +1,164 @@
+"""Bad input from the host side, through the public API only: what the other suites leave out.
+
+test_board_fake.py and test_board_sim.py cover the range checks and their
+statuses (host and device agree); test_sim_e2e.py covers malformed commands on
+the wire. Here: values of the wrong type for every argument, options that make
+no sense, every call on a closed board, and the device's own refusals reaching
+the API (``sent=True``) when the host's view is stale: the device kept an
+earlier session's configuration, or a Servo object outlived its pin's re-Init.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from fakedevice import FakeDevice
+from protoduino import Board
+from protoduino.messages import Status
+from protoduino.simboard import SimBoard
+
+
+@pytest.fixture
+def fake(tmp_path: Path) -> Iterator[FakeDevice]:
+    with FakeDevice(tmp_path) as device:
+        yield device
+
+
+@pytest.fixture
+def board(fake: FakeDevice) -> Iterator[Board]:
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
+        yield b
+
+
+WRONG_TYPES: list[tuple[str, Callable[[Board], object]]] = [
+    ("servo pin bool", lambda b: b.servo(True)),
+    ("servo pin float", lambda b: b.servo(9.0)),  # type: ignore[arg-type]
+    ("servo pin None", lambda b: b.servo(None)),  # type: ignore[arg-type]
+    ("servo safe str", lambda b: b.servo(9, safe="90")),  # type: ignore[arg-type]
+    ("servo safe float", lambda b: b.servo(9, safe=90.0)),  # type: ignore[arg-type]
+    ("servo safe_us str", lambda b: b.servo(9, safe_us="1500")),  # type: ignore[arg-type]
+    ("servo min_us float", lambda b: b.servo(9, min_us=1000.5)),  # type: ignore[arg-type]
+    ("servo max_us None", lambda b: b.servo(9, max_us=None)),  # type: ignore[arg-type]
+    ("digital pin str", lambda b: b.digital_output("13")),  # type: ignore[arg-type]
+    ("digital pin float", lambda b: b.digital_output(13.0)),  # type: ignore[arg-type]
+    ("digital safe str", lambda b: b.digital_output(13, safe="no")),  # type: ignore[arg-type]
+    ("digital safe None", lambda b: b.digital_output(13, safe=None)),  # type: ignore[arg-type]
+    ("ping payload str", lambda b: b.ping("abc")),  # type: ignore[arg-type]
+    ("ping payload int", lambda b: b.ping(5)),  # type: ignore[arg-type]
+    ("ping payload list", lambda b: b.ping([1, 2])),  # type: ignore[arg-type]
+]
+
+
+@pytest.mark.parametrize(("why", "action"), WRONG_TYPES, ids=[w[0] for w in WRONG_TYPES])
+def test_wrong_types_raise_type_error_and_send_nothing(
+    board: Board, fake: FakeDevice, why: str, action: Callable[[Board], object]
+) -> None:
+    before = len(fake.commands())
+    with pytest.raises(TypeError):
+        action(board)
+    assert len(fake.commands()) == before
+
+
+def test_wrong_types_on_output_objects(board: Board, fake: FakeDevice) -> None:
+    servo = board.servo(9)
+    led = board.digital_output(13)
+    before = len(fake.commands())
+    bad: list[Callable[[], None]] = [
+        lambda: servo.write(True),  # a bool is no angle
+        lambda: servo.write("90"),  # type: ignore[arg-type]
+        lambda: servo.write(None),  # type: ignore[arg-type]
+        lambda: servo.write_us(1500.0),  # type: ignore[arg-type]
+        lambda: servo.write_us(False),
+        lambda: led.write("on"),  # type: ignore[arg-type]
+        lambda: led.write(None),  # type: ignore[arg-type]
+        lambda: led.write(0.5),  # type: ignore[arg-type]
+    ]
+    for action in bad:
+        with pytest.raises(TypeError):
+            action()
+    assert len(fake.commands()) == before
+    led.write(1)  # type: ignore[arg-type]  # an int level is a level
+    assert fake.values[13] == 1
+
+
+@pytest.mark.parametrize(
+    "options",
+    [{"ack_timeout": 0}, {"ack_timeout": -1.0}, {"max_retries": -1}, {"window": 0}],
+    ids=str,
+)
+def test_nonsense_options_are_refused_before_anything_starts(
+    fake: FakeDevice, options: dict[str, Any]
+) -> None:
+    with pytest.raises(ValueError, match="required"):
+        Board.open(fake.port, **options)
+    assert not fake.commands() and fake.resets == 0  # the port was never even opened
+
+
+@pytest.mark.parametrize(
+    ("url", "text"),
+    [
+        ("faulty://{port}?ber=2", "must be a probability"),
+        ("faulty://{port}?nonsense=1", "unknown faulty:// parameter"),
+        ("faulty://?ber=0.1", "needs an inner URL"),
+        ("nosuchscheme://x", "cannot open"),
+    ],
+)
+def test_bad_urls_are_transport_errors(fake: FakeDevice, url: str, text: str) -> None:
+    with pytest.raises(protoduino.TransportError, match=text):
+        Board.open(url.format(port=fake.port), handshake_timeout=0.5)
+
+
+def test_every_call_on_a_closed_board_raises_board_closed(fake: FakeDevice) -> None:
+    board = Board.open(fake.port, ping=False)
+    servo = board.servo(9)
+    led = board.digital_output(13)
+    board.close()
+    before = len(fake.commands())
+    calls: list[Callable[[], object]] = [
+        lambda: servo.write(10),
+        lambda: servo.write_us(1500),
+        led.on,
+        led.off,
+        lambda: board.servo(10),
+        lambda: board.digital_output(12),
+        board.ping,
+        board.stop,
+    ]
+    for call in calls:
+        with pytest.raises(protoduino.BoardClosedError):
+            call()
+    assert len(fake.commands()) == before
+
+
+# --- the device's own refusals through the API ---------------------------------------
+
+
+def test_device_refusals_when_the_hosts_view_is_stale(sim_board: SimBoard) -> None:
+    """The device keeps its outputs across host sessions: a new Board does not know them."""
+    with Board.open(sim_board.port) as first:
+        first.digital_output(13)
+        for pin in range(2, 10):  # every servo slot
+            first.servo(pin)
+    with Board.open(sim_board.port) as second:
+        with pytest.raises(protoduino.CommandRejectedError) as info:
+            second.servo(13)  # the host sees a free pin; the device a digital output
+        assert info.value.status == Status.STATUS_PIN_IN_USE and info.value.sent
+        with pytest.raises(protoduino.CommandRejectedError) as info:
+            second.servo(10)  # the host counts no servo; the device has eight
+        assert info.value.status == Status.STATUS_NO_FREE_RESOURCE and info.value.sent
+        assert second.stats.rejected == 2
+        second.servo(9).write(45)  # re-initialising one of the device's servos is fine
+
+
+def test_a_servo_object_outlived_by_a_reinit(sim_board: SimBoard) -> None:
+    with Board.open(sim_board.port) as board:
+        wide = board.servo(9)  # 544..2400
+        board.servo(9, min_us=1000, max_us=2000)  # the same pin, narrower
+        with pytest.raises(protoduino.CommandRejectedError) as info:
+            wide.write_us(600)  # fine by the old object's limits, not by the device's
+        assert info.value.status == Status.STATUS_OUT_OF_RANGE and info.value.sent
+        wide.write_us(1500)  # within both
