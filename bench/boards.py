@@ -33,6 +33,7 @@ from protoduino.errors import ProtoduinoError
 from protoduino.framing import DELIMITER, StreamDecoder, frame_packet
 from protoduino.messages import ArduinoIn, ArduinoOut
 from protoduino.packets import Packet, parse_control, reset_payload
+from protoduino.simboard import BACKENDS as BACKEND_TABLE
 from protoduino.simboard import Backend, SimBoard
 
 #: The boards, in report order: (backend, label).
@@ -71,23 +72,41 @@ def missing_tool(backend: str) -> str | None:
     return None
 
 
-class _StatsSimBoard(SimBoard):
-    """The avr backend with the runner's ``--stats FILE`` (and ``--profile FILE``); SimBoard
-    has no option for them, so the command line is the backend's own with the options added
-    before the firmware."""
+class _RunnerBoard(SimBoard):
+    """The simavr runner with a command line of the bench's own (SimBoard has no option for
+    --stats, --profile or another program); everything else is SimBoard's."""
 
-    def __init__(self, stats: Path, profile: Path | None) -> None:
+    def __init__(self, backend: Backend) -> None:
         super().__init__("avr")
-        base = self._backend
-        extra = ["--stats", str(stats)]
-        if profile is not None:
-            extra += ["--profile", str(profile)]
+        self._backend = backend
 
-        def command(trace: Path | None, link: Path | None) -> list[str]:
-            cmd = base.command(trace, link)
-            return [*cmd[:-1], *extra, cmd[-1]]
 
-        self._backend = Backend(build=base.build, command=command)
+def _stats_backend(stats: Path, profile: Path | None) -> Backend:
+    """The avr backend with ``--stats FILE`` (and ``--profile FILE``) before the firmware."""
+    base = BACKEND_TABLE["avr"]
+    extra = ["--stats", str(stats)]
+    if profile is not None:
+        extra += ["--profile", str(profile)]
+
+    def command(trace: Path | None, link: Path | None) -> list[str]:
+        cmd = base.command(trace, link)
+        return [*cmd[:-1], *extra, cmd[-1]]
+
+    return Backend(build=base.build, command=command)
+
+
+def _echo_backend() -> Backend:
+    """The runner with its own test program, which echoes every UART byte at once."""
+    from protoduino import emulator
+
+    def build() -> Path:
+        emulator.build_test_program()
+        return emulator.build_runner()
+
+    def command(trace: Path | None, link: Path | None) -> list[str]:
+        return emulator.runner_command(emulator.TEST_PROGRAM, trace=trace, link=link)
+
+    return Backend(build=build, command=command)
 
 
 @contextlib.contextmanager
@@ -106,7 +125,21 @@ def started(
         raise ValueError("cycle statistics exist only on the emulated Uno (avr)")
     if profile is not None and stats is None:
         raise ValueError("a profile is written with the statistics: give stats= too")
-    sim = _StatsSimBoard(stats, profile) if stats is not None else SimBoard(backend)
+    sim = _RunnerBoard(_stats_backend(stats, profile)) if stats is not None else SimBoard(backend)
+    yield from _run(sim)
+
+
+@contextlib.contextmanager
+def started_echo() -> Iterator[SimBoard]:
+    """The emulated Uno running the runner's test program (a byte echo), not the firmware:
+    what the runner and the pty cost a round trip with no work on the MCU."""
+    tool = missing_tool("avr")
+    if tool is not None:
+        raise BoardUnavailableError(f"`{tool}` is not installed")
+    yield from _run(_RunnerBoard(_echo_backend()))
+
+
+def _run(sim: SimBoard) -> Iterator[SimBoard]:
     try:
         sim.start()
     except ProtoduinoError as error:  # BuildError, TransportError
@@ -282,3 +315,25 @@ class RawClient:
         self._serial.write(frame)
         self._read_until(is_ack)
         return time.perf_counter() - start
+
+
+def echo_round_trips(port: str, n: int, warmup: int = 5) -> list[float]:
+    """Seconds from writing one byte to reading its echo, ``n`` times (after ``warmup``)."""
+    out: list[float] = []
+    with serial.Serial(port, 115200, timeout=0) as link:
+        fd: int = link.fileno()
+        for i in range(warmup + n):
+            start = time.perf_counter()
+            link.write(b"x")
+            got = b""
+            deadline = start + RAW_TIMEOUT
+            while not got:
+                remaining = deadline - time.perf_counter()
+                if remaining <= 0:
+                    raise TimeoutError("the echo did not come back in time")
+                ready, _, _ = select.select([fd], [], [], remaining)
+                if ready:
+                    got = os.read(fd, 64)
+            if i >= warmup:
+                out.append(time.perf_counter() - start)
+    return out

@@ -11,9 +11,10 @@ The lower bound is the time the command's and the Ack's bytes take on a 115200-b
 
 To say where the time goes, the same board is also driven by :class:`bench.boards.RawClient`
 (pyserial and the framing only, no I/O thread): the difference is the host library's share. On
-the emulated Uno the runner's cycle counters give the firmware's awake time per command. The
-cases take turns in rounds (library, then raw client) so that a slow spell of the shared machine
-lands on both.
+the emulated Uno the runner's cycle counters give the firmware's awake time per command, and
+the runner's own test program, which echoes each UART byte at once, gives what the emulator and
+the pty add to a round trip with no protoduino code at all. The cases take turns in rounds
+(library, then raw client) so that a slow spell of the shared machine lands on both.
 """
 
 from __future__ import annotations
@@ -43,7 +44,9 @@ from .boards import (
     CycleStats,
     Percentiles,
     RawClient,
+    echo_round_trips,
     started,
+    started_echo,
 )
 from .core import Chart, Context, Section, SectionResult, Target, md_table
 from .peers import protoduino as protoduino_peer
@@ -119,6 +122,8 @@ class BoardRun:
     idle_share: float | None = None
     #: avr only: emulated time over wall time across the timed library blocks.
     pace: float | None = None
+    #: avr only: 1-byte echo round trips through the runner's test program (no firmware).
+    echo: list[float] = field(default_factory=list)
     error: str | None = None
 
 
@@ -199,7 +204,11 @@ def collect(samples: int) -> list[BoardRun]:
                 stats = Path(tmp) / "stats.jsonl" if backend == "avr" else None
                 with started(backend, stats=stats) as sim:
                     counter = CycleCounter(sim, stats) if stats is not None else None
-                    runs.append(measure_board(sim, backend, samples, counter))
+                    board_run = measure_board(sim, backend, samples, counter)
+            if backend == "avr":
+                with started_echo() as sim:
+                    board_run.echo = echo_round_trips(sim.port, samples)
+            runs.append(board_run)
         except BoardUnavailableError as error:
             log.warning("round trip: %s board not run: %s", backend, error)
             runs.append(BoardRun(backend, error=str(error)))
@@ -259,8 +268,8 @@ class Budget:
                 f"{self.host:,.0f}",
             ],
             [
-                "the rest: the pty, the emulator's pacing (bytes cross between batches of up "
-                "to 1 ms, emulation up to 1 ms ahead of the wall clock), scheduling",
+                "the rest: the emulator's pacing (emulated time up to 1 ms ahead of the wall "
+                "clock, batches of up to 1 ms), the pty, scheduling",
                 f"{self.rest:,.0f}",
             ],
             ["= Board p50 on the emulated Uno", f"{self.library:,.0f}"],
@@ -413,6 +422,17 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
     servo = budget(avr, "servo", host_overhead(host_board, "servo"))
     if servo is None:
         return "\n".join(out)
+    echo_text = ""
+    if avr.echo:
+        echo = Percentiles.of(avr.echo)
+        echo_wire = wire_time_us(2)
+        echo_text = (
+            "The runner alone, with its own test program answering each byte at once, "
+            f"echoes one byte in {echo.p50 * 1e6:,.0f} us at the median (p99 "
+            f"{echo.p99 * 1e6:,.0f} us) against {echo_wire:,.0f} us on the wire: "
+            f"{echo.p50 * 1e6 - echo_wire:,.0f} us of the rest is the emulator and the pty, "
+            "with no protoduino code involved. "
+        )
     allowed = servo.wire * (TARGET_RATIO - 1)
     shares = (
         ("the firmware's work", servo.work),
@@ -421,23 +441,33 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
     )
     biggest = max(shares, key=lambda item: item[1])
     verdict = "met" if target.met else "missed"
+    over = [name for name, us in shares if us > allowed]
+    if len(over) > 1:
+        alone = f" {' and '.join(over).capitalize()} each take more than that on their own."
+    elif over:
+        alone = f" {over[0].capitalize()} alone takes more than that."
+    else:
+        alone = ""
     out.append(
         f"The target is {verdict}: {TARGET_RATIO}x the servo write's wire time leaves "
         f"{allowed:,.0f} us above the wire for everything else, and the largest share is "
-        f"{biggest[0]} ({biggest[1]:,.0f} us). The firmware handles a frame only when its "
+        f"{biggest[0]} ({biggest[1]:,.0f} us).{alone} The firmware handles a frame only when its "
         "final delimiter arrives: COBS decoding, the CRC check, nanopb's decode, the command, "
         "the Ack's encoding, its CRC and COBS all happen between the command's last byte and "
         "the Ack's first, so that work adds to the wire time in full (part 5 counts its "
-        "cycles and profiles them). The rest is the emulated Uno's own: its runner "
-        "exchanges bytes with the pty between batches of up to 1 ms of emulated time and "
-        "sleeps in whole milliseconds, so round trips fall into modes about 1 ms apart (see "
-        "the histogram), and on a loaded machine it waits for a core; it also runs up to "
-        "1 ms ahead of the wall clock, which hides some latency. "
-        f"{_pace_text(avr.pace)}The host library adds "
+        "cycles and profiles them). The rest is the emulated Uno's own: its runner lets "
+        "emulated time run up to 1 ms ahead of the wall clock and sleeps in whole "
+        "milliseconds between batches, so a host byte enters the emulated UART up to 1 ms "
+        "after it was written, and an answer leaves at the end of a batch; round trips fall "
+        "into modes about 1 ms apart (see the histogram), and on a loaded machine the runner "
+        "also waits for a core. "
+        f"{echo_text}{_pace_text(avr.pace)}The host library adds "
         f"{servo.host:,.0f} us (its I/O thread wakes up to write the command, and the caller "
         f"wakes up at the Ack), {servo.host / servo.library * 100:.0f} % of the round trip. "
         "Without the firmware's work the median would be about "
-        f"{(servo.library - servo.work) / servo.wire:.2f}x the wire time.\n"
+        f"{(servo.library - servo.work) / servo.wire:.2f}x the wire time: the firmware's "
+        "work is the part protoduino can change; the emulator's share would be a real "
+        "Uno's USB-serial bridge latency instead, which this bench cannot measure.\n"
     )
     return "\n".join(out)
 

@@ -433,6 +433,15 @@ def test_emulator_counters_count_uart_bytes_and_agree_with_the_profile(tmp_path:
 
 
 @pytest.mark.avr
+def test_echo_calibration_through_the_runner_test_program() -> None:
+    _need("avr")
+    with boards.started_echo() as sim:
+        trips = boards.echo_round_trips(sim.port, 3, warmup=1)
+    assert len(trips) == 3
+    assert all(t > 0 for t in trips)
+
+
+@pytest.mark.avr
 def test_runner_writes_the_board_sections(tmp_path: Path) -> None:
     _need("native")
     _need("avr")
@@ -446,6 +455,7 @@ def test_runner_writes_the_board_sections(tmp_path: Path) -> None:
     for label, _ in boards.BACKENDS:
         assert f"| {boards.LABELS[label]} | servo write |" in text
     assert "### Where the emulated Uno's round trip goes" in text
+    assert "echoes one byte in" in text  # the emulator's own share, measured
     assert "### Profile of a servo write on the Uno" in text
     assert "`pd_link_send`" in text
     assert "not measured" not in text  # every target of parts 2, 3 and 5 has a verdict
