@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import random
 import select
 import shutil
 import signal
@@ -317,12 +318,23 @@ class RawClient:
         return time.perf_counter() - start
 
 
-def echo_round_trips(port: str, n: int, warmup: int = 5) -> list[float]:
-    """Seconds from writing one byte to reading its echo, ``n`` times (after ``warmup``)."""
+def echo_round_trips(
+    port: str,
+    n: int,
+    *,
+    warmup: int = 5,
+    gap: float = 0.0,
+    rng: random.Random | None = None,
+) -> list[float]:
+    """Seconds from writing one byte to reading its echo, ``n`` times (after ``warmup``),
+    each after a random pause of up to ``gap`` seconds."""
+    rng = rng or random.Random(0)
     out: list[float] = []
     with serial.Serial(port, 115200, timeout=0) as link:
         fd: int = link.fileno()
         for i in range(warmup + n):
+            if gap > 0:
+                time.sleep(rng.uniform(0.0, gap))
             start = time.perf_counter()
             link.write(b"x")
             got = b""

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import os
+import random
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -63,6 +64,11 @@ WARMUP = 5
 #: The emulated Uno's UART: U2X with UBRR 16 (firmware/avr/pd_avr_uart.c), so one 10-bit byte
 #: is 10 * 8 * 17 cycles; polled transmit waits that long for each byte after the first.
 UART_BYTE_CYCLES = 10 * 8 * 17
+#: Each timed call starts after a random pause of up to this (seconds): back-to-back calls
+#: would lock onto the emulator's 1 ms batches at whatever phase they happen to start with, and
+#: a run's median would depend on that luck; random starts sample every phase, as an
+#: application's commands would.
+MAX_GAP = 0.002
 #: Idle time over which the Uno's background load (clock tick, servo interrupts) is measured.
 IDLE_SECONDS = 0.3
 
@@ -127,11 +133,13 @@ class BoardRun:
     error: str | None = None
 
 
-def _timed(op: Callable[[int], object], n: int) -> list[float]:
+def _timed(op: Callable[[int], object], n: int, rng: random.Random) -> list[float]:
+    """``n`` timed calls of ``op``, each after a random pause (see :data:`MAX_GAP`)."""
     for i in range(WARMUP):
         op(i)
     out: list[float] = []
     for i in range(n):
+        time.sleep(rng.uniform(0.0, MAX_GAP))
         start = time.perf_counter()
         op(i)
         out.append(time.perf_counter() - start)
@@ -157,9 +165,10 @@ def _raw_op(raw: RawClient, make: Callable[[int], pb.ArduinoIn]) -> Callable[[in
 
 
 def measure_board(
-    sim: SimBoard, backend: str, samples: int, counter: CycleCounter | None
+    sim: SimBoard, backend: str, samples: int, counter: CycleCounter | None, seed: int
 ) -> BoardRun:
     run = BoardRun(backend)
+    rng = random.Random(seed)
     per_round = max(1, samples // ROUNDS)
     for kind, _label in KINDS:
         run.library[kind] = []
@@ -175,7 +184,7 @@ def measure_board(
             ops = _library_ops(board, servo)
             for kind, _label in KINDS:
                 before = counter.snapshot() if counter is not None else None
-                run.library[kind] += _timed(ops[kind], per_round)
+                run.library[kind] += _timed(ops[kind], per_round, rng)
                 if counter is not None and before is not None:
                     awake[kind].append((counter.snapshot() - before, per_round + WARMUP))
         with RawClient(sim.port) as raw:
@@ -184,7 +193,7 @@ def measure_board(
             init.servo_init.safe_degrees = 90
             raw.call(init)
             for kind, _label in KINDS:
-                run.raw[kind] += _timed(_raw_op(raw, RAW_MESSAGES[kind]), per_round)
+                run.raw[kind] += _timed(_raw_op(raw, RAW_MESSAGES[kind]), per_round, rng)
     if run.idle_share is not None:
         deltas = [d for blocks in awake.values() for d, _n in blocks]
         wall = sum(d.wall for d in deltas)
@@ -195,7 +204,7 @@ def measure_board(
     return run
 
 
-def collect(samples: int) -> list[BoardRun]:
+def collect(samples: int, seed: int = 7) -> list[BoardRun]:
     runs: list[BoardRun] = []
     for backend, _label in BACKENDS:
         log.info("round trip: %s board, %d samples per case", backend, samples)
@@ -204,10 +213,12 @@ def collect(samples: int) -> list[BoardRun]:
                 stats = Path(tmp) / "stats.jsonl" if backend == "avr" else None
                 with started(backend, stats=stats) as sim:
                     counter = CycleCounter(sim, stats) if stats is not None else None
-                    board_run = measure_board(sim, backend, samples, counter)
+                    board_run = measure_board(sim, backend, samples, counter, seed)
             if backend == "avr":
                 with started_echo() as sim:
-                    board_run.echo = echo_round_trips(sim.port, samples)
+                    board_run.echo = echo_round_trips(
+                        sim.port, samples, gap=MAX_GAP, rng=random.Random(seed)
+                    )
             runs.append(board_run)
         except BoardUnavailableError as error:
             log.warning("round trip: %s board not run: %s", backend, error)
@@ -229,7 +240,7 @@ class Budget:
 
     The host library's share is measured on the simulated board (library minus raw client
     there), where nothing else moves: on the emulated Uno the difference of two medians drowns
-    in the emulator's 1 ms modes.
+    in the spread the emulator's 1 ms batches give.
     """
 
     command_bytes: int
@@ -304,7 +315,7 @@ def budget(run: BoardRun, kind: str, host: float) -> Budget | None:
 
 def run(ctx: Context) -> SectionResult:
     load = os.getloadavg()[0]
-    runs = collect(ctx.samples)
+    runs = collect(ctx.samples, ctx.seed)
     rows: list[list[str]] = []
     targets: list[Target] = []
     hist_series: dict[str, dict[str, list[float]]] = {}
@@ -357,13 +368,15 @@ def run(ctx: Context) -> SectionResult:
 
     parts = [
         f"Wall-clock time of one call through the public API (`Servo.write`, `Board.ping()`), "
-        f"one at a time, {ctx.samples} samples per case after {WARMUP} untimed ones; "
+        f"one at a time, {ctx.samples} samples per case after {WARMUP} untimed ones, each "
+        f"after a random pause of 0 to {MAX_GAP * 1e3:g} ms so that the calls do not lock onto "
+        "the emulator's 1 ms batches; "
         f"percentiles by nearest rank. The wire time is the lower bound: the command's and the "
         f"Ack's bytes at {BAUD} baud, 8N1. The simulated board has no baud rate (a pty at "
         "memory speed), so its wire time is only for scale. *Raw client*: the same command "
         "from pyserial and the framing alone, no I/O thread (bench/boards.py), in turns with "
         f"the library ({ROUNDS} rounds); the difference is the host library's own cost, "
-        "clear on the simulated board and lost in the emulated Uno's 1 ms modes (there it can "
+        "clear on the simulated board and lost in the emulated Uno's spread (there it can "
         "even come out negative). "
         f"Load average at the start of this section: {load:.2f} (2 cores, shared).\n",
         md_table(
@@ -458,9 +471,9 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
         "cycles and profiles them). The rest is the emulated Uno's own: its runner lets "
         "emulated time run up to 1 ms ahead of the wall clock and sleeps in whole "
         "milliseconds between batches, so a host byte enters the emulated UART up to 1 ms "
-        "after it was written, and an answer leaves at the end of a batch; round trips fall "
-        "into modes about 1 ms apart (see the histogram), and on a loaded machine the runner "
-        "also waits for a core. "
+        "after it was written, and an answer leaves at the end of a batch: how long a round "
+        "trip takes depends on where in the batches its bytes land (most of the histogram's "
+        "width), and on a loaded machine the runner also waits for a core. "
         f"{echo_text}{_pace_text(avr.pace)}The host library adds "
         f"{servo.host:,.0f} us (its I/O thread wakes up to write the command, and the caller "
         f"wakes up at the Ack), {servo.host / servo.library * 100:.0f} % of the round trip. "

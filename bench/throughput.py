@@ -456,14 +456,25 @@ def _explain(points: BoardPoints, servo: LineRate, best: Point) -> str:
             f"of commands on the line at once, more than the Uno's {UNO_RX_RING}-byte receive "
             "ring holds while the firmware, slower than the line, works through them; the "
             "ring overflows, the frame that lost a byte fails its check and is dropped, and "
-            "its command goes again only after the Ack timeout. The 64-byte Pings "
-            f"({ping_line().command_bytes} B each) show the same from window 4 on. "
+            "its command goes again only after the Ack timeout. "
             + (f"Windows up to {max(calm)} keep within the ring. " if calm else "")
+            + _ping_trouble(points)
             + "A host that bounded the command bytes in flight to the device's receive "
             "buffer, not only their count, would avoid it; so would a firmware that handles a "
             "command in less than its line time (part 5)."
         )
     return "".join(lines) + "\n"
+
+
+def _ping_trouble(points: BoardPoints) -> str:
+    retried = [p.window for p in points.ping if p.retransmits or p.failed]
+    if not retried:
+        return ""
+    size = ping_line().command_bytes
+    return (
+        f"The {PING_PAYLOAD}-byte Pings ({size} B each, {retried[0] * size} B at window "
+        f"{retried[0]}) are retransmitted from window {retried[0]} on for the same reason. "
+    )
 
 
 SECTION = Section(3, "throughput", "Throughput", run)
