@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import bisect
 import collections
+import json
 import logging
 import random
 import statistics
@@ -43,7 +44,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qsl, urlencode
@@ -88,6 +89,8 @@ SLOP = 0.25
 LATENCY = 0.5
 #: Failsafe timing tolerance: the contract's 20 ms.
 FAILSAFE_TOLERANCE = 0.020
+#: The device's clock ticks in milliseconds.
+MILLIS_TICK = 0.001
 #: How far apart (s) the 0 lines of one reboot may be dated, beyond a servo's measuring lag.
 REBOOT_SPREAD = 0.005
 #: Extra time a call may take beyond its documented bound before it counts as hung (s).
@@ -316,6 +319,14 @@ class SoakResult:
             "resets": s.resets,
             "cuts": s.cuts,
             "command_line": s.command_line(),
+            "description": s.description,
+            "servos": s.servos,
+            "digitals": s.digitals,
+            "workers": s.workers,
+            "window": s.window,
+            "ack_timeout": s.ack_timeout,
+            "max_retries": s.max_retries,
+            "passed": self.passed,
             "duration_s": round(self.duration, 3),
             "sent": self.sent,
             "ok": self.ok,
@@ -334,6 +345,8 @@ class SoakResult:
             "recovery_median_s": self.recovery_median,
             "recovery_max_s": self.recovery_max,
             "recovered": self.recovered,
+            "recovery_failures": self.recovery_failures,
+            "failsafe_checked": self.failsafe_checked,
             "failsafe_ok": self.failsafe_ok,
             "failsafe_delay_s": self.failsafe_delay,
             "faults_injected": dict(self.faults),
@@ -616,7 +629,22 @@ def run(
     if wire.bad:
         result.violations.append(f"frames the monitor could not parse: {dict(wire.bad)}")
     _judge(result, runner, wire, lines, fs_stop)
+    _dump(trace.with_suffix("").with_suffix(".wire.jsonl"), runner, wire)
     return result
+
+
+def _dump(path: Path, runner: _Runner, wire: _Wire) -> None:
+    """What the host did, beside the trace, to look into a violation afterwards."""
+    with path.open("w") as out:
+        for r in runner.reboots:
+            out.write(json.dumps({"reboot": r}) + "\n")
+        for a, b in runner.cuts:
+            out.write(json.dumps({"cut": [a, b]}) + "\n")
+        out.write(json.dumps({"heal": runner.heal_at}) + "\n")
+        for c in runner.calls:
+            out.write(json.dumps({"call": asdict(c)}) + "\n")
+        for mid in wire.order:
+            out.write(json.dumps({"sent": asdict(wire.sent[mid])}) + "\n")
 
 
 def _setup_values(runner: _Runner, outputs: _Outputs) -> None:
@@ -736,7 +764,8 @@ def _judge(
         if tol and last is not None and abs(value - last) <= tol:
             continue  # a measured pulse's jitter: the same output value measured again
         h = clock.host(t)  # host time of the line
-        boot = sum(1 for b in boundaries if t >= b - REBOOT_SPREAD)
+        # A change just before a reset belongs to the old boot.
+        boot = sum(1 for b in boundaries if t >= b)
         if value == 0 and any(-REBOOT_SPREAD <= t - b <= lag + REBOOT_SPREAD for b in boundaries):
             continue  # a reboot releases every output
         candidates = [
@@ -824,7 +853,15 @@ def _judge(
         result.violations.append(f"recovery slower than {bound:g} s: {max(slow):.3f} s")
 
     if fs_stop is not None:
-        _judge_failsafe(result, wire=wire, lines=lines, clock=clock, fs_stop=fs_stop, traits=traits)
+        _judge_failsafe(
+            result,
+            calls=calls,
+            wire=wire,
+            lines=lines,
+            clock=clock,
+            fs_stop=fs_stop,
+            traits=traits,
+        )
 
 
 def _tx_delay(s: Scenario) -> float:
@@ -1023,9 +1060,47 @@ def _clock_map(
     return _ClockMap(anchors or [(0.0, first)])
 
 
+def _offset_bounds(
+    calls: list[CallRecord], wire: _Wire, lines: list[dict[str, Any]], clock: _ClockMap
+) -> tuple[float, float] | None:
+    """Bounds of (host - trace) time from the failsafe phase's digital writes, or None."""
+    lo, hi = float("-inf"), float("inf")
+    for c in calls:
+        if c.phase != "failsafe" or c.kind != "digital" or c.outcome != "ok":
+            continue
+        sent = next(
+            (
+                x
+                for x in wire.sent.values()
+                if x.kind == "digital_control"
+                and x.pin == c.pin
+                and x.value == c.value
+                and x.ack is not None
+                and c.start - SLOP <= x.txs[0] <= c.end
+            ),
+            None,
+        )
+        line = next(
+            (
+                float(e["t"])
+                for e in lines
+                if int(e["pin"]) == c.pin
+                and int(e["value"]) == c.value
+                and e["mode"] == "digital"
+                and c.start - SLOP <= clock.host(float(e["t"])) <= c.end + SLOP
+            ),
+            None,
+        )
+        if sent is None or sent.ack is None or line is None:
+            continue
+        lo, hi = max(lo, sent.txs[-1] - line), min(hi, sent.ack - line)
+    return (lo, hi) if lo <= hi else None
+
+
 def _judge_failsafe(
     result: SoakResult,
     *,
+    calls: list[CallRecord],
     wire: _Wire,
     lines: list[dict[str, Any]],
     clock: _ClockMap,
@@ -1067,10 +1142,25 @@ def _judge_failsafe(
         result.failsafe_ok = False
         return
     fired = min(edges)
-    low, high = fired - rx_hi, fired - rx_lo
+    low, high = fired - rx_hi - 0.003, fired - rx_lo + 0.003  # the clock map's error
+    bounds = _offset_bounds(calls, wire, lines, clock)
+    digital_edges = [
+        float(e["t"])
+        for e in lines
+        if int(e["pin"]) in digital_pins
+        and int(e["value"]) == 0
+        and clock.host(float(e["t"])) > max(rx_lo, fs_stop)
+    ]
+    if bounds is not None and digital_edges:
+        # Exact: a digital edge, and the offset bounded by the writes just before on the
+        # clean line (each executed between its transmission and its Ack).
+        t, (off_lo, off_hi) = min(digital_edges), bounds
+        low, high = t + off_lo - rx_hi, t + off_hi - rx_lo
     result.failsafe_delay = (round(low, 4), round(high, 4))
-    # Fires at >= 10 s after the last Ping received, within 20 ms (+ the clock fit's error).
-    ok = high >= FAILSAFE_TIMEOUT - 0.003 and low <= FAILSAFE_TIMEOUT + FAILSAFE_TOLERANCE
+    # Due 10 s after the last Ping received, not before, at most 20 ms late: the measured
+    # interval must meet [10 s, 10.02 s], give or take one tick of the device's millisecond
+    # clock (it compares whole milliseconds: a Ping at 5.0009 s reads as 5000 ms).
+    ok = high >= FAILSAFE_TIMEOUT - MILLIS_TICK and low <= FAILSAFE_TIMEOUT + FAILSAFE_TOLERANCE
     result.failsafe_ok = ok
     if not ok:
         result.violations.append(

@@ -19,10 +19,11 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from .. import soak as engine
 from ..errors import ProtoduinoError
-from ..soak import Scenario, SoakResult, fault_scenarios
+from ..soak import Scenario, fault_scenarios
 from .options import error
 
 HELP = "run seeded fault scenarios on the simulated board and report what happened"
@@ -74,7 +75,15 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="commands in each fault-kind scenario (default: %(default)s)",
     )
     parser.add_argument("--report", type=Path, help="write the Markdown report here")
-    parser.add_argument("--json", type=Path, help="write every figure as JSON here")
+    parser.add_argument(
+        "--json", type=Path, help="write every figure as JSON here (after each scenario)"
+    )
+    parser.add_argument(
+        "--from-json",
+        type=Path,
+        metavar="FILE",
+        help="run nothing: print and report the figures a --json run saved",
+    )
     parser.add_argument(
         "--workdir", type=Path, help="keep the boards' traces here (default: a temporary folder)"
     )
@@ -118,13 +127,24 @@ def describe(faults: str, resets: int, cuts: int) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.from_json is not None:
+        try:
+            results: list[dict[str, Any]] = json.loads(args.from_json.read_text())
+        except (OSError, ValueError) as exc:
+            return error("soak", f"cannot read {args.from_json}: {exc}")
+        for r in results:
+            print(f"== {r['scenario']}: {r['command_line']}")
+            print(figures(r))
+        argv = str(results[0].get("argv", "soak")) if results else "soak"
+        return finish(args, results, argv)
     try:
         todo = scenarios(args)
     except ValueError as exc:
         return error("soak", exc)
     if not todo:
         return error("soak", "nothing to run (--commands 0 and --kinds none)")
-    results: list[SoakResult] = []
+    argv = " ".join(["soak", *sys.argv[2:]]) if sys.argv[1:2] == ["soak"] else "soak"
+    results = []
     with tempfile.TemporaryDirectory(prefix="protoduino-soak-") as tmp:
         workdir = args.workdir or Path(tmp)
         for scenario in todo:
@@ -136,16 +156,21 @@ def run(args: argparse.Namespace) -> int:
                 print(f"   {n}/{total} commands, {rate:.0f}/s", file=sys.stderr, flush=True)
 
             try:
-                result = engine.run(scenario, workdir, progress=progress)
+                result = engine.run(scenario, workdir, progress=progress).as_dict()
             except ProtoduinoError as exc:
                 return error("soak", f"{scenario.name}: {exc}")
+            result["argv"] = argv
             results.append(result)
             print(figures(result), flush=True)
-    if args.json is not None:
-        args.json.write_text(json.dumps([r.as_dict() for r in results], indent=2) + "\n")
+            if args.json is not None:  # after each scenario: a long run is never lost
+                args.json.write_text(json.dumps(results, indent=2) + "\n")
+    return finish(args, results, argv)
+
+
+def finish(args: argparse.Namespace, results: list[dict[str, Any]], argv: str) -> int:
     if args.report is not None:
-        write_report(args.report, results, " ".join(sys.argv[1:]) or "soak")
-    failed = [r.scenario.name for r in results if not r.passed]
+        write_report(args.report, results, argv)
+    failed = [r["scenario"] for r in results if not r["passed"]]
     if failed:
         print(f"INVARIANTS VIOLATED in: {', '.join(failed)}", file=sys.stderr)
         return 1
@@ -161,37 +186,39 @@ def _dict(d: dict[str, int]) -> str:
     return ", ".join(f"{k} {v}" for k, v in sorted(d.items())) or "none"
 
 
-def figures(r: SoakResult) -> str:
-    """The figures of one run as a few readable lines."""
-    link = r.link
+def figures(r: dict[str, Any]) -> str:
+    """The figures of one run (``SoakResult.as_dict()``) as a few readable lines."""
+    link = r["link"]
     lines = [
-        f"   {r.sent} sent, {r.ok} ok, {r.executed} executed (seen in the trace; "
-        f"{r.executed_after_timeout} of them had timed out), rejected {_dict(r.rejected)}, "
-        f"{r.timed_out} timed out, other errors {_dict(r.errors)}",
-        f"   duplicates {r.duplicates}, corrupted executions {r.corrupted}, hung calls {r.hung} "
-        f"(longest {r.max_call:.3f} s, bound {r.call_bound:g} s), re-run after a reboot "
-        f"{r.reexecuted_after_reboot}",
-        f"   recovery: {len(r.recovery)} disruptions, median {_ms(r.recovery_median)}, "
-        f"max {_ms(r.recovery_max)}; healed line: "
-        + ("all commands ok" if r.recovered else f"{r.recovery_failures} failed"),
-        f"   injected: {_dict(r.faults)}",
+        f"   {r['sent']} sent, {r['ok']} ok, {r['executed']} executed (seen in the trace; "
+        f"{r['executed_after_timeout']} of them had timed out), rejected "
+        f"{_dict(r['rejected'])}, {r['timed_out']} timed out, other errors {_dict(r['errors'])}",
+        f"   duplicates {r['duplicates']}, corrupted executions {r['corrupted']}, hung calls "
+        f"{r['hung']} (longest {r['max_call_s']:.3f} s, bound {r['call_bound_s']:g} s), "
+        f"run again after a reboot {r['reexecuted_after_reboot']}",
+        f"   recovery: {len(r['recovery_s'])} disruptions, median {_ms(r['recovery_median_s'])}, "
+        f"max {_ms(r['recovery_max_s'])}; healed line: "
+        + ("all commands ok" if r["recovered"] else f"{r['recovery_failures']} failed"),
+        f"   injected: {_dict(r['faults_injected'])}",
         f"   link: {link.get('retransmits', 0)} retransmits, {link.get('late_acks', 0)} late "
         f"acks, bad frames {_dict(link.get('bad_frames', {}))}, "
         f"{link.get('rehandshakes', 0)} re-handshakes, {link.get('reboots_seen', 0)} reboots "
-        f"seen, {link.get('restores', 0)} restores, {link.get('guard_holds', 0)} dedupe-guard "
-        "holds",
+        f"seen, {link.get('restores', 0)} restores, {link.get('seq_desyncs', 0)} SEQ desyncs, "
+        f"{link.get('watchdog_resets', 0)} watchdog resets, {link.get('guard_holds', 0)} "
+        "dedupe-guard holds",
     ]
-    if r.failsafe_checked:
+    if r["failsafe_checked"]:
+        low, high = r["failsafe_delay_s"] or (None, None)
         lines.append(
-            f"   failsafe: fired {r.failsafe_delay} s after the last Ping: "
-            + ("on time" if r.failsafe_ok else "NOT on time")
+            f"   failsafe: outputs safe {low}..{high} s after the device's last Ping: "
+            + ("on time" if r["failsafe_ok"] else "NOT on time")
         )
-    lines.append(f"   {r.duration:.1f} s, " + ("PASSED" if r.passed else "FAILED"))
-    lines.extend(f"   ! {v}" for v in r.violations)
+    lines.append(f"   {r['duration_s']:.1f} s, " + ("PASSED" if r["passed"] else "FAILED"))
+    lines.extend(f"   ! {v}" for v in r["violations"])
     return "\n".join(lines)
 
 
-def write_report(path: Path, results: list[SoakResult], argv: str) -> None:
+def write_report(path: Path, results: list[dict[str, Any]], argv: str) -> None:
     kept = ""
     if path.exists():
         old = path.read_text()
@@ -201,19 +228,20 @@ def write_report(path: Path, results: list[SoakResult], argv: str) -> None:
     path.write_text(render_report(results, argv) + ("\n" + kept if kept else ""))
 
 
-def render_report(results: list[SoakResult], argv: str) -> str:
+def render_report(results: list[dict[str, Any]], argv: str) -> str:
     when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d")
     out = [
         "# Reliability under faults",
         "",
         f"Generated by `protoduino {argv}` on {when} ({platform.machine()}, "
-        f"Python {platform.python_version()}). Each scenario opens a simulated board with a "
-        "trace, talks to it through the seeded `faulty://` line (`protoduino.faults`) and "
-        "checks the board's own record of its outputs against what the host sent "
-        "(`protoduino.soak`): no corrupted command executed, no message id executed twice "
-        "within one boot, every call returned or raised within "
-        "`ACK_TIMEOUT x (MAX_RETRIES + 1) + HANDSHAKE_TIMEOUT`, the link recovered once the "
-        "faults stopped, and (long run) the failsafe fired 10 s after the last Ping.",
+        f"Python {platform.python_version()}); `protoduino soak --from-json` re-renders it. "
+        "Each scenario opens a simulated board with a trace, talks to it through the seeded "
+        "`faulty://` line (`protoduino.faults`) and checks the board's own record of its "
+        "outputs against what the host sent (`protoduino.soak`): no corrupted command "
+        "executed, no message id executed twice within one boot, every call returned or "
+        "raised within `ACK_TIMEOUT x (MAX_RETRIES + 1) + HANDSHAKE_TIMEOUT`, the link "
+        "recovered by itself once the faults stopped, and (long run) the failsafe fired "
+        "10 s after the last Ping.",
         "",
         "| scenario | injected | sent | ok | executed | rejected | timed out | duplicates "
         "| corrupted | hung | recovery median / max | result |",
@@ -221,29 +249,32 @@ def render_report(results: list[SoakResult], argv: str) -> str:
     ]
     for r in results:
         out.append(
-            f"| {r.scenario.name} | {_dict(r.faults)} | {r.sent} | {r.ok} | {r.executed} | "
-            f"{sum(r.rejected.values())} | {r.timed_out} | {r.duplicates} | {r.corrupted} | "
-            f"{r.hung} | {_ms(r.recovery_median)} / {_ms(r.recovery_max)} | "
-            + ("passed" if r.passed else "**FAILED**")
+            f"| {r['scenario']} | {_dict(r['faults_injected'])} | {r['sent']} | {r['ok']} | "
+            f"{r['executed']} | {sum(r['rejected'].values())} | {r['timed_out']} | "
+            f"{r['duplicates']} | {r['corrupted']} | {r['hung']} | "
+            f"{_ms(r['recovery_median_s'])} / {_ms(r['recovery_max_s'])} | "
+            + ("passed" if r["passed"] else "**FAILED**")
             + " |"
         )
     out += [
         "",
-        "*executed*: seen in the board's trace (a call that timed out may still have run: "
-        "its Acks were lost). *recovery*: from the end of each disruption (reset, cut, the "
-        "faults stopping) to the next successful call.",
+        "*sent*: calls made through the API (the stream, then the recovery commands on the "
+        "healed line). *executed*: seen in the board's trace; a call that timed out may still "
+        "have run (its Acks were lost), and a digital write that found its pin at that level "
+        "leaves no trace line. *recovery*: from the end of each disruption (a reset, a cut, "
+        "the faults stopping) to the next successful call.",
         "",
     ]
     for r in results:
-        s = r.scenario
         out += [
-            f"## {s.name}",
+            f"## {r['scenario']}",
             "",
-            s.description or describe(s.faults, s.resets, s.cuts),
+            r["description"] or describe(r["faults"], r["resets"], r["cuts"]),
             "",
-            f"Reproduce: `{s.command_line()}` (seed {s.seed}, {s.backend} board, "
-            f"{s.servos} servos and {s.digitals} digital outputs, {s.workers} calling threads, "
-            f"window {s.window}, ack timeout {s.ack_timeout:g} s, {s.max_retries} retries).",
+            f"Reproduce: `{r['command_line']}` (seed {r['seed']}, {r['backend']} board, "
+            f"{r['servos']} servos and {r['digitals']} digital outputs, {r['workers']} calling "
+            f"threads, window {r['window']}, ack timeout {r['ack_timeout']:g} s, "
+            f"{r['max_retries']} retries).",
             "",
             "```",
             figures(r),
