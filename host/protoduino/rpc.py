@@ -36,7 +36,8 @@ I/O thread.
 * A device that refuses a Control with STATUS_NOT_INITIALISED for an output
   the board configured has restarted unseen (its EVENT BOOT lost, then a
   re-handshake found it again): the restore runs, and that call is sent again
-  after it (once). It had not run, so this cannot run it twice.
+  after it, once, under a new id (the device keeps the refusal under the old
+  one). It had not run, so this cannot run it twice.
 """
 
 from __future__ import annotations

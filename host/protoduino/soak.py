@@ -43,7 +43,7 @@ import statistics
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -1167,21 +1167,3 @@ def _judge_failsafe(
             f"failsafe fired {low:.4f}..{high:.4f} s after the last Ping "
             f"(expected {FAILSAFE_TIMEOUT:g} s + {FAILSAFE_TOLERANCE * 1000:g} ms)"
         )
-
-
-def run_many(
-    scenarios: Iterable[Scenario],
-    workdir: Path,
-    *,
-    progress: Callable[[str, int], None] | None = None,
-) -> Iterator[SoakResult]:
-    """Run each scenario in turn, yielding its result as soon as it is judged."""
-    for scenario in scenarios:
-        hook = None
-        if progress is not None:
-            name = scenario.name
-
-            def hook(n: int, name: str = name) -> None:
-                progress(name, n)
-
-        yield run(scenario, workdir, progress=hook)
