@@ -128,6 +128,9 @@ class BoardRun:
     idle_share: float | None = None
     #: avr only: emulated time over wall time across the timed library blocks.
     pace: float | None = None
+    #: kind -> (command bytes, Ack bytes) per call as the Board sent and received them: its
+    #: message ids start at random, and one in 16 starts is a 4-byte varint, not 5.
+    wire_bytes: dict[str, tuple[float, float]] = field(default_factory=dict)
     #: avr only: 1-byte echo round trips through the runner's test program (no firmware).
     echo: list[float] = field(default_factory=list)
     error: str | None = None
@@ -174,6 +177,7 @@ def measure_board(
         run.library[kind] = []
         run.raw[kind] = []
     awake: dict[str, list[tuple[CycleStats, int]]] = {kind: [] for kind, _ in KINDS}
+    io: dict[str, list[int]] = {kind: [0, 0, 0] for kind, _ in KINDS}  # tx, rx, calls
     for _round in range(ROUNDS):
         with Board.open(sim.port, ping=False) as board:
             servo = board.servo(9)
@@ -184,7 +188,12 @@ def measure_board(
             ops = _library_ops(board, servo)
             for kind, _label in KINDS:
                 before = counter.snapshot() if counter is not None else None
+                link = board.stats
                 run.library[kind] += _timed(ops[kind], per_round, rng)
+                after = board.stats
+                io[kind][0] += after.tx_bytes - link.tx_bytes
+                io[kind][1] += after.rx_bytes - link.rx_bytes
+                io[kind][2] += per_round + WARMUP
                 if counter is not None and before is not None:
                     awake[kind].append((counter.snapshot() - before, per_round + WARMUP))
         with RawClient(sim.port) as raw:
@@ -194,6 +203,8 @@ def measure_board(
             raw.call(init)
             for kind, _label in KINDS:
                 run.raw[kind] += _timed(_raw_op(raw, RAW_MESSAGES[kind]), per_round, rng)
+    for kind, (tx, rx, calls) in io.items():
+        run.wire_bytes[kind] = (tx / calls, rx / calls)
     if run.idle_share is not None:
         deltas = [d for blocks in awake.values() for d, _n in blocks]
         wall = sum(d.wall for d in deltas)
@@ -226,6 +237,11 @@ def collect(samples: int, seed: int = 7) -> list[BoardRun]:
     return runs
 
 
+def _bytes(n: float) -> str:
+    """A per-call byte count: whole when it is (``19``), else one decimal (``18.9``)."""
+    return f"{round(n, 1):g}"
+
+
 def _us(seconds: float) -> str:
     return f"{seconds * 1e6:,.0f}"
 
@@ -243,8 +259,8 @@ class Budget:
     in the spread the emulator's 1 ms batches give.
     """
 
-    command_bytes: int
-    ack_bytes: int
+    command_bytes: float
+    ack_bytes: float
     wire: float
     awake: float  # the firmware's awake time per command
     awake_cycles: float
@@ -265,7 +281,8 @@ class Budget:
     def rows(self) -> list[list[str]]:
         return [
             [
-                f"command + Ack on the wire ({self.command_bytes} + {self.ack_bytes} B)",
+                f"command + Ack on the wire ({_bytes(self.command_bytes)} + "
+                f"{_bytes(self.ack_bytes)} B)",
                 f"{self.wire:,.0f}",
             ],
             [
@@ -299,15 +316,15 @@ def budget(run: BoardRun, kind: str, host: float) -> Budget | None:
     ``host`` is the host library's share in us."""
     if kind not in run.cycles:
         return None
-    command, ack = wire_frames(kind)
+    command, ack = run.wire_bytes[kind]
     cycles = run.cycles[kind]
     return Budget(
-        command_bytes=len(command),
-        ack_bytes=len(ack),
-        wire=wire_time_us(len(command) + len(ack)),
+        command_bytes=command,
+        ack_bytes=ack,
+        wire=wire_time_us(1) * (command + ack),
         awake=cycles / UNO_HZ * 1e6,
         awake_cycles=cycles,
-        tx_wait=(len(ack) - 1) * UART_BYTE_CYCLES / UNO_HZ * 1e6,
+        tx_wait=(ack - 1) * UART_BYTE_CYCLES / UNO_HZ * 1e6,
         host=host,
         library=Percentiles.of(run.library[kind]).p50 * 1e6,
     )
@@ -326,15 +343,15 @@ def run(ctx: Context) -> SectionResult:
             notes.append(f"The {label} was not run: {board_run.error}.")
             continue
         for kind, kind_label in KINDS:
-            command, ack = wire_frames(kind)
-            wire_s = wire_time_us(len(command) + len(ack)) / 1e6
+            command_b, ack_b = board_run.wire_bytes[kind]
+            wire_s = wire_time_us(1) * (command_b + ack_b) / 1e6
             lib = Percentiles.of(board_run.library[kind])
             raw = Percentiles.of(board_run.raw[kind])
             rows.append(
                 [
                     label,
                     kind_label,
-                    f"{len(command)} + {len(ack)}",
+                    f"{_bytes(command_b)} + {_bytes(ack_b)}",
                     _us(wire_s),
                     _us(lib.p50),
                     _us(lib.p90),
@@ -372,7 +389,9 @@ def run(ctx: Context) -> SectionResult:
         f"after a random pause of 0 to {MAX_GAP * 1e3:g} ms so that the calls do not lock onto "
         "the emulator's 1 ms batches; "
         f"percentiles by nearest rank. The wire time is the lower bound: the command's and the "
-        f"Ack's bytes at {BAUD} baud, 8N1. The simulated board has no baud rate (a pty at "
+        f"Ack's bytes at {BAUD} baud, 8N1, counted as the Board sent and received them (its "
+        "message ids start at random: 15 starts in 16 are 5-byte varints, the others make "
+        "frames a byte shorter each way). The simulated board has no baud rate (a pty at "
         "memory speed), so its wire time is only for scale. *Raw client*: the same command "
         "from pyserial and the framing alone, no I/O thread (bench/boards.py), in turns with "
         f"the library ({ROUNDS} rounds); the difference is the host library's own cost, "
@@ -406,13 +425,12 @@ def run(ctx: Context) -> SectionResult:
     chart_list: list[Chart] = []
     if ctx.chart_dir is not None:
         for backend, series in hist_series.items():
-            avr_board = backend == "avr"
+            avr_board = backend == "avr" and avr is not None
             unit = "ms" if avr_board else "us"
-            scale = 1e3 if avr_board else 1e6
-            command, ack = wire_frames("servo")
-            wire = wire_time_us(len(command) + len(ack)) / 1e6 * scale
-            vlines = {f"servo wire time {wire:.2f} {unit}": wire} if avr_board else {}
-            if avr_board:
+            vlines: dict[str, float] = {}
+            if avr is not None and avr_board:
+                wire = wire_time_us(1) * sum(avr.wire_bytes["servo"]) / 1e3
+                vlines[f"servo wire time {wire:.2f} ms"] = wire
                 vlines[f"target {TARGET_RATIO}x wire"] = wire * TARGET_RATIO
             path = charts.histogram(
                 ctx.chart_dir / f"roundtrip_{backend}.png",
@@ -442,9 +460,9 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
         echo_text = (
             "The runner alone, with its own test program answering each byte at once, "
             f"echoes one byte in {echo.p50 * 1e6:,.0f} us at the median (p99 "
-            f"{echo.p99 * 1e6:,.0f} us) against {echo_wire:,.0f} us on the wire: "
-            f"{echo.p50 * 1e6 - echo_wire:,.0f} us of the rest is the emulator and the pty, "
-            "with no protoduino code involved. "
+            f"{echo.p99 * 1e6:,.0f} us) against {echo_wire:,.0f} us on the wire: the emulator "
+            f"and the pty add {echo.p50 * 1e6 - echo_wire:,.0f} us to a round trip with no "
+            "protoduino code involved, the same order as the rest above. "
         )
     allowed = servo.wire * (TARGET_RATIO - 1)
     shares = (
