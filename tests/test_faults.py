@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import time
 from collections import Counter
 from typing import cast
@@ -9,6 +10,7 @@ from typing import cast
 import protoduino  # noqa: F401  (registers faulty://)
 import pytest
 import serial
+from protoduino import faults
 from protoduino.constants import PacketType
 from protoduino.faults import FaultConfig, FaultModel, parse_url
 from protoduino.framing import StreamDecoder, frame_packet
@@ -99,5 +101,48 @@ def test_delay_holds_bytes_back() -> None:
         port.write(b"abc\x00")
         assert port.read(10) == b"abc\x00"
         assert time.monotonic() - t0 >= 0.15
+    finally:
+        port.close()
+
+
+def test_named_line_pause_resume_heal() -> None:
+    url = "faulty://loop://?drop=1&dir=tx&paused=1&name=test-line-1"
+    port = serial.serial_for_url(url, timeout=0.2)
+    try:
+        found: object = faults.line("test-line-1")
+        assert found is port  # found by name, from code that did not open it
+        line = cast(FaultySerial, found)
+        frame = frame_packet(PacketType.COMMAND, 1, b"\x08\x01")
+        port.write(frame)
+        assert port.read(100) == frame  # paused: the line is clean
+        line.resume()
+        port.write(frame)
+        assert port.read(100) == b""  # drop=1: every byte lost
+        line.cut(30.0)
+        line.heal()  # faults off for good, the cut cancelled
+        port.write(frame)
+        assert port.read(100) == frame
+        assert line.stats["dropped_bytes"] == len(frame)
+    finally:
+        port.close()
+    del port, line, found
+    gc.collect()
+    assert faults.line("test-line-1") is None  # the registry does not keep ports alive
+
+
+def test_tx_delay_is_latency_not_a_blocked_writer() -> None:
+    port = serial.serial_for_url("faulty://loop://?delay=400&dir=tx", timeout=0.05)
+    try:
+        t0 = time.monotonic()
+        port.write(b"abc\x00")
+        port.write(b"def\x00")
+        wrote = time.monotonic() - t0
+        got = b""
+        while len(got) < 8 and time.monotonic() - t0 < 3.0:
+            got += port.read(100)
+        arrived = time.monotonic() - t0
+        assert wrote < 0.2  # the writer never waits for the delay
+        assert got == b"abc\x00def\x00"  # in order
+        assert arrived >= 0.4
     finally:
         port.close()
