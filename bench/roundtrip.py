@@ -461,8 +461,8 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
             "The runner alone, with its own test program answering each byte at once, "
             f"echoes one byte in {echo.p50 * 1e6:,.0f} us at the median (p99 "
             f"{echo.p99 * 1e6:,.0f} us) against {echo_wire:,.0f} us on the wire: the emulator "
-            f"and the pty add {echo.p50 * 1e6 - echo_wire:,.0f} us to a round trip with no "
-            "protoduino code involved, the same order as the rest above. "
+            f"and the pty alone add {echo.p50 * 1e6 - echo_wire:,.0f} us at the median to a "
+            "one-byte round trip with no protoduino code involved. "
         )
     allowed = servo.wire * (TARGET_RATIO - 1)
     shares = (
