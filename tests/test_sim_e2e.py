@@ -58,8 +58,6 @@ PULSE_TOLERANCE_US = 3
 BOARD_NAME = {"native": "sim", "avr": "uno"}
 #: The failsafe may fire up to this long after FAILSAFE_TIMEOUT (issue 3: 10.0 s + 20 ms).
 FAILSAFE_SLACK = 0.020
-#: A servo pulse repeats every 20 ms; a measured pin shows a new width at the next pulse.
-SERVO_FRAME = 0.020
 #: The device's clock counts whole milliseconds, so it may fire up to 1 ms "early"
 #: measured against the trace's microsecond timestamps; allow 2 ms.
 CLOCK_GRANULARITY = 0.002
@@ -556,10 +554,9 @@ def test_failsafe_after_ping_silence(sim_board: SimBoard, active: RawHost) -> No
     assert all(_agrees(sim_board, [c["value"]], [safe[c["pin"]]]) for c in safe_lines), safe_lines
     for line in safe_lines:
         delay = line["t"] - last_ping_t
-        # A measured servo shows its new width at its next pulse: up to a frame later.
-        measured_servo = sim_board.backend != "native" and line["mode"] == "servo"
-        late = FAILSAFE_SLACK + (SERVO_FRAME if measured_servo else 0.0)
-        assert FAILSAFE_TIMEOUT - CLOCK_GRANULARITY <= delay <= FAILSAFE_TIMEOUT + late, (
+        # At the pin too: the firmware starts a servo frame at once on entering the
+        # safe state (pd_hal_outputs_safe) instead of waiting out the 20 ms frame.
+        assert FAILSAFE_TIMEOUT - CLOCK_GRANULARITY <= delay <= FAILSAFE_TIMEOUT + FAILSAFE_SLACK, (
             line,
             delay,
         )

@@ -31,6 +31,8 @@ uint32_t pd_avr_millis(void);
 void pd_avr_servo_init(void);
 /* Start or update pulses on `pin` for `channel`; first call attaches the pin. */
 void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us);
+/* Start the next servo frame as soon as possible (failsafe, Stop). */
+void pd_avr_servo_expedite(void);
 
 /* Make `pin` an output at `level` (the level is set before the direction). */
 void pd_avr_digital_write(uint8_t pin, bool level);

@@ -55,6 +55,12 @@ void pd_hal_digital_write(void *hal, uint8_t pin, bool level)
     pd_avr_digital_write(pin, level);
 }
 
+void pd_hal_outputs_safe(void *hal)
+{
+    (void)hal;
+    pd_avr_servo_expedite();
+}
+
 const pd_board_info_t *pd_hal_board_info(void *hal)
 {
     (void)hal;

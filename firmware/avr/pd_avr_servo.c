@@ -26,6 +26,10 @@
 /* The ISR makes an end edge 10 cycles before a start edge (-O s code,
  * avr-gcc 5.4): one tick (8 cycles) gives most of it back. */
 #define PULSE_TRIM_TICKS 1u
+/* One period of the 1 kHz clock interrupt in Timer1 ticks: frames start at a
+ * fixed phase to it (see pd_avr_servo_init), so an expedited frame starts a
+ * whole number of these after the current frame's start. */
+#define CLOCK_TICKS 2000u
 
 typedef struct servo_channel {
     volatile uint8_t *port; /* NULL: channel not attached */
@@ -47,6 +51,22 @@ static uint8_t on_mask;
 static int8_t on_channel = -1; /* the channel on_port belongs to, -1: none */
 static bool in_gap = true;     /* the next compare ends the gap between frames */
 static uint16_t frame_start;   /* compare time at which the current frame began */
+static volatile bool expedite; /* start the next frame right after this one */
+
+/*
+ * The soonest frame start after `now` that keeps the frames' phase to the
+ * clock interrupt: frame_start plus a whole number of clock periods, at least
+ * MIN_GAP_TICKS away. Used when a safe state must reach the pins at once.
+ */
+static uint16_t soonest_start(uint16_t now)
+{
+    uint16_t elapsed = (uint16_t)(now + MIN_GAP_TICKS - frame_start);
+    uint16_t offset = CLOCK_TICKS;
+    while (offset <= elapsed) { /* at most 33 rounds; no 16-bit division on the AVR */
+        offset += CLOCK_TICKS;
+    }
+    return (uint16_t)(frame_start + offset);
+}
 
 void pd_avr_servo_init(void)
 {
@@ -104,11 +124,14 @@ ISR(TIMER1_COMPA_vect)
         /* End of the frame: wait out its 20 ms, or start the next at once when
          * eight 2.6 ms pulses have outlasted it. */
         off_port = &no_pin;
-        if ((uint16_t)(at - frame_start) <= FRAME_TICKS - MIN_GAP_TICKS) {
-            OCR1A = (uint16_t)(frame_start + FRAME_TICKS);
-        } else {
+        if ((uint16_t)(at - frame_start) > FRAME_TICKS - MIN_GAP_TICKS) {
             OCR1A = (uint16_t)(TCNT1 + MIN_GAP_TICKS);
+        } else if (expedite) {
+            OCR1A = soonest_start(TCNT1);
+        } else {
+            OCR1A = (uint16_t)(frame_start + FRAME_TICKS);
         }
+        expedite = false;
         in_gap = true;
         ch = next_attached(0);
     }
@@ -138,6 +161,24 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
             c->port = pd_avr_port(pin);
         }
         c->ticks = ticks;
+    }
+}
+
+void pd_avr_servo_expedite(void)
+{
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        if (!in_gap) {
+            /* Pulses under way: the frame's end starts the next one early. */
+            expedite = true;
+        } else {
+            /* Waiting out the frame: cut the wait short if that is sooner. */
+            uint16_t now = TCNT1;
+            uint16_t start = soonest_start(now);
+            if ((uint16_t)(start - now) < (uint16_t)(OCR1A - now)) {
+                OCR1A = start;
+            }
+        }
     }
 }
 

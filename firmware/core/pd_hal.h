@@ -46,6 +46,14 @@ void pd_hal_servo_write(void *hal, uint8_t channel, uint8_t pin, uint16_t us);
 /* Make `pin` a digital output (if it is not yet one) at `level`. */
 void pd_hal_digital_write(void *hal, uint8_t pin, bool level);
 
+/*
+ * Every configured output was just driven to its safe value (failsafe or
+ * Stop). A HAL whose outputs take effect only later should apply them now:
+ * a servo's new width otherwise waits for the next 20 ms frame, which would
+ * put the failsafe pulse at the pin up to 20 ms behind the deadline.
+ */
+void pd_hal_outputs_safe(void *hal);
+
 /* The board's description; must stay valid for the program's lifetime. */
 const pd_board_info_t *pd_hal_board_info(void *hal);
 

@@ -171,4 +171,5 @@ void pd_outputs_all_safe(pd_outputs_t *out, void *hal)
             drive_digital(out, hal, pin, (out->digital_safe >> pin) & 1u);
         }
     }
+    pd_hal_outputs_safe(hal);
 }

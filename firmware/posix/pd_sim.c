@@ -137,6 +137,12 @@ void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
     sim_trace(ctx, pin, SIM_PIN_DIGITAL, level ? 1u : 0u);
 }
 
+void pd_hal_outputs_safe(void *ctx)
+{
+    /* Virtual pins take their value the moment they are written. */
+    (void)ctx;
+}
+
 const pd_board_info_t *pd_hal_board_info(void *ctx)
 {
     (void)ctx;

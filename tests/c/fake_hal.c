@@ -141,6 +141,12 @@ void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
     hal->digital_writes[pin]++;
 }
 
+void pd_hal_outputs_safe(void *ctx)
+{
+    fake_hal_t *hal = ctx;
+    hal->outputs_safe_calls++;
+}
+
 const pd_board_info_t *pd_hal_board_info(void *ctx)
 {
     return &((fake_hal_t *)ctx)->info;

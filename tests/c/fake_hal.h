@@ -33,6 +33,7 @@ typedef struct fake_hal {
     int digital[PD_MAX_PINS];   /* -1: not a digital output, else 0/1 */
     unsigned servo_writes[PD_MAX_PINS];
     unsigned digital_writes[PD_MAX_PINS];
+    unsigned outputs_safe_calls; /* pd_hal_outputs_safe() since fake_init */
     pd_board_info_t info;
 } fake_hal_t;
 

@@ -41,8 +41,10 @@ static void test_failsafe_fires_at_10000_not_9999(void)
     CHECK_EQ(d.hal.servo_us[9], 2000); /* not yet */
     CHECK_EQ(d.hal.digital[13], 1);
     CHECK_EQ(t_failsafes(&d, NULL), 0);
+    CHECK_EQ(d.hal.outputs_safe_calls, 0u);
     d.hal.now_ms = 5000 + 10000;
     pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.outputs_safe_calls, 1u); /* the HAL may apply them at once */
     CHECK_EQ(d.hal.servo_us[9], 1472); /* safe values */
     CHECK_EQ(d.hal.digital[13], 0);
     protoduino_Failsafe fs;
@@ -188,7 +190,9 @@ static void test_stop(void)
     ping_at(&d, 10, 1000);
     fake_clear(&d.hal);
     protoduino_ArduinoIn in = m_stop(20);
+    unsigned safe_calls = d.hal.outputs_safe_calls;
     t_send_in(&d, &in);
+    CHECK_EQ(d.hal.outputs_safe_calls, safe_calls + 1u);
     CHECK_EQ(d.hal.servo_us[9], 1472); /* at once */
     CHECK_EQ(d.hal.digital[13], 0);
     CHECK_EQ(t_status(&d, 20), S(OK));
