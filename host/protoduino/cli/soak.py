@@ -183,7 +183,7 @@ def _ms(x: float | None) -> str:
 
 
 def _dict(d: dict[str, int]) -> str:
-    return ", ".join(f"{k} {v}" for k, v in sorted(d.items())) or "none"
+    return ", ".join(f"{k} {v}" for k, v in sorted(d.items()) if v) or "none"
 
 
 def figures(r: dict[str, Any]) -> str:
@@ -249,7 +249,8 @@ def render_report(results: list[dict[str, Any]], argv: str) -> str:
     ]
     for r in results:
         out.append(
-            f"| {r['scenario']} | {_dict(r['faults_injected'])} | {r['sent']} | {r['ok']} | "
+            f"| {r['scenario']} ({r['backend']}) | {_dict(r['faults_injected'])} | {r['sent']} | "
+            f"{r['ok']} | "
             f"{r['executed']} | {sum(r['rejected'].values())} | {r['timed_out']} | "
             f"{r['duplicates']} | {r['corrupted']} | {r['hung']} | "
             f"{_ms(r['recovery_median_s'])} / {_ms(r['recovery_max_s'])} | "
@@ -267,7 +268,7 @@ def render_report(results: list[dict[str, Any]], argv: str) -> str:
     ]
     for r in results:
         out += [
-            f"## {r['scenario']}",
+            f"## {r['scenario']} ({r['backend']})",
             "",
             r["description"] or describe(r["faults"], r["resets"], r["cuts"]),
             "",
