@@ -86,7 +86,7 @@ VALUE_STRIDE = 97
 SLOP = 0.25
 #: Longest time between a command's last transmission and its effect in the trace (s),
 #: before any configured line delay: the device reading it, a descheduled process.
-LATENCY = 0.5
+LATENCY = 1.0
 #: Failsafe timing tolerance: the contract's 20 ms.
 FAILSAFE_TOLERANCE = 0.020
 #: The device's clock ticks in milliseconds.
