@@ -20,6 +20,7 @@
  * - A servo whose pulses stop for more than max_period gets a value-0 line,
  *   dated to the end of its last pulse (as the native board writes 0 when
  *   its pulses stop on a reboot).
+ * - A pin that stops being an output (a reset) reports value 0 at once.
  * - A pin that becomes an output at level 0 and shows no pulse within
  *   low_wait (50 ms) is a digital 0. A Servo-library style driver starts a
  *   newly attached channel at the frame after next, up to two 20 ms frames
@@ -154,6 +155,26 @@ void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint64_
     uint8_t output = is_output ? 1U : 0U;
     uint8_t level = (output && port_bit) ? 1U : 0U;
 
+    if (!output && p->output) {
+        /* Released: a reset makes every pin an input, and whatever the pin
+         * carried stops at once. Report it now, as the native board reports a
+         * reboot, rather than after 50 ms without pulses: a host that restores
+         * its outputs sooner than that would otherwise leave no trace of the
+         * reset at all. */
+        p->output = 0;
+        p->level = 0;
+        p->high_pending = 0;
+        p->low_out_pending = 0;
+        if (p->servo) {
+            pd_servo_stopped(pins, n, cycle);
+        } else {
+            p->cand = 0;
+            if (p->emitted_mode >= 0) {
+                pd_emit(pins, n, cycle, (enum pd_pin_mode)p->emitted_mode, 0);
+            }
+        }
+        return;
+    }
     if (output && !p->output && !level) {
         p->low_out_pending = 1;
         p->out_since = cycle;
