@@ -514,3 +514,40 @@ def test_judge_counts_a_second_run_in_one_boot() -> None:
 def test_judge_counts_a_value_nobody_sent() -> None:
     result = _made_up_run(reboot=True, stray=1234)
     assert (result.duplicates, result.corrupted) == (0, 1)
+
+
+# --- the soak command -------------------------------------------------------------------
+
+
+def test_soak_command_runs_reports_and_rerenders(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from protoduino.cli.main import main
+    from protoduino.cli.soak import KEEP_MARKER
+
+    report, data = tmp_path / "reliability.md", tmp_path / "figures.json"
+    report.write_text(f"old generated part\n{KEEP_MARKER}\n## Fuzzing\nkept by hand\n")
+    argv = ["soak", "--commands", "40", "--resets", "1", "--no-failsafe", "--kinds", "dup"]
+    argv += ["--kind-commands", "30", "--json", str(data), "--report", str(report)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "== soak: 40 commands" in out and "== dup: 30 commands" in out
+    assert "all 2 scenarios passed every invariant" in out
+    text = report.read_text()
+    assert text.startswith("# Reliability under faults")
+    assert "| soak (native) |" in text and "| dup (native) |" in text
+    assert "old generated part" not in text and text.endswith("## Fuzzing\nkept by hand\n")
+    assert "protoduino soak --backend native --commands 40 --seed 1" in text  # to reproduce
+    report.unlink()
+    assert main(["soak", "--from-json", str(data), "--report", str(report)]) == 0
+    assert "| soak (native) |" in report.read_text()  # the same figures, rendered again
+
+
+def test_soak_command_refuses_nonsense(capsys: pytest.CaptureFixture[str]) -> None:
+    from protoduino.cli.main import main
+
+    assert main(["soak", "--commands", "0", "--kinds", "none"]) == 1
+    assert main(["soak", "--kinds", "ber,nosuchkind"]) == 1
+    assert main(["soak", "--faults", "ber=7"]) == 1
+    err = capsys.readouterr().err
+    assert "nothing to run" in err and "nosuchkind" in err and "probability" in err
