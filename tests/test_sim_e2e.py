@@ -61,6 +61,12 @@ FAILSAFE_SLACK = 0.020
 #: The device's clock counts whole milliseconds, so it may fire up to 1 ms "early"
 #: measured against the trace's microsecond timestamps; allow 2 ms.
 CLOCK_GRANULARITY = 0.002
+#: The emulated Uno runs on emulated time, paced to the host's clock: when the machine
+#: starves it, it falls behind and then catches up, so an interval read on the host's
+#: clock can come out shorter by the lag it made up. Only the host-clock sanity check
+#: allows for that; the timings at the pins are read from the trace, on the device's
+#: own (emulated) clock, and get no such allowance.
+PACING_SLACK = {"native": 0.0, "avr": 0.050}
 
 Status = pb.Status
 
@@ -543,7 +549,7 @@ def test_failsafe_after_ping_silence(sim_board: SimBoard, active: RawHost) -> No
     failsafe = parse_out(event.payload).failsafe
     assert failsafe.active
     assert failsafe.cause == pb.FAILSAFE_CAUSE_PING_TIMEOUT
-    assert waited >= FAILSAFE_TIMEOUT - CLOCK_GRANULARITY
+    assert waited >= FAILSAFE_TIMEOUT - CLOCK_GRANULARITY - PACING_SLACK[sim_board.backend]
 
     # Every output at its safe value, within 10.0 s + 20 ms of the last Ping.
     safe = {9: 1472, 13: 0, 12: 1, 11: 0}
