@@ -219,8 +219,6 @@ class FaultModel:
 class Cut:
     """When the line is cut: a schedule from the URL plus cuts ordered from code."""
 
-    _windows: list[tuple[float, float]]
-
     def __init__(self, cfg: FaultConfig) -> None:
         self._opened = time.monotonic()
         self._windows: list[tuple[float, float]] = []
@@ -233,7 +231,7 @@ class Cut:
         self._windows.append((now, now + seconds))
 
     def cancel(self) -> None:
-        self._windows = []
+        self._windows.clear()
 
     def active(self) -> bool:
         now = time.monotonic()
