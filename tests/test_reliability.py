@@ -551,3 +551,54 @@ def test_soak_command_refuses_nonsense(capsys: pytest.CaptureFixture[str]) -> No
     assert main(["soak", "--faults", "ber=7"]) == 1
     err = capsys.readouterr().err
     assert "nothing to run" in err and "nosuchkind" in err and "probability" in err
+
+
+def test_a_held_new_ping_does_not_block_the_retransmission_it_waits_for(
+    fake: FakeDevice,
+) -> None:
+    """X's Ack is lost, newer ids fill the guard, the link restarts (X goes back to the queue).
+
+    An automatic Ping fell due meanwhile and waits at the head of the urgent
+    queue for X to finish; X, in the other queue, must still go out again when
+    the link is back, or both would wait until X's deadline.
+    """
+    import fakedevice as fd
+
+    dropping = threading.Event()
+    dropping.set()
+    first: list[int] = []
+
+    def drop_x(msg: Any, arrival: int) -> bool:
+        if msg.WhichOneof("data") == "servo_control" and not first:
+            first.append(msg.message_id)
+        return bool(first) and msg.message_id == first[0] and dropping.is_set()
+
+    with Board.open(fake.port, ack_timeout=0.3, ping=False) as board:
+        servo = board.servo(9, min_us=500, max_us=2500)
+        ex = Executions(fake, drop_x)
+        outcome: list[BaseException | None] = []
+
+        def write_x() -> None:
+            try:
+                servo.write_us(700)
+                outcome.append(None)
+            except protoduino.ProtoduinoError as error:
+                outcome.append(error)
+
+        x = threading.Thread(target=write_x)
+        x.start()
+        assert fake.wait_for(lambda: bool(first))
+        others = threading.Thread(target=stream_writes, args=(board, 2, 10))
+        others.start()
+        assert fake.wait_for(lambda: board._rpc.guard_holds > 0)
+        board.pinging = True  # an automatic Ping falls due: a new id, held by the guard
+        assert fake.wait_for(lambda: bool(board._rpc._urgent))
+        fake.answer_reset = False  # the link stays down a moment
+        fake.send_data(fd.ack(1), seq=200)  # a SEQ far off: the host re-handshakes
+        assert fake.wait_for(lambda: board.stats.seq_desyncs == 1)
+        dropping.clear()
+        fake.answer_reset = True  # link up: the Ping still waits, X must go out again
+        x.join(10)
+        others.join(10)
+        assert outcome == [None]  # X went out again and was acknowledged
+        assert ex.count[first[0]] == 1 and max(ex.count.values()) == 1

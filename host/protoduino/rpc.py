@@ -337,8 +337,10 @@ class Rpc:
         for queue in queues:
             while queue and len(self._inflight) < self.window:
                 if queue[0].first_tx is None and not self._guard_allows_new():
+                    # Held: a new id. The next queue may still hold a retransmission
+                    # (a call requeued when the link went down), which the guard waits for.
                     self.guard_holds += 1
-                    return
+                    break
                 self._transmit(queue.popleft(), now)
 
     def _finish(
