@@ -14,6 +14,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from fuzzing import require_fuzz_tools, run_bounded
 from protoduino import constants
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -54,50 +55,14 @@ def test_c_unit_tests_under_sanitizers() -> None:
     assert "runtime error" not in output  # UBSan reports without aborting otherwise
 
 
-def _libfuzzer_available() -> bool:
-    if shutil.which("clang") is None:
-        return False
-    # clang prints the full path of a runtime it has, or just the name back.
-    found = subprocess.run(
-        ["clang", "-print-file-name=libclang_rt.fuzzer-x86_64.a"],
-        capture_output=True,
-        text=True,
-        check=False,
-    ).stdout.strip()
-    return Path(found).is_absolute() and Path(found).is_file()
-
-
 @pytest.mark.slow
 def test_fuzz_receive_path_bounded(tmp_path: Path) -> None:
-    _need("make", "clang")
-    if not _libfuzzer_available():
-        pytest.skip("the libFuzzer runtime is not installed (Debian package libclang-rt-14-dev)")
+    require_fuzz_tools()
     build = _make("fuzz")
     assert build.returncode == 0, (build.stdout + build.stderr)[-4000:]
-    work = tmp_path / "corpus"
-    work.mkdir()
     seeds = sorted(FUZZ_CORPUS.iterdir())
     assert len(seeds) > 20, "the seed corpus was not generated"
-    result = subprocess.run(
-        [
-            str(FUZZ_BIN),
-            f"-max_total_time={FUZZ_SECONDS}",
-            "-print_final_stats=1",
-            f"-artifact_prefix={tmp_path}/",
-            str(work),  # new inputs go here; the seed corpus stays as generated
-            str(FUZZ_CORPUS),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-        timeout=FUZZ_SECONDS * 3 + 60,
-    )
-    log = result.stderr[-6000:]
-    runs = re.search(r"stat::number_of_executed_units:\s*(\d+)", result.stderr)
-    assert result.returncode == 0, log
-    assert runs is not None and int(runs.group(1)) > 10_000, log
-    assert not list(tmp_path.glob("crash-*")) and not list(tmp_path.glob("leak-*")), log
-    assert "ERROR:" not in result.stderr, log
+    run_bounded(FUZZ_BIN, FUZZ_SECONDS, tmp_path, [FUZZ_CORPUS], min_runs=10_000)
 
 
 def _c_constants() -> dict[str, int]:
