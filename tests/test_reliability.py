@@ -432,7 +432,7 @@ def test_judge_sees_hung_calls(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
 # --- the judge on a made-up run: what counts as a duplicate -----------------------------
 
 
-def _made_up_run(*, reboot: bool, stray: int | None = None) -> soak.SoakResult:
+def _made_up_run(*, reboot: bool, stray: int | None = None, at: float = 2.5) -> soak.SoakResult:
     """One servo on pin 3; command X runs, its Ack is lost, X is sent again and runs again.
 
     With ``reboot`` the device restarted in between (and the session was
@@ -488,8 +488,9 @@ def _made_up_run(*, reboot: bool, stray: int | None = None) -> soak.SoakResult:
     wire.sent[x].ack, wire.sent[x].status = 1000.651, 0
     lines.append({"t": 0.6505, "pin": 3, "mode": "servo", "value": v1})  # ran again
     send(control(v2), [1000.810], v2)
+    send(lambda m: m.ping.SetInParent(), [1000.820], None)  # acknowledged: no failsafe till 1010.8
     if stray is not None:
-        lines.append({"t": 0.9, "pin": 3, "mode": "servo", "value": stray})
+        lines.append({"t": at, "pin": 3, "mode": "servo", "value": stray})  # after every window
     runner = SimpleNamespace(
         s=scenario, calls=calls, reboots=[1000.101] if reboot else [], cuts=[], heal_at=1000.8
     )
@@ -514,6 +515,14 @@ def test_judge_counts_a_second_run_in_one_boot() -> None:
 def test_judge_counts_a_value_nobody_sent() -> None:
     result = _made_up_run(reboot=True, stray=1234)
     assert (result.duplicates, result.corrupted) == (0, 1)
+
+
+def test_judge_counts_a_safe_value_while_pings_were_answered() -> None:
+    """The failsafe's value, with a Ping acknowledged just before: no failsafe could fire."""
+    result = _made_up_run(reboot=True, stray=soak.servo_safe(0))
+    assert (result.corrupted, result.failsafe_lines) == (1, 0)
+    later = _made_up_run(reboot=True, stray=soak.servo_safe(0), at=11.0)  # 10 s of silence
+    assert (later.corrupted, later.failsafe_lines) == (0, 1)
 
 
 # --- the soak command -------------------------------------------------------------------

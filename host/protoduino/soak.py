@@ -742,17 +742,17 @@ def _judge(
     # What may legitimately change each output, and when.
     causes = _causes(wire, tx_delay)
     boundaries = _boundaries(runner.reboots, lines, clock, traits)
-    acked_pings = sorted(
-        (sent.txs[0], sent.ack)
-        for sent in wire.sent.values()
-        if sent.kind == "ping" and sent.ack is not None and sent.status == 0
-    )
+    failsafe = _Failsafe(wire)
 
     used: dict[int, int] = {}  # message id -> the boot it executed in
     matched_ids: set[int] = set()
+    # Per (pin, value), causes in order of their window's start, for bisection: a digital
+    # level has thousands of them in a long run.
     by_value: dict[tuple[int, int], list[_Cause]] = {}
-    for cause in causes:
+    for cause in sorted(causes, key=lambda c: c.lo):
         by_value.setdefault((cause.pin, cause.value), []).append(cause)
+    starts = {key: [c.lo for c in group] for key, group in by_value.items()}
+    span = max((c.hi - c.lo for c in causes), default=0.0)
     failsafe_lines: list[float] = []
     previous: dict[int, int] = {}
     for entry in lines:
@@ -768,12 +768,13 @@ def _judge(
         boot = sum(1 for b in boundaries if t >= b)
         if value == 0 and any(-REBOOT_SPREAD <= t - b <= lag + REBOOT_SPREAD for b in boundaries):
             continue  # a reboot releases every output
-        candidates = [
-            c
-            for v in range(value - tol, value + tol + 1)
-            for c in by_value.get((pin, v), ())
-            if c.lo - SLOP <= h <= c.hi + lag
-        ]
+        candidates = []
+        for v in range(value - tol, value + tol + 1):
+            group = by_value.get((pin, v), [])
+            los = starts.get((pin, v), [])
+            first = bisect.bisect_left(los, h - lag - span)
+            last = bisect.bisect_right(los, h + SLOP)
+            candidates += [c for c in group[first:last] if c.lo - SLOP <= h <= c.hi + lag]
         fresh = [c for c in candidates if used.get(c.message_id, -1) != boot]
         # Never-used causes first (a cause used in an earlier boot may run again after a
         # reboot, but only if nothing else explains the line), then the one whose window
@@ -787,7 +788,7 @@ def _judge(
             used[chosen.message_id] = boot
             matched_ids.add(chosen.message_id)
             continue
-        if _failsafe_possible(pin=pin, value=value, h=h, wire=wire, acked_pings=acked_pings):
+        if failsafe.possible(pin, value, h):
             failsafe_lines.append(h)
             continue
         if candidates:
@@ -813,12 +814,14 @@ def _judge(
         if sent.kind in ("servo_control", "digital_control") and sent.pin is not None:
             assert sent.value is not None
             ids_by_value.setdefault((sent.pin, sent.value), []).append(sent)
+    firsts = {key: [x.txs[0] for x in sents] for key, sents in ids_by_value.items()}
     for c in stream:
-        ids = [
-            x.message_id
-            for x in ids_by_value.get((c.pin, c.value), ())
-            if c.start - SLOP <= x.txs[0] <= c.end + SLOP
+        sents = ids_by_value.get((c.pin, c.value), [])
+        los = firsts.get((c.pin, c.value), [])
+        window = sents[
+            bisect.bisect_left(los, c.start - SLOP) : bisect.bisect_right(los, c.end + SLOP)
         ]
+        ids = [x.message_id for x in window]
         seen = any(i in matched_ids for i in ids)
         if seen:
             result.executed += 1
@@ -923,27 +926,33 @@ def _boundaries(
     return out
 
 
-def _failsafe_possible(
-    *,
-    pin: int,
-    value: int,
-    h: float,
-    wire: _Wire,
-    acked_pings: list[tuple[float, float]],
-) -> bool:
+class _Failsafe:
     """Could the device's failsafe have driven ``pin`` to ``value`` at host time ``h``?
 
-    Only to the pin's safe value, and only if no Ping the device certainly
-    received (acknowledged) went out less than FAILSAFE_TIMEOUT before.
+    Only to the safe value of the pin's latest Init, and only if no Ping the
+    device certainly received (acknowledged) went out less than
+    FAILSAFE_TIMEOUT before.
     """
-    safe = {
-        s.pin: s.value
-        for s in wire.sent.values()
-        if s.kind in ("servo_init", "digital_init") and s.txs[0] <= h
-    }
-    if pin not in safe or safe[pin] != value:
-        return False
-    return not any(ack <= h and tx > h - FAILSAFE_TIMEOUT + SLOP for tx, ack in acked_pings)
+
+    def __init__(self, wire: _Wire) -> None:
+        self._inits: dict[int, list[tuple[float, int]]] = {}
+        pings: list[tuple[float, float]] = []
+        for sent in wire.sent.values():  # in order of first transmission
+            if sent.kind in ("servo_init", "digital_init") and sent.pin is not None:
+                assert sent.value is not None
+                self._inits.setdefault(sent.pin, []).append((sent.txs[0], sent.value))
+            elif sent.kind == "ping" and sent.ack is not None and sent.status == 0:
+                pings.append((sent.txs[0], sent.ack))
+        self._ping_tx = [tx for tx, _ in pings]
+        self._ping_ack = [ack for _, ack in pings]
+
+    def possible(self, pin: int, value: int, h: float) -> bool:
+        inits = self._inits.get(pin, [])
+        i = bisect.bisect_right([t for t, _ in inits], h)
+        if i == 0 or inits[i - 1][1] != value:
+            return False
+        first = bisect.bisect_right(self._ping_tx, h - FAILSAFE_TIMEOUT + SLOP)
+        return not any(ack <= h for ack in self._ping_ack[first:])
 
 
 class _ClockMap:
