@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import bisect
 import collections
+import contextlib
 import json
 import logging
 import random
@@ -43,7 +44,7 @@ import statistics
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -58,10 +59,11 @@ from .constants import (
     WATCHDOG_TIMEOUT,
     PacketType,
 )
-from .errors import AckTimeoutError, CommandRejectedError, ProtoduinoError
+from .errors import AckTimeoutError, CommandRejectedError, ProtocolError, ProtoduinoError
 from .events import Event, EventKind
 from .faults import FaultyLine, line, parse_url
-from .messages import ArduinoIn, ArduinoOut, status_name
+from .framing import decode_frame
+from .messages import ArduinoIn, ArduinoOut, parse_in, status_name
 from .packets import Packet
 from .simboard import SimBoard
 from .transport import FrameRecord
@@ -363,6 +365,8 @@ class _Wire:
     """Frame monitor: every COMMAND transmitted and every Ack received, by message id."""
 
     def __init__(self) -> None:
+        #: message id -> when write() was entered for each of its frames (recent ones only).
+        self.writes: dict[int, list[float]] = {}
         self.sent: dict[int, _Sent] = {}
         self.order: list[int] = []  # ids in order of first transmission
         self.ping_txs: list[float] = []
@@ -417,6 +421,18 @@ class _Wire:
         sent.txs.append(t)
         if sent.kind == "ping":
             self.ping_txs.append(t)
+
+
+def _write_times(writes: Iterable[tuple[float, bytes]]) -> dict[int, list[float]]:
+    """Message id -> the times its COMMAND frames were handed to the line."""
+    out: dict[int, list[float]] = {}
+    for t, raw in writes:
+        for chunk in raw.split(b"\x00"):
+            item = decode_frame(chunk) if chunk else None
+            if isinstance(item, Packet) and item.type is PacketType.COMMAND:
+                with contextlib.suppress(ProtocolError):
+                    out.setdefault(parse_in(item.payload).message_id, []).append(t)
+    return out
 
 
 def _deg_to_us(degrees: int, lo: int = SERVO_MIN_US, hi: int = SERVO_MAX_US) -> int:
@@ -572,16 +588,26 @@ class _Runner:
                 failed += 1
         return failed
 
-    def stop_pinging(self, outputs: _Outputs) -> float:
-        """Drive every output off its safe value, stop the pings; the time pinging stopped."""
+    def last_ping(self, outputs: _Outputs) -> tuple[float, float]:
+        """Stop the automatic Ping, drive every output off its safe value, Ping once more.
+
+        Returns the times just before that last Ping was submitted and just after
+        it returned: the device received it in between, whatever the scheduler did.
+        """
+        self.board.pinging = False
+        rpc = self.board._rpc
+        deadline = time.monotonic() + self.s.call_bound
+        while rpc._ping_call is not None and time.monotonic() < deadline:
+            time.sleep(0.01)  # an automatic Ping still under way
         for out in range(outputs.count):
             kind, pin, value, fn = outputs.next_command(out)
             if kind == "digital" and value == 0:  # end on 1: the failsafe then shows as a 0
                 self.call(kind, pin, value, fn, "failsafe")
                 kind, pin, value, fn = outputs.next_command(out)
             self.call(kind, pin, value, fn, "failsafe")
-        self.board.pinging = False
-        return time.monotonic()
+        before = time.monotonic()
+        self.board.ping()
+        return before, time.monotonic()
 
 
 def run(
@@ -616,10 +642,11 @@ def run(
             failed = runner.recover(outputs)
             result.recovered = failed == 0
             result.recovery_failures = failed
-            fs_stop = runner.stop_pinging(outputs) if scenario.failsafe else None
-            if fs_stop is not None:
-                _wait_for_failsafe(sim, outputs, fs_stop)
+            fs_ping = runner.last_ping(outputs) if scenario.failsafe else None
+            if fs_ping is not None:
+                _wait_for_failsafe(sim, outputs, fs_ping[1])
             result.faults = dict(runner.line().stats)
+            wire.writes = _write_times(runner.line().writes)
             result.link = _link_figures(board, runner)
         result.faults["device_resets"] = len(runner.reboots)
         result.faults["line_cuts"] = len(runner.cuts)
@@ -628,7 +655,7 @@ def run(
     result.duration = time.monotonic() - t0
     if wire.bad:
         result.violations.append(f"frames the monitor could not parse: {dict(wire.bad)}")
-    _judge(result, runner, wire, lines, fs_stop)
+    _judge(result, runner, wire, lines, fs_ping)
     _dump(trace.with_suffix("").with_suffix(".wire.jsonl"), runner, wire)
     return result
 
@@ -705,7 +732,7 @@ def _judge(
     runner: _Runner,
     wire: _Wire,
     lines: list[dict[str, Any]],
-    fs_stop: float | None,
+    fs_ping: tuple[float, float] | None,
 ) -> None:
     s = runner.s
     traits = BACKEND_TRAITS.get(s.backend, BACKEND_TRAITS["avr"])
@@ -855,14 +882,14 @@ def _judge(
     if slow:
         result.violations.append(f"recovery slower than {bound:g} s: {max(slow):.3f} s")
 
-    if fs_stop is not None:
+    if fs_ping is not None:
         _judge_failsafe(
             result,
             calls=calls,
             wire=wire,
             lines=lines,
             clock=clock,
-            fs_stop=fs_stop,
+            fs_ping=fs_ping,
             traits=traits,
         )
 
@@ -1072,11 +1099,18 @@ def _clock_map(
 def _offset_bounds(
     calls: list[CallRecord], wire: _Wire, lines: list[dict[str, Any]], clock: _ClockMap
 ) -> tuple[float, float] | None:
-    """Bounds of (host - trace) time from the failsafe phase's digital writes, or None."""
+    """Bounds of (host - trace) time from the failsafe phase's digital writes, or None.
+
+    Each ran after its frame was handed to the line (or at least after its call
+    started) and before its Ack was read; a digital edge is dated exactly. The
+    host's frame records are not used: a busy scheduler may let the device run
+    a frame before the host notes that it wrote it.
+    """
     lo, hi = float("-inf"), float("inf")
     for c in calls:
         if c.phase != "failsafe" or c.kind != "digital" or c.outcome != "ok":
             continue
+        start, end = c.start, c.end
         sent = next(
             (
                 x
@@ -1084,12 +1118,15 @@ def _offset_bounds(
                 if x.kind == "digital_control"
                 and x.pin == c.pin
                 and x.value == c.value
-                and x.ack is not None
-                and c.start - SLOP <= x.txs[0] <= c.end
+                and c.start <= x.txs[0] <= c.end
             ),
             None,
         )
-        line = next(
+        if sent is not None and len(sent.txs) == 1 and sent.ack is not None:
+            start = max([start, *wire.writes.get(sent.message_id, [])])
+            end = sent.ack
+        # Its line is the last such one: an earlier write may have set the same level.
+        line = max(
             (
                 float(e["t"])
                 for e in lines
@@ -1098,11 +1135,10 @@ def _offset_bounds(
                 and e["mode"] == "digital"
                 and c.start - SLOP <= clock.host(float(e["t"])) <= c.end + SLOP
             ),
-            None,
+            default=None,
         )
-        if sent is None or sent.ack is None or line is None:
-            continue
-        lo, hi = max(lo, sent.txs[-1] - line), min(hi, sent.ack - line)
+        if line is not None:
+            lo, hi = max(lo, start - line), min(hi, end - line)
     return (lo, hi) if lo <= hi else None
 
 
@@ -1113,19 +1149,22 @@ def _judge_failsafe(
     wire: _Wire,
     lines: list[dict[str, Any]],
     clock: _ClockMap,
-    fs_stop: float,
+    fs_ping: tuple[float, float],
     traits: BackendTraits,
 ) -> None:
     """The first safe value after the last Ping, against that Ping's reception."""
     result.failsafe_checked = True
-    pings = [s for s in wire.sent.values() if s.kind == "ping" and s.txs[0] <= fs_stop + 0.5]
-    if not pings:
-        result.violations.append("failsafe check: no Ping was ever sent")
-        result.failsafe_ok = False
-        return
-    last = max(pings, key=lambda s: s.txs[-1])
-    rx_lo = last.txs[-1]  # the device received it after this transmission...
-    rx_hi = last.ack if last.ack is not None else last.txs[-1] + 0.05  # ...and before its Ack
+    rx_lo, rx_hi = fs_ping  # the device received the last Ping in between
+    ping = next(
+        (x for x in wire.sent.values() if x.kind == "ping" and rx_lo <= x.txs[0] <= rx_hi),
+        None,
+    )
+    if ping is not None and len(ping.txs) == 1 and ping.ack is not None:
+        rx_lo = max([rx_lo, *wire.writes.get(ping.message_id, [])])  # handed to the line
+        rx_hi = ping.ack  # and answered
+    later = [s for s in wire.sent.values() if s.kind == "ping" and s.txs[-1] > rx_hi]
+    if later:
+        result.violations.append(f"failsafe check: {len(later)} Pings after the last one")
     digital_pins = {
         s.pin for s in wire.sent.values() if s.kind == "digital_init" and s.pin is not None
     }
@@ -1134,10 +1173,10 @@ def _judge_failsafe(
         for s in wire.sent.values()
         if s.kind == "servo_init" and s.pin is not None and s.value is not None
     }
-    edges = [
-        clock.host(float(e["t"]))
+    safe_lines = [
+        e
         for e in lines
-        if clock.host(float(e["t"])) > max(rx_lo, fs_stop)  # after the last write was acked
+        if clock.host(float(e["t"])) > rx_hi
         and (
             (int(e["pin"]) in digital_pins and int(e["value"]) == 0)
             or (
@@ -1146,31 +1185,24 @@ def _judge_failsafe(
             )
         )
     ]
-    if not edges:
+    if not safe_lines:
         result.violations.append("failsafe never fired after the pings stopped")
         result.failsafe_ok = False
         return
-    fired = min(edges)
+    fired = min(clock.host(float(e["t"])) for e in safe_lines)
     low, high = fired - rx_hi - 0.003, fired - rx_lo + 0.003  # the clock map's error
     bounds = _offset_bounds(calls, wire, lines, clock)
-    digital_edges = [
-        float(e["t"])
-        for e in lines
-        if int(e["pin"]) in digital_pins
-        and int(e["value"]) == 0
-        and clock.host(float(e["t"])) > max(rx_lo, fs_stop)
-    ]
-    if bounds is not None and digital_edges:
-        # Exact: a digital edge, and the offset bounded by the writes just before on the
-        # clean line (each executed between its transmission and its Ack).
-        t, (off_lo, off_hi) = min(digital_edges), bounds
+    digital = [float(e["t"]) for e in safe_lines if e["mode"] == "digital"]
+    if bounds is not None and digital:
+        # A digital edge (dated exactly), the offset bounded by the writes just before.
+        t, (off_lo, off_hi) = min(digital), bounds
         low, high = t + off_lo - rx_hi, t + off_hi - rx_lo
     result.failsafe_delay = (round(low, 4), round(high, 4))
     # Due 10 s after the last Ping received, not before, at most 20 ms late: the measured
     # interval must meet [10 s, 10.02 s], give or take one tick of the device's millisecond
     # clock (it compares whole milliseconds: a Ping at 5.0009 s reads as 5000 ms).
     ok = high >= FAILSAFE_TIMEOUT - MILLIS_TICK and low <= FAILSAFE_TIMEOUT + FAILSAFE_TOLERANCE
-    result.failsafe_ok = ok
+    result.failsafe_ok = ok and not later
     if not ok:
         result.violations.append(
             f"failsafe fired {low:.4f}..{high:.4f} s after the last Ping "

@@ -17,6 +17,8 @@ from ..faults import Cut, FaultConfig, FaultModel, parse_url, register
 
 #: Longest time one read of the inner port blocks.
 POLL = 0.02
+#: Writes remembered with their time (:attr:`Serial.writes`).
+WRITE_LOG = 4096
 
 
 class Serial(SerialBase):
@@ -35,6 +37,10 @@ class Serial(SerialBase):
         self._lock = threading.Lock()
         self._tx_lock = threading.Lock()
         self.stats: Counter[str] = Counter()
+        #: (time.monotonic() as write() was entered, the bytes as given) for the last
+        #: WRITE_LOG writes: when each frame left the caller, whatever the scheduler did
+        #: between its write and the caller's own record of it.
+        self.writes: deque[tuple[float, bytes]] = deque(maxlen=WRITE_LOG)
         super().__init__(*args, **kwargs)
 
     # --- pyserial plumbing ---------------------------------------------------
@@ -157,6 +163,7 @@ class Serial(SerialBase):
         """Accept every byte at once; damaged, delayed or cut on the way (never blocks longer)."""
         inner = self._require()
         raw = bytes(data)
+        self.writes.append((time.monotonic(), raw))
         assert self._cut is not None
         if self._cut.active():
             self.stats["cut_bytes"] += len(raw)
