@@ -611,3 +611,19 @@ def test_a_held_new_ping_does_not_block_the_retransmission_it_waits_for(
         others.join(10)
         assert outcome == [None]  # X went out again and was acknowledged
         assert ex.count[first[0]] == 1 and max(ex.count.values()) == 1
+
+
+@pytest.mark.parametrize("kind", list(soak.fault_scenarios(1)))
+def test_the_reproduce_command_runs_the_same_scenario(kind: str) -> None:
+    import shlex
+
+    from protoduino.cli import soak as cli
+    from protoduino.cli.main import build_parser
+
+    original = soak.fault_scenarios(700, 9, "avr")[kind]
+    words = shlex.split(cli.reproduce(original.as_dict()))
+    assert words[:2] == ["protoduino", "soak"]
+    (again,) = cli.scenarios(build_parser().parse_args(words[1:]))
+    keep = ("name", "description")
+    assert replace(again, **{k: getattr(original, k) for k in keep}) == original
+    assert cli.reproduce(original.as_dict()) == original.command_line()

@@ -169,23 +169,49 @@ class Scenario:
         """The longest any call may take (docs/api.md): every attempt, plus a handshake."""
         return self.ack_timeout * (self.max_retries + 1) + self.handshake_timeout
 
+    def as_dict(self) -> dict[str, Any]:
+        """The scenario's part of :meth:`SoakResult.as_dict` (what reproducing it needs)."""
+        return SoakResult(self).as_dict()
+
     def url(self, port: str, name: str) -> str:
         params = [*parse_qsl(self.faults), ("seed", str(self.seed)), ("paused", "1")]
         params.append(("name", name))
         return f"faulty://{port}?{urlencode(params)}"
 
     def command_line(self) -> str:
-        """The ``protoduino soak`` command that runs this scenario again."""
-        parts = ["protoduino soak", f"--backend {self.backend}", f"--commands {self.commands}"]
-        parts.append(f"--seed {self.seed}")
-        parts.append(f"--faults '{self.faults}'" if self.faults else "--faults ''")
-        if self.resets:
-            parts.append(f"--resets {self.resets}")
-        if self.cuts:
-            parts.append(f"--cuts {self.cuts} --cut-seconds {self.cut_seconds:g}")
-        if self.failsafe:
-            parts.append("--failsafe")
-        return " ".join(parts)
+        """The ``protoduino soak`` command that runs this scenario again (alone)."""
+        return command_line(
+            backend=self.backend,
+            commands=self.commands,
+            seed=self.seed,
+            faults=self.faults,
+            resets=self.resets,
+            cuts=self.cuts,
+            cut_seconds=self.cut_seconds,
+            failsafe=self.failsafe,
+        )
+
+
+def command_line(
+    *,
+    backend: str,
+    commands: int,
+    seed: int,
+    faults: str,
+    resets: int,
+    cuts: int,
+    cut_seconds: float,
+    failsafe: bool,
+) -> str:
+    """``protoduino soak`` options that run one scenario with these parameters, alone."""
+    parts = ["protoduino soak", f"--backend {backend}", f"--commands {commands}", f"--seed {seed}"]
+    parts.append(f"--faults '{faults}'")
+    parts.append(f"--resets {resets}")
+    if cuts:
+        parts.append(f"--cuts {cuts} --cut-seconds {cut_seconds:g}")
+    parts.append("--failsafe" if failsafe else "--no-failsafe")
+    parts.append("--kinds none")
+    return " ".join(parts)
 
 
 def fault_scenarios(commands: int, seed: int = 1, backend: str = "native") -> dict[str, Scenario]:
@@ -321,6 +347,10 @@ class SoakResult:
             "resets": s.resets,
             "cuts": s.cuts,
             "command_line": s.command_line(),
+            "commands": s.commands,
+            "cut_seconds": s.cut_seconds,
+            "failsafe": s.failsafe,
+            "recovery_commands": s.recovery_commands,
             "description": s.description,
             "servos": s.servos,
             "digitals": s.digitals,

@@ -50,10 +50,16 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="faulty:// parameters of the long scenario (default: %(default)s)",
     )
     parser.add_argument(
-        "--resets", type=int, default=20, metavar="N", help="device resets in the long scenario"
+        "--resets",
+        type=int,
+        default=20,
+        metavar="N",
+        help="device resets in the long scenario (default: %(default)s)",
     )
     parser.add_argument("--cuts", type=int, default=0, metavar="N", help="line cuts in it")
-    parser.add_argument("--cut-seconds", type=float, default=1.0, metavar="S", help="cut length")
+    parser.add_argument(
+        "--cut-seconds", type=float, default=1.0, metavar="S", help="cut length (default: 1)"
+    )
     parser.add_argument(
         "--failsafe",
         action=argparse.BooleanOptionalAction,
@@ -133,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         except (OSError, ValueError) as exc:
             return error("soak", f"cannot read {args.from_json}: {exc}")
         for r in results:
-            print(f"== {r['scenario']}: {r['command_line']}")
+            print(f"== {r['scenario']}: {reproduce(r)}")
             print(figures(r))
         argv = str(results[0].get("argv", "soak")) if results else "soak"
         return finish(args, results, argv)
@@ -176,6 +182,21 @@ def finish(args: argparse.Namespace, results: list[dict[str, Any]], argv: str) -
         return 1
     print(f"all {len(results)} scenarios passed every invariant")
     return 0
+
+
+def reproduce(r: dict[str, Any]) -> str:
+    """The command that runs one saved scenario again, alone (older JSON lacks some fields)."""
+    recovery = int(r.get("recovery_commands", 20))
+    return engine.command_line(
+        backend=str(r["backend"]),
+        commands=int(r.get("commands", int(r["sent"]) - recovery)),
+        seed=int(r["seed"]),
+        faults=str(r["faults"]),
+        resets=int(r["resets"]),
+        cuts=int(r["cuts"]),
+        cut_seconds=float(r.get("cut_seconds", 1.0)),
+        failsafe=bool(r.get("failsafe", r["failsafe_checked"])),
+    )
 
 
 def _ms(x: float | None) -> str:
@@ -272,7 +293,7 @@ def render_report(results: list[dict[str, Any]], argv: str) -> str:
             "",
             r["description"] or describe(r["faults"], r["resets"], r["cuts"]),
             "",
-            f"Reproduce: `{r['command_line']}` (seed {r['seed']}, {r['backend']} board, "
+            f"Reproduce: `{reproduce(r)}` (seed {r['seed']}, {r['backend']} board, "
             f"{r['servos']} servos and {r['digitals']} digital outputs, {r['workers']} calling "
             f"threads, window {r['window']}, ack timeout {r['ack_timeout']:g} s, "
             f"{r['max_retries']} retries).",
