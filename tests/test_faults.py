@@ -101,6 +101,7 @@ def test_delay_holds_bytes_back() -> None:
         port.write(b"abc\x00")
         assert port.read(10) == b"abc\x00"
         assert time.monotonic() - t0 >= 0.15
+        assert cast(FaultySerial, port).stats["delayed_bytes"] == 4
     finally:
         port.close()
 

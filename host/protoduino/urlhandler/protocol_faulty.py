@@ -145,6 +145,8 @@ class Serial(SerialBase):
             data = self._rx.apply(data)
         with self._lock:
             delay = self._cfg.delay > 0 and self._cfg.applies_to("rx") and not self._paused
+            if delay:
+                self.stats["delayed_bytes"] += len(data)
             if delay or self._delayed:
                 # Bytes never overtake delayed ones, even once the faults pause.
                 due = time.monotonic() + (self._cfg.delay / 1000 if delay else 0.0)
@@ -173,6 +175,7 @@ class Serial(SerialBase):
         if self._cfg.delay > 0 and self._cfg.applies_to("tx") and active:
             # Latency, not a slower line: the bytes leave later, in order, from
             # the next read or write (the caller polls reads continuously).
+            self.stats["delayed_bytes"] += len(out)
             with self._tx_lock:
                 self._tx_delayed.append((time.monotonic() + self._cfg.delay / 1000, out))
             self._flush_tx()
