@@ -124,7 +124,7 @@ def test_named_line_pause_resume_heal() -> None:
         port.write(frame)
         assert port.read(100) == frame
         assert line.stats["dropped_bytes"] == len(frame)
-        assert [raw for _, raw in line.writes] == [frame] * 3  # every write, as handed over
+        assert [raw for _, raw in line.recent_writes()] == [frame] * 3  # every write, as given
     finally:
         port.close()
     del port, line, found

@@ -40,7 +40,7 @@ import random
 import threading
 import time
 import weakref
-from collections import Counter, deque
+from collections import Counter
 from dataclasses import dataclass, fields
 from typing import Protocol
 from urllib.parse import parse_qsl
@@ -115,8 +115,8 @@ class FaultyLine(Protocol):
     """What an open ``faulty://`` port offers to code that drives a scenario."""
 
     stats: Counter[str]
-    #: (time write() was entered, bytes) for the recent writes towards the device.
-    writes: deque[tuple[float, bytes]]
+
+    def recent_writes(self) -> list[tuple[float, bytes]]: ...
 
     def cut(self, seconds: float) -> None: ...
 

@@ -676,7 +676,7 @@ def run(
             if fs_ping is not None:
                 _wait_for_failsafe(sim, outputs, fs_ping[1])
             result.faults = dict(runner.line().stats)
-            wire.writes = _write_times(runner.line().writes)
+            wire.writes = _write_times(runner.line().recent_writes())
             result.link = _link_figures(board, runner)
         result.faults["device_resets"] = len(runner.reboots)
         result.faults["line_cuts"] = len(runner.cuts)

@@ -17,7 +17,7 @@ from ..faults import Cut, FaultConfig, FaultModel, parse_url, register
 
 #: Longest time one read of the inner port blocks.
 POLL = 0.02
-#: Writes remembered with their time (:attr:`Serial.writes`).
+#: Writes remembered with their time (:meth:`Serial.recent_writes`).
 WRITE_LOG = 4096
 
 
@@ -37,10 +37,11 @@ class Serial(SerialBase):
         self._lock = threading.Lock()
         self._tx_lock = threading.Lock()
         self.stats: Counter[str] = Counter()
-        #: (time.monotonic() as write() was entered, the bytes as given) for the last
-        #: WRITE_LOG writes: when each frame left the caller, whatever the scheduler did
-        #: between its write and the caller's own record of it.
-        self.writes: deque[tuple[float, bytes]] = deque(maxlen=WRITE_LOG)
+        # (time.monotonic() as write() was entered, the bytes as given) for the last
+        # WRITE_LOG writes: when each frame left the caller, whatever the scheduler did
+        # between its write and the caller's own record of it. See recent_writes().
+        self._writes: deque[tuple[float, bytes]] = deque(maxlen=WRITE_LOG)
+        self._writes_lock = threading.Lock()
         super().__init__(*args, **kwargs)
 
     # --- pyserial plumbing ---------------------------------------------------
@@ -96,6 +97,14 @@ class Serial(SerialBase):
         if self._cut is None:
             raise PortNotOpenError()
         self._cut.cut(seconds)
+
+    def recent_writes(self) -> list[tuple[float, bytes]]:
+        """(time write() was entered, bytes) for the recent writes, oldest first.
+
+        A copy taken under a lock: the I/O thread may be writing meanwhile.
+        """
+        with self._writes_lock:
+            return list(self._writes)
 
     def pause(self) -> None:
         """Stop injecting random faults (cuts still apply; :meth:`heal` cancels them)."""
@@ -165,7 +174,8 @@ class Serial(SerialBase):
         """Accept every byte at once; damaged, delayed or cut on the way (never blocks longer)."""
         inner = self._require()
         raw = bytes(data)
-        self.writes.append((time.monotonic(), raw))
+        with self._writes_lock:
+            self._writes.append((time.monotonic(), raw))
         assert self._cut is not None
         if self._cut.active():
             self.stats["cut_bytes"] += len(raw)
