@@ -8,8 +8,10 @@ one line: append its name to ``SIM_BACKENDS`` (it must also be known to
 from __future__ import annotations
 
 import shutil
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from protoduino.simboard import SimBoard
@@ -35,3 +37,34 @@ def sim_board(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[SimBoa
         yield board
     finally:
         board.stop()
+
+
+#: The emulated Uno measures pulses on its pins: a few microseconds off. The native board is exact.
+PULSE_TOLERANCE_US = 3
+
+
+def pin_values(trace: list[dict[str, Any]], pin: int) -> list[int]:
+    """The values one pin took, in the trace's order."""
+    return [int(e["value"]) for e in trace if e["pin"] == pin]
+
+
+def wait_for_pin(
+    sim: SimBoard, pin: int, ok: Callable[[list[int]], bool], timeout: float = 5.0
+) -> list[int]:
+    """Wait until ``ok`` holds for the values ``pin`` took in the trace; return them.
+
+    The verdict is the trace's (what the pin did), not the wall clock's:
+    ``timeout`` only bounds how long a failing test waits. A command that
+    returned once acked has reached the device, not yet the pin (a servo
+    shows a new width at its next 20 ms frame, measured over two frames on
+    the emulated Uno), so a test that then changes the pin again must first
+    wait here for the change it wants to see.
+    """
+    deadline = time.monotonic() + timeout
+    while True:
+        values = pin_values(sim.trace(), pin)
+        if ok(values):
+            return values
+        if time.monotonic() > deadline:
+            raise AssertionError(f"pin {pin}: the trace shows {values}")
+        time.sleep(0.02)

@@ -18,7 +18,7 @@ import pytest
 from protoduino import Board, Event, EventKind
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard
-from simfixtures import SIM_BACKENDS
+from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS, pin_values
 
 SAFE_90_US = 544 + 90 * (2400 - 544) // 180  # 1472
 
@@ -48,13 +48,6 @@ def wait_until(predicate: Callable[[], bool], timeout: float) -> bool:
     return True
 
 
-def pin_values(trace: list[dict[str, Any]], pin: int) -> list[int]:
-    return [int(e["value"]) for e in trace if e["pin"] == pin]
-
-
-#: The emulated Uno measures pulses on its pins: a few microseconds off, and a pulse
-#: that lasted less than one 20 ms period may never show. The native board is exact.
-PULSE_TOLERANCE_US = 3
 BOARD_NAME = {"native": "sim", "avr": "uno"}
 
 

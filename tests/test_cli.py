@@ -11,6 +11,7 @@ from fakedevice import FakeDevice
 from protoduino.cli.main import COMMANDS, main
 from protoduino.cli.ports import classify
 from protoduino.simboard import SimBoard
+from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
 
 MINE = ["ports", "ping", "servo", "pin", "info", "monitor", "demo"]
 
@@ -123,18 +124,23 @@ def test_board_commands_against_the_sim(
     assert "firmware_version  0.1.0" in capsys.readouterr().out
     assert main(["ping", port, "-c", "2", "-i", "0.01", "-q"]) == 0
     assert "2 sent, 2 answered, 0 lost" in capsys.readouterr().out
+    # Each change is awaited in the trace before the next command: an Ack says the
+    # device took the value, the pin shows it at the next servo frame.
+    near = PULSE_TOLERANCE_US
     assert main(["servo", port, "9", "0"]) == 0
+    wait_for_pin(sim_board, 9, lambda v: bool(v) and abs(v[-1] - 544) <= near)
     assert main(["servo", port, "9", "2000", "--us"]) == 0
+    wait_for_pin(sim_board, 9, lambda v: bool(v) and abs(v[-1] - 2000) <= near)
     assert main(["pin", port, "13", "on"]) == 0
+    wait_for_pin(sim_board, 13, lambda v: v[-1:] == [1])
     assert main(["servo", port, "13", "90"]) == 1  # the device refuses: pin in use
     assert "STATUS_PIN_IN_USE" in capsys.readouterr().err
     assert main(["monitor", port, "--duration", "0.3", "--json"]) == 0
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert any(line.get("message", {}).get("code") == "RESET_ACK" for line in lines)
-    servo = [e["value"] for e in sim_board.trace() if e["pin"] == 9]
-    # the emulated Uno measures its pulses, a few microseconds off
-    assert abs(servo[-1] - 2000) <= 3 and any(abs(v - 544) <= 3 for v in servo)
-    assert [e["value"] for e in sim_board.trace() if e["pin"] == 13][-1] == 1
+    # The refused command and the monitor changed nothing at the pins.
+    assert abs(pin_values(sim_board.trace(), 9)[-1] - 2000) <= near
+    assert pin_values(sim_board.trace(), 13)[-1] == 1
 
 
 @pytest.mark.slow

@@ -43,7 +43,7 @@ from protoduino.packets import (
     reset_payload,
 )
 from protoduino.simboard import SimBoard
-from simfixtures import SIM_BACKENDS
+from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS
 
 VECTORS = Path(__file__).parent / "vectors" / "wire_v1.json"
 #: Generous bound for any single reply; the simulated board answers in well under 1 ms.
@@ -52,8 +52,6 @@ REPLY_TIMEOUT = 2.0
 TRACE_TIMEOUT = 2.0
 #: Long enough for any pending trace line: a servo frame, a measured pin's 30 ms low wait.
 QUIET = 0.1
-#: Servo pulse widths measured at an emulated pin may be off by this much (interrupt latency).
-PULSE_TOLERANCE_US = 3
 #: Board name each backend reports in DeviceInfo.
 BOARD_NAME = {"native": "sim", "avr": "uno"}
 #: The failsafe may fire up to this long after FAILSAFE_TIMEOUT (issue 3: 10.0 s + 20 ms).
