@@ -98,14 +98,15 @@ def _stats_backend(stats: Path, profile: Path | None) -> Backend:
 
 def _echo_backend() -> Backend:
     """The runner with its own test program, which echoes every UART byte at once."""
-    from protoduino import emulator
+    from protoduino.simboard import runner_command
+    from protoduino_dev import build as builds
 
     def build() -> Path:
-        emulator.build_test_program()
-        return emulator.build_runner()
+        builds.build_test_program()
+        return builds.build_runner()
 
     def command(trace: Path | None, link: Path | None) -> list[str]:
-        return emulator.runner_command(emulator.TEST_PROGRAM, trace=trace, link=link)
+        return runner_command(builds.TEST_PROGRAM, trace=trace, link=link)
 
     return Backend(build=build, command=command)
 

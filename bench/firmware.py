@@ -28,8 +28,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from tempfile import TemporaryDirectory
 
-from protoduino import Board, emulator
+from protoduino import Board
 from protoduino.errors import BuildError
+from protoduino_dev import build as builds
 
 from . import charts
 from .boards import UNO_HZ, BoardUnavailableError, CycleCounter, CycleStats, started
@@ -233,7 +234,7 @@ def _busy(delta: CycleStats, idle_share: float) -> float:
 
 
 def measure_cycles(samples: int, commands: int) -> CycleRun:
-    symbols = Symbols.of(emulator.FIRMWARE_ELF)
+    symbols = Symbols.of(builds.FIRMWARE_ELF)
     with TemporaryDirectory(prefix="bench-fw-") as tmp:
         stats = Path(tmp) / "stats.jsonl"
         profile_path = Path(tmp) / "profile.txt"
@@ -286,7 +287,7 @@ def measure_cycles(samples: int, commands: int) -> CycleRun:
 def run(ctx: Context) -> SectionResult:
     load = os.getloadavg()[0]
     try:
-        elf = emulator.build_firmware()
+        elf = builds.build_firmware()
         size = footprint(elf)
     except (BuildError, BoardUnavailableError, subprocess.SubprocessError, OSError) as error:
         reason = str(error).splitlines()[0]

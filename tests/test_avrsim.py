@@ -27,7 +27,8 @@ from typing import Any
 
 import pytest
 import serial
-from protoduino import emulator
+from protoduino.simboard import runner_command
+from protoduino_dev import build
 
 pytestmark = pytest.mark.avr
 
@@ -48,7 +49,7 @@ def built() -> tuple[Path, Path]:
     missing = _missing_tool()
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
-    return emulator.build_runner(), emulator.build_test_program()
+    return build.build_runner(), build.build_test_program()
 
 
 class Runner:
@@ -56,7 +57,7 @@ class Runner:
 
     def __init__(self, tmp: Path, *extra: str, link: Path | None = None) -> None:
         self.trace_path = tmp / f"trace-{id(self)}.jsonl"
-        cmd = emulator.runner_command(emulator.TEST_PROGRAM, trace=self.trace_path, link=link)
+        cmd = runner_command(build.TEST_PROGRAM, trace=self.trace_path, link=link)
         cmd[-1:-1] = list(extra)
         self.started = time.monotonic()
         self.proc = subprocess.Popen(

@@ -386,9 +386,9 @@ def test_raw_client_round_trip_on_the_simulated_board() -> None:
 
 def _built_elf() -> Path:
     _need("avr")
-    from protoduino import emulator
+    from protoduino_dev import build
 
-    return emulator.build_firmware()
+    return build.build_firmware()
 
 
 @pytest.mark.avr

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import protoduino
 import pytest
-from protoduino import codegen
 from protoduino._generated import protoduino_pb2 as pb
+from protoduino_dev import codegen
 
 ROOT = codegen.repo_root()
 

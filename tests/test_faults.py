@@ -7,15 +7,14 @@ import time
 from collections import Counter
 from typing import cast
 
-import protoduino  # noqa: F401  (registers faulty://)
 import pytest
 import serial
-from protoduino import faults
 from protoduino.constants import PacketType
-from protoduino.faults import FaultConfig, FaultModel, parse_url
 from protoduino.framing import StreamDecoder, frame_packet
 from protoduino.packets import Packet
-from protoduino.urlhandler.protocol_faulty import Serial as FaultySerial
+from protoduino_dev import faults  # importing protoduino_dev registers faulty://
+from protoduino_dev.faults import FaultConfig, FaultModel, parse_url
+from protoduino_dev.urlhandler.protocol_faulty import Serial as FaultySerial
 
 
 def _traffic(n: int = 400) -> tuple[list[Packet], bytes]:

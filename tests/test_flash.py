@@ -21,10 +21,12 @@ from pathlib import Path
 import protoduino
 import pytest
 import serial
-from protoduino import emulator
 from protoduino.constants import PROTOCOL_VERSION, ControlCode, PacketType
+from protoduino.flashing import strip_to_hex
 from protoduino.framing import StreamDecoder, frame_packet
 from protoduino.packets import Packet, parse_control, reset_payload
+from protoduino.simboard import runner_command
+from protoduino_dev import build
 
 pytestmark = pytest.mark.avr
 
@@ -37,7 +39,7 @@ def _missing_tool() -> str | None:
             return tool
     if not Path("/usr/include/simavr/sim_avr.h").exists():
         return "libsimavr-dev"
-    if not (Path(emulator.AVRSIM_DIR).exists() and Path("/usr/share/arduino").exists()):
+    if not (Path(build.AVRSIM_DIR).exists() and Path("/usr/share/arduino").exists()):
         return "arduino-core-avr (Optiboot sources)"
     return None
 
@@ -84,16 +86,16 @@ def tools() -> None:
     missing = _missing_tool()
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
-    emulator.build_runner()
-    emulator.build_optiboot()
+    build.build_runner()
+    build.build_optiboot()
 
 
 @pytest.fixture
 def blank_uno(tools: None, tmp_path: Path) -> Iterator[Board]:
     """Optiboot alone in the flash, started at the bootloader, auto-reset on open."""
-    cmd = emulator.runner_command(
-        hex_files=[emulator.OPTIBOOT_HEX],
-        boot_address=emulator.OPTIBOOT_ADDRESS,
+    cmd = runner_command(
+        hex_files=[build.OPTIBOOT_HEX],
+        boot_address=build.OPTIBOOT_ADDRESS,
         auto_reset=True,
         link=tmp_path / "uno",
     )
@@ -145,10 +147,10 @@ def test_flash_reports_a_port_that_does_not_exist(tools: None, tmp_path: Path) -
 
 def test_flash_reports_when_no_bootloader_answers(tools: None, tmp_path: Path) -> None:
     """A board running the runner's test program (an echo, no bootloader)."""
-    program = emulator.build_test_program()
-    board = Board(emulator.runner_command(program))
+    program = build.build_test_program()
+    board = Board(runner_command(program))
     try:
-        hex_file = emulator.strip_to_hex(program, tmp_path / "testprog.hex")
+        hex_file = strip_to_hex(program, tmp_path / "testprog.hex")
         result = _protoduino("flash", board.port, "--hex", str(hex_file))
     finally:
         board.close()

@@ -4,7 +4,7 @@ Part one drives the request layer against the scripted fake device, whose
 dedupe window behaves like the firmware's (the last 16 ids), to pin down the
 dedupe guard in ``protoduino.rpc``: a retransmission must still find its id in
 the device's window. Part two runs short seeded scenarios of every fault kind
-on the simulated board (``protoduino.soak``), each judged against the board's
+on the simulated board (``protoduino_dev.soak``), each judged against the board's
 own trace, on every backend of ``SIM_BACKENDS``. Part three makes sure the
 judge itself can fail.
 """
@@ -24,10 +24,11 @@ import fakedevice
 import protoduino
 import pytest
 from fakedevice import FakeDevice
-from protoduino import Board, faults, soak
+from protoduino import Board
 from protoduino.constants import DEDUPE_WINDOW, FAILSAFE_TIMEOUT, WATCHDOG_TIMEOUT
 from protoduino.rpc import Rpc
 from protoduino.simboard import SimBoard
+from protoduino_dev import faults, soak
 from simfixtures import SIM_BACKENDS
 
 # --- exactly once: the dedupe guard -----------------------------------------------------
@@ -532,7 +533,7 @@ def test_soak_command_runs_reports_and_rerenders(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from protoduino.cli.main import main
-    from protoduino.cli.soak import KEEP_MARKER
+    from protoduino_dev.cli.soak import KEEP_MARKER
 
     report, data = tmp_path / "reliability.md", tmp_path / "figures.json"
     report.write_text(f"old generated part\n{KEEP_MARKER}\n## Fuzzing\nkept by hand\n")
@@ -617,8 +618,8 @@ def test_a_held_new_ping_does_not_block_the_retransmission_it_waits_for(
 def test_the_reproduce_command_runs_the_same_scenario(kind: str) -> None:
     import shlex
 
-    from protoduino.cli import soak as cli
     from protoduino.cli.main import build_parser
+    from protoduino_dev.cli import soak as cli
 
     original = soak.fault_scenarios(700, 9, "avr")[kind]
     words = shlex.split(cli.reproduce(original.as_dict()))

@@ -6,7 +6,8 @@
 #   ./tools/dev.sh setup   set up only
 #
 # Setup is idempotent: Debian packages (installed only when missing), a
-# virtual environment in .venv with the package and its pinned dev extras,
+# virtual environment in .venv with the package, its pinned dev extras and the
+# development tools (dev/, the protoduino_dev package),
 # and the nanopb C runtime from Debian's source package (.deps/nanopb).
 set -euo pipefail
 
@@ -51,13 +52,13 @@ setup_venv() {
     local stamp="$venv/.protoduino-deps"
     local want
     # setup.py's sources too: the editable install compiles protoduino._speedups from them.
-    want=$(cat pyproject.toml constraints.txt tools/bench_setup.sh setup.py host/protoduino/_speedups.c \
+    want=$(cat pyproject.toml dev/pyproject.toml constraints.txt tools/bench_setup.sh setup.py host/protoduino/_speedups.c \
         firmware/core/pd_cobs.[ch] firmware/core/pd_crc.[ch] firmware/core/pd_protocol.h |
         sha256sum | cut -d' ' -f1)
     if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
         log "installing protoduino and its pinned dev dependencies into $venv"
         "$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt pip setuptools
-        "$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[dev]"
+        "$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[dev]" -e ./dev
         # The libraries the benchmarks compare against, so their smoke tests run too.
         VENV="$venv" "$root/tools/bench_setup.sh" >/dev/null
         echo "$want" >"$stamp"

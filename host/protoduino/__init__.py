@@ -9,8 +9,6 @@ See README.md for the API and docs/protocol.md for the wire protocol.
 
 from __future__ import annotations
 
-import serial as _serial
-
 from ._generated.schema_id import SCHEMA_ID
 from .board import Board, DeviceInfo, DigitalOutput, Servo
 from .constants import PROTOCOL_VERSION
@@ -30,10 +28,6 @@ from .errors import (
 from .events import Event, EventKind, Stats
 
 __version__ = "0.1.0"
-
-# Make the faulty:// URL (protoduino.faults) known to serial.serial_for_url.
-if "protoduino.urlhandler" not in _serial.protocol_handler_packages:
-    _serial.protocol_handler_packages.append("protoduino.urlhandler")
 
 __all__ = [
     "PROTOCOL_VERSION",

@@ -1,13 +1,15 @@
-"""Build, start and stop a simulated board: a real firmware core behind a pty.
+"""Start and stop a simulated board: a real firmware core behind a pty.
 
 Backends:
 
 * ``native``: the firmware's portable core compiled for this machine with a
-  POSIX HAL (``make -C firmware sim`` -> ``build/sim/pd_sim``). Needs only gcc.
-* ``avr``: the firmware's Uno build (``make -C firmware avr``) on an emulated
-  ATmega328P at 16 MHz (simavr, ``tools/avrsim`` -> ``build/avrsim/avrsim``),
-  paced to real time; its trace is measured at the emulated pins. Needs
-  avr-gcc and libsimavr-dev. Reboot = reset of the emulated MCU.
+  POSIX HAL (the program ``pd_sim``).
+* ``avr``: the firmware's Uno build on an emulated ATmega328P at 16 MHz (simavr,
+  the runner ``avrsim``), paced to real time; its trace is measured at the
+  emulated pins. Reboot = reset of the emulated MCU.
+
+Where the programs come from (a wheel's bundled copies, or built from the
+sources in a checkout) is :mod:`protoduino.programs`' business.
 
 Each backend is one entry in :data:`BACKENDS`: how to build it and the command
 that runs it. Every backend's program takes ``--trace FILE`` and ``--link
@@ -25,8 +27,6 @@ Typical use, in tests and in ``protoduino demo``::
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
 import json
 import logging
 import os
@@ -34,24 +34,19 @@ import select
 import signal
 import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
-from .errors import BuildError, TransportError
+from . import programs
+from .errors import TransportError
+from .flashing import MCU
 
 logger = logging.getLogger(__name__)
 
-ROOT = Path(__file__).resolve().parents[2]
-FIRMWARE_DIR = ROOT / "firmware"
-BUILD = ROOT / "build"
-#: make's cache is per file; this lock keeps two processes from building at once.
-BUILD_LOCK = BUILD / ".build.lock"
-MAKE_TIMEOUT = 300.0
 STOP_TIMEOUT = 5.0
-_TAIL_CHARS = 4000
 
 
 @dataclass(frozen=True)
@@ -64,47 +59,12 @@ class Backend:
     command: Callable[[Path | None, Path | None], list[str]]
 
 
-@contextlib.contextmanager
-def _build_lock() -> Iterator[None]:
-    BUILD.mkdir(parents=True, exist_ok=True)
-    with BUILD_LOCK.open("a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
-
-
-def make(directory: Path, *targets: str) -> None:
-    """Run make quietly; raise :class:`BuildError` with the tail of its output on failure."""
-    if not (directory / "Makefile").is_file():
-        raise BuildError(
-            f"{directory / 'Makefile'} not found: the simulated board is built from a "
-            "source checkout (git clone, then ./tools/dev.sh setup)"
-        )
-    cmd = ["make", "-s", "-C", str(directory), *targets]
-    with _build_lock():
-        try:
-            result = subprocess.run(
-                cmd, capture_output=True, text=True, check=False, timeout=MAKE_TIMEOUT
-            )
-        except FileNotFoundError as error:
-            raise BuildError("`make` is not installed (run ./tools/dev.sh setup)") from error
-        except subprocess.TimeoutExpired as error:
-            raise BuildError(f"`{' '.join(cmd)}` did not finish in {MAKE_TIMEOUT:.0f} s") from error
-    if result.returncode != 0:
-        output = (result.stdout + result.stderr).strip()[-_TAIL_CHARS:]
-        raise BuildError(f"`{' '.join(cmd)}` failed (exit {result.returncode}):\n{output}")
-    logger.debug("%s: ok", " ".join(cmd))
-
-
 def _build_native() -> Path:
-    make(FIRMWARE_DIR, "sim")
-    return BUILD / "sim" / "pd_sim"
+    return programs.locate(programs.NATIVE_SIM)
 
 
 def _native_command(trace: Path | None, link: Path | None) -> list[str]:
-    cmd = [str(BUILD / "sim" / "pd_sim")]
+    cmd = [str(programs.locate(programs.NATIVE_SIM))]
     if trace is not None:
         cmd += ["--trace", str(trace)]
     if link is not None:
@@ -113,17 +73,48 @@ def _native_command(trace: Path | None, link: Path | None) -> list[str]:
 
 
 def _build_avr() -> Path:
-    # The emulated Uno: the simavr runner (tools/avrsim) and the real firmware ELF.
-    from . import emulator
-
-    emulator.build_firmware()
-    return emulator.build_runner()
+    # The emulated Uno: the simavr runner and the real firmware ELF.
+    programs.locate(programs.FIRMWARE_ELF)
+    return programs.locate(programs.RUNNER)
 
 
 def _avr_command(trace: Path | None, link: Path | None) -> list[str]:
-    from . import emulator
+    return runner_command(programs.locate(programs.FIRMWARE_ELF), trace=trace, link=link)
 
-    return emulator.runner_command(emulator.FIRMWARE_ELF, trace=trace, link=link)
+
+def runner_command(
+    firmware: Path | None = None,
+    *,
+    runner: Path | None = None,
+    trace: Path | None = None,
+    link: Path | None = None,
+    hex_files: Sequence[Path] = (),
+    boot_address: int | None = None,
+    auto_reset: bool = False,
+) -> list[str]:
+    """The runner's command line (same options as the native board, plus flashing ones).
+
+    ``boot_address`` starts the MCU there (BOOTRST) with the external-reset
+    flag set, as after pressing reset; ``auto_reset`` resets it whenever a
+    client opens the port, as a real Uno's DTR line does. ``runner`` defaults
+    to the located (in a checkout: freshly built) ``avrsim``.
+    """
+    if runner is None:
+        runner = programs.locate(programs.RUNNER)
+    cmd = [str(runner), "--mcu", MCU, "--freq", "16000000"]
+    if trace is not None:
+        cmd += ["--trace", str(trace)]
+    if link is not None:
+        cmd += ["--link", str(link)]
+    for hex_file in hex_files:
+        cmd += ["--hex", str(hex_file)]
+    if boot_address is not None:
+        cmd += ["--boot", f"0x{boot_address:X}"]
+    if auto_reset:
+        cmd.append("--auto-reset")
+    if firmware is not None:
+        cmd.append(str(firmware))
+    return cmd
 
 
 #: Backend name -> how to build and run it.
@@ -143,7 +134,7 @@ def _backend(name: str) -> Backend:
 
 
 def build(backend: str = "native") -> Path:
-    """Build the board's program if needed (make caches it) and return its path."""
+    """The board's program (in a checkout: built first, make caches it)."""
     return _backend(backend).build()
 
 

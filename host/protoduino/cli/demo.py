@@ -45,12 +45,12 @@ class _Clock:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..simboard import SimBoard  # imported here: only the demo needs the builder
+    from ..simboard import SimBoard  # imported here: only the demo starts a board
 
     clock = _Clock()
     with tempfile.TemporaryDirectory(prefix="protoduino-demo-") as tmp:
         trace_path = args.trace or Path(tmp) / "trace.jsonl"
-        clock.say(f"building and starting the simulated board ({args.backend}) ...")
+        clock.say(f"starting the simulated board ({args.backend}) ...")
         try:
             with SimBoard(args.backend, trace=trace_path) as sim:
                 port = sim.start()

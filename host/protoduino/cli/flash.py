@@ -1,4 +1,4 @@
-"""``protoduino flash``: build the Uno firmware if needed and upload it through the bootloader."""
+"""``protoduino flash``: upload the Uno firmware through the bootloader with avrdude."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-HELP = "build the Uno firmware if needed and upload it with avrdude through the bootloader"
+HELP = "upload the Uno firmware (this version's, or --hex) with avrdude through the bootloader"
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -16,7 +16,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--hex",
         type=Path,
         default=None,
-        help="flash this Intel hex (or ELF, converted) instead of building the firmware",
+        help="flash this Intel hex (or ELF, converted) instead of this version's firmware",
     )
     parser.add_argument(
         "--baud", type=int, default=115200, help="bootloader baud rate (Optiboot: 115200)"
@@ -24,17 +24,15 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..emulator import build_firmware_hex, flash, strip_to_hex
+    from .. import programs
     from ..errors import BuildError, FlashError
+    from ..flashing import flash, strip_to_hex
 
     try:
         with tempfile.TemporaryDirectory(prefix="protoduino-flash-") as tmp:
             if args.hex is None:
-                print(
-                    "protoduino flash: building the firmware (make -C firmware avr)",
-                    file=sys.stderr,
-                )
-                hex_file = build_firmware_hex()
+                # In a source checkout this builds it first (make -C firmware avr).
+                hex_file = programs.locate(programs.FIRMWARE_HEX)
             elif args.hex.suffix == ".elf":
                 # An ELF may carry .eeprom or simavr's .mmcu: convert without them.
                 hex_file = strip_to_hex(args.hex, Path(tmp) / "firmware.hex")

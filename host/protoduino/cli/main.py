@@ -3,6 +3,11 @@
 Each subcommand lives in its own module exposing ``HELP`` (one line),
 ``register(parser)`` to add its arguments and ``run(args) -> int``. Adding a
 command means adding a module and its name to ``COMMANDS``.
+
+The development commands (``gen``, ``soak``) live in the separate package
+``protoduino_dev`` (``dev/`` in the source checkout), which a user's
+``pip install protoduino`` does not carry: without it they are still listed,
+and say how to get them instead of failing with an import error.
 """
 
 from __future__ import annotations
@@ -16,25 +21,53 @@ from types import ModuleType
 
 from .. import __version__
 
-#: Subcommand name -> module below protoduino.cli.
+DEV_PACKAGE = "protoduino_dev"
+DEV_MISSING = (
+    "`protoduino {name}` is a development command: it works in a source checkout "
+    "with the development tools installed (git clone, then ./tools/dev.sh setup, "
+    "which installs the protoduino_dev package from dev/)"
+)
+
+#: Subcommand name -> its module.
 COMMANDS: dict[str, str] = {
-    "gen": "gen",
-    "decode": "decode",
-    "ports": "ports",
-    "ping": "ping",
-    "servo": "servo",
-    "pin": "pin",
-    "info": "info",
-    "monitor": "monitor",
-    "flash": "flash",
-    "sim": "sim",
-    "demo": "demo",
-    "soak": "soak",
+    "decode": f"{__package__}.decode",
+    "ports": f"{__package__}.ports",
+    "ping": f"{__package__}.ping",
+    "servo": f"{__package__}.servo",
+    "pin": f"{__package__}.pin",
+    "info": f"{__package__}.info",
+    "monitor": f"{__package__}.monitor",
+    "flash": f"{__package__}.flash",
+    "sim": f"{__package__}.sim",
+    "demo": f"{__package__}.demo",
+    "gen": f"{DEV_PACKAGE}.cli.gen",
+    "soak": f"{DEV_PACKAGE}.cli.soak",
 }
 
 
-def _load(module: str) -> ModuleType:
-    return importlib.import_module(f"{__package__}.{module}")
+class _Missing:
+    """Stands in for a development command whose package is not installed."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.HELP = f"(development tools; not installed: see `protoduino {name} -h`)"
+
+    def register(self, parser: argparse.ArgumentParser) -> None:
+        parser.description = DEV_MISSING.format(name=self.name)
+        parser.add_argument("args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+
+    def run(self, args: argparse.Namespace) -> int:
+        print(f"protoduino {self.name}: " + DEV_MISSING.format(name=self.name), file=sys.stderr)
+        return 2
+
+
+def _load(name: str, module: str) -> ModuleType | _Missing:
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as error:
+        if module.startswith(DEV_PACKAGE) and error.name == DEV_PACKAGE:
+            return _Missing(name)
+        raise
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -46,7 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, module in COMMANDS.items():
-        mod = _load(module)
+        mod = _load(name, module)
         p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
         mod.register(p)
         p.set_defaults(_run=mod.run)

@@ -19,7 +19,7 @@ from ..events import Event
 from ..messages import packet_to_json
 from ..packets import BadFrame
 from ..transport import FrameRecord
-from .options import add_port, error
+from .options import add_port, error, load_url_handlers
 
 HELP = "show live decoded traffic (readable lines or JSON) with the link counters"
 
@@ -107,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def open_board_with_monitor(args: argparse.Namespace, sink: Any) -> Board:
+    load_url_handlers(args.port)
     return Board.open(
         args.port,
         baudrate=args.baud,

@@ -9,7 +9,7 @@ from collections.abc import Callable
 
 from ..board import Board
 from ..constants import ACK_TIMEOUT, HANDSHAKE_TIMEOUT
-from ..errors import ProtoduinoError
+from ..errors import ProtoduinoError, TransportError
 
 
 def add_port(parser: argparse.ArgumentParser) -> None:
@@ -34,7 +34,25 @@ def add_port(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def load_url_handlers(port: str) -> None:
+    """Make ``faulty://`` known when PORT asks for it.
+
+    The seeded line faults are development tooling (protoduino_dev), which the runtime does
+    not import: an application that imports protoduino gets no extra URL scheme.
+    """
+    if not port.startswith("faulty://"):
+        return
+    try:
+        import protoduino_dev  # noqa: F401  (registers faulty://)
+    except ModuleNotFoundError as exc:
+        raise TransportError(
+            "faulty:// URLs come with the development tools (protoduino_dev): in a source "
+            "checkout run ./tools/dev.sh setup"
+        ) from exc
+
+
 def open_board(args: argparse.Namespace, *, ping: bool = True) -> Board:
+    load_url_handlers(args.port)
     return Board.open(
         args.port,
         baudrate=args.baud,

@@ -1,4 +1,4 @@
-"""``protoduino sim``: build the simulated board on first use and run it in the foreground.
+"""``protoduino sim``: run a simulated board in the foreground.
 
 The board's program replaces this process (exec), so its first stdout line, the
 port to connect to, is the first line the user sees, and Ctrl-C or SIGTERM
@@ -15,7 +15,7 @@ from ..errors import ProtoduinoError
 from ..simboard import BACKENDS, build, command
 from .options import error
 
-HELP = "run a simulated board (builds it on first use); prints the port to connect to first"
+HELP = "run a simulated board; prints the port to connect to first"
 
 
 def register(parser: argparse.ArgumentParser) -> None:

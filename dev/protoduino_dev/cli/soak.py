@@ -6,7 +6,7 @@ then one scenario per fault kind (bit errors, bursts, dropped bytes, garbage,
 duplicated frames, latency, line cuts, device resets). Each prints its figures
 as it ends; ``--report docs/reliability.md`` writes them all as Markdown, with
 the command that reproduces each. The exit status is 1 if any invariant was
-violated (see :mod:`protoduino.soak`).
+violated (see :mod:`protoduino_dev.soak`).
 """
 
 from __future__ import annotations
@@ -21,10 +21,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from protoduino.cli.options import error
+from protoduino.errors import ProtoduinoError
+
 from .. import soak as engine
-from ..errors import ProtoduinoError
 from ..soak import Scenario, fault_scenarios
-from .options import error
 
 HELP = "run seeded fault scenarios on the simulated board and report what happened"
 
@@ -267,8 +268,8 @@ def render_report(results: list[dict[str, Any]], argv: str) -> str:
         f"({platform.machine()}, "
         f"Python {platform.python_version()}); `protoduino soak --from-json` re-renders it. "
         "Each scenario opens a simulated board with a trace, talks to it through the seeded "
-        "`faulty://` line (`protoduino.faults`) and checks the board's own record of its "
-        "outputs against what the host sent (`protoduino.soak`): no corrupted command "
+        "`faulty://` line (`protoduino_dev.faults`) and checks the board's own record of its "
+        "outputs against what the host sent (`protoduino_dev.soak`): no corrupted command "
         "executed, no message id executed twice within one boot, every call returned or "
         "raised within `ACK_TIMEOUT x (MAX_RETRIES + 1) + HANDSHAKE_TIMEOUT`, the link "
         "recovered by itself once the faults stopped, and (long run) the failsafe fired "

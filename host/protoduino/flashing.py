@@ -1,16 +1,8 @@
-"""The emulated Uno's pieces and the flashing logic.
+"""Flashing the Uno: upload the firmware's Intel hex through its bootloader with avrdude.
 
-Builds (each through ``make``, so repeated calls cost a few milliseconds):
-
-- the simavr runner ``build/avrsim/avrsim`` and its test program
-  (``tools/avrsim/``),
-- Optiboot in a 1 KB boot section at 0x7C00 (``build/optiboot/optiboot.hex``),
-- the firmware's Uno build (``make -C firmware avr``: ``build/avr/protoduino.{elf,hex}``).
-
-``flash()`` uploads an Intel hex through a board's bootloader with avrdude,
-exactly as for a real Uno; against the runner started with
-``runner_command(boot_address=OPTIBOOT_ADDRESS, auto_reset=True, ...)`` the
-same code path writes and verifies the emulated flash.
+``flash()`` talks to the bootloader exactly as the Arduino IDE does; against the emulated Uno
+started with Optiboot and auto-reset (``protoduino.simboard.runner_command``) the same code
+path writes and verifies the emulated flash (tests/test_flash.py).
 """
 
 from __future__ import annotations
@@ -21,7 +13,6 @@ import select
 import shutil
 import subprocess
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
@@ -29,62 +20,12 @@ from .errors import BuildError, FlashError
 
 logger = logging.getLogger(__name__)
 
-ROOT = Path(__file__).resolve().parents[2]
-BUILD = ROOT / "build"
-AVRSIM_DIR = ROOT / "tools" / "avrsim"
-FIRMWARE_DIR = ROOT / "firmware"
-
-RUNNER = BUILD / "avrsim" / "avrsim"
-TEST_PROGRAM = BUILD / "avrsim" / "testprog.elf"
-OPTIBOOT_HEX = BUILD / "optiboot" / "optiboot.hex"
-#: Start of the 1 KB boot section (hfuse BOOTSZ = 10) where Optiboot is linked.
-OPTIBOOT_ADDRESS = 0x7C00
-FIRMWARE_ELF = BUILD / "avr" / "protoduino.elf"
-FIRMWARE_HEX = BUILD / "avr" / "protoduino.hex"
-
 MCU = "atmega328p"
 DEFAULT_BAUD = 115200
 #: Upper bound for one avrdude run (about 1.5 s for 11 KB; avrdude's own
 #: retries against a silent port take longer, but not this long).
 FLASH_TIMEOUT = 120.0
 _TAIL_CHARS = 4000
-
-
-def _make(directory: Path, *targets: str) -> None:
-    # One make helper for the project (with its build lock), from simboard.
-    from .simboard import make
-
-    make(directory, *targets)
-
-
-def build_runner() -> Path:
-    """Build the simavr runner (cached by make) and return its path."""
-    _make(AVRSIM_DIR, "runner")
-    return RUNNER
-
-
-def build_test_program() -> Path:
-    """Build the runner's own AVR test program and return its ELF."""
-    _make(AVRSIM_DIR, "testprog")
-    return TEST_PROGRAM
-
-
-def build_optiboot() -> Path:
-    """Build Optiboot for the 1 KB boot section and return its hex."""
-    _make(AVRSIM_DIR, "optiboot")
-    return OPTIBOOT_HEX
-
-
-def build_firmware() -> Path:
-    """Build the firmware's Uno target and return its ELF."""
-    _make(FIRMWARE_DIR, "avr")
-    return FIRMWARE_ELF
-
-
-def build_firmware_hex() -> Path:
-    """Build the firmware's Uno target and return its flashable hex."""
-    _make(FIRMWARE_DIR, "avr")
-    return FIRMWARE_HEX
 
 
 def strip_to_hex(elf: Path, out: Path) -> Path:
@@ -101,37 +42,6 @@ def strip_to_hex(elf: Path, out: Path) -> Path:
     if result.returncode != 0:
         raise BuildError(f"avr-objcopy failed on {elf}: {result.stderr.strip()}")
     return out
-
-
-def runner_command(
-    firmware: Path | None = None,
-    *,
-    trace: Path | None = None,
-    link: Path | None = None,
-    hex_files: Sequence[Path] = (),
-    boot_address: int | None = None,
-    auto_reset: bool = False,
-) -> list[str]:
-    """The runner's command line (same options as the native board, plus flashing ones).
-
-    ``boot_address`` starts the MCU there (BOOTRST) with the external-reset
-    flag set, as after pressing reset; ``auto_reset`` resets it whenever a
-    client opens the port, as a real Uno's DTR line does.
-    """
-    cmd = [str(RUNNER), "--mcu", MCU, "--freq", "16000000"]
-    if trace is not None:
-        cmd += ["--trace", str(trace)]
-    if link is not None:
-        cmd += ["--link", str(link)]
-    for hex_file in hex_files:
-        cmd += ["--hex", str(hex_file)]
-    if boot_address is not None:
-        cmd += ["--boot", f"0x{boot_address:X}"]
-    if auto_reset:
-        cmd.append("--auto-reset")
-    if firmware is not None:
-        cmd.append(str(firmware))
-    return cmd
 
 
 def _explain_failure(port: str, output: str) -> str:
@@ -175,7 +85,10 @@ def flash(
         raise FlashError(f"no firmware file {hex_file}")
     avrdude = shutil.which("avrdude")
     if avrdude is None:
-        raise FlashError("avrdude is not installed (Debian package avrdude)")
+        raise FlashError(
+            "avrdude is not installed; it is the one tool protoduino flash needs "
+            "(Debian, Ubuntu, Raspberry Pi OS: sudo apt install avrdude)"
+        )
     cmd = [
         avrdude,
         "-c",

@@ -1,4 +1,4 @@
-"""pyserial handler for ``faulty://INNER?params``: see :mod:`protoduino.faults`."""
+"""pyserial handler for ``faulty://INNER?params``: see :mod:`protoduino_dev.faults`."""
 
 from __future__ import annotations
 

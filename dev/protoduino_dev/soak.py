@@ -50,8 +50,8 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qsl, urlencode
 
-from .board import Board, DigitalOutput, Servo
-from .constants import (
+from protoduino.board import Board, DigitalOutput, Servo
+from protoduino.constants import (
     ACK_TIMEOUT,
     FAILSAFE_TIMEOUT,
     HANDSHAKE_TIMEOUT,
@@ -59,14 +59,15 @@ from .constants import (
     WATCHDOG_TIMEOUT,
     PacketType,
 )
-from .errors import AckTimeoutError, CommandRejectedError, ProtocolError, ProtoduinoError
-from .events import Event, EventKind
+from protoduino.errors import AckTimeoutError, CommandRejectedError, ProtocolError, ProtoduinoError
+from protoduino.events import Event, EventKind
+from protoduino.framing import decode_frame
+from protoduino.messages import ArduinoIn, ArduinoOut, parse_in, status_name
+from protoduino.packets import Packet
+from protoduino.simboard import SimBoard
+from protoduino.transport import FrameRecord
+
 from .faults import FaultyLine, line, parse_url
-from .framing import decode_frame
-from .messages import ArduinoIn, ArduinoOut, parse_in, status_name
-from .packets import Packet
-from .simboard import SimBoard
-from .transport import FrameRecord
 
 log = logging.getLogger(__name__)
 

@@ -1,0 +1,1 @@
+"""The development subcommands of ``protoduino`` (gen, soak), found by protoduino.cli.main."""

@@ -1,0 +1,58 @@
+"""Where the programs that protoduino runs or flashes come from.
+
+Four programs: the simulated board (``pd_sim``, the firmware core on this machine), the
+emulated Uno's runner (``avrsim``, simavr) with the firmware's ELF, and the firmware's hex
+that ``protoduino flash`` uploads.
+
+* An installed wheel carries them, built when the wheel was built, as package data in
+  ``protoduino/_programs/``, so ``pip install protoduino`` is all a user needs.
+* In a source checkout the development tools (the ``protoduino_dev`` package, installed by
+  ``./tools/dev.sh setup``) build them from the current sources with ``make`` instead, so
+  that tests and demos never run a stale copy. That is why they take precedence.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+from .errors import BuildError
+
+NATIVE_SIM = "pd_sim"
+RUNNER = "avrsim"
+FIRMWARE_ELF = "protoduino.elf"
+FIRMWARE_HEX = "protoduino.hex"
+#: Every program name :func:`locate` knows.
+NAMES = (NATIVE_SIM, RUNNER, FIRMWARE_ELF, FIRMWARE_HEX)
+#: Folder of the bundled programs inside the package.
+BUNDLE_DIR = "_programs"
+
+
+def bundled(name: str) -> Path | None:
+    """The copy of ``name`` shipped inside this installation, or None."""
+    entry = resources.files(__package__) / BUNDLE_DIR / name
+    # A wheel installs as plain files, so the resource is a real path that a child process
+    # can run; a zipped installation would not be, and counts as not bundled.
+    if isinstance(entry, Path) and entry.is_file():
+        return entry
+    return None
+
+
+def locate(name: str) -> Path:
+    """The path of program ``name``, built first when the development tools are installed."""
+    if name not in NAMES:
+        raise ValueError(f"unknown program {name!r}; choose from {', '.join(NAMES)}")
+    try:
+        from protoduino_dev.build import build_program
+    except ModuleNotFoundError as error:
+        if error.name is None or not error.name.startswith("protoduino_dev"):
+            raise
+    else:
+        return build_program(name)
+    path = bundled(name)
+    if path is None:
+        raise BuildError(
+            f"this protoduino installation carries no {name}: install a released wheel, or "
+            "in a source checkout run ./tools/dev.sh setup (the development tools build it)"
+        )
+    return path
