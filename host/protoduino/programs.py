@@ -13,6 +13,7 @@ that ``protoduino flash`` uploads.
 
 from __future__ import annotations
 
+import importlib.util
 from importlib import resources
 from pathlib import Path
 
@@ -42,12 +43,9 @@ def locate(name: str) -> Path:
     """The path of program ``name``, built first when the development tools are installed."""
     if name not in NAMES:
         raise ValueError(f"unknown program {name!r}; choose from {', '.join(NAMES)}")
-    try:
+    if importlib.util.find_spec("protoduino_dev") is not None:
         from protoduino_dev.build import build_program
-    except ModuleNotFoundError as error:
-        if error.name is None or not error.name.startswith("protoduino_dev"):
-            raise
-    else:
+
         return build_program(name)
     path = bundled(name)
     if path is None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
 import logging
 import sys
 from collections.abc import Sequence
@@ -54,7 +55,8 @@ class _Missing:
 
     def register(self, parser: argparse.ArgumentParser) -> None:
         parser.description = DEV_MISSING.format(name=self.name)
-        parser.add_argument("args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+        # Whatever options were meant for the real command: main() lets them through.
+        parser.set_defaults(_any_arguments=True)
 
     def run(self, args: argparse.Namespace) -> int:
         print(f"protoduino {self.name}: " + DEV_MISSING.format(name=self.name), file=sys.stderr)
@@ -62,12 +64,9 @@ class _Missing:
 
 
 def _load(name: str, module: str) -> ModuleType | _Missing:
-    try:
-        return importlib.import_module(module)
-    except ModuleNotFoundError as error:
-        if module.startswith(DEV_PACKAGE) and error.name == DEV_PACKAGE:
-            return _Missing(name)
-        raise
+    if module.startswith(f"{DEV_PACKAGE}.") and importlib.util.find_spec(DEV_PACKAGE) is None:
+        return _Missing(name)
+    return importlib.import_module(module)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -88,7 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown and not getattr(args, "_any_arguments", False):
+        parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     try:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
 import sys
 import time
 from collections.abc import Callable
@@ -42,13 +44,12 @@ def load_url_handlers(port: str) -> None:
     """
     if not port.startswith("faulty://"):
         return
-    try:
-        import protoduino_dev  # noqa: F401  (registers faulty://)
-    except ModuleNotFoundError as exc:
+    if importlib.util.find_spec("protoduino_dev") is None:
         raise TransportError(
             "faulty:// URLs come with the development tools (protoduino_dev): in a source "
             "checkout run ./tools/dev.sh setup"
-        ) from exc
+        )
+    importlib.import_module("protoduino_dev")  # registers faulty://
 
 
 def open_board(args: argparse.Namespace, *, ping: bool = True) -> Board:
