@@ -16,7 +16,8 @@ struct pd_core;
 
 /*
  * The last PD_DEDUPE_WINDOW (message_id, status) pairs of executed commands.
- * Ping and GetInfo are neither looked up nor recorded: they change nothing, so
+ * Idempotent commands (PD_CMD_IDEMPOTENT in the command table: Ping, GetInfo)
+ * are neither looked up nor recorded: they change nothing, so
  * answering a repeat in full is harmless (and a repeated Ping must still count
  * as liveness), and keeping them out leaves the whole window to commands that
  * move outputs, which are the ones a duplicate could hurt. The window survives
@@ -33,6 +34,23 @@ void pd_dedupe_init(pd_dedupe_t *dd);
 /* Stored status of `id`, or -1 if it is not in the window. */
 int pd_dedupe_find(const pd_dedupe_t *dd, uint32_t id);
 void pd_dedupe_add(pd_dedupe_t *dd, uint32_t id, uint8_t status);
+
+/*
+ * One command being run: what its handler sees. The handler fills ack->result
+ * (its which_result is preset from the table) and may set `then`, which runs
+ * after the Ack was sent (a notice that must follow it, e.g. Failsafe).
+ */
+typedef struct pd_cmd {
+    const protoduino_ArduinoIn *in;
+    protoduino_Ack *ack;
+    void (*then)(struct pd_core *core);
+} pd_cmd_t;
+
+/* A command table entry's flags and result (pd_dispatch.c, where they are described). */
+typedef struct pd_command {
+    uint8_t flags;
+    uint8_t result;
+} pd_command_t;
 
 /* A COMMAND packet's payload, received while ACTIVE. */
 void pd_dispatch_command(struct pd_core *core, const uint8_t *payload, size_t len);

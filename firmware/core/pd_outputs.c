@@ -3,10 +3,70 @@
 #include <string.h>
 
 #include "pd_protocol.h"
+#include "pd_rom.h"
 
-/* The digital masks hold one bit per pin. */
+/* The digital masks hold one bit per pin; a slot fits the owner byte's low nibble. */
 typedef char pd_assert_pins_fit_mask[(PD_MAX_PINS <= 32) ? 1 : -1];
-typedef char pd_assert_servos_fit_mode[(PD_MAX_SERVOS <= 250) ? 1 : -1];
+typedef char pd_assert_servos_fit_slot[(PD_MAX_SERVOS <= PD_MAX_SLOTS) ? 1 : -1];
+typedef char pd_assert_modes_fit_owner[(PD_MODE_COUNT <= 16) ? 1 : -1];
+
+/*
+ * The pin-mode table: one entry per PD_MODE_x, in that order.
+ * slots: how many slots of per-slot state the mode has on this board (0: its
+ *        state is kept by pin, any number of its pins may be claimed);
+ * safe:  drive one of its pins to the safe value given at its Init.
+ */
+typedef struct pd_mode {
+    uint8_t (*slots)(void *hal);
+    void (*safe)(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot);
+} pd_mode_t;
+
+static uint8_t by_pin(void *hal)
+{
+    (void)hal;
+    return 0;
+}
+
+static uint8_t servo_slots(void *hal)
+{
+    uint8_t n = pd_hal_board_info(hal)->max_servos;
+    return n < PD_MAX_SERVOS ? n : PD_MAX_SERVOS;
+}
+
+static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint16_t us)
+{
+    pd_hal_servo_write(hal, channel, out->servo[channel].pin, us);
+}
+
+static void drive_digital(pd_outputs_t *out, void *hal, uint8_t pin, bool level)
+{
+    uint32_t bit = 1UL << pin;
+    out->digital_level = level ? (out->digital_level | bit) : (out->digital_level & ~bit);
+    pd_hal_digital_write(hal, pin, level);
+}
+
+static void servo_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    (void)pin;
+    drive_servo(out, hal, slot, out->servo[slot].safe_us);
+}
+
+static void digital_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    (void)slot;
+    drive_digital(out, hal, pin, (out->digital_safe >> pin) & 1u);
+}
+
+static const pd_mode_t pd_modes[PD_MODE_COUNT] PD_ROM = {
+    [PD_MODE_FREE] = {by_pin, NULL},
+    [PD_MODE_DIGITAL] = {by_pin, digital_safe},
+    [PD_MODE_SERVO] = {servo_slots, servo_safe},
+};
+
+static void mode_entry(uint8_t mode, pd_mode_t *entry)
+{
+    pd_rom_copy(entry, &pd_modes[mode], sizeof(*entry));
+}
 
 void pd_outputs_init(pd_outputs_t *out)
 {
@@ -28,16 +88,69 @@ static protoduino_Status check_pin(void *hal, uint32_t pin)
     return protoduino_Status_STATUS_OK;
 }
 
-static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint16_t us)
+protoduino_Status pd_pins_claim(pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
+                                uint8_t *slot)
 {
-    pd_hal_servo_write(hal, channel, out->servo[channel].pin, us);
+    protoduino_Status status = check_pin(hal, pin);
+    if (status != protoduino_Status_STATUS_OK) {
+        return status;
+    }
+    uint8_t owner = out->owner[pin];
+    if (owner != 0) {
+        if (PD_OWNER_MODE(owner) != mode) {
+            return protoduino_Status_STATUS_PIN_IN_USE;
+        }
+        *slot = PD_OWNER_SLOT(owner); /* re-init: new settings, same slot */
+        return protoduino_Status_STATUS_OK;
+    }
+    pd_mode_t entry;
+    mode_entry(mode, &entry);
+    uint8_t slots = entry.slots(hal);
+    uint8_t free_slot = 0;
+    if (slots > 0) {
+        /* The lowest slot no pin of this mode holds. */
+        uint16_t used = 0;
+        for (uint8_t p = 0; p < PD_MAX_PINS; p++) {
+            if (out->owner[p] != 0 && PD_OWNER_MODE(out->owner[p]) == mode) {
+                used |= (uint16_t)(1u << PD_OWNER_SLOT(out->owner[p]));
+            }
+        }
+        while (free_slot < slots && ((used >> free_slot) & 1u)) {
+            free_slot++;
+        }
+        if (free_slot >= slots) {
+            return protoduino_Status_STATUS_NO_FREE_RESOURCE;
+        }
+    }
+    out->owner[pin] = PD_OWNER(mode, free_slot);
+    *slot = free_slot;
+    return protoduino_Status_STATUS_OK;
 }
 
-static void drive_digital(pd_outputs_t *out, void *hal, uint8_t pin, bool level)
+protoduino_Status pd_pins_owned(const pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
+                                uint8_t *slot)
 {
-    uint32_t bit = 1UL << pin;
-    out->digital_level = level ? (out->digital_level | bit) : (out->digital_level & ~bit);
-    pd_hal_digital_write(hal, pin, level);
+    protoduino_Status status = check_pin(hal, pin);
+    if (status != protoduino_Status_STATUS_OK) {
+        return status;
+    }
+    uint8_t owner = out->owner[pin];
+    if (owner == 0 || PD_OWNER_MODE(owner) != mode) {
+        return protoduino_Status_STATUS_NOT_INITIALISED;
+    }
+    *slot = PD_OWNER_SLOT(owner);
+    return protoduino_Status_STATUS_OK;
+}
+
+uint8_t pd_pins_count(const pd_outputs_t *out, uint8_t mode)
+{
+    uint8_t n = 0;
+    for (uint8_t p = 0; p < PD_MAX_PINS; p++) {
+        if (out->owner[p] != 0 && PD_OWNER_MODE(out->owner[p]) == mode) {
+            n++;
+        }
+    }
+    return n;
 }
 
 static uint16_t degrees_to_us(const pd_servo_t *s, uint32_t degrees)
@@ -72,26 +185,12 @@ protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
 
-    uint8_t pin = (uint8_t)msg->pin;
-    uint8_t mode = out->pin_mode[pin];
     uint8_t channel;
-    if (mode == PD_PIN_DIGITAL) {
-        return protoduino_Status_STATUS_PIN_IN_USE;
+    status = pd_pins_claim(out, hal, msg->pin, PD_MODE_SERVO, &channel);
+    if (status != protoduino_Status_STATUS_OK) {
+        return status;
     }
-    if (mode >= PD_PIN_SERVO) {
-        channel = (uint8_t)(mode - PD_PIN_SERVO); /* re-init: new limits, same slot */
-    } else {
-        uint8_t max_servos = pd_hal_board_info(hal)->max_servos;
-        if (max_servos > PD_MAX_SERVOS) {
-            max_servos = PD_MAX_SERVOS;
-        }
-        if (out->servo_count >= max_servos) {
-            return protoduino_Status_STATUS_NO_FREE_RESOURCE;
-        }
-        channel = out->servo_count++;
-        out->pin_mode[pin] = (uint8_t)(PD_PIN_SERVO + channel);
-    }
-    limits.pin = pin;
+    limits.pin = (uint8_t)msg->pin;
     out->servo[channel] = limits;
     drive_servo(out, hal, channel, limits.safe_us);
     return protoduino_Status_STATUS_OK;
@@ -100,15 +199,11 @@ protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
 protoduino_Status pd_outputs_servo_control(pd_outputs_t *out, void *hal,
                                            const protoduino_ServoControl *msg)
 {
-    protoduino_Status status = check_pin(hal, msg->pin);
+    uint8_t channel;
+    protoduino_Status status = pd_pins_owned(out, hal, msg->pin, PD_MODE_SERVO, &channel);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
-    uint8_t mode = out->pin_mode[msg->pin];
-    if (mode < PD_PIN_SERVO) {
-        return protoduino_Status_STATUS_NOT_INITIALISED;
-    }
-    uint8_t channel = (uint8_t)(mode - PD_PIN_SERVO);
     const pd_servo_t *s = &out->servo[channel];
     uint16_t us;
     if (msg->which_value == protoduino_ServoControl_degrees_tag) {
@@ -132,16 +227,13 @@ protoduino_Status pd_outputs_servo_control(pd_outputs_t *out, void *hal,
 protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
                                           const protoduino_DigitalInit *msg)
 {
-    protoduino_Status status = check_pin(hal, msg->pin);
+    uint8_t slot;
+    protoduino_Status status = pd_pins_claim(out, hal, msg->pin, PD_MODE_DIGITAL, &slot);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
     uint8_t pin = (uint8_t)msg->pin;
-    if (out->pin_mode[pin] >= PD_PIN_SERVO) {
-        return protoduino_Status_STATUS_PIN_IN_USE;
-    }
     uint32_t bit = 1UL << pin;
-    out->pin_mode[pin] = PD_PIN_DIGITAL;
     out->digital_safe = msg->safe_level ? (out->digital_safe | bit) : (out->digital_safe & ~bit);
     drive_digital(out, hal, pin, msg->safe_level);
     return protoduino_Status_STATUS_OK;
@@ -150,12 +242,10 @@ protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
 protoduino_Status pd_outputs_digital_control(pd_outputs_t *out, void *hal,
                                              const protoduino_DigitalControl *msg)
 {
-    protoduino_Status status = check_pin(hal, msg->pin);
+    uint8_t slot;
+    protoduino_Status status = pd_pins_owned(out, hal, msg->pin, PD_MODE_DIGITAL, &slot);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
-    }
-    if (out->pin_mode[msg->pin] != PD_PIN_DIGITAL) {
-        return protoduino_Status_STATUS_NOT_INITIALISED;
     }
     drive_digital(out, hal, (uint8_t)msg->pin, msg->level);
     return protoduino_Status_STATUS_OK;
@@ -163,12 +253,12 @@ protoduino_Status pd_outputs_digital_control(pd_outputs_t *out, void *hal,
 
 void pd_outputs_all_safe(pd_outputs_t *out, void *hal)
 {
-    for (uint8_t ch = 0; ch < out->servo_count; ch++) {
-        drive_servo(out, hal, ch, out->servo[ch].safe_us);
-    }
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
-        if (out->pin_mode[pin] == PD_PIN_DIGITAL) {
-            drive_digital(out, hal, pin, (out->digital_safe >> pin) & 1u);
+        uint8_t owner = out->owner[pin];
+        if (owner != 0) {
+            pd_mode_t entry;
+            mode_entry(PD_OWNER_MODE(owner), &entry);
+            entry.safe(out, hal, pin, PD_OWNER_SLOT(owner));
         }
     }
     pd_hal_outputs_safe(hal);

@@ -1,8 +1,26 @@
 /*
- * The output registry: which pin is a servo or a digital output, its limits
- * and its safe value (PROTOCOL.md section 7, docs/architecture.md "device
- * semantics"). Every check the device makes on an Init or a Control lives
- * here and returns the Ack status; on any status but OK nothing changed.
+ * The output registry: which pin belongs to which pin mode, each mode's
+ * per-slot state, limits and safe values (PROTOCOL.md section 7,
+ * docs/architecture.md "device semantics"). Every check the device makes on
+ * an Init or a Control lives here and returns the Ack status; on any status
+ * but OK nothing changed.
+ *
+ * Two tables:
+ * - the pin-ownership table, pd_outputs_t.owner[]: one byte per pin, the mode
+ *   that owns it and the slot of that mode's state it uses (a servo's channel).
+ *   Every mode claims and looks up pins through pd_pins_claim() and
+ *   pd_pins_owned(), so "pin in use by another mode", "not initialised" and a
+ *   re-init keeping its slot are decided in one place for all of them;
+ * - the pin-mode table, pd_modes[] in pd_outputs.c: per mode, how many slots it
+ *   has and how to drive a pin of it to its safe value.
+ *
+ * How to add a pin mode (e.g. PWM):
+ *   1. a PD_MODE_x value below (before PD_MODE_COUNT; at most 16 modes);
+ *   2. its state, if any, in pd_outputs_t (an array indexed by slot, or a mask by pin);
+ *   3. one entry in pd_modes[] (pd_outputs.c): slots and safe;
+ *   4. its Init/Control functions here, which call pd_pins_claim()/pd_pins_owned(),
+ *      and their commands: one entry each in the command table (pd_dispatch.c);
+ *   5. on the host, one PinMode declaration in host/protoduino/commands.py.
  */
 #ifndef PD_OUTPUTS_H
 #define PD_OUTPUTS_H
@@ -21,10 +39,19 @@
 #define PD_MAX_SERVOS 8
 #endif
 
-/* pin_mode values: free, digital, or PD_PIN_SERVO + channel. */
-#define PD_PIN_FREE 0u
-#define PD_PIN_DIGITAL 1u
-#define PD_PIN_SERVO 2u
+/* Pin modes: the index into pd_modes[]. PD_MODE_FREE owns nothing. */
+enum {
+    PD_MODE_FREE = 0,
+    PD_MODE_DIGITAL, /* digital output; state by pin: digital_safe/digital_level */
+    PD_MODE_SERVO,   /* servo output; state by slot (= servo channel): servo[] */
+    PD_MODE_COUNT
+};
+
+/* An owner byte: mode in the high nibble, slot in the low one (one byte per pin of RAM). */
+#define PD_OWNER(mode, slot) ((uint8_t)(((mode) << 4) | (slot)))
+#define PD_OWNER_MODE(owner) ((uint8_t)((owner) >> 4))
+#define PD_OWNER_SLOT(owner) ((uint8_t)((owner) & 0x0Fu))
+#define PD_MAX_SLOTS 16u
 
 typedef struct pd_servo {
     uint8_t pin;
@@ -34,14 +61,29 @@ typedef struct pd_servo {
 } pd_servo_t;
 
 typedef struct pd_outputs {
-    uint8_t pin_mode[PD_MAX_PINS];
-    uint8_t servo_count; /* channels 0 .. servo_count - 1 are in use */
+    uint8_t owner[PD_MAX_PINS]; /* PD_OWNER(mode, slot); 0 = free */
     pd_servo_t servo[PD_MAX_SERVOS];
     uint32_t digital_safe;  /* bit N: safe level of pin N */
     uint32_t digital_level; /* bit N: current level of pin N */
 } pd_outputs_t;
 
 void pd_outputs_init(pd_outputs_t *out);
+
+/*
+ * Claim `pin` for `mode`: checks the pin exists and is not reserved, that no
+ * other mode owns it, and finds its slot (the one it has on a re-init, else
+ * the lowest free one of the mode). Returns the Ack status; on OK *slot is set
+ * and the pin is owned by `mode` (the caller must not fail after this).
+ */
+protoduino_Status pd_pins_claim(pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
+                                uint8_t *slot);
+
+/* For a Control: `pin` must exist, not be reserved and be owned by `mode`. */
+protoduino_Status pd_pins_owned(const pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
+                                uint8_t *slot);
+
+/* How many pins `mode` owns. */
+uint8_t pd_pins_count(const pd_outputs_t *out, uint8_t mode);
 
 protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
                                         const protoduino_ServoInit *msg);

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from numbers import Integral
 from types import TracebackType
 
+from .commands import DIGITAL, SERVO, PinMode
 from .constants import (
     ACK_TIMEOUT,
     HANDSHAKE_TIMEOUT,
@@ -74,7 +75,7 @@ class DeviceInfo:
 class _Output:
     """What the host knows of one configured pin, for checks and session restore."""
 
-    mode: str  # "servo" or "digital"
+    mode: PinMode
     init: bytes  # the Init as sent, without its message_id
     min_us: int = 0
     max_us: int = 0
@@ -321,15 +322,15 @@ class Board:
             init.safe_degrees = safe
         with self._lock:
             current = self._outputs.get(pin)
-            if current is not None and current.mode != "servo":
-                raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a digital output")
-            servos = sum(1 for o in self._outputs.values() if o.mode == "servo")
+            if current is not None and current.mode is not SERVO:
+                raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
+            servos = sum(1 for o in self._outputs.values() if o.mode is SERVO)
             if current is None and servos >= self.info.max_servos:
                 raise _reject(
                     Status.STATUS_NO_FREE_RESOURCE,
                     f"all {self.info.max_servos} servo slots are in use",
                 )
-        state = _Output("servo", msg.SerializeToString(), min_us, max_us)
+        state = _Output(SERVO, msg.SerializeToString(), min_us, max_us)
         self._send(msg, lambda: self._set_output(pin, state))
         return Servo(self, pin, min_us, max_us)
 
@@ -340,12 +341,12 @@ class Board:
             raise TypeError(f"safe must be a bool, not {type(safe).__name__}")
         with self._lock:
             current = self._outputs.get(pin)
-            if current is not None and current.mode != "digital":
-                raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a servo")
+            if current is not None and current.mode is not DIGITAL:
+                raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
         msg = ArduinoIn()
         msg.digital_init.pin = pin
         msg.digital_init.safe_level = bool(safe)
-        state = _Output("digital", msg.SerializeToString())
+        state = _Output(DIGITAL, msg.SerializeToString())
         self._send(msg, lambda: self._set_output(pin, state))
         return DigitalOutput(self, pin)
 

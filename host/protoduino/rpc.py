@@ -50,6 +50,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from .commands import command
 from .constants import ACK_TIMEOUT, DEDUPE_WINDOW, MAX_PAYLOAD, MAX_RETRIES, PING_INTERVAL
 from .errors import (
     AckTimeoutError,
@@ -70,10 +71,6 @@ FINISHED_MEMORY = 256
 #: A restore message that gets no Ack is sent again (a new call) this many more times:
 #: a restore left half done would leave an output unconfigured on the device.
 RESTORE_RETRIES = 3
-
-#: Calls whose re-execution changes nothing (the device answers their
-#: duplicates in full): they need no protection by the dedupe guard.
-IDEMPOTENT_KINDS = frozenset({"ping", "get_info"})
 
 Ack = Any  # protoduino_pb2.Ack (protobuf message classes are dynamic)
 
@@ -306,7 +303,7 @@ class Rpc:
             (
                 c.first_tx
                 for c in self._calls.values()
-                if c.first_tx is not None and c.kind not in IDEMPOTENT_KINDS
+                if c.first_tx is not None and not command(c.kind).idempotent
             ),
             default=None,
         )
@@ -470,22 +467,22 @@ class Rpc:
         re-handshake (watchdog, desync) found it answering again. Once per call,
         and never for the restore's own messages.
         """
+        init = command(call.kind).needs_init
         if (
             status != Status.STATUS_NOT_INITIALISED
-            or call.kind not in ("servo_control", "digital_control")
+            or init is None
             or call.restored
             or call is self._restore_call
             or self.restore_provider is None
         ):
             return False
         pin = getattr(_reparse(call.payload), call.kind).pin
-        init = call.kind.replace("control", "init")
         try:
             msgs = self.restore_provider()
         except Exception:
             log.exception("restore provider failed")
             return False
-        return any(m.WhichOneof("data") == init and getattr(m, init).pin == pin for m in msgs)
+        return any(_kind(m) == init and getattr(m, init).pin == pin for m in msgs)
 
     def _session_lost(self, call: Call) -> None:
         log.warning(
@@ -622,6 +619,11 @@ class Rpc:
     def outstanding(self) -> int:
         with self._lock:
             return len(self._calls)
+
+
+def _kind(msg: ArduinoIn) -> str | None:
+    kind: str | None = msg.WhichOneof("data")
+    return kind
 
 
 def _reparse(payload: bytes) -> ArduinoIn:

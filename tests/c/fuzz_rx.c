@@ -52,15 +52,24 @@ static void feed_packet(pd_core_t *core, uint8_t type, uint8_t seq, const uint8_
 
 static void check_invariants(const fake_hal_t *hal, const pd_core_t *core)
 {
-    if (core->link.rx_len > PD_MAX_ENCODED_FRAME || core->outputs.servo_count > PD_MAX_SERVOS ||
+    if (core->link.rx_len > PD_MAX_ENCODED_FRAME ||
+        pd_pins_count(&core->outputs, PD_MODE_SERVO) > PD_MAX_SERVOS ||
         core->dedupe.count > PD_DEDUPE_WINDOW) {
         abort();
     }
-    for (uint8_t ch = 0; ch < core->outputs.servo_count; ch++) {
-        const pd_servo_t *s = &core->outputs.servo[ch];
+    /* Every servo pin owns its own slot, and its slot points back at it. */
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        uint8_t owner = core->outputs.owner[pin];
+        if (owner == 0 || PD_OWNER_MODE(owner) != PD_MODE_SERVO) {
+            continue;
+        }
+        if (PD_OWNER_SLOT(owner) >= PD_MAX_SERVOS) {
+            abort();
+        }
+        const pd_servo_t *s = &core->outputs.servo[PD_OWNER_SLOT(owner)];
         int us = hal->servo_us[s->pin];
-        if (us < s->min_us || us > s->max_us || s->safe_us < s->min_us ||
-            s->safe_us > s->max_us || core->outputs.pin_mode[s->pin] != PD_PIN_SERVO + ch) {
+        if (s->pin != pin || us < s->min_us || us > s->max_us || s->safe_us < s->min_us ||
+            s->safe_us > s->max_us) {
             abort();
         }
     }

@@ -109,7 +109,7 @@ static void test_reset_again_resets_seq_keeps_outputs(void)
     CHECK(fake_frame(&d.hal, 0)->flushed);
     CHECK_EQ(d.hal.servo_us[9], 544);
     CHECK_EQ(d.hal.servo_writes[9], writes); /* outputs untouched */
-    CHECK_EQ(d.core.outputs.servo_count, 1); /* configuration kept */
+    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 1); /* configuration kept */
     in = m_info(30);
     t_send_in(&d, &in);
     CHECK_EQ(fake_frame(&d.hal, 1)->seq, 1);
@@ -296,7 +296,7 @@ static void test_reboot_returns_to_idle(void)
     pd_core_init(&d.core, &d.hal); /* what SIGUSR1 / a reset does */
     CHECK_EQ(t_events(&d, PD_EVENT_BOOT), 1);
     CHECK(!d.core.link.active);
-    CHECK_EQ(d.core.outputs.pin_mode[13], PD_PIN_FREE);
+    CHECK_EQ(d.core.outputs.owner[13], PD_MODE_FREE);
     in = m_digital(2, 13, false);
     t_send_in(&d, &in);
     CHECK_EQ(t_events(&d, PD_EVENT_NOT_ACTIVE), 1);

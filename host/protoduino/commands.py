@@ -1,0 +1,93 @@
+"""One declaration per command and per pin mode: the host's side of the firmware's tables.
+
+The firmware has a command table (``PD_COMMANDS`` in firmware/core/pd_dispatch.c:
+handler, idempotent or not, what its Ack returns) and a pin-mode table
+(``pd_modes`` in firmware/core/pd_outputs.c). Everything the host's layers need
+to know about a command (the request layer: may its duplicate run twice? does
+a session restore have to send an Init before it?) is read from here instead of
+lists of names kept in step across modules. tests/test_commands.py checks that
+every ArduinoIn member is declared and that the firmware's table agrees.
+
+How to add a command: one :class:`Command` in ``_BOARD_COMMANDS`` (or, for the
+Init and Control of a pin mode, one :class:`PinMode` in ``PIN_MODES``, which
+declares both), then its method on :class:`~protoduino.board.Board`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ._generated import protoduino_pb2 as pb
+
+
+@dataclass(frozen=True, slots=True)
+class PinMode:
+    """A way of using a pin; its Init claims the pin, its Control (if any) sets a value.
+
+    Both messages carry the pin in a field named ``pin``.
+    """
+
+    name: str  # as in the firmware's PD_MODE_<NAME>
+    init: str  # ArduinoIn member that configures a pin for this mode
+    control: str | None = None  # ArduinoIn member that sets its value (None: an input)
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """One ArduinoIn member as the host handles it."""
+
+    kind: str  # the ArduinoIn.data member
+    #: Running it twice changes nothing (the firmware's PD_CMD_IDEMPOTENT): the
+    #: device does not keep it in its dedupe window, so the request layer does
+    #: not guard its retransmissions.
+    idempotent: bool = False
+    #: The Ack.result member its Ack carries, if any.
+    result: str | None = None
+    #: The pin mode whose Init or Control it is, if any.
+    pin_mode: PinMode | None = None
+
+    @property
+    def needs_init(self) -> str | None:
+        """For a Control: the Init a restore must send before it (its pin's mode's Init)."""
+        mode = self.pin_mode
+        if mode is None or mode.control != self.kind:
+            return None
+        return mode.init
+
+
+DIGITAL = PinMode("digital", init="digital_init", control="digital_control")
+SERVO = PinMode("servo", init="servo_init", control="servo_control")
+
+#: Every pin mode, in the firmware's PD_MODE_* order.
+PIN_MODES: tuple[PinMode, ...] = (DIGITAL, SERVO)
+
+_BOARD_COMMANDS: tuple[Command, ...] = (
+    Command("ping", idempotent=True, result="ping_echo"),
+    Command("get_info", idempotent=True, result="info"),
+    Command("stop"),
+)
+
+
+def _pin_mode_commands(modes: tuple[PinMode, ...]) -> tuple[Command, ...]:
+    commands = []
+    for mode in modes:
+        commands.append(Command(mode.init, pin_mode=mode))
+        if mode.control is not None:
+            commands.append(Command(mode.control, pin_mode=mode))
+    return tuple(commands)
+
+
+#: ArduinoIn member -> its declaration.
+COMMANDS: dict[str, Command] = {c.kind: c for c in _BOARD_COMMANDS + _pin_mode_commands(PIN_MODES)}
+
+
+def command(kind: str) -> Command:
+    """The declaration of ``kind``; an undeclared one is treated as not idempotent."""
+    found = COMMANDS.get(kind)
+    return found if found is not None else Command(kind)
+
+
+def arduino_in_kinds() -> tuple[str, ...]:
+    """Every member of ArduinoIn.data in the schema (what must be declared here)."""
+    oneof = pb.ArduinoIn.DESCRIPTOR.oneofs_by_name["data"]
+    return tuple(field.name for field in oneof.fields)
