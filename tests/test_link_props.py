@@ -137,7 +137,7 @@ class LinkMachine(RuleBasedStateMachine):
             module.__dict__["time"] = time
 
     # Every callback the I/O thread makes must return normally, whatever it is given.
-    def _io(self, fn: Callable[..., None], *args: Any) -> None:
+    def _io(self, fn: Callable[..., object], *args: Any) -> None:
         fn(*args)
 
     def _seq(self, seq: int | None) -> int:
@@ -265,6 +265,10 @@ class LinkMachine(RuleBasedStateMachine):
         rpc = self.rpc
         assert len(rpc._inflight) <= rpc.window
         assert all(mid in rpc._calls for mid in rpc._inflight)
+        # The call bound: no call awaits its Ack past its round of retries, even after
+        # a tick far later than due.
+        for call in rpc._inflight.values():
+            assert self.clock.now < call.round_start + rpc.round_time
         for call in self.calls:
             if call.done.is_set():
                 assert (call.ack is None) != (call.error is None)

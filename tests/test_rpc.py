@@ -222,3 +222,35 @@ def test_calls_wait_for_a_reconnect(fake: FakeDevice) -> None:
         assert board.ping(b"back") >= 0
         assert board.stats.reconnects == 1
         assert board.stats.state == "active"
+
+
+def test_a_board_failed_for_good_fails_calls_at_once(fake: FakeDevice) -> None:
+    # A reboot into firmware of another protocol version: the link cannot come back, so
+    # a call in flight fails with the version error as soon as it is known, and so does
+    # every later call, instead of waiting out a deadline (here 600 s, to tell them apart).
+    with Board.open(fake.port, ping=False, ack_timeout=1.0, handshake_timeout=600.0) as board:
+        failed = threading.Event()
+        board.on_event(lambda e: failed.set() if e.kind is protoduino.EventKind.ERROR else None)
+        fake.version = protoduino.constants.PROTOCOL_VERSION + 1
+        fake.handler = lambda msg: []  # the ping is swallowed: the device reboots instead
+        errors: list[BaseException] = []
+
+        def call() -> None:
+            try:
+                board.ping()
+            except protoduino.ProtoduinoError as error:
+                errors.append(error)
+
+        worker = threading.Thread(target=call)
+        worker.start()
+        assert fake.wait_for(lambda: len(fake.commands("ping")) >= 1)
+        fake.reboot()
+        assert failed.wait(10)
+        worker.join(10)  # bounds a failing test only: the call's deadline is 600 s away
+        assert not worker.is_alive()
+        assert len(errors) == 1 and isinstance(errors[0], protoduino.VersionMismatchError)
+        commands = board.stats.commands
+        with pytest.raises(protoduino.VersionMismatchError):
+            board.servo(9)
+        assert board.stats.commands == commands  # refused before it was queued
+        assert board.stats.state == "failed"

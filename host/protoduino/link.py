@@ -79,7 +79,11 @@ class LinkListener(Protocol):
 
     def link_message(self, msg: ArduinoOut) -> None: ...
 
-    def link_tick(self, now: float) -> None: ...
+    def link_failed(self, error: ProtoduinoError) -> None: ...
+
+    def link_tick(self, now: float) -> float:
+        """Run the timers; return the time they next need to run."""
+        ...
 
 
 Notify = Callable[[Event], None]
@@ -194,7 +198,8 @@ class Link:
                 continue
             self._packet(item)
 
-    def transport_tick(self, now: float) -> None:
+    def transport_tick(self, now: float) -> float:
+        """Run the link's timers and the request layer's; return when they next need to run."""
         if self.state is LinkState.WAIT_ACK and self.transport.connected:
             if now >= self._hs_next:
                 if not self._hs_reported and now - self._hs_started >= self.handshake_timeout:
@@ -212,7 +217,12 @@ class Link:
             )
             self.watchdog_resets += 1
             self._restart("watchdog", now)
-        self._listener.link_tick(now)
+        due = self._listener.link_tick(now)
+        if self.state is LinkState.WAIT_ACK and self.transport.connected:
+            due = min(due, self._hs_next)
+        elif self.state is LinkState.ACTIVE and self.expect_traffic():
+            due = min(due, self._last_rx + self.watchdog_timeout)
+        return due
 
     # --- internals (I/O thread) -----------------------------------------------
 
@@ -274,6 +284,8 @@ class Link:
             self._notify(Event(EventKind.ERROR, str(error), {"error": str(error)}))
             if was_active:
                 self._listener.link_down("failed")
+        # For good: calls fail now rather than wait for a link that cannot come back.
+        self._listener.link_failed(error)
         self._opened.set()
 
     def _reboot_detected(self, how: str, now: float) -> None:

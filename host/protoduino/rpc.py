@@ -24,10 +24,17 @@ I/O thread.
   Without this, a short round trip lets many newer calls complete while X's
   Ack is lost, and X's retransmission would run a second time. A reboot
   empties the device's window: the count starts again from there.
+* Retries run on a fixed schedule from a call's first transmission: attempt
+  k goes out at ``k * ack_timeout`` and, with no Ack, the call fails at
+  ``(max_retries + 1) * ack_timeout``, exactly (the I/O thread sleeps until
+  the next such time, and a late attempt does not delay the next one).
 * While the link is down, nothing is sent: calls wait, bounded by their
   deadline (``call_timeout``), and fail with the link's own error (port lost,
   device silent) if it does not come back in time. When it comes back, calls
-  that were in flight are sent again with their ids.
+  that were in flight are sent again with their ids, with a fresh round of
+  retries. A link that failed for good (another protocol version or schema
+  after a reboot) fails every outstanding and later call at once with its
+  error: no deadline is waited out for a link that cannot come back.
 * Session restore: when the link comes back after a reboot, the messages from
   ``restore_provider`` are sent first, one at a time and in order (an Init
   must land before its Control), and user calls are held until they are done.
@@ -90,6 +97,7 @@ class Call:
         "on_done",
         "payload",
         "restored",
+        "round_start",
         "rtt",
         "sent_at",
         "submitted",
@@ -100,16 +108,22 @@ class Call:
         message_id: int,
         kind: str,
         payload: bytes,
+        *,
+        submitted: float,
         deadline: float,
         on_done: Callable[[Call], None] | None,
     ) -> None:
         self.message_id = message_id
         self.kind = kind
         self.payload = payload
-        self.submitted = time.monotonic()
+        self.submitted = submitted
         self.deadline = deadline
         self.on_done = on_done
+        #: Transmissions in the current round of retries (a new round after a link outage).
         self.attempts = 0
+        #: When the current round's first transmission went out: attempt k is due at
+        #: round_start + k * ack_timeout, and the round ends at (max_retries + 1) of them.
+        self.round_start = 0.0
         self.sent_at = 0.0
         #: Serial number of the first transmission to the current device boot (None: not yet).
         self.first_tx: int | None = None
@@ -130,6 +144,13 @@ class Call:
 
 MessageHook = Callable[[ArduinoOut], None]
 RestoreProvider = Callable[[], list[ArduinoIn]]
+Clock = Callable[[], float]
+
+
+def _monotonic() -> float:
+    # Looked up at each call, not bound at import: the link property test swaps the
+    # module's ``time`` for its own clock.
+    return time.monotonic()
 
 
 class Rpc:
@@ -145,11 +166,17 @@ class Rpc:
         ping: bool = True,
         ping_interval: float = PING_INTERVAL,
         link_wait: float = 5.0,
+        clock: Clock = _monotonic,
     ) -> None:
         if ack_timeout <= 0 or max_retries < 0 or window < 1:
             raise ValueError("ack_timeout > 0, max_retries >= 0 and window >= 1 are required")
         self.link: Link | None = None
         self._notify = notify
+        #: time.monotonic() unless a test injects its own; the I/O thread passes its
+        #: ``now`` to link_tick, every other timestamp here comes from this clock.
+        self._clock = clock
+        #: Set once the link failed for good: every call fails at once with it.
+        self._failed: ProtoduinoError | None = None
         self.ack_timeout = ack_timeout
         self.max_retries = max_retries
         self.window = window
@@ -200,6 +227,11 @@ class Rpc:
         link.expect_traffic = self._expect_traffic
 
     @property
+    def round_time(self) -> float:
+        """How long a call may await its Ack from its first transmission, every retry included."""
+        return self.ack_timeout * (self.max_retries + 1)
+
+    @property
     def call_timeout(self) -> float:
         """The longest any call may take: every retry plus waiting for the link."""
         return self.ack_timeout * (self.max_retries + 1) + self.link_wait
@@ -232,9 +264,11 @@ class Rpc:
         with self._lock:
             if self._closed:
                 raise BoardClosedError("the board is closed")
+            if self._failed is not None:
+                raise self._failed.with_traceback(None)
             call = self._new_call(msg, on_done)
             (self._urgent if urgent else self._pending).append(call)
-            self._pump(time.monotonic())
+            self._pump(self._clock())
         return call
 
     def call(self, msg: ArduinoIn) -> Ack:
@@ -245,7 +279,7 @@ class Rpc:
     def wait(self, call: Call) -> Ack:
         # The I/O thread fails every call by its deadline; the margin only
         # guards against that thread having died.
-        bound = call.deadline - time.monotonic() + self.ack_timeout * (self.max_retries + 2) + 1.0
+        bound = call.deadline - self._clock() + self.ack_timeout * (self.max_retries + 2) + 1.0
         if not call.done.wait(max(0.0, bound)):
             with self._lock:
                 self._finish(
@@ -267,7 +301,10 @@ class Rpc:
                 f"command of {len(payload)} bytes exceeds MAX_PAYLOAD ({MAX_PAYLOAD})"
             )
         kind = msg.WhichOneof("data") or "empty"
-        call = Call(mid, kind, payload, time.monotonic() + self.call_timeout, on_done)
+        now = self._clock()
+        call = Call(
+            mid, kind, payload, submitted=now, deadline=now + self.call_timeout, on_done=on_done
+        )
         self._calls[mid] = call
         self.commands += 1
         return call
@@ -281,6 +318,8 @@ class Rpc:
         if call.attempts:
             self.retransmits += 1
             log.debug("retransmitting %s id=%d", call.kind, call.message_id)
+        else:
+            call.round_start = now
         call.attempts += 1
         call.sent_at = now
         self._inflight[call.message_id] = call
@@ -374,16 +413,27 @@ class Rpc:
             recent_frames=frames,
         )
 
-    def link_tick(self, now: float) -> None:
+    def _attempt_due(self, call: Call) -> float:
+        """When an in-flight call's next transmission, or its failure, is due.
+
+        Counted from the round's first transmission, not from the previous
+        one: a retransmission that went out late (the I/O thread was busy)
+        does not push the others back, so a round ends exactly
+        ack_timeout x (max_retries + 1) after it began. Never after the deadline.
+        """
+        return min(call.round_start + call.attempts * self.ack_timeout, call.deadline)
+
+    def link_tick(self, now: float) -> float:
+        """Run the timers; return when they next need to run (the I/O thread sleeps until then)."""
         with self._lock:
             if self._closed:
-                return
+                return now + PING_INTERVAL
             for call in list(self._inflight.values()):
-                # The deadline is checked first: a call never outlives it, even
-                # if its last attempt went out just before.
-                if now < call.deadline and now - call.sent_at < self.ack_timeout:
+                if now < self._attempt_due(call):
                     continue
-                if call.attempts > self.max_retries or now >= call.deadline:
+                # The round is over even if this thread woke too late to send every attempt.
+                over = min(call.deadline, call.round_start + self.round_time)
+                if call.attempts > self.max_retries or now >= over:
                     self.timeouts += 1
                     self._finish(call, error=self._timeout_error(call))
                 else:
@@ -395,6 +445,16 @@ class Rpc:
                     self._finish(call, error=self._timeout_error(call))
             self._maybe_ping(now)
             self._pump(now)
+            return self._next_due(now)
+
+    def _next_due(self, now: float) -> float:
+        """The earliest timer still pending after a tick at ``now`` (lock held)."""
+        due = [self._attempt_due(c) for c in self._inflight.values()]
+        due += [c.deadline for q in (self._urgent, self._pending) for c in q]
+        link = self.link
+        if self._pinging and self._ping_call is None and link is not None and link.active:
+            due.append(self._next_ping)
+        return max(now, min(due, default=now + PING_INTERVAL))
 
     def _maybe_ping(self, now: float) -> None:
         link = self.link
@@ -415,7 +475,7 @@ class Rpc:
             self.ping_failures += 1
             log.debug("automatic ping failed: %s", call.error)
         else:
-            self.last_ping = time.monotonic()
+            self.last_ping = self._clock()
 
     def link_message(self, msg: ArduinoOut) -> None:
         if msg.WhichOneof("data") != "ack":
@@ -433,7 +493,7 @@ class Rpc:
                     log.debug("Ack for unknown message_id %d dropped", ack.message_id)
                 return
             self.acks += 1
-            now = time.monotonic()
+            now = self._clock()
             if call.sent_at:
                 call.rtt = now - call.sent_at
             if ack.status == 0:
@@ -533,7 +593,7 @@ class Rpc:
             if rebooted and self.restore_provider is not None:
                 self._begin_restore()
             self._next_ping = 0.0
-            self._pump(time.monotonic())
+            self._pump(self._clock())
 
     def _begin_restore(self) -> None:
         """Replay the board's session (lock held); user calls wait until it is done."""
@@ -561,6 +621,21 @@ class Rpc:
     def link_down(self, reason: str) -> None:
         with self._lock:
             self._requeue_inflight()
+
+    def link_failed(self, error: ProtoduinoError) -> None:
+        """The link failed for good (e.g. another protocol version after a reboot).
+
+        Nothing can bring it back but other firmware, so waiting is pointless:
+        every outstanding call fails now with ``error``, and so does every
+        later one, at once, instead of each waiting out its deadline.
+        """
+        with self._lock:
+            self._failed = error
+            self._restore.clear()
+            self._holding = False
+            self._restore_call = None
+            for call in list(self._calls.values()):
+                self._finish(call, error=error)
 
     def _requeue_inflight(self) -> None:
         """Calls in flight go back to the front of their queues, oldest first, to be resent."""

@@ -2,10 +2,13 @@
 
 The thread opens the port, reads in bulk and feeds the incremental
 :class:`~protoduino.framing.StreamDecoder`, writes the queued packets
-(CONTROL ahead of COMMAND), and calls its listener's ``transport_tick`` about
-every ``TICK`` seconds so that the layers above can run their timers
+(CONTROL ahead of COMMAND), and calls its listener's ``transport_tick`` at
+least every ``TICK`` seconds so that the layers above can run their timers
 (handshake backoff, watchdog, retransmission, ping) on the same thread,
-without locks around the port and without threads of their own.
+without locks around the port and without threads of their own. The tick
+returns when the timers next need to run, and the thread never sleeps past
+that: a retransmission or a call's failure happens on time, not up to a TICK
+late (four late retries made a 1.0 s bound 1.066 s).
 
 Any pyserial URL works (``/dev/ttyACM0``, ``socket://``, ``rfc2217://``,
 ``spy://``, ``loop://``). When the port has a file descriptor (serial ports,
@@ -65,7 +68,9 @@ class TransportListener(Protocol):
 
     def transport_received(self, items: list[Packet | BadFrame]) -> None: ...
 
-    def transport_tick(self, now: float) -> None: ...
+    def transport_tick(self, now: float) -> float:
+        """Run the timers; return when they next need to run (the thread wakes by then)."""
+        ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -117,6 +122,9 @@ class Transport:
         self._monitors: list[FrameMonitor] = []
         self._recent: collections.deque[FrameRecord] = collections.deque(maxlen=RECENT_FRAMES)
         self.connected = False
+        #: When the listener's timers next need a tick (time.monotonic()): the
+        #: thread never sleeps past it, so a timeout fires on time, not up to TICK late.
+        self._next_tick = 0.0
         self.last_error: Exception | None = None
         # Counters (read without a lock: single ints written by the I/O thread).
         self.rx_bytes = 0
@@ -272,7 +280,7 @@ class Transport:
                         for item in items:
                             self._record("rx", item)
                         listener.transport_received(items)
-                listener.transport_tick(time.monotonic())
+                self._next_tick = listener.transport_tick(time.monotonic())
         except Exception:  # pragma: no cover - a bug above must not die silently
             log.exception("%s: I/O thread crashed", self.name)
             self.last_error = TransportError(f"{self.name}: I/O thread crashed")
@@ -287,13 +295,17 @@ class Transport:
         assert self._listener is not None
         self._listener.transport_lost(self.last_error)
 
+    def _sleep_limit(self) -> float:
+        """How long a read may wait: TICK at most, and not past the next timer."""
+        return min(TICK, max(0.0, self._next_tick - time.monotonic()))
+
     def _read(self) -> bytes:
         fd = self._fileno()
         if fd is None:
-            self._port.timeout = TICK / 2
+            self._port.timeout = min(TICK / 2, self._sleep_limit())
             return bytes(self._port.read(READ_CHUNK))
         try:
-            ready, _, _ = select.select([fd, self._wake_r], [], [], TICK)
+            ready, _, _ = select.select([fd, self._wake_r], [], [], self._sleep_limit())
         except ValueError as error:  # fd closed under us
             raise OSError(str(error)) from error
         if self._wake_r in ready:
