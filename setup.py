@@ -1,21 +1,33 @@
-"""Builds the optional C accelerator ``protoduino._speedups``; everything else is in pyproject.toml.
+"""The build steps pyproject.toml cannot declare: the C accelerator and the bundled programs.
 
-The extension is optional (``optional=True``): where there is no C compiler or no Python headers,
-``pip install`` still succeeds, and ``protoduino.framing`` logs one warning and uses the
-pure-Python decoder. ``tests/test_framing_props.py`` fails when a compiler and the headers are
-present but the module was not built (a build broken by a warning must not pass as a skip).
+``protoduino._speedups`` (optional C accelerator): where there is no C compiler or no Python
+headers, ``pip install`` still succeeds, and ``protoduino.framing`` logs one warning and uses
+the pure-Python decoder. ``tests/test_framing_props.py`` fails when a compiler and the headers
+are present but the module was not built (a build broken by a warning must not pass as a
+skip). It compiles the firmware's own COBS and CRC (``firmware/core``), so both ends of the
+link check frames with the same code. Source paths are relative, as setuptools requires.
 
-It compiles the firmware's own COBS and CRC (``firmware/core``), so both ends of the link check
-frames with the same code. Source paths are relative, as setuptools requires.
+The programs (``protoduino/_programs/``, see ``protoduino.programs``): a wheel carries the
+Uno firmware as a ready hex (and its ELF, which the emulated Uno runs), the simulated board
+``pd_sim`` and the emulated Uno's runner ``avrsim``, built here with make, avr-gcc and gcc, so
+that ``pip install protoduino`` is enough to flash an Uno (avrdude then is the only tool) or to
+try a robot on the simulated board. They are not optional: a wheel without the firmware is
+not protoduino, so a missing tool fails the build with its name. An editable install
+(``pip install -e .``, the checkout's own) skips them: there, ``protoduino_dev`` builds each
+program from the current sources when it is used.
 """
 
 from __future__ import annotations
 
 import hashlib
+import shutil
+import subprocess
+import tempfile
 from pathlib import Path
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
+from setuptools.command.build_py import build_py
 
 ROOT = Path(__file__).resolve().parent
 
@@ -43,6 +55,58 @@ class StrictBuildExt(build_ext):
         super().build_extensions()
 
 
+#: What a wheel's protoduino/_programs/ holds: name -> (make directory, make arguments, the
+#: file below the build folder). The simulated board is built without the sanitizers that the
+#: checkout's build uses (they need their runtime libraries and slow it down).
+PROGRAMS = {
+    "protoduino.hex": ("firmware", ["avr"], "avr/protoduino.hex"),
+    "protoduino.elf": ("firmware", ["avr"], "avr/protoduino.elf"),
+    "pd_sim": ("firmware", ["sim", "SIM_CFLAGS=-O2"], "sim/pd_sim"),
+    "avrsim": ("tools/avrsim", ["runner"], "avrsim/avrsim"),
+}
+#: Tools the programs' builds need, with the Debian package that has each.
+BUILD_TOOLS = {
+    "make": "make",
+    "gcc": "build-essential",
+    "avr-gcc": "gcc-avr",
+    "avr-objcopy": "binutils-avr",
+}
+
+
+def build_programs(build_dir: Path, out_dir: Path, root: Path = ROOT) -> list[Path]:
+    """Build every program of :data:`PROGRAMS` below ``build_dir``; copy them to ``out_dir``."""
+    for tool, package in BUILD_TOOLS.items():
+        if shutil.which(tool) is None:
+            raise SystemExit(
+                f"building protoduino's wheel needs {tool} (Debian package {package}): it "
+                "compiles the Uno firmware and the simulated board that the wheel carries"
+            )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    copied = []
+    for name, (directory, args, built) in PROGRAMS.items():
+        cmd = ["make", "-s", "-C", str(root / directory), f"BUILD={build_dir}", *args]
+        result = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        if result.returncode != 0:
+            raise SystemExit(
+                f"`{' '.join(cmd)}` failed (exit {result.returncode}):\n"
+                + (result.stdout + result.stderr)[-4000:]
+            )
+        # copy2 keeps the executable bit, which the wheel records for pip to restore.
+        copied.append(Path(shutil.copy2(build_dir / built, out_dir / name)))
+    return copied
+
+
+class BuildPyWithPrograms(build_py):
+    """build_py, plus the programs in protoduino/_programs/ (not for an editable install)."""
+
+    def run(self) -> None:
+        super().run()
+        if self.editable_mode:
+            return
+        with tempfile.TemporaryDirectory(prefix="protoduino-programs-") as tmp:
+            build_programs(Path(tmp), Path(self.build_lib) / "protoduino" / "_programs")
+
+
 # Guarded so that tests can import source_digest(); setuptools runs this file as __main__.
 if __name__ == "__main__":
     setup(
@@ -56,5 +120,5 @@ if __name__ == "__main__":
                 optional=True,
             )
         ],
-        cmdclass={"build_ext": StrictBuildExt},
+        cmdclass={"build_ext": StrictBuildExt, "build_py": BuildPyWithPrograms},
     )

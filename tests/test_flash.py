@@ -33,7 +33,7 @@ pytestmark = pytest.mark.avr
 FLASH_TIMEOUT = 120.0
 
 
-def _missing_tool() -> str | None:
+def missing_tool() -> str | None:
     for tool in ("make", "cc", "avr-gcc", "avr-objcopy", "avrdude"):
         if shutil.which(tool) is None:
             return tool
@@ -55,7 +55,7 @@ def _protoduino(*args: str, timeout: float = FLASH_TIMEOUT) -> subprocess.Comple
     )
 
 
-class Board:
+class EmulatedUno:
     """An emulated Uno process (runner) and its port."""
 
     def __init__(self, cmd: list[str]) -> None:
@@ -83,28 +83,34 @@ class Board:
 
 @pytest.fixture(scope="module")
 def tools() -> None:
-    missing = _missing_tool()
+    missing = missing_tool()
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
     build.build_runner()
     build.build_optiboot()
 
 
-@pytest.fixture
-def blank_uno(tools: None, tmp_path: Path) -> Iterator[Board]:
+def start_blank_uno(link: Path) -> EmulatedUno:
     """Optiboot alone in the flash, started at the bootloader, auto-reset on open."""
+    build.build_runner()
+    build.build_optiboot()
     cmd = runner_command(
         hex_files=[build.OPTIBOOT_HEX],
         boot_address=build.OPTIBOOT_ADDRESS,
         auto_reset=True,
-        link=tmp_path / "uno",
+        link=link,
     )
-    board = Board(cmd)
+    return EmulatedUno(cmd)
+
+
+@pytest.fixture
+def blank_uno(tools: None, tmp_path: Path) -> Iterator[EmulatedUno]:
+    board = start_blank_uno(tmp_path / "uno")
     yield board
     board.close()
 
 
-def _handshake(port: str, timeout: float) -> Packet:
+def handshake(port: str, timeout: float) -> Packet:
     """RESET until RESET_ACK (covers the ~1 s Optiboot spends after the open's reset)."""
     decoder = StreamDecoder()
     reset = b"\x00" + frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION))
@@ -124,7 +130,7 @@ def _handshake(port: str, timeout: float) -> Packet:
     raise AssertionError(f"no RESET_ACK from {port} within {timeout} s")
 
 
-def test_flash_through_optiboot_then_handshake(blank_uno: Board) -> None:
+def test_flash_through_optiboot_then_handshake(blank_uno: EmulatedUno) -> None:
     result = _protoduino("flash", blank_uno.port)
     output = result.stdout + result.stderr
     assert result.returncode == 0, output
@@ -132,7 +138,7 @@ def test_flash_through_optiboot_then_handshake(blank_uno: Board) -> None:
     assert "device signature = 0x1e950f" in output
     assert "bytes of flash verified" in output
     assert "Writing | " in output
-    ack = _handshake(blank_uno.port, timeout=10.0)
+    ack = handshake(blank_uno.port, timeout=10.0)
     control = parse_control(ack.payload)
     assert control.version == PROTOCOL_VERSION
     assert control.schema_id == protoduino.SCHEMA_ID
@@ -148,7 +154,7 @@ def test_flash_reports_a_port_that_does_not_exist(tools: None, tmp_path: Path) -
 def test_flash_reports_when_no_bootloader_answers(tools: None, tmp_path: Path) -> None:
     """A board running the runner's test program (an echo, no bootloader)."""
     program = build.build_test_program()
-    board = Board(runner_command(program))
+    board = EmulatedUno(runner_command(program))
     try:
         hex_file = strip_to_hex(program, tmp_path / "testprog.hex")
         result = _protoduino("flash", board.port, "--hex", str(hex_file))

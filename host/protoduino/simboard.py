@@ -27,6 +27,7 @@ Typical use, in tests and in ``protoduino demo``::
 
 from __future__ import annotations
 
+import ctypes.util
 import json
 import logging
 import os
@@ -41,7 +42,7 @@ from types import TracebackType
 from typing import IO, Any
 
 from . import programs
-from .errors import TransportError
+from .errors import BuildError, TransportError
 from .flashing import MCU
 
 logger = logging.getLogger(__name__)
@@ -73,7 +74,13 @@ def _native_command(trace: Path | None, link: Path | None) -> list[str]:
 
 
 def _build_avr() -> Path:
-    # The emulated Uno: the simavr runner and the real firmware ELF.
+    # The emulated Uno: the simavr runner and the real firmware ELF. The runner links
+    # simavr's shared library, which a wheel cannot carry: say so before the loader would.
+    if ctypes.util.find_library("simavr") is None:
+        raise BuildError(
+            "the emulated Uno (backend avr) needs simavr's library: "
+            "sudo apt install libsimavr2 (Debian, Ubuntu, Raspberry Pi OS)"
+        )
     programs.locate(programs.FIRMWARE_ELF)
     return programs.locate(programs.RUNNER)
 
