@@ -18,8 +18,17 @@ replays the Inits, then those values, before any held call goes out. A Stop
 or a failsafe forgets the values (the device latched its outputs safe; a
 restore must not undo that).
 
+Non-blocking calls: every command also has a ``submit`` form that returns a
+:class:`concurrent.futures.Future` at once, resolved by the Ack with the same
+value or error the blocking call returns or raises; arguments are checked
+before anything is sent, so a bad one raises at once, as in the blocking call.
+Futures are resolved on the event thread, in the order their Acks arrived and
+in order with the events (never on the I/O thread: a slow done-callback must
+not stall the link, and a callback may command the board, even blocking). A
+submitted command cannot be recalled: ``future.cancel()`` returns False.
+
 Threads per board: the transport's I/O thread and one event thread that runs
-the ``on_event`` callbacks. Both stop in :meth:`Board.close`.
+the ``on_event`` callbacks and resolves futures. Both stop in :meth:`Board.close`.
 """
 
 from __future__ import annotations
@@ -28,9 +37,11 @@ import logging
 import queue
 import threading
 from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass
 from numbers import Integral
 from types import TracebackType
+from typing import TypeVar
 
 from .commands import DIGITAL, SERVO, PinMode
 from .constants import (
@@ -57,6 +68,33 @@ MAX_PING_PAYLOAD = 64
 
 EventCallback = Callable[[Event], None]
 
+T = TypeVar("T")
+
+#: What the event thread runs: an event for the callbacks, or a future to resolve.
+_Job = Event | Callable[[], None]
+
+
+def _no_value(call: Call) -> None:
+    call.result()  # raises the call's error, if any
+
+
+def _returning(obj: T) -> Callable[[Call], T]:
+    def value(call: Call) -> T:
+        call.result()
+        return obj
+
+    return value
+
+
+def _resolve(future: Future[T], call: Call, value: Callable[[Call], T]) -> None:
+    """Complete ``future`` with ``value(call)`` (which raises the call's error)."""
+    try:
+        result = value(call)
+    except BaseException as exc:  # the caller sees exactly what the blocking call raises
+        future.set_exception(exc)
+    else:
+        future.set_result(result)
+
 
 @dataclass(frozen=True, slots=True)
 class DeviceInfo:
@@ -77,9 +115,15 @@ class _Output:
 
     mode: PinMode
     init: bytes  # the Init as sent, without its message_id
+    safe: int  # the safe value: a pulse width (us) or a level (0, 1)
     min_us: int = 0
     max_us: int = 0
     last: bytes | None = None  # the last acknowledged Control, if any since init/stop/failsafe
+    #: The value last acknowledged (us or level); an Init, a Stop and a failsafe make it safe.
+    value: int = 0
+
+    def __post_init__(self) -> None:
+        self.value = self.safe
 
 
 def _int(name: str, value: object) -> int:
@@ -101,18 +145,46 @@ class Servo:
         self.min_us = min_us
         self.max_us = max_us
 
+    @property
+    def value(self) -> int | None:
+        """The pulse width (us) the device last acknowledged for this servo.
+
+        Its safe width after the Init, a Stop or a failsafe; None once the pin
+        was configured anew as something else (or for a servo object that
+        stands for a configuration since replaced).
+        """
+        return self.board._value(self.pin, SERVO)
+
+    def to_us(self, degrees: int) -> int:
+        """The pulse width the device makes for ``degrees`` (its own integer formula)."""
+        return self.min_us + degrees * (self.max_us - self.min_us) // SERVO_MAX_DEGREES
+
     def write(self, degrees: int) -> None:
         """Move to ``degrees`` (0..180, mapped linearly onto [min_us, max_us])."""
+        self.board._control(self.pin, *self._degrees(degrees))
+
+    def write_us(self, us: int) -> None:
+        """Set the pulse width in microseconds (within [min_us, max_us])."""
+        self.board._control(self.pin, *self._us(us))
+
+    def submit(self, degrees: int) -> Future[None]:
+        """:meth:`write` without waiting: a future resolved by the Ack."""
+        return self.board._control_future(self.pin, *self._degrees(degrees))
+
+    def submit_us(self, us: int) -> Future[None]:
+        """:meth:`write_us` without waiting: a future resolved by the Ack."""
+        return self.board._control_future(self.pin, *self._us(us))
+
+    def _degrees(self, degrees: int) -> tuple[ArduinoIn, int]:
         degrees = _int("degrees", degrees)
         if not 0 <= degrees <= SERVO_MAX_DEGREES:
             raise _reject(Status.STATUS_OUT_OF_RANGE, f"{degrees} degrees is outside 0..180")
         msg = ArduinoIn()
         msg.servo_control.pin = self.pin
         msg.servo_control.degrees = degrees
-        self.board._control(self.pin, msg)
+        return msg, self.to_us(degrees)
 
-    def write_us(self, us: int) -> None:
-        """Set the pulse width in microseconds (within [min_us, max_us])."""
+    def _us(self, us: int) -> tuple[ArduinoIn, int]:
         us = _int("us", us)
         if not self.min_us <= us <= self.max_us:
             raise _reject(
@@ -122,7 +194,7 @@ class Servo:
         msg = ArduinoIn()
         msg.servo_control.pin = self.pin
         msg.servo_control.us = us
-        self.board._control(self.pin, msg)
+        return msg, us
 
     def __repr__(self) -> str:
         return f"Servo(pin={self.pin}, min_us={self.min_us}, max_us={self.max_us})"
@@ -135,20 +207,33 @@ class DigitalOutput:
         self.board = board
         self.pin = pin
 
+    @property
+    def value(self) -> bool | None:
+        """The level the device last acknowledged (the safe level after Init, Stop, failsafe)."""
+        value = self.board._value(self.pin, DIGITAL)
+        return None if value is None else bool(value)
+
     def write(self, level: bool) -> None:
         """Drive the pin high (True) or low (False)."""
-        if not isinstance(level, bool | Integral):
-            raise TypeError(f"level must be a bool, not {type(level).__name__}")
-        msg = ArduinoIn()
-        msg.digital_control.pin = self.pin
-        msg.digital_control.level = bool(level)
-        self.board._control(self.pin, msg)
+        self.board._control(self.pin, *self._level(level))
 
     def on(self) -> None:
         self.write(True)
 
     def off(self) -> None:
         self.write(False)
+
+    def submit(self, level: bool) -> Future[None]:
+        """:meth:`write` without waiting: a future resolved by the Ack."""
+        return self.board._control_future(self.pin, *self._level(level))
+
+    def _level(self, level: bool) -> tuple[ArduinoIn, int]:
+        if not isinstance(level, bool | Integral):
+            raise TypeError(f"level must be a bool, not {type(level).__name__}")
+        msg = ArduinoIn()
+        msg.digital_control.pin = self.pin
+        msg.digital_control.level = bool(level)
+        return msg, int(bool(level))
 
     def __repr__(self) -> str:
         return f"DigitalOutput(pin={self.pin})"
@@ -173,7 +258,7 @@ class Board:
         self._lock = threading.Lock()
         self._outputs: dict[int, _Output] = {}
         self._callbacks: list[EventCallback] = []
-        self._events: queue.Queue[Event | None] = queue.Queue()
+        self._events: queue.Queue[_Job | None] = queue.Queue()
         self._closed = False
         self._rpc = Rpc(
             notify=self._notify,
@@ -294,6 +379,27 @@ class Board:
         :meth:`stop` return the servo there. Calling it again for the same pin
         changes the limits and the safe position.
         """
+        msg, on_ok, servo = self._servo_init(pin, safe, safe_us, min_us, max_us)
+        self._send(msg, on_ok)
+        return servo
+
+    def submit_servo(
+        self,
+        pin: int,
+        safe: int | None = None,
+        *,
+        safe_us: int | None = None,
+        min_us: int = SERVO_DEFAULT_MIN_US,
+        max_us: int = SERVO_DEFAULT_MAX_US,
+    ) -> Future[Servo]:
+        """:meth:`servo` without waiting: a future of the :class:`Servo`, resolved by the Ack."""
+        msg, on_ok, servo = self._servo_init(pin, safe, safe_us, min_us, max_us)
+        return self._future(msg, on_ok, _returning(servo))
+
+    def _servo_init(
+        self, pin: int, safe: int | None, safe_us: int | None, min_us: int, max_us: int
+    ) -> tuple[ArduinoIn, Callable[[], None], Servo]:
+        """Check a servo's configuration; its ServoInit, what to record at the Ack, its object."""
         pin = self._check_pin(pin)
         min_us = _int("min_us", min_us) or SERVO_DEFAULT_MIN_US
         max_us = _int("max_us", max_us) or SERVO_DEFAULT_MAX_US
@@ -330,12 +436,25 @@ class Board:
                     Status.STATUS_NO_FREE_RESOURCE,
                     f"all {self.info.max_servos} servo slots are in use",
                 )
-        state = _Output(SERVO, msg.SerializeToString(), min_us, max_us)
-        self._send(msg, lambda: self._set_output(pin, state))
-        return Servo(self, pin, min_us, max_us)
+        servo = Servo(self, pin, min_us, max_us)
+        width = init.safe_us if safe_us is not None else servo.to_us(init.safe_degrees)
+        state = _Output(SERVO, msg.SerializeToString(), width, min_us, max_us)
+        return msg, lambda: self._set_output(pin, state), servo
 
     def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
         """Configure ``pin`` as a digital output; it takes its ``safe`` level at once."""
+        msg, on_ok, output = self._digital_init(pin, safe)
+        self._send(msg, on_ok)
+        return output
+
+    def submit_digital_output(self, pin: int, safe: bool = False) -> Future[DigitalOutput]:
+        """:meth:`digital_output` without waiting: a future of the output, resolved by the Ack."""
+        msg, on_ok, output = self._digital_init(pin, safe)
+        return self._future(msg, on_ok, _returning(output))
+
+    def _digital_init(
+        self, pin: int, safe: bool
+    ) -> tuple[ArduinoIn, Callable[[], None], DigitalOutput]:
         pin = self._check_pin(pin)
         if not isinstance(safe, bool | Integral):  # bool("no") is True: no guessing
             raise TypeError(f"safe must be a bool, not {type(safe).__name__}")
@@ -346,36 +465,55 @@ class Board:
         msg = ArduinoIn()
         msg.digital_init.pin = pin
         msg.digital_init.safe_level = bool(safe)
-        state = _Output(DIGITAL, msg.SerializeToString())
-        self._send(msg, lambda: self._set_output(pin, state))
-        return DigitalOutput(self, pin)
+        state = _Output(DIGITAL, msg.SerializeToString(), int(bool(safe)))
+        return msg, lambda: self._set_output(pin, state), DigitalOutput(self, pin)
 
     # --- board-wide commands -------------------------------------------------------
 
     def ping(self, payload: bytes = b"") -> float:
         """Round trip of one Ping (seconds); the device echoes ``payload`` (<= 64 bytes)."""
+        msg, rtt = self._ping(payload)
+        return rtt(self._send(msg))
+
+    def submit_ping(self, payload: bytes = b"") -> Future[float]:
+        """:meth:`ping` without waiting: a future of the round trip, resolved by the Ack."""
+        msg, rtt = self._ping(payload)
+        return self._future(msg, None, rtt)
+
+    def _ping(self, payload: object) -> tuple[ArduinoIn, Callable[[Call], float]]:
         if not isinstance(payload, bytes | bytearray | memoryview):  # bytes(5) is 5 zeros
             raise TypeError(f"payload must be bytes, not {type(payload).__name__}")
-        payload = bytes(payload)
-        if len(payload) > MAX_PING_PAYLOAD:
+        sent = bytes(payload)
+        if len(sent) > MAX_PING_PAYLOAD:
             raise _reject(
                 Status.STATUS_DECODE_ERROR,
-                f"ping payload of {len(payload)} bytes exceeds {MAX_PING_PAYLOAD}",
+                f"ping payload of {len(sent)} bytes exceeds {MAX_PING_PAYLOAD}",
             )
         msg = ArduinoIn()
-        msg.ping.payload = payload
-        call = self._send(msg)
-        echo = bytes(call.result().ping_echo)
-        if echo != payload:
-            raise ProtocolError(f"ping echo differs: sent {payload.hex()}, got {echo.hex()}")
-        assert call.rtt is not None
-        return call.rtt
+        msg.ping.payload = sent
+
+        def rtt(call: Call) -> float:
+            echo = bytes(call.result().ping_echo)
+            if echo != sent:
+                raise ProtocolError(f"ping echo differs: sent {sent.hex()}, got {echo.hex()}")
+            assert call.rtt is not None
+            return call.rtt
+
+        return msg, rtt
 
     def stop(self) -> None:
         """Emergency stop: every configured output to its safe value at once, latched."""
+        self._send(self._stop_msg(), self._forget_values)
+
+    def submit_stop(self) -> Future[None]:
+        """:meth:`stop` without waiting: a future resolved by the Ack."""
+        return self._future(self._stop_msg(), self._forget_values, _no_value)
+
+    @staticmethod
+    def _stop_msg() -> ArduinoIn:
         msg = ArduinoIn()
         msg.stop.SetInParent()
-        self._send(msg, self._forget_values)
+        return msg
 
     @property
     def pinging(self) -> bool:
@@ -461,35 +599,81 @@ class Board:
             raise _reject(Status.STATUS_RESERVED_PIN, f"pin {pin} is reserved")
         return pin
 
-    def _control(self, pin: int, msg: ArduinoIn) -> None:
+    def _control(self, pin: int, msg: ArduinoIn, value: int) -> None:
         if self._closed:
             raise BoardClosedError("the board is closed")
         payload = msg.SerializeToString()
-        self._send(msg, lambda: self._set_value(pin, payload))
+        self._send(msg, lambda: self._set_value(pin, payload, value))
+
+    def _control_future(self, pin: int, msg: ArduinoIn, value: int) -> Future[None]:
+        if self._closed:
+            raise BoardClosedError("the board is closed")
+        payload = msg.SerializeToString()
+        return self._future(msg, lambda: self._set_value(pin, payload, value), _no_value)
 
     def _send(self, msg: ArduinoIn, on_ok: Callable[[], None] | None = None) -> Call:
-        """Send and wait; ``on_ok`` runs on the I/O thread right at the OK Ack, in order."""
+        """Send and wait; ``on_ok`` runs on the I/O thread right at the OK Ack, in order.
 
+        A blocking call waits on the Call itself, not on a future: the event
+        thread may be busy in a callback (or be the caller), and the bound
+        stays :meth:`Rpc.wait`'s.
+        """
+        call = self._submit(msg, on_ok)
+        self._rpc.wait(call)
+        return call
+
+    def _future(
+        self, msg: ArduinoIn, on_ok: Callable[[], None] | None, value: Callable[[Call], T]
+    ) -> Future[T]:
+        """Send without waiting; the future gets ``value(call)`` or the call's error.
+
+        It is resolved on the event thread (after ``on_ok``, in Ack order). The
+        request layer fails every call by its deadline, so every future is
+        resolved, at the latest with the blocking call's timeout error, or with
+        BoardClosedError at :meth:`close`.
+        """
+        future: Future[T] = Future()
+        future.set_running_or_notify_cancel()  # sent is sent: cancel() says False
+
+        def then(call: Call) -> None:
+            self._events.put(lambda: _resolve(future, call, value))
+
+        self._submit(msg, on_ok, then)
+        return future
+
+    def _submit(
+        self,
+        msg: ArduinoIn,
+        on_ok: Callable[[], None] | None,
+        then: Callable[[Call], None] | None = None,
+    ) -> Call:
         def done(call: Call) -> None:
             if call.error is None and on_ok is not None:
                 with self._lock:
                     on_ok()
+            if then is not None:
+                then(call)
 
-        call = self._rpc.submit(msg, on_done=done)
-        self._rpc.wait(call)
-        return call
+        return self._rpc.submit(msg, on_done=done)
 
     def _set_output(self, pin: int, state: _Output) -> None:
         self._outputs[pin] = state  # an Init drives the safe value: no value to restore
 
-    def _set_value(self, pin: int, control: bytes) -> None:
+    def _set_value(self, pin: int, control: bytes, value: int) -> None:
         out = self._outputs.get(pin)
         if out is not None:
             out.last = control
+            out.value = value
 
     def _forget_values(self) -> None:
         for out in self._outputs.values():
             out.last = None
+            out.value = out.safe
+
+    def _value(self, pin: int, mode: PinMode) -> int | None:
+        with self._lock:
+            out = self._outputs.get(pin)
+            return out.value if out is not None and out.mode is mode else None
 
     def _restore_messages(self) -> list[ArduinoIn]:
         """Every Init, then every last value (called on the I/O thread at a reboot)."""
@@ -556,13 +740,16 @@ class Board:
 
     def _dispatch(self) -> None:
         while True:
-            event = self._events.get()
-            if event is None:
+            job = self._events.get()
+            if job is None:
                 return
+            if not isinstance(job, Event):  # a future to resolve
+                job()
+                continue
             with self._lock:
                 callbacks = list(self._callbacks)
             for callback in callbacks:
                 try:
-                    callback(event)
+                    callback(job)
                 except Exception:
                     log.exception("%s: on_event callback failed", self.url)

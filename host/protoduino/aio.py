@@ -1,0 +1,219 @@
+"""asyncio API: the same board, awaited.
+
+A thin layer over :class:`protoduino.Board`: each command is the board's own
+``submit`` form, its :class:`concurrent.futures.Future` wrapped for the running
+loop (:func:`asyncio.wrap_future`). There is no second link or request layer
+here, so the blocking and the awaited calls have the same checks, bounds,
+retries, session restore and errors, and may be mixed on one board (from other
+threads too).
+
+Only two steps run on a worker thread (:func:`asyncio.to_thread`): opening (the
+handshake is the link's own blocking loop) and closing (it joins the board's
+threads). Cancelling an awaited command does not recall it: once submitted it
+is sent and acknowledged like any other; only the wait is abandoned.
+
+Events: ``async for event in board.events()`` sees every :class:`Event` from
+the moment it starts iterating until the board is closed (then the iteration
+ends); leaving an ``async with board.events() as events:`` block (or
+``events.close()``) ends it earlier. Each iterator buffers up to ``maxsize``
+events for a consumer that falls behind; beyond that the oldest is dropped and counted in
+:attr:`EventStream.dropped`, so a stalled consumer never grows memory without
+bound nor blocks the board's event thread.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+from concurrent.futures import Future
+from types import TracebackType
+from typing import Any, TypeVar
+
+from . import board as _board
+from .constants import SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
+from .events import Event, Stats
+
+T = TypeVar("T")
+
+#: Events one iterator keeps for a slow consumer before dropping the oldest.
+EVENT_BUFFER = 256
+
+
+async def _wait(future: Future[T]) -> T:
+    return await asyncio.wrap_future(future)
+
+
+async def open(url: str, **options: Any) -> Board:
+    """Open ``url`` like :meth:`protoduino.Board.open` (same keywords); the loop runs on."""
+    return Board(await asyncio.to_thread(_board.Board.open, url, **options))
+
+
+class Servo:
+    """An awaitable servo; get one from :meth:`Board.servo`. ``.sync`` is the blocking one."""
+
+    def __init__(self, sync: _board.Servo) -> None:
+        self.sync = sync
+        self.pin = sync.pin
+        self.min_us = sync.min_us
+        self.max_us = sync.max_us
+
+    async def write(self, degrees: int) -> None:
+        await _wait(self.sync.submit(degrees))
+
+    async def write_us(self, us: int) -> None:
+        await _wait(self.sync.submit_us(us))
+
+    def __repr__(self) -> str:
+        return f"aio.{self.sync!r}"
+
+
+class DigitalOutput:
+    """An awaitable digital output; get one from :meth:`Board.digital_output`."""
+
+    def __init__(self, sync: _board.DigitalOutput) -> None:
+        self.sync = sync
+        self.pin = sync.pin
+
+    async def write(self, level: bool) -> None:
+        await _wait(self.sync.submit(level))
+
+    async def on(self) -> None:
+        await self.write(True)
+
+    async def off(self) -> None:
+        await self.write(False)
+
+    def __repr__(self) -> str:
+        return f"aio.{self.sync!r}"
+
+
+class EventStream:
+    """An async iterator of a board's events (see the module docstring)."""
+
+    def __init__(self, board: Board, maxsize: int) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._buffer: collections.deque[Event | None] = collections.deque()
+        self._maxsize = maxsize
+        self._ready = asyncio.Event()
+        self._board = board
+        #: Events dropped because this iterator's consumer fell behind.
+        self.dropped = 0
+        self._unsubscribe = board.sync.on_event(self._from_thread)
+        board._streams.add(self)
+
+    def _from_thread(self, event: Event) -> None:  # the board's event thread
+        try:
+            self._loop.call_soon_threadsafe(self._put, event)
+        except RuntimeError:  # the loop is closed: nobody is listening any more
+            self._unsubscribe()
+
+    def _put(self, event: Event | None) -> None:  # the loop's thread
+        if event is not None and len(self._buffer) >= self._maxsize:
+            self._buffer.popleft()
+            self.dropped += 1
+        self._buffer.append(event)
+        self._ready.set()
+
+    def close(self) -> None:
+        """End the iteration (after the events already buffered)."""
+        self._unsubscribe()
+        self._board._streams.discard(self)
+        self._put(None)
+
+    async def __aenter__(self) -> EventStream:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self.close()
+
+    def __aiter__(self) -> EventStream:
+        return self
+
+    async def __anext__(self) -> Event:
+        while not self._buffer:
+            self._ready.clear()
+            await self._ready.wait()
+        event = self._buffer.popleft()
+        if event is None:
+            self._buffer.append(None)  # stays ended
+            raise StopAsyncIteration
+        return event
+
+
+class Board:
+    """An awaitable board; get one with :func:`open`. ``.sync`` is the blocking Board."""
+
+    def __init__(self, sync: _board.Board) -> None:
+        self.sync = sync
+        self._streams: set[EventStream] = set()
+
+    @classmethod
+    async def open(cls, url: str, **options: Any) -> Board:
+        return await open(url, **options)
+
+    async def __aenter__(self) -> Board:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.close()
+
+    async def close(self) -> None:
+        """Close the board (see :meth:`protoduino.Board.close`) and end every event iterator."""
+        await asyncio.to_thread(self.sync.close)
+        for stream in list(self._streams):
+            stream.close()
+
+    @property
+    def closed(self) -> bool:
+        return self.sync.closed
+
+    @property
+    def info(self) -> _board.DeviceInfo:
+        return self.sync.info
+
+    @property
+    def stats(self) -> Stats:
+        return self.sync.stats
+
+    @property
+    def pinging(self) -> bool:
+        return self.sync.pinging
+
+    @pinging.setter
+    def pinging(self, on: bool) -> None:
+        self.sync.pinging = on
+
+    async def servo(
+        self,
+        pin: int,
+        safe: int | None = None,
+        *,
+        safe_us: int | None = None,
+        min_us: int = SERVO_DEFAULT_MIN_US,
+        max_us: int = SERVO_DEFAULT_MAX_US,
+    ) -> Servo:
+        future = self.sync.submit_servo(pin, safe, safe_us=safe_us, min_us=min_us, max_us=max_us)
+        return Servo(await _wait(future))
+
+    async def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
+        return DigitalOutput(await _wait(self.sync.submit_digital_output(pin, safe)))
+
+    async def ping(self, payload: bytes = b"") -> float:
+        return await _wait(self.sync.submit_ping(payload))
+
+    async def stop(self) -> None:
+        await _wait(self.sync.submit_stop())
+
+    def events(self, maxsize: int = EVENT_BUFFER) -> EventStream:
+        """Every event from now on, until the board is closed: ``async for e in board.events()``."""
+        if maxsize < 1:
+            raise ValueError("maxsize must be at least 1")
+        return EventStream(self, maxsize)
+
+    def __repr__(self) -> str:
+        return f"aio.{self.sync!r}"

@@ -1,0 +1,185 @@
+"""protoduino.aio: awaitable open, commands and events over the same board core.
+
+Each test drives its own loop with asyncio.run (no pytest plugin needed).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from fakedevice import FakeDevice, ack
+from protoduino import EventKind, aio
+from protoduino.messages import ArduinoOut, Status
+from protoduino.simboard import SimBoard
+from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
+
+#: Bounds a failing test's wait only.
+BOUND = 10.0
+
+
+@pytest.fixture
+def fake(tmp_path: Path) -> Iterator[FakeDevice]:
+    with FakeDevice(tmp_path) as device:
+        yield device
+
+
+def log_msg(text: str) -> Any:
+    out = ArduinoOut()
+    out.log.text = text
+    return out
+
+
+def test_commands_and_values(fake: FakeDevice) -> None:
+    async def main() -> None:
+        async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
+            assert board.info.board == "fake"
+            servo = await board.servo(9, safe=10)
+            assert isinstance(servo.sync, protoduino.Servo) and servo.pin == 9
+            await servo.write(45)
+            led = await board.digital_output(13)
+            await led.on()
+            assert fake.values == {9: 45, 13: 1}
+            await servo.write_us(1500)
+            await led.off()
+            assert fake.values == {9: 1500, 13: 0}
+            assert await board.ping(b"x") > 0
+            await board.stop()
+            assert fake.commands("stop")
+            assert board.stats.timeouts == 0
+        assert board.closed
+
+    asyncio.run(asyncio.wait_for(main(), BOUND))
+
+
+def test_the_loop_keeps_running_while_commands_wait(fake: FakeDevice) -> None:
+    """Awaiting a held Ack leaves the loop free; gather runs commands side by side."""
+    released = threading.Event()
+
+    def hold(msg: Any) -> list[Any]:
+        replies = fake.default_reply(msg)
+        if msg.WhichOneof("data") == "servo_control":
+            threading.Thread(target=send, args=(replies,)).start()
+            return []
+        return replies
+
+    def send(replies: list[Any]) -> None:
+        released.wait(BOUND)
+        for out in replies:
+            fake.send_data(out)
+
+    async def main() -> None:
+        async with await aio.open(fake.port, ack_timeout=BOUND, ping=False) as board:
+            servos = [await board.servo(pin) for pin in (3, 5, 6)]
+            fake.handler = hold
+            before = len(fake.commands())
+            writes = asyncio.gather(*(s.write(20 + s.pin) for s in servos))
+            ticks = 0
+            while len(fake.commands()) < before + 3:  # the loop runs: this loop ticks
+                ticks += 1
+                await asyncio.sleep(0.01)
+            assert not writes.done()
+            released.set()
+            await writes
+            assert ticks > 0
+            assert fake.values == {3: 23, 5: 25, 6: 26}
+
+    asyncio.run(asyncio.wait_for(main(), BOUND))
+
+
+def test_errors_are_the_blocking_calls(fake: FakeDevice) -> None:
+    async def main() -> None:
+        async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
+            servo = await board.servo(9)
+            with pytest.raises(protoduino.CommandRejectedError) as info:
+                await servo.write(181)
+            assert info.value.sent is False
+            with pytest.raises(protoduino.CommandRejectedError) as info:
+                await board.servo(1)
+            assert info.value.status == Status.STATUS_RESERVED_PIN
+            fake.handler = lambda msg: [ack(msg.message_id, Status.STATUS_OUT_OF_RANGE)]
+            with pytest.raises(protoduino.CommandRejectedError) as info:
+                await servo.write(10)
+            assert info.value.sent is True
+            fake.handler = lambda msg: []
+            with pytest.raises(protoduino.AckTimeoutError):
+                await servo.write(10)
+
+    asyncio.run(asyncio.wait_for(main(), BOUND))
+
+
+def test_cancelled_wait_does_not_recall_the_command(fake: FakeDevice) -> None:
+    async def main() -> None:
+        async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
+            servo = await board.servo(9)
+            task = asyncio.create_task(servo.write(33))
+            await asyncio.sleep(0)  # the task starts: the command is submitted
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            assert await asyncio.to_thread(fake.wait_for, lambda: fake.values.get(9) == 33, BOUND)
+
+    asyncio.run(asyncio.wait_for(main(), BOUND))
+
+
+def test_events_iterate_until_close(fake: FakeDevice) -> None:
+    async def main() -> list[str]:
+        board = await aio.open(fake.port, ack_timeout=0.1, ping=False)
+        events = board.events()
+        fake.send_data(log_msg("one"))
+        fake.send_data(log_msg("two"))
+        texts = []
+        async for event in events:
+            if event.kind is EventKind.LOG:
+                texts.append(event.details["text"])
+            if len(texts) == 2:
+                await board.close()  # the iteration ends after what is buffered
+        return texts
+
+    assert asyncio.run(asyncio.wait_for(main(), BOUND)) == ["one", "two"]
+
+
+def test_event_buffer_is_bounded(fake: FakeDevice) -> None:
+    async def main() -> None:
+        async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
+            async with board.events(maxsize=2) as events:
+                for text in ("a", "b", "c", "d"):
+                    fake.send_data(log_msg(text))
+                while events.dropped < 2:  # the consumer stalls: the oldest go
+                    await asyncio.sleep(0.01)
+                got = [(await anext(events)).details["text"] for _ in range(2)]
+                assert got == ["c", "d"]
+            with pytest.raises(StopAsyncIteration):
+                await anext(events)
+            with pytest.raises(ValueError):
+                board.events(maxsize=0)
+
+    asyncio.run(asyncio.wait_for(main(), BOUND))
+
+
+def ends_near(want: int, values: list[int]) -> bool:
+    return bool(values) and abs(values[-1] - want) <= PULSE_TOLERANCE_US
+
+
+def test_aio_reaches_the_pins(sim_board: SimBoard) -> None:
+    pins = (3, 5, 6, 9)
+
+    async def main() -> None:
+        async with await aio.open(sim_board.port) as board:
+            servos = await asyncio.gather(*(board.servo(pin) for pin in pins))
+            led = await board.digital_output(13)
+            for degrees in (0, 60, 120):
+                await asyncio.gather(*(s.write(degrees + s.pin) for s in servos), led.on())
+            assert await board.ping() > 0
+
+    asyncio.run(asyncio.wait_for(main(), 60))
+    for pin in pins:
+        want = 544 + (120 + pin) * (2400 - 544) // 180
+        wait_for_pin(sim_board, pin, functools.partial(ends_near, want))
+    wait_for_pin(sim_board, 13, lambda v: 1 in v)

@@ -1,0 +1,219 @@
+"""Non-blocking calls: ``submit`` forms return futures resolved by the Ack, with blocking errors.
+
+The fake device holds or scripts Acks (several calls in flight from one
+thread, refusals, silence, close); the simulated boards show the values at the
+pins in their traces.
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, wait
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from fakedevice import FakeDevice, ack
+from protoduino import Board
+from protoduino.messages import ArduinoOut, Status
+from protoduino.simboard import SimBoard
+from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
+
+#: Long enough that a held Ack never times out while a test looks at the futures.
+PATIENT = 5.0
+
+
+@pytest.fixture
+def fake(tmp_path: Path) -> Iterator[FakeDevice]:
+    with FakeDevice(tmp_path) as device:
+        yield device
+
+
+@pytest.fixture
+def board(fake: FakeDevice) -> Iterator[Board]:
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
+        yield b
+
+
+class Holder:
+    """A fake-device handler that keeps the Acks of Controls until released."""
+
+    def __init__(self, fake: FakeDevice) -> None:
+        self.fake = fake
+        self.held: list[Any] = []
+        self.lock = threading.Lock()
+        fake.handler = self
+
+    def __call__(self, msg: Any) -> list[Any]:
+        replies = self.fake.default_reply(msg)
+        if msg.WhichOneof("data") in ("servo_control", "digital_control"):
+            with self.lock:
+                self.held.extend(replies)
+            return []
+        return replies
+
+    def release(self) -> None:
+        with self.lock:
+            held, self.held = self.held, []
+        for out in held:
+            self.fake.send_data(out)
+
+
+def test_several_calls_in_flight_from_one_thread(tmp_path: Path) -> None:
+    with (
+        FakeDevice(tmp_path) as fake,
+        Board.open(fake.port, ack_timeout=PATIENT, max_retries=0, ping=False) as board,
+    ):
+        servo = board.servo(9)
+        led = board.digital_output(13)
+        holder = Holder(fake)
+        before = len(fake.commands())
+        futures = [servo.submit(10), servo.submit_us(1500), led.submit(True)]
+        # Every one reached the device before any Ack came back: nothing blocked.
+        assert fake.wait_for(lambda: len(fake.commands()) == before + 3)
+        assert not any(f.done() for f in futures)
+        assert all(f.running() and not f.cancel() for f in futures)  # sent is sent
+        holder.release()
+        done, _ = wait(futures, timeout=PATIENT)
+        assert len(done) == 3
+        assert [f.result() for f in futures] == [None, None, None]
+        assert fake.values == {9: 1500, 13: 1}
+
+
+def test_future_values(board: Board, fake: FakeDevice) -> None:
+    servo = board.submit_servo(9, safe=10).result(PATIENT)
+    assert isinstance(servo, protoduino.Servo) and servo.pin == 9
+    led = board.submit_digital_output(13, safe=True).result(PATIENT)
+    assert isinstance(led, protoduino.DigitalOutput) and led.pin == 13
+    assert [r.kind for r in fake.commands()][-2:] == ["servo_init", "digital_init"]
+    rtt = board.submit_ping(b"abc").result(PATIENT)
+    assert isinstance(rtt, float) and rtt > 0
+    assert board.submit_stop().result(PATIENT) is None
+    assert fake.commands("stop")
+
+
+def test_argument_errors_raise_at_once(board: Board, fake: FakeDevice) -> None:
+    servo = board.servo(9, min_us=1000, max_us=2000)
+    led = board.digital_output(13)
+    before = len(fake.commands())
+    refused: list[tuple[Callable[[], object], int]] = [
+        (lambda: servo.submit(181), Status.STATUS_OUT_OF_RANGE),
+        (lambda: servo.submit_us(999), Status.STATUS_OUT_OF_RANGE),
+        (lambda: board.submit_servo(1), Status.STATUS_RESERVED_PIN),
+        (lambda: board.submit_digital_output(9), Status.STATUS_PIN_IN_USE),
+        (lambda: board.submit_ping(bytes(65)), Status.STATUS_DECODE_ERROR),
+    ]
+    for action, status in refused:
+        with pytest.raises(protoduino.CommandRejectedError) as info:
+            action()
+        assert info.value.status == status and info.value.sent is False
+    with pytest.raises(TypeError):
+        servo.submit(4.5)  # type: ignore[arg-type]
+    with pytest.raises(TypeError):
+        led.submit("on")  # type: ignore[arg-type]
+    assert len(fake.commands()) == before  # nothing went out
+
+
+def test_device_refusal_in_the_future(board: Board, fake: FakeDevice) -> None:
+    servo = board.servo(9)
+    fake.handler = lambda msg: [ack(msg.message_id, Status.STATUS_OUT_OF_RANGE)]
+    error = servo.submit(10).exception(PATIENT)
+    assert isinstance(error, protoduino.CommandRejectedError)
+    assert error.status == Status.STATUS_OUT_OF_RANGE and error.sent is True
+    # The blocking call raises the same kind of error.
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        servo.write(10)
+    assert info.value.status == Status.STATUS_OUT_OF_RANGE
+
+
+def test_silence_times_out(board: Board, fake: FakeDevice) -> None:
+    servo = board.servo(9)
+    fake.handler = lambda msg: []
+    future = servo.submit(10)
+    error = future.exception(PATIENT)
+    assert isinstance(error, protoduino.AckTimeoutError) and isinstance(error, TimeoutError)
+    assert len(fake.commands("servo_control")) == 4  # the first try and three retries
+
+
+def test_wrong_ping_echo(board: Board, fake: FakeDevice) -> None:
+    def bad_echo(msg: Any) -> list[Any]:
+        out = ArduinoOut()
+        out.ack.message_id = msg.message_id
+        out.ack.ping_echo = b"other"
+        return [out]
+
+    fake.handler = bad_echo
+    assert isinstance(board.submit_ping(b"mine").exception(PATIENT), protoduino.ProtocolError)
+
+
+def test_close_fails_outstanding_futures(tmp_path: Path) -> None:
+    with FakeDevice(tmp_path) as fake:
+        board = Board.open(fake.port, ack_timeout=PATIENT, max_retries=0, ping=False)
+        servo = board.servo(9)
+        Holder(fake)
+        future = servo.submit(10)
+        assert fake.wait_for(lambda: bool(fake.commands("servo_control")))
+        board.close()
+        assert isinstance(future.exception(PATIENT), protoduino.BoardClosedError)
+        with pytest.raises(protoduino.BoardClosedError):
+            servo.submit(20)
+
+
+def test_done_callback_may_command_the_board(board: Board, fake: FakeDevice) -> None:
+    """Futures resolve on the event thread, not the I/O thread: a blocking call works there."""
+    servo = board.servo(9)
+    seen: list[str] = []
+    finished = threading.Event()
+
+    def then(future: Future[None]) -> None:
+        seen.append(threading.current_thread().name)
+        servo.write(30)  # blocking, from the callback
+        finished.set()
+
+    servo.submit(20).add_done_callback(then)
+    assert finished.wait(PATIENT)
+    assert seen[0].startswith("protoduino-events")
+    assert fake.values[9] == 30
+
+
+def record(order: list[int], value: int, future: Future[None]) -> None:
+    order.append(value)
+
+
+def test_futures_in_ack_order_with_blocking_calls(board: Board, fake: FakeDevice) -> None:
+    servo = board.servo(9)
+    order: list[int] = []
+    futures = []
+    for degrees in range(0, 181, 20):
+        future = servo.submit(degrees)
+        future.add_done_callback(functools.partial(record, order, degrees))
+        futures.append(future)
+    servo.write(7)  # a blocking call among futures still returns once acked
+    wait(futures, timeout=PATIENT)
+    assert order == list(range(0, 181, 20))
+    assert fake.values[9] == 7
+
+
+def ends_near(want: int, values: list[int]) -> bool:
+    return bool(values) and abs(values[-1] - want) <= PULSE_TOLERANCE_US
+
+
+def test_futures_reach_the_pins(sim_board: SimBoard) -> None:
+    with Board.open(sim_board.port) as board:
+        servos = [board.servo(pin) for pin in (3, 5, 6, 9)]
+        led = board.digital_output(13)
+        futures: list[Future[None]] = []
+        for step in range(5):
+            futures += [s.submit(step * 20 + i) for i, s in enumerate(servos)]
+            futures.append(led.submit(step % 2 == 0))
+        done, _ = wait(futures, timeout=30)
+        assert len(done) == len(futures)
+        assert all(f.exception() is None for f in futures)
+        for i, servo in enumerate(servos):
+            want = 544 + (80 + i) * (2400 - 544) // 180
+            wait_for_pin(sim_board, servo.pin, functools.partial(ends_near, want))
+        wait_for_pin(sim_board, 13, lambda v: v[-1:] == [1])
+        assert board.stats.timeouts == 0 and board.stats.rejected == 0
