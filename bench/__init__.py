@@ -1,4 +1,4 @@
-"""protoduino's benchmarks against its peers (issue 7); ``python -m bench`` writes the report.
+"""protoduino's benchmarks against its peers; ``python -m bench`` writes docs/performance.md.
 
 Layout, so that a new measurement is a small addition:
 

@@ -2,7 +2,7 @@
 
 matplotlib is optional (the bench extras): :func:`pyplot` raises
 :class:`~bench.core.MissingDependencyError` without it, and the runner then leaves the charts out
-and says so in the report. The helpers cover what issue 7 asks for: bars (receive rates, wire
+and says so in the report. The helpers cover what the report needs: bars (receive rates, wire
 bytes), a latency histogram and a line chart (throughput against window size).
 """
 

@@ -114,7 +114,7 @@ def cpu_share(rate_bytes_per_s: float, throughput_bytes_per_s: float) -> float:
 
 @dataclass(frozen=True, slots=True)
 class Target:
-    """One of issue 7's targets as the report shows it; ``met`` is None when not measured."""
+    """One of the benchmarks' targets as the report shows it; ``met`` is None when not measured."""
 
     name: str
     goal: str
@@ -180,7 +180,7 @@ class Context:
 class Section:
     """One part of the report: ``run`` measures and returns the section's body.
 
-    ``number`` is the part of issue 7 it answers, used for ordering and the heading.
+    ``number`` is the part of the report it answers, used for ordering and the heading.
     """
 
     number: int

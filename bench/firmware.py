@@ -1,4 +1,6 @@
-"""Part 5 of issue 7: the Uno firmware's flash and static RAM, and its cycles per command.
+"""Benchmark part 5 (docs/performance.md).
+
+The Uno firmware's flash and static RAM, and its cycles per command.
 
 * Footprint: ``make -C firmware avr`` builds ``build/avr/protoduino.elf``; ``avr-size -A``
   gives its sections. Flash = .text + .data (the initial values of .data live in flash),

@@ -1,4 +1,6 @@
-"""Part 1 of issue 7: the host receive path, protoduino next to its peers, fed from memory.
+"""Benchmark part 1 (docs/performance.md).
+
+The host receive path, protoduino next to its peers, fed from memory.
 
 Each library's stream is built with that library's own encoder, held in memory, cut into reads
 of ``ctx.chunk`` bytes and consumed from a fresh parser state per repetition, up to the point
@@ -44,7 +46,7 @@ from .peers import RxCase, mavlink, pigweed, protoduino, serialtransfer
 
 log = logging.getLogger(__name__)
 
-#: Goals from issue 7.
+#: The targets this part is judged against (docs/performance.md shows them met or not).
 GOAL_RATIO_TO_PYMAVLINK = 5.0
 GOAL_CPU_AT_1MBPS = 0.10
 

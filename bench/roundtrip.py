@@ -1,4 +1,6 @@
-"""Part 2 of issue 7: command -> Ack round trip, next to the wire-time lower bound.
+"""Benchmark part 2 (docs/performance.md).
+
+Command -> Ack round trip, next to the wire-time lower bound.
 
 Wall-clock latency (``time.perf_counter``) of one call through the public API, from the call to
 its return with the Ack: ``Servo.write`` (ServoControl) and ``Board.ping()`` (an empty Ping),

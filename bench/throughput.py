@@ -1,4 +1,6 @@
-"""Part 3 of issue 7: acknowledged commands per second against the line rate, by window size.
+"""Benchmark part 3 (docs/performance.md).
+
+Acknowledged commands per second against the line rate, by window size.
 
 The public API only: ``Board.open(port, window=W)`` and ``W`` threads each calling
 ``Servo.write`` in a loop (any number of threads may command one board; ``window`` is how many

@@ -1,4 +1,6 @@
-"""Part 4 of issue 7: bytes on the wire to set a servo on pin 9 to 90 degrees, and the ack.
+"""Benchmark part 4 (docs/performance.md).
+
+Bytes on the wire to set a servo on pin 9 to 90 degrees, and the ack.
 
 Every byte string comes from the library's own encoder (see each ``bench.peers`` module for how
 the encoder is reached without a board); a sample built by hand from a specification would be

@@ -2,7 +2,7 @@
 
 The host opens ``fake.port``, a symlink to the pty's slave, exactly as it would
 open a real board; the fake speaks the wire protocol on the master side from
-its own thread. It follows the device side of PROTOCOL.md closely enough for
+its own thread. It follows the device side of docs/protocol.md closely enough for
 the host (RESET/RESET_ACK, SEQ, NOT_ACTIVE, one Ack per command, the dedupe
 window, a pin table so that a reboot forgets the configuration), and every
 reply goes through ``handler`` so a test can drop, duplicate, delay or corrupt

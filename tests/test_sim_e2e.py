@@ -54,7 +54,7 @@ TRACE_TIMEOUT = 2.0
 QUIET = 0.1
 #: Board name each backend reports in DeviceInfo.
 BOARD_NAME = {"native": "sim", "avr": "uno"}
-#: The failsafe may fire up to this long after FAILSAFE_TIMEOUT (issue 3: 10.0 s + 20 ms).
+#: The failsafe may fire up to this long after FAILSAFE_TIMEOUT (the requirement: 10.0 s + 20 ms).
 FAILSAFE_SLACK = 0.020
 #: The device's clock counts whole milliseconds, so it may fire up to 1 ms "early"
 #: measured against the trace's microsecond timestamps; allow 2 ms.

@@ -11,7 +11,7 @@ from protoduino.packets import ErrorReason
 VECTORS_PATH = Path(__file__).parent / "vectors" / "wire_v1.json"
 
 #: The vectors file names each invalid frame; this is the drop reason the
-#: receiver must report for it (PROTOCOL.md sections 2 and 3).
+#: receiver must report for it (docs/protocol.md sections 2 and 3).
 INVALID_FRAME_REASONS: dict[str, ErrorReason] = {
     "crc flipped": "crc",
     "len larger than payload": "length",

@@ -73,7 +73,7 @@ def parser_kind(decoder: Callable[[], Decoder]) -> str:
 class StandInRequestLayer:
     """The per-packet work of the link and request layers, without threads or I/O.
 
-    For each packet: SEQ accounting as PROTOCOL.md section 6 asks, then DATA is parsed as
+    For each packet: SEQ accounting as docs/protocol.md section 6 asks, then DATA is parsed as
     ``ArduinoOut`` with the project's ``messages.parse_out`` and an Ack resolves its pending call
     by ``message_id`` (a dict lookup, as a request layer keyed by id does), while events and
     CONTROL packets go to a listener. What it leaves out (locks, futures, logging) would cost the

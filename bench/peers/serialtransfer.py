@@ -3,8 +3,8 @@
 Its parser pulls bytes from a pyserial port inside ``SerialTransfer.available()``, so the
 benchmark swaps that port for :class:`MemoryPort`, which hands out bytes from memory. That is
 kinder to it than a real port: its state machine reads one byte per ``read()`` call, which on a
-real pyserial port costs a system call each (about 4.5 us measured here, TOOLCHAIN.md), and here
-costs a slice.
+real pyserial port costs a system call each (about 4.5 us, measured on the development machine),
+and here costs a slice.
 
 SerialTransfer moves application-defined structs; the layouts below (an Ack as message id
 uint32 + status uint8, a servo command as pin + degrees, one packet id per command) are ours.

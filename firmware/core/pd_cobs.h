@@ -1,5 +1,5 @@
 /*
- * Consistent Overhead Byte Stuffing (Cheshire and Baker, 1999), PROTOCOL.md
+ * Consistent Overhead Byte Stuffing (Cheshire and Baker, 1999), docs/protocol.md
  * section 2. Pure functions on bounded buffers; the streaming receiver that
  * collects bytes up to a 0x00 delimiter lives in pd_link.c.
  */

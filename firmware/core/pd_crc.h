@@ -1,6 +1,6 @@
 /*
  * CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, xorout 0),
- * PROTOCOL.md section 3. Bitwise rather than a 512-byte table: on the Uno the
+ * docs/protocol.md section 3. Bitwise rather than a 512-byte table: on the Uno the
  * table would cost a quarter of the flash budget's headroom, and at 115200 baud
  * the loop is far faster than the wire.
  */

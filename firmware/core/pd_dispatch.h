@@ -1,5 +1,5 @@
 /*
- * The application layer (PROTOCOL.md section 7): decode one ArduinoIn with
+ * The application layer (docs/protocol.md section 7): decode one ArduinoIn with
  * nanopb, execute it, answer exactly one Ack; the dedupe window; events.
  */
 #ifndef PD_DISPATCH_H

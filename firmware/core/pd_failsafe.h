@@ -1,5 +1,5 @@
 /*
- * The failsafe timer (PROTOCOL.md section 7): FAILSAFE_TIMEOUT after the last
+ * The failsafe timer (docs/protocol.md section 7): FAILSAFE_TIMEOUT after the last
  * sign of a live host (a Ping, or the handshake / boot when no Ping came yet)
  * every configured output goes to its safe value, once per silence. Pure
  * bookkeeping on a millisecond clock handed in by the caller, so the unit

@@ -28,7 +28,7 @@ typedef struct pd_board_info {
 /*
  * Write one whole encoded frame. Returns true only if every byte was accepted
  * for transmission. A false return makes the core keep its SEQ (the next frame
- * reuses it, PROTOCOL.md section 6) and send a lone 0x00 first, so that a
+ * reuses it, docs/protocol.md section 6) and send a lone 0x00 first, so that a
  * partly written frame cannot swallow the next one at the receiver.
  */
 bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len);

@@ -11,7 +11,7 @@ typedef char pd_assert_tx_fits_len[(PD_TX_MAX_PAYLOAD <= PD_MAX_PAYLOAD) ? 1 : -
 void pd_link_init(pd_link_t *link)
 {
     memset(link, 0, sizeof(*link));
-    /* PROTOCOL.md section 2: flush the receiver before our first frame. */
+    /* docs/protocol.md section 2: flush the receiver before our first frame. */
     link->tx_flush = true;
 }
 

@@ -1,5 +1,5 @@
 /*
- * The link layer (PROTOCOL.md sections 2, 5 and 6): the streaming COBS
+ * The link layer (docs/protocol.md sections 2, 5 and 6): the streaming COBS
  * receiver, packet checks, the IDLE/ACTIVE state machine with RESET/RESET_ACK,
  * SEQ accounting, link events, and the transmit path.
  *

@@ -1,6 +1,6 @@
 /*
  * The output registry: which pin belongs to which pin mode, each mode's
- * per-slot state, limits and safe values (PROTOCOL.md section 7,
+ * per-slot state, limits and safe values (docs/protocol.md section 7,
  * docs/architecture.md "device semantics"). Every check the device makes on
  * an Init or a Control lives here and returns the Ack status; on any status
  * but OK nothing changed.

@@ -1,5 +1,5 @@
 /*
- * Packets: [TYPE][LEN][SEQ][PAYLOAD (LEN)][CRC16 BE], PROTOCOL.md sections 3-4.
+ * Packets: [TYPE][LEN][SEQ][PAYLOAD (LEN)][CRC16 BE], docs/protocol.md sections 3-4.
  * Pure functions: building a packet has no side effects, so a frame that
  * failed to write can be rebuilt with the same SEQ.
  */

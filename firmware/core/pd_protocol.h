@@ -1,5 +1,5 @@
 /*
- * Wire protocol constants (PROTOCOL.md section 8) and wire enumerations.
+ * Wire protocol constants (docs/protocol.md section 8) and wire enumerations.
  *
  * Mirrors host/protoduino/constants.py; tests/test_firmware_unit.py parses this
  * header and compares every value with the Python module so the two cannot

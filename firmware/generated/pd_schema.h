@@ -2,7 +2,7 @@
 #ifndef PD_SCHEMA_H
 #define PD_SCHEMA_H
 
-/* CRC-32 of the schema's deterministic FileDescriptorSet (PROTOCOL.md section 5). */
+/* CRC-32 of the schema's deterministic FileDescriptorSet (docs/protocol.md 5). */
 #define PD_SCHEMA_ID 0x614404ADUL
 
 #endif /* PD_SCHEMA_H */

@@ -185,7 +185,7 @@ static int open_pty(char *slave_name, size_t cap, int *slave_fd)
         perror("pd_sim: open slave");
         return -1;
     }
-    /* PROTOCOL.md section 1: every byte value passes unchanged. */
+    /* docs/protocol.md section 1: every byte value passes unchanged. */
     struct termios tio;
     if (tcgetattr(*slave_fd, &tio) != 0) {
         perror("pd_sim: tcgetattr");

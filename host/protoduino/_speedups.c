@@ -1,5 +1,5 @@
 /*
- * protoduino._speedups: the host's stream decoder in C (issue 7).
+ * protoduino._speedups: the host's stream decoder in C (its speed: docs/performance.md).
  *
  * framing.PyStreamDecoder is the reference; this type must give exactly what
  * it gives: the same Packet / BadFrame items (instances of the classes in

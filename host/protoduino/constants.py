@@ -1,4 +1,4 @@
-"""Protocol constants (PROTOCOL.md section 8) and the wire's enumerations.
+"""Protocol constants (docs/protocol.md section 8) and the wire's enumerations.
 
 The firmware mirrors these in ``firmware/core/pd_protocol.h``; a test compares
 the two so they cannot drift.

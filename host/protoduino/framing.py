@@ -1,4 +1,4 @@
-"""COBS framing (PROTOCOL.md section 2) and the incremental stream decoder.
+"""COBS framing (docs/protocol.md section 2) and the incremental stream decoder.
 
 Recovery policy, the same on both ends of the link. The receiver collects
 non-zero bytes and acts only at a 0x00 delimiter, so it needs no timer:

@@ -1,4 +1,4 @@
-"""Link layer (PROTOCOL.md sections 5 and 6): handshake, SEQ accounting, watchdog.
+"""Link layer (docs/protocol.md sections 5 and 6): handshake, SEQ accounting, watchdog.
 
 States: WAIT_ACK (handshaking, or waiting for the port) -> ACTIVE; FAILED when
 the device speaks another protocol version or schema (nothing can fix that
@@ -332,7 +332,7 @@ class Link:
                 return
             self._listener.link_message(msg)
         elif packet.type is PacketType.COMMAND:
-            self.direction_drops += 1  # PROTOCOL.md 4: a COMMAND reaching the host
+            self.direction_drops += 1  # docs/protocol.md 4: a COMMAND reaching the host
         else:
             self._control(packet)
 

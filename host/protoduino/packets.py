@@ -1,4 +1,4 @@
-"""Packets: ``[TYPE][LEN][SEQ][PAYLOAD][CRC16 BE]`` (PROTOCOL.md sections 3 to 5).
+"""Packets: ``[TYPE][LEN][SEQ][PAYLOAD][CRC16 BE]`` (docs/protocol.md sections 3 to 5).
 
 Pure functions, no I/O. Building a packet has no side effects, so a frame
 that failed to write can be rebuilt and sent again with the same SEQ.

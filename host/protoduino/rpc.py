@@ -1,4 +1,4 @@
-"""Requests (PROTOCOL.md section 7): message ids, Acks, retransmission, window, ping.
+"""Requests (docs/protocol.md section 7): message ids, Acks, retransmission, window, ping.
 
 One transaction table, one lock. A call is submitted from any thread and
 waited on with a bound; everything timed (retransmission after ACK_TIMEOUT,

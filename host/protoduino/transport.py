@@ -19,7 +19,7 @@ If the port disappears (USB unplugged, the simulated board's pseudo-terminal
 gone) the thread closes it, tells the listener, and keeps trying to reopen it
 with a bounded backoff until the transport is closed.
 
-The transmit SEQ counter lives here because PROTOCOL.md section 6 ties it to
+The transmit SEQ counter lives here because docs/protocol.md section 6 ties it to
 the write itself: it advances only after the whole frame was written, and a
 frame that failed to write keeps its SEQ.
 """
@@ -213,7 +213,7 @@ class Transport:
                 self.url, baudrate=self.baudrate, timeout=0, write_timeout=WRITE_TIMEOUT
             )
             self._port = port
-            # PROTOCOL.md 2: a lone 0x00 flushes the receiver's half-filled buffer.
+            # docs/protocol.md 2: a lone 0x00 flushes the receiver's half-filled buffer.
             self._write_raw(DELIMITER)
         except (serial.SerialException, OSError, ValueError) as error:
             self._close_port()
@@ -342,7 +342,7 @@ class Transport:
                 self._write_raw(frame)
             except serial.SerialTimeoutException:
                 # Stuck port: drop this packet (the layers above retransmit) but keep
-                # its SEQ for the next one, as PROTOCOL.md 6 asks.
+                # its SEQ for the next one, as docs/protocol.md 6 asks.
                 self.write_errors += 1
                 log.warning("%s: write timed out; packet dropped", self.name)
                 self._pop(item)

@@ -5,7 +5,8 @@
  *          [--auto-reset] [--glitch PIN] [--stats FILE] [--profile FILE]
  *          [--mcu NAME] [--freq HZ] [FIRMWARE.elf]
  *
- * The command-line contract is the native simulated board's (contracts.md):
+ * The command-line contract is the native simulated board's (firmware/posix/pd_sim.c, as
+ * protoduino.simboard runs both):
  * the first stdout line is the port to open (the pty's slave, or --link),
  * SIGINT/SIGTERM exit cleanly, SIGUSR1 resets the MCU while keeping the pty,
  * and --trace writes one JSON line per output change, measured at the pins.
