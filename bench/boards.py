@@ -89,8 +89,8 @@ def _stats_backend(stats: Path, profile: Path | None) -> Backend:
     if profile is not None:
         extra += ["--profile", str(profile)]
 
-    def command(trace: Path | None, link: Path | None) -> list[str]:
-        cmd = base.command(trace, link)
+    def command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
+        cmd = base.command(trace, link, control)
         return [*cmd[:-1], *extra, cmd[-1]]
 
     return Backend(build=base.build, command=command)
@@ -105,8 +105,8 @@ def _echo_backend() -> Backend:
         builds.build_test_program()
         return builds.build_runner()
 
-    def command(trace: Path | None, link: Path | None) -> list[str]:
-        return runner_command(builds.TEST_PROGRAM, trace=trace, link=link)
+    def command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
+        return runner_command(builds.TEST_PROGRAM, trace=trace, link=link, control=control)
 
     return Backend(build=build, command=command)
 

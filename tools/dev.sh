@@ -21,6 +21,7 @@ APT_PACKAGES=(
     gcc-avr binutils-avr avr-libc          # the Uno firmware
     arduino-core-avr                       # Optiboot sources for the flashing test
     simavr libsimavr-dev                   # the emulated Uno
+    libjansson-dev                         # JSON of the simulated boards' control socket
     avrdude                                # flashing
     clang libclang-rt-14-dev               # libFuzzer + sanitizers for the C core
 )

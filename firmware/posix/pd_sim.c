@@ -1,13 +1,18 @@
 /*
  * The simulated board: the portable core behind a POSIX HAL.
  *
- *   pd_sim [--trace FILE] [--link PATH]
+ *   pd_sim [--trace FILE] [--link PATH] [--control PATH]
  *
  * Opens a pseudo-terminal in raw mode, prints the slave's path (or PATH when
  * --link makes a symlink to it) as the first line on stdout, then runs the
  * core until SIGINT/SIGTERM. SIGUSR1 is a simulated reboot. The pins are
  * virtual: every change is written to the trace as one JSON object per line,
  * flushed per line, with t = seconds since the process started (monotonic).
+ * --control PATH opens the input-control socket (tools/simcontrol): levels,
+ * analog values and pulse trains on the virtual input pins, which the HAL's
+ * input functions read back on the same clock. A pulse train is computed
+ * from the clock when it is read, not stepped, so no edge depends on how
+ * often this loop runs.
  *
  * We keep our own slave fd open for the whole run. Without it the master sees
  * EIO/POLLHUP whenever the host closes the port, and a host that reopens it
@@ -30,6 +35,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "pd_control.h"
 #include "pd_core.h"
 
 /* How long a frame may wait for room in the pty before it is dropped. */
@@ -37,8 +43,18 @@
 
 enum { SIM_PIN_UNUSED = 0, SIM_PIN_SERVO, SIM_PIN_DIGITAL };
 
+/* A virtual input pin, as the control socket drives it. */
+typedef struct {
+    uint8_t level;   /* the level outside pulse trains */
+    uint16_t analog; /* counts, 0..1023 (pins 14..19) */
+    uint32_t pulses; /* the current train: 0 = none */
+    uint32_t hz;
+    double start; /* board seconds of the train's first edge */
+} sim_input_t;
+
 typedef struct sim_hal {
     int master;
+    sim_input_t input[PD_MAX_PINS];
     FILE *trace;
     struct timespec start;
     uint8_t mode[PD_MAX_PINS];
@@ -89,6 +105,56 @@ static void sim_release_all(sim_hal_t *hal)
             hal->value[pin] = 0;
         }
     }
+}
+
+/* --- the control socket ------------------------------------------------ */
+
+#define SIM_FIRST_ANALOG 14 /* A0, as on the Uno */
+
+/* The pin's level at board time `now`: a pulse goes to the opposite of the
+ * level before the train for the first half of each period. */
+static uint8_t sim_input_level(const sim_input_t *in, double now)
+{
+    if (in->pulses && now >= in->start) {
+        double halves = (now - in->start) * 2.0 * (double)in->hz;
+        if (halves < 2.0 * (double)in->pulses) {
+            return (uint8_t)(in->level ^ (((uint64_t)halves & 1u) ? 0u : 1u));
+        }
+    }
+    return in->level;
+}
+
+static const char *sim_control_apply(void *ctx, const pd_control_cmd_t *cmd, double *t)
+{
+    sim_hal_t *hal = ctx;
+    if (cmd->pin >= sim_board.num_pins) {
+        return "no such pin on this board (pins 2..19)";
+    }
+    if (sim_board.reserved_pins & (1UL << cmd->pin)) {
+        return "pins 0 and 1 carry the serial link";
+    }
+    sim_input_t *in = &hal->input[cmd->pin];
+    double now = sim_elapsed(hal);
+    switch (cmd->kind) {
+    case PD_CONTROL_LEVEL:
+        in->pulses = 0; /* a level ends any train */
+        in->level = (uint8_t)cmd->value;
+        break;
+    case PD_CONTROL_ANALOG:
+        if (cmd->pin < SIM_FIRST_ANALOG) {
+            return "analog inputs are pins 14..19 (A0..A5)";
+        }
+        in->analog = (uint16_t)cmd->value;
+        break;
+    case PD_CONTROL_PULSES:
+        in->level = sim_input_level(in, now); /* a new train starts from where the pin is */
+        in->pulses = cmd->pulses;
+        in->hz = cmd->hz;
+        in->start = now;
+        break;
+    }
+    *t = now;
+    return NULL;
 }
 
 /* --- the HAL ------------------------------------------------------------- */
@@ -162,7 +228,7 @@ static void on_signal(int sig)
 
 static int usage(void)
 {
-    fprintf(stderr, "usage: pd_sim [--trace FILE] [--link PATH]\n");
+    fprintf(stderr, "usage: pd_sim [--trace FILE] [--link PATH] [--control PATH]\n");
     return 2;
 }
 
@@ -210,6 +276,8 @@ int main(int argc, char **argv)
 {
     const char *trace_path = NULL;
     const char *link_path = NULL;
+    const char *control_path = NULL;
+    static pd_control_t control;
     static sim_hal_t hal;
     static pd_core_t core;
     char slave_name[128];
@@ -221,6 +289,8 @@ int main(int argc, char **argv)
             trace_path = argv[++i];
         } else if (strcmp(argv[i], "--link") == 0 && i + 1 < argc) {
             link_path = argv[++i];
+        } else if (strcmp(argv[i], "--control") == 0 && i + 1 < argc) {
+            control_path = argv[++i];
         } else {
             return usage();
         }
@@ -244,6 +314,10 @@ int main(int argc, char **argv)
     }
     hal.master = open_pty(slave_name, sizeof(slave_name), &slave_fd);
     if (hal.master < 0) {
+        return 1;
+    }
+    pd_control_init(&control);
+    if (control_path && pd_control_open(&control, control_path, sim_control_apply, &hal) != 0) {
         return 1;
     }
     if (link_path) {
@@ -271,15 +345,21 @@ int main(int argc, char **argv)
             sim_release_all(&hal);
             pd_core_init(&core, &hal);
         }
-        struct pollfd p = {.fd = hal.master, .events = POLLIN};
-        int ready = poll(&p, 1, 1);
+        struct pollfd fds[1 + PD_CONTROL_MAX_CLIENTS + 1];
+        fds[0] = (struct pollfd){.fd = hal.master, .events = POLLIN};
+        int nfds = 1 + pd_control_pollfds(&control, fds + 1);
+        int ready = poll(fds, (nfds_t)nfds, 1);
+        struct pollfd p = fds[0];
+        if (ready > 0 && nfds > 1) {
+            pd_control_service(&control);
+        }
         if (ready > 0 && (p.revents & POLLIN)) {
             uint8_t buf[512];
             ssize_t n = read(hal.master, buf, sizeof(buf));
             if (n > 0) {
                 pd_core_rx(&core, buf, (size_t)n);
             }
-        } else if (ready > 0) {
+        } else if (ready > 0 && p.revents) {
             /* POLLHUP/POLLERR should not happen with our slave open; never spin. */
             struct timespec ms = {0, 1000000};
             nanosleep(&ms, NULL);
@@ -287,6 +367,7 @@ int main(int argc, char **argv)
         pd_core_poll(&core);
     }
 
+    pd_control_close(&control);
     if (link_path) {
         unlink(link_path);
     }

@@ -13,6 +13,7 @@
      +-- BoardClosedError         the board was closed while, or before, the call ran
      +-- BuildError               a build step (make, avr-objcopy) failed
      +-- FlashError               avrdude could not upload the firmware
+     +-- SimControlError          a simulated board refused an input command (also a ValueError)
 
 Third-party exceptions (pyserial, protobuf) are wrapped at the boundary with
 ``raise ... from error`` so callers need to catch only ``ProtoduinoError``.
@@ -108,3 +109,7 @@ class BuildError(ProtoduinoError):
 
 class FlashError(ProtoduinoError):
     """Uploading firmware failed: wrong port, no bootloader answering, or avrdude's error."""
+
+
+class SimControlError(ProtoduinoError, ValueError):
+    """A simulated board's control socket refused an input command; the message says why."""

@@ -12,10 +12,15 @@ Where the programs come from (a wheel's bundled copies, or built from the
 sources in a checkout) is :mod:`protoduino.programs`' business.
 
 Each backend is one entry in :data:`BACKENDS`: how to build it and the command
-that runs it. Every backend's program takes ``--trace FILE`` and ``--link
-PATH``, prints the port to open as its first line on stdout, reboots on
-SIGUSR1 (or its own equivalent, see :meth:`SimBoard.reboot`) and exits cleanly
-on SIGTERM.
+that runs it. Every backend's program takes ``--trace FILE``, ``--link PATH``
+and ``--control PATH``, prints the port to open as its first line on stdout,
+reboots on SIGUSR1 (or its own equivalent, see :meth:`SimBoard.reboot`) and
+exits cleanly on SIGTERM.
+
+The board's inputs are driven through its control socket
+(:mod:`protoduino.simcontrol`): :meth:`SimBoard.set_level`,
+:meth:`SimBoard.set_analog` and :meth:`SimBoard.pulses`. On the emulated Uno
+they reach the real AVR's pins and ADC, so the firmware's own input code runs.
 
 Typical use, in tests and in ``protoduino demo``::
 
@@ -23,6 +28,7 @@ Typical use, in tests and in ``protoduino demo``::
         port = sim.start()
         ...                       # talk to `port` with pyserial or Board.open
         changes = sim.trace()     # [{"t": ..., "pin": 9, "mode": "servo", "value": 1500}, ...]
+        sim.set_level(2, 0)       # a button on pin 2 pressed (to ground)
 """
 
 from __future__ import annotations
@@ -32,8 +38,10 @@ import json
 import logging
 import os
 import select
+import shutil
 import signal
 import subprocess
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -44,6 +52,7 @@ from typing import IO, Any
 from . import programs
 from .errors import BuildError, TransportError
 from .flashing import MCU
+from .simcontrol import SimControl
 
 logger = logging.getLogger(__name__)
 
@@ -56,20 +65,22 @@ class Backend:
 
     #: Builds everything the board needs and returns the program to run.
     build: Callable[[], Path]
-    #: The full command line for the built program, given --trace and --link.
-    command: Callable[[Path | None, Path | None], list[str]]
+    #: The full command line for the built program, given --trace, --link and --control.
+    command: Callable[[Path | None, Path | None, Path | None], list[str]]
 
 
 def _build_native() -> Path:
     return programs.locate(programs.NATIVE_SIM)
 
 
-def _native_command(trace: Path | None, link: Path | None) -> list[str]:
+def _native_command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
     cmd = [str(programs.locate(programs.NATIVE_SIM))]
     if trace is not None:
         cmd += ["--trace", str(trace)]
     if link is not None:
         cmd += ["--link", str(link)]
+    if control is not None:
+        cmd += ["--control", str(control)]
     return cmd
 
 
@@ -85,8 +96,10 @@ def _build_avr() -> Path:
     return programs.locate(programs.RUNNER)
 
 
-def _avr_command(trace: Path | None, link: Path | None) -> list[str]:
-    return runner_command(programs.locate(programs.FIRMWARE_ELF), trace=trace, link=link)
+def _avr_command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
+    return runner_command(
+        programs.locate(programs.FIRMWARE_ELF), trace=trace, link=link, control=control
+    )
 
 
 def runner_command(
@@ -95,6 +108,7 @@ def runner_command(
     runner: Path | None = None,
     trace: Path | None = None,
     link: Path | None = None,
+    control: Path | None = None,
     hex_files: Sequence[Path] = (),
     boot_address: int | None = None,
     auto_reset: bool = False,
@@ -113,6 +127,8 @@ def runner_command(
         cmd += ["--trace", str(trace)]
     if link is not None:
         cmd += ["--link", str(link)]
+    if control is not None:
+        cmd += ["--control", str(control)]
     for hex_file in hex_files:
         cmd += ["--hex", str(hex_file)]
     if boot_address is not None:
@@ -146,22 +162,39 @@ def build(backend: str = "native") -> Path:
 
 
 def command(
-    backend: str = "native", *, trace: Path | None = None, link: Path | None = None
+    backend: str = "native",
+    *,
+    trace: Path | None = None,
+    link: Path | None = None,
+    control: Path | None = None,
 ) -> list[str]:
     """The command line that runs an already built board."""
-    return _backend(backend).command(trace, link)
+    return _backend(backend).command(trace, link, control)
 
 
 class SimBoard:
-    """One simulated board process; a context manager whose exit stops it."""
+    """One simulated board process; a context manager whose exit stops it.
+
+    ``control`` is where its input-control socket listens; by default a
+    fresh temporary directory holds it (a Unix socket path must stay under
+    108 bytes, which test directories often exceed).
+    """
 
     def __init__(
-        self, backend: str = "native", *, trace: Path | None = None, link: Path | None = None
+        self,
+        backend: str = "native",
+        *,
+        trace: Path | None = None,
+        link: Path | None = None,
+        control: Path | None = None,
     ) -> None:
         self._backend = _backend(backend)
         self.backend = backend
         self.trace_path = trace
         self.link = link
+        self._control_path = control
+        self._control_dir: Path | None = None
+        self._control: SimControl | None = None
         self._proc: subprocess.Popen[bytes] | None = None
         self._port: str | None = None
 
@@ -173,7 +206,11 @@ class SimBoard:
             raise RuntimeError("this SimBoard was already started")
         deadline = time.monotonic() + timeout
         self._backend.build()
-        cmd = self._backend.command(self.trace_path, self.link)
+        if self._control_path is None:
+            self._control_dir = Path(tempfile.mkdtemp(prefix="protoduino-"))
+            self._control_path = self._control_dir / "control"
+        self._control = SimControl(self._control_path)
+        cmd = self._backend.command(self.trace_path, self.link, self._control_path)
         logger.debug("starting %s", " ".join(cmd))
         # stderr is inherited: the board writes there only when something is wrong.
         self._proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE)
@@ -219,6 +256,39 @@ class SimBoard:
         return self._proc.pid
 
     @property
+    def control_path(self) -> Path:
+        """The board's input-control socket (see :mod:`protoduino.simcontrol`)."""
+        if self._control_path is None:
+            raise RuntimeError("the board is not started")
+        return self._control_path
+
+    # -- inputs --------------------------------------------------------------
+
+    @property
+    def control(self) -> SimControl:
+        """The client of the board's control socket (:meth:`SimControl.send` takes any command)."""
+        if self._control is None or not self.running:
+            raise RuntimeError("the board is not running")
+        return self._control
+
+    def set_level(self, pin: int, level: bool | int) -> float:
+        """Drive digital input ``pin`` (ends a pulse train on it); returns the board time."""
+        return self.control.level(pin, level)
+
+    def set_analog(self, pin: int, counts: int) -> float:
+        """Set analog input ``pin`` (14..19 = A0..A5) to ``counts`` (0..1023)."""
+        return self.control.analog(pin, counts)
+
+    def pulses(self, pin: int, count: int, hz: int) -> float:
+        """Send ``count`` pulses at ``hz`` on ``pin``, on the board's own clock.
+
+        Each pulse leaves the pin's current level for half a period and comes
+        back. Returns when the train has started (its board time); it lasts
+        ``count / hz`` seconds.
+        """
+        return self.control.pulses(pin, count, hz)
+
+    @property
     def running(self) -> bool:
         return self._proc is not None and self._proc.poll() is None
 
@@ -253,6 +323,11 @@ class SimBoard:
         stdout: IO[bytes] | None = proc.stdout
         if stdout is not None:
             stdout.close()
+        if self._control is not None:
+            self._control.close()
+        if self._control_dir is not None:
+            shutil.rmtree(self._control_dir, ignore_errors=True)
+            self._control_dir = None
 
     def _signal(self, sig: signal.Signals) -> None:
         if self._proc is None or self._proc.poll() is not None:

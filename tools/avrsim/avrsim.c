@@ -1,15 +1,27 @@
 /*
  * avrsim.c: an emulated Arduino Uno (ATmega328P, simavr) on a pseudo-terminal.
  *
- *   avrsim [--trace FILE] [--link PATH] [--hex FILE]... [--boot ADDR]
- *          [--auto-reset] [--glitch PIN] [--stats FILE] [--profile FILE]
- *          [--mcu NAME] [--freq HZ] [FIRMWARE.elf]
+ *   avrsim [--trace FILE] [--link PATH] [--control PATH] [--hex FILE]...
+ *          [--boot ADDR] [--auto-reset] [--glitch PIN] [--stats FILE]
+ *          [--profile FILE] [--mcu NAME] [--freq HZ] [FIRMWARE.elf]
  *
  * The command-line contract is the native simulated board's (firmware/posix/pd_sim.c, as
  * protoduino.simboard runs both):
  * the first stdout line is the port to open (the pty's slave, or --link),
  * SIGINT/SIGTERM exit cleanly, SIGUSR1 resets the MCU while keeping the pty,
- * and --trace writes one JSON line per output change, measured at the pins.
+ * and --trace writes one JSON line per output change, measured at the pins
+ * (servo pulse widths, digital levels, and the duty of the timers' PWM, read
+ * from their compare-output IRQs: PWM never goes through the PORT register).
+ *
+ * --control PATH (tools/simcontrol) drives the MCU's inputs the way the
+ * outside world would, so the firmware's own input code is what runs: a level
+ * is raised on the port pin's IRQ (PIN register, pin-change and external
+ * interrupts) and held there as the port's "external" level, so that simavr
+ * does not overwrite it with the pull-up whenever the firmware writes the
+ * port; an analog value is raised on the ADC's input IRQ in millivolts
+ * (AVCC = 5000 mV, rounded up so that the 10-bit result is exactly the
+ * counts asked for); pulses are toggled by a simavr cycle timer, so their
+ * edges are on the emulated clock to the cycle.
  *
  * Why a runner of our own rather than simavr's uart_pty part: uart_pty always
  * makes the same symlink (parallel boards clobber each other) and its stop
@@ -47,14 +59,17 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <avr_adc.h>
 #include <avr_extint.h>
 #include <avr_ioport.h>
+#include <avr_timer.h>
 #include <avr_uart.h>
 #include <sim_avr.h>
 #include <sim_elf.h>
 #include <sim_hex.h>
 #include <sim_regbit.h>
 
+#include "pd_control.h"
 #include "pd_pins.h"
 
 #define PD_DEFAULT_MCU "atmega328p"
@@ -70,6 +85,8 @@
  * the client's open(), as with the native board, instead of being cut in half
  * by an open() that lands while it is being sent. */
 #define PD_ANNOUNCE_MS 50U
+#define PD_VCC_MV 5000U /* VCC, AVCC and AREF of the emulated Uno */
+#define PD_FIRST_ANALOG 14 /* A0 */
 
 /* Uno pin numbering: D0..D7 = PD0..7, D8..D13 = PB0..5, A0..A5 = PC0..5. */
 typedef struct {
@@ -78,6 +95,34 @@ typedef struct {
     int bits;
     avr_ioport_t *io;
 } pd_port_t;
+
+/* An input pin as the control socket drives it. */
+typedef struct {
+    int pin;
+    uint8_t driven; /* a level is held on the pin */
+    uint8_t level;
+    uint32_t edges_left; /* pulse train: level changes still to make */
+    uint64_t start;      /* pulse train: cycle of its first edge */
+    uint64_t edges_done;
+    uint32_t hz;
+    int timer; /* the cycle timer is registered */
+} pd_input_t;
+
+/* A pin a timer's compare output can drive (OCnA/OCnB). */
+typedef struct {
+    int pin;
+    char timer_name;
+    int comp;
+    avr_timer_t *timer;
+    uint8_t oc_level; /* the compare output's last level */
+} pd_pwm_pin_t;
+
+static pd_pwm_pin_t g_pwm_pins[] = {
+    {6, '0', AVR_TIMER_COMPA, NULL, 0},  {5, '0', AVR_TIMER_COMPB, NULL, 0},
+    {9, '1', AVR_TIMER_COMPA, NULL, 0},  {10, '1', AVR_TIMER_COMPB, NULL, 0},
+    {11, '2', AVR_TIMER_COMPA, NULL, 0}, {3, '2', AVR_TIMER_COMPB, NULL, 0},
+};
+#define PD_PWM_PINS (sizeof g_pwm_pins / sizeof g_pwm_pins[0])
 
 typedef struct {
     uint8_t data[PD_BUF_SIZE];
@@ -117,6 +162,10 @@ typedef struct {
     const char *profile_path; /* --profile: NULL when off */
     uint64_t *profile;        /* awake cycles per flash word */
     size_t profile_words;
+    pd_control_t control;
+    pd_input_t input[PD_PINS_COUNT];
+    uint8_t ext_mask[3]; /* per port: pins held by the control socket */
+    uint8_t ext_value[3];
 } pd_sim_t;
 
 static pd_sim_t g_sim;
@@ -177,9 +226,22 @@ static void pd_trace_emit(void *ctx, uint64_t cycle, int pin, enum pd_pin_mode m
         return;
     }
     double t = (double)cycle / (double)sim->avr->frequency;
+    const char *name = mode == PD_PIN_MODE_SERVO ? "servo"
+                       : mode == PD_PIN_MODE_PWM ? "pwm"
+                                                 : "digital";
     fprintf(sim->trace, "{\"t\": %.6f, \"pin\": %d, \"mode\": \"%s\", \"value\": %u}\n", t, pin,
-            mode == PD_PIN_MODE_SERVO ? "servo" : "digital", value);
+            name, value);
     fflush(sim->trace);
+}
+
+static pd_pwm_pin_t *pd_pwm_pin(int pin)
+{
+    for (size_t i = 0; i < PD_PWM_PINS; i++) {
+        if (g_pwm_pins[i].pin == pin) {
+            return &g_pwm_pins[i];
+        }
+    }
+    return NULL;
 }
 
 static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
@@ -194,7 +256,183 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
         if (pin < 2) {
             continue; /* D0/D1 are the UART */
         }
-        pd_pins_sample(&sim->pins, pin, (ddr >> b) & 1, (out >> b) & 1, now);
+        int level = (out >> b) & 1;
+        uint32_t pwm_tick = 0;
+        pd_pwm_pin_t *w = pd_pwm_pin(pin);
+        if (w && w->timer) {
+            int kind = w->timer->wgm_op_mode_kind;
+            if (kind == avr_timer_wgm_pwm || kind == avr_timer_wgm_fast_pwm ||
+                kind == avr_timer_wgm_fc_pwm) {
+                pwm_tick = w->timer->cs_div_value ? w->timer->cs_div_value : 1U; /* prescaler */
+            }
+            /* A connected compare output overrides the PORT bit. */
+            if (avr_regbit_get(sim->avr, w->timer->comp[w->comp].com)) {
+                level = w->oc_level;
+            }
+        }
+        pd_pins_sample(&sim->pins, pin, (ddr >> b) & 1, level, pwm_tick, now);
+    }
+}
+
+static pd_port_t *pd_port_of(pd_sim_t *sim, int pin)
+{
+    return &sim->ports[pin < 8 ? 0 : (pin < 14 ? 1 : 2)];
+}
+
+/* A timer's compare output changed (its IRQ carries the new level). */
+static void pd_oc_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    pd_pwm_pin_t *w = param;
+    w->oc_level = (value & 0xffU) ? 1U : 0U;
+    pd_port_t *port = pd_port_of(&g_sim, w->pin);
+    if (port->io) {
+        pd_port_sample(&g_sim, port, g_sim.avr->data[port->io->r_ddr]);
+    }
+}
+
+/* --- inputs driven through the control socket -------------------------- */
+
+/* Hold `pin` at `level` as the outside world would. */
+static void pd_drive(pd_sim_t *sim, int pin, uint8_t level)
+{
+    int idx = pin < 8 ? 0 : (pin < 14 ? 1 : 2);
+    pd_port_t *port = &sim->ports[idx];
+    if (!port->io) {
+        return;
+    }
+    int bit = pin - port->first_pin;
+    uint8_t mask = (uint8_t)(1U << bit);
+    sim->ext_mask[idx] |= mask;
+    sim->ext_value[idx] = (uint8_t)((sim->ext_value[idx] & ~mask) | (level ? mask : 0U));
+    avr_ioport_external_t ext = {.name = (unsigned)port->name & 0x7fU,
+                                 .mask = sim->ext_mask[idx],
+                                 .value = sim->ext_value[idx]};
+    avr_ioctl(sim->avr, AVR_IOCTL_IOPORT_SET_EXTERNAL(port->name), &ext);
+    sim->input[pin].driven = 1;
+    sim->input[pin].level = level;
+    avr_raise_irq(avr_io_getirq(sim->avr, AVR_IOCTL_IOPORT_GETIRQ(port->name), bit), level);
+}
+
+/* The level the MCU reads on `pin` now (PIN register bit). */
+static uint8_t pd_pin_reads(pd_sim_t *sim, int pin)
+{
+    pd_port_t *port = pd_port_of(sim, pin);
+    if (!port->io) {
+        return 0;
+    }
+    avr_ioport_state_t st;
+    if (avr_ioctl(sim->avr, AVR_IOCTL_IOPORT_GETSTATE(port->name), &st) != 0) {
+        return 0;
+    }
+    int bit = pin - port->first_pin;
+    uint8_t pull = (uint8_t)((st.port & ~st.ddr) >> bit) & 1U; /* pull-up of an input */
+    return sim->input[pin].driven ? sim->input[pin].level : (uint8_t)(((st.pin >> bit) & 1U) | pull);
+}
+
+/* Cycle of a train's edge k (k = 0 is the first): exact on average for any
+ * rate, by integer arithmetic from the train's start. */
+static uint64_t pd_edge_cycle(const pd_sim_t *sim, const pd_input_t *in, uint64_t k)
+{
+    return in->start + k * (uint64_t)sim->avr->frequency / (2U * (uint64_t)in->hz);
+}
+
+static avr_cycle_count_t pd_pulse_timer(struct avr_t *avr, avr_cycle_count_t when, void *param)
+{
+    (void)avr;
+    pd_input_t *in = param;
+    pd_sim_t *sim = &g_sim;
+    if (!in->edges_left) {
+        in->timer = 0;
+        return 0;
+    }
+    pd_drive(sim, in->pin, in->level ? 0U : 1U);
+    in->edges_left--;
+    in->edges_done++;
+    if (!in->edges_left) {
+        in->timer = 0;
+        return 0;
+    }
+    uint64_t next = pd_edge_cycle(sim, in, in->edges_done);
+    uint64_t now = pd_cycles(sim);
+    return when + (next > now ? next - now : 1U);
+}
+
+/* (Re)arm a pulse train's cycle timer for its next edge. */
+static void pd_arm_pulses(pd_sim_t *sim, pd_input_t *in)
+{
+    if (!in->edges_left || sim->crashed) {
+        return;
+    }
+    uint64_t next = pd_edge_cycle(sim, in, in->edges_done);
+    uint64_t now = pd_cycles(sim);
+    avr_cycle_timer_cancel(sim->avr, pd_pulse_timer, in);
+    avr_cycle_timer_register(sim->avr, next > now ? next - now : 1U, pd_pulse_timer, in);
+    in->timer = 1;
+}
+
+static void pd_set_analog(pd_sim_t *sim, int pin, unsigned counts)
+{
+    /* simavr converts mV * 1023 / AVCC, truncating: the smallest mV that
+     * gives `counts` is ceil(counts * AVCC / 1023). */
+    uint32_t mv = (counts * PD_VCC_MV + 1022U) / 1023U;
+    avr_raise_irq(avr_io_getirq(sim->avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + (pin - PD_FIRST_ANALOG)),
+                  mv);
+}
+
+static const char *pd_control_apply(void *ctx, const pd_control_cmd_t *cmd, double *t)
+{
+    pd_sim_t *sim = ctx;
+    if (cmd->pin >= PD_PINS_COUNT) {
+        return "no such pin on this board (pins 2..19)";
+    }
+    if (cmd->pin < 2) {
+        return "pins 0 and 1 carry the serial link";
+    }
+    pd_input_t *in = &sim->input[cmd->pin];
+    switch (cmd->kind) {
+    case PD_CONTROL_LEVEL:
+        in->edges_left = 0; /* a level ends any train */
+        avr_cycle_timer_cancel(sim->avr, pd_pulse_timer, in);
+        in->timer = 0;
+        pd_drive(sim, cmd->pin, (uint8_t)cmd->value);
+        break;
+    case PD_CONTROL_ANALOG:
+        if (cmd->pin < PD_FIRST_ANALOG) {
+            return "analog inputs are pins 14..19 (A0..A5)";
+        }
+        pd_set_analog(sim, cmd->pin, (unsigned)cmd->value);
+        break;
+    case PD_CONTROL_PULSES:
+        /* From the level the pin is at: the first edge leaves it at once. */
+        pd_drive(sim, cmd->pin, pd_pin_reads(sim, cmd->pin));
+        in->edges_left = 2U * cmd->pulses;
+        in->edges_done = 0;
+        in->hz = cmd->hz;
+        in->start = pd_cycles(sim) + 1U;
+        pd_arm_pulses(sim, in);
+        break;
+    }
+    *t = (double)pd_cycles(sim) / (double)sim->avr->frequency;
+    return NULL;
+}
+
+/* After a reset: simavr cleared the PIN registers and every cycle timer, but
+ * the outside world still drives its pins. */
+static void pd_restore_inputs(pd_sim_t *sim)
+{
+    for (int pin = 2; pin < PD_PINS_COUNT; pin++) {
+        pd_input_t *in = &sim->input[pin];
+        if (in->driven) {
+            pd_port_t *port = pd_port_of(sim, pin);
+            if (port->io) {
+                uint8_t mask = (uint8_t)(1U << (pin - port->first_pin));
+                sim->avr->data[port->io->r_pin] =
+                    (uint8_t)((sim->avr->data[port->io->r_pin] & ~mask) | (in->level ? mask : 0U));
+            }
+        }
+        in->timer = 0;
+        pd_arm_pulses(sim, in);
     }
 }
 
@@ -341,6 +579,7 @@ static void pd_after_reset(pd_sim_t *sim)
         sim->cycle_base += sim->last_cycle;
     }
     sim->last_cycle = sim->avr->cycle;
+    pd_restore_inputs(sim);
     for (int i = 0; i < 3; i++) {
         if (sim->ports[i].io) {
             pd_port_sample(sim, &sim->ports[i], sim->avr->data[sim->ports[i].io->r_ddr]);
@@ -398,9 +637,11 @@ static avr_io_t *pd_find_io(avr_t *avr, const char *kind, char name)
 {
     for (avr_io_t *io = avr->io_port; io; io = io->next) {
         if (!strcmp(io->kind, kind)) {
-            /* Both avr_uart_t and avr_ioport_t start with the io, then name. */
-            char io_name = !strcmp(kind, "uart") ? ((avr_uart_t *)io)->name
-                                                 : ((avr_ioport_t *)io)->name;
+            /* avr_uart_t, avr_ioport_t and avr_timer_t all start with the
+             * io, then the name. */
+            char io_name = !strcmp(kind, "uart")    ? ((avr_uart_t *)io)->name
+                           : !strcmp(kind, "timer") ? ((avr_timer_t *)io)->name
+                                                    : ((avr_ioport_t *)io)->name;
             if (io_name == name) {
                 return io;
             }
@@ -438,6 +679,22 @@ static void pd_connect(pd_sim_t *sim)
             avr_irq_register_notify(ddr, pd_ddr_hook, port);
         }
     }
+
+    for (size_t i = 0; i < PD_PWM_PINS; i++) {
+        pd_pwm_pin_t *w = &g_pwm_pins[i];
+        w->timer = (avr_timer_t *)pd_find_io(avr, "timer", w->timer_name);
+        avr_irq_t *oc =
+            avr_io_getirq(avr, AVR_IOCTL_TIMER_GETIRQ(w->timer_name), TIMER_IRQ_OUT_COMP + w->comp);
+        if (w->timer && oc) {
+            avr_irq_register_notify(oc, pd_oc_hook, w);
+        } else {
+            w->timer = NULL;
+        }
+    }
+    for (int pin = 0; pin < PD_PINS_COUNT; pin++) {
+        sim->input[pin].pin = pin;
+    }
+    avr->vcc = avr->avcc = avr->aref = PD_VCC_MV;
 
     sim->uart = (avr_uart_t *)pd_find_io(avr, "uart", '0');
     uint32_t flags = 0; /* no stdio echo of the UART, no usleep when polled */
@@ -587,17 +844,19 @@ static int pd_load_hex(pd_sim_t *sim, const char *path)
 static void pd_usage(FILE *f)
 {
     fprintf(f,
-            "usage: avrsim [--trace FILE] [--link PATH] [--hex FILE]... [--boot ADDR]\n"
-            "              [--auto-reset] [--glitch PIN] [--stats FILE] [--profile FILE]\n"
-            "              [--mcu NAME] [--freq HZ] [FIRMWARE.elf]\n"
+            "usage: avrsim [--trace FILE] [--link PATH] [--control PATH] [--hex FILE]...\n"
+            "              [--boot ADDR] [--auto-reset] [--glitch PIN] [--stats FILE]\n"
+            "              [--profile FILE] [--mcu NAME] [--freq HZ] [FIRMWARE.elf]\n"
             "Runs an emulated Arduino Uno with UART0 on a pseudo-terminal; prints the\n"
             "port as the first stdout line. SIGUSR1 resets the MCU, SIGINT/SIGTERM exit;\n"
             "with --stats, SIGUSR2 and the exit append cycle and UART counters to FILE;\n"
-            "with --profile, SIGUSR2 writes awake cycles per flash address to FILE.\n");
+            "with --profile, SIGUSR2 writes awake cycles per flash address to FILE;\n"
+            "--control PATH: a Unix socket taking JSON input commands, one per line.\n");
 }
 
 static void pd_cleanup(pd_sim_t *sim)
 {
+    pd_control_close(&sim->control);
     if (sim->link) {
         unlink(sim->link);
     }
@@ -660,7 +919,14 @@ static void pd_run(pd_sim_t *sim)
             /* A stopped MCU still lets time pass, so that deadlines resolve. */
             sim->cycle_base = target > sim->avr->cycle ? target - sim->avr->cycle : 0;
         }
+        /* A timer switched on or off with no IRQ (TCCRnA/B writes): resample. */
+        for (int i = 0; i < 3; i++) {
+            if (sim->ports[i].io) {
+                pd_port_sample(sim, &sim->ports[i], sim->avr->data[sim->ports[i].io->r_ddr]);
+            }
+        }
         pd_pins_poll(&sim->pins, pd_cycles(sim));
+        pd_control_service(&sim->control);
         pd_pump_pty(sim);
         pd_start_rx(sim);
         if (sim->port_out && !sim->tx.len &&
@@ -681,12 +947,15 @@ static void pd_run(pd_sim_t *sim)
             }
         }
         if (timeout_ms > 0) {
-            struct pollfd fds[2] = {{.fd = sim->master, .events = POLLIN},
-                                    {.fd = sim->inotify, .events = POLLIN}};
+            struct pollfd fds[2 + PD_CONTROL_MAX_CLIENTS + 1] = {
+                {.fd = sim->master, .events = POLLIN}, {.fd = sim->inotify, .events = POLLIN}};
             if (sim->tx.len) {
                 fds[0].events |= POLLOUT;
             }
-            poll(fds, sim->inotify >= 0 ? 2 : 1, timeout_ms);
+            int nfds = sim->inotify >= 0 ? 2 : 1;
+            nfds += pd_control_pollfds(&sim->control, fds + nfds);
+            poll(fds, (nfds_t)nfds, timeout_ms);
+            pd_control_service(&sim->control);
         }
     }
 }
@@ -697,6 +966,7 @@ int main(int argc, char **argv)
     pd_sim_t *sim = &g_sim;
     const char *trace_path = NULL;
     const char *stats_path = NULL;
+    const char *control_path = NULL;
     const char *hex[PD_MAX_HEX];
     int hex_count = 0;
     const char *mcu = PD_DEFAULT_MCU;
@@ -706,6 +976,7 @@ int main(int argc, char **argv)
     sim->master = -1;
     sim->slave = -1;
     sim->glitch_pin = -1;
+    pd_control_init(&sim->control);
 
     static const struct option options[] = {
         {"trace", required_argument, NULL, 't'}, {"link", required_argument, NULL, 'l'},
@@ -713,6 +984,7 @@ int main(int argc, char **argv)
         {"mcu", required_argument, NULL, 'm'},   {"freq", required_argument, NULL, 'f'},
         {"auto-reset", no_argument, NULL, 'r'},  {"glitch", required_argument, NULL, 'g'},
         {"stats", required_argument, NULL, 's'}, {"profile", required_argument, NULL, 'p'},
+        {"control", required_argument, NULL, 'c'},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -757,6 +1029,9 @@ int main(int argc, char **argv)
             break;
         case 'p':
             sim->profile_path = optarg;
+            break;
+        case 'c':
+            control_path = optarg;
             break;
         case 'h':
             pd_usage(stdout);
@@ -846,6 +1121,10 @@ int main(int argc, char **argv)
         }
     }
     pd_connect(sim);
+    if (control_path && pd_control_open(&sim->control, control_path, pd_control_apply, sim) != 0) {
+        pd_cleanup(sim);
+        return 1;
+    }
     if (pd_open_pty(sim) != 0) {
         pd_cleanup(sim);
         return 1;

@@ -25,6 +25,19 @@
  *   low_wait (50 ms) is a digital 0. A Servo-library style driver starts a
  *   newly attached channel at the frame after next, up to two 20 ms frames
  *   after the pin became an output.
+ * - PWM: an output whose timer runs in a PWM mode (the runner tells) is a PWM
+ *   pin. Its value is the duty 0..255 = round(255 * high / period), measured
+ *   from rising edge to rising edge in whole ticks of the timer (the
+ *   waveform's own resolution: simavr's compare events land a few cycles
+ *   either side of the tick, and a duty such as 129/256 = 128.496/255 would
+ *   otherwise flicker between two values), reported once two periods in a row agree
+ *   (a period cut by a duty change is dropped) and dated to the first of
+ *   them. A PWM pin with no edge for pwm_steady (5 ms) is at duty 0 or 255:
+ *   like Arduino's analogWrite, firmware disconnects the timer from the pin
+ *   for those two values (the hardware cannot make them in fast PWM) and
+ *   drives the level, and a steady level is all a pin can show of them. So
+ *   a plain digital output on the other pin of a timer that makes PWM also
+ *   reads as PWM 0 or 255 here; protoduino's firmware has no such pin.
  */
 #include "pd_pins.h"
 
@@ -132,6 +145,62 @@ static void pd_long_high(pd_pins_t *pins, int n)
     pd_emit(pins, n, p->rise, PD_PIN_MODE_DIGITAL, 1);
 }
 
+static void pd_pwm_restart(pd_pin_t *p, uint64_t cycle)
+{
+    p->pwm_have_rise = 0;
+    p->pwm_have_fall = 0;
+    p->pwm_last_duty = -1;
+    p->pwm_edge = cycle;
+}
+
+/* One period measured: reported when the previous one agrees. */
+static void pd_pwm_period(pd_pins_t *pins, int n, uint64_t rise, uint64_t fall, uint64_t next)
+{
+    pd_pin_t *p = &pins->pin[n];
+    uint64_t tick = p->pwm_tick ? p->pwm_tick : 1U;
+    uint64_t high = (fall - rise + tick / 2U) / tick;
+    uint64_t period = (next - rise + tick / 2U) / tick;
+    int duty = period ? (int)lround(255.0 * (double)high / (double)period) : 0;
+    if (duty == p->pwm_last_duty) {
+        pd_emit(pins, n, p->pwm_last_at, PD_PIN_MODE_PWM, (unsigned)duty);
+    }
+    p->pwm_last_duty = duty;
+    p->pwm_last_at = rise;
+}
+
+/* A sample of a pin that carries PWM. */
+static void pd_pwm_sample(pd_pins_t *pins, int n, uint8_t level, uint64_t cycle)
+{
+    pd_pin_t *p = &pins->pin[n];
+    if (!p->pwm) {
+        /* Whatever the pin did before (a level, pulses) ends here. */
+        p->pwm = 1;
+        p->servo = 0;
+        p->cand = 0;
+        p->high_pending = 0;
+        p->low_out_pending = 0;
+        p->level = level;
+        pd_pwm_restart(p, cycle);
+        return;
+    }
+    if (level == p->level) {
+        return;
+    }
+    p->level = level;
+    p->pwm_edge = cycle;
+    if (level) {
+        if (p->pwm_have_rise && p->pwm_have_fall) {
+            pd_pwm_period(pins, n, p->pwm_rise, p->pwm_fall, cycle);
+        }
+        p->pwm_rise = cycle;
+        p->pwm_have_rise = 1;
+        p->pwm_have_fall = 0;
+    } else if (p->pwm_have_rise) {
+        p->pwm_fall = cycle;
+        p->pwm_have_fall = 1;
+    }
+}
+
 void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, void *ctx)
 {
     memset(pins, 0, sizeof *pins);
@@ -139,6 +208,7 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
     pins->max_pulse = (uint64_t)frequency * 3U / 1000U;
     pins->max_period = (uint64_t)frequency * 50U / 1000U;
     pins->low_wait = (uint64_t)frequency * 50U / 1000U;
+    pins->pwm_steady = (uint64_t)frequency * 5U / 1000U;
     pins->emit = emit;
     pins->ctx = ctx;
     for (int n = 0; n < PD_PINS_COUNT; n++) {
@@ -146,7 +216,8 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
     }
 }
 
-void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint64_t cycle)
+void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint32_t pwm_tick,
+                    uint64_t cycle)
 {
     if (n < 0 || n >= PD_PINS_COUNT) {
         return;
@@ -163,6 +234,7 @@ void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint64_
          * reset at all. */
         p->output = 0;
         p->level = 0;
+        p->pwm = 0;
         p->high_pending = 0;
         p->low_out_pending = 0;
         if (p->servo) {
@@ -174,6 +246,17 @@ void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint64_
             }
         }
         return;
+    }
+    if (output && pwm_tick) {
+        p->output = 1;
+        p->pwm_tick = pwm_tick;
+        pd_pwm_sample(pins, n, level, cycle);
+        return;
+    }
+    if (p->pwm) {
+        /* The timer left its PWM mode: the pin is an ordinary output again. */
+        p->pwm = 0;
+        p->low_out_pending = 0;
     }
     if (output && !p->output && !level) {
         p->low_out_pending = 1;
@@ -205,6 +288,13 @@ void pd_pins_poll(pd_pins_t *pins, uint64_t cycle)
 {
     for (int n = 0; n < PD_PINS_COUNT; n++) {
         pd_pin_t *p = &pins->pin[n];
+        if (p->pwm) {
+            if (cycle - p->pwm_edge > pins->pwm_steady) {
+                pd_emit(pins, n, p->pwm_edge, PD_PIN_MODE_PWM, p->level ? 255U : 0U);
+                pd_pwm_restart(p, p->pwm_edge);
+            }
+            continue;
+        }
         if (p->high_pending && cycle - p->rise > pins->max_pulse) {
             pd_long_high(pins, n);
         }

@@ -20,6 +20,7 @@ enum pd_pin_mode {
     PD_PIN_MODE_NONE = 0,
     PD_PIN_MODE_DIGITAL,
     PD_PIN_MODE_SERVO,
+    PD_PIN_MODE_PWM,
 };
 
 /* Called once per trace line: cycle is the emulated time of the change. */
@@ -41,6 +42,16 @@ typedef struct {
     double servo_us; /* measured width behind the reported servo value */
     uint64_t last_rise;
     uint64_t last_fall;
+    /* PWM: the pin carries a timer's waveform (its timer is in a PWM mode). */
+    uint8_t pwm;
+    uint32_t pwm_tick; /* cycles per timer tick */
+    uint8_t pwm_have_rise;
+    uint8_t pwm_have_fall;
+    int pwm_last_duty; /* the previous period's duty, -1: none */
+    uint64_t pwm_rise;
+    uint64_t pwm_fall;
+    uint64_t pwm_last_at; /* start of the previous period */
+    uint64_t pwm_edge;    /* the last edge: a level held longer is duty 0 or 255 */
     int emitted_mode; /* -1: nothing reported yet */
     unsigned emitted_value;
 } pd_pin_t;
@@ -51,14 +62,19 @@ typedef struct {
     uint64_t max_pulse;  /* longer highs are digital levels */
     uint64_t max_period; /* pulses further apart are not one servo signal */
     uint64_t low_wait;   /* how long an output low waits for a first pulse (50 ms) */
+    uint64_t pwm_steady; /* a PWM pin without an edge this long is at duty 0 or 255 (5 ms) */
     pd_pins_emit_fn emit;
     void *ctx;
 } pd_pins_t;
 
 void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, void *ctx);
 
-/* A possible change of one pin: is_output = DDR bit, level = PORT bit. */
-void pd_pins_sample(pd_pins_t *pins, int pin, int is_output, int port_bit, uint64_t cycle);
+/* A possible change of one pin: is_output = DDR bit, level = the level driven
+ * (the PORT bit, or the timer's compare output while it is connected),
+ * pwm_tick = 0, or the cycles per tick of the pin's timer when that timer
+ * runs in a PWM mode. */
+void pd_pins_sample(pd_pins_t *pins, int pin, int is_output, int port_bit, uint32_t pwm_tick,
+                    uint64_t cycle);
 
 /* Resolves the deadlines that have passed at `cycle`. */
 void pd_pins_poll(pd_pins_t *pins, uint64_t cycle);

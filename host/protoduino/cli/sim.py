@@ -34,6 +34,13 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--link", type=Path, metavar="PATH", help="also make PATH a symlink to the board's port"
     )
+    parser.add_argument(
+        "--control",
+        type=Path,
+        metavar="PATH",
+        help='a Unix socket driving the inputs, one JSON object per line: {"pin": 2, "level": 0}, '
+        '{"pin": 14, "analog": 512}, {"pin": 3, "pulses": 100, "hz": 2000}',
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -41,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         build(args.backend)
     except ProtoduinoError as exc:
         return error("sim", exc)
-    cmd = command(args.backend, trace=args.trace, link=args.link)
+    cmd = command(args.backend, trace=args.trace, link=args.link, control=args.control)
     try:
         os.execv(cmd[0], cmd)
     except OSError as exc:

@@ -14,8 +14,15 @@
  * is echoed back, and lines are also parsed as commands:
  *   S<pin> <us>   servo on pin 9 or 10 with that pulse width (attach if needed)
  *   X<pin>        stop the pulses on that servo pin (pin driven low)
- *   D<pin> <0|1>  pin 8 or 13 as a digital output at that level
- * Unknown lines are ignored (they were echoed already).
+ *   D<pin> <0|1>  pin 7, 8 or 13 as a digital output at that level
+ *   P<pin> <duty> PWM duty 0..255 on pin 3 or 11 (Timer2 fast PWM, prescaler
+ *                 64, 976 Hz, as Arduino's analogWrite; 0 and 255 are levels)
+ *   U<pin> <0|1>  pin 2, 4 or 5 as an input, pull-up off/on
+ *   R<pin>        answers "r<pin> <level>" (the PIN register bit, any pin 2..19)
+ *   A<ch>         answers "a<ch> <counts>" (one ADC conversion of A<ch>, AVCC)
+ *   E             answers "e <rising edges counted on INT0 (pin 2)>"
+ * Answers follow the echo of the command line. Unknown lines are ignored
+ * (they were echoed already).
  */
 #include <avr/interrupt.h>
 #include <avr/io.h>
@@ -31,6 +38,8 @@ static const uint8_t pd_channel_bit[PD_CHANNELS] = {_BV(PB1), _BV(PB2)};
 static volatile uint16_t pd_channel_ticks[PD_CHANNELS];
 static volatile uint8_t pd_channel_active[PD_CHANNELS];
 static volatile int8_t pd_current = -1;
+
+static volatile uint16_t pd_int0_edges;
 
 static volatile uint8_t pd_rx_buf[64];
 static volatile uint8_t pd_rx_head;
@@ -58,6 +67,11 @@ ISR(TIMER1_COMPA_vect)
     }
 }
 
+ISR(INT0_vect)
+{
+    pd_int0_edges++;
+}
+
 ISR(USART_RX_vect)
 {
     uint8_t c = UDR0;
@@ -83,6 +97,88 @@ static int pd_getc(void)
     uint8_t c = pd_rx_buf[pd_rx_tail];
     pd_rx_tail = (uint8_t)((pd_rx_tail + 1U) % sizeof pd_rx_buf);
     return c;
+}
+
+static void pd_puts(const char *s)
+{
+    while (*s) {
+        pd_putc((uint8_t)*s++);
+    }
+}
+
+static void pd_putu(uint16_t v)
+{
+    char buf[6];
+    uint8_t n = 0;
+    do {
+        buf[n++] = (char)('0' + v % 10U);
+        v /= 10U;
+    } while (v);
+    while (n) {
+        pd_putc((uint8_t)buf[--n]);
+    }
+}
+
+static void pd_answer(char tag, int16_t index, uint16_t value)
+{
+    pd_putc((uint8_t)tag);
+    if (index >= 0) {
+        pd_putu((uint16_t)index);
+    }
+    pd_putc(' ');
+    pd_putu(value);
+    pd_puts("\n");
+}
+
+static volatile uint8_t *pd_pin_reg(uint16_t pin)
+{
+    return pin < 8U ? &PIND : (pin < 14U ? &PINB : &PINC);
+}
+
+static uint8_t pd_bit(uint16_t pin)
+{
+    return (uint8_t)(1U << (pin < 8U ? pin : (pin < 14U ? pin - 8U : pin - 14U)));
+}
+
+static uint16_t pd_adc(uint8_t ch)
+{
+    ADMUX = (uint8_t)(_BV(REFS0) | (ch & 7U)); /* AVCC reference */
+    ADCSRA = _BV(ADEN) | _BV(ADSC) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0);
+    while (ADCSRA & _BV(ADSC)) {
+    }
+    return ADC;
+}
+
+/* Pin 3 = OC2B (PD3), pin 11 = OC2A (PB3). */
+static void pd_pwm(uint16_t pin, uint16_t duty)
+{
+    uint8_t com = pin == 3U ? _BV(COM2B1) : _BV(COM2A1);
+    volatile uint8_t *port = pin == 3U ? &PORTD : &PORTB;
+    uint8_t bit = pin == 3U ? _BV(PD3) : _BV(PB3);
+    TCCR2A |= _BV(WGM21) | _BV(WGM20); /* fast PWM, TOP = 0xFF */
+    TCCR2B = _BV(CS22);                /* prescaler 64 */
+    if (duty == 0U || duty >= 255U) {
+        if (duty) {
+            *port |= bit;
+        } else {
+            *port &= (uint8_t)~bit;
+        }
+        TCCR2A &= (uint8_t)~com;
+    } else {
+        /* High for (OCR + 1) / 256 of the period: the nearest to duty / 255. */
+        uint8_t ocr = (uint8_t)(((uint32_t)duty * 512U / 255U + 1U) / 2U - 1U);
+        if (pin == 3U) {
+            OCR2B = ocr;
+        } else {
+            OCR2A = ocr;
+        }
+        TCCR2A |= com;
+    }
+    if (pin == 3U) {
+        DDRD |= bit;
+    } else {
+        DDRB |= bit;
+    }
 }
 
 static int8_t pd_channel_of(uint16_t pin)
@@ -124,14 +220,35 @@ static void pd_command(const char *line)
         pd_channel_active[ch] = 0;
         PORTB &= (uint8_t)~pd_channel_bit[ch];
         sei();
-    } else if (op == 'D' && (pin == 8U || pin == 13U)) {
-        uint8_t bit = (pin == 8U) ? _BV(PB0) : _BV(PB5);
+    } else if (op == 'D' && (pin == 7U || pin == 8U || pin == 13U)) {
+        volatile uint8_t *port = pin == 7U ? &PORTD : &PORTB;
+        volatile uint8_t *ddr = pin == 7U ? &DDRD : &DDRB;
+        uint8_t bit = pd_bit(pin);
         if (arg) {
-            PORTB |= bit;
+            *port |= bit;
         } else {
-            PORTB &= (uint8_t)~bit;
+            *port &= (uint8_t)~bit;
         }
-        DDRB |= bit;
+        *ddr |= bit;
+    } else if (op == 'P' && (pin == 3U || pin == 11U) && arg <= 255U) {
+        pd_pwm(pin, arg);
+    } else if (op == 'U' && (pin == 2U || pin == 4U || pin == 5U)) {
+        uint8_t bit = pd_bit(pin);
+        DDRD &= (uint8_t)~bit;
+        if (arg) {
+            PORTD |= bit;
+        } else {
+            PORTD &= (uint8_t)~bit;
+        }
+    } else if (op == 'R' && pin >= 2U && pin <= 19U) {
+        pd_answer('r', (int16_t)pin, (*pd_pin_reg(pin) & pd_bit(pin)) ? 1U : 0U);
+    } else if (op == 'A' && pin <= 5U) {
+        pd_answer('a', (int16_t)pin, pd_adc((uint8_t)pin));
+    } else if (op == 'E') {
+        cli();
+        uint16_t edges = pd_int0_edges;
+        sei();
+        pd_answer('e', -1, edges);
     }
 }
 
@@ -152,6 +269,8 @@ int main(void)
     OCR1A = 100U;
     TIFR1 = _BV(OCF1A);
     TIMSK1 = _BV(OCIE1A);
+    EICRA = _BV(ISC01) | _BV(ISC00); /* INT0 on rising edges */
+    EIMSK = _BV(INT0);
     sei();
 
     char line[24];
