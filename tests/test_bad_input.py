@@ -85,6 +85,23 @@ def test_wrong_types_on_output_objects(board: Board, fake: FakeDevice) -> None:
     assert fake.values[13] == 1
 
 
+@pytest.mark.parametrize("level", [2, -1, 255])
+def test_digital_levels_other_than_0_and_1_are_refused(
+    board: Board, fake: FakeDevice, level: int
+) -> None:
+    """bool(2) is True: an int that is not 0 or 1 is refused, not read as "on"."""
+    led = board.digital_output(13)
+    led.write(0)  # type: ignore[arg-type]
+    before = len(fake.commands())
+    with pytest.raises(protoduino.CommandRejectedError, match="not a level") as info:
+        led.write(level)  # type: ignore[arg-type]
+    assert info.value.status == Status.STATUS_OUT_OF_RANGE and not info.value.sent
+    with pytest.raises(protoduino.CommandRejectedError, match="not a level"):
+        board.digital_output(12, safe=level)  # type: ignore[arg-type]
+    assert len(fake.commands()) == before
+    assert fake.values[13] == 0
+
+
 @pytest.mark.parametrize(
     "options",
     [{"ack_timeout": 0}, {"ack_timeout": -1.0}, {"max_retries": -1}, {"window": 0}],

@@ -57,6 +57,11 @@ def test_info(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["info", fake.port]) == 0
     out = capsys.readouterr().out
     assert "board             fake" in out
+    # The link counters, as README and --help promise.
+    assert "link counters" in out
+    counters = dict(line.split(maxsplit=1) for line in out.splitlines() if " " in line)
+    assert counters["handshakes"] == "1"
+    assert counters["acks"] == "2"  # GetInfo, then the Ping that measured rtt
     assert main(["info", fake.port, "--json"]) == 0
     obj = json.loads(capsys.readouterr().out)
     assert obj["info"]["num_pins"] == 20
@@ -94,7 +99,9 @@ def test_servo_and_pin(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> 
 def test_servo_refuses_bad_values_before_sending(
     fake: FakeDevice, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(["servo", fake.port, "9", "200"]) == 1
+    with pytest.raises(SystemExit) as usage:  # a usage error, before the port is opened
+        main(["servo", fake.port, "9", "200"])
+    assert usage.value.code == 2
     assert "outside 0..180" in capsys.readouterr().err
     assert main(["servo", fake.port, "0", "90"]) == 1  # reserved pin, refused by the host
     assert "STATUS_RESERVED_PIN" in capsys.readouterr().err

@@ -84,6 +84,8 @@ class FakeTransport:
         self.url = self.name = "fake://"
         self.connected = True
         self.sent: list[tuple[PacketType, bytes, bool]] = []
+        self.rx_since_open = 0  # what the link reports when the handshake fails
+        self.rx_head = b""
 
     def send(self, ptype: PacketType, payload: bytes, *, reset_seq: bool = False) -> None:
         self.sent.append((ptype, payload, reset_seq))

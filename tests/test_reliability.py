@@ -556,9 +556,15 @@ def test_soak_command_runs_reports_and_rerenders(
 def test_soak_command_refuses_nonsense(capsys: pytest.CaptureFixture[str]) -> None:
     from protoduino.cli.main import main
 
-    assert main(["soak", "--commands", "0", "--kinds", "none"]) == 1
-    assert main(["soak", "--kinds", "ber,nosuchkind"]) == 1
-    assert main(["soak", "--faults", "ber=7"]) == 1
+    # Usage errors, refused while parsing (tests/test_cli_usage.py has every command's).
+    for argv in (
+        ["soak", "--commands", "0", "--kinds", "none"],
+        ["soak", "--kinds", "ber,nosuchkind"],
+        ["soak", "--faults", "ber=7"],
+    ):
+        with pytest.raises(SystemExit) as usage:
+            main(argv)
+        assert usage.value.code == 2
     err = capsys.readouterr().err
     assert "nothing to run" in err and "nosuchkind" in err and "probability" in err
 

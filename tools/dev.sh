@@ -24,6 +24,7 @@ APT_PACKAGES=(
     libjansson-dev                         # JSON of the simulated boards' control socket
     avrdude                                # flashing
     clang libclang-rt-14-dev               # libFuzzer + sanitizers for the C core
+    ser2net                                # the RFC 2217 server of the remote-board test
 )
 
 log() { printf '\033[1m==> %s\033[0m\n' "$*" >&2; }

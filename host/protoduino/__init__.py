@@ -15,6 +15,7 @@ from .constants import PROTOCOL_VERSION
 from .errors import (
     AckTimeoutError,
     BoardClosedError,
+    CaptureError,
     CommandRejectedError,
     HandshakeError,
     LinkError,
@@ -35,6 +36,7 @@ __all__ = [
     "AckTimeoutError",
     "Board",
     "BoardClosedError",
+    "CaptureError",
     "CommandRejectedError",
     "DeviceInfo",
     "DigitalOutput",

@@ -34,6 +34,7 @@ the ``on_event`` callbacks and resolves futures. Both stop in :meth:`Board.close
 from __future__ import annotations
 
 import logging
+import os
 import queue
 import threading
 from collections.abc import Callable
@@ -43,6 +44,7 @@ from numbers import Integral
 from types import TracebackType
 from typing import TypeVar
 
+from .capture import CaptureWriter
 from .commands import DIGITAL, SERVO, PinMode
 from .constants import (
     ACK_TIMEOUT,
@@ -132,6 +134,21 @@ def _int(name: str, value: object) -> int:
     return int(value)
 
 
+def _level(name: str, value: object) -> bool:
+    """A digital level: True/False, or the ints 1/0; anything else is refused, never clamped.
+
+    ``bool(2)`` is True, so accepting any int would turn a wrong value (a PWM
+    duty, a pin number passed by mistake) into "on".
+    """
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, Integral):
+        if int(value) in (0, 1):
+            return bool(value)
+        raise _reject(Status.STATUS_OUT_OF_RANGE, f"{name} {int(value)} is not a level (0 or 1)")
+    raise TypeError(f"{name} must be a bool, not {type(value).__name__}")
+
+
 def _reject(status: int, text: str) -> CommandRejectedError:
     return CommandRejectedError(status, f"{text} ({status_name(status)})", sent=False)
 
@@ -214,7 +231,7 @@ class DigitalOutput:
         return None if value is None else bool(value)
 
     def write(self, level: bool) -> None:
-        """Drive the pin high (True) or low (False)."""
+        """Drive the pin high (True or 1) or low (False or 0); any other value is refused."""
         self.board._control(self.pin, *self._level(level))
 
     def on(self) -> None:
@@ -228,12 +245,11 @@ class DigitalOutput:
         return self.board._control_future(self.pin, *self._level(level))
 
     def _level(self, level: bool) -> tuple[ArduinoIn, int]:
-        if not isinstance(level, bool | Integral):
-            raise TypeError(f"level must be a bool, not {type(level).__name__}")
+        value = _level("level", level)
         msg = ArduinoIn()
         msg.digital_control.pin = self.pin
-        msg.digital_control.level = bool(level)
-        return msg, int(bool(level))
+        msg.digital_control.level = value
+        return msg, int(value)
 
     def __repr__(self) -> str:
         return f"DigitalOutput(pin={self.pin})"
@@ -253,6 +269,7 @@ class Board:
         window: int = 4,
         ping: bool = True,
         monitor: FrameMonitor | None = None,
+        capture: str | os.PathLike[str] | None = None,
     ) -> None:
         self.url = url
         self._lock = threading.Lock()
@@ -270,13 +287,20 @@ class Board:
         )
         self._rpc.message_hook = self._message
         self._rpc.restore_provider = self._restore_messages
+        # Before the port: a capture that cannot be written fails with nothing opened,
+        # and the handshake is in it.
+        self._capture = CaptureWriter(capture, url) if capture is not None else None
         self._transport = Transport(url, baudrate=baudrate)
         if monitor is not None:
             self._transport.add_monitor(monitor)
+        if self._capture is not None:
+            self._transport.add_monitor(self._capture.frame)
         self._link = Link(
             self._transport, self._rpc, handshake_timeout=handshake_timeout, notify=self._notify
         )
         self._rpc.attach(self._link)
+        if self._capture is not None:
+            self._capture.set_stats(lambda: self.stats)
         self._event_thread = threading.Thread(
             target=self._dispatch, name=f"protoduino-events[{url}]", daemon=True
         )
@@ -300,6 +324,7 @@ class Board:
         window: int = 4,
         ping: bool = True,
         monitor: FrameMonitor | None = None,
+        capture: str | os.PathLike[str] | None = None,
     ) -> Board:
         """Open ``url`` (any pyserial URL), handshake and read the device's info.
 
@@ -312,7 +337,11 @@ class Board:
         how many commands may await their Ack at once; ``ping=False`` starts
         without the automatic 1 Hz Ping (see :attr:`pinging`); ``monitor`` is
         called with every frame in both directions from the first one on
-        (on the I/O thread: be quick).
+        (on the I/O thread: be quick); ``capture`` is a file that records every
+        frame in both directions with its time, the link counters and the events
+        (:mod:`protoduino.capture`; ``protoduino decode`` reads it, ``protoduino
+        monitor --follow`` shows it live), raising :class:`CaptureError` if it
+        cannot be written.
         """
         return cls(
             url,
@@ -323,6 +352,7 @@ class Board:
             window=window,
             ping=ping,
             monitor=monitor,
+            capture=capture,
         )
 
     # --- context and life cycle -------------------------------------------------------
@@ -350,6 +380,8 @@ class Board:
             self._closed = True
         self._rpc.close()
         self._link.close()
+        if self._capture is not None:
+            self._capture.close()  # after the I/O thread stopped: the last frame is in
         self._events.put(None)
         if self._event_thread is not threading.current_thread():
             self._event_thread.join(2.0)
@@ -456,16 +488,15 @@ class Board:
         self, pin: int, safe: bool
     ) -> tuple[ArduinoIn, Callable[[], None], DigitalOutput]:
         pin = self._check_pin(pin)
-        if not isinstance(safe, bool | Integral):  # bool("no") is True: no guessing
-            raise TypeError(f"safe must be a bool, not {type(safe).__name__}")
+        safe = _level("safe", safe)  # bool("no") and bool(2) are True: no guessing
         with self._lock:
             current = self._outputs.get(pin)
             if current is not None and current.mode is not DIGITAL:
                 raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
         msg = ArduinoIn()
         msg.digital_init.pin = pin
-        msg.digital_init.safe_level = bool(safe)
-        state = _Output(DIGITAL, msg.SerializeToString(), int(bool(safe)))
+        msg.digital_init.safe_level = safe
+        state = _Output(DIGITAL, msg.SerializeToString(), int(safe))
         return msg, lambda: self._set_output(pin, state), DigitalOutput(self, pin)
 
     # --- board-wide commands -------------------------------------------------------
@@ -736,6 +767,8 @@ class Board:
 
     def _notify(self, event: Event) -> None:
         log.debug("%s: event %s", self.url, event)
+        if self._capture is not None:
+            self._capture.event(event)
         self._events.put(event)
 
     def _dispatch(self) -> None:

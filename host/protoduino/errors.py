@@ -14,6 +14,7 @@
      +-- BuildError               a build step (make, avr-objcopy) failed
      +-- FlashError               avrdude could not upload the firmware
      +-- SimControlError          a simulated board refused an input command (also a ValueError)
+     +-- CaptureError             a capture file cannot be written or read
 
 Third-party exceptions (pyserial, protobuf) are wrapped at the boundary with
 ``raise ... from error`` so callers need to catch only ``ProtoduinoError``.
@@ -113,3 +114,7 @@ class FlashError(ProtoduinoError):
 
 class SimControlError(ProtoduinoError, ValueError):
     """A simulated board's control socket refused an input command; the message says why."""
+
+
+class CaptureError(ProtoduinoError):
+    """A capture file cannot be written, or what was read is not a capture."""

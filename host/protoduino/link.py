@@ -89,6 +89,27 @@ class LinkListener(Protocol):
 Notify = Callable[[Event], None]
 
 
+def describe_received(count: int, head: bytes, packets: int) -> str:
+    """What a device that did not answer RESET sent instead, for the error message.
+
+    A port full of text is a sketch (or another firmware) printing; silence is
+    no firmware, a wrong port or a wrong baud rate; frames without a RESET_ACK
+    are a protoduino device stuck in some other state.
+    """
+    if packets:
+        return f"received {packets} protoduino frames but no RESET_ACK"
+    if count == 0:
+        return "received nothing"
+    body = head.strip(b"\x00")  # a flush byte is no message
+    text = body.decode("ascii", errors="replace")
+    if body and all(c.isprintable() or c in "\r\n\t" for c in text):
+        snippet = " ".join(text.split())
+        more = "..." if count > len(head) or len(snippet) > 40 else ""
+        return f"received {count} bytes of text, not protoduino frames: '{snippet[:40]}{more}'"
+    more = " ..." if count > 16 else ""
+    return f"received {count} bytes, not protoduino frames: {head[:16].hex(' ')}{more}"
+
+
 class Link:
     """The link state machine over one :class:`Transport`; see the module docstring."""
 
@@ -121,6 +142,7 @@ class Link:
         self._hs_next = 0.0
         self._hs_delay = RESET_FIRST_RETRY
         self._hs_reported = False
+        self._hs_packets = 0  # good packets received while handshaking (none a RESET_ACK)
         self._was_active = False
         self._pending_reboot = False
         self._opened = threading.Event()
@@ -227,10 +249,13 @@ class Link:
     # --- internals (I/O thread) -----------------------------------------------
 
     def _no_answer_text(self) -> str:
+        heard = describe_received(
+            self.transport.rx_since_open, self.transport.rx_head, self._hs_packets
+        )
         return (
             f"the device on {self.transport.url} did not answer RESET within "
-            f"{self.handshake_timeout:g} s; check that the protoduino firmware is flashed, "
-            "the port and baud rate are right, and nothing else holds the port"
+            f"{self.handshake_timeout:g} s ({heard}); check that the protoduino firmware is "
+            "flashed, the port and baud rate are right, and nothing else holds the port"
         )
 
     def _start_handshake(self, now: float) -> None:
@@ -239,6 +264,7 @@ class Link:
         self._hs_next = now
         self._hs_delay = RESET_FIRST_RETRY
         self._hs_reported = False
+        self._hs_packets = 0
         if not self._opened.is_set():
             self.down_error = HandshakeError(self._no_answer_text())
         self._send_reset(now)
@@ -319,6 +345,7 @@ class Link:
                     self._pending_reboot = True
                 return
         if self.state is not LinkState.ACTIVE:
+            self._hs_packets += 1
             return  # stale traffic from before the handshake
         self.rx_packets += 1
         self._last_rx = now

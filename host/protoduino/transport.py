@@ -57,6 +57,11 @@ REOPEN_FIRST = 0.05
 REOPEN_MAX = 1.0
 #: Frames kept for diagnostics (attached to timeout errors).
 RECENT_FRAMES = 32
+#: URL schemes whose pyserial handler has no write timeout, and whose port settings
+#: (timeouts included) are negotiated with a remote server at each change.
+NO_WRITE_TIMEOUT = REMOTE_URLS = ("rfc2217://",)
+#: First bytes received after each open, kept to say what a wrong device sent.
+RX_HEAD = 64
 
 
 class TransportListener(Protocol):
@@ -132,6 +137,9 @@ class Transport:
         self.tx_packets = 0
         self.write_errors = 0
         self.opens = 0
+        #: Bytes received since the port was last opened, and the first RX_HEAD of them.
+        self.rx_since_open = 0
+        self.rx_head = b""
 
     # --- life cycle ---------------------------------------------------------
 
@@ -208,17 +216,31 @@ class Transport:
                 os.write(self._wake_w, b"x")
 
     def _open(self) -> None:
+        # pyserial 3.5's rfc2217:// refuses any write timeout (NotImplementedError); its
+        # socket's own 5 s timeout bounds a write there instead.
+        no_write_timeout = self.url.lower().startswith(NO_WRITE_TIMEOUT)
         try:
             port = serial.serial_for_url(
-                self.url, baudrate=self.baudrate, timeout=0, write_timeout=WRITE_TIMEOUT
+                self.url,
+                baudrate=self.baudrate,
+                timeout=0,
+                write_timeout=None if no_write_timeout else WRITE_TIMEOUT,
             )
             self._port = port
             # docs/protocol.md 2: a lone 0x00 flushes the receiver's half-filled buffer.
             self._write_raw(DELIMITER)
-        except (serial.SerialException, OSError, ValueError) as error:
+        except Exception as error:  # any URL handler's failure, in the ProtoduinoError tree
             self._close_port()
-            raise TransportError(f"cannot open {self.url}: {error}") from error
+            hint = ""
+            if no_write_timeout and "option 'control'" in str(error):
+                hint = (
+                    " (a server in front of a pseudo-terminal or of a port without modem "
+                    "lines never acknowledges modem control: add ?ign_set_control to the URL)"
+                )
+            raise TransportError(f"cannot open {self.url}: {error}{hint}") from error
         self._decoder.reset()
+        self.rx_since_open = 0
+        self.rx_head = b""
         self.connected = True
         self.opens += 1
 
@@ -275,6 +297,9 @@ class Transport:
                     continue
                 if data:
                     self.rx_bytes += len(data)
+                    if len(self.rx_head) < RX_HEAD:
+                        self.rx_head += data[: RX_HEAD - len(self.rx_head)]
+                    self.rx_since_open += len(data)
                     items = self._decoder.feed(data)
                     if items:
                         for item in items:
@@ -302,7 +327,13 @@ class Transport:
     def _read(self) -> bytes:
         fd = self._fileno()
         if fd is None:
-            self._port.timeout = min(TICK / 2, self._sleep_limit())
+            if not self.url.lower().startswith(REMOTE_URLS):
+                self._port.timeout = min(TICK / 2, self._sleep_limit())
+            elif self._port.timeout != TICK / 2:
+                # Set once: pyserial reconfigures the port at every assignment, and on
+                # rfc2217:// that is a round trip of subnegotiations to the server (it made
+                # every read take 160 ms); the network's latency dwarfs the finer timer here.
+                self._port.timeout = TICK / 2
             return bytes(self._port.read(READ_CHUNK))
         try:
             ready, _, _ = select.select([fd, self._wake_r], [], [], self._sleep_limit())

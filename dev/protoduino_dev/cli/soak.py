@@ -21,10 +21,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+from protoduino.cli import argtypes
 from protoduino.cli.options import error
 from protoduino.errors import ProtoduinoError
+from protoduino.simboard import BACKENDS
 
 from .. import soak as engine
+from ..faults import parse_url
 from ..soak import Scenario, fault_scenarios
 
 HELP = "run seeded fault scenarios on the simulated board and report what happened"
@@ -35,31 +38,42 @@ KEEP_MARKER = "<!-- written by hand below this line; protoduino soak keeps it --
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--backend", default="native", help="native (default) or avr")
+    parser.add_argument(
+        "--backend", choices=sorted(BACKENDS), default="native", help="native (default) or avr"
+    )
     parser.add_argument(
         "--commands",
-        type=int,
+        type=argtypes.count,
         default=100_000,
         metavar="N",
         help="commands in the long scenario; 0 skips it (default: %(default)s)",
     )
-    parser.add_argument("--seed", type=int, default=1, help="seed of every scenario (default: 1)")
+    parser.add_argument(
+        "--seed", type=argtypes.count, default=1, help="seed of every scenario (default: 1)"
+    )
     parser.add_argument(
         "--faults",
+        type=fault_query,
         default=DEFAULT_FAULTS,
         metavar="QUERY",
         help="faulty:// parameters of the long scenario (default: %(default)s)",
     )
     parser.add_argument(
         "--resets",
-        type=int,
+        type=argtypes.count,
         default=20,
         metavar="N",
         help="device resets in the long scenario (default: %(default)s)",
     )
-    parser.add_argument("--cuts", type=int, default=0, metavar="N", help="line cuts in it")
     parser.add_argument(
-        "--cut-seconds", type=float, default=1.0, metavar="S", help="cut length (default: 1)"
+        "--cuts", type=argtypes.count, default=0, metavar="N", help="line cuts in it"
+    )
+    parser.add_argument(
+        "--cut-seconds",
+        type=argtypes.positive_seconds,
+        default=1.0,
+        metavar="S",
+        help="cut length (default: 1)",
     )
     parser.add_argument(
         "--failsafe",
@@ -69,6 +83,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--kinds",
+        type=fault_kinds,
         default="all",
         metavar="LIST",
         help="fault-kind scenarios to run after it: all, none, or a comma list of "
@@ -76,7 +91,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--kind-commands",
-        type=int,
+        type=argtypes.positive_count,
         default=5000,
         metavar="N",
         help="commands in each fault-kind scenario (default: %(default)s)",
@@ -94,6 +109,35 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--workdir", type=Path, help="keep the boards' traces here (default: a temporary folder)"
     )
+
+
+def fault_query(text: str) -> str:
+    """faulty:// parameters, checked as the line will read them."""
+    try:
+        parse_url(f"faulty://check?{text}" if text else "faulty://check")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def fault_kinds(text: str) -> str:
+    """all, none, or a comma list of known fault kinds."""
+    if text in ("all", "none"):
+        return text
+    known = fault_scenarios(1)
+    wanted = [k.strip() for k in text.split(",") if k.strip()]
+    unknown = [k for k in wanted if k not in known]
+    if unknown or not wanted:
+        raise argparse.ArgumentTypeError(
+            f"unknown fault kind(s) {unknown or [text]}; known: all, none, {', '.join(known)}"
+        )
+    return text
+
+
+def check(args: argparse.Namespace) -> str | None:
+    if args.from_json is None and args.commands == 0 and args.kinds == "none":
+        return "nothing to run (--commands 0 and --kinds none)"
+    return None
 
 
 def scenarios(args: argparse.Namespace) -> list[Scenario]:

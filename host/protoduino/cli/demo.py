@@ -18,7 +18,8 @@ from ..board import Board
 from ..constants import FAILSAFE_TIMEOUT
 from ..errors import ProtoduinoError
 from ..events import Event, EventKind
-from .options import error
+from ..simboard import BACKENDS
+from .options import add_capture, error
 
 HELP = "run the demo on the simulated board: sweep a servo, blink a pin, watch the failsafe"
 
@@ -30,10 +31,12 @@ SAFE_DEGREES = 90
 def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--backend",
+        choices=sorted(BACKENDS),
         default="native",
         help="simulated board: native (default) or avr (the emulated Uno)",
     )
     parser.add_argument("--trace", type=Path, help="keep the board's pin trace in this file")
+    add_capture(parser)
 
 
 class _Clock:
@@ -55,16 +58,16 @@ def run(args: argparse.Namespace) -> int:
             with SimBoard(args.backend, trace=trace_path) as sim:
                 port = sim.start()
                 clock.say(f"simulated board on {port} (pid {sim.pid})")
-                ok = _demo(port, clock)
+                ok = _demo(port, clock, args.capture)
                 trace = sim.trace()
         except ProtoduinoError as exc:
             return error("demo", exc)
         return 0 if _report(trace, clock) and ok else 1
 
 
-def _demo(port: str, clock: _Clock) -> bool:
+def _demo(port: str, clock: _Clock, capture: Path | None) -> bool:
     events: queue.Queue[Event] = queue.Queue()
-    with Board.open(port) as board:
+    with Board.open(port, capture=capture) as board:
         info = board.info
         clock.say(
             f"connected: {info.board} firmware {info.firmware_version}, protocol "

@@ -7,6 +7,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from . import argtypes
+
 HELP = "upload the Uno firmware (this version's, or --hex) with avrdude through the bootloader"
 
 
@@ -19,7 +21,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="flash this Intel hex (or ELF, converted) instead of this version's firmware",
     )
     parser.add_argument(
-        "--baud", type=int, default=115200, help="bootloader baud rate (Optiboot: 115200)"
+        "--baud", type=argtypes.baud, default=115200, help="bootloader baud rate (Optiboot: 115200)"
     )
 
 

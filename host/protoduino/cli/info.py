@@ -17,6 +17,14 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
+def _counter(value: object) -> str:
+    if isinstance(value, dict):  # drops by reason
+        return ", ".join(f"{k} {v}" for k, v in sorted(value.items())) or "0"
+    if value is None:
+        return "-"
+    return f"{value:.6f}" if isinstance(value, float) else str(value)
+
+
 def run(args: argparse.Namespace) -> int:
     def body(board: Board) -> int:
         rtt = board.ping()
@@ -35,6 +43,11 @@ def run(args: argparse.Namespace) -> int:
         for key, value in info.items():
             print(f"{key:<17} {value}")
         print(f"rtt               {rtt * 1000:.3f} ms")
+        print("link counters")
+        for key, value in board.stats.as_dict().items():
+            if key == "last_ping":  # a time.monotonic() reading: meaningless to print
+                continue
+            print(f"{key:<17} {_counter(value)}")
         return 0
 
     return with_board("info", args, body, ping=False)

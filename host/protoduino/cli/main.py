@@ -1,8 +1,14 @@
 """Entry point of the ``protoduino`` command.
 
 Each subcommand lives in its own module exposing ``HELP`` (one line),
-``register(parser)`` to add its arguments and ``run(args) -> int``. Adding a
-command means adding a module and its name to ``COMMANDS``.
+``register(parser)`` to add its arguments and ``run(args) -> int``, and
+optionally ``check(args) -> str | None`` for what depends on several options
+(a refusal there is a usage error like any other). Adding a command means
+adding a module and its name to ``COMMANDS``.
+
+Bad values are usage errors: exit status 2 and one line on stderr, from the
+argparse types in :mod:`.argtypes`, before any port is opened. Nothing the
+command line does ends in a traceback (``-vv`` logs one for a bug).
 
 The development commands (``gen``, ``soak``) live in the separate package
 ``protoduino_dev`` (``dev/`` in the source checkout), which a user's
@@ -19,8 +25,12 @@ import logging
 import sys
 from collections.abc import Sequence
 from types import ModuleType
+from typing import NoReturn
 
 from .. import __version__
+from ..errors import ProtoduinoError
+
+log = logging.getLogger("protoduino.cli")
 
 DEV_PACKAGE = "protoduino_dev"
 DEV_MISSING = (
@@ -69,8 +79,15 @@ def _load(name: str, module: str) -> ModuleType | _Missing:
     return importlib.import_module(module)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+class Parser(argparse.ArgumentParser):
+    """Usage errors in one line (the usage itself is one ``--help`` away), exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> Parser:
+    parser = Parser(
         prog="protoduino",
         description="Drive an Arduino's servos and pins over a reliable serial link.",
     )
@@ -80,8 +97,17 @@ def build_parser() -> argparse.ArgumentParser:
     for name, module in COMMANDS.items():
         mod = _load(name, module)
         p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
+        # -v after the subcommand too; its own dest, or it would replace the count before it.
+        p.add_argument(
+            "-v",
+            "--verbose",
+            action="count",
+            default=0,
+            dest="verbose_after",
+            help=argparse.SUPPRESS,
+        )
         mod.register(p)
-        p.set_defaults(_run=mod.run)
+        p.set_defaults(_run=mod.run, _check=getattr(mod, "check", None), _parser=p)
     return parser
 
 
@@ -90,7 +116,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args, unknown = parser.parse_known_args(argv)
     if unknown and not getattr(args, "_any_arguments", False):
         parser.error(f"unrecognized arguments: {' '.join(unknown)}")
-    level = logging.WARNING - 10 * min(args.verbose, 2)
+    if args._check is not None and (problem := args._check(args)) is not None:
+        args._parser.error(problem)
+    verbose = args.verbose + args.verbose_after
+    level = logging.WARNING - 10 * min(verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     try:
         rc: int = args._run(args)
@@ -99,6 +128,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:
         # Output piped into `head` and the like: not an error.
         return 0
+    except ProtoduinoError as exc:  # a command that let one through: still one line
+        print(f"protoduino {args.command}: {exc}", file=sys.stderr)
+        return 1
+    except Exception as exc:  # a bug: one line, the traceback only with -vv
+        log.debug("traceback", exc_info=True)
+        print(
+            f"protoduino {args.command}: internal error: {type(exc).__name__}: {exc} "
+            "(please report it; -vv shows the traceback)",
+            file=sys.stderr,
+        )
+        return 1
     return rc
 
 

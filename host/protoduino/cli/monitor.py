@@ -3,6 +3,11 @@
 It opens the board like any client (handshake, 1 Hz Ping) and prints every
 frame in both directions as it crosses the wire, decoded, plus the board's
 events; the counters come every ``--stats-every`` seconds and at the end.
+
+``monitor --follow CAPTURE`` watches a session that another process owns
+instead (one started with ``--capture CAPTURE`` or ``Board.open(capture=)``):
+it reads the capture as it grows, never the port, and shows the same lines,
+with that session's own counters as it records them (about once a second).
 """
 
 from __future__ import annotations
@@ -11,28 +16,54 @@ import argparse
 import json
 import queue
 import time
+from pathlib import Path
 from typing import Any
 
 from ..board import Board
+from ..capture import (
+    CapturedEvent,
+    CapturedFrame,
+    CapturedStats,
+    CaptureEnd,
+    CaptureHeader,
+    follow,
+)
 from ..errors import ProtoduinoError
 from ..events import Event
 from ..messages import packet_to_json
 from ..packets import BadFrame
 from ..transport import FrameRecord
+from . import argtypes
+from .decode import record_json
 from .options import add_port, error, load_url_handlers
 
 HELP = "show live decoded traffic (readable lines or JSON) with the link counters"
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    add_port(parser)
+    add_port(parser, required=False)
+    parser.add_argument(
+        "--follow",
+        type=Path,
+        metavar="CAPTURE",
+        help="show the live traffic of the session writing CAPTURE; the port is not touched",
+    )
+    parser.add_argument(
+        "--from-start",
+        action="store_true",
+        help="with --follow: the whole capture first, not only what comes next",
+    )
     parser.add_argument("--json", action="store_true", help="one JSON object per line")
     parser.add_argument(
-        "--duration", type=float, default=0.0, metavar="S", help="stop after S seconds (0: Ctrl-C)"
+        "--duration",
+        type=argtypes.seconds,
+        default=0.0,
+        metavar="S",
+        help="stop after S seconds (0: Ctrl-C)",
     )
     parser.add_argument(
         "--stats-every",
-        type=float,
+        type=argtypes.seconds,
         default=5.0,
         metavar="S",
         help="print the link counters every S seconds (0: only at the end)",
@@ -58,19 +89,32 @@ def frame_line(obj: dict[str, Any]) -> str:
     return f"{head} {obj['type']:<7} seq={obj['seq']:<3} {body}"
 
 
-def stats_line(board: Board) -> str:
-    s = board.stats
-    dropped = sum(s.dropped.values())
-    rtt = f"{s.rtt * 1000:.2f} ms" if s.rtt is not None else "-"
+def stats_line(s: dict[str, Any]) -> str:
+    """The counters (``Stats.as_dict()``, or a capture's stats line) in one line."""
+    dropped = sum(s.get("dropped", {}).values())
+    rtt = f"{s['rtt'] * 1000:.2f} ms" if s.get("rtt") is not None else "-"
     return (
-        f"[{s.state}] rx {s.rx_packets} tx {s.tx_packets} dropped {dropped} lost {s.seq_lost} "
-        f"desync {s.seq_desyncs} acks {s.acks} retx {s.retransmits} timeouts {s.timeouts} "
-        f"late {s.late_acks} unknown {s.unknown_acks} handshakes {s.handshakes} "
-        f"reboots {s.reboots} rtt {rtt}"
+        f"[{s.get('state')}] rx {s.get('rx_packets')} tx {s.get('tx_packets')} dropped "
+        f"{dropped} lost {s.get('seq_lost')} desync {s.get('seq_desyncs')} acks {s.get('acks')} "
+        f"retx {s.get('retransmits')} timeouts {s.get('timeouts')} late {s.get('late_acks')} "
+        f"unknown {s.get('unknown_acks')} handshakes {s.get('handshakes')} "
+        f"reboots {s.get('reboots')} rtt {rtt}"
     )
 
 
+def check(args: argparse.Namespace) -> str | None:
+    if (args.port is None) == (args.follow is None):
+        return "give either PORT or --follow CAPTURE"
+    if args.from_start and args.follow is None:
+        return "--from-start goes with --follow"
+    if args.follow is not None and args.capture is not None:
+        return "--capture records a session this command opens; --follow opens none"
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.follow is not None:
+        return follow_capture(args)
     items: queue.Queue[FrameRecord | Event] = queue.Queue()
     t0 = time.monotonic()
     try:
@@ -115,6 +159,7 @@ def open_board_with_monitor(args: argparse.Namespace, sink: Any) -> Board:
         handshake_timeout=args.handshake_timeout,
         ping=not args.no_ping,
         monitor=sink,
+        capture=args.capture,
     )
 
 
@@ -122,4 +167,39 @@ def print_stats(board: Board, as_json: bool) -> None:
     if as_json:
         print(json.dumps({"stats": board.stats.as_dict()}, default=str), flush=True)
     else:
-        print(stats_line(board), flush=True)
+        print(stats_line(board.stats.as_dict()), flush=True)
+
+
+def follow_capture(args: argparse.Namespace) -> int:
+    """Print a capture's records as its writer appends them, until it ends or --duration."""
+    deadline = time.monotonic() + args.duration if args.duration > 0 else float("inf")
+    t0 = 0.0
+    try:
+        for record in follow(
+            args.follow, from_start=args.from_start, stop=lambda: time.monotonic() >= deadline
+        ):
+            if isinstance(record, CaptureHeader):
+                t0 = record.started
+                if not args.json:
+                    print(f"following {args.follow}: the session on {record.url}", flush=True)
+                continue
+            if isinstance(record, CaptureEnd):
+                if not args.json:
+                    print(f"{record.t - t0:10.3f} END     the session closed", flush=True)
+                break
+            if args.json:
+                obj = record_json(record)
+                obj["t"] = round(obj["t"] - t0, 6)
+                print(json.dumps(obj, default=str), flush=True)
+            elif isinstance(record, CapturedFrame):
+                rec = FrameRecord(record.t, record.direction, record.item)
+                print(frame_line(frame_json(rec, t0)), flush=True)
+            elif isinstance(record, CapturedStats):
+                print(stats_line(record.stats), flush=True)
+            elif isinstance(record, CapturedEvent):
+                print(f"{record.t - t0:10.3f} EVENT   {record.kind}: {record.text}", flush=True)
+    except KeyboardInterrupt:
+        pass
+    except ProtoduinoError as exc:
+        return error("monitor", exc)
+    return 0

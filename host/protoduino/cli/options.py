@@ -8,31 +8,49 @@ import importlib.util
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 from ..board import Board
 from ..constants import ACK_TIMEOUT, HANDSHAKE_TIMEOUT
 from ..errors import ProtoduinoError, TransportError
+from . import argtypes
 
 
-def add_port(parser: argparse.ArgumentParser) -> None:
+def add_port(parser: argparse.ArgumentParser, *, required: bool = True) -> None:
     """PORT plus the link options every board command takes."""
     parser.add_argument(
-        "port", metavar="PORT", help="serial port or pyserial URL (/dev/ttyACM0, socket://...)"
+        "port",
+        metavar="PORT",
+        nargs=None if required else "?",
+        help="serial port or pyserial URL (/dev/ttyACM0, rfc2217://pi:7000, socket://...)",
     )
-    parser.add_argument("--baud", type=int, default=115200, help="baud rate (default: %(default)s)")
+    parser.add_argument(
+        "--baud", type=argtypes.baud, default=115200, help="baud rate (default: %(default)s)"
+    )
     parser.add_argument(
         "--ack-timeout",
-        type=float,
+        type=argtypes.positive_seconds,
         default=ACK_TIMEOUT,
         metavar="S",
         help="seconds to wait for each Ack before a retry (default: %(default)s)",
     )
     parser.add_argument(
         "--handshake-timeout",
-        type=float,
+        type=argtypes.positive_seconds,
         default=HANDSHAKE_TIMEOUT,
         metavar="S",
         help="seconds to wait for the device to answer (default: %(default)s)",
+    )
+    add_capture(parser)
+
+
+def add_capture(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--capture",
+        type=Path,
+        metavar="FILE",
+        help="record every frame both ways with its time, the counters and the events "
+        "(protoduino decode reads it; monitor --follow shows it live)",
     )
 
 
@@ -60,6 +78,7 @@ def open_board(args: argparse.Namespace, *, ping: bool = True) -> Board:
         ack_timeout=args.ack_timeout,
         handshake_timeout=args.handshake_timeout,
         ping=ping,
+        capture=args.capture,
     )
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..board import Board
+from . import argtypes
 from .options import add_port, hold, with_board
 
 HELP = "set a digital output pin on or off"
@@ -14,14 +15,14 @@ LEVELS = {"on": True, "off": False, "1": True, "0": False, "high": True, "low": 
 
 def register(parser: argparse.ArgumentParser) -> None:
     add_port(parser)
-    parser.add_argument("pin", type=int, metavar="PIN")
+    parser.add_argument("pin", type=argtypes.pin, metavar="PIN")
     parser.add_argument("level", choices=sorted(LEVELS), metavar="on|off")
     parser.add_argument(
         "--safe", choices=sorted(LEVELS), default="off", help="safe level (default: off)"
     )
     parser.add_argument(
         "--hold",
-        type=float,
+        type=argtypes.seconds,
         default=0.0,
         metavar="S",
         help="keep the link alive S seconds; once the host stops pinging, the device's "

@@ -8,6 +8,7 @@ import time
 
 from ..board import MAX_PING_PAYLOAD, Board
 from ..errors import AckTimeoutError
+from . import argtypes
 from .options import add_port, with_board
 
 HELP = "send Pings and print round-trip time statistics"
@@ -15,14 +16,21 @@ HELP = "send Pings and print round-trip time statistics"
 
 def register(parser: argparse.ArgumentParser) -> None:
     add_port(parser)
-    parser.add_argument("-c", "--count", type=int, default=10, help="pings (default: 10)")
     parser.add_argument(
-        "-i", "--interval", type=float, default=0.2, metavar="S", help="seconds between pings"
+        "-c", "--count", type=argtypes.positive_count, default=10, help="pings (default: 10)"
+    )
+    parser.add_argument(
+        "-i",
+        "--interval",
+        type=argtypes.seconds,
+        default=0.2,
+        metavar="S",
+        help="seconds between pings",
     )
     parser.add_argument(
         "-s",
         "--size",
-        type=int,
+        type=argtypes.integer(0, MAX_PING_PAYLOAD, name="size"),
         default=0,
         help=f"payload bytes echoed back (0..{MAX_PING_PAYLOAD}, default 0)",
     )

@@ -5,22 +5,36 @@ from __future__ import annotations
 import argparse
 
 from ..board import Board
-from .options import add_port, error, hold, with_board
+from ..constants import SERVO_LIMIT_MAX_US, SERVO_LIMIT_MIN_US, SERVO_MAX_DEGREES
+from . import argtypes
+from .options import add_port, hold, with_board
+
+US = argtypes.integer(SERVO_LIMIT_MIN_US, SERVO_LIMIT_MAX_US, name="microseconds")
 
 HELP = "move a servo to ANGLE degrees (or microseconds with --us)"
 
 
 def register(parser: argparse.ArgumentParser) -> None:
     add_port(parser)
-    parser.add_argument("pin", type=int, metavar="PIN")
-    parser.add_argument("angle", type=int, metavar="ANGLE", help="0..180 degrees, or us with --us")
+    parser.add_argument("pin", type=argtypes.pin, metavar="PIN")
+    parser.add_argument(
+        "angle",
+        type=argtypes.integer(name="angle"),
+        metavar="ANGLE",
+        help="0..180 degrees, or us with --us",
+    )
     parser.add_argument("--us", action="store_true", help="ANGLE is a pulse width in microseconds")
-    parser.add_argument("--safe", type=int, default=90, help="safe position in degrees (90)")
-    parser.add_argument("--min-us", type=int, default=544, help="pulse for 0 degrees (544)")
-    parser.add_argument("--max-us", type=int, default=2400, help="pulse for 180 degrees (2400)")
+    parser.add_argument(
+        "--safe",
+        type=argtypes.integer(0, SERVO_MAX_DEGREES, name="degrees"),
+        default=90,
+        help="safe position in degrees (90)",
+    )
+    parser.add_argument("--min-us", type=US, default=544, help="pulse for 0 degrees (544)")
+    parser.add_argument("--max-us", type=US, default=2400, help="pulse for 180 degrees (2400)")
     parser.add_argument(
         "--hold",
-        type=float,
+        type=argtypes.seconds,
         default=0.0,
         metavar="S",
         help="keep the link alive S seconds; once the host stops pinging, the device's "
@@ -28,12 +42,18 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def run(args: argparse.Namespace) -> int:
-    # Checked before the Init, which would move the servo to its safe position first.
-    low, high = (args.min_us, args.max_us) if args.us else (0, 180)
+def check(args: argparse.Namespace) -> str | None:
+    """Refused before the Init, which would move the servo to its safe position first."""
+    if args.min_us >= args.max_us:
+        return f"--min-us {args.min_us} must be below --max-us {args.max_us}"
+    low, high = (args.min_us, args.max_us) if args.us else (0, SERVO_MAX_DEGREES)
     if not low <= args.angle <= high:
         unit = "us" if args.us else "degrees"
-        return error("servo", f"{args.angle} {unit} is outside {low}..{high}; nothing sent")
+        return f"{args.angle} {unit} is outside {low}..{high}; nothing sent"
+    return None
+
+
+def run(args: argparse.Namespace) -> int:
 
     def body(board: Board) -> int:
         servo = board.servo(args.pin, safe=args.safe, min_us=args.min_us, max_us=args.max_us)

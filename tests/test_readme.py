@@ -1,0 +1,177 @@
+"""The README's command examples, run as written (the device paths swapped for test boards).
+
+Every ``protoduino ...`` line in the README's ``sh`` blocks belongs to one
+block below and is run by it, against the board it assumes: the real-Uno block
+flashes an emulated Uno that holds only Optiboot, then drives it; the capture
+block runs on the simulated board; the remote block goes through ser2net. The
+pins are judged from the board's own trace. The command table's synopses are
+checked against the parsers: every option it shows exists.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import shlex
+import shutil
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from protoduino import emulator
+from protoduino.cli.main import COMMANDS, build_parser, main
+from protoduino.simboard import SimBoard
+from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
+from test_flash import Board as UnoProcess
+from test_flash import _missing_tool
+from test_remote import Ser2net
+
+# pyserial 3.5's rfc2217 reader thread uses the old threading setters.
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning:serial.rfc2217")
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+UNO_PORT = "/dev/ttyACM0"
+
+#: Each example block, named by a text only it contains.
+BLOCKS = {
+    "uno": f"protoduino flash {UNO_PORT}",
+    "capture": "--capture robot.jsonl",
+    "remote": "rfc2217://raspberrypi.local:7000",
+}
+
+
+def example_blocks() -> list[list[str]]:
+    """The ``protoduino`` lines of each ``sh`` block of the README, comments dropped."""
+    blocks = re.findall(r"```sh\n(.*?)```", README.read_text(), flags=re.S)
+    out = []
+    for block in blocks:
+        lines = [
+            line.split("  #")[0].strip()
+            for line in block.splitlines()
+            if line.startswith("protoduino ")
+        ]
+        if lines:
+            out.append(lines)
+    return out
+
+
+def block(name: str) -> list[str]:
+    found = [b for b in example_blocks() if any(BLOCKS[name] in line for line in b)]
+    assert len(found) == 1, f"README: {len(found)} example blocks contain {BLOCKS[name]!r}"
+    return found[0]
+
+
+def run(line: str, replace: dict[str, str]) -> int:
+    for old, new in replace.items():
+        line = line.replace(old, new)
+    argv = shlex.split(line)
+    assert argv[0] == "protoduino"
+    return main(argv[1:])
+
+
+def test_every_example_block_is_run() -> None:
+    for lines in example_blocks():
+        owners = [n for n, marker in BLOCKS.items() if any(marker in line for line in lines)]
+        assert len(owners) == 1, f"README example block run by no test (or two): {lines}"
+
+
+def test_the_command_table_matches_the_parsers() -> None:
+    rows = re.findall(r"^\| `protoduino (\w+)([^`]*)` \|", README.read_text(), flags=re.M)
+    assert {name for name, _ in rows} == set(COMMANDS)
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    subparsers: dict[str, argparse.ArgumentParser] = sub.choices
+    for name, synopsis in rows:
+        known = {o for a in subparsers[name]._actions for o in a.option_strings}
+        shown = re.findall(r"(?<![\w-])(--?[a-z][\w-]*)", synopsis)
+        assert [o for o in shown if o not in known] == [], f"protoduino {name}{synopsis}"
+
+
+@pytest.fixture
+def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.chdir(tmp_path)  # the examples write their files where they run
+    return tmp_path
+
+
+@pytest.fixture
+def blank_uno(tmp_path: Path) -> Iterator[tuple[UnoProcess, Path]]:
+    """An emulated Uno with only Optiboot in its flash, reset on open, writing a trace."""
+    missing = _missing_tool()
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+    emulator.build_runner()
+    emulator.build_optiboot()
+    trace = tmp_path / "uno-trace.jsonl"
+    uno = UnoProcess(
+        emulator.runner_command(
+            hex_files=[emulator.OPTIBOOT_HEX],
+            boot_address=emulator.OPTIBOOT_ADDRESS,
+            auto_reset=True,
+            trace=trace,
+            link=tmp_path / "uno",
+        )
+    )
+    yield uno, trace
+    uno.close()
+
+
+@pytest.mark.avr
+def test_the_real_uno_examples(
+    blank_uno: tuple[UnoProcess, Path], workdir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    uno, trace = blank_uno
+
+    def pin(number: int) -> list[int]:
+        changes = [json.loads(x) for x in trace.read_text().splitlines() if x.strip()]
+        return pin_values(changes, number)
+
+    def wait(number: int, ok: Callable[[list[int]], bool]) -> None:
+        """The change reached the pin: an Ack says the device took it, a servo shows it at
+        its next 20 ms frame; the next command's open resets the Uno (its DTR auto-reset)."""
+        deadline = time.monotonic() + 10.0
+        while not ok(pin(number)):
+            assert time.monotonic() < deadline, f"pin {number}: {pin(number)}"
+            time.sleep(0.02)
+
+    lines = block("uno")
+    assert [shlex.split(x)[1] for x in lines] == ["ports", "flash", "info", "servo", "pin"]
+    for line in lines:
+        assert run(line, {UNO_PORT: uno.port}) == 0, line
+        if " servo " in line:  # servo 9 45: 544 + 45 * (2400 - 544) / 180 us
+            wait(9, lambda v: any(abs(x - 1008) <= PULSE_TOLERANCE_US for x in v))
+    wait(13, lambda v: v[-1:] == [1])
+    out = capsys.readouterr().out
+    assert "num_pins          20" in out
+    assert "handshakes        1" in out  # info's link counters
+
+
+def test_the_capture_examples(
+    workdir: Path, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed (needed to build the native board)")
+    with SimBoard("native", trace=tmp_path / "trace.jsonl") as sim:
+        sim.start()
+        lines = block("capture")
+        for line in lines:
+            assert run(line, {UNO_PORT: sim.port}) == 0, line
+        wait_for_pin(sim, 9, lambda v: bool(v) and v[-1] == 1008)
+    out = capsys.readouterr().out
+    assert '"servo_control":{"pin":9,"degrees":45}' in out  # monitor --follow
+    assert '"servo_control": {"pin": 9, "degrees": 45}' in out  # decode
+    assert (workdir / "robot.mcap").stat().st_size > 0
+
+
+def test_the_remote_example(sim_board: SimBoard, tmp_path: Path) -> None:
+    if shutil.which("ser2net") is None:
+        pytest.skip("ser2net is not installed (tools/dev.sh setup installs it)")
+    server = Ser2net(sim_board.port, tmp_path)
+    server.start()
+    try:
+        for line in block("remote"):
+            local = f"rfc2217://127.0.0.1:{server.port}"
+            assert run(line, {"rfc2217://raspberrypi.local:7000": local}) == 0, line
+    finally:
+        server.stop()
