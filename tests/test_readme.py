@@ -20,9 +20,9 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from protoduino import emulator
 from protoduino.cli.main import COMMANDS, build_parser, main
-from protoduino.simboard import SimBoard
+from protoduino.simboard import SimBoard, runner_command
+from protoduino_dev import build
 from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
 from test_flash import Board as UnoProcess
 from test_flash import _missing_tool
@@ -101,13 +101,13 @@ def blank_uno(tmp_path: Path) -> Iterator[tuple[UnoProcess, Path]]:
     missing = _missing_tool()
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
-    emulator.build_runner()
-    emulator.build_optiboot()
+    build.build_runner()
+    build.build_optiboot()
     trace = tmp_path / "uno-trace.jsonl"
     uno = UnoProcess(
-        emulator.runner_command(
-            hex_files=[emulator.OPTIBOOT_HEX],
-            boot_address=emulator.OPTIBOOT_ADDRESS,
+        runner_command(
+            hex_files=[build.OPTIBOOT_HEX],
+            boot_address=build.OPTIBOOT_ADDRESS,
             auto_reset=True,
             trace=trace,
             link=tmp_path / "uno",
