@@ -15,17 +15,20 @@ import json
 import re
 import shlex
 import shutil
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from protoduino import Board
 from protoduino.cli.main import COMMANDS, build_parser, main
 from protoduino.simboard import SimBoard, runner_command
 from protoduino_dev import build
 from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
-from test_flash import Board as UnoProcess
-from test_flash import _missing_tool
+from test_flash import EmulatedUno as UnoProcess
+from test_flash import missing_tool
 from test_remote import Ser2net
 
 # pyserial 3.5's rfc2217 reader thread uses the old threading setters.
@@ -34,9 +37,10 @@ pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning:serial.rfc22
 README = Path(__file__).resolve().parents[1] / "README.md"
 UNO_PORT = "/dev/ttyACM0"
 
-#: Each example block, named by a text only it contains.
+#: Each example block, named by a line only it contains.
 BLOCKS = {
-    "uno": f"protoduino flash {UNO_PORT}",
+    "install": "protoduino demo",
+    "uno": "protoduino ports",
     "capture": "--capture robot.jsonl",
     "remote": "rfc2217://raspberrypi.local:7000",
 }
@@ -98,7 +102,7 @@ def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 @pytest.fixture
 def blank_uno(tmp_path: Path) -> Iterator[tuple[UnoProcess, Path]]:
     """An emulated Uno with only Optiboot in its flash, reset on open, writing a trace."""
-    missing = _missing_tool()
+    missing = missing_tool()
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
     build.build_runner()
@@ -145,6 +149,38 @@ def test_the_real_uno_examples(
     out = capsys.readouterr().out
     assert "num_pins          20" in out
     assert "handshakes        1" in out  # info's link counters
+
+
+@pytest.mark.avr
+@pytest.mark.slow
+def test_the_install_examples(
+    blank_uno: tuple[UnoProcess, Path], workdir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """flash (on an Uno holding only Optiboot), sim (its port answers), demo (passes)."""
+    uno, _trace = blank_uno
+    lines = block("install")
+    assert [shlex.split(x)[1] for x in lines] == ["flash", "sim", "demo"]
+    assert run(lines[0], {UNO_PORT: uno.port}) == 0
+    with Board.open(uno.port) as board:  # the flashed firmware answers
+        assert board.info.num_pins == 20
+    sim = subprocess.Popen(
+        [sys.executable, "-m", "protoduino.cli.main", *shlex.split(lines[1])[1:]],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    try:
+        assert sim.stdout is not None
+        port = sim.stdout.readline().strip()  # the port comes first
+        with Board.open(port) as board:
+            assert board.ping() > 0
+    finally:
+        sim.terminate()
+        sim.wait(10)
+        assert sim.stdout is not None
+        sim.stdout.close()
+    assert run(lines[2], {}) == 0
+    assert "demo done" in capsys.readouterr().out
 
 
 def test_the_capture_examples(
