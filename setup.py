@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parent
 #: Everything the module is compiled from. Their digest is compiled in as
 #: ``_speedups.SOURCE_DIGEST``, so a test can tell a stale in-place build from a fresh one.
 SOURCES = ["host/protoduino/_speedups.c", "firmware/core/pd_cobs.c", "firmware/core/pd_crc.c"]
-HEADERS = ["firmware/core/pd_cobs.h", "firmware/core/pd_crc.h", "firmware/core/pd_protocol.h"]
+HEADERS = ["firmware/core/pd_cobs.h", "firmware/core/pd_crc.h", "firmware/generated/pd_protocol.h"]
 
 
 def source_digest(root: Path = ROOT) -> str:
@@ -115,7 +115,7 @@ if __name__ == "__main__":
                 "protoduino._speedups",
                 sources=SOURCES,
                 depends=HEADERS,
-                include_dirs=["firmware/core"],
+                include_dirs=["firmware/core", "firmware/generated"],
                 define_macros=[("PD_SPEEDUPS_DIGEST", f'"{source_digest()}"')],
                 optional=True,
             )

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import protoduino
 import pytest
+from protoduino import constants
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino_dev import codegen
 
@@ -67,3 +69,37 @@ def test_nanopb_bounds_every_variable_field() -> None:
     options = (ROOT / "proto" / codegen.OPTIONS_NAME).read_text()
     for name in variable:
         assert f"protoduino.{name} " in options, name
+
+
+def _protocol_macros() -> dict[str, int]:
+    text = (ROOT / "firmware/generated/pd_protocol.h").read_text()
+    found = re.findall(r"^#define (PD_\w+) (0x[0-9A-Fa-f]+|\d+)U?L?$", text, re.MULTILINE)
+    return {name: int(value, 0) for name, value in found}
+
+
+def test_pd_protocol_h_carries_constants_py_values() -> None:
+    """Read back from the committed header: every listed constant and enum member, in C units."""
+    macros = _protocol_macros()
+    expected: dict[str, int] = {}
+    for name in constants.FIRMWARE_CONSTANTS:
+        value = getattr(constants, name)
+        if isinstance(value, float):  # seconds on the host, milliseconds on the device
+            expected[f"PD_{name}_MS"] = round(value * 1000)
+        else:
+            expected[f"PD_{name}"] = value
+    for prefix, enum in constants.FIRMWARE_ENUMS.items():
+        expected.update({f"PD_{prefix}_{m.name}": m.value for m in enum})
+    assert macros == expected
+    assert macros["PD_FAILSAFE_TIMEOUT_MS"] == 10_000
+
+
+def test_pd_protocol_h_carries_only_what_the_firmware_uses() -> None:
+    """A constant the C code never uses belongs to the host alone: it stays out of the header."""
+    sources = [
+        p
+        for folder in ("firmware/core", "firmware/avr", "firmware/posix")
+        for p in sorted((ROOT / folder).glob("*.[ch]"))
+    ]
+    text = "\n".join(p.read_text() for p in sources)
+    unused = [name for name in _protocol_macros() if not re.search(rf"\b{name}\b", text)]
+    assert unused == [], f"not used by the firmware: {unused} (drop them from FIRMWARE_*)"

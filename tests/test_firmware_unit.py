@@ -15,7 +15,6 @@ from pathlib import Path
 
 import pytest
 from fuzzing import require_fuzz_tools, run_bounded
-from protoduino import constants
 
 ROOT = Path(__file__).resolve().parents[1]
 FIRMWARE = ROOT / "firmware"
@@ -63,37 +62,3 @@ def test_fuzz_receive_path_bounded(tmp_path: Path) -> None:
     seeds = sorted(FUZZ_CORPUS.iterdir())
     assert len(seeds) > 20, "the seed corpus was not generated"
     run_bounded(FUZZ_BIN, FUZZ_SECONDS, tmp_path, [FUZZ_CORPUS], min_runs=10_000)
-
-
-def _c_constants() -> dict[str, int]:
-    text = (FIRMWARE / "core" / "pd_protocol.h").read_text()
-    found = re.findall(r"^#define (PD_\w+) (0x[0-9A-Fa-f]+|\d+)U?L?\b", text, re.MULTILINE)
-    return {name: int(value, 0) for name, value in found}
-
-
-def test_protocol_constants_match_python() -> None:
-    """pd_protocol.h mirrors constants.py: every value, so they cannot drift."""
-    c = _c_constants()
-    checked = 0
-    for name in dir(constants):
-        value = getattr(constants, name)
-        if not name.isupper() or isinstance(value, bool):
-            continue
-        if isinstance(value, float):  # seconds on the host, milliseconds on the device
-            assert c.get(f"PD_{name}_MS") == round(value * 1000), name
-            checked += 1
-        elif isinstance(value, int):
-            if name in ("MIN_PACKET",):  # an expression in C, checked below
-                continue
-            assert c.get(f"PD_{name}") == value, name
-            checked += 1
-    for enum, prefix in (
-        (constants.PacketType, "PD_PACKET_"),
-        (constants.ControlCode, "PD_CONTROL_"),
-        (constants.EventCode, "PD_EVENT_"),
-    ):
-        for member in enum:
-            assert c.get(prefix + member.name) == member.value, member
-            checked += 1
-    assert c["PD_HEADER_SIZE"] + c["PD_CRC_SIZE"] == constants.MIN_PACKET
-    assert checked >= 25  # the scan found the constants at all

@@ -55,7 +55,7 @@ setup_venv() {
     local want
     # setup.py's sources too: the editable install compiles protoduino._speedups from them.
     want=$(cat pyproject.toml dev/pyproject.toml constraints.txt tools/bench_setup.sh setup.py host/protoduino/_speedups.c \
-        firmware/core/pd_cobs.[ch] firmware/core/pd_crc.[ch] firmware/core/pd_protocol.h |
+        firmware/core/pd_cobs.[ch] firmware/core/pd_crc.[ch] firmware/generated/pd_protocol.h |
         sha256sum | cut -d' ' -f1)
     if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
         log "installing protoduino and its pinned dev dependencies into $venv"

@@ -1,7 +1,9 @@
 """Protocol constants (docs/protocol.md section 8) and the wire's enumerations.
 
-The firmware mirrors these in ``firmware/core/pd_protocol.h``; a test compares
-the two so they cannot drift.
+The one source of them for both sides: ``protoduino gen`` writes the ones the
+firmware uses (:data:`FIRMWARE_CONSTANTS`, :data:`FIRMWARE_ENUMS`) to
+``firmware/generated/pd_protocol.h``, and tests/test_codegen.py fails when the
+committed header is stale or carries a constant the firmware does not use.
 """
 
 from __future__ import annotations
@@ -37,12 +39,16 @@ SERVO_MAX_DEGREES = 180
 
 
 class PacketType(IntEnum):
+    """Packet TYPE (docs/protocol.md section 4)."""
+
     CONTROL = 0x00
     DATA = 0x01  # device to host: one ArduinoOut
     COMMAND = 0x02  # host to device: one ArduinoIn
 
 
 class ControlCode(IntEnum):
+    """CONTROL payload CODE (docs/protocol.md section 5)."""
+
     RESET = 0x00
     RESET_ACK = 0x01
     HEARTBEAT = 0x02
@@ -50,7 +56,36 @@ class ControlCode(IntEnum):
 
 
 class EventCode(IntEnum):
+    """EVENT codes (docs/protocol.md section 5)."""
+
     BOOT = 0x01
     NOT_ACTIVE = 0x02
     DESYNC = 0x03
     RX_OVERFLOW = 0x04
+
+
+#: What the firmware needs of this module, written by ``protoduino gen`` to
+#: firmware/generated/pd_protocol.h as ``PD_<NAME>`` (a duration in seconds as
+#: ``PD_<NAME>_MS``: the device's clock counts milliseconds). The handshake,
+#: watchdog, ping and Ack timings, the retries and SEQ_TOLERANCE are the host's alone.
+FIRMWARE_CONSTANTS = (
+    "PROTOCOL_VERSION",
+    "MAX_PAYLOAD",
+    "MAX_ENCODED_FRAME",
+    "HEADER_SIZE",
+    "MIN_PACKET",
+    "FAILSAFE_TIMEOUT",
+    "SEQ_DESYNC_THRESHOLD",
+    "DEDUPE_WINDOW",
+    "SERVO_DEFAULT_MIN_US",
+    "SERVO_DEFAULT_MAX_US",
+    "SERVO_LIMIT_MIN_US",
+    "SERVO_LIMIT_MAX_US",
+    "SERVO_MAX_DEGREES",
+)
+#: The enumerations the firmware needs, by their C prefix: ``PD_<PREFIX>_<MEMBER>``.
+FIRMWARE_ENUMS: dict[str, type[IntEnum]] = {
+    "PACKET": PacketType,
+    "CONTROL": ControlCode,
+    "EVENT": EventCode,
+}
