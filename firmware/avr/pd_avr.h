@@ -31,6 +31,9 @@ uint32_t pd_avr_millis(void);
 void pd_avr_servo_init(void);
 /* Start or update pulses on `pin` for `channel`; first call attaches the pin. */
 void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us);
+/* Hold servo writes (true) until the release (false), then apply them all at
+ * the next frame start (pd_hal_servo_hold). */
+void pd_avr_servo_hold(bool hold);
 /* Start the next servo frame as soon as possible (failsafe, Stop). */
 void pd_avr_servo_expedite(void);
 

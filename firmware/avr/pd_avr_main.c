@@ -49,6 +49,12 @@ void pd_hal_servo_write(void *hal, uint8_t channel, uint8_t pin, uint16_t us)
     pd_avr_servo_write(channel, pin, us);
 }
 
+void pd_hal_servo_hold(void *hal, bool hold)
+{
+    (void)hal;
+    pd_avr_servo_hold(hold);
+}
+
 void pd_hal_digital_write(void *hal, uint8_t pin, bool level)
 {
     (void)hal;

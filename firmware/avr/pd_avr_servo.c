@@ -34,7 +34,8 @@
 typedef struct servo_channel {
     volatile uint8_t *port; /* NULL: channel not attached */
     uint8_t mask;
-    uint16_t ticks;
+    uint16_t ticks; /* the width this frame's pulse has */
+    uint16_t next;  /* the width written, taken into `ticks` at the next frame start */
 } servo_channel_t;
 
 static servo_channel_t channels[PD_MAX_SERVOS];
@@ -52,6 +53,8 @@ static int8_t on_channel = -1; /* the channel on_port belongs to, -1: none */
 static bool in_gap = true;     /* the next compare ends the gap between frames */
 static uint16_t frame_start;   /* compare time at which the current frame began */
 static volatile bool expedite; /* start the next frame right after this one */
+/* Writes are held (pd_avr_servo_hold): frame starts leave `next` alone. */
+static volatile bool held;
 
 /*
  * The soonest frame start after `now` that keeps the frames' phase to the
@@ -111,6 +114,14 @@ ISR(TIMER1_COMPA_vect)
     if (in_gap) {
         frame_start = at;
         in_gap = false;
+        /* Every new width starts at a frame start, so that widths written
+         * together (a Pose, a speed step) reach the pins in the same frame.
+         * Before channel 0's width is read below. */
+        if (!held) {
+            for (uint8_t n = 0; n < PD_MAX_SERVOS; n++) {
+                channels[n].ticks = channels[n].next;
+            }
+        }
     }
     int8_t ch = on_channel; /* the channel now high, if any */
     if (ch >= 0) {
@@ -159,9 +170,15 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
             *pd_avr_ddr(pin) |= pd_avr_mask(pin);
             c->mask = pd_avr_mask(pin);
             c->port = pd_avr_port(pin);
+            c->ticks = ticks; /* valid for the next frame, held or not */
         }
-        c->ticks = ticks;
+        c->next = ticks;
     }
+}
+
+void pd_avr_servo_hold(bool hold)
+{
+    held = hold;
 }
 
 void pd_avr_servo_expedite(void)

@@ -32,7 +32,9 @@ void pd_core_poll(pd_core_t *core)
      * link IDLE again, so an IDLE device has nothing to make safe and no one to
      * tell: the timer is checked only while ACTIVE.
      */
-    if (core->link.active && pd_failsafe_due(&core->failsafe, pd_hal_millis(core->hal))) {
+    uint32_t now = pd_hal_millis(core->hal);
+    if (core->link.active && pd_failsafe_due(&core->failsafe, now)) {
         pd_core_enter_safe(core, protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT);
     }
+    pd_outputs_step(&core->outputs, core->hal, now);
 }

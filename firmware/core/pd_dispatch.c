@@ -145,6 +145,23 @@ static protoduino_Status cmd_digital_control(pd_core_t *core, pd_cmd_t *cmd)
     return pd_outputs_digital_control(&core->outputs, core->hal, &cmd->in->data.digital_control);
 }
 
+static protoduino_Status cmd_pose(pd_core_t *core, pd_cmd_t *cmd)
+{
+    uint8_t bad;
+    protoduino_Status status =
+        pd_outputs_pose(&core->outputs, core->hal, &cmd->in->data.pose, &bad);
+    if (status != protoduino_Status_STATUS_OK) {
+        cmd->ack->refused_item = (uint32_t)bad + 1u;
+    }
+    return status;
+}
+
+static protoduino_Status cmd_read_outputs(pd_core_t *core, pd_cmd_t *cmd)
+{
+    pd_outputs_read(&core->outputs, &cmd->ack->result.outputs);
+    return protoduino_Status_STATUS_OK;
+}
+
 static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
 {
     pd_outputs_all_safe(&core->outputs, core->hal);
@@ -190,7 +207,9 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
     X(servo_control, 0, 0)                                                   \
     X(digital_init, 0, 0)                                                    \
     X(digital_control, 0, 0)                                                 \
-    X(stop, 0, 0)
+    X(stop, 0, 0)                                                            \
+    X(pose, 0, 0)                                                            \
+    X(read_outputs, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)
 
 /* The table entry for `tag` (flags and result; the handler is run by run_command). */
 static bool find_command(pb_size_t tag, pd_command_t *entry)

@@ -38,7 +38,12 @@ static void put_varint(writer_t *w, uint32_t value)
 
 static void put_tag(writer_t *w, uint8_t tag, uint8_t wire_type)
 {
-    put(w, (uint8_t)((tag << 3) | wire_type)); /* every tag here is < 16 */
+    if (tag < 16u) {
+        put(w, (uint8_t)((tag << 3) | wire_type));
+    } else { /* two bytes, up to tag 31 */
+        put(w, (uint8_t)(0x80u | ((tag << 3) & 0x7Fu) | wire_type));
+        put(w, (uint8_t)(tag >> 4));
+    }
 }
 
 /* A singular proto3 scalar: omitted when zero. */
@@ -93,19 +98,23 @@ static void close_msg(writer_t *w, size_t at)
     }
 }
 
-static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
+static void put_fixed32(writer_t *w, uint8_t tag, uint32_t v)
 {
-    put_string(w, protoduino_DeviceInfo_firmware_version_tag, info->firmware_version,
-               sizeof(info->firmware_version));
-    put_uint(w, protoduino_DeviceInfo_protocol_version_tag, info->protocol_version);
-    if (info->schema_id != 0) {
-        uint32_t v = info->schema_id;
-        put_tag(w, protoduino_DeviceInfo_schema_id_tag, WT_FIXED32);
+    if (v != 0) {
+        put_tag(w, tag, WT_FIXED32);
         put(w, (uint8_t)v); /* little-endian */
         put(w, (uint8_t)(v >> 8));
         put(w, (uint8_t)(v >> 16));
         put(w, (uint8_t)(v >> 24));
     }
+}
+
+static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
+{
+    put_string(w, protoduino_DeviceInfo_firmware_version_tag, info->firmware_version,
+               sizeof(info->firmware_version));
+    put_uint(w, protoduino_DeviceInfo_protocol_version_tag, info->protocol_version);
+    put_fixed32(w, protoduino_DeviceInfo_schema_id_tag, info->schema_id);
     put_string(w, protoduino_DeviceInfo_board_tag, info->board, sizeof(info->board));
     put_uint(w, protoduino_DeviceInfo_num_pins_tag, info->num_pins);
     put_uint(w, protoduino_DeviceInfo_max_servos_tag, info->max_servos);
@@ -136,7 +145,19 @@ static void put_ack(writer_t *w, const protoduino_Ack *ack)
         size_t at = open_msg(w, protoduino_Ack_info_tag);
         put_info(w, &ack->result.info);
         close_msg(w, at);
+    } else if (ack->which_result == protoduino_Ack_outputs_tag) {
+        const protoduino_OutputStates *st = &ack->result.outputs;
+        size_t at = open_msg(w, protoduino_Ack_outputs_tag);
+        if (st->servos.size > sizeof(st->servos.bytes)) {
+            w->ok = false;
+        } else if (st->servos.size > 0) {
+            put_bytes(w, protoduino_OutputStates_servos_tag, st->servos.bytes, st->servos.size);
+        }
+        put_fixed32(w, protoduino_OutputStates_digital_pins_tag, st->digital_pins);
+        put_fixed32(w, protoduino_OutputStates_digital_levels_tag, st->digital_levels);
+        close_msg(w, at);
     }
+    put_uint(w, protoduino_Ack_refused_item_tag, ack->refused_item);
 }
 
 size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap)

@@ -43,6 +43,14 @@ uint32_t pd_hal_millis(void *hal);
  */
 void pd_hal_servo_write(void *hal, uint8_t channel, uint8_t pin, uint16_t us);
 
+/*
+ * Hold (true) servo writes until the release (false), then let them all take
+ * effect at the same servo frame: a Pose's joints, or one speed step of every
+ * moving servo, start together at the pins. A HAL whose writes take effect at
+ * once may do nothing. Never nested.
+ */
+void pd_hal_servo_hold(void *hal, bool hold);
+
 /* Make `pin` a digital output (if it is not yet one) at `level`. */
 void pd_hal_digital_write(void *hal, uint8_t pin, bool level);
 

@@ -35,7 +35,12 @@ static uint8_t servo_slots(void *hal)
 
 static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint16_t us)
 {
-    pd_hal_servo_write(hal, channel, out->servo[channel].pin, us);
+    pd_servo_t *s = &out->servo[channel];
+    s->target_us = us;
+    if (s->step == 0) { /* no speed limit: there at once; else pd_outputs_step moves it */
+        s->us = us;
+        pd_hal_servo_write(hal, channel, s->pin, us);
+    }
 }
 
 static void drive_digital(pd_outputs_t *out, void *hal, uint8_t pin, bool level)
@@ -170,7 +175,10 @@ protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
     if (min_us < PD_SERVO_LIMIT_MIN_US || max_us > PD_SERVO_LIMIT_MAX_US || min_us >= max_us) {
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
-    pd_servo_t limits = {0, (uint16_t)min_us, (uint16_t)max_us, 0};
+    if (msg->max_speed > PD_SERVO_MAX_SPEED) {
+        return protoduino_Status_STATUS_INVALID_ARGUMENT;
+    }
+    pd_servo_t limits = {0, 0, (uint16_t)min_us, (uint16_t)max_us, 0, 0, 0};
     if (msg->which_safe == protoduino_ServoInit_safe_degrees_tag) {
         if (msg->safe.safe_degrees > PD_SERVO_MAX_DEGREES) {
             return protoduino_Status_STATUS_OUT_OF_RANGE;
@@ -192,12 +200,19 @@ protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
     }
     limits.pin = (uint8_t)msg->pin;
     out->servo[channel] = limits;
-    drive_servo(out, hal, channel, limits.safe_us);
+    drive_servo(out, hal, channel, limits.safe_us); /* an Init jumps to safe, limited or not */
+    /* The speed limit rounds to whole us per frame, at least 1. */
+    uint32_t step = (msg->max_speed + 25u) / 50u;
+    out->servo[channel].step = (uint8_t)(msg->max_speed && step == 0 ? 1u : step);
     return protoduino_Status_STATUS_OK;
 }
 
-protoduino_Status pd_outputs_servo_control(pd_outputs_t *out, void *hal,
-                                           const protoduino_ServoControl *msg)
+/*
+ * A ServoControl: checked, then (if `apply`) driven. Not inlined, here and in
+ * digital_control: the Control and the Pose share one copy (118 B on the Uno).
+ */
+static __attribute__((noinline)) protoduino_Status
+servo_control(pd_outputs_t *out, void *hal, const protoduino_ServoControl *msg, bool apply)
 {
     uint8_t channel;
     protoduino_Status status = pd_pins_owned(out, hal, msg->pin, PD_MODE_SERVO, &channel);
@@ -220,8 +235,123 @@ protoduino_Status pd_outputs_servo_control(pd_outputs_t *out, void *hal,
     } else {
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
-    drive_servo(out, hal, channel, us);
+    if (apply) {
+        drive_servo(out, hal, channel, us);
+    }
     return protoduino_Status_STATUS_OK;
+}
+
+protoduino_Status pd_outputs_servo_control(pd_outputs_t *out, void *hal,
+                                           const protoduino_ServoControl *msg)
+{
+    return servo_control(out, hal, msg, true);
+}
+
+/* A DigitalControl: checked, then (if `apply`) driven. */
+static __attribute__((noinline)) protoduino_Status
+digital_control(pd_outputs_t *out, void *hal, const protoduino_DigitalControl *msg, bool apply)
+{
+    uint8_t slot;
+    protoduino_Status status = pd_pins_owned(out, hal, msg->pin, PD_MODE_DIGITAL, &slot);
+    if (status == protoduino_Status_STATUS_OK && apply) {
+        drive_digital(out, hal, (uint8_t)msg->pin, msg->level);
+    }
+    return status;
+}
+
+protoduino_Status pd_outputs_digital_control(pd_outputs_t *out, void *hal,
+                                             const protoduino_DigitalControl *msg)
+{
+    return digital_control(out, hal, msg, true);
+}
+
+protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino_Pose *msg,
+                                  uint8_t *bad)
+{
+    uint32_t seen = 0;
+
+    *bad = 0;
+    if (msg->items_count == 0) {
+        return protoduino_Status_STATUS_INVALID_ARGUMENT;
+    }
+    /* Pass 0 checks every item, pass 1 applies them all (servos held, so that
+     * their new widths start at the same frame). */
+    for (uint8_t pass = 0; pass < 2; pass++) {
+        for (uint8_t i = 0; i < msg->items_count; i++) {
+            const protoduino_PoseItem *item = &msg->items[i];
+            protoduino_Status status = protoduino_Status_STATUS_INVALID_ARGUMENT;
+            uint32_t pin = 0;
+            if (item->which_output == protoduino_PoseItem_servo_tag) {
+                status = servo_control(out, hal, &item->output.servo, pass);
+                pin = item->output.servo.pin;
+            } else if (item->which_output == protoduino_PoseItem_digital_tag) {
+                status = digital_control(out, hal, &item->output.digital, pass);
+                pin = item->output.digital.pin;
+            }
+            if (pass == 0) {
+                /* pin < PD_MAX_PINS <= 32 once the item is valid */
+                if (status == protoduino_Status_STATUS_OK && ((seen >> pin) & 1u)) {
+                    status = protoduino_Status_STATUS_INVALID_ARGUMENT; /* a pin twice */
+                }
+                if (status != protoduino_Status_STATUS_OK) {
+                    *bad = i;
+                    return status;
+                }
+                seen |= 1UL << pin;
+            }
+        }
+        pd_hal_servo_hold(hal, pass == 0);
+    }
+    return protoduino_Status_STATUS_OK;
+}
+
+void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
+{
+    typedef char fits[(sizeof(states->servos.bytes) >= 5u * PD_MAX_SERVOS) ? 1 : -1];
+    (void)sizeof(fits);
+    uint8_t *b = states->servos.bytes;
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        uint8_t owner = out->owner[pin];
+        if (owner == 0) {
+            continue;
+        }
+        if (PD_OWNER_MODE(owner) == PD_MODE_SERVO) {
+            const pd_servo_t *s = &out->servo[PD_OWNER_SLOT(owner)];
+            *b++ = pin;
+            *b++ = (uint8_t)s->us;
+            *b++ = (uint8_t)(s->us >> 8);
+            *b++ = (uint8_t)s->target_us;
+            *b++ = (uint8_t)(s->target_us >> 8);
+        } else if (PD_OWNER_MODE(owner) == PD_MODE_DIGITAL) {
+            states->digital_pins |= 1UL << pin;
+        }
+    }
+    states->servos.size = (pb_size_t)(b - states->servos.bytes);
+    states->digital_levels = out->digital_level & states->digital_pins;
+}
+
+void pd_outputs_step(pd_outputs_t *out, void *hal, uint32_t now)
+{
+    /* One step per servo frame; a late call does not make up a missed one
+     * (the speed is a limit: a busy loop may only make a move slower). */
+    if ((uint32_t)(now - out->stepped_at) < PD_SERVO_FRAME_MS) {
+        return;
+    }
+    out->stepped_at = now;
+    pd_hal_servo_hold(hal, true); /* every moving servo steps at the same frame */
+    for (uint8_t ch = 0; ch < PD_MAX_SERVOS; ch++) {
+        pd_servo_t *s = &out->servo[ch];
+        if (s->us == s->target_us) {
+            continue; /* also every unused channel: all zero */
+        }
+        if (s->us < s->target_us) {
+            s->us = s->target_us - s->us <= s->step ? s->target_us : s->us + s->step;
+        } else {
+            s->us = s->us - s->target_us <= s->step ? s->target_us : s->us - s->step;
+        }
+        pd_hal_servo_write(hal, ch, s->pin, s->us);
+    }
+    pd_hal_servo_hold(hal, false);
 }
 
 protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
@@ -236,18 +366,6 @@ protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
     uint32_t bit = 1UL << pin;
     out->digital_safe = msg->safe_level ? (out->digital_safe | bit) : (out->digital_safe & ~bit);
     drive_digital(out, hal, pin, msg->safe_level);
-    return protoduino_Status_STATUS_OK;
-}
-
-protoduino_Status pd_outputs_digital_control(pd_outputs_t *out, void *hal,
-                                             const protoduino_DigitalControl *msg)
-{
-    uint8_t slot;
-    protoduino_Status status = pd_pins_owned(out, hal, msg->pin, PD_MODE_DIGITAL, &slot);
-    if (status != protoduino_Status_STATUS_OK) {
-        return status;
-    }
-    drive_digital(out, hal, (uint8_t)msg->pin, msg->level);
     return protoduino_Status_STATUS_OK;
 }
 

@@ -55,9 +55,12 @@ enum {
 
 typedef struct pd_servo {
     uint8_t pin;
+    uint8_t step; /* speed limit: most us per servo frame; 0: none */
     uint16_t min_us;
     uint16_t max_us;
     uint16_t safe_us;
+    uint16_t us;        /* the width driven now */
+    uint16_t target_us; /* the width it moves to (differs only while speed-limited) */
 } pd_servo_t;
 
 typedef struct pd_outputs {
@@ -65,7 +68,9 @@ typedef struct pd_outputs {
     pd_servo_t servo[PD_MAX_SERVOS];
     uint32_t digital_safe;  /* bit N: safe level of pin N */
     uint32_t digital_level; /* bit N: current level of pin N */
+    uint32_t stepped_at;    /* pd_hal_millis() of the last speed step */
 } pd_outputs_t;
+
 
 void pd_outputs_init(pd_outputs_t *out);
 
@@ -94,7 +99,25 @@ protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
 protoduino_Status pd_outputs_digital_control(pd_outputs_t *out, void *hal,
                                              const protoduino_DigitalControl *msg);
 
-/* Drive every configured output to its safe value (failsafe, Stop). */
+/*
+ * Several outputs at once, all or nothing: every item is checked (in order,
+ * each as its Control would be; a pin twice is STATUS_INVALID_ARGUMENT) before
+ * any is applied. On a refusal *bad is the offending item's index.
+ */
+protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino_Pose *msg,
+                                  uint8_t *bad);
+
+/* What every configured output drives now (ReadOutputs). */
+void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states);
+
+/*
+ * Speed limits: move every speed-limited servo one step per servo frame
+ * (PD_SERVO_FRAME_MS of `now`) toward its target. Called from pd_core_poll.
+ */
+void pd_outputs_step(pd_outputs_t *out, void *hal, uint32_t now);
+
+/* Drive every configured output to its safe value (failsafe, Stop); a
+ * speed-limited servo moves there at its speed. */
 void pd_outputs_all_safe(pd_outputs_t *out, void *hal);
 
 #endif /* PD_OUTPUTS_H */

@@ -23,6 +23,9 @@
 #define PD_SERVO_LIMIT_MIN_US 400
 #define PD_SERVO_LIMIT_MAX_US 2600
 #define PD_SERVO_MAX_DEGREES 180
+/* Speed limits (ServoInit.max_speed, us per second) step once per servo frame. */
+#define PD_SERVO_FRAME_MS 20u
+#define PD_SERVO_MAX_SPEED 12750u /* 255 us per frame */
 
 /* PacketType: Packet TYPE (docs/protocol.md section 4). */
 #define PD_PACKET_CONTROL 0x00

@@ -27,10 +27,22 @@ PB_BIND(protoduino_Stop, protoduino_Stop, AUTO)
 PB_BIND(protoduino_GetInfo, protoduino_GetInfo, AUTO)
 
 
+PB_BIND(protoduino_PoseItem, protoduino_PoseItem, AUTO)
+
+
+PB_BIND(protoduino_Pose, protoduino_Pose, AUTO)
+
+
+PB_BIND(protoduino_ReadOutputs, protoduino_ReadOutputs, AUTO)
+
+
 PB_BIND(protoduino_ArduinoIn, protoduino_ArduinoIn, AUTO)
 
 
 PB_BIND(protoduino_DeviceInfo, protoduino_DeviceInfo, AUTO)
+
+
+PB_BIND(protoduino_OutputStates, protoduino_OutputStates, AUTO)
 
 
 PB_BIND(protoduino_Ack, protoduino_Ack, AUTO)

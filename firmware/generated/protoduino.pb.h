@@ -58,6 +58,10 @@ typedef struct _protoduino_ServoInit {
         uint32_t safe_degrees; /* 0..180 */
         uint32_t safe_us; /* within [min_us, max_us] */
     } safe;
+    /* Speed limit in us per second, 0: none (a new value is driven at once).
+ Otherwise every later value (Control, Pose, Stop, failsafe) is approached
+ by (max_speed + 25) / 50 us per 20 ms servo frame; at most 12750. */
+    uint32_t max_speed;
 } protoduino_ServoInit;
 
 typedef struct _protoduino_ServoControl {
@@ -90,6 +94,27 @@ typedef struct _protoduino_GetInfo {
     char dummy_field;
 } protoduino_GetInfo;
 
+/* Several outputs at once, all or nothing: each item is the Control it names,
+ every one is checked before any is applied, and a refusal names the item
+ (Ack.refused_item). The servos' new widths start at the same servo frame. */
+typedef struct _protoduino_PoseItem {
+    pb_size_t which_output;
+    union {
+        protoduino_ServoControl servo;
+        protoduino_DigitalControl digital;
+    } output;
+} protoduino_PoseItem;
+
+typedef struct _protoduino_Pose {
+    pb_size_t items_count;
+    protoduino_PoseItem items[8]; /* 1..8 items, each pin at most once */
+} protoduino_Pose;
+
+/* Ask what the device drives now (OutputStates, returned in the Ack). */
+typedef struct _protoduino_ReadOutputs {
+    char dummy_field;
+} protoduino_ReadOutputs;
+
 typedef struct _protoduino_ArduinoIn {
     uint32_t message_id; /* non-zero; reused by retransmissions */
     pb_size_t which_data;
@@ -101,6 +126,8 @@ typedef struct _protoduino_ArduinoIn {
         protoduino_DigitalControl digital_control;
         protoduino_Stop stop;
         protoduino_GetInfo get_info;
+        protoduino_Pose pose;
+        protoduino_ReadOutputs read_outputs;
     } data;
 } protoduino_ArduinoIn;
 
@@ -115,6 +142,17 @@ typedef struct _protoduino_DeviceInfo {
     uint32_t reserved_pins[4];
 } protoduino_DeviceInfo;
 
+typedef PB_BYTES_ARRAY_T(40) protoduino_OutputStates_servos_t;
+/* Every configured output and its value now (answer to ReadOutputs). */
+typedef struct _protoduino_OutputStates {
+    /* 5 bytes per servo, in pin order: its pin, then the width it drives now and
+ the width it moves to (the same unless speed-limited), each in us as a
+ little-endian uint16. Bytes, not messages: the Uno's encoder stays small. */
+    protoduino_OutputStates_servos_t servos;
+    uint32_t digital_pins; /* bit N: pin N is a digital output */
+    uint32_t digital_levels; /* bit N: the level pin N drives */
+} protoduino_OutputStates;
+
 typedef PB_BYTES_ARRAY_T(64) protoduino_Ack_ping_echo_t;
 typedef struct _protoduino_Ack {
     uint32_t message_id;
@@ -123,7 +161,9 @@ typedef struct _protoduino_Ack {
     union {
         protoduino_Ack_ping_echo_t ping_echo; /* the Ping's payload, unchanged */
         protoduino_DeviceInfo info; /* answer to GetInfo */
+        protoduino_OutputStates outputs; /* answer to ReadOutputs */
     } result;
+    uint32_t refused_item; /* a refused Pose: its offending item, counted from 1 */
 } protoduino_Ack;
 
 /* Sent when the safe state is entered (active = true) and when the next Ping
@@ -182,6 +222,10 @@ extern "C" {
 
 
 
+
+
+
+
 #define protoduino_Ack_status_ENUMTYPE protoduino_Status
 
 #define protoduino_Failsafe_cause_ENUMTYPE protoduino_FailsafeCause
@@ -193,29 +237,37 @@ extern "C" {
 
 /* Initializer values for message structs */
 #define protoduino_Ping_init_default             {{0, {0}}}
-#define protoduino_ServoInit_init_default        {0, 0, 0, 0, {0}}
+#define protoduino_ServoInit_init_default        {0, 0, 0, 0, {0}, 0}
 #define protoduino_ServoControl_init_default     {0, 0, {0}}
 #define protoduino_DigitalInit_init_default      {0, 0}
 #define protoduino_DigitalControl_init_default   {0, 0}
 #define protoduino_Stop_init_default             {0}
 #define protoduino_GetInfo_init_default          {0}
+#define protoduino_PoseItem_init_default         {0, {protoduino_ServoControl_init_default}}
+#define protoduino_Pose_init_default             {0, {protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default}}
+#define protoduino_ReadOutputs_init_default      {0}
 #define protoduino_ArduinoIn_init_default        {0, 0, {protoduino_Ping_init_default}}
 #define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}}
-#define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}}
+#define protoduino_OutputStates_init_default     {{0, {0}}, 0, 0}
+#define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, 0}
 #define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN}
 #define protoduino_DecodeError_init_default      {0}
 #define protoduino_Log_init_default              {_protoduino_LogLevel_MIN, ""}
 #define protoduino_ArduinoOut_init_default       {0, {protoduino_Ack_init_default}}
 #define protoduino_Ping_init_zero                {{0, {0}}}
-#define protoduino_ServoInit_init_zero           {0, 0, 0, 0, {0}}
+#define protoduino_ServoInit_init_zero           {0, 0, 0, 0, {0}, 0}
 #define protoduino_ServoControl_init_zero        {0, 0, {0}}
 #define protoduino_DigitalInit_init_zero         {0, 0}
 #define protoduino_DigitalControl_init_zero      {0, 0}
 #define protoduino_Stop_init_zero                {0}
 #define protoduino_GetInfo_init_zero             {0}
+#define protoduino_PoseItem_init_zero            {0, {protoduino_ServoControl_init_zero}}
+#define protoduino_Pose_init_zero                {0, {protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero}}
+#define protoduino_ReadOutputs_init_zero         {0}
 #define protoduino_ArduinoIn_init_zero           {0, 0, {protoduino_Ping_init_zero}}
 #define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}}
-#define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}}
+#define protoduino_OutputStates_init_zero        {{0, {0}}, 0, 0}
+#define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, 0}
 #define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN}
 #define protoduino_DecodeError_init_zero         {0}
 #define protoduino_Log_init_zero                 {_protoduino_LogLevel_MIN, ""}
@@ -228,6 +280,7 @@ extern "C" {
 #define protoduino_ServoInit_max_us_tag          3
 #define protoduino_ServoInit_safe_degrees_tag    4
 #define protoduino_ServoInit_safe_us_tag         5
+#define protoduino_ServoInit_max_speed_tag       30
 #define protoduino_ServoControl_pin_tag          1
 #define protoduino_ServoControl_degrees_tag      2
 #define protoduino_ServoControl_us_tag           3
@@ -235,6 +288,9 @@ extern "C" {
 #define protoduino_DigitalInit_safe_level_tag    2
 #define protoduino_DigitalControl_pin_tag        1
 #define protoduino_DigitalControl_level_tag      2
+#define protoduino_PoseItem_servo_tag            1
+#define protoduino_PoseItem_digital_tag          2
+#define protoduino_Pose_items_tag                1
 #define protoduino_ArduinoIn_message_id_tag      1
 #define protoduino_ArduinoIn_ping_tag            2
 #define protoduino_ArduinoIn_servo_init_tag      3
@@ -243,6 +299,8 @@ extern "C" {
 #define protoduino_ArduinoIn_digital_control_tag 6
 #define protoduino_ArduinoIn_stop_tag            7
 #define protoduino_ArduinoIn_get_info_tag        8
+#define protoduino_ArduinoIn_pose_tag            30
+#define protoduino_ArduinoIn_read_outputs_tag    31
 #define protoduino_DeviceInfo_firmware_version_tag 1
 #define protoduino_DeviceInfo_protocol_version_tag 2
 #define protoduino_DeviceInfo_schema_id_tag      3
@@ -250,10 +308,15 @@ extern "C" {
 #define protoduino_DeviceInfo_num_pins_tag       5
 #define protoduino_DeviceInfo_max_servos_tag     6
 #define protoduino_DeviceInfo_reserved_pins_tag  7
+#define protoduino_OutputStates_servos_tag       1
+#define protoduino_OutputStates_digital_pins_tag 2
+#define protoduino_OutputStates_digital_levels_tag 3
 #define protoduino_Ack_message_id_tag            1
 #define protoduino_Ack_status_tag                2
 #define protoduino_Ack_ping_echo_tag             3
 #define protoduino_Ack_info_tag                  4
+#define protoduino_Ack_outputs_tag               30
+#define protoduino_Ack_refused_item_tag          31
 #define protoduino_Failsafe_active_tag           1
 #define protoduino_Failsafe_cause_tag            2
 #define protoduino_DecodeError_count_tag         1
@@ -275,7 +338,8 @@ X(a, STATIC,   SINGULAR, UINT32,   pin,               1) \
 X(a, STATIC,   SINGULAR, UINT32,   min_us,            2) \
 X(a, STATIC,   SINGULAR, UINT32,   max_us,            3) \
 X(a, STATIC,   ONEOF,    UINT32,   (safe,safe_degrees,safe.safe_degrees),   4) \
-X(a, STATIC,   ONEOF,    UINT32,   (safe,safe_us,safe.safe_us),   5)
+X(a, STATIC,   ONEOF,    UINT32,   (safe,safe_us,safe.safe_us),   5) \
+X(a, STATIC,   SINGULAR, UINT32,   max_speed,        30)
 #define protoduino_ServoInit_CALLBACK NULL
 #define protoduino_ServoInit_DEFAULT NULL
 
@@ -308,6 +372,25 @@ X(a, STATIC,   SINGULAR, BOOL,     level,             2)
 #define protoduino_GetInfo_CALLBACK NULL
 #define protoduino_GetInfo_DEFAULT NULL
 
+#define protoduino_PoseItem_FIELDLIST(X, a) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (output,servo,output.servo),   1) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (output,digital,output.digital),   2)
+#define protoduino_PoseItem_CALLBACK NULL
+#define protoduino_PoseItem_DEFAULT NULL
+#define protoduino_PoseItem_output_servo_MSGTYPE protoduino_ServoControl
+#define protoduino_PoseItem_output_digital_MSGTYPE protoduino_DigitalControl
+
+#define protoduino_Pose_FIELDLIST(X, a) \
+X(a, STATIC,   REPEATED, MESSAGE,  items,             1)
+#define protoduino_Pose_CALLBACK NULL
+#define protoduino_Pose_DEFAULT NULL
+#define protoduino_Pose_items_MSGTYPE protoduino_PoseItem
+
+#define protoduino_ReadOutputs_FIELDLIST(X, a) \
+
+#define protoduino_ReadOutputs_CALLBACK NULL
+#define protoduino_ReadOutputs_DEFAULT NULL
+
 #define protoduino_ArduinoIn_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, UINT32,   message_id,        1) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,ping,data.ping),   2) \
@@ -316,7 +399,9 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,servo_control,data.servo_control),   4)
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,digital_init,data.digital_init),   5) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,digital_control,data.digital_control),   6) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,stop,data.stop),   7) \
-X(a, STATIC,   ONEOF,    MESSAGE,  (data,get_info,data.get_info),   8)
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,get_info,data.get_info),   8) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,pose,data.pose),  30) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,read_outputs,data.read_outputs),  31)
 #define protoduino_ArduinoIn_CALLBACK NULL
 #define protoduino_ArduinoIn_DEFAULT NULL
 #define protoduino_ArduinoIn_data_ping_MSGTYPE protoduino_Ping
@@ -326,6 +411,8 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,get_info,data.get_info),   8)
 #define protoduino_ArduinoIn_data_digital_control_MSGTYPE protoduino_DigitalControl
 #define protoduino_ArduinoIn_data_stop_MSGTYPE protoduino_Stop
 #define protoduino_ArduinoIn_data_get_info_MSGTYPE protoduino_GetInfo
+#define protoduino_ArduinoIn_data_pose_MSGTYPE protoduino_Pose
+#define protoduino_ArduinoIn_data_read_outputs_MSGTYPE protoduino_ReadOutputs
 
 #define protoduino_DeviceInfo_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, STRING,   firmware_version,   1) \
@@ -338,14 +425,24 @@ X(a, STATIC,   REPEATED, UINT32,   reserved_pins,     7)
 #define protoduino_DeviceInfo_CALLBACK NULL
 #define protoduino_DeviceInfo_DEFAULT NULL
 
+#define protoduino_OutputStates_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, BYTES,    servos,            1) \
+X(a, STATIC,   SINGULAR, FIXED32,  digital_pins,      2) \
+X(a, STATIC,   SINGULAR, FIXED32,  digital_levels,    3)
+#define protoduino_OutputStates_CALLBACK NULL
+#define protoduino_OutputStates_DEFAULT NULL
+
 #define protoduino_Ack_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, UINT32,   message_id,        1) \
 X(a, STATIC,   SINGULAR, UENUM,    status,            2) \
 X(a, STATIC,   ONEOF,    BYTES,    (result,ping_echo,result.ping_echo),   3) \
-X(a, STATIC,   ONEOF,    MESSAGE,  (result,info,result.info),   4)
+X(a, STATIC,   ONEOF,    MESSAGE,  (result,info,result.info),   4) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (result,outputs,result.outputs),  30) \
+X(a, STATIC,   SINGULAR, UINT32,   refused_item,     31)
 #define protoduino_Ack_CALLBACK NULL
 #define protoduino_Ack_DEFAULT NULL
 #define protoduino_Ack_result_info_MSGTYPE protoduino_DeviceInfo
+#define protoduino_Ack_result_outputs_MSGTYPE protoduino_OutputStates
 
 #define protoduino_Failsafe_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, BOOL,     active,            1) \
@@ -383,8 +480,12 @@ extern const pb_msgdesc_t protoduino_DigitalInit_msg;
 extern const pb_msgdesc_t protoduino_DigitalControl_msg;
 extern const pb_msgdesc_t protoduino_Stop_msg;
 extern const pb_msgdesc_t protoduino_GetInfo_msg;
+extern const pb_msgdesc_t protoduino_PoseItem_msg;
+extern const pb_msgdesc_t protoduino_Pose_msg;
+extern const pb_msgdesc_t protoduino_ReadOutputs_msg;
 extern const pb_msgdesc_t protoduino_ArduinoIn_msg;
 extern const pb_msgdesc_t protoduino_DeviceInfo_msg;
+extern const pb_msgdesc_t protoduino_OutputStates_msg;
 extern const pb_msgdesc_t protoduino_Ack_msg;
 extern const pb_msgdesc_t protoduino_Failsafe_msg;
 extern const pb_msgdesc_t protoduino_DecodeError_msg;
@@ -399,8 +500,12 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_DigitalControl_fields &protoduino_DigitalControl_msg
 #define protoduino_Stop_fields &protoduino_Stop_msg
 #define protoduino_GetInfo_fields &protoduino_GetInfo_msg
+#define protoduino_PoseItem_fields &protoduino_PoseItem_msg
+#define protoduino_Pose_fields &protoduino_Pose_msg
+#define protoduino_ReadOutputs_fields &protoduino_ReadOutputs_msg
 #define protoduino_ArduinoIn_fields &protoduino_ArduinoIn_msg
 #define protoduino_DeviceInfo_fields &protoduino_DeviceInfo_msg
+#define protoduino_OutputStates_fields &protoduino_OutputStates_msg
 #define protoduino_Ack_fields &protoduino_Ack_msg
 #define protoduino_Failsafe_fields &protoduino_Failsafe_msg
 #define protoduino_DecodeError_fields &protoduino_DecodeError_msg
@@ -408,9 +513,9 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_Ack_size                      91
-#define protoduino_ArduinoIn_size                74
-#define protoduino_ArduinoOut_size               93
+#define protoduino_Ack_size                      98
+#define protoduino_ArduinoIn_size                138
+#define protoduino_ArduinoOut_size               100
 #define protoduino_DecodeError_size              6
 #define protoduino_DeviceInfo_size               81
 #define protoduino_DigitalControl_size           8
@@ -418,9 +523,13 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_Failsafe_size                 4
 #define protoduino_GetInfo_size                  0
 #define protoduino_Log_size                      51
+#define protoduino_OutputStates_size             52
 #define protoduino_Ping_size                     66
+#define protoduino_PoseItem_size                 14
+#define protoduino_Pose_size                     128
+#define protoduino_ReadOutputs_size              0
 #define protoduino_ServoControl_size             12
-#define protoduino_ServoInit_size                24
+#define protoduino_ServoInit_size                31
 #define protoduino_Stop_size                     0
 
 #ifdef __cplusplus

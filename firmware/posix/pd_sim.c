@@ -198,6 +198,14 @@ void pd_hal_servo_write(void *ctx, uint8_t channel, uint8_t pin, uint16_t us)
     sim_trace(ctx, pin, SIM_PIN_SERVO, us);
 }
 
+void pd_hal_servo_hold(void *ctx, bool hold)
+{
+    /* Virtual pins take their value the moment they are written: a held batch
+     * is written within microseconds, at one trace time. */
+    (void)ctx;
+    (void)hold;
+}
+
 void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
 {
     sim_trace(ctx, pin, SIM_PIN_DIGITAL, level ? 1u : 0u);

@@ -10,7 +10,7 @@ See README.md for the API and docs/protocol.md for the wire protocol.
 from __future__ import annotations
 
 from ._generated.schema_id import SCHEMA_ID
-from .board import Board, DeviceInfo, DigitalOutput, Servo
+from .board import Board, DeviceInfo, DigitalOutput, OutputState, Servo, effective_speed
 from .constants import PROTOCOL_VERSION
 from .errors import (
     AckTimeoutError,
@@ -44,6 +44,7 @@ __all__ = [
     "EventKind",
     "HandshakeError",
     "LinkError",
+    "OutputState",
     "PayloadTooLargeError",
     "ProtocolError",
     "ProtoduinoError",
@@ -53,4 +54,5 @@ __all__ = [
     "TransportError",
     "VersionMismatchError",
     "__version__",
+    "effective_speed",
 ]

@@ -25,11 +25,13 @@ from __future__ import annotations
 
 import asyncio
 import collections
+from collections.abc import Mapping
 from concurrent.futures import Future
 from types import TracebackType
 from typing import Any, TypeVar
 
 from . import board as _board
+from .board import OutputState
 from .constants import SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
 from .events import Event, Stats
 
@@ -56,6 +58,11 @@ class Servo:
         self.pin = sync.pin
         self.min_us = sync.min_us
         self.max_us = sync.max_us
+        self.max_speed_us = sync.max_speed_us
+
+    @property
+    def value(self) -> int | None:
+        return self.sync.value
 
     async def write(self, degrees: int) -> None:
         await _wait(self.sync.submit(degrees))
@@ -74,6 +81,10 @@ class DigitalOutput:
         self.sync = sync
         self.pin = sync.pin
 
+    @property
+    def value(self) -> bool | None:
+        return self.sync.value
+
     async def write(self, level: bool) -> None:
         await _wait(self.sync.submit(level))
 
@@ -85,6 +96,13 @@ class DigitalOutput:
 
     def __repr__(self) -> str:
         return f"aio.{self.sync!r}"
+
+
+_Output = Servo | DigitalOutput | _board.Servo | _board.DigitalOutput
+
+
+def _sync(output: _Output) -> _board.Servo | _board.DigitalOutput:
+    return output.sync if isinstance(output, Servo | DigitalOutput) else output
 
 
 class EventStream:
@@ -196,8 +214,18 @@ class Board:
         safe_us: int | None = None,
         min_us: int = SERVO_DEFAULT_MIN_US,
         max_us: int = SERVO_DEFAULT_MAX_US,
+        max_speed: float | None = None,
+        max_speed_us: int | None = None,
     ) -> Servo:
-        future = self.sync.submit_servo(pin, safe, safe_us=safe_us, min_us=min_us, max_us=max_us)
+        future = self.sync.submit_servo(
+            pin,
+            safe,
+            safe_us=safe_us,
+            min_us=min_us,
+            max_us=max_us,
+            max_speed=max_speed,
+            max_speed_us=max_speed_us,
+        )
         return Servo(await _wait(future))
 
     async def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
@@ -208,6 +236,13 @@ class Board:
 
     async def stop(self) -> None:
         await _wait(self.sync.submit_stop())
+
+    async def pose(self, targets: Mapping[_Output, int | bool]) -> None:
+        """:meth:`protoduino.Board.pose`; the outputs may be these or the blocking ones."""
+        await _wait(self.sync.submit_pose({_sync(o): v for o, v in targets.items()}))
+
+    async def read_outputs(self) -> dict[int, OutputState]:
+        return await _wait(self.sync.submit_read_outputs())
 
     def events(self, maxsize: int = EVENT_BUFFER) -> EventStream:
         """Every event from now on, until the board is closed: ``async for e in board.events()``."""

@@ -33,16 +33,18 @@ the ``on_event`` callbacks and resolves futures. Both stop in :meth:`Board.close
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import queue
+import struct
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass
 from numbers import Integral
 from types import TracebackType
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from .capture import CaptureWriter
 from .commands import DIGITAL, SERVO, PinMode
@@ -56,7 +58,7 @@ from .constants import (
     SERVO_LIMIT_MIN_US,
     SERVO_MAX_DEGREES,
 )
-from .errors import BoardClosedError, CommandRejectedError, ProtocolError
+from .errors import BoardClosedError, CommandRejectedError, ProtocolError, ProtoduinoError
 from .events import Event, EventKind, Stats
 from .link import Link
 from .messages import ArduinoIn, ArduinoOut, Status, status_name
@@ -67,6 +69,35 @@ log = logging.getLogger(__name__)
 
 #: Ping payloads are bounded by the schema (protoduino.options: 64 bytes).
 MAX_PING_PAYLOAD = 64
+
+#: A Pose's most items (protoduino.options: Pose.items max_count).
+MAX_POSE_ITEMS = 8
+
+#: Servo speed limits step once per 20 ms servo frame: a limit is a whole
+#: number of us per frame, 1 .. 255 (ServoInit.max_speed, docs/protocol.md).
+FRAMES_PER_SECOND = 50
+MAX_SPEED_US = 255 * FRAMES_PER_SECOND
+
+
+def effective_speed(us_per_second: int) -> int:
+    """The speed the device keeps for a requested ``max_speed`` (us/s): whole us per frame."""
+    if us_per_second <= 0:
+        return 0
+    step = max(1, (us_per_second + FRAMES_PER_SECOND // 2) // FRAMES_PER_SECOND)
+    return step * FRAMES_PER_SECOND
+
+
+@dataclass(frozen=True, slots=True)
+class OutputState:
+    """One configured output as the device drives it now (:meth:`Board.read_outputs`)."""
+
+    pin: int
+    mode: str  # "servo" or "digital"
+    #: A servo's pulse width now (us), or a digital level (0, 1).
+    value: int
+    #: Where a servo is going (differs from ``value`` while a speed limit moves it).
+    target: int
+
 
 EventCallback = Callable[[Event], None]
 
@@ -86,6 +117,22 @@ def _returning(obj: T) -> Callable[[Call], T]:
         return obj
 
     return value
+
+
+def _output_states(call: Call) -> dict[int, OutputState]:
+    """Decode OutputStates (docs/protocol.md: 5 bytes per servo, then the digital masks)."""
+    states = call.result().outputs
+    blob = bytes(states.servos)
+    if len(blob) % 5:
+        raise ProtocolError(f"OutputStates.servos of {len(blob)} bytes is not 5 per servo")
+    found: dict[int, OutputState] = {}
+    for pin, us, target in struct.iter_unpack("<BHH", blob):
+        found[pin] = OutputState(pin, "servo", us, target)
+    for pin in range(32):
+        if states.digital_pins >> pin & 1:
+            level = states.digital_levels >> pin & 1
+            found[pin] = OutputState(pin, "digital", level, level)
+    return dict(sorted(found.items()))
 
 
 def _resolve(future: Future[T], call: Call, value: Callable[[Call], T]) -> None:
@@ -156,11 +203,15 @@ def _reject(status: int, text: str) -> CommandRejectedError:
 class Servo:
     """A servo output; get one from :meth:`Board.servo`."""
 
-    def __init__(self, board: Board, pin: int, min_us: int, max_us: int) -> None:
+    def __init__(
+        self, board: Board, pin: int, min_us: int, max_us: int, max_speed_us: int = 0
+    ) -> None:
         self.board = board
         self.pin = pin
         self.min_us = min_us
         self.max_us = max_us
+        #: The speed limit the device keeps (us per second; 0: none, values jump).
+        self.max_speed_us = max_speed_us
 
     @property
     def value(self) -> int | None:
@@ -171,6 +222,12 @@ class Servo:
         stands for a configuration since replaced).
         """
         return self.board._value(self.pin, SERVO)
+
+    def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
+        degrees = _int("degrees", value)
+        msg, us = self._degrees(degrees)
+        item.servo.CopyFrom(msg.servo_control)
+        return msg, us
 
     def to_us(self, degrees: int) -> int:
         """The pulse width the device makes for ``degrees`` (its own integer formula)."""
@@ -229,6 +286,11 @@ class DigitalOutput:
         """The level the device last acknowledged (the safe level after Init, Stop, failsafe)."""
         value = self.board._value(self.pin, DIGITAL)
         return None if value is None else bool(value)
+
+    def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
+        msg, level = self._level(value)  # type: ignore[arg-type]
+        item.digital.CopyFrom(msg.digital_control)
+        return msg, level
 
     def write(self, level: bool) -> None:
         """Drive the pin high (True or 1) or low (False or 0); any other value is refused."""
@@ -403,6 +465,8 @@ class Board:
         safe_us: int | None = None,
         min_us: int = SERVO_DEFAULT_MIN_US,
         max_us: int = SERVO_DEFAULT_MAX_US,
+        max_speed: float | None = None,
+        max_speed_us: int | None = None,
     ) -> Servo:
         """Configure ``pin`` as a servo; it moves to its safe position at once.
 
@@ -410,8 +474,16 @@ class Board:
         ``safe_us`` gives it in microseconds instead. The failsafe and
         :meth:`stop` return the servo there. Calling it again for the same pin
         changes the limits and the safe position.
+
+        ``max_speed`` (degrees per second) or ``max_speed_us`` (us per second)
+        limits its speed on the device: every later value (write, pose, stop,
+        failsafe) is approached one step per 20 ms servo frame. The device keeps
+        a whole number of us per frame (:func:`effective_speed`, in
+        ``Servo.max_speed_us``), at most 12750 us/s.
         """
-        msg, on_ok, servo = self._servo_init(pin, safe, safe_us, min_us, max_us)
+        msg, on_ok, servo = self._servo_init(
+            pin, safe, safe_us, min_us, max_us, max_speed, max_speed_us
+        )
         self._send(msg, on_ok)
         return servo
 
@@ -423,13 +495,24 @@ class Board:
         safe_us: int | None = None,
         min_us: int = SERVO_DEFAULT_MIN_US,
         max_us: int = SERVO_DEFAULT_MAX_US,
+        max_speed: float | None = None,
+        max_speed_us: int | None = None,
     ) -> Future[Servo]:
         """:meth:`servo` without waiting: a future of the :class:`Servo`, resolved by the Ack."""
-        msg, on_ok, servo = self._servo_init(pin, safe, safe_us, min_us, max_us)
+        msg, on_ok, servo = self._servo_init(
+            pin, safe, safe_us, min_us, max_us, max_speed, max_speed_us
+        )
         return self._future(msg, on_ok, _returning(servo))
 
-    def _servo_init(
-        self, pin: int, safe: int | None, safe_us: int | None, min_us: int, max_us: int
+    def _servo_init(  # noqa: PLR0917  (servo()'s arguments, checked in one place)
+        self,
+        pin: int,
+        safe: int | None,
+        safe_us: int | None,
+        min_us: int,
+        max_us: int,
+        max_speed: float | None,
+        max_speed_us: int | None,
     ) -> tuple[ArduinoIn, Callable[[], None], Servo]:
         """Check a servo's configuration; its ServoInit, what to record at the Ack, its object."""
         pin = self._check_pin(pin)
@@ -443,9 +526,10 @@ class Board:
                 f"servo limits [{min_us}, {max_us}] us must satisfy "
                 f"{SERVO_LIMIT_MIN_US} <= min_us < max_us <= {SERVO_LIMIT_MAX_US}",
             )
+        speed = self._speed(max_speed, max_speed_us, max_us - min_us)
         msg = ArduinoIn()
         init = msg.servo_init
-        init.pin, init.min_us, init.max_us = pin, min_us, max_us
+        init.pin, init.min_us, init.max_us, init.max_speed = pin, min_us, max_us, speed
         if safe_us is not None:
             safe_us = _int("safe_us", safe_us)
             if not min_us <= safe_us <= max_us:
@@ -468,10 +552,34 @@ class Board:
                     Status.STATUS_NO_FREE_RESOURCE,
                     f"all {self.info.max_servos} servo slots are in use",
                 )
-        servo = Servo(self, pin, min_us, max_us)
+        servo = Servo(self, pin, min_us, max_us, effective_speed(speed))
         width = init.safe_us if safe_us is not None else servo.to_us(init.safe_degrees)
         state = _Output(SERVO, msg.SerializeToString(), width, min_us, max_us)
         return msg, lambda: self._set_output(pin, state), servo
+
+    @staticmethod
+    def _speed(degrees_per_s: float | None, us_per_s: int | None, span_us: int) -> int:
+        """A speed limit as ServoInit.max_speed (us per second, 0: none), checked."""
+        if degrees_per_s is not None and us_per_s is not None:
+            raise TypeError("give max_speed (degrees/s) or max_speed_us, not both")
+        if degrees_per_s is not None:
+            if isinstance(degrees_per_s, bool) or not isinstance(degrees_per_s, int | float):
+                raise TypeError(f"max_speed must be a number, not {type(degrees_per_s).__name__}")
+            if not degrees_per_s > 0:  # also NaN
+                raise _reject(Status.STATUS_INVALID_ARGUMENT, "max_speed must be above 0")
+            us_per_s = max(1, round(degrees_per_s * span_us / SERVO_MAX_DEGREES))
+        elif us_per_s is None:
+            return 0
+        else:
+            us_per_s = _int("max_speed_us", us_per_s)
+            if us_per_s <= 0:
+                raise _reject(Status.STATUS_INVALID_ARGUMENT, "max_speed_us must be above 0")
+        if us_per_s > MAX_SPEED_US:
+            raise _reject(
+                Status.STATUS_INVALID_ARGUMENT,
+                f"a speed limit of {us_per_s} us/s is above the device's {MAX_SPEED_US}",
+            )
+        return us_per_s
 
     def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
         """Configure ``pin`` as a digital output; it takes its ``safe`` level at once."""
@@ -544,6 +652,98 @@ class Board:
     def _stop_msg() -> ArduinoIn:
         msg = ArduinoIn()
         msg.stop.SetInParent()
+        return msg
+
+    def pose(self, targets: Mapping[Servo | DigitalOutput, int | bool]) -> None:
+        """Set several outputs in one command, all or nothing.
+
+        ``targets`` maps each output to its value: degrees (int) for a
+        :class:`Servo`, a level for a :class:`DigitalOutput`. The device checks
+        every value before it applies any; the servos' new widths start at the
+        same servo frame (digital levels change at once, as the command runs).
+        A refusal, on the host or by the device, raises
+        :class:`CommandRejectedError` whose ``output`` is the offending output.
+        """
+        msg, on_ok, value = self._pose(targets)
+        call = self._submit(msg, on_ok)
+        with contextlib.suppress(ProtoduinoError):  # raised again below, the output named
+            self._rpc.wait(call)
+        value(call)
+
+    def submit_pose(self, targets: Mapping[Servo | DigitalOutput, int | bool]) -> Future[None]:
+        """:meth:`pose` without waiting: a future resolved by the Ack."""
+        msg, on_ok, value = self._pose(targets)
+        return self._future(msg, on_ok, value)
+
+    def _pose(
+        self, targets: Mapping[Servo | DigitalOutput, int | bool]
+    ) -> tuple[ArduinoIn, Callable[[], None], Callable[[Call], None]]:
+        if self._closed:
+            raise BoardClosedError("the board is closed")
+        if not isinstance(targets, Mapping):
+            raise TypeError(
+                f"a pose is a mapping of outputs to values, not {type(targets).__name__}"
+            )
+        if not 1 <= len(targets) <= MAX_POSE_ITEMS:
+            raise _reject(
+                Status.STATUS_INVALID_ARGUMENT,
+                f"a pose sets 1 to {MAX_POSE_ITEMS} outputs, not {len(targets)}",
+            )
+        msg = ArduinoIn()
+        outputs: list[Servo | DigitalOutput] = []
+        records: list[tuple[int, bytes, int]] = []  # pin, its Control (for a restore), value
+        for output, target in targets.items():
+            if not isinstance(output, Servo | DigitalOutput):
+                raise TypeError(f"a pose sets Servo and DigitalOutput objects, not {output!r}")
+            if output.board is not self:
+                raise ValueError(f"{output!r} belongs to another board")
+            item = msg.pose.items.add()
+            try:
+                if output.pin in (o.pin for o in outputs):
+                    raise _reject(Status.STATUS_INVALID_ARGUMENT, f"pin {output.pin} twice")
+                control, width = output._pose_item(item, target)
+            except CommandRejectedError as error:
+                raise CommandRejectedError(
+                    error.status, f"pose: {output!r}: {error}", sent=False, output=output
+                ) from None
+            except TypeError as error:
+                raise TypeError(f"pose: {output!r}: {error}") from None
+            outputs.append(output)
+            records.append((output.pin, control.SerializeToString(), width))
+
+        def on_ok() -> None:
+            for pin, control, width in records:
+                self._set_value(pin, control, width)
+
+        def value(call: Call) -> None:
+            try:
+                call.result()
+            except CommandRejectedError as error:
+                index = call.ack.refused_item if call.ack is not None else 0
+                if not 1 <= index <= len(outputs):
+                    raise  # a repeated refusal (answered from the dedupe window) names none
+                output = outputs[index - 1]
+                raise CommandRejectedError(
+                    error.status,
+                    f"pose refused by the device at {output!r}: {status_name(error.status)}",
+                    output=output,
+                ) from None
+
+        return msg, on_ok, value
+
+    def read_outputs(self) -> dict[int, OutputState]:
+        """What the device drives now, by pin: every configured output, even one this
+        session did not configure (a new session sees the state it inherits)."""
+        return _output_states(self._send(self._read_msg()))
+
+    def submit_read_outputs(self) -> Future[dict[int, OutputState]]:
+        """:meth:`read_outputs` without waiting."""
+        return self._future(self._read_msg(), None, _output_states)
+
+    @staticmethod
+    def _read_msg() -> ArduinoIn:
+        msg = ArduinoIn()
+        msg.read_outputs.SetInParent()
         return msg
 
     @property

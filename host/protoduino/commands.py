@@ -65,6 +65,8 @@ _BOARD_COMMANDS: tuple[Command, ...] = (
     Command("ping", idempotent=True, result="ping_echo"),
     Command("get_info", idempotent=True, result="info"),
     Command("stop"),
+    Command("pose"),  # several pin-mode Controls at once (PoseItem: ServoControl, DigitalControl)
+    Command("read_outputs", idempotent=True, result="outputs"),
 )
 
 

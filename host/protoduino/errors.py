@@ -77,13 +77,17 @@ class CommandRejectedError(ProtoduinoError):
     """The command was refused; ``status`` says why (a ``Status`` enum value).
 
     ``sent`` is False when the host refused it before sending, with the same
-    status the device would have given.
+    status the device would have given. ``output`` is the output object a
+    refused pose names (None for other commands).
     """
 
-    def __init__(self, status: int, message: str, *, sent: bool = True) -> None:
+    def __init__(
+        self, status: int, message: str, *, sent: bool = True, output: object = None
+    ) -> None:
         super().__init__(message)
         self.status = status
         self.sent = sent
+        self.output = output
 
 
 class AckTimeoutError(ProtoduinoError, TimeoutError):

@@ -511,6 +511,7 @@ class Rpc:
                 self.rejected += 1
                 self._finish(
                     call,
+                    ack=ack,  # kept: a refusal may say more (a Pose's refused_item)
                     error=CommandRejectedError(
                         ack.status,
                         f"{call.kind} rejected by the device: {status_name(ack.status)}",

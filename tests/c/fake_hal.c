@@ -129,6 +129,17 @@ void pd_hal_servo_write(void *ctx, uint8_t channel, uint8_t pin, uint16_t us)
     hal->servo_writes[pin]++;
 }
 
+void pd_hal_servo_hold(void *ctx, bool hold)
+{
+    fake_hal_t *hal = ctx;
+    if (hal->servo_held == hold) {
+        fprintf(stderr, "fake_hal: servo hold %d twice\n", hold);
+        abort();
+    }
+    hal->servo_held = hold;
+    hal->servo_holds += hold;
+}
+
 void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
 {
     fake_hal_t *hal = ctx;

@@ -34,6 +34,8 @@ typedef struct fake_hal {
     unsigned servo_writes[PD_MAX_PINS];
     unsigned digital_writes[PD_MAX_PINS];
     unsigned outputs_safe_calls; /* pd_hal_outputs_safe() since fake_init */
+    bool servo_held;             /* inside pd_hal_servo_hold(true) .. (false) */
+    unsigned servo_holds;        /* pd_hal_servo_hold(true) calls since fake_init */
     pd_board_info_t info;
 } fake_hal_t;
 

@@ -42,6 +42,7 @@ typedef struct pd_test_case {
 extern const pd_test_case_t pd_tests_codec[];
 extern const pd_test_case_t pd_tests_link[];
 extern const pd_test_case_t pd_tests_dispatch[];
+extern const pd_test_case_t pd_tests_motion[];
 extern const pd_test_case_t pd_tests_failsafe[];
 extern const pd_test_case_t pd_tests_encode[];
 

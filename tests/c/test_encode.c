@@ -141,6 +141,30 @@ static void test_encode_failsafe_decode_error_log(void)
     }
 }
 
+static void test_encode_ack_outputs_and_refused_item(void)
+{
+    protoduino_ArduinoOut out = ack(7, protoduino_Status_STATUS_OK);
+    out.data.ack.which_result = protoduino_Ack_outputs_tag;
+    CHECK_EQ(compare(&out), 0); /* nothing configured: an empty nested message */
+    protoduino_OutputStates *st = &out.data.ack.result.outputs;
+    st->servos.size = sizeof(st->servos.bytes); /* eight servos, the most */
+    for (size_t i = 0; i < st->servos.size; i++) {
+        st->servos.bytes[i] = (uint8_t)(0xFF - i);
+    }
+    st->digital_pins = 0xFFFFFFFFu;
+    st->digital_levels = 0x80000001u;
+    CHECK_EQ(compare(&out), 0);
+    st->servos.size = sizeof(st->servos.bytes) + 1u; /* corrupt: refused */
+    uint8_t buf[protoduino_ArduinoOut_size + 8];
+    CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
+    out = ack(0xFFFFFFFFu, protoduino_Status_STATUS_OUT_OF_RANGE);
+    const uint32_t items[] = {1, 8, 127, 128, 0xFFFFFFFFu};
+    for (size_t i = 0; i < sizeof(items) / sizeof(items[0]); i++) {
+        out.data.ack.refused_item = items[i]; /* tag 31: two bytes */
+        CHECK_EQ(compare(&out), 0);
+    }
+}
+
 static void test_encode_empty(void)
 {
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
@@ -154,6 +178,7 @@ const pd_test_case_t pd_tests_encode[] = {
     TEST_CASE(test_encode_ack_ping_echo),
     TEST_CASE(test_encode_ack_info),
     TEST_CASE(test_encode_failsafe_decode_error_log),
+    TEST_CASE(test_encode_ack_outputs_and_refused_item),
     TEST_CASE(test_encode_empty),
     {NULL, NULL},
 };

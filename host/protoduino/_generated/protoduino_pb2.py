@@ -24,45 +24,53 @@ _sym_db = _symbol_database.Default()
 
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x10protoduino.proto\x12\nprotoduino\"\x17\n\x04Ping\x12\x0f\n\x07payload\x18\x01 \x01(\x0c\"k\n\tServoInit\x12\x0b\n\x03pin\x18\x01 \x01(\r\x12\x0e\n\x06min_us\x18\x02 \x01(\r\x12\x0e\n\x06max_us\x18\x03 \x01(\r\x12\x16\n\x0csafe_degrees\x18\x04 \x01(\rH\x00\x12\x11\n\x07safe_us\x18\x05 \x01(\rH\x00\x42\x06\n\x04safe\"E\n\x0cServoControl\x12\x0b\n\x03pin\x18\x01 \x01(\r\x12\x11\n\x07\x64\x65grees\x18\x02 \x01(\rH\x00\x12\x0c\n\x02us\x18\x03 \x01(\rH\x00\x42\x07\n\x05value\".\n\x0b\x44igitalInit\x12\x0b\n\x03pin\x18\x01 \x01(\r\x12\x12\n\nsafe_level\x18\x02 \x01(\x08\",\n\x0e\x44igitalControl\x12\x0b\n\x03pin\x18\x01 \x01(\r\x12\r\n\x05level\x18\x02 \x01(\x08\"\x06\n\x04Stop\"\t\n\x07GetInfo\"\xdc\x02\n\tArduinoIn\x12\x12\n\nmessage_id\x18\x01 \x01(\r\x12 \n\x04ping\x18\x02 \x01(\x0b\x32\x10.protoduino.PingH\x00\x12+\n\nservo_init\x18\x03 \x01(\x0b\x32\x15.protoduino.ServoInitH\x00\x12\x31\n\rservo_control\x18\x04 \x01(\x0b\x32\x18.protoduino.ServoControlH\x00\x12/\n\x0c\x64igital_init\x18\x05 \x01(\x0b\x32\x17.protoduino.DigitalInitH\x00\x12\x35\n\x0f\x64igital_control\x18\x06 \x01(\x0b\x32\x1a.protoduino.DigitalControlH\x00\x12 \n\x04stop\x18\x07 \x01(\x0b\x32\x10.protoduino.StopH\x00\x12\'\n\x08get_info\x18\x08 \x01(\x0b\x32\x13.protoduino.GetInfoH\x00\x42\x06\n\x04\x64\x61ta\"\x9f\x01\n\nDeviceInfo\x12\x18\n\x10\x66irmware_version\x18\x01 \x01(\t\x12\x18\n\x10protocol_version\x18\x02 \x01(\r\x12\x11\n\tschema_id\x18\x03 \x01(\x07\x12\r\n\x05\x62oard\x18\x04 \x01(\t\x12\x10\n\x08num_pins\x18\x05 \x01(\r\x12\x12\n\nmax_servos\x18\x06 \x01(\r\x12\x15\n\rreserved_pins\x18\x07 \x03(\r\"\x84\x01\n\x03\x41\x63k\x12\x12\n\nmessage_id\x18\x01 \x01(\r\x12\"\n\x06status\x18\x02 \x01(\x0e\x32\x12.protoduino.Status\x12\x13\n\tping_echo\x18\x03 \x01(\x0cH\x00\x12&\n\x04info\x18\x04 \x01(\x0b\x32\x16.protoduino.DeviceInfoH\x00\x42\x08\n\x06result\"D\n\x08\x46\x61ilsafe\x12\x0e\n\x06\x61\x63tive\x18\x01 \x01(\x08\x12(\n\x05\x63\x61use\x18\x02 \x01(\x0e\x32\x19.protoduino.FailsafeCause\"\x1c\n\x0b\x44\x65\x63odeError\x12\r\n\x05\x63ount\x18\x01 \x01(\r\"8\n\x03Log\x12#\n\x05level\x18\x01 \x01(\x0e\x32\x14.protoduino.LogLevel\x12\x0c\n\x04text\x18\x02 \x01(\t\"\xaf\x01\n\nArduinoOut\x12\x1e\n\x03\x61\x63k\x18\x01 \x01(\x0b\x32\x0f.protoduino.AckH\x00\x12(\n\x08\x66\x61ilsafe\x18\x02 \x01(\x0b\x32\x14.protoduino.FailsafeH\x00\x12/\n\x0c\x64\x65\x63ode_error\x18\x03 \x01(\x0b\x32\x17.protoduino.DecodeErrorH\x00\x12\x1e\n\x03log\x18\x04 \x01(\x0b\x32\x0f.protoduino.LogH\x00\x42\x06\n\x04\x64\x61ta*\x83\x02\n\x06Status\x12\r\n\tSTATUS_OK\x10\x00\x12\x16\n\x12STATUS_INVALID_PIN\x10\x01\x12\x17\n\x13STATUS_RESERVED_PIN\x10\x02\x12\x1a\n\x16STATUS_NOT_INITIALISED\x10\x03\x12\x17\n\x13STATUS_OUT_OF_RANGE\x10\x04\x12\x1b\n\x17STATUS_NO_FREE_RESOURCE\x10\x05\x12\x15\n\x11STATUS_PIN_IN_USE\x10\x06\x12\x1b\n\x17STATUS_INVALID_ARGUMENT\x10\x07\x12\x17\n\x13STATUS_DECODE_ERROR\x10\x08\x12\x1a\n\x16STATUS_UNKNOWN_COMMAND\x10\t*b\n\rFailsafeCause\x12\x17\n\x13\x46\x41ILSAFE_CAUSE_NONE\x10\x00\x12\x1f\n\x1b\x46\x41ILSAFE_CAUSE_PING_TIMEOUT\x10\x01\x12\x17\n\x13\x46\x41ILSAFE_CAUSE_STOP\x10\x02*_\n\x08LogLevel\x12\x13\n\x0fLOG_LEVEL_DEBUG\x10\x00\x12\x12\n\x0eLOG_LEVEL_INFO\x10\x01\x12\x15\n\x11LOG_LEVEL_WARNING\x10\x02\x12\x13\n\x0fLOG_LEVEL_ERROR\x10\x03\x62\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x10protoduino.proto\x12\nprotoduino\"\x17\n\x04Ping\x12\x0f\n\x07payload\x18\x01 \x01(\x0c\"~\n\tServoInit\x12\x0b\n\x03pin\x18\x01 \x01(\r\x12\x0e\n\x06min_us\x18\x02 \x01(\r\x12\x0e\n\x06max_us\x18\x03 \x01(\r\x12\x16\n\x0csafe_degrees\x18\x04 \x01(\rH\x00\x12\x11\n\x07safe_us\x18\x05 \x01(\rH\x00\x12\x11\n\tmax_speed\x18\x1e \x01(\rB\x06\n\x04safe\"E\n\x0cServoControl\x12\x0b\n\x03pin\x18\x01 \x01(\r\x12\x11\n\x07\x64\x65grees\x18\x02 \x01(\rH\x00\x12\x0c\n\x02us\x18\x03 \x01(\rH\x00\x42\x07\n\x05value\".\n\x0b\x44igitalInit\x12\x0b\n\x03pin\x18\x01 \x01(\r\x12\x12\n\nsafe_level\x18\x02 \x01(\x08\",\n\x0e\x44igitalControl\x12\x0b\n\x03pin\x18\x01 \x01(\r\x12\r\n\x05level\x18\x02 \x01(\x08\"\x06\n\x04Stop\"\t\n\x07GetInfo\"n\n\x08PoseItem\x12)\n\x05servo\x18\x01 \x01(\x0b\x32\x18.protoduino.ServoControlH\x00\x12-\n\x07\x64igital\x18\x02 \x01(\x0b\x32\x1a.protoduino.DigitalControlH\x00\x42\x08\n\x06output\"+\n\x04Pose\x12#\n\x05items\x18\x01 \x03(\x0b\x32\x14.protoduino.PoseItem\"\r\n\x0bReadOutputs\"\xaf\x03\n\tArduinoIn\x12\x12\n\nmessage_id\x18\x01 \x01(\r\x12 \n\x04ping\x18\x02 \x01(\x0b\x32\x10.protoduino.PingH\x00\x12+\n\nservo_init\x18\x03 \x01(\x0b\x32\x15.protoduino.ServoInitH\x00\x12\x31\n\rservo_control\x18\x04 \x01(\x0b\x32\x18.protoduino.ServoControlH\x00\x12/\n\x0c\x64igital_init\x18\x05 \x01(\x0b\x32\x17.protoduino.DigitalInitH\x00\x12\x35\n\x0f\x64igital_control\x18\x06 \x01(\x0b\x32\x1a.protoduino.DigitalControlH\x00\x12 \n\x04stop\x18\x07 \x01(\x0b\x32\x10.protoduino.StopH\x00\x12\'\n\x08get_info\x18\x08 \x01(\x0b\x32\x13.protoduino.GetInfoH\x00\x12 \n\x04pose\x18\x1e \x01(\x0b\x32\x10.protoduino.PoseH\x00\x12/\n\x0cread_outputs\x18\x1f \x01(\x0b\x32\x17.protoduino.ReadOutputsH\x00\x42\x06\n\x04\x64\x61ta\"\x9f\x01\n\nDeviceInfo\x12\x18\n\x10\x66irmware_version\x18\x01 \x01(\t\x12\x18\n\x10protocol_version\x18\x02 \x01(\r\x12\x11\n\tschema_id\x18\x03 \x01(\x07\x12\r\n\x05\x62oard\x18\x04 \x01(\t\x12\x10\n\x08num_pins\x18\x05 \x01(\r\x12\x12\n\nmax_servos\x18\x06 \x01(\r\x12\x15\n\rreserved_pins\x18\x07 \x03(\r\"L\n\x0cOutputStates\x12\x0e\n\x06servos\x18\x01 \x01(\x0c\x12\x14\n\x0c\x64igital_pins\x18\x02 \x01(\x07\x12\x16\n\x0e\x64igital_levels\x18\x03 \x01(\x07\"\xc7\x01\n\x03\x41\x63k\x12\x12\n\nmessage_id\x18\x01 \x01(\r\x12\"\n\x06status\x18\x02 \x01(\x0e\x32\x12.protoduino.Status\x12\x13\n\tping_echo\x18\x03 \x01(\x0cH\x00\x12&\n\x04info\x18\x04 \x01(\x0b\x32\x16.protoduino.DeviceInfoH\x00\x12+\n\x07outputs\x18\x1e \x01(\x0b\x32\x18.protoduino.OutputStatesH\x00\x12\x14\n\x0crefused_item\x18\x1f \x01(\rB\x08\n\x06result\"D\n\x08\x46\x61ilsafe\x12\x0e\n\x06\x61\x63tive\x18\x01 \x01(\x08\x12(\n\x05\x63\x61use\x18\x02 \x01(\x0e\x32\x19.protoduino.FailsafeCause\"\x1c\n\x0b\x44\x65\x63odeError\x12\r\n\x05\x63ount\x18\x01 \x01(\r\"8\n\x03Log\x12#\n\x05level\x18\x01 \x01(\x0e\x32\x14.protoduino.LogLevel\x12\x0c\n\x04text\x18\x02 \x01(\t\"\xaf\x01\n\nArduinoOut\x12\x1e\n\x03\x61\x63k\x18\x01 \x01(\x0b\x32\x0f.protoduino.AckH\x00\x12(\n\x08\x66\x61ilsafe\x18\x02 \x01(\x0b\x32\x14.protoduino.FailsafeH\x00\x12/\n\x0c\x64\x65\x63ode_error\x18\x03 \x01(\x0b\x32\x17.protoduino.DecodeErrorH\x00\x12\x1e\n\x03log\x18\x04 \x01(\x0b\x32\x0f.protoduino.LogH\x00\x42\x06\n\x04\x64\x61ta*\x83\x02\n\x06Status\x12\r\n\tSTATUS_OK\x10\x00\x12\x16\n\x12STATUS_INVALID_PIN\x10\x01\x12\x17\n\x13STATUS_RESERVED_PIN\x10\x02\x12\x1a\n\x16STATUS_NOT_INITIALISED\x10\x03\x12\x17\n\x13STATUS_OUT_OF_RANGE\x10\x04\x12\x1b\n\x17STATUS_NO_FREE_RESOURCE\x10\x05\x12\x15\n\x11STATUS_PIN_IN_USE\x10\x06\x12\x1b\n\x17STATUS_INVALID_ARGUMENT\x10\x07\x12\x17\n\x13STATUS_DECODE_ERROR\x10\x08\x12\x1a\n\x16STATUS_UNKNOWN_COMMAND\x10\t*b\n\rFailsafeCause\x12\x17\n\x13\x46\x41ILSAFE_CAUSE_NONE\x10\x00\x12\x1f\n\x1b\x46\x41ILSAFE_CAUSE_PING_TIMEOUT\x10\x01\x12\x17\n\x13\x46\x41ILSAFE_CAUSE_STOP\x10\x02*_\n\x08LogLevel\x12\x13\n\x0fLOG_LEVEL_DEBUG\x10\x00\x12\x12\n\x0eLOG_LEVEL_INFO\x10\x01\x12\x15\n\x11LOG_LEVEL_WARNING\x10\x02\x12\x13\n\x0fLOG_LEVEL_ERROR\x10\x03\x62\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
 _builder.BuildTopDescriptorsAndMessages(DESCRIPTOR, 'protoduino_pb2', _globals)
 if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
-  _globals['_STATUS']._serialized_start=1335
-  _globals['_STATUS']._serialized_end=1594
-  _globals['_FAILSAFECAUSE']._serialized_start=1596
-  _globals['_FAILSAFECAUSE']._serialized_end=1694
-  _globals['_LOGLEVEL']._serialized_start=1696
-  _globals['_LOGLEVEL']._serialized_end=1791
+  _globals['_STATUS']._serialized_start=1754
+  _globals['_STATUS']._serialized_end=2013
+  _globals['_FAILSAFECAUSE']._serialized_start=2015
+  _globals['_FAILSAFECAUSE']._serialized_end=2113
+  _globals['_LOGLEVEL']._serialized_start=2115
+  _globals['_LOGLEVEL']._serialized_end=2210
   _globals['_PING']._serialized_start=32
   _globals['_PING']._serialized_end=55
   _globals['_SERVOINIT']._serialized_start=57
-  _globals['_SERVOINIT']._serialized_end=164
-  _globals['_SERVOCONTROL']._serialized_start=166
-  _globals['_SERVOCONTROL']._serialized_end=235
-  _globals['_DIGITALINIT']._serialized_start=237
-  _globals['_DIGITALINIT']._serialized_end=283
-  _globals['_DIGITALCONTROL']._serialized_start=285
-  _globals['_DIGITALCONTROL']._serialized_end=329
-  _globals['_STOP']._serialized_start=331
-  _globals['_STOP']._serialized_end=337
-  _globals['_GETINFO']._serialized_start=339
-  _globals['_GETINFO']._serialized_end=348
-  _globals['_ARDUINOIN']._serialized_start=351
-  _globals['_ARDUINOIN']._serialized_end=699
-  _globals['_DEVICEINFO']._serialized_start=702
-  _globals['_DEVICEINFO']._serialized_end=861
-  _globals['_ACK']._serialized_start=864
-  _globals['_ACK']._serialized_end=996
-  _globals['_FAILSAFE']._serialized_start=998
-  _globals['_FAILSAFE']._serialized_end=1066
-  _globals['_DECODEERROR']._serialized_start=1068
-  _globals['_DECODEERROR']._serialized_end=1096
-  _globals['_LOG']._serialized_start=1098
-  _globals['_LOG']._serialized_end=1154
-  _globals['_ARDUINOOUT']._serialized_start=1157
-  _globals['_ARDUINOOUT']._serialized_end=1332
+  _globals['_SERVOINIT']._serialized_end=183
+  _globals['_SERVOCONTROL']._serialized_start=185
+  _globals['_SERVOCONTROL']._serialized_end=254
+  _globals['_DIGITALINIT']._serialized_start=256
+  _globals['_DIGITALINIT']._serialized_end=302
+  _globals['_DIGITALCONTROL']._serialized_start=304
+  _globals['_DIGITALCONTROL']._serialized_end=348
+  _globals['_STOP']._serialized_start=350
+  _globals['_STOP']._serialized_end=356
+  _globals['_GETINFO']._serialized_start=358
+  _globals['_GETINFO']._serialized_end=367
+  _globals['_POSEITEM']._serialized_start=369
+  _globals['_POSEITEM']._serialized_end=479
+  _globals['_POSE']._serialized_start=481
+  _globals['_POSE']._serialized_end=524
+  _globals['_READOUTPUTS']._serialized_start=526
+  _globals['_READOUTPUTS']._serialized_end=539
+  _globals['_ARDUINOIN']._serialized_start=542
+  _globals['_ARDUINOIN']._serialized_end=973
+  _globals['_DEVICEINFO']._serialized_start=976
+  _globals['_DEVICEINFO']._serialized_end=1135
+  _globals['_OUTPUTSTATES']._serialized_start=1137
+  _globals['_OUTPUTSTATES']._serialized_end=1213
+  _globals['_ACK']._serialized_start=1216
+  _globals['_ACK']._serialized_end=1415
+  _globals['_FAILSAFE']._serialized_start=1417
+  _globals['_FAILSAFE']._serialized_end=1485
+  _globals['_DECODEERROR']._serialized_start=1487
+  _globals['_DECODEERROR']._serialized_end=1515
+  _globals['_LOG']._serialized_start=1517
+  _globals['_LOG']._serialized_end=1573
+  _globals['_ARDUINOOUT']._serialized_start=1576
+  _globals['_ARDUINOOUT']._serialized_end=1751
 # @@protoc_insertion_point(module_scope)

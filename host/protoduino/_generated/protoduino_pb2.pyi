@@ -153,6 +153,7 @@ class ServoInit(_message.Message):
     MAX_US_FIELD_NUMBER: _builtins.int
     SAFE_DEGREES_FIELD_NUMBER: _builtins.int
     SAFE_US_FIELD_NUMBER: _builtins.int
+    MAX_SPEED_FIELD_NUMBER: _builtins.int
     pin: _builtins.int
     min_us: _builtins.int
     """0 means the default, 544"""
@@ -162,6 +163,11 @@ class ServoInit(_message.Message):
     """0..180"""
     safe_us: _builtins.int
     """within [min_us, max_us]"""
+    max_speed: _builtins.int
+    """Speed limit in us per second, 0: none (a new value is driven at once).
+    Otherwise every later value (Control, Pose, Stop, failsafe) is approached
+    by (max_speed + 25) / 50 us per 20 ms servo frame; at most 12750.
+    """
     def __init__(
         self,
         *,
@@ -170,10 +176,11 @@ class ServoInit(_message.Message):
         max_us: _builtins.int = ...,
         safe_degrees: _builtins.int = ...,
         safe_us: _builtins.int = ...,
+        max_speed: _builtins.int = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _typing.Literal["safe", b"safe", "safe_degrees", b"safe_degrees", "safe_us", b"safe_us"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["max_us", b"max_us", "min_us", b"min_us", "pin", b"pin", "safe", b"safe", "safe_degrees", b"safe_degrees", "safe_us", b"safe_us"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["max_speed", b"max_speed", "max_us", b"max_us", "min_us", b"min_us", "pin", b"pin", "safe", b"safe", "safe_degrees", b"safe_degrees", "safe_us", b"safe_us"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     _WhichOneofReturnType_safe: _TypeAlias = _typing.Literal["safe_degrees", "safe_us"]  # noqa: Y015
     _WhichOneofArgType_safe: _TypeAlias = _typing.Literal["safe", b"safe"]  # noqa: Y015
@@ -291,6 +298,76 @@ class GetInfo(_message.Message):
 Global___GetInfo: _TypeAlias = GetInfo  # noqa: Y015
 
 @_typing.final
+class PoseItem(_message.Message):
+    """Several outputs at once, all or nothing: each item is the Control it names,
+    every one is checked before any is applied, and a refusal names the item
+    (Ack.refused_item). The servos' new widths start at the same servo frame.
+    """
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    SERVO_FIELD_NUMBER: _builtins.int
+    DIGITAL_FIELD_NUMBER: _builtins.int
+    @_builtins.property
+    def servo(self) -> Global___ServoControl: ...
+    @_builtins.property
+    def digital(self) -> Global___DigitalControl: ...
+    def __init__(
+        self,
+        *,
+        servo: Global___ServoControl | None = ...,
+        digital: Global___DigitalControl | None = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _typing.Literal["digital", b"digital", "output", b"output", "servo", b"servo"]  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["digital", b"digital", "output", b"output", "servo", b"servo"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    _WhichOneofReturnType_output: _TypeAlias = _typing.Literal["servo", "digital"]  # noqa: Y015
+    _WhichOneofArgType_output: _TypeAlias = _typing.Literal["output", b"output"]  # noqa: Y015
+    def WhichOneof(self, oneof_group: _WhichOneofArgType_output) -> _WhichOneofReturnType_output | None: ...
+
+Global___PoseItem: _TypeAlias = PoseItem  # noqa: Y015
+
+@_typing.final
+class Pose(_message.Message):
+    DESCRIPTOR: _descriptor.Descriptor
+
+    ITEMS_FIELD_NUMBER: _builtins.int
+    @_builtins.property
+    def items(self) -> _containers.RepeatedCompositeFieldContainer[Global___PoseItem]:
+        """1..8 items, each pin at most once"""
+
+    def __init__(
+        self,
+        *,
+        items: _abc.Iterable[Global___PoseItem] | None = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["items", b"items"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___Pose: _TypeAlias = Pose  # noqa: Y015
+
+@_typing.final
+class ReadOutputs(_message.Message):
+    """Ask what the device drives now (OutputStates, returned in the Ack)."""
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    def __init__(
+        self,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___ReadOutputs: _TypeAlias = ReadOutputs  # noqa: Y015
+
+@_typing.final
 class ArduinoIn(_message.Message):
     DESCRIPTOR: _descriptor.Descriptor
 
@@ -302,6 +379,8 @@ class ArduinoIn(_message.Message):
     DIGITAL_CONTROL_FIELD_NUMBER: _builtins.int
     STOP_FIELD_NUMBER: _builtins.int
     GET_INFO_FIELD_NUMBER: _builtins.int
+    POSE_FIELD_NUMBER: _builtins.int
+    READ_OUTPUTS_FIELD_NUMBER: _builtins.int
     message_id: _builtins.int
     """non-zero; reused by retransmissions"""
     @_builtins.property
@@ -318,6 +397,10 @@ class ArduinoIn(_message.Message):
     def stop(self) -> Global___Stop: ...
     @_builtins.property
     def get_info(self) -> Global___GetInfo: ...
+    @_builtins.property
+    def pose(self) -> Global___Pose: ...
+    @_builtins.property
+    def read_outputs(self) -> Global___ReadOutputs: ...
     def __init__(
         self,
         *,
@@ -329,12 +412,14 @@ class ArduinoIn(_message.Message):
         digital_control: Global___DigitalControl | None = ...,
         stop: Global___Stop | None = ...,
         get_info: Global___GetInfo | None = ...,
+        pose: Global___Pose | None = ...,
+        read_outputs: Global___ReadOutputs | None = ...,
     ) -> None: ...
-    _HasFieldArgType: _TypeAlias = _typing.Literal["data", b"data", "digital_control", b"digital_control", "digital_init", b"digital_init", "get_info", b"get_info", "ping", b"ping", "servo_control", b"servo_control", "servo_init", b"servo_init", "stop", b"stop"]  # noqa: Y015
+    _HasFieldArgType: _TypeAlias = _typing.Literal["data", b"data", "digital_control", b"digital_control", "digital_init", b"digital_init", "get_info", b"get_info", "ping", b"ping", "pose", b"pose", "read_outputs", b"read_outputs", "servo_control", b"servo_control", "servo_init", b"servo_init", "stop", b"stop"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["data", b"data", "digital_control", b"digital_control", "digital_init", b"digital_init", "get_info", b"get_info", "message_id", b"message_id", "ping", b"ping", "servo_control", b"servo_control", "servo_init", b"servo_init", "stop", b"stop"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["data", b"data", "digital_control", b"digital_control", "digital_init", b"digital_init", "get_info", b"get_info", "message_id", b"message_id", "ping", b"ping", "pose", b"pose", "read_outputs", b"read_outputs", "servo_control", b"servo_control", "servo_init", b"servo_init", "stop", b"stop"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
-    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ping", "servo_init", "servo_control", "digital_init", "digital_control", "stop", "get_info"]  # noqa: Y015
+    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ping", "servo_init", "servo_control", "digital_init", "digital_control", "stop", "get_info", "pose", "read_outputs"]  # noqa: Y015
     _WhichOneofArgType_data: _TypeAlias = _typing.Literal["data", b"data"]  # noqa: Y015
     def WhichOneof(self, oneof_group: _WhichOneofArgType_data) -> _WhichOneofReturnType_data | None: ...
 
@@ -380,6 +465,39 @@ class DeviceInfo(_message.Message):
 Global___DeviceInfo: _TypeAlias = DeviceInfo  # noqa: Y015
 
 @_typing.final
+class OutputStates(_message.Message):
+    """Every configured output and its value now (answer to ReadOutputs)."""
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    SERVOS_FIELD_NUMBER: _builtins.int
+    DIGITAL_PINS_FIELD_NUMBER: _builtins.int
+    DIGITAL_LEVELS_FIELD_NUMBER: _builtins.int
+    servos: _builtins.bytes
+    """5 bytes per servo, in pin order: its pin, then the width it drives now and
+    the width it moves to (the same unless speed-limited), each in us as a
+    little-endian uint16. Bytes, not messages: the Uno's encoder stays small.
+    """
+    digital_pins: _builtins.int
+    """bit N: pin N is a digital output"""
+    digital_levels: _builtins.int
+    """bit N: the level pin N drives"""
+    def __init__(
+        self,
+        *,
+        servos: _builtins.bytes = ...,
+        digital_pins: _builtins.int = ...,
+        digital_levels: _builtins.int = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["digital_levels", b"digital_levels", "digital_pins", b"digital_pins", "servos", b"servos"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___OutputStates: _TypeAlias = OutputStates  # noqa: Y015
+
+@_typing.final
 class Ack(_message.Message):
     DESCRIPTOR: _descriptor.Descriptor
 
@@ -387,13 +505,21 @@ class Ack(_message.Message):
     STATUS_FIELD_NUMBER: _builtins.int
     PING_ECHO_FIELD_NUMBER: _builtins.int
     INFO_FIELD_NUMBER: _builtins.int
+    OUTPUTS_FIELD_NUMBER: _builtins.int
+    REFUSED_ITEM_FIELD_NUMBER: _builtins.int
     message_id: _builtins.int
     status: Global___Status.ValueType
     ping_echo: _builtins.bytes
     """the Ping's payload, unchanged"""
+    refused_item: _builtins.int
+    """a refused Pose: its offending item, counted from 1"""
     @_builtins.property
     def info(self) -> Global___DeviceInfo:
         """answer to GetInfo"""
+
+    @_builtins.property
+    def outputs(self) -> Global___OutputStates:
+        """answer to ReadOutputs"""
 
     def __init__(
         self,
@@ -402,12 +528,14 @@ class Ack(_message.Message):
         status: Global___Status.ValueType = ...,
         ping_echo: _builtins.bytes = ...,
         info: Global___DeviceInfo | None = ...,
+        outputs: Global___OutputStates | None = ...,
+        refused_item: _builtins.int = ...,
     ) -> None: ...
-    _HasFieldArgType: _TypeAlias = _typing.Literal["info", b"info", "ping_echo", b"ping_echo", "result", b"result"]  # noqa: Y015
+    _HasFieldArgType: _TypeAlias = _typing.Literal["info", b"info", "outputs", b"outputs", "ping_echo", b"ping_echo", "result", b"result"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["info", b"info", "message_id", b"message_id", "ping_echo", b"ping_echo", "result", b"result", "status", b"status"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["info", b"info", "message_id", b"message_id", "outputs", b"outputs", "ping_echo", b"ping_echo", "refused_item", b"refused_item", "result", b"result", "status", b"status"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
-    _WhichOneofReturnType_result: _TypeAlias = _typing.Literal["ping_echo", "info"]  # noqa: Y015
+    _WhichOneofReturnType_result: _TypeAlias = _typing.Literal["ping_echo", "info", "outputs"]  # noqa: Y015
     _WhichOneofArgType_result: _TypeAlias = _typing.Literal["result", b"result"]  # noqa: Y015
     def WhichOneof(self, oneof_group: _WhichOneofArgType_result) -> _WhichOneofReturnType_result | None: ...
 

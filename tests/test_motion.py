@@ -1,0 +1,290 @@
+"""Poses, speed limits, the device's readback: host checks on the fake device, the rest at the pins.
+
+The pin verdicts come from the boards' traces on their own clocks: on the
+emulated Uno a servo's trace time is the rising edge of the first pulse with
+the new width, so the servos of one pose changing in the same 20 ms frame
+start within the pulses before them (well under 10 ms), while a change one
+frame later would start at least 12 ms apart.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import itertools
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from fakedevice import FakeDevice, ack
+from protoduino import Board, aio, effective_speed
+from protoduino.messages import Status
+from protoduino.simboard import SimBoard
+from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
+
+BOUND = 10.0
+
+
+@pytest.fixture
+def fake(tmp_path: Path) -> Iterator[FakeDevice]:
+    with FakeDevice(tmp_path) as device:
+        yield device
+
+
+@pytest.fixture
+def board(fake: FakeDevice) -> Iterator[Board]:
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
+        yield b
+
+
+def us(degrees: int, lo: int = 544, hi: int = 2400) -> int:
+    return lo + degrees * (hi - lo) // 180
+
+
+# --- poses: the host side ----------------------------------------------------------
+
+
+def test_pose_message_and_readback(board: Board, fake: FakeDevice) -> None:
+    a, b = board.servo(3), board.servo(5, min_us=1000, max_us=2000)
+    led = board.digital_output(13)
+    board.pose({a: 10, b: 180, led: True})
+    (sent,) = fake.commands("pose")
+    items = sent.msg.pose.items
+    assert [i.WhichOneof("output") for i in items] == ["servo", "servo", "digital"]
+    assert (items[0].servo.pin, items[0].servo.degrees) == (3, 10)
+    assert (items[1].servo.pin, items[1].servo.degrees) == (5, 180)
+    assert (items[2].digital.pin, items[2].digital.level) == (13, True)
+    assert (a.value, b.value, led.value) == (us(10), 2000, True)
+    assert board.submit_pose({a: 20}).result(BOUND) is None
+    assert a.value == us(20)
+
+
+def test_pose_checked_before_sending(board: Board, fake: FakeDevice) -> None:
+    a, b = board.servo(3), board.servo(5)
+    led = board.digital_output(13)
+    before = len(fake.commands())
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.pose({a: 10, b: 181, led: True})
+    assert info.value.output is b and info.value.sent is False
+    assert info.value.status == Status.STATUS_OUT_OF_RANGE and "pin=5" in str(info.value)
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.pose({})
+    assert info.value.status == Status.STATUS_INVALID_ARGUMENT
+    nine = {board.servo(pin): 0 for pin in range(2, 10)} | {led: False}
+    with pytest.raises(protoduino.CommandRejectedError):
+        board.pose(nine)  # more than 8 items
+    before = len(fake.commands())
+    twin = protoduino.Servo(board, 3, 544, 2400)
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.pose({a: 10, twin: 20})
+    assert info.value.output is twin and info.value.status == Status.STATUS_INVALID_ARGUMENT
+    with pytest.raises(TypeError):
+        board.pose({a: 4.5})  # type: ignore[dict-item]
+    with pytest.raises(TypeError):
+        board.pose({led: "on"})  # type: ignore[dict-item]
+    with pytest.raises(TypeError):
+        board.pose([(a, 10)])  # type: ignore[arg-type]
+    assert len(fake.commands()) == before  # nothing went out
+    assert a.value == us(90)
+
+
+def test_pose_of_another_board(board: Board, tmp_path: Path) -> None:
+    (tmp_path / "other").mkdir()
+    with FakeDevice(tmp_path / "other") as other_fake, Board.open(other_fake.port) as other:
+        theirs = other.servo(3)
+        with pytest.raises(ValueError, match="another board"):
+            board.pose({theirs: 10})
+
+
+def test_device_refusal_names_the_output(board: Board, fake: FakeDevice) -> None:
+    a, b = board.servo(3), board.servo(5)
+
+    def refuse_second(msg: Any) -> list[Any]:
+        out = ack(msg.message_id, Status.STATUS_NOT_INITIALISED)
+        out.ack.refused_item = 2
+        return [out]
+
+    fake.handler = refuse_second
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.pose({a: 10, b: 20})
+    assert info.value.output is b and info.value.sent is True
+    assert info.value.status == Status.STATUS_NOT_INITIALISED
+    error = board.submit_pose({a: 10, b: 20}).exception(BOUND)
+    assert isinstance(error, protoduino.CommandRejectedError) and error.output is b
+    assert (a.value, b.value) == (us(90), us(90))  # nothing recorded
+
+
+def test_pose_values_are_restored_after_a_reboot(board: Board, fake: FakeDevice) -> None:
+    a = board.servo(3)
+    led = board.digital_output(13)
+    board.pose({a: 33, led: True})
+    restored = len(fake.commands())
+    fake.reboot()
+    assert fake.wait_for(lambda: fake.values == {3: 33, 13: 1}, BOUND)
+    kinds = [r.kind for r in fake.commands()[restored:]]
+    assert kinds[:4] == ["servo_init", "digital_init", "servo_control", "digital_control"]
+
+
+# --- speed limits: the host side ---------------------------------------------------
+
+
+def test_speed_limit_in_the_init(board: Board, fake: FakeDevice) -> None:
+    fast = board.servo(3, max_speed_us=500)
+    assert fast.max_speed_us == 500
+    slow = board.servo(5, max_speed=60)  # degrees/s: 60 * 1856 / 180 = 618.7 -> 619 us/s
+    assert slow.max_speed_us == effective_speed(619) == 600  # whole us per 20 ms frame
+    free = board.servo(6)
+    assert free.max_speed_us == 0
+    speeds = [r.msg.servo_init.max_speed for r in fake.commands("servo_init")]
+    assert speeds == [500, 619, 0]
+    assert effective_speed(1) == 50 and effective_speed(12750) == 12750
+    before = len(fake.commands())
+    for kwargs in ({"max_speed_us": 12751}, {"max_speed_us": 0}, {"max_speed": -1.0}):
+        with pytest.raises(protoduino.CommandRejectedError) as info:
+            board.servo(9, **kwargs)
+        assert info.value.status == Status.STATUS_INVALID_ARGUMENT and not info.value.sent
+    with pytest.raises(TypeError):
+        board.servo(9, max_speed=10, max_speed_us=100)
+    assert len(fake.commands()) == before
+
+
+# --- at the pins: both boards ---------------------------------------------------------
+
+PINS = (3, 5, 6, 9)
+
+
+def ends_near(want: int, values: list[int]) -> bool:
+    return bool(values) and abs(values[-1] - want) <= PULSE_TOLERANCE_US
+
+
+def change_time(trace: list[dict[str, Any]], pin: int, want: int, after: float) -> float:
+    """The trace time at which ``pin`` first showed ``want`` after ``after``."""
+    for e in trace:
+        if e["pin"] == pin and e["t"] > after and abs(int(e["value"]) - want) <= PULSE_TOLERANCE_US:
+            return float(e["t"])
+    raise AssertionError(f"pin {pin} never showed {want}")
+
+
+def test_pose_changes_every_joint_in_one_frame(sim_board: SimBoard) -> None:
+    with Board.open(sim_board.port) as board:
+        servos = [board.servo(pin) for pin in PINS]
+        led = board.digital_output(13)
+        for s in servos:
+            wait_for_pin(sim_board, s.pin, functools.partial(ends_near, us(90)))
+        start = sim_board.trace()[-1]["t"]
+        for round_ in range(3):  # a few poses, at whatever phase of the frame they land
+            targets: dict[protoduino.Servo | protoduino.DigitalOutput, int | bool] = {
+                s: 20 + 40 * round_ + i for i, s in enumerate(servos)
+            }
+            targets[led] = round_ % 2 == 0
+            board.pose(targets)
+            for i, s in enumerate(servos):
+                want = us(20 + 40 * round_ + i)
+                wait_for_pin(sim_board, s.pin, functools.partial(ends_near, want))
+            trace = sim_board.trace()
+            times = [
+                change_time(trace, s.pin, us(20 + 40 * round_ + i), start)
+                for i, s in enumerate(servos)
+            ]
+            spread = max(times) - min(times)
+            assert spread < 0.010, f"pose {round_}: joints changed {spread * 1000:.1f} ms apart"
+            start = max(times)
+
+
+def test_pose_all_or_nothing_at_the_pins(sim_board: SimBoard) -> None:
+    with Board.open(sim_board.port) as board:
+        a = board.servo(3)
+        led = board.digital_output(13)
+        wait_for_pin(sim_board, 3, functools.partial(ends_near, us(90)))
+        unconfigured = protoduino.Servo(board, 10, 544, 2400)  # the device has no servo on 10
+        with pytest.raises(protoduino.CommandRejectedError) as info:
+            board.pose({a: 0, led: True, unconfigured: 45})
+        assert info.value.output is unconfigured and info.value.sent
+        assert info.value.status == Status.STATUS_NOT_INITIALISED
+        assert board.ping() > 0  # a later command's Ack: the pose's moment has passed
+        board.pose({a: 180})  # a marker: once pin 3 shows it, pin 13 would have shown a 1
+        wait_for_pin(sim_board, 3, functools.partial(ends_near, us(180)))
+        trace = sim_board.trace()
+        assert not any(int(e["value"]) for e in trace if e["pin"] == 13)
+        assert not any(e["pin"] == 10 for e in trace)
+        assert all(abs(int(e["value"]) - us(0)) > 10 for e in trace if e["pin"] == 3)
+
+
+def ramp(trace: list[dict[str, Any]], pin: int, after: float) -> list[tuple[float, int]]:
+    return [(float(e["t"]), int(e["value"])) for e in trace if e["pin"] == pin and e["t"] > after]
+
+
+def check_ramp(points: list[tuple[float, int]], start: int, end: int, speed: int) -> None:
+    """Steps of at most one frame's worth, taking |end - start| / speed seconds in all."""
+    values = [start] + [v for _, v in points]
+    step = speed // 50
+    for before, after in itertools.pairwise(values):
+        assert abs(after - before) <= step + PULSE_TOLERANCE_US, f"a jump of {after - before} us"
+    assert abs(values[-1] - end) <= PULSE_TOLERANCE_US
+    took = points[-1][0] - points[0][0]
+    frames = abs(end - start) / step
+    # From the first step to the last: frames - 1 frame times; the device steps on
+    # its millisecond clock, a frame or so either way at the ends.
+    assert (frames - 3) * 0.020 <= took <= (frames + 1) * 0.020, f"{took:.3f} s for {frames} steps"
+
+
+def test_speed_limit_at_the_pin(sim_board: SimBoard) -> None:
+    with Board.open(sim_board.port) as board:
+        servo = board.servo(9, safe_us=1500, max_speed_us=500)  # 10 us per frame
+        wait_for_pin(sim_board, 9, functools.partial(ends_near, 1500))
+        mark = sim_board.trace()[-1]["t"]
+        servo.write_us(1800)
+        assert servo.value == 1800  # the acknowledged target
+        wait_for_pin(sim_board, 9, functools.partial(ends_near, 1800))
+        check_ramp(ramp(sim_board.trace(), 9, mark), 1500, 1800, 500)
+        states = board.read_outputs()
+        assert states[9] == protoduino.OutputState(9, "servo", 1800, 1800)
+        # Stop returns it to safe at the same speed; the readback shows it on its way.
+        mark = sim_board.trace()[-1]["t"]
+        board.stop()
+        moving = board.read_outputs()[9]
+        assert moving.target == 1500 and 1500 < moving.value <= 1800
+        wait_for_pin(sim_board, 9, functools.partial(ends_near, 1500))
+        check_ramp(ramp(sim_board.trace(), 9, mark), 1800, 1500, 500)
+
+
+def test_failsafe_returns_at_the_speed_limit(sim_board: SimBoard) -> None:
+    with Board.open(sim_board.port) as board:
+        servo = board.servo(9, safe_us=1500, max_speed_us=1000)  # 20 us per frame
+        servo.write_us(1700)
+        wait_for_pin(sim_board, 9, functools.partial(ends_near, 1700))
+        mark = sim_board.trace()[-1]["t"]
+        board.pinging = False  # the failsafe fires after 10 s of silence
+        wait_for_pin(sim_board, 9, functools.partial(ends_near, 1500), timeout=30)
+        check_ramp(ramp(sim_board.trace(), 9, mark), 1700, 1500, 1000)
+
+
+def test_read_outputs_in_a_new_session(sim_board: SimBoard) -> None:
+    with Board.open(sim_board.port) as board:
+        board.servo(3).write(45)
+        board.digital_output(13).on()
+        board.servo(5, safe_us=1234)
+        assert board.read_outputs() == {
+            3: protoduino.OutputState(3, "servo", us(45), us(45)),
+            5: protoduino.OutputState(5, "servo", 1234, 1234),
+            13: protoduino.OutputState(13, "digital", 1, 1),
+        }
+    with Board.open(sim_board.port) as again:  # knows nothing yet: asks the device
+        inherited = again.read_outputs()
+        assert inherited[3].value == us(45) and inherited[13].value == 1
+        assert inherited[5].value == 1234
+
+
+def test_aio_pose_and_readback(sim_board: SimBoard) -> None:
+    async def main() -> dict[int, protoduino.OutputState]:
+        async with await aio.open(sim_board.port) as board:
+            a, b = await asyncio.gather(board.servo(3), board.servo(5, max_speed=600))
+            assert b.max_speed_us > 0
+            await board.pose({a: 30, b.sync: 150})
+            return await board.read_outputs()
+
+    states = asyncio.run(asyncio.wait_for(main(), 60))
+    assert states[3].value == us(30) and states[5].target == us(150)
+    wait_for_pin(sim_board, 3, functools.partial(ends_near, us(30)))
