@@ -719,7 +719,7 @@ class Board:
             try:
                 call.result()
             except CommandRejectedError as error:
-                index = call.ack.refused_item if call.ack is not None else 0
+                index = call.refusal.refused_item if call.refusal is not None else 0
                 if not 1 <= index <= len(outputs):
                     raise  # a repeated refusal (answered from the dedupe window) names none
                 output = outputs[index - 1]

@@ -96,6 +96,7 @@ class Call:
         "message_id",
         "on_done",
         "payload",
+        "refusal",
         "restored",
         "round_start",
         "rtt",
@@ -131,6 +132,8 @@ class Call:
         self.restored = False
         self.rtt: float | None = None
         self.ack: Ack | None = None
+        #: The device's refusing Ack, if it refused the call (``error`` is then set).
+        self.refusal: Ack | None = None
         self.error: ProtoduinoError | None = None
         self.done = threading.Event()
 
@@ -509,9 +512,9 @@ class Rpc:
                         self._pending.appendleft(call)
             else:
                 self.rejected += 1
+                call.refusal = ack  # it may say more (a Pose's refused_item)
                 self._finish(
                     call,
-                    ack=ack,  # kept: a refusal may say more (a Pose's refused_item)
                     error=CommandRejectedError(
                         ack.status,
                         f"{call.kind} rejected by the device: {status_name(ack.status)}",
