@@ -24,8 +24,9 @@
 #define PD_SERVO_LIMIT_MAX_US 2600
 #define PD_SERVO_MAX_DEGREES 180
 /* Speed limits (ServoInit.max_speed, us per second) step once per servo frame. */
-#define PD_SERVO_FRAME_MS 20u
-#define PD_SERVO_MAX_SPEED 12750u /* 255 us per frame */
+#define PD_SERVO_FRAME_MS 20UL
+/* The fastest limit: 255 us per frame. */
+#define PD_SERVO_MAX_SPEED 12750
 
 /* PacketType: Packet TYPE (docs/protocol.md section 4). */
 #define PD_PACKET_CONTROL 0x00

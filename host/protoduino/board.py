@@ -54,9 +54,11 @@ from .constants import (
     MAX_RETRIES,
     SERVO_DEFAULT_MAX_US,
     SERVO_DEFAULT_MIN_US,
+    SERVO_FRAME,
     SERVO_LIMIT_MAX_US,
     SERVO_LIMIT_MIN_US,
     SERVO_MAX_DEGREES,
+    SERVO_MAX_SPEED,
 )
 from .errors import BoardClosedError, CommandRejectedError, ProtocolError, ProtoduinoError
 from .events import Event, EventKind, Stats
@@ -75,8 +77,8 @@ MAX_POSE_ITEMS = 8
 
 #: Servo speed limits step once per 20 ms servo frame: a limit is a whole
 #: number of us per frame, 1 .. 255 (ServoInit.max_speed, docs/protocol.md).
-FRAMES_PER_SECOND = 50
-MAX_SPEED_US = 255 * FRAMES_PER_SECOND
+FRAMES_PER_SECOND = round(1 / SERVO_FRAME)
+MAX_SPEED_US = SERVO_MAX_SPEED
 
 
 def effective_speed(us_per_second: int) -> int:

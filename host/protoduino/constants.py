@@ -36,6 +36,10 @@ SERVO_DEFAULT_MAX_US = 2400
 SERVO_LIMIT_MIN_US = 400
 SERVO_LIMIT_MAX_US = 2600
 SERVO_MAX_DEGREES = 180
+#: Speed limits (ServoInit.max_speed, us per second) step once per servo frame.
+SERVO_FRAME = 0.020
+#: The fastest limit: 255 us per frame.
+SERVO_MAX_SPEED = 12750
 
 
 class PacketType(IntEnum):
@@ -82,6 +86,8 @@ FIRMWARE_CONSTANTS = (
     "SERVO_LIMIT_MIN_US",
     "SERVO_LIMIT_MAX_US",
     "SERVO_MAX_DEGREES",
+    "SERVO_FRAME",
+    "SERVO_MAX_SPEED",
 )
 #: The enumerations the firmware needs, by their C prefix: ``PD_<PREFIX>_<MEMBER>``.
 FIRMWARE_ENUMS: dict[str, type[IntEnum]] = {
