@@ -7,14 +7,14 @@ Return the issue's targets as :class:`~bench.core.Target` so the summary at the 
 lists them; raise :class:`~bench.core.MissingDependencyError` for a missing optional package, and
 the runner reports the section as not run instead of failing.
 
-Parts 2, 3 and 5 measure boards (``bench.boards``: the simulated board, the emulated Uno and its
+Parts 2, 3, 5 and 6 measure boards (``bench.boards``: the simulated board, the emulated Uno and its
 cycle counters); latency and throughput there are wall-clock quantities (``time.perf_counter``),
 while part 1 measures CPU time (``bench.core.measure``).
 """
 
 from __future__ import annotations
 
-from . import firmware, receive, roundtrip, throughput, wire
+from . import firmware, motion, receive, roundtrip, throughput, wire
 from .core import Section
 
 SECTIONS: tuple[Section, ...] = (
@@ -23,4 +23,5 @@ SECTIONS: tuple[Section, ...] = (
     throughput.SECTION,
     wire.SECTION,
     firmware.SECTION,
+    motion.SECTION,
 )

@@ -463,3 +463,26 @@ def test_runner_writes_the_board_sections(tmp_path: Path) -> None:
         link = f"perf/{chart}.png"
         if link in text:
             assert (tmp_path / link).read_bytes().startswith(b"\x89PNG")
+
+
+@pytest.mark.avr
+def test_motion_section_on_both_boards() -> None:
+    """Part 6: every pose case and every rate method measured on both boards, none lost."""
+    _need("native")
+    _need("avr")
+    from bench import motion
+    from bench.core import Context
+
+    text = motion.run(Context(samples=20, commands=30, chart_dir=None)).markdown
+    assert "not run" not in text
+    for label, _ in boards.BACKENDS:
+        assert f"### {boards.LABELS[label][0].upper()}{boards.LABELS[label][1:]}" in text
+    for joints in motion.JOINTS:
+        for method in motion.METHODS:
+            rows = [
+                line for line in text.splitlines() if line.startswith(f"| {joints} | {method} |")
+            ]
+            assert len(rows) == 2  # one per board
+            assert all(row.endswith("| 0 |") for row in rows)  # no pose lost
+    for method in motion.RATE_METHODS:
+        assert sum(line.startswith(f"| {method} |") for line in text.splitlines()) == 2
