@@ -170,6 +170,22 @@ def test_follow_starts_at_the_end_and_stops_at_the_end_mark(tmp_path: Path) -> N
     assert isinstance(rest[-1], CaptureEnd)
 
 
+def test_follow_starts_over_when_a_new_session_restarts_the_capture(tmp_path: Path) -> None:
+    cap = tmp_path / "c.jsonl"
+    first = '{"capture":"protoduino","version":1,"url":"old","schema_id":1,"started":1.0}\n'
+    cap.write_text(first + '{"t":2.0,"event":"log","text":"a long line of the old session"}\n')
+    records = follow(cap, from_start=True)
+    assert isinstance(next(records), CaptureHeader)
+    assert isinstance(next(records), CapturedEvent)
+    # What a new CaptureWriter on the same path does: truncate, then write its header.
+    cap.write_text('{"capture":"protoduino","version":1,"url":"new","schema_id":1,"started":5}\n')
+    with cap.open("a") as f:
+        f.write('{"t":6.0,"end":true}\n')
+    header = next(records)
+    assert isinstance(header, CaptureHeader) and header.url == "new"
+    assert isinstance(next(records), CaptureEnd)
+
+
 def test_monitor_follows_a_session_another_process_owns(fake: FakeDevice, tmp_path: Path) -> None:
     """The session is this process's; the monitor is another one and reads only the file."""
     cap = tmp_path / "live.jsonl"

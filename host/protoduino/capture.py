@@ -252,7 +252,9 @@ def follow(
 
     Reads the header first; then, unless ``from_start``, skips what is already
     there (live traffic only). Only whole lines are parsed: a line still being
-    written waits for its newline. Never opens the port, only the file.
+    written waits for its newline. A capture that shrinks was started again by
+    a new session (the writer truncates it): reading starts over at its new
+    header, which is yielded like the first. Never opens the port, only the file.
     """
     try:
         f = open(path, encoding="utf-8")  # noqa: SIM115 - closed below
@@ -280,6 +282,10 @@ def follow(
         while not stop():
             chunk = f.readline()
             if not chunk:
+                if os.fstat(f.fileno()).st_size < f.tell():  # a new session's capture
+                    f.seek(0)
+                    pending = ""
+                    continue
                 time.sleep(poll)
                 continue
             pending += chunk

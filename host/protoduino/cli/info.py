@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"rtt               {rtt * 1000:.3f} ms")
         print("link counters")
         for key, value in board.stats.as_dict().items():
-            if key == "last_ping":  # a time.monotonic() reading: meaningless to print
+            if key in ("last_ping", "rtt"):  # a time.monotonic() reading; rtt is above
                 continue
             print(f"{key:<17} {_counter(value)}")
         return 0
