@@ -157,6 +157,23 @@ class FakeDevice:
                 with contextlib.suppress(OSError):
                     os.write(self._master, data)
 
+    def send_burst(self, msgs: list[Any], timeout: float = 10.0) -> None:
+        """Send DATA messages back to back, every byte (send_raw drops what a full pty refuses)."""
+        data = b"".join(
+            frame_packet(PacketType.DATA, self._next_seq(None), m.SerializeToString()) for m in msgs
+        )
+        view = memoryview(data)
+        deadline = time.monotonic() + timeout
+        with self._wlock:
+            while view:
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"the host read nothing for {timeout} s")
+                select.select([], [self._master], [], 0.1)
+                try:
+                    view = view[os.write(self._master, view) :]
+                except BlockingIOError:
+                    continue
+
     def send_control(self, payload: bytes, *, seq: int | None = None) -> None:
         self.send_raw(frame_packet(PacketType.CONTROL, self._next_seq(seq), payload))
 

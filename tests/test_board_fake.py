@@ -12,6 +12,7 @@ import protoduino
 import pytest
 from fakedevice import FakeDevice, ack
 from protoduino import Board, Event, EventKind
+from protoduino.events import EVENT_QUEUE_LIMIT
 from protoduino.messages import ArduinoOut, Status
 
 
@@ -290,3 +291,63 @@ def test_close_from_an_event_callback(fake: FakeDevice) -> None:
     fake.send_data(log_msg("bye"))
     assert closed.wait(5)
     assert board.closed
+
+
+def test_a_log_flood_behind_a_slow_callback_stays_bounded(board: Board, fake: FakeDevice) -> None:
+    # A device flooding Log lines while a callback is slow: the queue holds at most
+    # EVENT_QUEUE_LIMIT events, the oldest Log lines go first and are counted, and a
+    # failsafe arriving behind the flood is delivered all the same.
+    held = threading.Event()
+    release = threading.Event()
+    seen: list[Event] = []
+
+    def slow(event: Event) -> None:
+        seen.append(event)
+        held.set()
+        release.wait(30)
+
+    board.on_event(slow)
+    fake.send_data(log_msg("first"))
+    assert held.wait(5)  # the callback holds the event thread from here on
+    flood = EVENT_QUEUE_LIMIT * 3
+    fake.send_burst([log_msg(f"flood {i}") for i in range(flood)])
+    failsafe = ArduinoOut()
+    failsafe.failsafe.active = True
+    failsafe.failsafe.cause = 1  # type: ignore[assignment]
+    fake.send_data(failsafe)
+    dropped = flood + 1 - EVENT_QUEUE_LIMIT  # what the queue cannot hold, failsafe included
+    try:
+        assert fake.wait_for(lambda: board.stats.events_dropped == {"log": dropped}, 10)
+        assert board._events.waiting == EVENT_QUEUE_LIMIT
+    finally:
+        release.set()
+    assert fake.wait_for(lambda: bool(seen) and seen[-1].kind is EventKind.FAILSAFE, 10)
+    logs = [e.details["text"] for e in seen if e.kind is EventKind.LOG]
+    assert logs == ["first"] + [f"flood {i}" for i in range(dropped, flood)]  # the newest
+
+
+def test_close_returns_and_calls_nothing_more(fake: FakeDevice) -> None:
+    board = Board.open(fake.port, ping=False)
+    held = threading.Event()
+    release = threading.Event()
+    seen: list[Event] = []
+
+    def slow(event: Event) -> None:
+        seen.append(event)
+        held.set()
+        release.wait(30)
+
+    board.on_event(slow)
+    for i in range(10):
+        fake.send_data(log_msg(str(i)))
+    assert held.wait(5)
+    assert fake.wait_for(lambda: board._events.waiting == 9)
+    try:
+        board.close()  # returns although the callback still runs (after CLOSE_WAIT)
+        thread = board._events._thread
+        assert thread.is_alive()  # a running callback is not interrupted
+    finally:
+        release.set()
+    thread.join(5)
+    assert not thread.is_alive()
+    assert [e.details["text"] for e in seen] == ["0"]  # nothing was called after close()

@@ -36,7 +36,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import queue
 import struct
 import threading
 from collections.abc import Callable, Mapping
@@ -61,7 +60,7 @@ from .constants import (
     SERVO_MAX_SPEED,
 )
 from .errors import BoardClosedError, CommandRejectedError, ProtocolError, ProtoduinoError
-from .events import Event, EventKind, Stats
+from .events import Event, EventCallback, EventDispatcher, EventKind, Stats
 from .link import Link
 from .messages import ArduinoIn, ArduinoOut, Status, status_name
 from .rpc import Call, Rpc
@@ -101,12 +100,7 @@ class OutputState:
     target: int
 
 
-EventCallback = Callable[[Event], None]
-
 T = TypeVar("T")
-
-#: What the event thread runs: an event for the callbacks, or a future to resolve.
-_Job = Event | Callable[[], None]
 
 
 def _no_value(call: Call) -> None:
@@ -338,8 +332,6 @@ class Board:
         self.url = url
         self._lock = threading.Lock()
         self._outputs: dict[int, _Output] = {}
-        self._callbacks: list[EventCallback] = []
-        self._events: queue.Queue[_Job | None] = queue.Queue()
         self._closed = False
         self._rpc = Rpc(
             notify=self._notify,
@@ -365,10 +357,8 @@ class Board:
         self._rpc.attach(self._link)
         if self._capture is not None:
             self._capture.set_stats(lambda: self.stats)
-        self._event_thread = threading.Thread(
-            target=self._dispatch, name=f"protoduino-events[{url}]", daemon=True
-        )
-        self._event_thread.start()
+        # Started only now: a constructor above that refuses its options leaves no thread.
+        self._events = EventDispatcher(url)
         try:
             self._link.open()
             self.info = self._get_info()
@@ -435,8 +425,14 @@ class Board:
     def close(self) -> None:
         """Stop pinging, fail outstanding calls, stop every thread, close the port.
 
-        Idempotent. The device is left as it is: with pings gone, its failsafe
-        drives the outputs safe after FAILSAFE_TIMEOUT.
+        Idempotent, and callable from an event callback. The device is left as
+        it is: with pings gone, its failsafe drives the outputs safe after
+        FAILSAFE_TIMEOUT. No event callback starts once close() was called
+        (events still queued are discarded; futures are still resolved, with
+        BoardClosedError for calls that had not completed); one that is running
+        is waited for up to CLOSE_WAIT (1 s), then left to finish (see
+        :class:`EventDispatcher`). So close() returns within about 1 s plus the
+        I/O thread's stop (at once, or 2 s for a wedged port driver).
         """
         with self._lock:
             if self._closed:
@@ -446,9 +442,7 @@ class Board:
         self._link.close()
         if self._capture is not None:
             self._capture.close()  # after the I/O thread stopped: the last frame is in
-        self._events.put(None)
-        if self._event_thread is not threading.current_thread():
-            self._event_thread.join(2.0)
+        self._events.close()
 
     @property
     def closed(self) -> bool:
@@ -761,17 +755,10 @@ class Board:
         """Call ``callback(event)`` for every :class:`Event`; returns an unsubscribe function.
 
         Callbacks run on the board's event thread, one at a time; they may
-        command the board.
+        command the board. Events wait for them in a bounded queue: see
+        :class:`EventDispatcher` for what a slow callback loses.
         """
-        with self._lock:
-            self._callbacks.append(callback)
-
-        def unsubscribe() -> None:
-            with self._lock:
-                if callback in self._callbacks:
-                    self._callbacks.remove(callback)
-
-        return unsubscribe
+        return self._events.subscribe(callback)
 
     def add_frame_monitor(self, monitor: FrameMonitor) -> None:
         """See every frame in both directions (runs on the I/O thread: be quick)."""
@@ -813,6 +800,7 @@ class Board:
             unknown_acks=rpc.unknown_acks,
             pings=rpc.pings,
             ping_failures=rpc.ping_failures,
+            events_dropped=dict(self._events.dropped),
             rtt=rpc.rtt,
             last_ping=rpc.last_ping,
         )
@@ -869,7 +857,7 @@ class Board:
         future.set_running_or_notify_cancel()  # sent is sent: cancel() says False
 
         def then(call: Call) -> None:
-            self._events.put(lambda: _resolve(future, call, value))
+            self._events.put_job(lambda: _resolve(future, call, value))
 
         self._submit(msg, on_ok, then)
         return future
@@ -972,19 +960,3 @@ class Board:
         if self._capture is not None:
             self._capture.event(event)
         self._events.put(event)
-
-    def _dispatch(self) -> None:
-        while True:
-            job = self._events.get()
-            if job is None:
-                return
-            if not isinstance(job, Event):  # a future to resolve
-                job()
-                continue
-            with self._lock:
-                callbacks = list(self._callbacks)
-            for callback in callbacks:
-                try:
-                    callback(job)
-                except Exception:
-                    log.exception("%s: on_event callback failed", self.url)

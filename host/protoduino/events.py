@@ -1,17 +1,24 @@
-"""What a board reports to its ``on_event`` callbacks, and its counters.
+"""What a board reports to its ``on_event`` callbacks, the thread that calls them, its counters.
 
 Events are values, never exceptions: the callbacks run on the board's own
 event thread (never the I/O thread), one at a time, in the order things
-happened, so a slow callback delays other callbacks but never the link.
+happened, so a slow callback delays other callbacks but never the link. The
+queue in between is bounded (:class:`EventDispatcher`): a slow callback
+behind a flood of Log lines costs dropped Log lines, counted, not memory.
 """
 
 from __future__ import annotations
 
+import collections
+import logging
+import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
+
+log = logging.getLogger(__name__)
 
 
 class EventKind(StrEnum):
@@ -83,8 +90,173 @@ class Stats:
     unknown_acks: int  # for an id this host never sent
     pings: int
     ping_failures: int
+    #: Events the callbacks never saw because the event queue was full, by kind.
+    events_dropped: Mapping[str, int]
     rtt: float | None  # last Ping round trip (seconds)
     last_ping: float | None  # time.monotonic() of the last acknowledged automatic Ping
 
     def as_dict(self) -> dict[str, Any]:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
+
+
+#: Kinds that inform without changing what the host knows of the device: when the
+#: queue is full the oldest of them is dropped first (a flood of Log lines must not
+#: push out a failsafe or a reboot).
+INFORMATIONAL = frozenset(
+    {EventKind.LOG, EventKind.DECODE_ERROR, EventKind.DEVICE_DESYNC, EventKind.RX_OVERFLOW}
+)
+
+#: Events waiting for the callbacks, at most (a few hundred kilobytes).
+EVENT_QUEUE_LIMIT = 1024
+
+#: How long :meth:`EventDispatcher.close` waits for a callback that is running to return.
+CLOSE_WAIT = 1.0
+
+EventCallback = Callable[[Event], None]
+#: Work for the event thread other than an event: resolving a future, in order with them.
+Job = Callable[[], None]
+
+
+class EventDispatcher:
+    """The board's event thread: a bounded queue in, every callback called in order.
+
+    :meth:`put` never blocks (the I/O thread calls it). When ``limit`` events
+    already wait, one is dropped and counted in :attr:`dropped` by kind: the
+    oldest informational one (:data:`INFORMATIONAL`); if none is waiting, the
+    new event itself if it is informational; only when the queue holds
+    nothing but state changes (failsafe, reboot, link up or down, restore,
+    error) and another one comes, the oldest of them, logged as an error.
+    That takes ``limit`` state changes piled up behind a callback stuck for
+    minutes: memory stays bounded even then.
+
+    Jobs (:meth:`put_job`: a future's resolution) run in the same order but
+    are never dropped nor counted: there is one per outstanding call, and a
+    dropped one would leave its future unresolved forever.
+
+    :meth:`close` stops the thread: no callback starts after it was called,
+    events still waiting are discarded, jobs still waiting run (each future
+    gets its result or BoardClosedError), and a callback that is running is
+    waited for up to ``close_wait`` seconds. A callback still running after
+    that is not interrupted (Python cannot stop a thread): it finishes on its
+    own (daemon) thread, which then runs the jobs left and ends.
+    """
+
+    def __init__(
+        self, name: str, *, limit: int = EVENT_QUEUE_LIMIT, close_wait: float = CLOSE_WAIT
+    ) -> None:
+        if limit < 1:
+            raise ValueError("limit must be at least 1")
+        self.name = name
+        self.limit = limit
+        self.close_wait = close_wait
+        self._cond = threading.Condition()
+        self._queue: collections.deque[Event | Job] = collections.deque()
+        self._events = 0  # how many items of the queue are events
+        self._callbacks: list[EventCallback] = []
+        self._closed = False
+        self._exited = False
+        #: Events dropped because the queue was full, by kind.
+        self.dropped: collections.Counter[str] = collections.Counter()
+        self._thread = threading.Thread(
+            target=self._run, name=f"protoduino-events[{name}]", daemon=True
+        )
+        self._thread.start()
+
+    def subscribe(self, callback: EventCallback) -> Callable[[], None]:
+        """Add ``callback``; returns the function that removes it."""
+        with self._cond:
+            self._callbacks.append(callback)
+
+        def unsubscribe() -> None:
+            with self._cond:
+                if callback in self._callbacks:
+                    self._callbacks.remove(callback)
+
+        return unsubscribe
+
+    def put(self, event: Event) -> None:
+        """Queue ``event`` for the callbacks; never blocks, drops by the policy above."""
+        with self._cond:
+            if self._closed:
+                return
+            if self._events >= self.limit:
+                victim = next(
+                    (e for e in self._queue if isinstance(e, Event) and e.kind in INFORMATIONAL),
+                    None,
+                )
+                if victim is None and event.kind in INFORMATIONAL:
+                    self.dropped[event.kind.value] += 1
+                    return
+                if victim is None:
+                    victim = next(e for e in self._queue if isinstance(e, Event))
+                    log.error(
+                        "%s: event queue full of state changes; dropped %s", self.name, victim
+                    )
+                self._queue.remove(victim)
+                self._events -= 1
+                self.dropped[victim.kind.value] += 1
+            self._queue.append(event)
+            self._events += 1
+            self._cond.notify()
+
+    def put_job(self, job: Job) -> None:
+        """Run ``job`` on the event thread, in order with the events (see the class docstring)."""
+        with self._cond:
+            if not self._exited:
+                self._queue.append(job)
+                self._cond.notify()
+                return
+        job()  # the thread is gone (closed): run it here rather than never
+
+    @property
+    def waiting(self) -> int:
+        """Events queued and not yet handed to the callbacks."""
+        with self._cond:
+            return self._events
+
+    def close(self) -> None:
+        """Stop the thread; see the class docstring. Idempotent; callable from a callback."""
+        with self._cond:
+            self._closed = True
+            discarded = self._events
+            self._queue = collections.deque(e for e in self._queue if not isinstance(e, Event))
+            self._events = 0
+            self._cond.notify_all()
+        if discarded:
+            log.debug("%s: %d undelivered events discarded at close", self.name, discarded)
+        if self._thread is threading.current_thread():
+            return  # a callback closing the board: the thread ends when it returns
+        self._thread.join(self.close_wait)
+        if self._thread.is_alive():
+            log.warning(
+                "%s: an on_event callback still runs %.1f s after close(); it is left to "
+                "finish, and no other callback will be called",
+                self.name,
+                self.close_wait,
+            )
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._queue and not self._closed:
+                    self._cond.wait()
+                if not self._queue:  # closed, and every job run
+                    self._exited = True
+                    return
+                item = self._queue.popleft()
+                callbacks = list(self._callbacks)
+                if isinstance(item, Event):
+                    self._events -= 1
+            if not isinstance(item, Event):
+                try:
+                    item()
+                except Exception:
+                    log.exception("%s: event-thread job failed", self.name)
+                continue
+            for callback in callbacks:
+                if self._closed:  # close() was called during an earlier callback
+                    break
+                try:
+                    callback(item)
+                except Exception:
+                    log.exception("%s: on_event callback failed", self.name)

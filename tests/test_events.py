@@ -1,0 +1,114 @@
+"""The event queue's bound and drop policy, and how close() stops the event thread."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from protoduino.events import Event, EventDispatcher, EventKind
+
+
+class Gate:
+    """A callback that records each event and holds the event thread on the first one."""
+
+    def __init__(self) -> None:
+        self.seen: list[Event] = []
+        self.entered = threading.Event()
+        self.release = threading.Event()
+
+    def __call__(self, event: Event) -> None:
+        self.seen.append(event)
+        self.entered.set()
+        self.release.wait(30)
+
+    def wait_seen(self, count: int, timeout: float = 5.0) -> None:
+        deadline = time.monotonic() + timeout
+        while len(self.seen) < count:
+            assert time.monotonic() < deadline, f"only {self.seen}"
+            time.sleep(0.01)
+
+
+def ev(kind: EventKind, text: str) -> Event:
+    return Event(kind, text)
+
+
+def test_informational_events_go_first_state_changes_last() -> None:
+    dispatcher = EventDispatcher("test", limit=3, close_wait=5.0)
+    gate = Gate()
+    dispatcher.subscribe(gate)
+    try:
+        dispatcher.put(ev(EventKind.LOG, "held"))
+        assert gate.entered.wait(5)  # the callback holds the thread: the queue only fills
+        for kind, text in [
+            (EventKind.FAILSAFE, "f1"),
+            (EventKind.LOG, "l1"),
+            (EventKind.REBOOTED, "r1"),  # full: f1 l1 r1
+            (EventKind.LOG, "l2"),  # the oldest informational one goes: f1 r1 l2
+            (EventKind.RESTORED, "s1"),  # again: f1 r1 s1
+            (EventKind.DECODE_ERROR, "d1"),  # none waiting: the new informational one goes
+            (EventKind.ERROR, "e1"),  # nothing but state changes: the oldest goes
+        ]:
+            dispatcher.put(ev(kind, text))
+            assert dispatcher.waiting <= 3
+        assert dispatcher.dropped == {"log": 2, "decode_error": 1, "failsafe": 1}
+        gate.release.set()
+        gate.wait_seen(4)
+        assert [e.text for e in gate.seen] == ["held", "r1", "s1", "e1"]
+    finally:
+        gate.release.set()
+        dispatcher.close()
+
+
+def test_close_calls_no_callback_after_it_and_leaves_a_running_one_alone() -> None:
+    dispatcher = EventDispatcher("test", close_wait=0.05)
+    gate = Gate()
+    dispatcher.subscribe(gate)
+    for i in range(10):
+        dispatcher.put(ev(EventKind.LOG, str(i)))
+    assert gate.entered.wait(5)
+    dispatcher.close()  # returns although the callback still runs
+    thread = dispatcher._thread
+    assert thread.is_alive()  # not interrupted: Python cannot stop a thread
+    dispatcher.put(ev(EventKind.FAILSAFE, "late"))  # after close: ignored
+    gate.release.set()
+    thread.join(5)
+    assert not thread.is_alive()  # it ended once the callback returned
+    assert [e.text for e in gate.seen] == ["0"]  # the nine waiting events were discarded
+
+
+def test_close_from_a_callback() -> None:
+    dispatcher = EventDispatcher("test")
+    done = threading.Event()
+
+    def close_and_note(event: Event) -> None:
+        dispatcher.close()  # must not wait for its own thread
+        done.set()
+
+    dispatcher.subscribe(close_and_note)
+    dispatcher.put(ev(EventKind.LOG, "x"))
+    assert done.wait(5)
+    dispatcher._thread.join(5)
+    assert not dispatcher._thread.is_alive()
+
+
+def test_jobs_are_never_dropped_and_still_run_at_close() -> None:
+    # Jobs resolve futures: one dropped would leave a caller waiting forever.
+    dispatcher = EventDispatcher("test", limit=1, close_wait=0.05)
+    gate = Gate()
+    dispatcher.subscribe(gate)
+    ran: list[int] = []
+    dispatcher.put(ev(EventKind.LOG, "held"))
+    assert gate.entered.wait(5)
+    dispatcher.put_job(lambda: ran.append(1))
+    dispatcher.put(ev(EventKind.LOG, "a"))
+    dispatcher.put(ev(EventKind.LOG, "b"))  # the limit counts events only: "a" goes
+    dispatcher.put_job(lambda: ran.append(2))
+    assert dispatcher.dropped == {"log": 1}
+    dispatcher.close()  # the callback still holds the thread
+    gate.release.set()
+    dispatcher._thread.join(5)
+    assert not dispatcher._thread.is_alive()
+    assert ran == [1, 2]  # the jobs ran; the waiting event "b" was discarded
+    assert [e.text for e in gate.seen] == ["held"]
+    dispatcher.put_job(lambda: ran.append(3))  # after the thread ended: run at once, here
+    assert ran == [1, 2, 3]
