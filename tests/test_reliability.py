@@ -247,7 +247,8 @@ def test_a_device_that_lost_its_configuration_unseen_is_restored(fake: FakeDevic
         ]
         assert refused.msg.message_id != again.msg.message_id
         assert board.stats.reboots == 1 and board.stats.rejected == 0
-        assert any(e.kind is protoduino.EventKind.REBOOTED for e in events)
+        # Events reach callbacks on the event thread, after the call may have returned.
+        assert fake.wait_for(lambda: any(e.kind is protoduino.EventKind.REBOOTED for e in events))
         led.on()  # and the session goes on
         assert fake.values == {9: 120, 13: 1}
 
