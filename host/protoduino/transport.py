@@ -329,12 +329,15 @@ class Transport:
         if fd is None:
             if not self.url.lower().startswith(REMOTE_URLS):
                 self._port.timeout = min(TICK / 2, self._sleep_limit())
-            elif self._port.timeout != TICK / 2:
+                return bytes(self._port.read(READ_CHUNK))
+            if self._port.timeout != TICK / 2:
                 # Set once: pyserial reconfigures the port at every assignment, and on
                 # rfc2217:// that is a round trip of subnegotiations to the server (it made
                 # every read take 160 ms); the network's latency dwarfs the finer timer here.
                 self._port.timeout = TICK / 2
-            return bytes(self._port.read(READ_CHUNK))
+            # rfc2217's read(n) waits out its whole timeout unless n bytes came: ask for
+            # what is queued, or for one byte, returned the moment it arrives.
+            return bytes(self._port.read(self._port.in_waiting or 1))
         try:
             ready, _, _ = select.select([fd, self._wake_r], [], [], self._sleep_limit())
         except ValueError as error:  # fd closed under us
