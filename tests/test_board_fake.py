@@ -14,6 +14,7 @@ from fakedevice import FakeDevice, ack
 from protoduino import Board, Event, EventKind
 from protoduino.events import EVENT_QUEUE_LIMIT
 from protoduino.messages import ArduinoOut, Status
+from protoduino.transport import FrameRecord
 
 
 @pytest.fixture
@@ -351,3 +352,27 @@ def test_close_returns_and_calls_nothing_more(fake: FakeDevice) -> None:
     thread.join(5)
     assert not thread.is_alive()
     assert [e.details["text"] for e in seen] == ["0"]  # nothing was called after close()
+
+
+def test_a_frame_monitor_cannot_call_into_the_board(board: Board, fake: FakeDevice) -> None:
+    # A monitor runs on the I/O thread: a call from it would wait for an answer that only
+    # that thread can deliver (the link stalled for 8 s). It is refused at once instead.
+    errors: list[BaseException] = []
+    armed = threading.Event()
+
+    def meddling(record: FrameRecord) -> None:
+        if armed.is_set() and record.direction == "rx":
+            armed.clear()
+            try:
+                board.ping(b"from the monitor")
+            except protoduino.ProtoduinoError as error:
+                errors.append(error)
+
+    board.add_frame_monitor(meddling)
+    armed.set()
+    board.ping(b"main")  # its Ack is the frame the monitor sees
+    assert len(errors) == 1 and isinstance(errors[0], protoduino.ReentrantCallError), errors
+    assert "I/O thread" in str(errors[0])
+    assert [p.msg.ping.payload for p in fake.commands("ping")] == [b"main"]
+    assert board.stats.timeouts == 0 and board.stats.retransmits == 0
+    board.close()  # closing from a monitor is fine too: nothing waits

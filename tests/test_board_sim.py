@@ -18,6 +18,7 @@ import pytest
 from protoduino import Board, Event, EventKind
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard
+from protoduino.transport import FrameRecord
 from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS, pin_values
 
 SAFE_90_US = 544 + 90 * (2400 - 544) // 180  # 1472
@@ -395,3 +396,28 @@ def test_lossy_line_is_repaired(sim: SimBoard) -> None:
         stats = board.stats
     expect_pin(sim, 9, [SAFE_90_US, *(us(d) for d in range(0, 181, 2))])
     assert stats.retransmits > 0 or stats.seq_lost > 0 or sum(stats.dropped.values()) > 0
+
+
+def test_a_frame_monitor_calling_the_board_is_refused(board: Board, sim: SimBoard) -> None:
+    # A monitor runs on the I/O thread; a call from it would wait for an Ack only that
+    # thread can read (it stalled the link for 8 s). It is refused at once instead.
+    servo = board.servo(9)
+    expect_pin(sim, 9, [SAFE_90_US])
+    errors: list[BaseException] = []
+    armed = threading.Event()
+
+    def meddling(record: FrameRecord) -> None:
+        if armed.is_set() and record.direction == "rx":
+            armed.clear()
+            try:
+                servo.write(150)
+            except protoduino.ProtoduinoError as error:
+                errors.append(error)
+
+    board.add_frame_monitor(meddling)
+    armed.set()
+    servo.write(30)  # its Ack is the frame the monitor sees
+    assert len(errors) == 1 and isinstance(errors[0], protoduino.ReentrantCallError), errors
+    servo.write(60)
+    expect_pin(sim, 9, [SAFE_90_US, us(30), us(60)])  # the monitor's 150 never went out
+    assert board.stats.timeouts == 0 and board.stats.retransmits == 0

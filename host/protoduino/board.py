@@ -59,7 +59,13 @@ from .constants import (
     SERVO_MAX_DEGREES,
     SERVO_MAX_SPEED,
 )
-from .errors import BoardClosedError, CommandRejectedError, ProtocolError, ProtoduinoError
+from .errors import (
+    BoardClosedError,
+    CommandRejectedError,
+    ProtocolError,
+    ProtoduinoError,
+    ReentrantCallError,
+)
 from .events import Event, EventCallback, EventDispatcher, EventKind, Stats
 from .link import Link
 from .messages import ArduinoIn, ArduinoOut, Status, status_name
@@ -761,7 +767,13 @@ class Board:
         return self._events.subscribe(callback)
 
     def add_frame_monitor(self, monitor: FrameMonitor) -> None:
-        """See every frame in both directions (runs on the I/O thread: be quick)."""
+        """See every frame in both directions (on the I/O thread: be quick).
+
+        A monitor cannot make a blocking call on the board: it raises
+        :class:`ReentrantCallError` at once (it would wait for an Ack that only
+        the I/O thread, busy running the monitor, can read). A ``submit`` form
+        returns at once and is allowed; waiting on its future there is not.
+        """
         self._transport.add_monitor(monitor)
 
     @property
@@ -839,6 +851,12 @@ class Board:
         thread may be busy in a callback (or be the caller), and the bound
         stays :meth:`Rpc.wait`'s.
         """
+        if self._transport.on_io_thread():
+            raise ReentrantCallError(
+                f"{msg.WhichOneof('data')} called on the board's I/O thread (from a frame "
+                "monitor?): it would wait for an Ack that only this thread can read. Call it "
+                "from another thread, or use its submit form (never wait on the future there)"
+            )
         call = self._submit(msg, on_ok)
         self._rpc.wait(call)
         return call

@@ -11,6 +11,7 @@
      +-- CommandRejectedError     the device (or the host, checking first) refused a command
      +-- AckTimeoutError          no Ack after every retry; also a builtin TimeoutError
      +-- BoardClosedError         the board was closed while, or before, the call ran
+     +-- ReentrantCallError       a blocking board call from the I/O thread (a frame monitor)
      +-- BuildError               a build step (make, avr-objcopy) failed
      +-- FlashError               avrdude could not upload the firmware
      +-- SimControlError          a simulated board refused an input command (also a ValueError)
@@ -106,6 +107,14 @@ class AckTimeoutError(ProtoduinoError, TimeoutError):
 
 class BoardClosedError(ProtoduinoError):
     """The board is closed."""
+
+
+class ReentrantCallError(ProtoduinoError, RuntimeError):
+    """A blocking board call made on the board's own I/O thread (from a frame monitor).
+
+    The call would wait for its Ack, which only that thread can read: the link
+    would stall until the call's deadline. It is refused at once instead.
+    """
 
 
 class BuildError(ProtoduinoError):

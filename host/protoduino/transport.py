@@ -94,7 +94,9 @@ class FrameRecord:
         return f"{self.t:.3f} {self.direction} {p.type.name} seq={p.seq} {p.payload.hex()}"
 
 
-#: A monitor sees every frame in both directions (on the I/O thread: be quick).
+#: A monitor sees every frame in both directions, on the I/O thread, as the frame
+#: passes: it must be quick, and it cannot make a blocking board call (that raises
+#: ReentrantCallError: it would wait for an Ack that only this thread can read).
 FrameMonitor = Callable[[FrameRecord], None]
 
 
@@ -173,6 +175,10 @@ class Transport:
     @property
     def closed(self) -> bool:
         return self._stop.is_set()
+
+    def on_io_thread(self) -> bool:
+        """Is the caller this transport's I/O thread (a monitor, or a listener callback)?"""
+        return self._thread is threading.current_thread()
 
     # --- sending ------------------------------------------------------------
 
