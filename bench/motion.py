@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import logging
+import random
 import statistics
 import threading
 import time
@@ -153,7 +154,14 @@ def _move(method: str, board: Board, servos: Sequence[Servo], targets: Sequence[
             t.join()
 
 
-def measure_poses(board: Board, trace: Trace, clock: Clock, trials: int) -> list[PoseStats]:
+def measure_poses(
+    board: Board, trace: Trace, clock: Clock, trials: int, seed: int
+) -> list[PoseStats]:
+    # Each trial waits until the trace shows the last one, and the emulated Uno writes a
+    # servo's line a frame after the change: without a random pause the trials would all
+    # start at the same phase of the servo frame, and the wait for the next frame would be
+    # the same, unrepresentative, share of every call-to-pin time.
+    rng = random.Random(seed)
     out: list[PoseStats] = []
     for joints in JOINTS:
         servos = [board.servo(pin) for pin in ARM_PINS[:joints]]
@@ -168,6 +176,7 @@ def measure_poses(board: Board, trace: Trace, clock: Clock, trials: int) -> list
                 if any(s.value == w for s, w in zip(servos, wants.values(), strict=True)):
                     targets = [t + 3 for t in targets]
                     wants = {s.pin: us(d) for s, d in zip(servos, targets, strict=True)}
+                time.sleep(rng.uniform(0.0, 0.020))
                 after = trace.update()[-1]["t"] if trace.events else 0.0
                 t0 = time.monotonic()
                 _move(method, board, servos, targets)
@@ -243,7 +252,7 @@ class BoardResult:
     error: str | None = None
 
 
-def collect(trials: int, commands: int) -> list[BoardResult]:
+def collect(trials: int, commands: int, seed: int = 7) -> list[BoardResult]:
     out: list[BoardResult] = []
     for backend, _label in BACKENDS:
         result = BoardResult(backend)
@@ -260,7 +269,7 @@ def collect(trials: int, commands: int) -> list[BoardResult]:
                 with Board.open(sim.port) as board:
                     led = board.digital_output(CLOCK_PIN)
                     result.clock = calibrate(led, trace)
-                    result.poses = measure_poses(board, trace, result.clock, trials)
+                    result.poses = measure_poses(board, trace, result.clock, trials, seed)
                     result.rates = measure_rates(board, commands)
             except (ProtoduinoError, BoardUnavailableError, RuntimeError) as error:
                 log.warning("motion: %s board not run: %s", backend, error)
@@ -280,7 +289,7 @@ def _ms(values: list[float], q: float = 0.5) -> str:
 def run(ctx: Context) -> SectionResult:
     trials = max(3, min(TRIALS, ctx.samples // 20))
     commands = max(40, ctx.commands // 3)
-    results = collect(trials, commands)
+    results = collect(trials, commands, ctx.seed)
     parts = [
         f"**Poses.** {trials} trials per case, the methods taking turns, each moving every "
         "joint to a new angle: `Board.pose({servo: degrees, ...})` (one command), `Servo.write` "
@@ -289,7 +298,8 @@ def run(ctx: Context) -> SectionResult:
         "in the board's trace; *spread*: from the first joint's change to the last one's; "
         "*returned*: until the call (or the last thread) returned. Median and 90th percentile, "
         "in ms. A servo shows a new width at its next 20 ms frame, so up to a frame of every "
-        "to-the-pins time is the frame's phase. The call-to-pin times compare host and board "
+        "to-the-pins time is the frame's phase (each trial starts after a random pause of "
+        "0-20 ms, so that the phases vary). The call-to-pin times compare host and board "
         "clocks (both CLOCK_MONOTONIC) through an offset measured with digital toggles; its "
         "uncertainty is given per board.\n",
         f"**Commands per second.** {commands} acknowledged servo commands per round, 3 rounds, "
