@@ -12,13 +12,19 @@
 /* UART receive ring (a power of two): ~11 ms of line time at 115200 baud,
  * more than the longest frame the core sends takes to transmit. */
 #define PD_AVR_RX_SIZE 128u
+/* UART transmit ring: the replies to one command (PD_TX_RESERVE) and a short report. */
+#define PD_AVR_TX_SIZE 160u
 
 void pd_avr_uart_init(uint32_t baud);
-/* Next received byte, or -1 if none. */
-int16_t pd_avr_uart_read(void);
+/* The oldest received byte, left in the ring, or -1 if none. */
+int16_t pd_avr_uart_peek(void);
+/* Remove the oldest received byte (after a successful peek). */
+void pd_avr_uart_drop(void);
 bool pd_avr_uart_rx_empty(void);
-/* Transmit bytes, returning when the last one is in the UART. */
-void pd_avr_uart_write(const uint8_t *data, uint16_t len);
+/* Bytes the transmit ring can take now. */
+uint8_t pd_avr_uart_tx_room(void);
+/* Queue `len` bytes for transmission, all or none (false: no room); never waits. */
+bool pd_avr_uart_write(const uint8_t *data, uint16_t len);
 /* Bytes lost because the RX ring was full (counted, never reported). */
 uint16_t pd_avr_uart_rx_dropped(void);
 

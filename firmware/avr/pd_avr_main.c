@@ -1,9 +1,11 @@
 /*
  * The Uno firmware: the portable core behind the ATmega328P HAL.
  *
- * The main loop hands every received byte to the core, lets it check the
- * failsafe, and sleeps (idle mode) until the next interrupt: a received byte
- * or the 1 kHz clock tick, so the failsafe is checked at least every 1 ms.
+ * The main loop offers every received byte to the core, lets it check the
+ * failsafe, and sleeps (idle mode) until the next interrupt: a received byte,
+ * a transmitted one or the 1 kHz clock tick, so the failsafe is checked at
+ * least every 1 ms. It never waits for the UART: frames go into a transmit
+ * ring that an interrupt drains.
  */
 #include <avr/interrupt.h>
 #include <avr/io.h>
@@ -26,11 +28,16 @@ static const pd_board_info_t uno = {
     .reserved_pins = (1UL << 0) | (1UL << 1), /* RX, TX: the link itself */
 };
 
+uint16_t pd_hal_tx_room(void *hal)
+{
+    (void)hal;
+    return pd_avr_uart_tx_room();
+}
+
 bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len)
 {
     (void)hal;
-    pd_avr_uart_write(data, len);
-    return true;
+    return pd_avr_uart_write(data, len);
 }
 
 uint32_t pd_hal_millis(void *hal)
@@ -87,16 +94,18 @@ void pd_avr_setup(void)
 void pd_avr_loop(void)
 {
     int16_t byte;
-    while ((byte = pd_avr_uart_read()) >= 0) {
-        pd_core_rx_byte(&core, (uint8_t)byte);
+    while ((byte = pd_avr_uart_peek()) >= 0 && pd_core_rx_byte(&core, (uint8_t)byte)) {
+        pd_avr_uart_drop();
     }
     pd_core_poll(&core);
 
     /* Sleep unless a byte slipped in; `sei; sleep` cannot miss the wake-up,
-     * because the instruction after sei always runs before any interrupt. */
+     * because the instruction after sei always runs before any interrupt. A
+     * byte the core left (byte >= 0: its replies need transmit room) waits for
+     * the transmit interrupt, which wakes us as the queue drains. */
     set_sleep_mode(SLEEP_MODE_IDLE);
     cli();
-    if (pd_avr_uart_rx_empty()) {
+    if (byte >= 0 || pd_avr_uart_rx_empty()) {
         sleep_enable();
         sei();
         sleep_cpu();

@@ -4,11 +4,12 @@
  * the Arduino core's HardwareSerial: the same job in far less flash and RAM.
  *
  * Receive: an interrupt fills a ring buffer, so no byte is lost while the
- * main loop is busy. Transmit: polled. The core hands over whole frames and
- * the longest (an Ack with a 64-byte ping echo) takes 9 ms on the wire,
- * during which at most ~100 bytes can arrive: the RX ring holds them. A TX
- * ring would only let the loop run on while a frame drains, for 64 more bytes
- * of RAM; at line rate the answers cannot leave any faster either way.
+ * main loop is busy. Transmit: the core queues whole frames into a second
+ * ring and the data-register-empty interrupt sends them, so the loop never
+ * waits for the line: while an Ack drains (1 ms for a servo command's, 9 ms
+ * for a 64-byte ping echo) it decodes and runs the next command. The ring
+ * holds the most one command can make the device send plus room for a
+ * report (pd_link.h, PD_TX_RESERVE).
  */
 #include <avr/interrupt.h>
 #include <avr/io.h>
@@ -18,12 +19,18 @@
 
 #define RX_MASK (PD_AVR_RX_SIZE - 1u)
 
+typedef char pd_assert_tx_size[PD_AVR_TX_SIZE <= 255 ? 1 : -1];
+
 typedef char pd_assert_rx_pow2[(PD_AVR_RX_SIZE & RX_MASK) == 0 && PD_AVR_RX_SIZE <= 256 ? 1 : -1];
 
 static volatile uint8_t rx_buf[PD_AVR_RX_SIZE];
 static volatile uint8_t rx_head; /* written by the ISR */
 static volatile uint8_t rx_tail; /* written by the main loop */
 static volatile uint16_t rx_dropped;
+
+static volatile uint8_t tx_buf[PD_AVR_TX_SIZE];
+static volatile uint8_t tx_head; /* written by the main loop */
+static volatile uint8_t tx_tail; /* written by the ISR */
 
 void pd_avr_uart_init(uint32_t baud)
 {
@@ -57,15 +64,18 @@ ISR(USART_RX_vect)
     rx_head = next;
 }
 
-int16_t pd_avr_uart_read(void)
+int16_t pd_avr_uart_peek(void)
 {
     uint8_t tail = rx_tail;
     if (tail == rx_head) {
         return -1;
     }
-    uint8_t byte = rx_buf[tail];
-    rx_tail = (uint8_t)((tail + 1u) & RX_MASK);
-    return byte;
+    return rx_buf[tail];
+}
+
+void pd_avr_uart_drop(void)
+{
+    rx_tail = (uint8_t)((rx_tail + 1u) & RX_MASK);
 }
 
 bool pd_avr_uart_rx_empty(void)
@@ -73,14 +83,46 @@ bool pd_avr_uart_rx_empty(void)
     return rx_tail == rx_head;
 }
 
-void pd_avr_uart_write(const uint8_t *data, uint16_t len)
+uint8_t pd_avr_uart_tx_room(void)
 {
-    for (uint16_t i = 0; i < len; i++) {
-        while (!(UCSR0A & _BV(UDRE0))) {
-            /* the RX interrupt keeps receiving meanwhile */
-        }
-        UDR0 = data[i];
+    uint8_t head = tx_head;
+    uint8_t tail = tx_tail;
+    uint8_t used = (uint8_t)(head - tail);
+    if (head < tail) {
+        used = (uint8_t)(used + PD_AVR_TX_SIZE); /* wrapped: modulo 256, then back into range */
     }
+    return (uint8_t)(PD_AVR_TX_SIZE - 1u - used);
+}
+
+bool pd_avr_uart_write(const uint8_t *data, uint16_t len)
+{
+    if (len > pd_avr_uart_tx_room()) {
+        return false;
+    }
+    uint8_t head = tx_head;
+    for (uint16_t i = 0; i < len; i++) {
+        tx_buf[head] = data[i];
+        head = (uint8_t)(head + 1u == PD_AVR_TX_SIZE ? 0u : head + 1u);
+    }
+    tx_head = head; /* one byte: the ISR sees the whole frame or none of it */
+    UCSR0B |= _BV(UDRIE0);
+    return true;
+}
+
+/*
+ * One byte per interrupt, the ring's next, into the data register; off when
+ * the ring is empty. Short and without nested interrupts: it delays a servo
+ * edge by at most its own few dozen cycles.
+ */
+ISR(USART_UDRE_vect)
+{
+    uint8_t tail = tx_tail;
+    if (tail == tx_head) {
+        UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        return;
+    }
+    UDR0 = tx_buf[tail];
+    tx_tail = (uint8_t)(tail + 1u == PD_AVR_TX_SIZE ? 0u : tail + 1u);
 }
 
 uint16_t pd_avr_uart_rx_dropped(void)

@@ -4,6 +4,10 @@ void pd_core_init(pd_core_t *core, void *hal)
 {
     core->hal = hal;
     core->decode_errors = 0;
+    core->periodic = NULL;
+    core->report = NULL;
+    core->report_pending = 0;
+    core->last_tick = (uint8_t)pd_hal_millis(hal);
     pd_link_init(&core->link);
     pd_dedupe_init(&core->dedupe);
     pd_outputs_init(&core->outputs);
@@ -11,11 +15,29 @@ void pd_core_init(pd_core_t *core, void *hal)
     pd_link_send_event(core, PD_EVENT_BOOT);
 }
 
-void pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len)
+size_t pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len)
 {
-    for (size_t i = 0; i < len; i++) {
-        pd_link_rx_byte(core, data[i]);
+    size_t i = 0;
+    while (i < len && pd_link_rx_byte(core, data[i])) {
+        i++;
     }
+    return i;
+}
+
+/* The lowest pending report slot, if its message can go out now. */
+static void send_report(pd_core_t *core)
+{
+    uint8_t slot = 0;
+    while (!((core->report_pending >> slot) & 1u)) {
+        slot++;
+    }
+    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
+    if (core->report(core, slot, &out)) {
+        if (!pd_dispatch_send_spare(core, &out)) {
+            return; /* no room beyond the replies' reserve yet: the newest value, later */
+        }
+    }
+    core->report_pending = (uint8_t)(core->report_pending & ~(1u << slot));
 }
 
 void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause)
@@ -37,4 +59,11 @@ void pd_core_poll(pd_core_t *core)
         pd_core_enter_safe(core, protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT);
     }
     pd_outputs_step(&core->outputs, core->hal, now);
+    if (core->periodic != NULL && (uint8_t)now != core->last_tick) {
+        core->last_tick = (uint8_t)now;
+        core->periodic(core, now);
+    }
+    if (core->report_pending != 0 && core->report != NULL && core->link.active) {
+        send_report(core);
+    }
 }

@@ -2,8 +2,9 @@
  * The device as one value: link, dedupe window, outputs and failsafe, with no
  * globals, so the unit tests and the fuzzer can instantiate as many as they
  * like. The platform's main loop calls pd_core_init() once at power-up, then
- * pd_core_rx() with every received byte and pd_core_poll() often (at least
- * every few milliseconds: the failsafe is checked there).
+ * offers received bytes with pd_core_rx()/pd_core_rx_byte() (keeping those it
+ * did not take for the next pass) and calls pd_core_poll() often (at least
+ * every few milliseconds: the failsafe, the periodic hook and reports run there).
  */
 #ifndef PD_CORE_H
 #define PD_CORE_H
@@ -21,6 +22,28 @@
 /* Reported in DeviceInfo.firmware_version; follows the Python package's version. */
 #define PD_FIRMWARE_VERSION "0.1.0"
 
+struct pd_core;
+
+/*
+ * The periodic hook: called by pd_core_poll() at most once per millisecond
+ * tick, with the tick. For work that is not a reply (sampling inputs,
+ * deciding a report is due). It must do a bounded amount of work per call
+ * (e.g. one pin per call, round-robin): the loop's latency is the sum of its
+ * parts.
+ */
+typedef void (*pd_periodic_fn)(struct pd_core *core, uint32_t now_ms);
+
+/*
+ * A report source: fill `out` with the newest value of report slot `slot`,
+ * or return false if there is nothing to send after all. Called only when the
+ * message can go out at once, so a value is read when it is sent: a newer
+ * value replaces one that has not left yet, by construction.
+ */
+typedef bool (*pd_report_fn)(struct pd_core *core, uint8_t slot, protoduino_ArduinoOut *out);
+
+/* Report slots: one bit each in pd_core_t.report_pending. */
+#define PD_REPORT_SLOTS 8u
+
 typedef struct pd_core {
     void *hal; /* handed back to every pd_hal_* call */
     pd_link_t link;
@@ -28,20 +51,32 @@ typedef struct pd_core {
     pd_outputs_t outputs;
     pd_failsafe_t failsafe;
     uint32_t decode_errors; /* COMMAND payloads that did not decode, since boot */
+    pd_periodic_fn periodic; /* NULL: none */
+    pd_report_fn report;     /* NULL: no reports */
+    uint8_t report_pending;  /* bit N: slot N has a value to send */
+    uint8_t last_tick;       /* low byte of the millisecond the hook last ran */
 } pd_core_t;
 
 /* Power-up state: nothing configured, link IDLE; sends EVENT BOOT. */
 void pd_core_init(pd_core_t *core, void *hal);
 
-static inline void pd_core_rx_byte(pd_core_t *core, uint8_t byte)
+/* Offer one byte; false: not taken (its frame's replies would not fit yet), offer it again. */
+static inline bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
 {
-    pd_link_rx_byte(core, byte);
+    return pd_link_rx_byte(core, byte);
 }
 
-void pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len);
+/* Offer `len` bytes; returns how many were taken (the rest: offer again later). */
+size_t pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len);
 
-/* Periodic work: the failsafe timer. */
+/* Periodic work: the failsafe timer, the periodic hook, at most one report. */
 void pd_core_poll(pd_core_t *core);
+
+/* Report slot `slot` has a new value: send it (pd_core_t.report builds it) when the line allows. */
+static inline void pd_core_report(pd_core_t *core, uint8_t slot)
+{
+    core->report_pending = (uint8_t)(core->report_pending | (1u << slot));
+}
 
 /* Every configured output to its safe value, flag set, event sent (Stop, timeout). */
 void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause);

@@ -48,6 +48,20 @@ bool pd_dispatch_send(pd_core_t *core, const protoduino_ArduinoOut *msg)
     return pd_link_send(core, PD_PACKET_DATA, raw, len);
 }
 
+bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg)
+{
+    uint8_t raw[PD_TX_RAW_MAX];
+
+    if (!core->link.active) {
+        return false;
+    }
+    size_t len = pd_encode_out(msg, raw + PD_HEADER_SIZE, PD_TX_MAX_PAYLOAD);
+    if (len == 0 || pd_hal_tx_room(core->hal) < PD_TX_RESERVE + PD_TX_FRAME_BYTES(len)) {
+        return false;
+    }
+    return pd_link_send(core, PD_PACKET_DATA, raw, len);
+}
+
 bool pd_dispatch_send_failsafe(pd_core_t *core, bool active, protoduino_FailsafeCause cause)
 {
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;

@@ -58,6 +58,13 @@ void pd_dispatch_command(struct pd_core *core, const uint8_t *payload, size_t le
 /* Send one ArduinoOut as a DATA packet (only while ACTIVE). */
 bool pd_dispatch_send(struct pd_core *core, const protoduino_ArduinoOut *msg);
 
+/*
+ * Send an unsolicited message (a report) only if the transmit queue keeps
+ * PD_TX_RESERVE of room after it, so it never delays a reply's room. Returns
+ * whether it was queued.
+ */
+bool pd_dispatch_send_spare(struct pd_core *core, const protoduino_ArduinoOut *msg);
+
 /* ArduinoOut.failsafe{active, cause}. */
 bool pd_dispatch_send_failsafe(struct pd_core *core, bool active, protoduino_FailsafeCause cause);
 

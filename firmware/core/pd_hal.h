@@ -9,7 +9,8 @@
  *
  * Receiving is not part of this header: the platform's main loop reads bytes
  * however suits it (ISR ring buffer, poll() on a pty, a fuzzer's input) and
- * pushes them into the core with pd_core_rx().
+ * offers them to the core with pd_core_rx(), which may leave some for later
+ * (while the transmit queue is too full for their replies).
  */
 #ifndef PD_HAL_H
 #define PD_HAL_H
@@ -26,11 +27,18 @@ typedef struct pd_board_info {
 } pd_board_info_t;
 
 /*
- * Write one whole encoded frame. Returns true only if every byte was accepted
- * for transmission. A false return makes the core keep its SEQ (the next frame
- * reuses it, docs/protocol.md section 6) and send a lone 0x00 first, so that a
- * partly written frame cannot swallow the next one at the receiver.
+ * Transmit is a queue the platform drains on its own (the Uno: the UART's
+ * data-register-empty interrupt), so the core never waits for the line.
+ *
+ * pd_hal_tx_room: how many bytes pd_hal_write would accept now.
+ * pd_hal_write: queue one whole encoded frame, all or nothing, without
+ * waiting. Returns false, having queued nothing, if it does not fit (or the
+ * port is gone). The core asks for room first and holds back received frames
+ * while the queue cannot take their replies (pd_link.h, PD_TX_RESERVE), so a
+ * refusal is rare; it makes the core keep its SEQ (the next frame reuses it,
+ * docs/protocol.md section 6) and send a lone 0x00 before its next frame.
  */
+uint16_t pd_hal_tx_room(void *hal);
 bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len);
 
 /* Milliseconds since an arbitrary origin; wraps modulo 2^32. */

@@ -7,6 +7,9 @@
 #include "pd_schema.h"
 
 typedef char pd_assert_tx_fits_len[(PD_TX_MAX_PAYLOAD <= PD_MAX_PAYLOAD) ? 1 : -1];
+/* The notices PD_TX_RESERVE counts on fit PD_TX_NOTICE_MAX. */
+typedef char pd_assert_notice_fits[(protoduino_Failsafe_size + 2u <= 8u &&
+                                    protoduino_DecodeError_size + 2u <= 8u) ? 1 : -1];
 
 void pd_link_init(pd_link_t *link)
 {
@@ -151,7 +154,7 @@ static void handle_frame(pd_core_t *core)
     PD_STAT_INC(link, ignored);
 }
 
-void pd_link_rx_byte(pd_core_t *core, uint8_t byte)
+bool pd_link_rx_byte(pd_core_t *core, uint8_t byte)
 {
     pd_link_t *link = &core->link;
 
@@ -159,20 +162,24 @@ void pd_link_rx_byte(pd_core_t *core, uint8_t byte)
         if (link->rx_skipping) {
             link->rx_skipping = false;
         } else if (link->rx_len > 0) {
+            if (pd_hal_tx_room(core->hal) < PD_TX_RESERVE) {
+                return false; /* its replies would not fit: later */
+            }
             handle_frame(core);
         }
         link->rx_len = 0;
-        return;
+        return true;
     }
     if (link->rx_skipping) {
-        return;
+        return true;
     }
     if (link->rx_len >= PD_MAX_ENCODED_FRAME) {
         link->rx_len = 0;
         link->rx_skipping = true;
         PD_STAT_INC(link, rx_overflow);
         pd_link_send_event(core, PD_EVENT_RX_OVERFLOW);
-        return;
+        return true;
     }
     link->rx_buf[link->rx_len++] = byte;
+    return true;
 }

@@ -11,10 +11,17 @@
  * everything up to the next 0x00 is skipped. So a corrupted frame never
  * damages the next one, and no timer is needed.
  *
- * Transmit: there is no queue. A frame is built on the stack, encoded into a
- * bounded buffer and handed to the HAL whole, in the order the core produces
- * them, so a CONTROL frame never waits behind queued DATA (there is none to
- * clear on RESET either). DATA is sent only while ACTIVE; CONTROL always.
+ * Transmit: a frame is built on the stack, encoded into a bounded buffer and
+ * handed to the HAL's transmit queue whole, in the order the core produces
+ * them; the platform drains the queue in the background (pd_hal.h). Replies
+ * (Acks, CONTROL, the notices that follow an Ack) go in at once. A received
+ * frame is only acted upon while the queue has room for everything it can
+ * make the device send (PD_TX_RESERVE): otherwise its delimiter is left
+ * unconsumed, the bytes wait in the platform's receive buffer (which the host's
+ * flow control keeps from overflowing) and the loop goes on. Unsolicited
+ * reports go in only when room beyond that reserve remains, so they never
+ * hold up a reply by more than one short frame. DATA is sent only while
+ * ACTIVE; CONTROL always.
  */
 #ifndef PD_LINK_H
 #define PD_LINK_H
@@ -33,7 +40,18 @@ struct pd_core;
 #define PD_TX_MAX_PAYLOAD protoduino_ArduinoOut_size
 #define PD_TX_RAW_MAX (PD_MIN_PACKET + PD_TX_MAX_PAYLOAD)
 /* Encoded frame plus an optional leading 0x00 and the delimiter. */
-#define PD_TX_FRAME_MAX (PD_COBS_MAX_ENCODED(PD_TX_RAW_MAX) + 2u)
+#define PD_TX_FRAME_BYTES(payload) (PD_COBS_MAX_ENCODED(PD_MIN_PACKET + (payload)) + 2u)
+#define PD_TX_FRAME_MAX PD_TX_FRAME_BYTES(PD_TX_MAX_PAYLOAD)
+/* A CONTROL frame (payloads are <= 6 B: RESET_ACK) and a notice (Failsafe, DecodeError). */
+#define PD_TX_CONTROL_MAX PD_TX_FRAME_BYTES(6u)
+#define PD_TX_NOTICE_MAX PD_TX_FRAME_BYTES(8u)
+/*
+ * The most one received frame can make the device send: an EVENT (DESYNC),
+ * then the largest Ack and the notice that may follow it (or a DecodeError
+ * and its Ack, which are smaller). A frame is acted upon only when the
+ * transmit queue has this much room; every platform's queue holds more.
+ */
+#define PD_TX_RESERVE (PD_TX_CONTROL_MAX + PD_TX_FRAME_MAX + PD_TX_NOTICE_MAX)
 
 /*
  * Diagnostic counters; they wrap, nothing depends on them. No message carries
@@ -84,8 +102,12 @@ typedef struct pd_link {
 
 void pd_link_init(pd_link_t *link);
 
-/* Feed one received byte; complete packets are acted upon at once. */
-void pd_link_rx_byte(struct pd_core *core, uint8_t byte);
+/*
+ * Offer one received byte; a complete packet is acted upon at once. Returns
+ * false, without consuming it, for a delimiter that completes a frame while
+ * the transmit queue has less than PD_TX_RESERVE of room: offer it again later.
+ */
+bool pd_link_rx_byte(struct pd_core *core, uint8_t byte);
 
 /*
  * Send one packet whose payload (`len` bytes) already sits at

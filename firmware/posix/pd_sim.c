@@ -38,8 +38,12 @@
 #include "pd_control.h"
 #include "pd_core.h"
 
-/* How long a frame may wait for room in the pty before it is dropped. */
-#define SIM_WRITE_BUDGET_MS 20
+/*
+ * The transmit queue, as on the Uno: frames wait here and the loop moves them
+ * to the pty when it can take them, never waiting for it. The same size as the
+ * Uno's ring, so the core holds back received frames on the same occasions.
+ */
+#define SIM_TX_SIZE 160u
 
 enum { SIM_PIN_UNUSED = 0, SIM_PIN_SERVO, SIM_PIN_DIGITAL };
 
@@ -59,6 +63,8 @@ typedef struct sim_hal {
     struct timespec start;
     uint8_t mode[PD_MAX_PINS];
     uint16_t value[PD_MAX_PINS];
+    uint8_t tx[SIM_TX_SIZE];
+    size_t tx_len; /* bytes queued, from tx[0] */
 } sim_hal_t;
 
 static const pd_board_info_t sim_board = {
@@ -159,32 +165,40 @@ static const char *sim_control_apply(void *ctx, const pd_control_cmd_t *cmd, dou
 
 /* --- the HAL ------------------------------------------------------------- */
 
+uint16_t pd_hal_tx_room(void *ctx)
+{
+    sim_hal_t *hal = ctx;
+    return (uint16_t)(SIM_TX_SIZE - hal->tx_len);
+}
+
 bool pd_hal_write(void *ctx, const uint8_t *data, uint16_t len)
 {
     sim_hal_t *hal = ctx;
-    size_t done = 0;
-    int budget = SIM_WRITE_BUDGET_MS;
+    if (len > SIM_TX_SIZE - hal->tx_len) {
+        return false;
+    }
+    memcpy(hal->tx + hal->tx_len, data, len);
+    hal->tx_len += len;
+    return true;
+}
 
-    while (done < len) {
-        ssize_t n = write(hal->master, data + done, len - done);
-        if (n > 0) {
-            done += (size_t)n;
-            continue;
-        }
+/* Move what the pty takes now from the queue to it. */
+static void sim_tx_flush(sim_hal_t *hal)
+{
+    while (hal->tx_len > 0) {
+        ssize_t n = write(hal->master, hal->tx, hal->tx_len);
         if (n < 0 && errno == EINTR) {
             continue;
         }
-        if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK) {
-            return false;
+        if (n <= 0) {
+            if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK) {
+                hal->tx_len = 0; /* the port is gone: what was queued is lost, as on a wire */
+            }
+            return;
         }
-        /* The pty is full (nobody reads): wait a little, then give up. */
-        if (budget-- <= 0) {
-            return false;
-        }
-        struct pollfd p = {.fd = hal->master, .events = POLLOUT};
-        poll(&p, 1, 1);
+        memmove(hal->tx, hal->tx + n, hal->tx_len - (size_t)n);
+        hal->tx_len -= (size_t)n;
     }
-    return true;
 }
 
 uint32_t pd_hal_millis(void *ctx)
@@ -290,6 +304,8 @@ int main(int argc, char **argv)
     static pd_core_t core;
     char slave_name[128];
     int slave_fd = -1;
+    static uint8_t rx[512];
+    size_t rx_len = 0, rx_off = 0;
 
     clock_gettime(CLOCK_MONOTONIC, &hal.start);
     for (int i = 1; i < argc; i++) {
@@ -351,28 +367,39 @@ int main(int argc, char **argv)
         if (sim_reboot) {
             sim_reboot = 0;
             sim_release_all(&hal);
+            hal.tx_len = 0; /* a reset MCU forgets its transmit queue */
+            rx_len = rx_off = 0;
             pd_core_init(&core, &hal);
         }
+        /* Bytes the core left last time (their replies need transmit room) go first. */
+        if (rx_off < rx_len) {
+            rx_off += pd_core_rx(&core, rx + rx_off, rx_len - rx_off);
+        }
+        short events = (short)((rx_off == rx_len ? POLLIN : 0) | (hal.tx_len > 0 ? POLLOUT : 0));
         struct pollfd fds[1 + PD_CONTROL_MAX_CLIENTS + 1];
-        fds[0] = (struct pollfd){.fd = hal.master, .events = POLLIN};
+        fds[0] = (struct pollfd){.fd = hal.master, .events = events};
         int nfds = 1 + pd_control_pollfds(&control, fds + 1);
         int ready = poll(fds, (nfds_t)nfds, 1);
         struct pollfd p = fds[0];
         if (ready > 0 && nfds > 1) {
             pd_control_service(&control);
         }
+        if (ready > 0 && (p.revents & POLLOUT)) {
+            sim_tx_flush(&hal);
+        }
         if (ready > 0 && (p.revents & POLLIN)) {
-            uint8_t buf[512];
-            ssize_t n = read(hal.master, buf, sizeof(buf));
+            ssize_t n = read(hal.master, rx, sizeof(rx));
             if (n > 0) {
-                pd_core_rx(&core, buf, (size_t)n);
+                rx_len = (size_t)n;
+                rx_off = pd_core_rx(&core, rx, rx_len);
             }
-        } else if (ready > 0 && p.revents) {
+        } else if (ready > 0 && (p.revents & (POLLHUP | POLLERR | POLLNVAL))) {
             /* POLLHUP/POLLERR should not happen with our slave open; never spin. */
             struct timespec ms = {0, 1000000};
             nanosleep(&ms, NULL);
         }
         pd_core_poll(&core);
+        sim_tx_flush(&hal); /* what this pass queued goes out now, not after the next poll() */
     }
 
     pd_control_close(&control);

@@ -31,6 +31,7 @@ void fake_init(fake_hal_t *hal)
     hal->info.num_pins = 20;
     hal->info.max_servos = 8;
     hal->info.reserved_pins = 0x3;
+    hal->tx_room = UINT16_MAX;
 }
 
 void fake_clear(fake_hal_t *hal)
@@ -53,9 +54,17 @@ const fake_frame_t *fake_frame(const fake_hal_t *hal, size_t i)
     return &hal->frames[(first + i) % FAKE_MAX_FRAMES];
 }
 
+uint16_t pd_hal_tx_room(void *ctx)
+{
+    return ((fake_hal_t *)ctx)->tx_room;
+}
+
 bool pd_hal_write(void *ctx, const uint8_t *data, uint16_t len)
 {
     fake_hal_t *hal = ctx;
+    if (len > hal->tx_room) {
+        return false; /* all or nothing, as the HAL contract says */
+    }
     uint8_t raw[PD_MAX_ENCODED_FRAME];
     bool flushed = false;
     pd_packet_t pkt;

@@ -27,6 +27,7 @@ typedef struct fake_frame {
 typedef struct fake_hal {
     uint32_t now_ms;
     bool fail_writes;       /* pd_hal_write refuses every frame */
+    uint16_t tx_room;       /* what pd_hal_tx_room reports (fake_init: plenty) */
     size_t n_frames;        /* frames sent since the last fake_clear() (may exceed the ring) */
     fake_frame_t frames[FAKE_MAX_FRAMES];
     int servo_us[PD_MAX_PINS];  /* -1: not a servo */

@@ -45,5 +45,6 @@ extern const pd_test_case_t pd_tests_dispatch[];
 extern const pd_test_case_t pd_tests_motion[];
 extern const pd_test_case_t pd_tests_failsafe[];
 extern const pd_test_case_t pd_tests_encode[];
+extern const pd_test_case_t pd_tests_engine[];
 
 #endif /* PD_TEST_H */

@@ -1,0 +1,221 @@
+/*
+ * The I/O engine: the transmit queue's back-pressure on receiving, report
+ * slots (newest value wins, never ahead of a reply's room) and the periodic
+ * hook. The fake HAL's tx_room stands for the platform's transmit queue.
+ */
+#include <pb_encode.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "pd_cobs.h"
+#include "pd_packet.h"
+#include "pd_test.h"
+#include "test_util.h"
+
+/* Encode one ArduinoIn as a whole wire frame (delimiter included); returns its length. */
+static size_t frame_of(tdev_t *d, const protoduino_ArduinoIn *in, uint8_t *wire, size_t cap)
+{
+    uint8_t payload[PD_MAX_PAYLOAD];
+    uint8_t raw[PD_MIN_PACKET + PD_MAX_PAYLOAD];
+    size_t raw_len = 0;
+    pb_ostream_t s = pb_ostream_from_buffer(payload, sizeof(payload));
+    if (!pb_encode(&s, protoduino_ArduinoIn_fields, in) ||
+        pd_packet_build(PD_PACKET_COMMAND, d->host_seq++, payload, s.bytes_written, raw,
+                        sizeof(raw), &raw_len) != PD_PACKET_OK) {
+        return 0;
+    }
+    size_t n = pd_cobs_encode(raw, raw_len, wire, cap - 1u);
+    wire[n++] = 0;
+    return n;
+}
+
+static void test_frame_waits_for_transmit_room(void)
+{
+    tdev_t d;
+    t_active(&d);
+    uint8_t wire[64];
+    protoduino_ArduinoIn in = m_digital_init(7, 13, true);
+    size_t n = frame_of(&d, &in, wire, sizeof(wire));
+    CHECK(n > 2);
+
+    d.hal.tx_room = PD_TX_RESERVE - 1u;
+    /* Every byte but the delimiter is taken; the delimiter waits. */
+    CHECK_EQ(pd_core_rx(&d.core, wire, n), n - 1u);
+    CHECK_EQ(fake_count(&d.hal), 0);
+    CHECK_EQ(d.hal.digital[13], -1); /* not executed either */
+    CHECK(!pd_core_rx_byte(&d.core, 0));
+    pd_core_poll(&d.core);
+    CHECK_EQ(fake_count(&d.hal), 0);
+
+    d.hal.tx_room = PD_TX_RESERVE;
+    CHECK(pd_core_rx_byte(&d.core, 0));
+    CHECK_EQ(t_status(&d, 7), protoduino_Status_STATUS_OK);
+    CHECK_EQ(d.hal.digital[13], 1);
+}
+
+static void test_reserve_holds_the_largest_replies(void)
+{
+    /* A Ping with the longest payload that clears the failsafe sends the
+     * largest Ack and then a Failsafe notice: both fit the reserve. */
+    tdev_t d;
+    t_active(&d);
+    uint8_t payload[64];
+    memset(payload, 0xA5, sizeof(payload));
+    protoduino_ArduinoIn in = m_stop(1);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    fake_clear(&d.hal);
+    d.hal.tx_room = PD_TX_RESERVE;
+    in = m_ping(2, payload, sizeof(payload));
+    t_send_in(&d, &in);
+    CHECK_EQ(t_status(&d, 2), protoduino_Status_STATUS_OK);
+    protoduino_Failsafe fs;
+    CHECK_EQ(t_failsafes(&d, &fs), 1);
+    CHECK(!fs.active);
+}
+
+/* A report source for the tests: slot N reports value[N] as a Log text. */
+static unsigned report_value[PD_REPORT_SLOTS];
+static unsigned report_calls;
+
+static bool test_report(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *out)
+{
+    (void)core;
+    report_calls++;
+    out->which_data = protoduino_ArduinoOut_log_tag;
+    out->data.log.level = protoduino_LogLevel_LOG_LEVEL_INFO;
+    snprintf(out->data.log.text, sizeof(out->data.log.text), "%u:%u", (unsigned)slot,
+             report_value[slot]);
+    return true;
+}
+
+static int reports_sent(const tdev_t *d, char *last, size_t cap)
+{
+    int n = 0;
+    protoduino_ArduinoOut out;
+    for (size_t i = 0; i < fake_count(&d->hal); i++) {
+        if (t_out(d, i, &out) && out.which_data == protoduino_ArduinoOut_log_tag) {
+            n++;
+            snprintf(last, cap, "%s", out.data.log.text);
+        }
+    }
+    return n;
+}
+
+static void test_report_newest_value_replaces_unsent(void)
+{
+    tdev_t d;
+    char last[64] = "";
+    t_active(&d);
+    d.core.report = test_report;
+    report_calls = 0;
+
+    /* No room beyond the replies' reserve: the report waits, the bit stays. */
+    d.hal.tx_room = PD_TX_RESERVE + 4u;
+    report_value[3] = 1;
+    pd_core_report(&d.core, 3);
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
+    report_value[3] = 2;
+    pd_core_report(&d.core, 3);
+    report_value[3] = 3;
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
+
+    /* Room: one report, with the newest value; the older ones never leave. */
+    d.hal.tx_room = UINT16_MAX;
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1);
+    CHECK(strcmp(last, "3:3") == 0);
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1); /* sent once */
+}
+
+static void test_reply_goes_before_pending_report(void)
+{
+    tdev_t d;
+    char last[64] = "";
+    t_active(&d);
+    d.core.report = test_report;
+    report_value[0] = 42;
+    pd_core_report(&d.core, 0);
+    /* A command arriving in the same pass is answered first; the report follows. */
+    protoduino_ArduinoIn in = m_digital_init(9, 13, false);
+    t_send_in(&d, &in);
+    pd_core_poll(&d.core);
+    CHECK_EQ(fake_count(&d.hal), 2);
+    protoduino_ArduinoOut out;
+    CHECK(t_out(&d, 0, &out));
+    CHECK_EQ(out.which_data, protoduino_ArduinoOut_ack_tag);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1);
+    CHECK(strcmp(last, "0:42") == 0);
+}
+
+static void test_one_report_per_pass_lowest_slot_first(void)
+{
+    tdev_t d;
+    char last[64] = "";
+    t_active(&d);
+    d.core.report = test_report;
+    report_value[1] = 10;
+    report_value[5] = 50;
+    pd_core_report(&d.core, 5);
+    pd_core_report(&d.core, 1);
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1);
+    CHECK(strcmp(last, "1:10") == 0);
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 2);
+    CHECK(strcmp(last, "5:50") == 0);
+}
+
+static void test_no_report_while_idle(void)
+{
+    tdev_t d;
+    char last[64] = "";
+    t_boot(&d);
+    fake_clear(&d.hal);
+    d.core.report = test_report;
+    pd_core_report(&d.core, 0);
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
+    CHECK_EQ(fake_count(&d.hal), 0);
+}
+
+static unsigned hook_calls;
+static uint32_t hook_last;
+
+static void test_hook(pd_core_t *core, uint32_t now_ms)
+{
+    (void)core;
+    hook_calls++;
+    hook_last = now_ms;
+}
+
+static void test_periodic_hook_once_per_tick(void)
+{
+    tdev_t d;
+    t_active(&d);
+    hook_calls = 0;
+    d.core.periodic = test_hook;
+    pd_core_poll(&d.core);
+    CHECK_EQ(hook_calls, 0); /* the tick of init already ran its course */
+    d.hal.now_ms += 1;
+    pd_core_poll(&d.core);
+    pd_core_poll(&d.core);
+    CHECK_EQ(hook_calls, 1);
+    CHECK_EQ(hook_last, d.hal.now_ms);
+    d.hal.now_ms += 5; /* a slow pass: one call, not five */
+    pd_core_poll(&d.core);
+    CHECK_EQ(hook_calls, 2);
+}
+
+const pd_test_case_t pd_tests_engine[] = {
+    TEST_CASE(test_frame_waits_for_transmit_room),
+    TEST_CASE(test_reserve_holds_the_largest_replies),
+    TEST_CASE(test_report_newest_value_replaces_unsent),
+    TEST_CASE(test_reply_goes_before_pending_report),
+    TEST_CASE(test_one_report_per_pass_lowest_slot_first),
+    TEST_CASE(test_no_report_while_idle),
+    TEST_CASE(test_periodic_hook_once_per_tick),
+    {NULL, NULL},
+};
