@@ -1,8 +1,9 @@
 """The Uno firmware stays below StandardFirmataPlus in flash and static RAM.
 
 StandardFirmataPlus, built with the same toolchain (docs: TOOLCHAIN reference
-sizes), needs 15,202 B of flash and 1,274 B of static RAM; protoduino aims at
-12,000 B and 800 B, leaving most of the Uno's 2 KB of RAM to the stack. The
+sizes), needs 15,202 B of flash and 1,274 B of static RAM; protoduino aims to
+stay below StandardFirmata (13,212 B and 1,069 B), which does digital and
+analog I/O, PWM, servos and I2C with no CRC, no acks and no failsafe. The
 build itself prints the figures (``make -C firmware avr``); this test checks
 that it does, measures them again with ``avr-size`` and enforces the limit.
 """
@@ -22,8 +23,8 @@ ROOT = Path(__file__).resolve().parents[1]
 ELF = ROOT / "build" / "avr" / "protoduino.elf"
 FLASH_LIMIT = 15_202
 RAM_LIMIT = 1_274
-FLASH_AIM = 12_000
-RAM_AIM = 800
+FLASH_AIM = 13_212
+RAM_AIM = 1_069
 
 
 def _sections(elf: Path) -> dict[str, int]:

@@ -111,18 +111,23 @@ bool pd_avr_uart_write(const uint8_t *data, uint16_t len)
 
 /*
  * One byte per interrupt, the ring's next, into the data register; off when
- * the ring is empty. Short and without nested interrupts: it delays a servo
- * edge by at most its own few dozen cycles.
+ * the ring is empty. The interrupt is level-triggered (it stays pending while
+ * the data register is empty), so it masks itself before letting other
+ * interrupts in: the servo interrupt must not wait behind this one, or a
+ * pulse edge would be late by the rest of this handler. Writing UCSR0B from
+ * here and from pd_avr_uart_write() cannot lose the enable: the main loop
+ * only ever sets it, after its frame is in the ring.
  */
 ISR(USART_UDRE_vect)
 {
+    UCSR0B &= (uint8_t)~_BV(UDRIE0);
+    sei();
     uint8_t tail = tx_tail;
-    if (tail == tx_head) {
-        UCSR0B &= (uint8_t)~_BV(UDRIE0);
-        return;
+    if (tail != tx_head) {
+        UDR0 = tx_buf[tail];
+        tx_tail = (uint8_t)(tail + 1u == PD_AVR_TX_SIZE ? 0u : tail + 1u);
+        UCSR0B |= _BV(UDRIE0);
     }
-    UDR0 = tx_buf[tail];
-    tx_tail = (uint8_t)(tail + 1u == PD_AVR_TX_SIZE ? 0u : tail + 1u);
 }
 
 uint16_t pd_avr_uart_rx_dropped(void)
