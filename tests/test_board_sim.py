@@ -421,3 +421,39 @@ def test_a_frame_monitor_calling_the_board_is_refused(board: Board, sim: SimBoar
     servo.write(60)
     expect_pin(sim, 9, [SAFE_90_US, us(30), us(60)])  # the monitor's 150 never went out
     assert board.stats.timeouts == 0 and board.stats.retransmits == 0
+
+
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    """Run the command line in another process (bounded: a hung one fails the test)."""
+    return subprocess.run(
+        [sys.executable, "-m", "protoduino.cli.main", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+
+
+def test_a_second_opener_is_refused_and_the_first_notices_nothing(
+    board: Board, sim: SimBoard
+) -> None:
+    servo = board.servo(9)
+    servo.write(30)
+    expect_pin(sim, 9, [SAFE_90_US, us(30)])
+    before = board.stats
+    # Another process: a one-shot command that would move the servo, and a monitor.
+    second = cli("servo", sim.port, "9", "150", "--handshake-timeout", "2")
+    monitor = cli("monitor", sim.port, "--duration", "1")
+    for other in (second, monitor):
+        assert other.returncode == 1, other
+        assert "in use" in other.stderr, other.stderr
+    servo.write(60)
+    # The pin took the first session's values only: never 150 degrees, never a reset.
+    expect_pin(sim, 9, [SAFE_90_US, us(30), us(60)])
+    after = board.stats
+    assert (after.handshakes, after.reboots, after.reconnects, after.timeouts) == (
+        before.handshakes,
+        before.reboots,
+        before.reconnects,
+        0,
+    )

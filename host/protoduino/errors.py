@@ -4,6 +4,7 @@
      +-- ProtocolError            bytes that break the wire protocol (bad control payload, ...)
      |    +-- PayloadTooLargeError  a message over MAX_PAYLOAD, refused at the sender
      +-- TransportError           the port could not be opened, or was lost
+     |    +-- PortInUseError        another program holds the port
      +-- LinkError                the link could not be (re)established
      |    +-- HandshakeError        the device did not answer RESET in time
      |    +-- VersionMismatchError  device and host speak different protocol versions
@@ -38,6 +39,10 @@ class PayloadTooLargeError(ProtocolError):
 
 class TransportError(ProtoduinoError):
     """The serial port could not be opened, or failed while in use."""
+
+
+class PortInUseError(TransportError):
+    """Another program (another Board, ``protoduino monitor``...) holds the port."""
 
 
 class LinkError(ProtoduinoError):

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import errno
 import logging
 import os
 import select
@@ -40,7 +41,7 @@ from typing import Any, Protocol
 import serial
 
 from .constants import PacketType
-from .errors import TransportError
+from .errors import PortInUseError, TransportError
 from .framing import DELIMITER, StreamDecoder, frame_packet
 from .packets import BadFrame, Packet
 
@@ -231,12 +232,26 @@ class Transport:
                 baudrate=self.baudrate,
                 timeout=0,
                 write_timeout=None if no_write_timeout else WRITE_TIMEOUT,
+                # pyserial takes flock(LOCK_EX | LOCK_NB) on a serial port or pty before
+                # it configures anything: a second opener fails, and the first one's line
+                # is untouched (two hosts would re-handshake each other in turn).
+                exclusive=True,
             )
             self._port = port
             # docs/protocol.md 2: a lone 0x00 flushes the receiver's half-filled buffer.
             self._write_raw(DELIMITER)
         except Exception as error:  # any URL handler's failure, in the ProtoduinoError tree
+            in_use = self._port is None and getattr(error, "errno", None) in (
+                errno.EAGAIN,
+                errno.EWOULDBLOCK,
+            )  # pyserial's "Could not exclusively lock port": the lock is held
             self._close_port()
+            if in_use:
+                raise PortInUseError(
+                    f"cannot open {self.url}: port in use by another program (another "
+                    "protoduino Board or `protoduino monitor`, in this or another process); "
+                    "close it first"
+                ) from error
             hint = ""
             if no_write_timeout and "option 'control'" in str(error):
                 hint = (

@@ -65,6 +65,7 @@ class Serial(SerialBase):
             baudrate=self.baudrate,
             timeout=self._poll_interval(),
             write_timeout=self.write_timeout,
+            exclusive=self.exclusive,  # the wrapped port is locked as the caller asked
         )
         self.is_open = True
         register(cfg.name, self)
