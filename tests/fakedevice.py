@@ -77,7 +77,7 @@ class FakeDevice:
         self._active = False
         self._tx_seq = 0
         self._decoder = StreamDecoder()
-        self._dedupe: collections.OrderedDict[int, int] = collections.OrderedDict()
+        self.dedupe: collections.OrderedDict[int, int] = collections.OrderedDict()
         #: pin -> "servo" | "digital"; forgotten on reboot, like a real device.
         self.pins: dict[int, str] = {}
         self.values: dict[int, int] = {}
@@ -140,7 +140,7 @@ class FakeDevice:
             self._active = False
             self._tx_seq = 0
             self._decoder.reset()
-            self._dedupe.clear()
+            self.dedupe.clear()
             self.pins.clear()
             self.values.clear()
         self.send_control(event_payload(EventCode.BOOT))
@@ -175,18 +175,37 @@ class FakeDevice:
                     continue
 
     def send_control(self, payload: bytes, *, seq: int | None = None) -> None:
-        self.send_raw(frame_packet(PacketType.CONTROL, self._next_seq(seq), payload))
+        self.send_raw(frame_packet(PacketType.CONTROL, self.next_seq(seq), payload))
 
     def send_data(self, msg: Any, *, delay: float = 0.0, seq: int | None = None) -> None:
         payload = msg.SerializeToString()
-        self.send_raw(frame_packet(PacketType.DATA, self._next_seq(seq), payload), delay)
+        self.send_raw(frame_packet(PacketType.DATA, self.next_seq(seq), payload), delay)
 
-    def _next_seq(self, seq: int | None) -> int:
+    def next_seq(self, seq: int | None = None) -> int:
+        """The SEQ for the next packet the fake sends (``seq``, if given, instead)."""
         with self._cond:
             if seq is not None:
                 return seq
             seq, self._tx_seq = self._tx_seq, (self._tx_seq + 1) & 0xFF
             return seq
+
+    def skip_seq(self, count: int) -> None:
+        """Use up ``count`` SEQ numbers: to the host, that many packets lost on the way."""
+        for _ in range(count):
+            self.next_seq()
+
+    @property
+    def tx_seq(self) -> int:
+        """The SEQ the fake's next packet will carry."""
+        with self._cond:
+            return self._tx_seq
+
+    def forget(self) -> None:
+        """Lose every pin, value and remembered id without a BOOT (a reset the host missed)."""
+        with self._cond:
+            self.pins.clear()
+            self.values.clear()
+            self.dedupe.clear()
 
     # --- observing ------------------------------------------------------------------
 
@@ -210,8 +229,8 @@ class FakeDevice:
         """Ack OK after a minimal execution (pin table, values, ping echo, info)."""
         mid = msg.message_id
         kind = msg.WhichOneof("data")
-        if mid in self._dedupe and kind not in ("ping", "get_info"):
-            return [ack(mid, self._dedupe[mid])]
+        if mid in self.dedupe and kind not in ("ping", "get_info"):
+            return [ack(mid, self.dedupe[mid])]
         out = ack(mid)
         if kind == "ping":
             out.ack.ping_echo = msg.ping.payload
@@ -235,9 +254,9 @@ class FakeDevice:
                 self.values[ctl.pin] = int(ctl.level)
             else:
                 self.values[ctl.pin] = getattr(ctl, str(ctl.WhichOneof("value")))
-        self._dedupe[mid] = out.ack.status
-        while len(self._dedupe) > DEDUPE_WINDOW:
-            self._dedupe.popitem(last=False)
+        self.dedupe[mid] = out.ack.status
+        while len(self.dedupe) > DEDUPE_WINDOW:
+            self.dedupe.popitem(last=False)
         return [out]
 
     def _run(self) -> None:

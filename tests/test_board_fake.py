@@ -171,10 +171,15 @@ def test_session_restore_after_reboot(board: Board, fake: FakeDevice) -> None:
     assert fake.values[9] == 50
 
 
-def test_held_call_resumes_after_restore(board: Board, fake: FakeDevice) -> None:
+def test_held_call_resumes_after_restore(fake: FakeDevice) -> None:
+    # ack_timeout 0.5: room for the reboot before retries run out.
+    with Board.open(fake.port, ack_timeout=0.5, ping=False) as board:
+        _held_call_resumes_after_restore(board, fake)
+
+
+def _held_call_resumes_after_restore(board: Board, fake: FakeDevice) -> None:
     rec = Recorder(board)
     servo = board.servo(9)
-    board._rpc.ack_timeout = 0.5  # room for the reboot before retries run out
     swallowed: list[int] = []
 
     def reboot_on_write(msg: Any) -> list[Any]:

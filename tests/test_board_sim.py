@@ -192,7 +192,7 @@ def test_host_checks_match_the_device(
         api(board)
     assert host.value.sent is False
     with pytest.raises(protoduino.CommandRejectedError) as device:
-        board._rpc.call(raw(build))  # the same command, past the host's checks
+        board.request(raw(build))  # the same command, past the host's checks
     assert device.value.sent is True
     assert host.value.status == device.value.status
 
@@ -202,20 +202,20 @@ def test_state_dependent_checks_match_the_device(board: Board) -> None:
     with pytest.raises(protoduino.CommandRejectedError) as host:
         board.servo(13)
     with pytest.raises(protoduino.CommandRejectedError) as device:
-        board._rpc.call(raw(lambda m: m.servo_init.MergeFrom(_si(13))))
+        board.request(raw(lambda m: m.servo_init.MergeFrom(_si(13))))
     assert host.value.status == device.value.status == Status.STATUS_PIN_IN_USE
     servo = board.servo(9, min_us=1000, max_us=2000)
     with pytest.raises(protoduino.CommandRejectedError) as host:
         servo.write_us(2001)
     with pytest.raises(protoduino.CommandRejectedError) as device:
-        board._rpc.call(raw(lambda m: m.servo_control.MergeFrom(_sc(9, us_=2001))))
+        board.request(raw(lambda m: m.servo_control.MergeFrom(_sc(9, us_=2001))))
     assert host.value.status == device.value.status == Status.STATUS_OUT_OF_RANGE
     for pin in (2, 3, 4, 5, 6, 7, 8):
         board.servo(pin)
     with pytest.raises(protoduino.CommandRejectedError) as host:
         board.servo(10)
     with pytest.raises(protoduino.CommandRejectedError) as device:
-        board._rpc.call(raw(lambda m: m.servo_init.MergeFrom(_si(10))))
+        board.request(raw(lambda m: m.servo_init.MergeFrom(_si(10))))
     assert host.value.status == device.value.status == Status.STATUS_NO_FREE_RESOURCE
 
 
@@ -234,7 +234,7 @@ def test_device_only_rejections(board: Board) -> None:
     ]
     for build, status in cases:
         with pytest.raises(protoduino.CommandRejectedError) as info:
-            board._rpc.call(raw(build))
+            board.request(raw(build))
         assert info.value.status == status and info.value.sent
 
 

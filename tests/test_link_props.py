@@ -13,7 +13,6 @@ exception would kill the board.
 from __future__ import annotations
 
 import contextlib
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -27,7 +26,6 @@ from hypothesis.stateful import (
     precondition,
     rule,
 )
-from protoduino import link as link_module
 from protoduino import rpc as rpc_module
 from protoduino._generated.schema_id import SCHEMA_ID
 from protoduino.constants import MAX_PAYLOAD, ControlCode, EventCode, PacketType
@@ -38,6 +36,7 @@ from protoduino.link import Link, LinkState
 from protoduino.messages import ArduinoIn, ArduinoOut, parse_in, parse_out
 from protoduino.packets import BadFrame, Packet, event_payload, parse_control, reset_ack_payload
 from protoduino.rpc import Rpc
+from protoduino.transport import TransportListener
 
 # --- pure receive path ------------------------------------------------------------------
 
@@ -68,12 +67,12 @@ def test_parsers_refuse_only_with_protocol_errors(
 
 
 class FakeClock:
-    """Stands in for the ``time`` module of link.py and rpc.py: a clock the test moves."""
+    """The clock the link and the request layer are given: it moves when the test moves it."""
 
     def __init__(self) -> None:
         self.now = 1000.0
 
-    def monotonic(self) -> float:
+    def __call__(self) -> float:
         return self.now
 
 
@@ -83,7 +82,12 @@ class FakeTransport:
     def __init__(self) -> None:
         self.url = self.name = "fake://"
         self.connected = True
+        self.rx_since_open = 0
+        self.rx_head = b""
         self.sent: list[tuple[PacketType, bytes, bool]] = []
+
+    def start(self, listener: TransportListener) -> None:
+        pass  # the machine calls the listener itself
         self.rx_since_open = 0  # what the link reports when the handshake fails
         self.rx_head = b""
 
@@ -119,31 +123,28 @@ class LinkMachine(RuleBasedStateMachine):
     def __init__(self) -> None:
         super().__init__()
         self.clock = FakeClock()
-        for module in (link_module, rpc_module):
-            module.__dict__["time"] = self.clock
         self.events: list[Event] = []
         self.transport = FakeTransport()
-        self.rpc = Rpc(notify=self.events.append, ack_timeout=0.25, ping=True, window=4)
+        self.rpc = Rpc(
+            notify=self.events.append, ack_timeout=0.25, ping=True, window=4, clock=self.clock
+        )
         self.link = Link(
-            self.transport,  # type: ignore[arg-type]
+            self.transport,
             self.rpc,
             handshake_timeout=5.0,
             notify=self.events.append,
+            clock=self.clock,
         )
         self.rpc.attach(self.link)
         self.decoder = StreamDecoder()
         self.calls: list[rpc_module.Call] = []
-
-    def teardown(self) -> None:
-        for module in (link_module, rpc_module):
-            module.__dict__["time"] = time
 
     # Every callback the I/O thread makes must return normally, whatever it is given.
     def _io(self, fn: Callable[..., object], *args: Any) -> None:
         fn(*args)
 
     def _seq(self, seq: int | None) -> int:
-        return self.link._rx_expected if seq is None else seq
+        return self.link.expected_seq if seq is None else seq
 
     def _packet(self, ptype: PacketType, seq: int | None, payload: bytes) -> None:
         self._io(self.link.transport_received, [Packet(ptype, self._seq(seq), payload)])
@@ -208,9 +209,9 @@ class LinkMachine(RuleBasedStateMachine):
     @rule(seq=seqs, status=st.sampled_from([0, 0, 0, 4]))
     def device_answers(self, seq: int | None, status: int) -> None:
         """A well-behaved device: one Ack for each command in flight, echo included."""
-        for mid, call in list(self.rpc._inflight.items()):
+        for call in self.rpc.state().inflight:
             out = ArduinoOut()
-            out.ack.message_id = mid
+            out.ack.message_id = call.message_id
             out.ack.status = status  # type: ignore[assignment]
             out.ack.ping_echo = parse_in(call.payload).ping.payload
             self._packet(PacketType.DATA, seq, out.SerializeToString())
@@ -265,11 +266,12 @@ class LinkMachine(RuleBasedStateMachine):
     def consistent(self) -> None:
         assert self.link.state in tuple(LinkState)
         rpc = self.rpc
-        assert len(rpc._inflight) <= rpc.window
-        assert all(mid in rpc._calls for mid in rpc._inflight)
+        state = rpc.state()
+        assert len(state.inflight) <= rpc.window
+        assert all(call.message_id in state.open_calls for call in state.inflight)
         # The call bound: no call awaits its Ack past its round of retries, even after
         # a tick far later than due.
-        for call in rpc._inflight.values():
+        for call in state.inflight:
             assert self.clock.now < call.round_start + rpc.round_time
         for call in self.calls:
             if call.done.is_set():
@@ -291,8 +293,3 @@ LinkMachine.TestCase.settings = settings(
     suppress_health_check=[HealthCheck.too_slow],
 )
 test_link_state_machine = LinkMachine.TestCase
-
-
-def test_the_clock_is_restored() -> None:
-    # The machine swaps the modules' clock while it runs; it must put it back.
-    assert link_module.__dict__["time"] is time and rpc_module.__dict__["time"] is time

@@ -51,7 +51,7 @@ class Executions:
         self.arrivals[mid] += 1
         self.order.append(mid)
         kind = msg.WhichOneof("data")
-        if kind not in ("ping", "get_info") and mid not in self.fake._dedupe:
+        if kind not in ("ping", "get_info") and mid not in self.fake.dedupe:
             if self.count[mid]:
                 self.evicted_retransmissions.append(mid)
             self.count[mid] += 1
@@ -105,7 +105,7 @@ def test_lost_ack_while_later_commands_stream_executes_once(fake: FakeDevice) ->
         assert ex.arrivals[first[0]] == 2  # X was retransmitted once ...
         assert ex.count[first[0]] == 1  # ... and answered from the window, not run again
         assert max(ex.count.values()) == 1, ex.evicted_retransmissions
-        assert board._rpc.guard_holds > 0  # the guard did hold newer ids back
+        assert board.stats.guard_holds > 0  # the guard did hold newer ids back
         # Between X's first arrival and its retransmission, at most 15 other ids.
         i, j = (k for k, mid in enumerate(ex.order) if mid == first[0])
         assert len(set(ex.order[i + 1 : j])) <= DEDUPE_WINDOW - 1
@@ -235,10 +235,7 @@ def test_a_device_that_lost_its_configuration_unseen_is_restored(fake: FakeDevic
         servo = board.servo(9)
         servo.write(45)
         led = board.digital_output(13)
-        with fake._cond:  # a reset whose BOOT was lost: state gone, link still up
-            fake.pins.clear()
-            fake.values.clear()
-            fake._dedupe.clear()
+        fake.forget()  # a reset whose BOOT was lost: state gone, link still up
         servo.write(120)
         assert fake.pins == {9: "servo", 13: "digital"}
         assert fake.values == {9: 120}
@@ -607,9 +604,9 @@ def test_a_held_new_ping_does_not_block_the_retransmission_it_waits_for(
         assert fake.wait_for(lambda: bool(first))
         others = threading.Thread(target=stream_writes, args=(board, 2, 10))
         others.start()
-        assert fake.wait_for(lambda: board._rpc.guard_holds > 0)
+        assert fake.wait_for(lambda: board.stats.guard_holds > 0)
         board.pinging = True  # an automatic Ping falls due: a new id, held by the guard
-        assert fake.wait_for(lambda: bool(board._rpc._urgent))
+        assert fake.wait_for(lambda: board.rpc_state().urgent > 0)
         fake.answer_reset = False  # the link stays down a moment
         fake.send_data(fd.ack(1), seq=200)  # a SEQ far off: the host re-handshakes
         assert fake.wait_for(lambda: board.stats.seq_desyncs == 1)

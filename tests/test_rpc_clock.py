@@ -8,6 +8,7 @@ verdict is exact.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -30,11 +31,6 @@ class Clock:
         return self.now
 
 
-class FakeTransport:
-    def recent_frames(self) -> tuple[str, ...]:
-        return ()
-
-
 class FakeLink:
     """What Rpc uses of a Link: an always-up link that records when each command left."""
 
@@ -42,15 +38,17 @@ class FakeLink:
         self.clock = clock
         self.active = True
         self.down_error: ProtoduinoError | None = None
-        self.transport = FakeTransport()
         self.reboots = 0
         self.sent: list[float] = []
-        self.expect_traffic: Any = None
+        self.expect_traffic: Callable[[], bool] = lambda: True
 
     def send_command(self, payload: bytes) -> bool:
         if self.active:
             self.sent.append(self.clock.now)
         return self.active
+
+    def recent_frames(self) -> tuple[str, ...]:
+        return ()
 
 
 def setup() -> tuple[Clock, FakeLink, Rpc]:
@@ -65,7 +63,7 @@ def setup() -> tuple[Clock, FakeLink, Rpc]:
         clock=clock,
     )
     link = FakeLink(clock)
-    rpc.attach(link)  # type: ignore[arg-type]
+    rpc.attach(link)
     return clock, link, rpc
 
 

@@ -58,6 +58,7 @@ from .constants import (
     SERVO_LIMIT_MIN_US,
     SERVO_MAX_DEGREES,
     SERVO_MAX_SPEED,
+    WATCHDOG_TIMEOUT,
 )
 from .errors import (
     BoardClosedError,
@@ -69,7 +70,7 @@ from .errors import (
 from .events import Event, EventCallback, EventDispatcher, EventKind, Stats
 from .link import Link
 from .messages import ArduinoIn, ArduinoOut, Status, status_name
-from .rpc import Call, Rpc
+from .rpc import Ack, Call, Rpc, RpcState
 from .transport import FrameMonitor, Transport
 
 log = logging.getLogger(__name__)
@@ -334,6 +335,7 @@ class Board:
         ping: bool = True,
         monitor: FrameMonitor | None = None,
         capture: str | os.PathLike[str] | None = None,
+        watchdog_timeout: float = WATCHDOG_TIMEOUT,
     ) -> None:
         self.url = url
         self._lock = threading.Lock()
@@ -358,7 +360,11 @@ class Board:
         if self._capture is not None:
             self._transport.add_monitor(self._capture.frame)
         self._link = Link(
-            self._transport, self._rpc, handshake_timeout=handshake_timeout, notify=self._notify
+            self._transport,
+            self._rpc,
+            handshake_timeout=handshake_timeout,
+            watchdog_timeout=watchdog_timeout,
+            notify=self._notify,
         )
         self._rpc.attach(self._link)
         if self._capture is not None:
@@ -385,6 +391,7 @@ class Board:
         ping: bool = True,
         monitor: FrameMonitor | None = None,
         capture: str | os.PathLike[str] | None = None,
+        watchdog_timeout: float = WATCHDOG_TIMEOUT,
     ) -> Board:
         """Open ``url`` (any pyserial URL), handshake and read the device's info.
 
@@ -401,7 +408,8 @@ class Board:
         frame in both directions with its time, the link counters and the events
         (:mod:`protoduino.capture`; ``protoduino decode`` reads it, ``protoduino
         monitor --follow`` shows it live), raising :class:`CaptureError` if it
-        cannot be written.
+        cannot be written; ``watchdog_timeout`` is how long the device may stay
+        silent while answers are due before the link handshakes again.
         """
         return cls(
             url,
@@ -413,6 +421,7 @@ class Board:
             ping=ping,
             monitor=monitor,
             capture=capture,
+            watchdog_timeout=watchdog_timeout,
         )
 
     # --- context and life cycle -------------------------------------------------------
@@ -777,6 +786,25 @@ class Board:
         self._transport.add_monitor(monitor)
 
     @property
+    def call_timeout(self) -> float:
+        """Longest a call takes before it fails: its retries, plus waiting for a link that is down."""
+        return self._rpc.call_timeout
+
+    def rpc_state(self) -> RpcState:
+        """A snapshot of the request layer's table (calls in flight, queued, the next id)."""
+        return self._rpc.state()
+
+    def request(self, msg: ArduinoIn) -> Ack:
+        """Send one ArduinoIn exactly as given and return the device's Ack.
+
+        Nothing is checked on the host and nothing is remembered for a reboot's
+        restore: this is for a message the API has no method for, and for testing
+        the device's own checks. Any status but OK raises
+        :class:`CommandRejectedError`, as every command does.
+        """
+        return self._rpc.call(msg)
+
+    @property
     def stats(self) -> Stats:
         """A snapshot of the link counters."""
         link, rpc, tr = self._link, self._rpc, self._transport
@@ -810,6 +838,7 @@ class Board:
             rejected=rpc.rejected,
             late_acks=rpc.late_acks,
             unknown_acks=rpc.unknown_acks,
+            guard_holds=rpc.guard_holds,
             pings=rpc.pings,
             ping_failures=rpc.ping_failures,
             events_dropped=dict(self._events.dropped),

@@ -88,6 +88,8 @@ class Stats:
     rejected: int  # Acks with a status other than OK
     late_acks: int  # for a command already finished (e.g. a retransmission's twin)
     unknown_acks: int  # for an id this host never sent
+    #: New commands held back so that a retransmission stays inside the device's dedupe window.
+    guard_holds: int
     pings: int
     ping_failures: int
     #: Events the callbacks never saw because the event queue was full, by kind.

@@ -33,6 +33,7 @@ from enum import StrEnum
 from typing import Protocol
 
 from ._generated.schema_id import SCHEMA_ID
+from .clock import Clock
 from .constants import (
     PROTOCOL_VERSION,
     SEQ_DESYNC_THRESHOLD,
@@ -54,13 +55,40 @@ from .errors import (
 from .events import Event, EventKind
 from .messages import ArduinoOut, parse_out
 from .packets import BadFrame, Packet, parse_control, reset_payload
-from .transport import Transport
+from .transport import TransportListener
 
 log = logging.getLogger(__name__)
 
 #: First RESET retry delay and the largest one (seconds).
 RESET_FIRST_RETRY = 0.1
 RESET_MAX_RETRY = 1.0
+
+
+class PacketPort(Protocol):
+    """What the link needs of the layer below it.
+
+    :class:`~protoduino.transport.Transport` (a pyserial port and its I/O thread) in use; an
+    in-process device in tests, which then drives the link without a thread or a port.
+    """
+
+    url: str
+    name: str
+    #: True while the port is open.
+    connected: bool
+    #: Bytes received since the last open, and the first of them (to say what a wrong
+    #: device sent).
+    rx_since_open: int
+    rx_head: bytes
+
+    def start(self, listener: TransportListener) -> None: ...
+
+    def close(self) -> None: ...
+
+    def send(self, ptype: PacketType, payload: bytes, *, reset_seq: bool = False) -> None: ...
+
+    def clear_queue(self) -> None: ...
+
+    def recent_frames(self) -> tuple[str, ...]: ...
 
 
 class LinkState(StrEnum):
@@ -115,7 +143,7 @@ class Link:
 
     def __init__(
         self,
-        transport: Transport,
+        transport: PacketPort,
         listener: LinkListener,
         *,
         handshake_timeout: float,
@@ -123,8 +151,12 @@ class Link:
         watchdog_timeout: float = WATCHDOG_TIMEOUT,
         schema_id: int = SCHEMA_ID,
         version: int = PROTOCOL_VERSION,
+        clock: Clock = time.monotonic,
     ) -> None:
         self.transport = transport
+        #: Every timestamp of the link's own comes from this clock (the I/O thread's ticks
+        #: pass their ``now`` from the same one).
+        self._clock = clock
         self._listener = listener
         self._notify = notify
         self.handshake_timeout = handshake_timeout
@@ -183,6 +215,15 @@ class Link:
     def active(self) -> bool:
         return self.state is LinkState.ACTIVE
 
+    def recent_frames(self) -> tuple[str, ...]:
+        """The last frames on the line (the transport's record), to show in an error."""
+        return self.transport.recent_frames()
+
+    @property
+    def expected_seq(self) -> int:
+        """The SEQ the link expects on the device's next packet (docs/protocol.md 6)."""
+        return self._rx_expected
+
     def send_command(self, payload: bytes) -> bool:
         """Queue one COMMAND; False (nothing queued) unless the link is ACTIVE."""
         if self.state is not LinkState.ACTIVE:
@@ -199,7 +240,7 @@ class Link:
             self.reconnects += 1
             if self._was_active:
                 self._pending_reboot = True
-        self._start_handshake(time.monotonic())
+        self._start_handshake(self._clock())
 
     def transport_lost(self, error: Exception) -> None:
         if self.state in (LinkState.CLOSED, LinkState.FAILED):
@@ -229,7 +270,9 @@ class Link:
                 self._send_reset(now)
         elif (
             self.state is LinkState.ACTIVE
-            and now - self._last_rx > self.watchdog_timeout
+            # >=: at the due time this returns below, not a hair later (an exact clock
+            # would otherwise be asked to tick again at the same instant, forever).
+            and now - self._last_rx >= self.watchdog_timeout
             and self.expect_traffic()
         ):
             log.warning(
@@ -322,7 +365,7 @@ class Link:
         self._restart("device rebooted", now)
 
     def _packet(self, packet: Packet) -> None:
-        now = time.monotonic()
+        now = self._clock()
         if packet.type is PacketType.CONTROL:
             try:
                 ctl = parse_control(packet.payload)

@@ -55,8 +55,10 @@ import secrets
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Protocol
 
+from .clock import Clock
 from .commands import command
 from .constants import ACK_TIMEOUT, DEDUPE_WINDOW, MAX_PAYLOAD, MAX_RETRIES, PING_INTERVAL
 from .errors import (
@@ -67,7 +69,6 @@ from .errors import (
     ProtoduinoError,
 )
 from .events import Event, EventKind
-from .link import Link
 from .messages import ArduinoIn, ArduinoOut, Status, status_name
 
 log = logging.getLogger(__name__)
@@ -147,13 +148,40 @@ class Call:
 
 MessageHook = Callable[[ArduinoOut], None]
 RestoreProvider = Callable[[], list[ArduinoIn]]
-Clock = Callable[[], float]
 
 
-def _monotonic() -> float:
-    # Looked up at each call, not bound at import: the link property test swaps the
-    # module's ``time`` for its own clock.
-    return time.monotonic()
+class LinkPort(Protocol):
+    """What the request layer needs of the link below it (:class:`~protoduino.link.Link`)."""
+
+    down_error: ProtoduinoError | None
+    #: Set by :meth:`Rpc.attach`: whether the link's watchdog should expect answers.
+    expect_traffic: Callable[[], bool]
+    #: Device reboots seen (the request layer counts the ones only it can see).
+    reboots: int
+
+    @property
+    def active(self) -> bool: ...
+
+    def send_command(self, payload: bytes) -> bool: ...
+
+    def recent_frames(self) -> tuple[str, ...]:
+        """The last frames on the line, to show in an error."""
+        ...
+
+
+@dataclass(frozen=True)
+class RpcState:
+    """A consistent snapshot of the transaction table (:meth:`Rpc.state`), for diagnosis."""
+
+    #: The calls sent and awaiting their Ack, oldest first.
+    inflight: tuple[Call, ...]
+    #: Message ids of every call not finished yet (in flight or queued).
+    open_calls: tuple[int, ...]
+    #: Calls queued behind the window: automatic Pings first, then the user's.
+    urgent: int
+    pending: int
+    #: The id the next call will get.
+    next_id: int
 
 
 class Rpc:
@@ -169,11 +197,12 @@ class Rpc:
         ping: bool = True,
         ping_interval: float = PING_INTERVAL,
         link_wait: float = 5.0,
-        clock: Clock = _monotonic,
+        clock: Clock = time.monotonic,
+        first_id: int | None = None,
     ) -> None:
         if ack_timeout <= 0 or max_retries < 0 or window < 1:
             raise ValueError("ack_timeout > 0, max_retries >= 0 and window >= 1 are required")
-        self.link: Link | None = None
+        self.link: LinkPort | None = None
         self._notify = notify
         #: time.monotonic() unless a test injects its own; the I/O thread passes its
         #: ``now`` to link_tick, every other timestamp here comes from this clock.
@@ -189,7 +218,11 @@ class Rpc:
         self.message_hook: MessageHook | None = None
         self.restore_provider: RestoreProvider | None = None
         self._lock = threading.Lock()
-        self._next_id = secrets.randbelow(0xFFFFFFFF) + 1
+        # Random by default, so that ids from before a host restart do not look like
+        # retransmissions to the device's dedupe window; ``first_id`` fixes it (tests).
+        if first_id is not None and not 1 <= first_id <= 0xFFFFFFFF:
+            raise ValueError("first_id must be 1 .. 2**32-1 (0 is never a message id)")
+        self._next_id = first_id or secrets.randbelow(0xFFFFFFFF) + 1
         self._calls: dict[int, Call] = {}
         self._inflight: dict[int, Call] = {}
         self._urgent: collections.deque[Call] = collections.deque()  # pings
@@ -225,7 +258,18 @@ class Rpc:
         #: time.monotonic() of the last acknowledged automatic Ping.
         self.last_ping: float | None = None
 
-    def attach(self, link: Link) -> None:
+    def state(self) -> RpcState:
+        """The transaction table as it is now (taken under the table's lock)."""
+        with self._lock:
+            return RpcState(
+                inflight=tuple(self._inflight.values()),
+                open_calls=tuple(self._calls),
+                urgent=len(self._urgent),
+                pending=len(self._pending),
+                next_id=self._next_id,
+            )
+
+    def attach(self, link: LinkPort) -> None:
         self.link = link
         link.expect_traffic = self._expect_traffic
 
@@ -409,7 +453,7 @@ class Rpc:
         link = self.link
         if link is not None and not link.active and link.down_error is not None:
             return link.down_error
-        frames = link.transport.recent_frames() if link is not None else ()
+        frames = link.recent_frames() if link is not None else ()
         return AckTimeoutError(
             f"no Ack for {call.kind} (message_id {call.message_id}) after {call.attempts} "
             f"transmissions, {self.ack_timeout:g} s each",

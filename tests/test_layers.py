@@ -1,0 +1,205 @@
+"""The link and request layers on an in-process device: no port, no thread, no wall clock.
+
+Each test builds the two layers exactly as ``Board`` does (``Rpc`` attached to a ``Link``),
+hands the link a :class:`~virtualdevice.VirtualDevice` as its port and a
+:class:`~virtualdevice.ManualClock` as its clock, and plays the I/O thread itself. Every verdict
+is a count or an exact time on that clock.
+"""
+
+from __future__ import annotations
+
+import pytest
+from protoduino.constants import (
+    ACK_TIMEOUT,
+    FAILSAFE_TIMEOUT,
+    MAX_RETRIES,
+    PING_INTERVAL,
+    PacketType,
+)
+from protoduino.errors import AckTimeoutError, TransportError, VersionMismatchError
+from protoduino.events import Event, EventKind
+from protoduino.link import Link, LinkState
+from protoduino.messages import ArduinoIn
+from protoduino.rpc import Rpc
+from virtualdevice import ManualClock, VirtualDevice
+
+HANDSHAKE_TIMEOUT = 5.0
+WATCHDOG_TIMEOUT = 2.0
+
+
+class Stack:
+    """A Link and its Rpc over a virtual device, as Board wires them."""
+
+    def __init__(self, device: VirtualDevice, *, ping: bool = False, first_id: int = 1) -> None:
+        self.clock = ManualClock()
+        self.device = device
+        self.events: list[Event] = []
+        self.restore: list[ArduinoIn] = []
+        self.rpc = Rpc(
+            notify=self.events.append,
+            ack_timeout=ACK_TIMEOUT,
+            max_retries=MAX_RETRIES,
+            ping=ping,
+            link_wait=HANDSHAKE_TIMEOUT,
+            clock=self.clock,
+            first_id=first_id,
+        )
+        self.rpc.restore_provider = lambda: list(self.restore)
+        self.link = Link(
+            device,
+            self.rpc,
+            handshake_timeout=HANDSHAKE_TIMEOUT,
+            watchdog_timeout=WATCHDOG_TIMEOUT,
+            notify=self.events.append,
+            clock=self.clock,
+        )
+        self.rpc.attach(self.link)
+
+    def run(self, seconds: float) -> None:
+        self.device.run_until(self.link, self.clock, seconds)
+
+    def kinds(self) -> list[EventKind]:
+        return [e.kind for e in self.events]
+
+
+def digital_init(pin: int) -> ArduinoIn:
+    msg = ArduinoIn()
+    msg.digital_init.pin = pin
+    return msg
+
+
+def commands(device: VirtualDevice) -> int:
+    return sum(1 for ptype, _ in device.received if ptype is PacketType.COMMAND)
+
+
+def test_open_handshakes_with_one_reset() -> None:
+    stack = Stack(VirtualDevice())
+    stack.link.open()
+    assert stack.link.state is LinkState.ACTIVE
+    assert stack.device.resets == 1
+    assert stack.link.expected_seq == 1  # RESET_ACK was SEQ 0
+
+
+def test_a_command_is_acknowledged_and_executed_once() -> None:
+    stack = Stack(VirtualDevice())
+    stack.link.open()
+    call = stack.rpc.submit(digital_init(13))
+    assert stack.device.deliver() == 1
+    assert call.done.is_set() and call.error is None
+    assert [m.digital_init.pin for m in stack.device.executed] == [13]
+    assert stack.rpc.acks == 1 and stack.rpc.retransmits == 0
+
+
+def test_a_lost_ack_is_retransmitted_at_ack_timeout_and_not_executed_twice() -> None:
+    stack = Stack(VirtualDevice())
+    stack.link.open()
+    stack.device.lose = 1  # the first Ack never arrives
+    start = stack.clock()
+    call = stack.rpc.submit(digital_init(7))
+    stack.device.deliver()
+    stack.run(ACK_TIMEOUT * 0.99)
+    assert not call.done.is_set() and commands(stack.device) == 1
+    stack.run(ACK_TIMEOUT * 0.02)  # the retransmission went out at start + ACK_TIMEOUT
+    assert call.done.is_set() and call.error is None
+    assert commands(stack.device) == 2
+    assert len(stack.device.executed) == 1  # the dedupe window re-acknowledged it
+    assert call.rtt is not None and call.rtt <= stack.clock() - start
+    assert stack.rpc.retransmits == 1
+
+
+def test_a_command_never_acknowledged_fails_at_the_call_bound() -> None:
+    stack = Stack(VirtualDevice())
+    stack.link.open()
+    stack.device.silent = True
+    call = stack.rpc.submit(digital_init(7))
+    bound = ACK_TIMEOUT * (MAX_RETRIES + 1)
+    stack.run(bound * 0.999)
+    assert not call.done.is_set()
+    assert commands(stack.device) == MAX_RETRIES + 1
+    stack.run(bound * 0.002)
+    assert isinstance(call.error, AckTimeoutError)
+    assert stack.rpc.timeouts == 1
+
+
+def test_the_watchdog_handshakes_again_after_silence() -> None:
+    stack = Stack(VirtualDevice(), ping=True)
+    stack.link.open()
+    stack.run(1.5)  # pings answered: nothing to say
+    assert stack.link.watchdog_resets == 0 and stack.device.resets == 1
+    stack.device.silent = True
+    stack.run(WATCHDOG_TIMEOUT + 0.5)
+    assert stack.link.watchdog_resets == 1
+    assert stack.device.resets >= 2  # RESET again, until the device answers
+    stack.device.silent = False
+    stack.run(1.5)
+    assert stack.link.state is LinkState.ACTIVE
+    assert EventKind.CONNECTED in stack.kinds()
+
+
+def test_a_device_reboot_restores_the_configuration_first() -> None:
+    stack = Stack(VirtualDevice())
+    stack.link.open()
+    stack.restore = [digital_init(13)]
+    stack.device.reboot()
+    stack.run(0.5)  # BOOT seen -> RESET -> RESET_ACK -> restore
+    assert stack.link.state is LinkState.ACTIVE and stack.link.reboots == 1
+    assert [m.digital_init.pin for m in stack.device.executed] == [13]
+    assert EventKind.REBOOTED in stack.kinds()
+
+
+def test_message_ids_wrap_around_without_zero() -> None:
+    stack = Stack(VirtualDevice(), first_id=0xFFFFFFFE)
+    stack.link.open()
+    ids = []
+    for pin in (2, 3, 4):
+        call = stack.rpc.submit(digital_init(pin))
+        stack.device.deliver()
+        assert call.done.is_set() and call.error is None
+        ids.append(call.message_id)
+    assert ids == [0xFFFFFFFE, 0xFFFFFFFF, 1]
+    assert stack.rpc.state().next_id == 2
+
+
+def test_a_device_on_another_protocol_version_is_refused() -> None:
+    stack = Stack(VirtualDevice(version=99))
+    with pytest.raises(VersionMismatchError):
+        stack.link.open()
+    assert stack.link.state is not LinkState.ACTIVE
+
+
+def pings(device: VirtualDevice) -> int:
+    msgs = [ArduinoIn.FromString(p) for t, p in device.received if t is PacketType.COMMAND]
+    return sum(1 for m in msgs if m.WhichOneof("data") == "ping")
+
+
+def test_pings_keep_their_interval_and_stop_while_paused() -> None:
+    stack = Stack(VirtualDevice(), ping=True)
+    stack.link.open()
+    stack.run(PING_INTERVAL * 5 - 0.001)
+    assert pings(stack.device) == 5  # one at once, then one per interval
+    stack.rpc.pinging = False
+    stack.run(FAILSAFE_TIMEOUT * 2)
+    assert pings(stack.device) == 5
+    assert stack.link.watchdog_resets == 0  # a device left alone may be silent
+    stack.rpc.pinging = True
+    stack.device.deliver()
+    stack.run(0.001)
+    assert pings(stack.device) == 6  # resumed at once
+
+
+def test_a_call_fails_with_the_port_error_while_the_port_is_gone() -> None:
+    stack = Stack(VirtualDevice())
+    stack.link.open()
+    stack.device.connected = False
+    stack.link.transport_lost(TransportError("port vanished"))
+    start = stack.clock()
+    call = stack.rpc.submit(digital_init(7))
+    # The bound of every call: its round of retries plus the link's handshake time.
+    bound = stack.rpc.call_timeout
+    assert bound == ACK_TIMEOUT * (MAX_RETRIES + 1) + HANDSHAKE_TIMEOUT
+    stack.run(bound - 0.001)
+    assert not call.done.is_set()  # waiting for the link to come back
+    stack.run(0.002)
+    assert isinstance(call.error, TransportError) and "vanished" in str(call.error)
+    assert stack.clock() - start <= bound + 0.001
+    assert commands(stack.device) == 0
