@@ -160,7 +160,7 @@ class FakeDevice:
     def send_burst(self, msgs: list[Any], timeout: float = 10.0) -> None:
         """Send DATA messages back to back, every byte (send_raw drops what a full pty refuses)."""
         data = b"".join(
-            frame_packet(PacketType.DATA, self._next_seq(None), m.SerializeToString()) for m in msgs
+            frame_packet(PacketType.DATA, self.next_seq(), m.SerializeToString()) for m in msgs
         )
         view = memoryview(data)
         deadline = time.monotonic() + timeout

@@ -787,7 +787,7 @@ class Board:
 
     @property
     def call_timeout(self) -> float:
-        """Longest a call takes before it fails: its retries, plus waiting for a link that is down."""
+        """Longest a call takes to fail: its retries, plus waiting for a link that is down."""
         return self._rpc.call_timeout
 
     def rpc_state(self) -> RpcState:
