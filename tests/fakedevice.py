@@ -250,14 +250,31 @@ class FakeDevice:
             ctl = getattr(msg, kind)
             if self.pins.get(ctl.pin) != kind.split("_")[0]:
                 out.ack.status = Status.STATUS_NOT_INITIALISED
-            elif kind == "digital_control":
-                self.values[ctl.pin] = int(ctl.level)
             else:
-                self.values[ctl.pin] = getattr(ctl, str(ctl.WhichOneof("value")))
+                self._apply(kind, ctl)
+        elif kind == "pose":  # all or nothing; only the pin-mode check (what the tests need)
+            items = [
+                (f"{i.WhichOneof('output')}_control", getattr(i, i.WhichOneof("output")))
+                for i in msg.pose.items
+            ]
+            for n, (item_kind, ctl) in enumerate(items, 1):
+                if self.pins.get(ctl.pin) != item_kind.split("_")[0]:
+                    out.ack.status = Status.STATUS_NOT_INITIALISED
+                    out.ack.refused_item = n
+                    break
+            else:
+                for item_kind, ctl in items:
+                    self._apply(item_kind, ctl)
         self.dedupe[mid] = out.ack.status
         while len(self.dedupe) > DEDUPE_WINDOW:
             self.dedupe.popitem(last=False)
         return [out]
+
+    def _apply(self, kind: str, ctl: Any) -> None:
+        if kind == "digital_control":
+            self.values[ctl.pin] = int(ctl.level)
+        else:
+            self.values[ctl.pin] = getattr(ctl, str(ctl.WhichOneof("value")))
 
     def _run(self) -> None:
         while not self._stop.is_set():

@@ -127,6 +127,27 @@ def test_pose_values_are_restored_after_a_reboot(board: Board, fake: FakeDevice)
     assert kinds[:4] == ["servo_init", "digital_init", "servo_control", "digital_control"]
 
 
+def test_a_pose_after_an_unseen_reboot_restores_the_session(board: Board, fake: FakeDevice) -> None:
+    """The device forgot everything without an EVENT BOOT: the pose's refused item (a
+    configured output) starts the restore, then the pose runs once, under a new id."""
+    a, b = board.servo(3), board.servo(5)
+    led = board.digital_output(13)
+    with fake._cond:  # a reset whose BOOT was lost: state gone, link still up
+        fake.pins.clear()
+        fake.values.clear()
+        fake.dedupe.clear()
+    board.pose({a: 10, b: 20, led: True})
+    assert fake.pins == {3: "servo", 5: "servo", 13: "digital"}
+    assert fake.values == {3: 10, 5: 20, 13: 1}
+    refused, again = fake.commands("pose")
+    assert refused.msg.message_id != again.msg.message_id
+    assert board.stats.reboots == 1 and board.stats.rejected == 0
+    unconfigured = protoduino.Servo(board, 10, 544, 2400)  # never configured: a refusal
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.pose({a: 30, unconfigured: 40})
+    assert info.value.output is unconfigured and board.stats.reboots == 1
+
+
 # --- speed limits: the host side ---------------------------------------------------
 
 

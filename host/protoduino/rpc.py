@@ -547,7 +547,7 @@ class Rpc:
                 if call.kind == "ping":
                     self.rtt = call.rtt
                 self._finish(call, ack=ack)
-            elif self._lost_session(call, ack.status):
+            elif self._lost_session(call, ack):
                 if not self._holding:  # the first such answer: restore, then send again
                     self._session_lost(call)
                 else:  # another call sent before the restore began: it goes again after it
@@ -566,25 +566,30 @@ class Rpc:
                 )
             self._pump(now)
 
-    def _lost_session(self, call: Call, status: int) -> bool:
+    def _lost_session(self, call: Call, ack: Ack) -> bool:
         """Did the device refuse ``call`` because it lost what the board configured?
 
         STATUS_NOT_INITIALISED for a Control on an output the board did
         configure (its Init is among the restore messages) means the device
         restarted without the host seeing it: its EVENT BOOT was lost and a
-        re-handshake (watchdog, desync) found it answering again. Once per call,
-        and never for the restore's own messages.
+        re-handshake (watchdog, desync) found it answering again. A Pose counts
+        by its refused item, which is such a Control. Once per call, and never
+        for the restore's own messages.
         """
-        init = command(call.kind).needs_init
         if (
-            status != Status.STATUS_NOT_INITIALISED
-            or init is None
+            ack.status != Status.STATUS_NOT_INITIALISED
             or call.restored
             or call is self._restore_call
             or self.restore_provider is None
         ):
             return False
-        pin = getattr(_reparse(call.payload), call.kind).pin
+        control = _refused_control(_reparse(call.payload), ack)
+        if control is None:
+            return False
+        kind, pin = control
+        init = command(kind).needs_init
+        if init is None:
+            return False
         try:
             msgs = self.restore_provider()
         except Exception:
@@ -747,6 +752,38 @@ class Rpc:
 def _kind(msg: ArduinoIn) -> str | None:
     kind: str | None = msg.WhichOneof("data")
     return kind
+
+
+def _refused_control(msg: ArduinoIn, ack: Ack) -> tuple[str, int] | None:
+    """The ArduinoIn member and pin of the Control a refusal was about, if any.
+
+    A command that names a pin is its own Control; a Pose's refused item is
+    one of its Controls (a PoseItem member of the same message type).
+    """
+    kind = _kind(msg)
+    if kind is None:
+        return None
+    body = getattr(msg, kind)
+    if kind == "pose":
+        index = ack.refused_item
+        if not 1 <= index <= len(body.items):
+            return None
+        item = body.items[index - 1]
+        member = item.WhichOneof("output")
+        if member is None:
+            return None
+        body = getattr(item, member)
+        kind = _MEMBER_OF_TYPE.get(body.DESCRIPTOR.full_name, "")
+    pin = getattr(body, "pin", None)
+    return (kind, pin) if isinstance(pin, int) else None
+
+
+#: ArduinoIn member by its message type (a Pose item's Control -> "servo_control", ...).
+_MEMBER_OF_TYPE = {
+    field.message_type.full_name: field.name
+    for field in ArduinoIn.DESCRIPTOR.oneofs_by_name["data"].fields
+    if field.message_type is not None
+}
 
 
 def _reparse(payload: bytes) -> ArduinoIn:
