@@ -2,12 +2,22 @@
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Iterator
 
 import pytest
+from hypothesis import settings
 from simfixtures import sim_board  # noqa: F401  (the fixture, found by pytest by name)
+
+# Hypothesis's 200 ms per-example deadline judges the machine's load, not the code: with
+# other work on the cores an example can take longer, and the test fails as "flaky".
+settings.register_profile("dev", deadline=None)
+# CI (.ci/run sets CI=true) also draws the same examples every run, so that a verdict never
+# depends on the draw; a developer's runs keep exploring new ones.
+settings.register_profile("ci", deadline=None, derandomize=True)
+settings.load_profile("ci" if os.environ.get("CI") else "dev")
 
 #: How long a test's threads get to finish after it ends before they count as leaked.
 THREAD_GRACE = 3.0

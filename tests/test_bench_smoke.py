@@ -420,8 +420,13 @@ def test_emulator_counters_count_uart_bytes_and_agree_with_the_profile(tmp_path:
             before = counter.snapshot()
             for i in range(n):
                 raw.call(roundtrip.RAW_MESSAGES["ping"](i))
-            time.sleep(0.05)  # the last Ack's final byte leaves the UART after it was read
+            # The last Ack's final byte leaves the UART after the host read it: wait for the
+            # counter, not for a time (the deadline bounds a failure only).
+            deadline = time.monotonic() + 10.0
             delta = counter.snapshot() - before
+            while delta.uart_tx < n * len(ack) and time.monotonic() < deadline:
+                time.sleep(0.01)
+                delta = counter.snapshot() - before
         by_function = firmware.read_profile(profile, firmware.Symbols.of(elf))
     assert (delta.uart_rx, delta.uart_tx) == (n * len(command), n * len(ack))
     assert 0 < delta.awake < delta.cycles

@@ -16,7 +16,12 @@ from protoduino.constants import (
     PING_INTERVAL,
     PacketType,
 )
-from protoduino.errors import AckTimeoutError, TransportError, VersionMismatchError
+from protoduino.errors import (
+    AckTimeoutError,
+    HandshakeError,
+    TransportError,
+    VersionMismatchError,
+)
 from protoduino.events import Event, EventKind
 from protoduino.link import Link, LinkState
 from protoduino.messages import ArduinoIn
@@ -57,6 +62,10 @@ class Stack:
 
     def run(self, seconds: float) -> None:
         self.device.run_until(self.link, self.clock, seconds)
+
+    def state(self) -> LinkState:
+        # A call, not the attribute: each read is fresh to the type checker as well.
+        return self.link.state
 
     def kinds(self) -> list[EventKind]:
         return [e.kind for e in self.events]
@@ -158,6 +167,19 @@ def test_message_ids_wrap_around_without_zero() -> None:
         ids.append(call.message_id)
     assert ids == [0xFFFFFFFE, 0xFFFFFFFF, 1]
     assert stack.rpc.state().next_id == 2
+
+
+def test_a_silent_device_fails_the_handshake_at_its_timeout() -> None:
+    stack = Stack(VirtualDevice())
+    stack.device.silent = True
+    stack.device.start(stack.link)  # what Link.open does, without waiting for a thread
+    stack.run(HANDSHAKE_TIMEOUT - 0.001)
+    assert stack.state() is LinkState.WAIT_ACK
+    assert stack.device.resets >= 5  # RESET resent with backoff: 0, 0.1, 0.3, 0.7, 1.5 ...
+    stack.run(0.002)
+    assert stack.state() is LinkState.FAILED
+    assert isinstance(stack.link.down_error, HandshakeError)
+    assert "did not answer RESET" in str(stack.link.down_error)
 
 
 def test_a_device_on_another_protocol_version_is_refused() -> None:

@@ -264,9 +264,11 @@ class Link:
     def transport_tick(self, now: float) -> float:
         """Run the link's timers and the request layer's; return when they next need to run."""
         if self.state is LinkState.WAIT_ACK and self.transport.connected:
-            if now >= self._hs_next:
-                if not self._hs_reported and now - self._hs_started >= self.handshake_timeout:
-                    self._handshake_failed()
+            # The timeout is a timer of its own: checked only at the next RESET retry, it
+            # was reported up to a retry interval late (5.5 s for 5 s).
+            if not self._hs_reported and now >= self._hs_started + self.handshake_timeout:
+                self._handshake_failed()
+            if self.state is LinkState.WAIT_ACK and now >= self._hs_next:
                 self._send_reset(now)
         elif (
             self.state is LinkState.ACTIVE
@@ -285,6 +287,8 @@ class Link:
         due = self._listener.link_tick(now)
         if self.state is LinkState.WAIT_ACK and self.transport.connected:
             due = min(due, self._hs_next)
+            if not self._hs_reported:
+                due = min(due, self._hs_started + self.handshake_timeout)
         elif self.state is LinkState.ACTIVE and self.expect_traffic():
             due = min(due, self._last_rx + self.watchdog_timeout)
         return due
