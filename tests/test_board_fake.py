@@ -324,7 +324,7 @@ def test_a_log_flood_behind_a_slow_callback_stays_bounded(board: Board, fake: Fa
     dropped = flood + 1 - EVENT_QUEUE_LIMIT  # what the queue cannot hold, failsafe included
     try:
         assert fake.wait_for(lambda: board.stats.events_dropped == {"log": dropped}, 10)
-        assert board._events.waiting == EVENT_QUEUE_LIMIT
+        assert board.events.waiting == EVENT_QUEUE_LIMIT
     finally:
         release.set()
     assert fake.wait_for(lambda: bool(seen) and seen[-1].kind is EventKind.FAILSAFE, 10)
@@ -347,10 +347,10 @@ def test_close_returns_and_calls_nothing_more(fake: FakeDevice) -> None:
     for i in range(10):
         fake.send_data(log_msg(str(i)))
     assert held.wait(5)
-    assert fake.wait_for(lambda: board._events.waiting == 9)
+    assert fake.wait_for(lambda: board.events.waiting == 9)
     try:
         board.close()  # returns although the callback still runs (after CLOSE_WAIT)
-        thread = board._events._thread
+        thread = board.events.thread
         assert thread.is_alive()  # a running callback is not interrupted
     finally:
         release.set()

@@ -67,7 +67,7 @@ def test_close_calls_no_callback_after_it_and_leaves_a_running_one_alone() -> No
         dispatcher.put(ev(EventKind.LOG, str(i)))
     assert gate.entered.wait(5)
     dispatcher.close()  # returns although the callback still runs
-    thread = dispatcher._thread
+    thread = dispatcher.thread
     assert thread.is_alive()  # not interrupted: Python cannot stop a thread
     dispatcher.put(ev(EventKind.FAILSAFE, "late"))  # after close: ignored
     gate.release.set()
@@ -87,8 +87,8 @@ def test_close_from_a_callback() -> None:
     dispatcher.subscribe(close_and_note)
     dispatcher.put(ev(EventKind.LOG, "x"))
     assert done.wait(5)
-    dispatcher._thread.join(5)
-    assert not dispatcher._thread.is_alive()
+    dispatcher.thread.join(5)
+    assert not dispatcher.thread.is_alive()
 
 
 def test_jobs_are_never_dropped_and_still_run_at_close() -> None:
@@ -106,8 +106,8 @@ def test_jobs_are_never_dropped_and_still_run_at_close() -> None:
     assert dispatcher.dropped == {"log": 1}
     dispatcher.close()  # the callback still holds the thread
     gate.release.set()
-    dispatcher._thread.join(5)
-    assert not dispatcher._thread.is_alive()
+    dispatcher.thread.join(5)
+    assert not dispatcher.thread.is_alive()
     assert ran == [1, 2]  # the jobs ran; the waiting event "b" was discarded
     assert [e.text for e in gate.seen] == ["held"]
     dispatcher.put_job(lambda: ran.append(3))  # after the thread ended: run at once, here

@@ -132,10 +132,7 @@ def test_a_pose_after_an_unseen_reboot_restores_the_session(board: Board, fake: 
     configured output) starts the restore, then the pose runs once, under a new id."""
     a, b = board.servo(3), board.servo(5)
     led = board.digital_output(13)
-    with fake._cond:  # a reset whose BOOT was lost: state gone, link still up
-        fake.pins.clear()
-        fake.values.clear()
-        fake.dedupe.clear()
+    fake.forget()  # a reset whose BOOT was lost: state gone, link still up
     board.pose({a: 10, b: 20, led: True})
     assert fake.pins == {3: "servo", 5: "servo", 13: "digital"}
     assert fake.values == {3: 10, 5: 20, 13: 1}

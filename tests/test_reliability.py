@@ -25,9 +25,11 @@ import protoduino
 import pytest
 from fakedevice import FakeDevice
 from protoduino import Board
-from protoduino.constants import DEDUPE_WINDOW, FAILSAFE_TIMEOUT, WATCHDOG_TIMEOUT
+from protoduino.constants import DEDUPE_WINDOW, FAILSAFE_TIMEOUT, WATCHDOG_TIMEOUT, PacketType
+from protoduino.packets import Packet
 from protoduino.rpc import Rpc
 from protoduino.simboard import SimBoard
+from protoduino.transport import FrameRecord
 from protoduino_dev import faults, soak
 from simfixtures import SIM_BACKENDS
 
@@ -407,25 +409,26 @@ def test_judge_sees_duplicates_without_the_guard(
     assert not result.passed
 
 
-def test_judge_sees_a_change_nobody_commanded(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_judge_sees_a_change_nobody_commanded(tmp_path: Path) -> None:
     """Hide one command from the wire record: its effect must count as corrupted."""
     hidden: list[int] = []
-    real = soak._Wire._command
 
-    def forget_one(self: soak._Wire, t: float, payload: bytes) -> None:
+    def hide(record: FrameRecord) -> bool:
+        item = record.item
+        if record.direction != "tx" or not isinstance(item, Packet):
+            return False
+        if item.type is not PacketType.COMMAND:
+            return False
         msg = protoduino.messages.ArduinoIn()
-        msg.ParseFromString(payload)
+        msg.ParseFromString(item.payload)
         if msg.WhichOneof("data") == "servo_control" and msg.servo_control.us == soak.servo_value(
             0, 5
         ):
             hidden.append(msg.message_id)
-            return
-        real(self, t, payload)
+            return True
+        return False
 
-    monkeypatch.setattr(soak._Wire, "_command", forget_one)
-    result = soak.run(soak.Scenario("hidden", commands=60, seed=2), tmp_path)
+    result = soak.run(soak.Scenario("hidden", commands=60, seed=2), tmp_path, hide=hide)
     assert hidden
     assert result.corrupted == 1, result.as_dict()
     assert any("unexplained output change" in v for v in result.violations)

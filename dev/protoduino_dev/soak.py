@@ -395,7 +395,9 @@ class SoakResult:
 class _Wire:
     """Frame monitor: every COMMAND transmitted and every Ack received, by message id."""
 
-    def __init__(self) -> None:
+    def __init__(self, hide: Callable[[FrameRecord], bool] | None = None) -> None:
+        #: Frames left out of the record (run()'s ``hide``).
+        self._hide = hide
         #: message id -> when write() was entered for each of its frames (recent ones only).
         self.writes: dict[int, list[float]] = {}
         self.sent: dict[int, _Sent] = {}
@@ -405,7 +407,7 @@ class _Wire:
 
     def __call__(self, record: FrameRecord) -> None:
         item = record.item
-        if not isinstance(item, Packet):
+        if not isinstance(item, Packet) or (self._hide is not None and self._hide(record)):
             return
         try:
             if record.direction == "tx" and item.type is PacketType.COMMAND:
@@ -646,13 +648,18 @@ def run(
     workdir: Path,
     *,
     progress: Callable[[int], None] | None = None,
+    hide: Callable[[FrameRecord], bool] | None = None,
 ) -> SoakResult:
-    """Run ``scenario`` on a fresh simulated board; trace and log files go to ``workdir``."""
+    """Run ``scenario`` on a fresh simulated board; trace and log files go to ``workdir``.
+
+    ``hide`` leaves the frames it returns True for out of the wire record, to test the
+    judge itself: an effect whose command was hidden must count as corrupted.
+    """
     workdir.mkdir(parents=True, exist_ok=True)
     trace = workdir / f"{scenario.name}-{scenario.backend}-{scenario.seed}.trace.jsonl"
     trace.unlink(missing_ok=True)
     name = f"soak-{scenario.name}-{id(scenario):x}-{time.monotonic_ns()}"
-    wire = _Wire()
+    wire = _Wire(hide)
     result = SoakResult(scenario, call_bound=scenario.call_bound)
     t0 = time.monotonic()
     with SimBoard(scenario.backend, trace=trace) as sim:

@@ -790,6 +790,11 @@ class Board:
         """Longest a call takes to fail: its retries, plus waiting for a link that is down."""
         return self._rpc.call_timeout
 
+    @property
+    def events(self) -> EventDispatcher:
+        """The board's event dispatcher: its thread, the events waiting and those dropped."""
+        return self._events
+
     def rpc_state(self) -> RpcState:
         """A snapshot of the request layer's table (calls in flight, queued, the next id)."""
         return self._rpc.state()

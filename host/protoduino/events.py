@@ -164,6 +164,11 @@ class EventDispatcher:
         )
         self._thread.start()
 
+    @property
+    def thread(self) -> threading.Thread:
+        """The thread that runs the callbacks (to join after :meth:`close`, which does not)."""
+        return self._thread
+
     def subscribe(self, callback: EventCallback) -> Callable[[], None]:
         """Add ``callback``; returns the function that removes it."""
         with self._cond:
