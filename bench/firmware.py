@@ -42,7 +42,7 @@ from .throughput import drive, servo_line
 
 log = logging.getLogger(__name__)
 
-#: The aim: below StandardFirmata built with the same avr-gcc 5.4 (TOOLCHAIN.md reference sizes).
+#: The aim: below StandardFirmata built with the same avr-gcc 5.4 (the project's reference sizes).
 FLASH_GOAL = 13_212
 RAM_GOAL = 1_069
 #: The ATmega328P: 32 KB flash of which Optiboot keeps 0.5 KB (1 KB here, see tools/avrsim), 2 KB

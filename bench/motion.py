@@ -1,6 +1,6 @@
 """Benchmark part 6 (docs/performance.md): motion.
 
-Two questions from issue 13, on both boards:
+Two questions about motion (docs/api.md, Motion), on both boards:
 
 * Poses: the time from the call until every joint of a 4- and a 6-servo pose shows its new
   width at the pins, and how far apart the joints start, for one ``Board.pose`` call, for
