@@ -19,8 +19,9 @@ settings.register_profile("dev", deadline=None)
 settings.register_profile("ci", deadline=None, derandomize=True)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
 
-#: How long a test's threads get to finish after it ends before they count as leaked.
-THREAD_GRACE = 3.0
+#: How long a test's threads get to finish after it ends before they count as leaked (a
+#: bound only: the check returns as soon as they have; a loaded machine may need seconds).
+THREAD_GRACE = 10.0
 
 
 @pytest.fixture(autouse=True)
