@@ -34,7 +34,12 @@ ROOT = Path(__file__).resolve().parent
 #: Everything the module is compiled from. Their digest is compiled in as
 #: ``_speedups.SOURCE_DIGEST``, so a test can tell a stale in-place build from a fresh one.
 SOURCES = ["host/protoduino/_speedups.c", "firmware/core/pd_cobs.c", "firmware/core/pd_crc.c"]
-HEADERS = ["firmware/core/pd_cobs.h", "firmware/core/pd_crc.h", "firmware/generated/pd_protocol.h"]
+HEADERS = [
+    "firmware/core/pd_cobs.h",
+    "firmware/core/pd_crc.h",
+    "firmware/core/pd_rom.h",
+    "firmware/generated/pd_protocol.h",
+]
 
 
 def source_digest(root: Path = ROOT) -> str:

@@ -68,6 +68,8 @@ class FakeDevice:
         self.version = version
         self.schema_id = schema_id
         self.answer_reset = answer_reset
+        #: DeviceInfo.rx_buffer (0: not stated, the window alone limits the host).
+        self.rx_buffer = 0
         #: Replies to a decoded, active COMMAND; replace to script faults.
         self.handler: Callable[[Any], Reply] = self.default_reply
         self.received: list[Received] = []
@@ -243,6 +245,7 @@ class FakeDevice:
             info.num_pins = 20
             info.max_servos = 8
             info.reserved_pins.extend([0, 1])
+            info.rx_buffer = self.rx_buffer
         elif kind in ("servo_init", "digital_init"):
             init = getattr(msg, kind)
             self.pins[init.pin] = kind.split("_")[0]

@@ -12,6 +12,7 @@ import protoduino
 import pytest
 from fakedevice import FakeDevice, ack
 from protoduino import Board
+from protoduino.framing import frame_size
 from protoduino.messages import ArduinoIn, Status
 
 ACK_TIMEOUT = 0.1
@@ -167,6 +168,38 @@ def test_window_bounds_calls_in_flight(fake: FakeDevice) -> None:
         for future in futures:
             with pytest.raises(protoduino.ProtoduinoError):
                 future.result(timeout=30)
+
+
+def test_bytes_in_flight_stay_within_the_devices_receive_buffer(fake: FakeDevice) -> None:
+    """Flow control by bytes: at window 16, only as many frames fly as fit DeviceInfo.rx_buffer."""
+    payload = bytes(10)
+    longest = ping_msg(payload)
+    longest.message_id = 0xFFFFFFFF  # a 5-byte varint, the longest id
+    size = frame_size(len(longest.SerializeToString()))
+    fake.rx_buffer = 3 * size + 1  # room for three frames, not four
+    held: list[Any] = []
+
+    def hold(msg: Any) -> list[Any]:
+        if msg.WhichOneof("data") != "ping":
+            return fake.default_reply(msg)
+        held.append(msg)
+        return []
+
+    with Board.open(fake.port, window=16, ping=False, ack_timeout=0.5) as board:
+        assert board.info.rx_buffer == fake.rx_buffer
+        fake.handler = hold
+        calls = [board._rpc.submit(ping_msg(payload)) for _ in range(8)]
+        assert fake.wait_for(lambda: len(held) >= 3)
+        time.sleep(0.1)  # anything beyond the budget would have gone by now
+        assert len({m.message_id for m in held}) == 3
+        # Each answer frees room for exactly one more.
+        fake.handler = fake.default_reply
+        for msg in list(held):
+            for reply in fake.default_reply(msg):
+                fake.send_data(reply)
+        for call in calls:
+            board._rpc.wait(call)
+        assert board.stats.retransmits == 0
 
 
 def test_automatic_ping_and_pause(fake: FakeDevice) -> None:

@@ -26,6 +26,7 @@ static const pd_board_info_t uno = {
     .num_pins = 20,
     .max_servos = 8,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* RX, TX: the link itself */
+    .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
 };
 
 uint16_t pd_hal_tx_room(void *hal)

@@ -1,8 +1,10 @@
 /*
  * CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, xorout 0),
- * docs/protocol.md section 3. Bitwise rather than a 512-byte table: on the Uno the
- * table would cost a quarter of the flash budget's headroom, and at 115200 baud
- * the loop is far faster than the wire.
+ * PROTOCOL.md section 3. A 16-entry table (4 bits per step, 32 B of flash)
+ * rather than the 512-byte one a byte per step would need: on the Uno that
+ * would take a large part of the flash headroom. The receiver advances it one
+ * byte at a time as bytes arrive (pd_crc16_byte), so at a frame's delimiter
+ * only the comparison remains.
  */
 #ifndef PD_CRC_H
 #define PD_CRC_H
@@ -12,6 +14,7 @@
 
 #define PD_CRC16_INIT 0xFFFFu
 
+uint16_t pd_crc16_byte(uint16_t crc, uint8_t byte);
 uint16_t pd_crc16_update(uint16_t crc, const uint8_t *data, size_t len);
 
 static inline uint16_t pd_crc16(const uint8_t *data, size_t len)

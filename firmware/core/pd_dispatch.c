@@ -91,6 +91,7 @@ static void fill_info(pd_core_t *core, protoduino_DeviceInfo *info)
     info->schema_id = PD_SCHEMA_ID;
     info->num_pins = board->num_pins;
     info->max_servos = board->max_servos;
+    info->rx_buffer = board->rx_buffer;
     info->reserved_pins_count = 0;
     for (uint8_t pin = 0; pin < 32u && pin < board->num_pins; pin++) {
         if ((board->reserved_pins >> pin) & 1u) {
@@ -260,7 +261,9 @@ void pd_dispatch_command(pd_core_t *core, const uint8_t *payload, size_t len)
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
     pb_istream_t stream = pb_istream_from_buffer(payload, len);
 
-    if (!pb_decode(&stream, protoduino_ArduinoIn_fields, &in)) {
+    /* NOINIT: `in` is already all zeros, proto3's defaults; nanopb would walk every
+     * field descriptor of ArduinoIn to set them again. */
+    if (!pb_decode_ex(&stream, protoduino_ArduinoIn_fields, &in, PB_DECODE_NOINIT)) {
         /* Nothing is executed; the host learns of it twice if it can. */
         core->decode_errors++;
         out.which_data = protoduino_ArduinoOut_decode_error_tag;

@@ -128,6 +128,7 @@ static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
         }
         close_msg(w, at);
     }
+    put_uint(w, protoduino_DeviceInfo_rx_buffer_tag, info->rx_buffer);
 }
 
 static void put_ack(writer_t *w, const protoduino_Ack *ack)

@@ -24,6 +24,7 @@ typedef struct pd_board_info {
     uint8_t num_pins;             /* pins are 0 .. num_pins - 1, at most PD_MAX_PINS */
     uint8_t max_servos;           /* at most PD_MAX_SERVOS */
     uint32_t reserved_pins;       /* bit N set: pin N is reserved (the Uno's UART: 0, 1) */
+    uint16_t rx_buffer;           /* bytes of received frames it buffers (DeviceInfo.rx_buffer) */
 } pd_board_info_t;
 
 /*

@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "pd_core.h"
+#include "pd_crc.h"
 #include "pd_packet.h"
 #include "pd_schema.h"
 
@@ -11,9 +12,20 @@ typedef char pd_assert_tx_fits_len[(PD_TX_MAX_PAYLOAD <= PD_MAX_PAYLOAD) ? 1 : -
 typedef char pd_assert_notice_fits[(protoduino_Failsafe_size + 2u <= 8u &&
                                     protoduino_DecodeError_size + 2u <= 8u) ? 1 : -1];
 
+/* The receiver's state at the start of a frame. */
+static void rx_restart(pd_link_t *link)
+{
+    link->rx_len = 0;
+    link->rx_out = 0;
+    link->rx_crc = PD_CRC16_INIT;
+    link->rx_left = 0;
+    link->rx_zero = false;
+}
+
 void pd_link_init(pd_link_t *link)
 {
     memset(link, 0, sizeof(*link));
+    rx_restart(link);
     /* docs/protocol.md section 2: flush the receiver before our first frame. */
     link->tx_flush = true;
 }
@@ -109,13 +121,12 @@ static void handle_frame(pd_core_t *core)
 {
     pd_link_t *link = &core->link;
     pd_packet_t pkt;
-    int n = pd_cobs_decode(link->rx_buf, link->rx_len, link->rx_buf, sizeof(link->rx_buf));
 
-    if (n < 0) {
-        PD_STAT_INC(link, drop_cobs);
+    if (link->rx_left != 0) {
+        PD_STAT_INC(link, drop_cobs); /* the last code byte points past the frame's end */
         return;
     }
-    switch (pd_packet_parse(link->rx_buf, (size_t)n, &pkt)) {
+    switch (pd_packet_check(link->rx_buf, link->rx_out, link->rx_crc, &pkt)) {
     case PD_PACKET_OK:
         break;
     case PD_PACKET_ERR_CRC:
@@ -154,6 +165,16 @@ static void handle_frame(pd_core_t *core)
     PD_STAT_INC(link, ignored);
 }
 
+/* One decoded byte: stored (while it fits) and into the CRC. */
+static void rx_put(pd_link_t *link, uint8_t byte)
+{
+    if (link->rx_out < sizeof(link->rx_buf)) {
+        link->rx_buf[link->rx_out] = byte;
+        link->rx_crc = pd_crc16_byte(link->rx_crc, byte);
+    }
+    link->rx_out++; /* past the buffer: the length check drops the packet */
+}
+
 bool pd_link_rx_byte(pd_core_t *core, uint8_t byte)
 {
     pd_link_t *link = &core->link;
@@ -167,19 +188,32 @@ bool pd_link_rx_byte(pd_core_t *core, uint8_t byte)
             }
             handle_frame(core);
         }
-        link->rx_len = 0;
+        rx_restart(link);
         return true;
     }
     if (link->rx_skipping) {
         return true;
     }
     if (link->rx_len >= PD_MAX_ENCODED_FRAME) {
-        link->rx_len = 0;
+        rx_restart(link);
         link->rx_skipping = true;
         PD_STAT_INC(link, rx_overflow);
         pd_link_send_event(core, PD_EVENT_RX_OVERFLOW);
         return true;
     }
-    link->rx_buf[link->rx_len++] = byte;
+    link->rx_len++;
+    /* Streaming COBS (PROTOCOL.md section 2): a code byte starts a block of
+     * code - 1 data bytes; every block but a full one (0xFF) and the last
+     * implies a 0x00, emitted here once the next block shows it was not the last. */
+    if (link->rx_left == 0) {
+        if (link->rx_zero) {
+            rx_put(link, 0);
+        }
+        link->rx_left = (uint8_t)(byte - 1u);
+        link->rx_zero = byte != 0xFFu;
+    } else {
+        rx_put(link, byte);
+        link->rx_left--;
+    }
     return true;
 }

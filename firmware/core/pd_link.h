@@ -4,9 +4,11 @@
  * SEQ accounting, link events, and the transmit path.
  *
  * Receive recovery policy, the same as the host's framing.py: bytes are
- * collected until a 0x00; an empty frame is ignored; anything else is COBS
- * decoded in place and checked (length, CRC, type), and dropped and counted by
- * reason if it fails. More than PD_MAX_ENCODED_FRAME bytes without a 0x00 is
+ * collected until a 0x00; an empty frame is ignored; anything else is checked
+ * (COBS, length, CRC, type), and dropped and counted by reason if it fails.
+ * The work is done as the bytes arrive: each one is COBS-decoded into rx_buf
+ * and advances the CRC, so at the delimiter only the checks, the nanopb
+ * decode and the command remain (the round trip's share of the device). More than PD_MAX_ENCODED_FRAME bytes without a 0x00 is
  * an overflow: the buffer is discarded, EVENT RX_OVERFLOW is sent and
  * everything up to the next 0x00 is skipped. So a corrupted frame never
  * damages the next one, and no timer is needed.
@@ -88,8 +90,12 @@ typedef struct pd_link_stats {
 } pd_link_stats_t;
 
 typedef struct pd_link {
-    uint8_t rx_buf[PD_MAX_ENCODED_FRAME];
-    uint16_t rx_len;
+    uint8_t rx_buf[PD_MIN_PACKET + PD_MAX_PAYLOAD]; /* the packet, decoded as it arrives */
+    uint16_t rx_len;  /* encoded bytes of the current frame so far */
+    uint16_t rx_out;  /* decoded bytes so far (may pass rx_buf's size: then too long) */
+    uint16_t rx_crc;  /* CRC-16 over the decoded bytes so far */
+    uint8_t rx_left;  /* bytes left in the current COBS block; 0: the next one is a code */
+    bool rx_zero;     /* the current block implies a 0x00 after it, if another follows */
     bool rx_skipping; /* after an overflow, until the next 0x00 */
     bool active;      /* IDLE until the first RESET */
     bool tx_flush;    /* send a lone 0x00 before the next frame */

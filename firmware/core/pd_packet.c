@@ -28,8 +28,16 @@ pd_packet_result_t pd_packet_parse(const uint8_t *raw, size_t len, pd_packet_t *
     if (len < PD_MIN_PACKET || len != (size_t)PD_MIN_PACKET + raw[1]) {
         return PD_PACKET_ERR_LENGTH;
     }
+    return pd_packet_check(raw, len, pd_crc16(raw, len), pkt);
+}
+
+pd_packet_result_t pd_packet_check(const uint8_t *raw, size_t len, uint16_t crc, pd_packet_t *pkt)
+{
+    if (len < PD_MIN_PACKET || len != (size_t)PD_MIN_PACKET + raw[1]) {
+        return PD_PACKET_ERR_LENGTH;
+    }
     /* The CRC over the data and its own big-endian bytes is zero. */
-    if (pd_crc16(raw, len) != 0) {
+    if (crc != 0) {
         return PD_PACKET_ERR_CRC;
     }
     if (raw[0] > PD_PACKET_COMMAND) {

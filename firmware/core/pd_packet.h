@@ -38,4 +38,10 @@ pd_packet_result_t pd_packet_build(uint8_t type, uint8_t seq, const uint8_t *pay
 /* Check length, then CRC, then TYPE (the host's order) and fill `pkt`. */
 pd_packet_result_t pd_packet_parse(const uint8_t *raw, size_t len, pd_packet_t *pkt);
 
+/*
+ * The same checks for a packet whose CRC was advanced as its bytes arrived:
+ * `crc` is CRC-16 over all `len` bytes, its own two included (0 when intact).
+ */
+pd_packet_result_t pd_packet_check(const uint8_t *raw, size_t len, uint16_t crc, pd_packet_t *pkt);
+
 #endif /* PD_PACKET_H */

@@ -140,6 +140,9 @@ typedef struct _protoduino_DeviceInfo {
     uint32_t max_servos;
     pb_size_t reserved_pins_count;
     uint32_t reserved_pins[4];
+    /* Bytes of received frames the device can hold while it works (the Uno's
+ receive ring): the host keeps the command frames in flight within it. */
+    uint32_t rx_buffer;
 } protoduino_DeviceInfo;
 
 typedef PB_BYTES_ARRAY_T(40) protoduino_OutputStates_servos_t;
@@ -247,7 +250,7 @@ extern "C" {
 #define protoduino_Pose_init_default             {0, {protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default}}
 #define protoduino_ReadOutputs_init_default      {0}
 #define protoduino_ArduinoIn_init_default        {0, 0, {protoduino_Ping_init_default}}
-#define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}}
+#define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_OutputStates_init_default     {{0, {0}}, 0, 0}
 #define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, 0}
 #define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN}
@@ -265,7 +268,7 @@ extern "C" {
 #define protoduino_Pose_init_zero                {0, {protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero}}
 #define protoduino_ReadOutputs_init_zero         {0}
 #define protoduino_ArduinoIn_init_zero           {0, 0, {protoduino_Ping_init_zero}}
-#define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}}
+#define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_OutputStates_init_zero        {{0, {0}}, 0, 0}
 #define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, 0}
 #define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN}
@@ -308,6 +311,7 @@ extern "C" {
 #define protoduino_DeviceInfo_num_pins_tag       5
 #define protoduino_DeviceInfo_max_servos_tag     6
 #define protoduino_DeviceInfo_reserved_pins_tag  7
+#define protoduino_DeviceInfo_rx_buffer_tag      8
 #define protoduino_OutputStates_servos_tag       1
 #define protoduino_OutputStates_digital_pins_tag 2
 #define protoduino_OutputStates_digital_levels_tag 3
@@ -421,7 +425,8 @@ X(a, STATIC,   SINGULAR, FIXED32,  schema_id,         3) \
 X(a, STATIC,   SINGULAR, STRING,   board,             4) \
 X(a, STATIC,   SINGULAR, UINT32,   num_pins,          5) \
 X(a, STATIC,   SINGULAR, UINT32,   max_servos,        6) \
-X(a, STATIC,   REPEATED, UINT32,   reserved_pins,     7)
+X(a, STATIC,   REPEATED, UINT32,   reserved_pins,     7) \
+X(a, STATIC,   SINGULAR, UINT32,   rx_buffer,         8)
 #define protoduino_DeviceInfo_CALLBACK NULL
 #define protoduino_DeviceInfo_DEFAULT NULL
 
@@ -513,11 +518,11 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_Ack_size                      98
+#define protoduino_Ack_size                      104
 #define protoduino_ArduinoIn_size                138
-#define protoduino_ArduinoOut_size               100
+#define protoduino_ArduinoOut_size               106
 #define protoduino_DecodeError_size              6
-#define protoduino_DeviceInfo_size               81
+#define protoduino_DeviceInfo_size               87
 #define protoduino_DigitalControl_size           8
 #define protoduino_DigitalInit_size              8
 #define protoduino_Failsafe_size                 4

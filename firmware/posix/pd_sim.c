@@ -72,6 +72,7 @@ static const pd_board_info_t sim_board = {
     .num_pins = 20,
     .max_servos = 8,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* the Uno's UART, for the same semantics */
+    .rx_buffer = 512,                         /* one read() of the pty; the pty holds more */
 };
 
 static volatile sig_atomic_t sim_stop;

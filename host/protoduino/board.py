@@ -159,6 +159,9 @@ class DeviceInfo:
     num_pins: int
     max_servos: int
     reserved_pins: tuple[int, ...]
+    #: Bytes of received frames the device buffers while it works (0: not stated); the
+    #: board keeps the command bytes in flight within it.
+    rx_buffer: int = 0
 
 
 @dataclass(slots=True)
@@ -374,6 +377,7 @@ class Board:
         try:
             self._link.open()
             self.info = self._get_info()
+            self._rpc.rx_budget = self.info.rx_buffer or None
         except BaseException:
             self.close()
             raise
@@ -971,6 +975,7 @@ class Board:
             num_pins=info.num_pins,
             max_servos=info.max_servos,
             reserved_pins=tuple(info.reserved_pins),
+            rx_buffer=info.rx_buffer,
         )
 
     def _message(self, msg: ArduinoOut) -> None:

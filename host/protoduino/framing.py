@@ -74,6 +74,17 @@ def encode_frame(raw_packet: bytes) -> bytes:
     return cobs_encode(raw_packet) + DELIMITER
 
 
+def frame_size(payload_len: int) -> int:
+    """The most bytes a packet with ``payload_len`` payload bytes takes on the wire.
+
+    COBS adds one byte per 254 and one more; then the delimiter, and the lone
+    0x00 a sender may put in front after a failed write. Flow control counts
+    frames by this (docs/protocol.md section 7).
+    """
+    raw = MIN_PACKET + payload_len
+    return raw + raw // 254 + 1 + 2
+
+
 def frame_packet(ptype: PacketType, seq: int, payload: bytes = b"") -> bytes:
     """Build, CRC, COBS-encode and delimit one packet."""
     return encode_frame(build_packet(ptype, seq, payload))

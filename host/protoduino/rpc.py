@@ -13,7 +13,9 @@ I/O thread.
   for an id never sent is counted as unknown. Both are dropped: a stale reply
   never completes the wrong call.
 * Up to ``window`` calls are in flight at once, so a burst is not paced by the
-  round trip; the device answers them in order.
+  round trip; the device answers them in order. Flow control by bytes: their
+  frames together also stay within the receive buffer the device states
+  (DeviceInfo.rx_buffer), so a burst never overflows it at any window.
 * Dedupe guard: a retransmission is harmless only while its id is still in
   the device's window of the last DEDUPE_WINDOW (16) executed ids. So while a
   call X that changes outputs awaits its Ack, at most DEDUPE_WINDOW - 1
@@ -69,6 +71,7 @@ from .errors import (
     ProtoduinoError,
 )
 from .events import Event, EventKind
+from .framing import frame_size
 from .messages import ArduinoIn, ArduinoOut, Status, status_name
 
 log = logging.getLogger(__name__)
@@ -212,6 +215,10 @@ class Rpc:
         self.ack_timeout = ack_timeout
         self.max_retries = max_retries
         self.window = window
+        #: Bytes of received frames the device can hold (DeviceInfo.rx_buffer): the command
+        #: frames in flight are kept within it, so they never overflow its receive buffer
+        #: whatever the window. None: not known yet, the window alone limits.
+        self.rx_budget: int | None = None
         self.ping_interval = ping_interval
         #: Longest a call waits for the link to come back before it fails.
         self.link_wait = link_wait
@@ -404,6 +411,19 @@ class Rpc:
         # The protected call itself is in the log with a serial >= oldest.
         return len(self._tx_log) - 1 < DEDUPE_WINDOW - 1
 
+    def _fits(self, call: Call) -> bool:
+        """Does ``call``'s frame fit the device's receive buffer beside those in flight?
+
+        Every byte sent and not yet answered may still sit in that buffer (the
+        device takes a frame out before it answers it), so keeping their sum
+        within it means no frame is ever dropped for want of room. One call is
+        always allowed, whatever its size, or nothing could ever go.
+        """
+        if self.rx_budget is None or not self._inflight:
+            return True
+        used = sum(frame_size(len(c.payload)) for c in self._inflight.values())
+        return used + frame_size(len(call.payload)) <= self.rx_budget
+
     def _pump(self, now: float) -> None:
         """Send what may be sent now (lock held)."""
         link = self.link
@@ -418,7 +438,7 @@ class Rpc:
         else:
             queues = (self._urgent, self._pending)
         for queue in queues:
-            while queue and len(self._inflight) < self.window:
+            while queue and len(self._inflight) < self.window and self._fits(queue[0]):
                 if queue[0].first_tx is None and not self._guard_allows_new():
                     # Held: a new id. The next queue may still hold a retransmission
                     # (a call requeued when the link went down), which the guard waits for.

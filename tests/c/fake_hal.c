@@ -31,6 +31,7 @@ void fake_init(fake_hal_t *hal)
     hal->info.num_pins = 20;
     hal->info.max_servos = 8;
     hal->info.reserved_pins = 0x3;
+    hal->info.rx_buffer = 127;
     hal->tx_room = UINT16_MAX;
 }
 

@@ -209,7 +209,82 @@ static void test_periodic_hook_once_per_tick(void)
     CHECK_EQ(hook_calls, 2);
 }
 
+/*
+ * The receiver decodes COBS and advances the CRC byte by byte; the result must
+ * be what decoding the whole frame at its delimiter gives (pd_cobs_decode, then
+ * pd_packet_parse): the same verdict for every frame, valid, mutated or noise.
+ */
+static uint32_t lcg(uint32_t *state)
+{
+    *state = *state * 1664525u + 1013904223u;
+    return *state >> 8;
+}
+
+static void test_streaming_receiver_agrees_with_whole_frame_decoding(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    uint32_t seed = 12345;
+    pd_link_stats_t want = d.core.link.stats;
+    for (int round = 0; round < 3000; round++) {
+        uint8_t frame[PD_MAX_ENCODED_FRAME];
+        size_t len;
+        if (round % 3 == 0) {
+            /* A valid packet of random type and payload, perhaps mutated. */
+            uint8_t raw[PD_MIN_PACKET + PD_MAX_PAYLOAD];
+            uint8_t payload[PD_MAX_PAYLOAD];
+            size_t plen = lcg(&seed) % 40u, raw_len = 0;
+            for (size_t i = 0; i < plen; i++) {
+                payload[i] = (uint8_t)lcg(&seed);
+            }
+            uint8_t type = (uint8_t)(lcg(&seed) % 4u);
+            pd_packet_build(type, (uint8_t)lcg(&seed), payload, plen, raw, sizeof(raw), &raw_len);
+            len = pd_cobs_encode(raw, raw_len, frame, sizeof(frame));
+            if (lcg(&seed) % 2u) {
+                frame[lcg(&seed) % len] = (uint8_t)(lcg(&seed) | 1u); /* no 0x00 inside */
+            }
+        } else {
+            len = 1u + lcg(&seed) % (round % 3 == 1 ? 20u : PD_MAX_ENCODED_FRAME);
+            for (size_t i = 0; i < len; i++) {
+                frame[i] = (uint8_t)(1u + lcg(&seed) % 255u);
+            }
+        }
+        /* What decoding the whole frame says. */
+        uint8_t dec[PD_MAX_ENCODED_FRAME];
+        pd_packet_t pkt;
+        int n = pd_cobs_decode(frame, len, dec, sizeof(dec));
+        if (n < 0) {
+            want.drop_cobs++;
+        } else {
+            switch (pd_packet_parse(dec, (size_t)n, &pkt)) {
+            case PD_PACKET_OK:
+                want.packets++;
+                break;
+            case PD_PACKET_ERR_CRC:
+                want.drop_crc++;
+                break;
+            case PD_PACKET_ERR_TYPE:
+                want.drop_type++;
+                break;
+            default:
+                want.drop_length++;
+                break;
+            }
+        }
+        t_feed(&d, frame, len);
+        t_feed(&d, (const uint8_t *)"", 1);
+        const pd_link_stats_t *got = &d.core.link.stats;
+        CHECK_EQ(got->drop_cobs, want.drop_cobs);
+        CHECK_EQ(got->drop_crc, want.drop_crc);
+        CHECK_EQ(got->drop_type, want.drop_type);
+        CHECK_EQ(got->drop_length, want.drop_length);
+        CHECK_EQ(got->packets, want.packets);
+    }
+    CHECK(want.packets > 100 && want.drop_cobs > 100 && want.drop_crc > 100);
+}
+
 const pd_test_case_t pd_tests_engine[] = {
+    TEST_CASE(test_streaming_receiver_agrees_with_whole_frame_decoding),
     TEST_CASE(test_frame_waits_for_transmit_room),
     TEST_CASE(test_reserve_holds_the_largest_replies),
     TEST_CASE(test_report_newest_value_replaces_unsent),

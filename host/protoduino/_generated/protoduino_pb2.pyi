@@ -436,6 +436,7 @@ class DeviceInfo(_message.Message):
     NUM_PINS_FIELD_NUMBER: _builtins.int
     MAX_SERVOS_FIELD_NUMBER: _builtins.int
     RESERVED_PINS_FIELD_NUMBER: _builtins.int
+    RX_BUFFER_FIELD_NUMBER: _builtins.int
     firmware_version: _builtins.str
     protocol_version: _builtins.int
     schema_id: _builtins.int
@@ -443,6 +444,10 @@ class DeviceInfo(_message.Message):
     num_pins: _builtins.int
     """pins are numbered 0 .. num_pins - 1"""
     max_servos: _builtins.int
+    rx_buffer: _builtins.int
+    """Bytes of received frames the device can hold while it works (the Uno's
+    receive ring): the host keeps the command frames in flight within it.
+    """
     @_builtins.property
     def reserved_pins(self) -> _containers.RepeatedScalarFieldContainer[_builtins.int]: ...
     def __init__(
@@ -455,10 +460,11 @@ class DeviceInfo(_message.Message):
         num_pins: _builtins.int = ...,
         max_servos: _builtins.int = ...,
         reserved_pins: _abc.Iterable[_builtins.int] | None = ...,
+        rx_buffer: _builtins.int = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["board", b"board", "firmware_version", b"firmware_version", "max_servos", b"max_servos", "num_pins", b"num_pins", "protocol_version", b"protocol_version", "reserved_pins", b"reserved_pins", "schema_id", b"schema_id"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["board", b"board", "firmware_version", b"firmware_version", "max_servos", b"max_servos", "num_pins", b"num_pins", "protocol_version", b"protocol_version", "reserved_pins", b"reserved_pins", "rx_buffer", b"rx_buffer", "schema_id", b"schema_id"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
