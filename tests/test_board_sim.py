@@ -457,3 +457,41 @@ def test_a_second_opener_is_refused_and_the_first_notices_nothing(
         before.reconnects,
         0,
     )
+
+
+@pytest.mark.parametrize("window", [4, 8, 16])
+def test_clean_line_never_retransmits_at_any_window(sim: SimBoard, window: int) -> None:
+    """Flow control by bytes: a burst at any window fits the device's receive buffer.
+
+    Judged by the link counters: every call acknowledged at its first transmission, no
+    receive overflow reported by the device, no frame dropped on either side. GetInfo is
+    the hard case: its Ack is seven times its command, so while Acks queue up behind the
+    line, commands pile up in the device's receive buffer; a window counted in commands
+    only overflows it there (an emulated Uno at window 16 did).
+    """
+    with Board.open(sim.port, window=window, ping=False) as board:
+        assert board.info.rx_buffer > 0
+        servo = board.servo(9)
+        msgs = []
+        for i in range(60):
+            msg = ArduinoIn()
+            msg.servo_control.pin = 9
+            msg.servo_control.degrees = (i * 7) % 181
+            msgs.append(msg)
+        for i in range(12):
+            msg = ArduinoIn()
+            msg.ping.payload = bytes([i + 1]) * 64
+            msgs.append(msg)
+        for _ in range(24):  # a 14-byte command whose Ack (DeviceInfo) takes 100 bytes
+            msg = ArduinoIn()
+            msg.get_info.SetInParent()
+            msgs.append(msg)
+        calls = [board._rpc.submit(msg) for msg in msgs]  # all at once: the window fills
+        for call in calls:
+            board._rpc.wait(call)
+        servo.write(90)
+        stats = board.stats
+        assert stats.retransmits == 0, stats
+        assert stats.timeouts == 0 and stats.device_rx_overflows == 0, stats
+        assert not stats.dropped, stats
+        assert stats.acks >= len(calls)
