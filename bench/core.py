@@ -143,6 +143,8 @@ class SectionResult:
     targets: list[Target] = field(default_factory=list)
     charts: list[Chart] = field(default_factory=list)
     packages: list[str] = field(default_factory=list)
+    #: Figures other documents quote from this run: name -> text (bench.report.quote).
+    quotes: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True)

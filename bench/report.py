@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
+from pathlib import Path
 
 from .core import Context, Section, SectionResult, md_table
 
@@ -61,3 +63,29 @@ def render(
         for chart in result.charts:
             out += [f"![{chart.caption}]({ctx.link(chart.path)})", "", f"*{chart.caption}*", ""]
     return "\n".join(out).rstrip() + "\n"
+
+
+def _escape(text: str) -> str:
+    """``text`` as a literal re.sub replacement."""
+    return text.replace("\\", "\\\\")
+
+
+def quote(paths: Sequence[Path], quotes: dict[str, str]) -> list[Path]:
+    """Put this run's figures into other documents, between their markers.
+
+    A document quotes figure ``name`` as ``<!-- bench:name -->...<!-- /bench:name -->``; the
+    text between is replaced, so README.md, firmware/README.md and performance.md give the
+    same number from the same run. Returns the files changed.
+    """
+    changed = []
+    for path in paths:
+        text = path.read_text(encoding="utf-8")
+        new = text
+        for name, value in quotes.items():
+            tag = re.escape(name)
+            pattern = rf"(<!-- bench:{tag} -->).*?(<!-- /bench:{tag} -->)"
+            new = re.sub(pattern, rf"\g<1>{_escape(value)}\g<2>", new, flags=re.S)
+        if new != text:
+            path.write_text(new, encoding="utf-8")
+            changed.append(path)
+    return changed

@@ -491,3 +491,19 @@ def test_motion_section_on_both_boards() -> None:
             assert all(row.endswith("| 0 |") for row in rows)  # no pose lost
     for method in motion.RATE_METHODS:
         assert sum(line.startswith(f"| {method} |") for line in text.splitlines()) == 2
+
+
+def test_report_quote_replaces_only_between_markers(tmp_path: Path) -> None:
+    from bench import report
+
+    doc = tmp_path / "README.md"
+    doc.write_text("a <!-- bench:footprint -->old<!-- /bench:footprint --> b\nold\n")
+    other = tmp_path / "other.md"
+    other.write_text("no markers: old\n")
+    changed = report.quote([doc, other], {"footprint": "flash 1 B"})
+    assert changed == [doc]
+    assert (
+        doc.read_text() == "a <!-- bench:footprint -->flash 1 B<!-- /bench:footprint --> b\nold\n"
+    )
+    assert other.read_text() == "no markers: old\n"
+    assert report.quote([doc], {"footprint": "flash 1 B"}) == []  # nothing left to change
