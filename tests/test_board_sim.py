@@ -10,6 +10,7 @@ import textwrap
 import threading
 import time
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -472,23 +473,17 @@ def test_clean_line_never_retransmits_at_any_window(sim: SimBoard, window: int) 
     with Board.open(sim.port, window=window, ping=False) as board:
         assert board.info.rx_buffer > 0
         servo = board.servo(9)
-        msgs = []
-        for i in range(60):
-            msg = ArduinoIn()
-            msg.servo_control.pin = 9
-            msg.servo_control.degrees = (i * 7) % 181
-            msgs.append(msg)
-        for i in range(12):
-            msg = ArduinoIn()
-            msg.ping.payload = bytes([i + 1]) * 64
-            msgs.append(msg)
-        for _ in range(24):  # a 14-byte command whose Ack (DeviceInfo) takes 100 bytes
-            msg = ArduinoIn()
-            msg.get_info.SetInParent()
-            msgs.append(msg)
-        calls = [board._rpc.submit(msg) for msg in msgs]  # all at once: the window fills
-        for call in calls:
-            board._rpc.wait(call)
+        info = ArduinoIn()
+        info.get_info.SetInParent()
+        # All at once, so the window fills: servo writes, 64-byte Pings, and GetInfo (a
+        # 14-byte command whose Ack, DeviceInfo, takes 100 bytes) from as many threads.
+        futures: list[Future[Any]] = [servo.submit((i * 7) % 181) for i in range(60)]
+        futures += [board.submit_ping(bytes([i + 1]) * 64) for i in range(12)]
+        with ThreadPoolExecutor(max_workers=24) as pool:
+            infos = [pool.submit(board.request, info) for _ in range(24)]
+            for future in [*futures, *infos]:
+                future.result(timeout=60)
+        calls = futures + infos
         servo.write(90)
         stats = board.stats
         assert stats.retransmits == 0, stats

@@ -188,17 +188,19 @@ def test_bytes_in_flight_stay_within_the_devices_receive_buffer(fake: FakeDevice
     with Board.open(fake.port, window=16, ping=False, ack_timeout=0.5) as board:
         assert board.info.rx_buffer == fake.rx_buffer
         fake.handler = hold
-        calls = [board._rpc.submit(ping_msg(payload)) for _ in range(8)]
+        futures = [board.submit_ping(payload) for _ in range(8)]
+        # Submitting sends at once what may go: three frames fit, five wait their turn.
+        state = board.rpc_state()
+        assert len(state.inflight) == 3 and state.pending == 5
         assert fake.wait_for(lambda: len(held) >= 3)
-        time.sleep(0.1)  # anything beyond the budget would have gone by now
         assert len({m.message_id for m in held}) == 3
-        # Each answer frees room for exactly one more.
+        # Each answer frees room for one more.
         fake.handler = fake.default_reply
         for msg in list(held):
             for reply in fake.default_reply(msg):
                 fake.send_data(reply)
-        for call in calls:
-            board._rpc.wait(call)
+        for future in futures:
+            future.result(timeout=10)
         assert board.stats.retransmits == 0
 
 
