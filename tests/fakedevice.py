@@ -215,7 +215,7 @@ class FakeDevice:
         with self._cond:
             return [r for r in self.received if kind is None or r.kind == kind]
 
-    def wait_for(self, predicate: Callable[[], bool], timeout: float = 5.0) -> bool:
+    def wait_for(self, predicate: Callable[[], bool], timeout: float = 30.0) -> bool:
         deadline = time.monotonic() + timeout
         with self._cond:
             while not predicate():

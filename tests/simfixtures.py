@@ -49,7 +49,7 @@ def pin_values(trace: list[dict[str, Any]], pin: int) -> list[int]:
 
 
 def wait_for_pin(
-    sim: SimBoard, pin: int, ok: Callable[[list[int]], bool], timeout: float = 5.0
+    sim: SimBoard, pin: int, ok: Callable[[list[int]], bool], timeout: float = 30.0
 ) -> list[int]:
     """Wait until ``ok`` holds for the values ``pin`` took in the trace; return them.
 

@@ -95,7 +95,7 @@ class Runner:
         return [json.loads(line) for line in lines if line.endswith("}")]
 
     def wait_for(
-        self, predicate: Callable[[dict[str, Any]], bool], *, since: int = 0, timeout: float = 5.0
+        self, predicate: Callable[[dict[str, Any]], bool], *, since: int = 0, timeout: float = 30.0
     ) -> dict[str, Any]:
         """The first trace line from index ``since`` on that matches."""
         deadline = time.monotonic() + timeout

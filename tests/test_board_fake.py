@@ -40,7 +40,7 @@ class Recorder:
             self.events.append(event)
             self._cond.notify_all()
 
-    def wait(self, kind: EventKind, timeout: float = 5.0) -> Event:
+    def wait(self, kind: EventKind, timeout: float = 30.0) -> Event:
         deadline = time.monotonic() + timeout
         with self._cond:
             while True:

@@ -75,7 +75,7 @@ def expect_pin(
     *,
     since: int = 0,
     digital: bool = False,
-    timeout: float = 3.0,
+    timeout: float = 30.0,
 ) -> None:
     """Wait until the trace (from line ``since``) shows ``expected`` for ``pin``."""
     exact = sim.backend == "native"
@@ -94,7 +94,7 @@ class Recorder:
         self.events: list[Event] = []
         board.on_event(self.events.append)
 
-    def wait(self, kind: EventKind, timeout: float = 10.0, count: int = 1) -> list[Event]:
+    def wait(self, kind: EventKind, timeout: float = 30.0, count: int = 1) -> list[Event]:
         ok = wait_until(lambda: len(self.of(kind)) >= count, timeout)
         assert ok, f"no {kind} event in {timeout} s; got {self.events}"
         return self.of(kind)

@@ -21,7 +21,7 @@ class Gate:
         self.entered.set()
         self.release.wait(30)
 
-    def wait_seen(self, count: int, timeout: float = 5.0) -> None:
+    def wait_seen(self, count: int, timeout: float = 30.0) -> None:
         deadline = time.monotonic() + timeout
         while len(self.seen) < count:
             assert time.monotonic() < deadline, f"only {self.seen}"

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -148,8 +147,12 @@ def test_watchdog_rehandshakes_when_device_goes_silent(fake: FakeDevice) -> None
         fake.handler = fake.default_reply
         assert board.stats.watchdog_resets >= 1
         board.ping()
-        assert any(
-            e.kind is EventKind.DISCONNECTED and e.details["reason"] == "watchdog" for e in seen
+        # Events reach callbacks on the board's event thread: wait for it, not for a time.
+        assert fake.wait_for(
+            lambda: any(
+                e.kind is EventKind.DISCONNECTED and e.details["reason"] == "watchdog"
+                for e in list(seen)
+            )
         )
 
 
@@ -161,9 +164,7 @@ def test_device_events_reach_callbacks(fake: FakeDevice) -> None:
         fake.send_control(event_payload(0x7E))  # unknown: logged, ignored
         fake.send_raw(frame_packet(PacketType.COMMAND, fake.next_seq(), b"\x08\x01"))
         board.ping()
-        deadline = time.monotonic() + 2
-        while len(seen) < 2 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        assert fake.wait_for(lambda: len(seen) >= 2)  # delivered on the event thread
         kinds = [e.kind for e in seen]
         assert EventKind.DEVICE_DESYNC in kinds
         assert EventKind.RX_OVERFLOW in kinds
@@ -180,10 +181,7 @@ def test_not_active_means_rebooted(fake: FakeDevice) -> None:
         assert fake.wait_for(lambda: board.stats.reboots == 1)
         board.ping()
         assert board.stats.handshakes == 2
-        deadline = time.monotonic() + 2
-        while EventKind.REBOOTED not in [e.kind for e in seen] and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert EventKind.REBOOTED in [e.kind for e in seen]
+        assert fake.wait_for(lambda: EventKind.REBOOTED in [e.kind for e in list(seen)])
 
 
 def test_board_close_stops_threads_and_is_idempotent(fake: FakeDevice) -> None:

@@ -47,9 +47,9 @@ from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS
 
 VECTORS = Path(__file__).parent / "vectors" / "wire_v1.json"
 #: Generous bound for any single reply; the simulated board answers in well under 1 ms.
-REPLY_TIMEOUT = 2.0
+REPLY_TIMEOUT = 20.0
 #: Bound for a change to reach the trace (a measured pin reports a digital low after 30 ms).
-TRACE_TIMEOUT = 2.0
+TRACE_TIMEOUT = 20.0
 #: Long enough for any pending trace line: a servo frame, a measured pin's 30 ms low wait.
 QUIET = 0.1
 #: Board name each backend reports in DeviceInfo.
