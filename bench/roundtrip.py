@@ -53,7 +53,7 @@ from .boards import (
 )
 from .core import Chart, Context, Section, SectionResult, Target, md_table
 from .peers import protoduino as protoduino_peer
-from .wire import BAUD, wire_time_us
+from .wire import BAUD, EMULATED_BYTE_US, board_byte_us
 
 log = logging.getLogger(__name__)
 
@@ -326,7 +326,7 @@ def budget(run: BoardRun, kind: str, host: float) -> Budget | None:
     return Budget(
         command_bytes=command,
         ack_bytes=ack,
-        wire=wire_time_us(1) * (command + ack),
+        wire=EMULATED_BYTE_US * (command + ack),
         awake=cycles / UNO_HZ * 1e6,
         awake_cycles=cycles,
         host=host,
@@ -348,7 +348,7 @@ def run(ctx: Context) -> SectionResult:
             continue
         for kind, kind_label in KINDS:
             command_b, ack_b = board_run.wire_bytes[kind]
-            wire_s = wire_time_us(1) * (command_b + ack_b) / 1e6
+            wire_s = board_byte_us(board_run.backend) * (command_b + ack_b) / 1e6
             lib = Percentiles.of(board_run.library[kind])
             raw = Percentiles.of(board_run.raw[kind])
             rows.append(
@@ -393,10 +393,13 @@ def run(ctx: Context) -> SectionResult:
         f"after a random pause of 0 to {MAX_GAP * 1e3:g} ms so that the calls do not lock onto "
         "the emulator's 1 ms batches; "
         f"percentiles by nearest rank. The wire time is the lower bound: the command's and the "
-        f"Ack's bytes at {BAUD} baud, 8N1, counted as the Board sent and received them (its "
-        "message ids start at random: 15 starts in 16 are 5-byte varints, the others make "
-        "frames a byte shorter each way). The simulated board has no baud rate (a pty at "
-        "memory speed), so its wire time is only for scale. *Raw client*: the same command "
+        "Ack's bytes counted as the Board sent and received them (its message ids start at "
+        "random: 15 starts in 16 are 5-byte varints, the others make frames a byte shorter "
+        "each way), on the emulated Uno at its own line's byte time: simavr 1.6 times every "
+        f"byte as 11 bits at the 117,647 baud the firmware's UBRR sets, {EMULATED_BYTE_US:.1f} "
+        f"us a byte (a real line at {BAUD} baud, 8N1, takes 86.8 us). The simulated board has "
+        "no baud rate (a pty at memory speed), so its wire time, at 8N1, is only for scale. "
+        "*Raw client*: the same command "
         "from pyserial and the framing alone, no I/O thread (bench/boards.py), in turns with "
         f"the library ({ROUNDS} rounds); the difference is the host library's own cost, "
         "clear on the simulated board and lost in the emulated Uno's spread (there it can "
@@ -433,7 +436,7 @@ def run(ctx: Context) -> SectionResult:
             unit = "ms" if avr_board else "us"
             vlines: dict[str, float] = {}
             if avr is not None and avr_board:
-                wire = wire_time_us(1) * sum(avr.wire_bytes["servo"]) / 1e3
+                wire = EMULATED_BYTE_US * sum(avr.wire_bytes["servo"]) / 1e3
                 vlines[f"servo wire time {wire:.2f} ms"] = wire
                 vlines[f"target {TARGET_RATIO}x wire"] = wire * TARGET_RATIO
             path = charts.histogram(
@@ -460,7 +463,7 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
     echo_text = ""
     if avr.echo:
         echo = Percentiles.of(avr.echo)
-        echo_wire = wire_time_us(2)
+        echo_wire = EMULATED_BYTE_US * 2
         echo_text = (
             "The runner alone, with its own test program answering each byte at once, "
             f"echoes one byte in {echo.p50 * 1e6:,.0f} us at the median (p99 "

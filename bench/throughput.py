@@ -50,7 +50,7 @@ from .boards import (
 )
 from .core import Chart, Context, Section, SectionResult, Target, fmt_rate, md_table
 from .peers import protoduino as protoduino_peer
-from .wire import BAUD, BITS_PER_BYTE
+from .wire import EMULATED_BYTE_US
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +61,8 @@ PING_PAYLOAD = 64
 TARGET_SHARE = 0.9
 #: The windows at which the rate must reach the target and stay there without a retry.
 HOLD_WINDOWS = (4, 8, 16)
-LINE_BYTES_PER_S = BAUD / BITS_PER_BYTE
+#: The emulated Uno's line (bench.wire.EMULATED_BYTE_US: 11 bits a byte at 117,647 baud).
+LINE_BYTES_PER_S = 1e6 / EMULATED_BYTE_US
 #: Untimed calls per point before the clock starts.
 WARMUP = 8
 #: Longest one point may take before it is abandoned (every call is bounded by the Board).
@@ -320,9 +321,10 @@ def run(ctx: Context) -> SectionResult:
         f"{max(4, ctx.commands // 4)} per point. Each point is {ROUNDS} rounds, the windows "
         "taking turns; a rate is the median round's wall-clock rate, and the spread "
         "((max - min) / median of the rounds) shows how much the shared machine moved. "
-        "Failures, retransmissions and timeouts are summed over the rounds. The line at "
-        f"{BAUD} baud 8N1 "
-        f"carries {LINE_BYTES_PER_S:,.0f} B/s: a servo command is {servo.command_bytes} B and "
+        "Failures, retransmissions and timeouts are summed over the rounds. The emulated Uno's "
+        "line (simavr times every byte as 11 bits, at the 117,647 baud the firmware's UBRR "
+        f"sets) carries {LINE_BYTES_PER_S:,.0f} B/s: a servo command is "
+        f"{servo.command_bytes} B and "
         f"its Ack {servo.ack_bytes} B with a 5-byte message id (15 of the Board's random "
         "first ids in 16), so the line rate is "
         f"{servo.both:,.0f} commands/s with "
