@@ -270,19 +270,10 @@ class Budget:
     library: float  # Board p50 on the emulated Uno
 
     @property
-    def work(self) -> float:
-        """Firmware time outside the wire time, at most: all of its awake time.
-
-        Transmit no longer waits on the line (an interrupt drains a ring), and the receive
-        work is done as the bytes arrive, overlapping the wire; so the awake time bounds
-        what the firmware adds to the round trip from above.
-        """
-        return self.awake
-
-    @property
-    def rest(self) -> float:
-        """The pty, the emulator's pacing and scheduling: what the others leave."""
-        return self.library - self.wire - self.work - self.host
+    def beyond(self) -> float:
+        """The round trip beyond the wire and the host library: the firmware's work after
+        the command's last byte, the emulator's pacing, the pty, scheduling."""
+        return self.library - self.wire - self.host
 
     def rows(self) -> list[list[str]]:
         return [
@@ -292,20 +283,21 @@ class Budget:
                 f"{self.wire:,.0f}",
             ],
             [
-                f"firmware work: awake {self.awake:,.0f} us ({self.awake_cycles:,.0f} cycles) "
-                "in all, an upper bound of its share (its receive work overlaps the wire)",
-                f"{self.work:,.0f}",
-            ],
-            [
                 "host library (on the simulated board: Board p50 minus raw client p50)",
                 f"{self.host:,.0f}",
             ],
             [
-                "the rest: the emulator's pacing (emulated time up to 1 ms ahead of the wall "
-                "clock, batches of up to 1 ms), the pty, scheduling",
-                f"{self.rest:,.0f}",
+                "beyond both: the firmware's work after the command's last byte, the "
+                "emulator's pacing (emulated time up to 1 ms ahead of the wall clock, batches "
+                "of up to 1 ms), the pty, scheduling",
+                f"{self.beyond:,.0f}",
             ],
             ["= Board p50 on the emulated Uno", f"{self.library:,.0f}"],
+            [
+                "for scale, not in the sum: the firmware awake per command "
+                f"({self.awake_cycles:,.0f} cycles), most of it while the bytes are on the wire",
+                f"{self.awake:,.0f}",
+            ],
         ]
 
 
@@ -472,41 +464,25 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
             "one-byte round trip with no protoduino code involved. "
         )
     allowed = servo.wire * (TARGET_RATIO - 1)
-    shares = (
-        ("the firmware's work", servo.work),
-        ("the pty, the emulator's pacing and scheduling", servo.rest),
-        ("the host library", servo.host),
-    )
-    biggest = max(shares, key=lambda item: item[1])
     verdict = "met" if target.met else "missed"
-    over = [name for name, us in shares if us > allowed]
-    if len(over) > 1:
-        alone = f" {' and '.join(over).capitalize()} each take more than that on their own."
-    elif over:
-        alone = f" {over[0].capitalize()} alone takes more than that."
-    else:
-        alone = ""
     out.append(
         f"The target is {verdict}: {TARGET_RATIO}x the servo write's wire time leaves "
-        f"{allowed:,.0f} us above the wire for everything else, and the largest share is "
-        f"{biggest[0]} ({biggest[1]:,.0f} us).{alone} The firmware COBS-decodes each byte and "
-        "folds it into the CRC as it arrives; what is left after the command's last byte (the "
-        "checks, nanopb's decode, the command, the Ack's encoding, its CRC and COBS into the "
-        "transmit ring) adds to the wire time in full, and the Ack's first byte leaves as "
-        "soon as it is in the ring (part 5 counts the cycles and profiles them). The rest is "
-        "the emulated Uno's own: its runner lets "
-        "emulated time run up to 1 ms ahead of the wall clock and sleeps in whole "
-        "milliseconds between batches, so a host byte enters the emulated UART up to 1 ms "
-        "after it was written, and an answer leaves at the end of a batch: how long a round "
-        "trip takes depends on where in the batches its bytes land (most of the histogram's "
-        "width), and on a loaded machine the runner also waits for a core. "
-        f"{echo_text}{_pace_text(avr.pace)}The host library adds "
-        f"{servo.host:,.0f} us (its I/O thread wakes up to write the command, and the caller "
-        f"wakes up at the Ack), {servo.host / servo.library * 100:.0f} % of the round trip. "
-        "Without the firmware's work the median would be about "
-        f"{(servo.library - servo.work) / servo.wire:.2f}x the wire time: the firmware's "
-        "work is the part protoduino can change; the emulator's share would be a real "
-        "Uno's USB-serial bridge latency instead, which this bench cannot measure.\n"
+        f"{allowed:,.0f} us above the wire for everything else; the host library takes "
+        f"{servo.host:,.0f} us of it and the rest of the round trip {servo.beyond:,.0f} us. The "
+        "firmware COBS-decodes each byte and folds it into the CRC as it arrives, and sends "
+        "its Ack through a ring an interrupt drains; what it still does between the command's "
+        "last byte and the Ack's first is the checks, nanopb's decode, the command and the "
+        "Ack's encoding (part 5 profiles its cycles), so most of its "
+        f"{servo.awake:,.0f} us awake per command overlaps the wire. The rest is the emulated "
+        "Uno's own: its runner lets emulated time run up to 1 ms ahead of the wall clock and "
+        "sleeps in whole milliseconds between batches, so a host byte enters the emulated UART "
+        "up to 1 ms after it was written, and an answer leaves at the end of a batch: how long "
+        "a round trip takes depends on where in the batches its bytes land (most of the "
+        "histogram's width), and on a loaded machine the runner also waits for a core. "
+        f"{echo_text}{_pace_text(avr.pace)}The host library adds {servo.host:,.0f} us (its I/O "
+        "thread wakes up to write the command, and the caller wakes up at the Ack), "
+        f"{servo.host / servo.library * 100:.0f} % of the round trip. The emulator's share would "
+        "be a real Uno's USB-serial bridge latency instead, which this bench cannot measure.\n"
     )
     return "\n".join(out)
 
