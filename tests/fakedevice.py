@@ -25,7 +25,13 @@ from pathlib import Path
 from typing import Any
 
 from protoduino._generated.schema_id import SCHEMA_ID
-from protoduino.constants import DEDUPE_WINDOW, ControlCode, EventCode, PacketType
+from protoduino.constants import (
+    DEDUPE_WINDOW,
+    PROTOCOL_VERSION,
+    ControlCode,
+    EventCode,
+    PacketType,
+)
 from protoduino.framing import StreamDecoder, frame_packet
 from protoduino.messages import ArduinoIn, ArduinoOut, Status
 from protoduino.packets import Packet, event_payload, parse_control, reset_ack_payload
@@ -60,7 +66,7 @@ class FakeDevice:
         self,
         directory: Path,
         *,
-        version: int = 1,
+        version: int = PROTOCOL_VERSION,
         schema_id: int = SCHEMA_ID,
         answer_reset: bool = True,
     ) -> None:
@@ -83,6 +89,9 @@ class FakeDevice:
         #: pin -> "servo" | "digital"; forgotten on reboot, like a real device.
         self.pins: dict[int, str] = {}
         self.values: dict[int, int] = {}
+        #: The session that owns the pins (0: none since power-up), and this power-up's id.
+        self.session = 0
+        self.boot_id = 0
         self._later: list[tuple[float, bytes]] = []
         self._master = -1
         self._slave = -1
@@ -145,6 +154,8 @@ class FakeDevice:
             self.dedupe.clear()
             self.pins.clear()
             self.values.clear()
+            self.session = 0
+            self.boot_id += 1
         self.send_control(event_payload(EventCode.BOOT))
 
     # --- sending ------------------------------------------------------------------
@@ -231,7 +242,7 @@ class FakeDevice:
         """Ack OK after a minimal execution (pin table, values, ping echo, info)."""
         mid = msg.message_id
         kind = msg.WhichOneof("data")
-        if mid in self.dedupe and kind not in ("ping", "get_info"):
+        if mid in self.dedupe and kind not in ("ping", "get_info", "heartbeat"):
             return [ack(mid, self.dedupe[mid])]
         out = ack(mid)
         if kind == "ping":
@@ -314,10 +325,24 @@ class FakeDevice:
                     self._cond.notify_all()
                 if not self.answer_reset:
                     return
+                if self.version < 2 or ctl.version != self.version or ctl.session is None:
+                    # Version 1, or a RESET of another version: the short answer, IDLE.
+                    with self._cond:
+                        self._active = self.version < 2 and ctl.version == self.version
+                        self._tx_seq = 0
+                    self.send_control(reset_ack_payload(self.version, self.schema_id))
+                    return
                 with self._cond:
                     self._active = True
                     self._tx_seq = 0
-                self.send_control(reset_ack_payload(self.version, self.schema_id))
+                    resumed = ctl.session != 0 and ctl.session == self.session
+                    if not resumed:  # a new session: the pin table is freed
+                        self.session = ctl.session
+                        self.pins.clear()
+                        self.values.clear()
+                self.send_control(
+                    reset_ack_payload(self.version, self.schema_id, self.boot_id, resumed)
+                )
             return
         if packet.type is not PacketType.COMMAND:
             return

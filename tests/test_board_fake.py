@@ -40,17 +40,21 @@ class Recorder:
             self.events.append(event)
             self._cond.notify_all()
 
-    def wait(self, kind: EventKind, timeout: float = 30.0) -> Event:
+    def wait(self, kind: EventKind, timeout: float = 30.0, count: int = 1) -> Event:
+        """The ``count``-th event of ``kind``."""
         deadline = time.monotonic() + timeout
         with self._cond:
             while True:
-                for event in self.events:
-                    if event.kind is kind:
-                        return event
+                found = self.of(kind)
+                if len(found) >= count:
+                    return found[count - 1]
                 left = deadline - time.monotonic()
                 if left <= 0:
                     raise AssertionError(f"no {kind} event; got {self.events}")
                 self._cond.wait(left)
+
+    def of(self, kind: EventKind) -> list[Event]:
+        return [e for e in self.events if e.kind is kind]
 
 
 def log_msg(text: str) -> Any:
@@ -150,34 +154,54 @@ def test_device_rejection_is_sent_true(board: Board, fake: FakeDevice) -> None:
     assert info.value.status == Status.STATUS_PIN_IN_USE and info.value.sent
 
 
-def test_session_restore_after_reboot(board: Board, fake: FakeDevice) -> None:
-    rec = Recorder(board)
+def _configure_a_session(board: Board) -> tuple[protoduino.Servo, protoduino.DigitalOutput]:
     servo = board.servo(9, safe=90)
     servo.write(45)
     led = board.digital_output(13)
     led.write(True)
     board.servo(10, safe_us=1500)  # an output never commanded: its Init alone is replayed
+    return servo, led
+
+
+def test_restore_after_reboot_brings_outputs_up_safe(board: Board, fake: FakeDevice) -> None:
+    """The default policy: every output re-initialised (at its safe value), no stale values."""
+    rec = Recorder(board)
+    servo, _ = _configure_a_session(board)
     mark = len(fake.commands())
     fake.reboot()
     restored = rec.wait(EventKind.RESTORED)
-    assert restored.details["replayed"] == 5 and restored.details["failed"] == []
+    assert restored.details == {"replayed": 4, "failed": [], "values": False}
     rec.wait(EventKind.REBOOTED)
-    replay = [r.kind for r in fake.commands()[mark:]]
-    assert replay[:5] == ["servo_init", "digital_init", "servo_init", "servo_control",
-                          "digital_control"]  # fmt: skip
+    replay = [r.kind for r in fake.commands()[mark:] if r.kind != "ping"]
+    assert replay[:4] == ["configure_failsafe", "servo_init", "digital_init", "servo_init"]
     assert fake.pins == {9: "servo", 13: "digital", 10: "servo"}
-    assert fake.values == {9: 45, 13: 1}
+    assert fake.values == {}  # nothing moved back to a pose of the previous boot
     servo.write(50)  # and the session goes on
     assert fake.values[9] == 50
 
 
-def test_held_call_resumes_after_restore(fake: FakeDevice) -> None:
+def test_restore_last_values_when_opted_in(fake: FakeDevice) -> None:
+    with Board.open(fake.port, restore="last") as board:
+        rec = Recorder(board)
+        _configure_a_session(board)
+        mark = len(fake.commands())
+        fake.reboot()
+        restored = rec.wait(EventKind.RESTORED)
+        assert restored.details == {"replayed": 6, "failed": [], "values": True}
+        replay = [r.kind for r in fake.commands()[mark:] if r.kind != "ping"]
+        assert replay[:6] == ["configure_failsafe", "servo_init", "digital_init", "servo_init",
+                              "servo_control", "digital_control"]  # fmt: skip
+        assert fake.values == {9: 45, 13: 1}
+
+
+def test_a_call_in_flight_at_a_reboot_fails_and_is_not_replayed(fake: FakeDevice) -> None:
+    """Defect 3: the command whose execution reset the board is never sent again."""
     # ack_timeout 0.5: room for the reboot before retries run out.
     with Board.open(fake.port, ack_timeout=0.5, ping=False) as board:
-        _held_call_resumes_after_restore(board, fake)
+        _call_in_flight_at_a_reboot(board, fake)
 
 
-def _held_call_resumes_after_restore(board: Board, fake: FakeDevice) -> None:
+def _call_in_flight_at_a_reboot(board: Board, fake: FakeDevice) -> None:
     rec = Recorder(board)
     servo = board.servo(9)
     swallowed: list[int] = []
@@ -190,12 +214,33 @@ def _held_call_resumes_after_restore(board: Board, fake: FakeDevice) -> None:
         return fake.default_reply(msg)
 
     fake.handler = reboot_on_write
-    servo.write(120)  # returns once executed on the rebooted device
+    with pytest.raises(protoduino.DeviceRebootedError, match="rebooted"):
+        servo.write(120)
     rec.wait(EventKind.RESTORED)
-    kinds = [r.kind for r in fake.commands()]
-    last_init = max(i for i, k in enumerate(kinds) if k == "servo_init")
-    assert kinds[last_init + 1 :].count("servo_control") >= 1  # resumed after the restore
-    assert fake.values[9] == 120
+    assert [r.kind for r in fake.commands()].count("servo_control") == 1  # never replayed
+    assert 9 not in fake.values and fake.pins == {9: "servo"}  # back, at its safe value
+    servo.write(60)  # the application decides what comes next
+    assert fake.values[9] == 60
+
+
+def test_a_reboot_loop_stops_restoring(fake: FakeDevice) -> None:
+    with Board.open(fake.port, ping=False, reboot_limit=3, reboot_window=60.0) as board:
+        rec = Recorder(board)
+        servo = board.servo(9)
+        for n in (1, 2):
+            fake.reboot()
+            rec.wait(EventKind.RESTORED, count=n)
+            board.ping()
+        inits = len(fake.commands("servo_init"))
+        fake.reboot()
+        error = rec.wait(EventKind.ERROR)
+        assert "reboot loop" in error.text
+        with pytest.raises(protoduino.RebootLoopError):
+            servo.write(10)
+        with pytest.raises(protoduino.RebootLoopError):
+            board.ping()
+        assert len(fake.commands("servo_init")) == inits  # no third restore
+        assert len(rec.of(EventKind.RESTORED)) == 2
 
 
 def test_stop_and_failsafe_forget_values(board: Board, fake: FakeDevice) -> None:

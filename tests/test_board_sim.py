@@ -239,19 +239,54 @@ def test_device_only_rejections(board: Board) -> None:
         assert info.value.status == status and info.value.sent
 
 
-def test_session_restore_after_reboot(board: Board, sim: SimBoard) -> None:
+def test_restore_after_reboot_brings_outputs_up_safe(board: Board, sim: SimBoard) -> None:
+    """Defect 3: after a reboot an output comes back at its safe value, not at a stale pose."""
     rec = Recorder(board)
     board.servo(9).write(30)
     board.digital_output(13).on()
     expect_pin(sim, 9, [SAFE_90_US, us(30)])
     before = len(sim.trace())
     sim.reboot()
-    rec.wait(EventKind.RESTORED)
+    restored = rec.wait(EventKind.RESTORED)[0]
+    assert restored.details["values"] is False
     assert rec.of(EventKind.REBOOTED)
-    # the reboot drops every output (value 0), then the restore brings them back
-    expect_pin(sim, 9, [0, SAFE_90_US, us(30)], since=before)
-    expect_pin(sim, 13, [0, 0, 1], since=before, digital=True)  # released, init (safe), on
+    board.ping()  # the restore is acknowledged: anything it moved is at the pins
+    # the reboot drops every output (value 0), the restore brings each back safe, and stays
+    expect_pin(sim, 9, [0, SAFE_90_US], since=before)
+    expect_pin(sim, 13, [0, 0], since=before, digital=True)  # released, init (safe)
     assert board.stats.reboots == 1
+
+
+def test_restore_last_values_when_opted_in(sim: SimBoard) -> None:
+    with Board.open(sim.port, restore="last") as board:
+        rec = Recorder(board)
+        board.servo(9).write(30)
+        board.digital_output(13).on()
+        expect_pin(sim, 9, [SAFE_90_US, us(30)])
+        before = len(sim.trace())
+        sim.reboot()
+        assert rec.wait(EventKind.RESTORED)[0].details["values"] is True
+        expect_pin(sim, 9, [0, SAFE_90_US, us(30)], since=before)
+        expect_pin(sim, 13, [0, 0, 1], since=before, digital=True)
+
+
+def test_a_reboot_loop_stops_restoring(sim: SimBoard) -> None:
+    with Board.open(sim.port, ping=False, reboot_limit=3, reboot_window=60.0) as board:
+        rec = Recorder(board)
+        servo = board.servo(9)
+        for n in (1, 2):
+            sim.reboot()
+            rec.wait(EventKind.RESTORED, count=n)
+            board.ping()
+        before = len(sim.trace())
+        sim.reboot()
+        assert "reboot loop" in rec.wait(EventKind.ERROR)[0].text
+        with pytest.raises(protoduino.RebootLoopError):
+            servo.write(10)
+        # The decision was taken with the handshake, before the event: no restore began.
+        assert not board._rpc._holding and not board._rpc._restore
+        assert board.stats.reboots == 3
+        assert pin_values(sim.trace()[before:], 9) in ([0], [])
 
 
 @pytest.mark.parametrize("backend", SIM_BACKENDS)
@@ -274,8 +309,11 @@ def test_reconnect_and_restore_after_the_sim_is_killed(backend: str, tmp_path: P
             rec.wait(EventKind.RESTORED, timeout=10)
             board.ping()
             assert board.stats.reconnects >= 1
-            expect_pin(second, 9, [SAFE_90_US, us(120)])
-            expect_pin(second, 13, [0, 1], digital=True)
+            # a new device (another boot id, or a session it never heard of): outputs lost,
+            # re-initialised at their safe values
+            assert rec.of(EventKind.REBOOTED) or rec.of(EventKind.SESSION_LOST)
+            expect_pin(second, 9, [SAFE_90_US])
+            expect_pin(second, 13, [0], digital=True)
     finally:
         first.stop()
         second.stop()

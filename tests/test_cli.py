@@ -140,14 +140,25 @@ def test_board_commands_against_the_sim(
     wait_for_pin(sim_board, 9, lambda v: bool(v) and abs(v[-1] - 2000) <= near)
     assert main(["pin", port, "13", "on"]) == 0
     wait_for_pin(sim_board, 13, lambda v: v[-1:] == [1])
-    assert main(["servo", port, "13", "90"]) == 1  # the device refuses: pin in use
+    # Every command on a port shares one host session: the device kept pin 13 from
+    # the command before, so a servo there is refused ...
+    assert main(["servo", port, "13", "90"]) == 1
     assert "STATUS_PIN_IN_USE" in capsys.readouterr().err
+    # ... and the same Init again does not touch the pin (before sessions, `pin 13 on`
+    # on a pin already on drove it to its safe level first: 1 -> 0 -> 1).
+    lines_13 = len(pin_values(sim_board.trace(), 13))
+    assert main(["pin", port, "13", "on"]) == 0
+    capsys.readouterr()
     assert main(["monitor", port, "--duration", "0.3", "--json"]) == 0
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
-    assert any(line.get("message", {}).get("code") == "RESET_ACK" for line in lines)
-    # The refused command and the monitor changed nothing at the pins.
+    assert any(line.get("message", {}).get("resumed") is True for line in lines)
+    # The refused command, the repeated one and the monitor changed nothing at the pins.
     assert abs(pin_values(sim_board.trace(), 9)[-1] - 2000) <= near
-    assert pin_values(sim_board.trace(), 13)[-1] == 1
+    assert pin_values(sim_board.trace(), 13)[lines_13 - 1 :] == [1]
+    # A new session: the device releases what the earlier commands configured.
+    assert main(["servo", port, "13", "90", "--new-session"]) == 0
+    wait_for_pin(sim_board, 9, lambda v: v[-1:] == [0])  # pulses stopped
+    wait_for_pin(sim_board, 13, lambda v: abs(v[-1] - 1472) <= near)
 
 
 @pytest.mark.slow

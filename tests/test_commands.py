@@ -19,6 +19,21 @@ DISPATCH = ROOT / "firmware" / "core" / "pd_dispatch.c"
 OUTPUTS_H = ROOT / "firmware" / "core" / "pd_outputs.h"
 
 
+def _firmware_flags() -> dict[str, str]:
+    text = DISPATCH.read_text()
+    table = re.search(r"#define PD_COMMANDS\(X\)(.*?)\n\n", text, re.S)
+    assert table
+    return dict(re.findall(r"X\((\w+),\s*([\w|]+),", table.group(1)))
+
+
+def test_only_controls_are_refused_once_the_failsafe_ran_out() -> None:
+    """PD_CMD_COMMANDS marks what sets a commanded value: each pin mode's Control, and a
+    Pose (several of them at once)."""
+    for kind, flags in _firmware_flags().items():
+        controls = commands.command(kind).needs_init is not None or kind == "pose"
+        assert ("PD_CMD_COMMANDS" in flags) == controls, kind
+
+
 def _firmware_commands() -> dict[str, tuple[bool, str | None]]:
     """name -> (idempotent, Ack.result member) from the X(...) lines of PD_COMMANDS."""
     text = DISPATCH.read_text()

@@ -48,10 +48,18 @@ def test_handshake_and_info(fake: FakeDevice) -> None:
 def test_version_mismatch_names_both_versions(tmp_path: Path) -> None:
     with FakeDevice(tmp_path, version=7), pytest.raises(protoduino.VersionMismatchError) as info:
         Board.open(str(tmp_path / "fake-tty"))
-    assert info.value.host_version == 1
+    assert info.value.host_version == protoduino.PROTOCOL_VERSION
     assert info.value.device_version == 7
-    assert "1" in str(info.value) and "7" in str(info.value)
+    assert "2" in str(info.value) and "7" in str(info.value)
     assert isinstance(info.value, protoduino.LinkError)
+
+
+def test_version_1_firmware_gets_the_clear_version_error(tmp_path: Path) -> None:
+    """A version 1 device answers our RESET with its 6-byte RESET_ACK: the host names both."""
+    with FakeDevice(tmp_path, version=1), pytest.raises(protoduino.VersionMismatchError) as info:
+        Board.open(str(tmp_path / "fake-tty"))
+    assert (info.value.host_version, info.value.device_version) == (2, 1)
+    assert "host speaks 2, device speaks 1" in str(info.value)
 
 
 def test_schema_mismatch_names_both_fingerprints(tmp_path: Path) -> None:
@@ -174,14 +182,22 @@ def test_device_events_reach_callbacks(fake: FakeDevice) -> None:
         assert stats.dropped.get("direction") == 1
 
 
-def test_not_active_means_rebooted(fake: FakeDevice) -> None:
+def test_not_active_means_handshake_again_and_the_boot_id_tells(fake: FakeDevice) -> None:
     with Board.open(fake.port, ping=False) as board:
         seen, _ = events_of(board)
+        # A NOT_ACTIVE from a device that did not reboot (same boot id, session resumed):
+        # a handshake, nothing lost, no restore.
         fake.send_control(event_payload(EventCode.NOT_ACTIVE))
+        assert fake.wait_for(lambda: board.stats.handshakes == 2)
+        board.ping()
+        assert board.stats.reboots == 0 and board.stats.sessions_lost == 0
+        # A real reboot: a new boot id.
+        fake.reboot()
         assert fake.wait_for(lambda: board.stats.reboots == 1)
         board.ping()
-        assert board.stats.handshakes == 2
+        assert board.stats.handshakes == 3
         assert fake.wait_for(lambda: EventKind.REBOOTED in [e.kind for e in list(seen)])
+        assert [e.kind for e in list(seen)].count(EventKind.REBOOTED) == 1
 
 
 def test_board_close_stops_threads_and_is_idempotent(fake: FakeDevice) -> None:

@@ -182,8 +182,8 @@ def test_many_lost_acks_under_load_never_execute_twice(fake: FakeDevice) -> None
         assert max(ex.count.values()) == 1, ex.evicted_retransmissions
 
 
-def test_reboot_empties_the_window_and_the_guard_starts_again(fake: FakeDevice) -> None:
-    """A call in flight across a reboot is sent again after the restore (docs/protocol.md 7)."""
+def test_a_call_in_flight_across_a_reboot_never_reaches_the_new_boot(fake: FakeDevice) -> None:
+    """It may have run on the old boot (and be what reset it): it fails, it is not sent again."""
     swallowed: list[int] = []
 
     def reboot_on_first_write(msg: Any) -> list[Any]:
@@ -197,12 +197,14 @@ def test_reboot_empties_the_window_and_the_guard_starts_again(fake: FakeDevice) 
     with Board.open(fake.port, ack_timeout=0.4, ping=False) as board:
         servo = board.servo(9)
         fake.handler = reboot_on_first_write
-        servo.write(120)  # returns once it ran on the new boot, after the restore
-        assert fake.values == {9: 120}
+        with pytest.raises(protoduino.DeviceRebootedError):
+            servo.write(120)
         assert board.stats.reboots == 1
+        assert fake.wait_for(lambda: fake.pins == {9: "servo"})  # re-initialised
+        assert fake.values == {}  # at its safe value
         again = [r for r in fake.commands("servo_control") if r.msg.message_id == swallowed[0]]
-        assert len(again) == 2  # the same id, once per boot
-        servo.write(60)
+        assert len(again) == 1  # once, on the old boot only
+        servo.write(60)  # the dedupe guard starts again from the empty window
         assert fake.values == {9: 60}
 
 
@@ -218,7 +220,7 @@ def test_a_restore_message_without_ack_is_sent_again(fake: FakeDevice) -> None:
             return []
         return replies
 
-    with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
+    with Board.open(fake.port, ack_timeout=0.1, ping=False, restore="last") as board:
         board.on_event(events.append)
         board.servo(9).write(45)
         fake.handler = lose_replayed_init

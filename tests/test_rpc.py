@@ -96,7 +96,7 @@ def test_duplicate_ack_is_counted_late_and_dropped(board: Board, fake: FakeDevic
     board.ping(b"a")
     board.ping(b"b")
     assert fake.wait_for(lambda: board.stats.late_acks == 2)
-    assert board.stats.acks == 3  # get_info + two pings
+    assert board.stats.acks == 4  # get_info, configure_failsafe, two pings
 
 
 def test_late_ack_never_completes_the_wrong_call(board: Board, fake: FakeDevice) -> None:

@@ -99,8 +99,13 @@ class RawHost:
         self.write(self.frame(PacketType.COMMAND, msg.SerializeToString()))
 
     def reset(self) -> Control:
-        """Handshake: a lone 0x00, RESET (SEQ 0), then wait for RESET_ACK."""
-        self.write(b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION)))
+        """Handshake: a lone 0x00, RESET (SEQ 0, session 1), then wait for RESET_ACK."""
+        return self.reset_session(1)
+
+    def reset_session(self, session: int) -> Control:
+        self.write(
+            b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION, session))
+        )
         self.seq = 1
         pkt = self.wait(lambda p: _control_code(p) is ControlCode.RESET_ACK)
         return parse_control(pkt.payload)
@@ -245,7 +250,7 @@ def active(host: RawHost) -> RawHost:
     return host
 
 
-def _servo_init(mid: int, pin: int, **kw: int) -> pb.ArduinoIn:
+def _servo_init(mid: int, pin: int, **kw: Any) -> pb.ArduinoIn:
     return pb.ArduinoIn(message_id=mid, servo_init=pb.ServoInit(pin=pin, **kw))
 
 
@@ -269,26 +274,59 @@ def _ping(mid: int, payload: bytes = b"") -> pb.ArduinoIn:
 
 
 def test_handshake_bytes_and_schema_id(host: RawHost) -> None:
-    host.write(b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION)))
-    expected = b"\0" + frame_packet(
-        PacketType.CONTROL, 0, reset_ack_payload(PROTOCOL_VERSION, protoduino.SCHEMA_ID)
-    )
+    host.write(b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION, 77)))
     # A board that boots while the port is being opened (an emulator) may have
     # sent its EVENT BOOT, or the tail of it, first; nothing else may come before.
     boot = b"\0" + frame_packet(PacketType.CONTROL, 0, event_payload(EventCode.BOOT))
     got = b""
+    decoder = StreamDecoder()
+    acks: list[Control] = []
     deadline = time.monotonic() + REPLY_TIMEOUT
-    while not got.endswith(expected) and time.monotonic() < deadline:
-        got += host.ser.read(max(1, host.ser.in_waiting))
-    before, answer = got[: -len(expected)], got[-len(expected) :]
-    assert answer == expected
-    assert boot.endswith(before), before
-    (packet,) = StreamDecoder().feed(answer)
-    assert isinstance(packet, Packet)
-    ack = parse_control(packet.payload)
+    while not acks and time.monotonic() < deadline:
+        data = host.ser.read(max(1, host.ser.in_waiting))
+        got += data
+        for item in decoder.feed(data):
+            if isinstance(item, Packet) and _control_code(item) is ControlCode.RESET_ACK:
+                acks.append(parse_control(item.payload))
+    (ack,) = acks
     assert ack.code is ControlCode.RESET_ACK
     assert ack.version == PROTOCOL_VERSION
     assert ack.schema_id == protoduino.SCHEMA_ID
+    assert ack.boot_id is not None and ack.resumed is False  # a new session
+    expected = b"\0" + frame_packet(
+        PacketType.CONTROL,
+        0,
+        reset_ack_payload(PROTOCOL_VERSION, protoduino.SCHEMA_ID, ack.boot_id, False),
+    )
+    before, answer = got[: -len(expected)], got[-len(expected) :]
+    assert answer == expected
+    assert boot.endswith(before), before
+    # The same session again: resumed, same boot.
+    assert host.reset_session(77) == Control(
+        ControlCode.RESET_ACK,
+        version=PROTOCOL_VERSION,
+        schema_id=protoduino.SCHEMA_ID,
+        boot_id=ack.boot_id,
+        resumed=True,
+    )
+
+
+def test_version_1_host_gets_the_short_answer_and_its_version_error(
+    sim_board: SimBoard, host: RawHost
+) -> None:
+    """An old host: RESET in version 1's shape; the device answers in the shape version 1
+    reads (its host then raises VersionMismatchError naming 1 and 2) and commands nothing."""
+    host.write(b"\0" + frame_packet(PacketType.CONTROL, 0, bytes((ControlCode.RESET, 1))))
+    host.seq = 1
+    pkt = host.wait(lambda p: _control_code(p) is ControlCode.RESET_ACK)
+    assert len(pkt.payload) == 6  # CODE VERSION SCHEMA_ID: version 1's exact shape
+    assert pkt.payload[1] == PROTOCOL_VERSION
+    error = protoduino.VersionMismatchError(1, pkt.payload[1])
+    assert "host speaks 1, device speaks 2" in str(error)
+    host.send(_digital_init(5, 13, True))
+    host.event(EventCode.NOT_ACTIVE)  # it stayed IDLE
+    _quiet(sim_board)
+    assert sim_board.trace() == []
 
 
 def test_boot_event_and_reboot(sim_board: SimBoard, active: RawHost) -> None:

@@ -40,11 +40,16 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us);
 /* Hold servo writes (true) until the release (false), then apply them all at
  * the next frame start (pd_hal_servo_hold). */
 void pd_avr_servo_hold(bool hold);
+/* Stop the channel's pulses after the one under way; a later write attaches again. */
+void pd_avr_servo_detach(uint8_t channel);
 /* Start the next servo frame as soon as possible (failsafe, Stop). */
 void pd_avr_servo_expedite(void);
 
-/* Make `pin` an output at `level` (the level is set before the direction). */
-void pd_avr_digital_write(uint8_t pin, bool level);
+/* output: make `pin` an output at `level` (the level is set before the
+ * direction); else an input, without pull-up when level is false (power-up). */
+void pd_avr_pin_set(uint8_t pin, bool output, bool level);
+#define pd_avr_digital_write(pin, level) pd_avr_pin_set((pin), true, (level))
+#define pd_avr_digital_release(pin) pd_avr_pin_set((pin), false, false)
 
 /* Everything at power-up, then one iteration of the main loop. */
 void pd_avr_setup(void);

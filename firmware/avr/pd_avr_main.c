@@ -7,6 +7,7 @@
  * least every 1 ms. It never waits for the UART: frames go into a transmit
  * ring that an interrupt drains.
  */
+#include <avr/eeprom.h>
 #include <avr/interrupt.h>
 #include <avr/io.h>
 #include <avr/sleep.h>
@@ -67,6 +68,34 @@ void pd_hal_digital_write(void *hal, uint8_t pin, bool level)
 {
     (void)hal;
     pd_avr_digital_write(pin, level);
+}
+
+void pd_hal_servo_detach(void *hal, uint8_t channel, uint8_t pin)
+{
+    (void)hal;
+    (void)pin;
+    pd_avr_servo_detach(channel);
+}
+
+void pd_hal_digital_release(void *hal, uint8_t pin)
+{
+    (void)hal;
+    pd_avr_digital_release(pin);
+}
+
+/*
+ * The boot counter lives in the first four bytes of EEPROM: read, add one,
+ * write back (eeprom_update_dword writes only the bytes that change). At one
+ * write per power-up the EEPROM's 100,000 cycles last 100,000 boots; an erased
+ * EEPROM (0xFFFFFFFF) starts the count at 0.
+ */
+uint32_t pd_hal_boot_id(void *hal)
+{
+    (void)hal;
+    uint32_t *const counter = (uint32_t *)0;
+    uint32_t id = eeprom_read_dword(counter) + 1u;
+    eeprom_update_dword(counter, id);
+    return id;
 }
 
 void pd_hal_outputs_safe(void *hal)

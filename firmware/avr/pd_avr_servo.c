@@ -32,8 +32,8 @@
 #define CLOCK_TICKS 2000u
 
 typedef struct servo_channel {
-    volatile uint8_t *port; /* NULL: channel not attached */
-    uint8_t mask;
+    volatile uint8_t *port; /* NULL: channel never used (not in the sequence) */
+    uint8_t mask;           /* 0: detached (no edges) */
     uint16_t ticks; /* the width this frame's pulse has */
     uint16_t next;  /* the width written, taken into `ticks` at the next frame start */
 } servo_channel_t;
@@ -161,15 +161,21 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
         return;
     }
     uint16_t ticks = (uint16_t)(us * TICKS_PER_US);
+    volatile uint8_t *port = pd_avr_port(pin);
+    uint8_t mask = pd_avr_mask(pin);
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
         servo_channel_t *c = &channels[channel];
-        if (c->port == NULL) {
-            /* Attach: output, low, joins the sequence at the next frame. */
-            *pd_avr_port(pin) &= (uint8_t)~pd_avr_mask(pin);
-            *pd_avr_ddr(pin) |= pd_avr_mask(pin);
-            c->mask = pd_avr_mask(pin);
-            c->port = pd_avr_port(pin);
+        if (c->port != port || c->mask != mask) {
+            /* Attach (first use, after a detach, or another pin): output, low,
+             * joins the sequence at the channel's next turn. A pulse still under
+             * way on this pin (detached a moment ago) ends by its own edge. */
+            if (off_port != port || !(off_mask & mask)) {
+                *port &= (uint8_t)~mask;
+            }
+            *pd_avr_ddr(pin) |= mask;
+            c->mask = mask;
+            c->port = port;
             c->ticks = ticks; /* valid for the next frame, held or not */
         }
         c->next = ticks;
@@ -179,6 +185,26 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
 void pd_avr_servo_hold(bool hold)
 {
     held = hold;
+}
+
+/*
+ * The channel keeps its place in the frame with no edges (mask 0), so the
+ * frame's timing does not move; the pin is left alone: a pulse under way ends
+ * at its own time through the off edge the ISR already holds, and a pulse
+ * about to start is cancelled before it does.
+ */
+void pd_avr_servo_detach(uint8_t channel)
+{
+    if (channel >= PD_MAX_SERVOS) {
+        return;
+    }
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        channels[channel].mask = 0;
+        if (on_channel == (int8_t)channel) {
+            on_mask = 0;
+        }
+    }
 }
 
 void pd_avr_servo_expedite(void)
@@ -199,17 +225,24 @@ void pd_avr_servo_expedite(void)
     }
 }
 
-void pd_avr_digital_write(uint8_t pin, bool level)
+/* One function for both (the pin lookups cost flash each time they are inlined). */
+void pd_avr_pin_set(uint8_t pin, bool output, bool level)
 {
     volatile uint8_t *port = pd_avr_port(pin);
+    volatile uint8_t *ddr = pd_avr_ddr(pin);
     uint8_t mask = pd_avr_mask(pin);
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
+        if (!output) {
+            *ddr &= (uint8_t)~mask; /* input first: the pin never drives the other level */
+        }
         if (level) {
             *port |= mask;
         } else {
             *port &= (uint8_t)~mask;
         }
-        *pd_avr_ddr(pin) |= mask;
+        if (output) {
+            *ddr |= mask;
+        }
     }
 }

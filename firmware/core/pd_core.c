@@ -8,6 +8,8 @@ void pd_core_init(pd_core_t *core, void *hal)
     core->report = NULL;
     core->report_pending = 0;
     core->last_tick = (uint8_t)pd_hal_millis(hal);
+    core->session = 0;
+    core->boot_id = pd_hal_boot_id(hal);
     pd_link_init(&core->link);
     pd_dedupe_init(&core->dedupe);
     pd_outputs_init(&core->outputs);
@@ -43,19 +45,20 @@ static void send_report(pd_core_t *core)
 void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause)
 {
     pd_outputs_all_safe(&core->outputs, core->hal);
-    pd_failsafe_set(&core->failsafe);
-    pd_dispatch_send_failsafe(core, true, cause);
+    if (cause == protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP) {
+        pd_failsafe_stop(&core->failsafe); /* the timer keeps running */
+    } else {
+        pd_failsafe_fire(&core->failsafe);
+    }
+    pd_dispatch_send_failsafe(core, true, cause); /* dropped while IDLE: no one to tell */
 }
 
 void pd_core_poll(pd_core_t *core)
 {
-    /*
-     * Outputs can only be configured once ACTIVE, and only a reboot makes the
-     * link IDLE again, so an IDLE device has nothing to make safe and no one to
-     * tell: the timer is checked only while ACTIVE.
-     */
+    /* Checked in every state: a RESET of another protocol version makes the
+     * link IDLE with outputs still configured. */
     uint32_t now = pd_hal_millis(core->hal);
-    if (core->link.active && pd_failsafe_due(&core->failsafe, now)) {
+    if (pd_failsafe_due(&core->failsafe, now)) {
         pd_core_enter_safe(core, protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT);
     }
     pd_outputs_step(&core->outputs, core->hal, now);
@@ -66,4 +69,18 @@ void pd_core_poll(pd_core_t *core)
     if (core->report_pending != 0 && core->report != NULL && core->link.active) {
         send_report(core);
     }
+}
+
+bool pd_core_open_session(pd_core_t *core, uint32_t session)
+{
+    if (session != 0 && session == core->session) {
+        return true; /* a re-handshake: not a sign of life, the timer runs on */
+    }
+    /* Another owner: what the previous one configured is not its to command,
+     * and its safe values are not its to choose. Every output returns to the
+     * state it has at power-up, which the wiring must tolerate anyway. */
+    pd_outputs_release_all(&core->outputs, core->hal);
+    pd_failsafe_init(&core->failsafe, pd_hal_millis(core->hal));
+    core->session = session;
+    return false;
 }

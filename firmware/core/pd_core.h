@@ -46,6 +46,8 @@ typedef bool (*pd_report_fn)(struct pd_core *core, uint8_t slot, protoduino_Ardu
 
 typedef struct pd_core {
     void *hal; /* handed back to every pd_hal_* call */
+    uint32_t boot_id; /* this power-up's, from the HAL (RESET_ACK) */
+    uint32_t session; /* the host session that owns the outputs; 0: none since power-up */
     pd_link_t link;
     pd_dedupe_t dedupe;
     pd_outputs_t outputs;
@@ -80,5 +82,12 @@ static inline void pd_core_report(pd_core_t *core, uint8_t slot)
 
 /* Every configured output to its safe value, flag set, event sent (Stop, timeout). */
 void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause);
+
+/*
+ * A RESET carrying `session`: the same session keeps its outputs and its
+ * failsafe timer; another one releases every output and starts afresh.
+ * Returns whether the session was resumed.
+ */
+bool pd_core_open_session(pd_core_t *core, uint32_t session);
 
 #endif /* PD_CORE_H */

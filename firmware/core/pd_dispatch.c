@@ -123,14 +123,58 @@ static void notify_stopped(pd_core_t *core)
 
 /* --- command handlers: each returns the Ack status ------------------------ */
 
+/* A liveness message: restarts the failsafe timer, clears its flag. */
+static void alive(pd_core_t *core, pd_cmd_t *cmd)
+{
+    if (pd_failsafe_alive(&core->failsafe, pd_hal_millis(core->hal))) {
+        cmd->then = notify_failsafe_cleared;
+    }
+}
+
 static protoduino_Status cmd_ping(pd_core_t *core, pd_cmd_t *cmd)
 {
     const protoduino_Ping *ping = &cmd->in->data.ping;
-    if (pd_failsafe_ping(&core->failsafe, pd_hal_millis(core->hal))) {
-        cmd->then = notify_failsafe_cleared;
+    if (!core->failsafe.heartbeat_only) {
+        alive(core, cmd); /* liveness unless the session wants the application's Heartbeat */
     }
     cmd->ack->result.ping_echo.size = ping->payload.size;
     memcpy(cmd->ack->result.ping_echo.bytes, ping->payload.bytes, ping->payload.size);
+    return protoduino_Status_STATUS_OK;
+}
+
+static protoduino_Status cmd_heartbeat(pd_core_t *core, pd_cmd_t *cmd)
+{
+    alive(core, cmd); /* whatever the liveness source */
+    return protoduino_Status_STATUS_OK;
+}
+
+/* ConfigureFailsafe: this session's timeout and liveness source; restarts the timer. */
+static protoduino_Status cmd_configure_failsafe(pd_core_t *core, pd_cmd_t *cmd)
+{
+    const protoduino_ConfigureFailsafe *msg = &cmd->in->data.configure_failsafe;
+    uint32_t timeout = msg->timeout_ms ? msg->timeout_ms : PD_FAILSAFE_TIMEOUT_MS;
+    if (timeout < PD_FAILSAFE_MIN_MS || timeout > PD_FAILSAFE_MAX_MS ||
+        (msg->liveness != protoduino_Liveness_LIVENESS_PING &&
+         msg->liveness != protoduino_Liveness_LIVENESS_HEARTBEAT)) {
+        return protoduino_Status_STATUS_INVALID_ARGUMENT;
+    }
+    core->failsafe.timeout_ms = timeout;
+    core->failsafe.heartbeat_only = msg->liveness == protoduino_Liveness_LIVENESS_HEARTBEAT;
+    /* Whoever configures the session is alive; a longer timeout must not count
+     * from a liveness message that came under the old one. */
+    alive(core, cmd);
+    return protoduino_Status_STATUS_OK;
+}
+
+static protoduino_Status cmd_release(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_outputs_release(&core->outputs, core->hal, cmd->in->data.release.pin);
+}
+
+static protoduino_Status cmd_release_all(pd_core_t *core, pd_cmd_t *cmd)
+{
+    (void)cmd;
+    pd_outputs_release_all(&core->outputs, core->hal);
     return protoduino_Status_STATUS_OK;
 }
 
@@ -180,7 +224,7 @@ static protoduino_Status cmd_read_outputs(pd_core_t *core, pd_cmd_t *cmd)
 static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
 {
     pd_outputs_all_safe(&core->outputs, core->hal);
-    pd_failsafe_set(&core->failsafe);
+    pd_failsafe_stop(&core->failsafe); /* the timer keeps running */
     cmd->then = notify_stopped;
     return protoduino_Status_STATUS_OK;
 }
@@ -196,6 +240,10 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
  *           neither looked up in nor recorded in the dedupe window (a repeat
  *           is answered in full; the window is left to commands that move
  *           outputs). Must agree with `idempotent` in host/protoduino/commands.py;
+ *           PD_CMD_COMMANDS: it sets an output to a commanded (not safe)
+ *           value, so it is refused with STATUS_FAILSAFE_EXPIRED once the
+ *           failsafe timer has run out, until the next liveness message:
+ *           there is never a commanded output without a running timer;
  *   result  the Ack.result member its Ack carries (0: none); the handler fills it.
  *
  * Why an X-macro and not an array of structs with function pointers: the
@@ -214,17 +262,22 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
  *      that every ArduinoIn member has one and that both sides agree on the flags).
  */
 #define PD_CMD_IDEMPOTENT 0x01u
+#define PD_CMD_COMMANDS 0x02u
 
 #define PD_COMMANDS(X)                                                       \
     X(ping, PD_CMD_IDEMPOTENT, protoduino_Ack_ping_echo_tag)                 \
     X(get_info, PD_CMD_IDEMPOTENT, protoduino_Ack_info_tag)                  \
     X(servo_init, 0, 0)                                                      \
-    X(servo_control, 0, 0)                                                   \
+    X(servo_control, PD_CMD_COMMANDS, 0)                                     \
     X(digital_init, 0, 0)                                                    \
-    X(digital_control, 0, 0)                                                 \
+    X(digital_control, PD_CMD_COMMANDS, 0)                                   \
     X(stop, 0, 0)                                                            \
-    X(pose, 0, 0)                                                            \
-    X(read_outputs, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)
+    X(pose, PD_CMD_COMMANDS, 0)                                              \
+    X(read_outputs, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)           \
+    X(configure_failsafe, 0, 0)                                              \
+    X(heartbeat, PD_CMD_IDEMPOTENT, 0)                                       \
+    X(release, 0, 0)                                                         \
+    X(release_all, 0, 0)
 
 /* The table entry for `tag` (flags and result; the handler is run by run_command). */
 static bool find_command(pb_size_t tag, pd_command_t *entry)
@@ -293,7 +346,10 @@ void pd_dispatch_command(pd_core_t *core, const uint8_t *payload, size_t len)
     }
     pd_cmd_t cmd = {&in, &out.data.ack, NULL};
     protoduino_Status status = protoduino_Status_STATUS_UNKNOWN_COMMAND;
-    if (known) {
+    if (known && (entry.flags & PD_CMD_COMMANDS) &&
+        pd_failsafe_expired(&core->failsafe, pd_hal_millis(core->hal))) {
+        status = protoduino_Status_STATUS_FAILSAFE_EXPIRED;
+    } else if (known) {
         out.data.ack.which_result = entry.result;
         status = run_command(core, &cmd);
         if (status != protoduino_Status_STATUS_OK) {

@@ -5,28 +5,38 @@
 void pd_failsafe_init(pd_failsafe_t *fs, uint32_t now_ms)
 {
     fs->alive_ms = now_ms;
+    fs->timeout_ms = PD_FAILSAFE_TIMEOUT_MS;
+    fs->fired = false;
     fs->active = false;
+    fs->heartbeat_only = false;
 }
 
-void pd_failsafe_restart(pd_failsafe_t *fs, uint32_t now_ms)
-{
-    fs->alive_ms = now_ms;
-}
-
-bool pd_failsafe_ping(pd_failsafe_t *fs, uint32_t now_ms)
+bool pd_failsafe_alive(pd_failsafe_t *fs, uint32_t now_ms)
 {
     bool was_active = fs->active;
     fs->alive_ms = now_ms;
+    fs->fired = false;
     fs->active = false;
     return was_active;
 }
 
-bool pd_failsafe_due(const pd_failsafe_t *fs, uint32_t now_ms)
+bool pd_failsafe_expired(const pd_failsafe_t *fs, uint32_t now_ms)
 {
-    return !fs->active && (uint32_t)(now_ms - fs->alive_ms) >= PD_FAILSAFE_TIMEOUT_MS;
+    return (uint32_t)(now_ms - fs->alive_ms) >= fs->timeout_ms;
 }
 
-void pd_failsafe_set(pd_failsafe_t *fs)
+bool pd_failsafe_due(const pd_failsafe_t *fs, uint32_t now_ms)
+{
+    return !fs->fired && pd_failsafe_expired(fs, now_ms);
+}
+
+void pd_failsafe_fire(pd_failsafe_t *fs)
+{
+    fs->fired = true;
+    fs->active = true;
+}
+
+void pd_failsafe_stop(pd_failsafe_t *fs)
 {
     fs->active = true;
 }

@@ -60,8 +60,27 @@ void pd_hal_servo_write(void *hal, uint8_t channel, uint8_t pin, uint16_t us);
  */
 void pd_hal_servo_hold(void *hal, bool hold);
 
+/*
+ * Stop the pulses of servo channel `channel` on `pin` (a servo whose safe
+ * state is "detach", or a released servo): the pulse under way, if any, ends
+ * at its normal time (a cut pulse would be a position of its own), then the
+ * pin stays low, as between two pulses. A later pd_hal_servo_write attaches
+ * the channel again.
+ */
+void pd_hal_servo_detach(void *hal, uint8_t channel, uint8_t pin);
+
 /* Make `pin` a digital output (if it is not yet one) at `level`. */
 void pd_hal_digital_write(void *hal, uint8_t pin, bool level);
+
+/* A released digital output: the pin becomes an input (no pull-up), as at power-up. */
+void pd_hal_digital_release(void *hal, uint8_t pin);
+
+/*
+ * An identifier of this power-up, read once by pd_core_init(): it must differ
+ * from the previous power-up's, so that a host can tell a reboot from a
+ * reconnect (protocol.md section 5). The Uno counts its boots in EEPROM.
+ */
+uint32_t pd_hal_boot_id(void *hal);
 
 /*
  * Every configured output was just driven to its safe value (failsafe or

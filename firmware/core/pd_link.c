@@ -81,23 +81,44 @@ bool pd_link_send_event(pd_core_t *core, uint8_t event)
     return send_control(core, payload, sizeof(payload));
 }
 
-/* RESET: clear the link state (not the outputs), answer, become ACTIVE. */
-static void handle_reset(pd_core_t *core)
+static void put_be32(uint8_t *p, uint32_t v)
+{
+    p[0] = (uint8_t)(v >> 24);
+    p[1] = (uint8_t)(v >> 16);
+    p[2] = (uint8_t)(v >> 8);
+    p[3] = (uint8_t)v;
+}
+
+/*
+ * RESET (protocol.md section 5). Ours: clear the link state, open or resume
+ * the session, answer RESET_ACK with the boot id, become ACTIVE. Of another
+ * version: answer with the short RESET_ACK every version can read (code,
+ * VERSION, SCHEMA_ID), so that the host names the mismatch, and stay IDLE:
+ * a host that speaks another protocol commands nothing here.
+ */
+static void handle_reset(pd_core_t *core, const uint8_t *payload, uint8_t len)
 {
     pd_link_t *link = &core->link;
-    const uint32_t id = PD_SCHEMA_ID;
-    const uint8_t payload[6] = {
-        PD_CONTROL_RESET_ACK, PD_PROTOCOL_VERSION, (uint8_t)(id >> 24),
-        (uint8_t)(id >> 16),  (uint8_t)(id >> 8),  (uint8_t)id,
-    };
+    uint8_t ack[PD_RESET_ACK_SIZE];
+    uint8_t ack_len = PD_RESET_ACK_V1_SIZE;
 
-    link->active = true;
+    ack[0] = PD_CONTROL_RESET_ACK;
+    ack[1] = PD_PROTOCOL_VERSION;
+    put_be32(ack + 2, PD_SCHEMA_ID);
     link->tx_seq = 0;
     link->rx_seq = 1;
     link->tx_flush = true; /* the host may hold a partial frame from before */
-    /* A handshake is a sign of a live host: the failsafe counts from here. */
-    pd_failsafe_restart(&core->failsafe, pd_hal_millis(core->hal));
-    send_control(core, payload, sizeof(payload));
+    if (len == PD_RESET_SIZE && payload[1] == PD_PROTOCOL_VERSION) {
+        uint32_t session = ((uint32_t)payload[2] << 24) | ((uint32_t)payload[3] << 16) |
+                           ((uint32_t)payload[4] << 8) | payload[5];
+        put_be32(ack + 6, core->boot_id);
+        ack[10] = pd_core_open_session(core, session) ? PD_RESET_ACK_RESUMED : 0u;
+        ack_len = PD_RESET_ACK_SIZE;
+        link->active = true;
+    } else {
+        link->active = false;
+    }
+    send_control(core, ack, ack_len);
 }
 
 static void count_seq(pd_core_t *core, uint8_t seq)
@@ -143,7 +164,7 @@ static void handle_frame(pd_core_t *core)
 
     if (pkt.type == PD_PACKET_CONTROL && pkt.len >= 2 && pkt.payload[0] == PD_CONTROL_RESET) {
         /* Answered whatever our state; our VERSION goes back, the host judges. */
-        handle_reset(core);
+        handle_reset(core, pkt.payload, pkt.len);
         return;
     }
     if (link->active) {
@@ -160,7 +181,7 @@ static void handle_frame(pd_core_t *core)
         return;
     }
     if (pkt.type == PD_PACKET_CONTROL && pkt.len == 1 && pkt.payload[0] == PD_CONTROL_HEARTBEAT) {
-        return; /* liveness of the link only; the failsafe wants Pings */
+        return; /* liveness of the link only; never of the application */
     }
     PD_STAT_INC(link, ignored);
 }

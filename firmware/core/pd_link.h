@@ -38,7 +38,7 @@
 
 struct pd_core;
 
-/* Largest payload the device sends: one ArduinoOut (CONTROL payloads are <= 6 B). */
+/* Largest payload the device sends: one ArduinoOut (CONTROL payloads are <= 11 B). */
 #define PD_TX_MAX_PAYLOAD protoduino_ArduinoOut_size
 #define PD_TX_RAW_MAX (PD_MIN_PACKET + PD_TX_MAX_PAYLOAD)
 /* Encoded frame plus an optional leading 0x00 and the delimiter. */

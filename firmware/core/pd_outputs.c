@@ -14,11 +14,13 @@ typedef char pd_assert_modes_fit_owner[(PD_MODE_COUNT <= 16) ? 1 : -1];
  * The pin-mode table: one entry per PD_MODE_x, in that order.
  * slots: how many slots of per-slot state the mode has on this board (0: its
  *        state is kept by pin, any number of its pins may be claimed);
- * safe:  drive one of its pins to the safe value given at its Init.
+ * safe:  drive one of its pins to the safe value given at its Init;
+ * release: let go of one of its pins (the owner table is cleared by the caller).
  */
 typedef struct pd_mode {
     uint8_t (*slots)(void *hal);
     void (*safe)(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot);
+    void (*release)(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot);
 } pd_mode_t;
 
 static uint8_t by_pin(void *hal)
@@ -36,8 +38,15 @@ static uint8_t servo_slots(void *hal)
 static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint16_t us)
 {
     pd_servo_t *s = &out->servo[channel];
+    if (us == PD_SERVO_SAFE_DETACH) { /* no pulses: at once, whatever the speed limit */
+        s->us = s->target_us = us;
+        pd_hal_servo_detach(hal, channel, s->pin);
+        return;
+    }
     s->target_us = us;
-    if (s->step == 0) { /* no speed limit: there at once; else pd_outputs_step moves it */
+    /* No speed limit, or limp (no known position to move from): there at once;
+     * else pd_outputs_step moves it. */
+    if (s->step == 0 || s->us == PD_SERVO_SAFE_DETACH) {
         s->us = us;
         pd_hal_servo_write(hal, channel, s->pin, us);
     }
@@ -62,10 +71,28 @@ static void digital_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot
     drive_digital(out, hal, pin, (out->digital_safe >> pin) & 1u);
 }
 
+static void servo_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    pd_servo_t *s = &out->servo[slot];
+    s->us = s->target_us = 0; /* a free channel is all zero: pd_outputs_step skips it */
+    s->step = 0;
+    pd_hal_servo_detach(hal, slot, pin);
+}
+
+static void digital_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    /* Its bits in digital_safe/digital_level are stale from here on, and unread:
+     * both are read only for pins the digital mode owns, and a DigitalInit sets
+     * the safe bit and drives the level before anything reads them. */
+    (void)out;
+    (void)slot;
+    pd_hal_digital_release(hal, pin);
+}
+
 static const pd_mode_t pd_modes[PD_MODE_COUNT] PD_ROM = {
-    [PD_MODE_FREE] = {by_pin, NULL},
-    [PD_MODE_DIGITAL] = {by_pin, digital_safe},
-    [PD_MODE_SERVO] = {servo_slots, servo_safe},
+    [PD_MODE_FREE] = {by_pin, NULL, NULL},
+    [PD_MODE_DIGITAL] = {by_pin, digital_safe, digital_release},
+    [PD_MODE_SERVO] = {servo_slots, servo_safe, servo_release},
 };
 
 static void mode_entry(uint8_t mode, pd_mode_t *entry)
@@ -189,21 +216,33 @@ protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
             return protoduino_Status_STATUS_OUT_OF_RANGE;
         }
         limits.safe_us = (uint16_t)msg->safe.safe_us;
+    } else if (msg->which_safe == protoduino_ServoInit_safe_detach_tag && msg->safe.safe_detach) {
+        limits.safe_us = PD_SERVO_SAFE_DETACH;
     } else {
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
 
+    /* The speed limit rounds to whole us per frame, at least 1. */
+    uint32_t step = (msg->max_speed + 25u) / 50u;
+    step = msg->max_speed && step == 0 ? 1u : step;
+
+    uint8_t was = out->owner[msg->pin];
     uint8_t channel;
     status = pd_pins_claim(out, hal, msg->pin, PD_MODE_SERVO, &channel);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
     limits.pin = (uint8_t)msg->pin;
-    out->servo[channel] = limits;
-    drive_servo(out, hal, channel, limits.safe_us); /* an Init jumps to safe, limited or not */
-    /* The speed limit rounds to whole us per frame, at least 1. */
-    uint32_t step = (msg->max_speed + 25u) / 50u;
-    out->servo[channel].step = (uint8_t)(msg->max_speed && step == 0 ? 1u : step);
+    pd_servo_t *now = &out->servo[channel];
+    if (was != 0 && now->min_us == limits.min_us && now->max_us == limits.max_us &&
+        now->safe_us == limits.safe_us && now->step == step) {
+        /* The same configuration again (a CLI one-shot, a resumed session): the
+         * pin keeps what it does, no detour through the safe value. */
+        return protoduino_Status_STATUS_OK;
+    }
+    *now = limits;
+    drive_servo(out, hal, channel, limits.safe_us);
+    now->step = (uint8_t)step;
     return protoduino_Status_STATUS_OK;
 }
 
@@ -358,15 +397,49 @@ protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
                                           const protoduino_DigitalInit *msg)
 {
     uint8_t slot;
+    bool was = msg->pin < PD_MAX_PINS && out->owner[msg->pin] != 0;
     protoduino_Status status = pd_pins_claim(out, hal, msg->pin, PD_MODE_DIGITAL, &slot);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
     uint8_t pin = (uint8_t)msg->pin;
     uint32_t bit = 1UL << pin;
+    if (was && ((out->digital_safe & bit) != 0) == msg->safe_level) {
+        return protoduino_Status_STATUS_OK; /* the same configuration: the level stays */
+    }
     out->digital_safe = msg->safe_level ? (out->digital_safe | bit) : (out->digital_safe & ~bit);
     drive_digital(out, hal, pin, msg->safe_level);
     return protoduino_Status_STATUS_OK;
+}
+
+protoduino_Status pd_outputs_release(pd_outputs_t *out, void *hal, uint32_t pin)
+{
+    protoduino_Status status = check_pin(hal, pin);
+    if (status != protoduino_Status_STATUS_OK) {
+        return status;
+    }
+    uint8_t owner = out->owner[pin];
+    if (owner == 0) {
+        return protoduino_Status_STATUS_NOT_INITIALISED;
+    }
+    pd_mode_t entry;
+    mode_entry(PD_OWNER_MODE(owner), &entry);
+    entry.release(out, hal, (uint8_t)pin, PD_OWNER_SLOT(owner));
+    out->owner[pin] = 0;
+    return protoduino_Status_STATUS_OK;
+}
+
+void pd_outputs_release_all(pd_outputs_t *out, void *hal)
+{
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        uint8_t owner = out->owner[pin];
+        if (owner != 0) { /* an owned pin passed check_pin when it was claimed */
+            pd_mode_t entry;
+            mode_entry(PD_OWNER_MODE(owner), &entry);
+            entry.release(out, hal, pin, PD_OWNER_SLOT(owner));
+            out->owner[pin] = 0;
+        }
+    }
 }
 
 void pd_outputs_all_safe(pd_outputs_t *out, void *hal)

@@ -12,12 +12,12 @@
  *   pd_pins_owned(), so "pin in use by another mode", "not initialised" and a
  *   re-init keeping its slot are decided in one place for all of them;
  * - the pin-mode table, pd_modes[] in pd_outputs.c: per mode, how many slots it
- *   has and how to drive a pin of it to its safe value.
+ *   has, how to drive a pin of it to its safe value and how to release it.
  *
  * How to add a pin mode (e.g. PWM):
  *   1. a PD_MODE_x value below (before PD_MODE_COUNT; at most 16 modes);
  *   2. its state, if any, in pd_outputs_t (an array indexed by slot, or a mask by pin);
- *   3. one entry in pd_modes[] (pd_outputs.c): slots and safe;
+ *   3. one entry in pd_modes[] (pd_outputs.c): slots, safe and release;
  *   4. its Init/Control functions here, which call pd_pins_claim()/pd_pins_owned(),
  *      and their commands: one entry each in the command table (pd_dispatch.c);
  *   5. on the host, one PinMode declaration in host/protoduino/commands.py.
@@ -53,12 +53,15 @@ enum {
 #define PD_OWNER_SLOT(owner) ((uint8_t)((owner) & 0x0Fu))
 #define PD_MAX_SLOTS 16u
 
+/* safe_us meaning "the safe state is no pulses at all" (real widths are >= 400). */
+#define PD_SERVO_SAFE_DETACH 0u
+
 typedef struct pd_servo {
     uint8_t pin;
     uint8_t step; /* speed limit: most us per servo frame; 0: none */
     uint16_t min_us;
     uint16_t max_us;
-    uint16_t safe_us;
+    uint16_t safe_us;   /* PD_SERVO_SAFE_DETACH: limp */
     uint16_t us;        /* the width driven now */
     uint16_t target_us; /* the width it moves to (differs only while speed-limited) */
 } pd_servo_t;
@@ -115,6 +118,17 @@ void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states);
  * (PD_SERVO_FRAME_MS of `now`) toward its target. Called from pd_core_poll.
  */
 void pd_outputs_step(pd_outputs_t *out, void *hal, uint32_t now);
+
+/*
+ * Release one output (STATUS_NOT_INITIALISED if the pin is free): the pin is
+ * free again for any mode, its slot for another pin. What the pin does then is
+ * its mode's release (pd_hal.h: a servo stops pulsing, a digital pin becomes an
+ * input, as at power-up).
+ */
+protoduino_Status pd_outputs_release(pd_outputs_t *out, void *hal, uint32_t pin);
+
+/* Release every output (ReleaseAll, a new session). */
+void pd_outputs_release_all(pd_outputs_t *out, void *hal);
 
 /* Drive every configured output to its safe value (failsafe, Stop); a
  * speed-limited servo moves there at its speed. */

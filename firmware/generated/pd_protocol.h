@@ -6,7 +6,7 @@
 #ifndef PD_PROTOCOL_H
 #define PD_PROTOCOL_H
 
-#define PD_PROTOCOL_VERSION 1
+#define PD_PROTOCOL_VERSION 2
 #define PD_MAX_PAYLOAD 255
 /* COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter. */
 #define PD_MAX_ENCODED_FRAME 262
@@ -14,6 +14,15 @@
 #define PD_HEADER_SIZE 3
 #define PD_MIN_PACKET 5
 #define PD_FAILSAFE_TIMEOUT_MS 10000UL
+/* The range a session may configure its failsafe timeout in (seconds). */
+#define PD_FAILSAFE_MIN_MS 100UL
+#define PD_FAILSAFE_MAX_MS 60000UL
+/* CONTROL payload sizes (section 5). RESET: CODE VERSION SESSION(4). RESET_ACK: CODE VERSION SCHEMA_ID(4) BOOT_ID(4) FLAGS; its first 6 bytes (version 1's whole RESET_ACK) are all a RESET of another version gets. */
+#define PD_RESET_SIZE 6
+#define PD_RESET_ACK_V1_SIZE 6
+#define PD_RESET_ACK_SIZE 11
+/* RESET_ACK FLAGS: the session was resumed (the device kept its outputs). */
+#define PD_RESET_ACK_RESUMED 1
 #define PD_SEQ_DESYNC_THRESHOLD 50
 #define PD_DEDUPE_WINDOW 16
 /* Servo pulse defaults when a ServoInit leaves min_us/max_us at 0. */

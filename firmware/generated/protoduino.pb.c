@@ -36,6 +36,18 @@ PB_BIND(protoduino_Pose, protoduino_Pose, AUTO)
 PB_BIND(protoduino_ReadOutputs, protoduino_ReadOutputs, AUTO)
 
 
+PB_BIND(protoduino_ConfigureFailsafe, protoduino_ConfigureFailsafe, AUTO)
+
+
+PB_BIND(protoduino_Heartbeat, protoduino_Heartbeat, AUTO)
+
+
+PB_BIND(protoduino_Release, protoduino_Release, AUTO)
+
+
+PB_BIND(protoduino_ReleaseAll, protoduino_ReleaseAll, AUTO)
+
+
 PB_BIND(protoduino_ArduinoIn, protoduino_ArduinoIn, AUTO)
 
 
@@ -58,6 +70,7 @@ PB_BIND(protoduino_Log, protoduino_Log, AUTO)
 
 
 PB_BIND(protoduino_ArduinoOut, protoduino_ArduinoOut, AUTO)
+
 
 
 

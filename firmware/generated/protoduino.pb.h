@@ -22,8 +22,18 @@ typedef enum _protoduino_Status {
     protoduino_Status_STATUS_PIN_IN_USE = 6, /* pin already configured for another mode */
     protoduino_Status_STATUS_INVALID_ARGUMENT = 7, /* malformed argument (min >= max, message_id 0, ...) */
     protoduino_Status_STATUS_DECODE_ERROR = 8, /* the payload did not decode past its message_id */
-    protoduino_Status_STATUS_UNKNOWN_COMMAND = 9 /* no command in the oneof */
+    protoduino_Status_STATUS_UNKNOWN_COMMAND = 9, /* no command in the oneof */
+    /* The failsafe timer ran out and no liveness message (Ping or Heartbeat,
+ per the session's liveness source) came since: a Control now would leave
+ an output commanded with no running timer. Send the liveness message first. */
+    protoduino_Status_STATUS_FAILSAFE_EXPIRED = 10
 } protoduino_Status;
+
+/* Where the failsafe timer's liveness comes from (protocol.md section 7). */
+typedef enum _protoduino_Liveness {
+    protoduino_Liveness_LIVENESS_PING = 0, /* the host library's automatic Ping (default) */
+    protoduino_Liveness_LIVENESS_HEARTBEAT = 1 /* only the application's Heartbeat */
+} protoduino_Liveness;
 
 typedef enum _protoduino_FailsafeCause {
     protoduino_FailsafeCause_FAILSAFE_CAUSE_NONE = 0,
@@ -46,7 +56,9 @@ typedef struct _protoduino_Ping {
     protoduino_Ping_payload_t payload;
 } protoduino_Ping;
 
-/* Configure a servo output. It moves to its safe position at once.
+/* Configure a servo output. It moves to its safe position at once, unless
+ the pin is already a servo with exactly this configuration: then nothing
+ at the pin changes (a repeated Init never glitches an output).
  Degrees map linearly onto [min_us, max_us]:
    us = min_us + degrees * (max_us - min_us) / 180   (integer division) */
 typedef struct _protoduino_ServoInit {
@@ -57,6 +69,7 @@ typedef struct _protoduino_ServoInit {
     union {
         uint32_t safe_degrees; /* 0..180 */
         uint32_t safe_us; /* within [min_us, max_us] */
+        bool safe_detach; /* true: the safe state is no pulses at all (limp) */
     } safe;
     /* Speed limit in us per second, 0: none (a new value is driven at once).
  Otherwise every later value (Control, Pose, Stop, failsafe) is approached
@@ -73,7 +86,8 @@ typedef struct _protoduino_ServoControl {
     } value;
 } protoduino_ServoControl;
 
-/* Configure a digital output. It takes its safe level at once. */
+/* Configure a digital output. It takes its safe level at once, unless the pin
+ is already a digital output with this safe level (then nothing changes). */
 typedef struct _protoduino_DigitalInit {
     uint32_t pin;
     bool safe_level;
@@ -115,6 +129,30 @@ typedef struct _protoduino_ReadOutputs {
     char dummy_field;
 } protoduino_ReadOutputs;
 
+/* This session's failsafe: timeout and liveness source. A new session starts
+ with the defaults (10 s, LIVENESS_PING). Restarts the timer. */
+typedef struct _protoduino_ConfigureFailsafe {
+    uint32_t timeout_ms; /* 100..60000; 0 means the default, 10000 */
+    protoduino_Liveness liveness;
+} protoduino_ConfigureFailsafe;
+
+/* The application's own sign of life: feeds the failsafe timer whatever the
+ liveness source, and is the only thing that does with LIVENESS_HEARTBEAT. */
+typedef struct _protoduino_Heartbeat {
+    char dummy_field;
+} protoduino_Heartbeat;
+
+/* Release one output: the pin returns to its power-up state (a servo's
+ pulses stop, a digital pin becomes an input) and is free for any mode. */
+typedef struct _protoduino_Release {
+    uint32_t pin;
+} protoduino_Release;
+
+/* Release every output: the device is as unconfigured as after power-up. */
+typedef struct _protoduino_ReleaseAll {
+    char dummy_field;
+} protoduino_ReleaseAll;
+
 typedef struct _protoduino_ArduinoIn {
     uint32_t message_id; /* non-zero; reused by retransmissions */
     pb_size_t which_data;
@@ -126,6 +164,10 @@ typedef struct _protoduino_ArduinoIn {
         protoduino_DigitalControl digital_control;
         protoduino_Stop stop;
         protoduino_GetInfo get_info;
+        protoduino_ConfigureFailsafe configure_failsafe;
+        protoduino_Heartbeat heartbeat;
+        protoduino_Release release;
+        protoduino_ReleaseAll release_all;
         protoduino_Pose pose;
         protoduino_ReadOutputs read_outputs;
     } data;
@@ -169,8 +211,8 @@ typedef struct _protoduino_Ack {
     uint32_t refused_item; /* a refused Pose: its offending item, counted from 1 */
 } protoduino_Ack;
 
-/* Sent when the safe state is entered (active = true) and when the next Ping
- clears the flag (active = false). Outputs stay at their safe values until
+/* Sent when the safe state is entered (active = true) and when the next
+ liveness message clears the flag (active = false). Outputs stay at their safe values until
  each is commanded again. */
 typedef struct _protoduino_Failsafe {
     bool active;
@@ -205,8 +247,12 @@ extern "C" {
 
 /* Helper constants for enums */
 #define _protoduino_Status_MIN protoduino_Status_STATUS_OK
-#define _protoduino_Status_MAX protoduino_Status_STATUS_UNKNOWN_COMMAND
-#define _protoduino_Status_ARRAYSIZE ((protoduino_Status)(protoduino_Status_STATUS_UNKNOWN_COMMAND+1))
+#define _protoduino_Status_MAX protoduino_Status_STATUS_FAILSAFE_EXPIRED
+#define _protoduino_Status_ARRAYSIZE ((protoduino_Status)(protoduino_Status_STATUS_FAILSAFE_EXPIRED+1))
+
+#define _protoduino_Liveness_MIN protoduino_Liveness_LIVENESS_PING
+#define _protoduino_Liveness_MAX protoduino_Liveness_LIVENESS_HEARTBEAT
+#define _protoduino_Liveness_ARRAYSIZE ((protoduino_Liveness)(protoduino_Liveness_LIVENESS_HEARTBEAT+1))
 
 #define _protoduino_FailsafeCause_MIN protoduino_FailsafeCause_FAILSAFE_CAUSE_NONE
 #define _protoduino_FailsafeCause_MAX protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP
@@ -222,6 +268,11 @@ extern "C" {
 
 
 
+
+
+
+
+#define protoduino_ConfigureFailsafe_liveness_ENUMTYPE protoduino_Liveness
 
 
 
@@ -249,6 +300,10 @@ extern "C" {
 #define protoduino_PoseItem_init_default         {0, {protoduino_ServoControl_init_default}}
 #define protoduino_Pose_init_default             {0, {protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default}}
 #define protoduino_ReadOutputs_init_default      {0}
+#define protoduino_ConfigureFailsafe_init_default {0, _protoduino_Liveness_MIN}
+#define protoduino_Heartbeat_init_default        {0}
+#define protoduino_Release_init_default          {0}
+#define protoduino_ReleaseAll_init_default       {0}
 #define protoduino_ArduinoIn_init_default        {0, 0, {protoduino_Ping_init_default}}
 #define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_OutputStates_init_default     {{0, {0}}, 0, 0}
@@ -267,6 +322,10 @@ extern "C" {
 #define protoduino_PoseItem_init_zero            {0, {protoduino_ServoControl_init_zero}}
 #define protoduino_Pose_init_zero                {0, {protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero}}
 #define protoduino_ReadOutputs_init_zero         {0}
+#define protoduino_ConfigureFailsafe_init_zero   {0, _protoduino_Liveness_MIN}
+#define protoduino_Heartbeat_init_zero           {0}
+#define protoduino_Release_init_zero             {0}
+#define protoduino_ReleaseAll_init_zero          {0}
 #define protoduino_ArduinoIn_init_zero           {0, 0, {protoduino_Ping_init_zero}}
 #define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_OutputStates_init_zero        {{0, {0}}, 0, 0}
@@ -283,6 +342,7 @@ extern "C" {
 #define protoduino_ServoInit_max_us_tag          3
 #define protoduino_ServoInit_safe_degrees_tag    4
 #define protoduino_ServoInit_safe_us_tag         5
+#define protoduino_ServoInit_safe_detach_tag     6
 #define protoduino_ServoInit_max_speed_tag       30
 #define protoduino_ServoControl_pin_tag          1
 #define protoduino_ServoControl_degrees_tag      2
@@ -294,6 +354,9 @@ extern "C" {
 #define protoduino_PoseItem_servo_tag            1
 #define protoduino_PoseItem_digital_tag          2
 #define protoduino_Pose_items_tag                1
+#define protoduino_ConfigureFailsafe_timeout_ms_tag 1
+#define protoduino_ConfigureFailsafe_liveness_tag 2
+#define protoduino_Release_pin_tag               1
 #define protoduino_ArduinoIn_message_id_tag      1
 #define protoduino_ArduinoIn_ping_tag            2
 #define protoduino_ArduinoIn_servo_init_tag      3
@@ -302,6 +365,10 @@ extern "C" {
 #define protoduino_ArduinoIn_digital_control_tag 6
 #define protoduino_ArduinoIn_stop_tag            7
 #define protoduino_ArduinoIn_get_info_tag        8
+#define protoduino_ArduinoIn_configure_failsafe_tag 9
+#define protoduino_ArduinoIn_heartbeat_tag       10
+#define protoduino_ArduinoIn_release_tag         11
+#define protoduino_ArduinoIn_release_all_tag     12
 #define protoduino_ArduinoIn_pose_tag            30
 #define protoduino_ArduinoIn_read_outputs_tag    31
 #define protoduino_DeviceInfo_firmware_version_tag 1
@@ -343,6 +410,7 @@ X(a, STATIC,   SINGULAR, UINT32,   min_us,            2) \
 X(a, STATIC,   SINGULAR, UINT32,   max_us,            3) \
 X(a, STATIC,   ONEOF,    UINT32,   (safe,safe_degrees,safe.safe_degrees),   4) \
 X(a, STATIC,   ONEOF,    UINT32,   (safe,safe_us,safe.safe_us),   5) \
+X(a, STATIC,   ONEOF,    BOOL,     (safe,safe_detach,safe.safe_detach),   6) \
 X(a, STATIC,   SINGULAR, UINT32,   max_speed,        30)
 #define protoduino_ServoInit_CALLBACK NULL
 #define protoduino_ServoInit_DEFAULT NULL
@@ -395,6 +463,27 @@ X(a, STATIC,   REPEATED, MESSAGE,  items,             1)
 #define protoduino_ReadOutputs_CALLBACK NULL
 #define protoduino_ReadOutputs_DEFAULT NULL
 
+#define protoduino_ConfigureFailsafe_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, UINT32,   timeout_ms,        1) \
+X(a, STATIC,   SINGULAR, UENUM,    liveness,          2)
+#define protoduino_ConfigureFailsafe_CALLBACK NULL
+#define protoduino_ConfigureFailsafe_DEFAULT NULL
+
+#define protoduino_Heartbeat_FIELDLIST(X, a) \
+
+#define protoduino_Heartbeat_CALLBACK NULL
+#define protoduino_Heartbeat_DEFAULT NULL
+
+#define protoduino_Release_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, UINT32,   pin,               1)
+#define protoduino_Release_CALLBACK NULL
+#define protoduino_Release_DEFAULT NULL
+
+#define protoduino_ReleaseAll_FIELDLIST(X, a) \
+
+#define protoduino_ReleaseAll_CALLBACK NULL
+#define protoduino_ReleaseAll_DEFAULT NULL
+
 #define protoduino_ArduinoIn_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, UINT32,   message_id,        1) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,ping,data.ping),   2) \
@@ -404,6 +493,10 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,digital_init,data.digital_init),   5) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,digital_control,data.digital_control),   6) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,stop,data.stop),   7) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,get_info,data.get_info),   8) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,configure_failsafe,data.configure_failsafe),   9) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,heartbeat,data.heartbeat),  10) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,release,data.release),  11) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,release_all,data.release_all),  12) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,pose,data.pose),  30) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,read_outputs,data.read_outputs),  31)
 #define protoduino_ArduinoIn_CALLBACK NULL
@@ -415,6 +508,10 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,read_outputs,data.read_outputs),  31)
 #define protoduino_ArduinoIn_data_digital_control_MSGTYPE protoduino_DigitalControl
 #define protoduino_ArduinoIn_data_stop_MSGTYPE protoduino_Stop
 #define protoduino_ArduinoIn_data_get_info_MSGTYPE protoduino_GetInfo
+#define protoduino_ArduinoIn_data_configure_failsafe_MSGTYPE protoduino_ConfigureFailsafe
+#define protoduino_ArduinoIn_data_heartbeat_MSGTYPE protoduino_Heartbeat
+#define protoduino_ArduinoIn_data_release_MSGTYPE protoduino_Release
+#define protoduino_ArduinoIn_data_release_all_MSGTYPE protoduino_ReleaseAll
 #define protoduino_ArduinoIn_data_pose_MSGTYPE protoduino_Pose
 #define protoduino_ArduinoIn_data_read_outputs_MSGTYPE protoduino_ReadOutputs
 
@@ -488,6 +585,10 @@ extern const pb_msgdesc_t protoduino_GetInfo_msg;
 extern const pb_msgdesc_t protoduino_PoseItem_msg;
 extern const pb_msgdesc_t protoduino_Pose_msg;
 extern const pb_msgdesc_t protoduino_ReadOutputs_msg;
+extern const pb_msgdesc_t protoduino_ConfigureFailsafe_msg;
+extern const pb_msgdesc_t protoduino_Heartbeat_msg;
+extern const pb_msgdesc_t protoduino_Release_msg;
+extern const pb_msgdesc_t protoduino_ReleaseAll_msg;
 extern const pb_msgdesc_t protoduino_ArduinoIn_msg;
 extern const pb_msgdesc_t protoduino_DeviceInfo_msg;
 extern const pb_msgdesc_t protoduino_OutputStates_msg;
@@ -508,6 +609,10 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_PoseItem_fields &protoduino_PoseItem_msg
 #define protoduino_Pose_fields &protoduino_Pose_msg
 #define protoduino_ReadOutputs_fields &protoduino_ReadOutputs_msg
+#define protoduino_ConfigureFailsafe_fields &protoduino_ConfigureFailsafe_msg
+#define protoduino_Heartbeat_fields &protoduino_Heartbeat_msg
+#define protoduino_Release_fields &protoduino_Release_msg
+#define protoduino_ReleaseAll_fields &protoduino_ReleaseAll_msg
 #define protoduino_ArduinoIn_fields &protoduino_ArduinoIn_msg
 #define protoduino_DeviceInfo_fields &protoduino_DeviceInfo_msg
 #define protoduino_OutputStates_fields &protoduino_OutputStates_msg
@@ -521,18 +626,22 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_Ack_size                      104
 #define protoduino_ArduinoIn_size                138
 #define protoduino_ArduinoOut_size               106
+#define protoduino_ConfigureFailsafe_size        8
 #define protoduino_DecodeError_size              6
 #define protoduino_DeviceInfo_size               87
 #define protoduino_DigitalControl_size           8
 #define protoduino_DigitalInit_size              8
 #define protoduino_Failsafe_size                 4
 #define protoduino_GetInfo_size                  0
+#define protoduino_Heartbeat_size                0
 #define protoduino_Log_size                      51
 #define protoduino_OutputStates_size             52
 #define protoduino_Ping_size                     66
 #define protoduino_PoseItem_size                 14
 #define protoduino_Pose_size                     128
 #define protoduino_ReadOutputs_size              0
+#define protoduino_ReleaseAll_size               0
+#define protoduino_Release_size                  6
 #define protoduino_ServoControl_size             12
 #define protoduino_ServoInit_size                31
 #define protoduino_Stop_size                     0

@@ -65,6 +65,7 @@ typedef struct sim_hal {
     uint16_t value[PD_MAX_PINS];
     uint8_t tx[SIM_TX_SIZE];
     size_t tx_len; /* bytes queued, from tx[0] */
+    uint32_t last_boot_id;
 } sim_hal_t;
 
 static const pd_board_info_t sim_board = {
@@ -224,6 +225,36 @@ void pd_hal_servo_hold(void *ctx, bool hold)
 void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
 {
     sim_trace(ctx, pin, SIM_PIN_DIGITAL, level ? 1u : 0u);
+}
+
+void pd_hal_servo_detach(void *ctx, uint8_t channel, uint8_t pin)
+{
+    (void)channel;
+    sim_trace(ctx, pin, SIM_PIN_SERVO, 0); /* no pulses: the emulated Uno's trace says 0 too */
+}
+
+void pd_hal_digital_release(void *ctx, uint8_t pin)
+{
+    sim_trace(ctx, pin, SIM_PIN_DIGITAL, 0); /* an input reads as 0 in the trace, as on the Uno */
+}
+
+/* Random at every boot (a simulated power-up): a reboot never repeats the last id. */
+uint32_t pd_hal_boot_id(void *ctx)
+{
+    sim_hal_t *hal = ctx;
+    uint32_t id = 0;
+    FILE *f = fopen("/dev/urandom", "rb");
+    if (f == NULL || fread(&id, sizeof(id), 1, f) != 1) {
+        id = (uint32_t)time(NULL) ^ (uint32_t)getpid();
+    }
+    if (f != NULL) {
+        fclose(f);
+    }
+    if (id == hal->last_boot_id) {
+        id++;
+    }
+    hal->last_boot_id = id;
+    return id;
 }
 
 void pd_hal_outputs_safe(void *ctx)

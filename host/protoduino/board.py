@@ -12,11 +12,21 @@ device acknowledged it and raises otherwise:
 * a link that is down and does not come back in time raises the link's error
   (:class:`TransportError`, :class:`HandshakeError`, ...).
 
-Session restore: the board remembers every Init it sent and the last value
-acknowledged for each output. When the device reboots, the request layer
-replays the Inits, then those values, before any held call goes out. A Stop
-or a failsafe forgets the values (the device latched its outputs safe; a
-restore must not undo that).
+Sessions: every board is one host session (a random id, or ``session=``
+to take over where another process left off, as the command line does).
+The device keeps a session's outputs across a re-handshake of the same
+session (a reconnect) and releases them for a new one.
+
+Restore policy: the board remembers every Init it sent and the last value
+acknowledged for each output. When the device loses them (it rebooted, or
+another session took it over), every call still outstanding fails with
+:class:`DeviceRebootedError`, a REBOOTED (or SESSION_LOST) event tells the
+application, and the board re-initialises every output, which comes up at
+its safe value. With ``restore="last"`` it then sends each last value again.
+A reboot loop (``reboot_limit`` losses within ``reboot_window`` seconds)
+stops restoring: every call then raises :class:`RebootLoopError`. A Stop or a
+failsafe forgets the values (the device latched its outputs safe; a restore
+must not undo that).
 
 Non-blocking calls: every command also has a ``submit`` form that returns a
 :class:`concurrent.futures.Future` at once, resolved by the Ack with the same
@@ -43,14 +53,19 @@ from concurrent.futures import Future
 from dataclasses import dataclass
 from numbers import Integral
 from types import TracebackType
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
+from ._generated import protoduino_pb2 as pb
 from .capture import CaptureWriter
 from .commands import DIGITAL, SERVO, PinMode
 from .constants import (
     ACK_TIMEOUT,
+    FAILSAFE_MAX,
+    FAILSAFE_MIN,
+    FAILSAFE_TIMEOUT,
     HANDSHAKE_TIMEOUT,
     MAX_RETRIES,
+    PING_INTERVAL,
     SERVO_DEFAULT_MAX_US,
     SERVO_DEFAULT_MIN_US,
     SERVO_FRAME,
@@ -70,7 +85,7 @@ from .errors import (
 from .events import Event, EventCallback, EventDispatcher, EventKind, Stats
 from .link import Link
 from .messages import ArduinoIn, ArduinoOut, Status, status_name
-from .rpc import Ack, Call, Rpc, RpcState
+from .rpc import REBOOT_LIMIT, REBOOT_WINDOW, Ack, Call, Rpc, RpcState
 from .transport import FrameMonitor, Transport
 
 log = logging.getLogger(__name__)
@@ -148,6 +163,14 @@ def _resolve(future: Future[T], call: Call, value: Callable[[Call], T]) -> None:
         future.set_result(result)
 
 
+#: Where the device's failsafe timer gets its liveness from (protocol.md section 7).
+Liveness = Literal["ping", "heartbeat"]
+#: What the board sends when the device lost its outputs.
+RestorePolicy = Literal["safe", "last"]
+#: The automatic Ping comes at least this many times per failsafe timeout.
+PINGS_PER_TIMEOUT = 4
+
+
 @dataclass(frozen=True, slots=True)
 class DeviceInfo:
     """What the device says about itself (GetInfo), read once at open."""
@@ -223,9 +246,10 @@ class Servo:
     def value(self) -> int | None:
         """The pulse width (us) the device last acknowledged for this servo.
 
-        Its safe width after the Init, a Stop or a failsafe; None once the pin
-        was configured anew as something else (or for a servo object that
-        stands for a configuration since replaced).
+        Its safe width after the Init, a Stop or a failsafe (0 for ``safe="detach"``:
+        no pulses); None once the pin was released or configured anew as
+        something else (or for a servo object that stands for a configuration
+        since replaced).
         """
         return self.board._value(self.pin, SERVO)
 
@@ -276,6 +300,10 @@ class Servo:
         msg.servo_control.us = us
         return msg, us
 
+    def release(self) -> None:
+        """Release the servo: its pulses stop (limp) and the pin is free for any mode."""
+        self.board.release(self.pin)
+
     def __repr__(self) -> str:
         return f"Servo(pin={self.pin}, min_us={self.min_us}, max_us={self.max_us})"
 
@@ -319,6 +347,10 @@ class DigitalOutput:
         msg.digital_control.level = value
         return msg, int(value)
 
+    def release(self) -> None:
+        """Release the pin: it becomes an input, as at power-up, free for any mode."""
+        self.board.release(self.pin)
+
     def __repr__(self) -> str:
         return f"DigitalOutput(pin={self.pin})"
 
@@ -339,7 +371,25 @@ class Board:
         monitor: FrameMonitor | None = None,
         capture: str | os.PathLike[str] | None = None,
         watchdog_timeout: float = WATCHDOG_TIMEOUT,
+        failsafe_timeout: float = FAILSAFE_TIMEOUT,
+        liveness: Liveness = "ping",
+        restore: RestorePolicy = "safe",
+        session: int | None = None,
+        reboot_limit: int = REBOOT_LIMIT,
+        reboot_window: float = REBOOT_WINDOW,
     ) -> None:
+        if not FAILSAFE_MIN <= failsafe_timeout <= FAILSAFE_MAX:
+            raise ValueError(
+                f"failsafe_timeout must be {FAILSAFE_MIN:g}..{FAILSAFE_MAX:g} s, "
+                f"not {failsafe_timeout!r}"
+            )
+        if liveness not in ("ping", "heartbeat"):
+            raise ValueError(f"liveness must be 'ping' or 'heartbeat', not {liveness!r}")
+        if restore not in ("safe", "last"):
+            raise ValueError(f"restore must be 'safe' or 'last', not {restore!r}")
+        self.failsafe_timeout = float(failsafe_timeout)
+        self.liveness: Liveness = liveness
+        self.restore: RestorePolicy = restore
         self.url = url
         self._lock = threading.Lock()
         self._outputs: dict[int, _Output] = {}
@@ -350,8 +400,13 @@ class Board:
             max_retries=max_retries,
             window=window,
             ping=ping,
+            # A missed Ping or two must not trip a short failsafe.
+            ping_interval=min(PING_INTERVAL, self.failsafe_timeout / PINGS_PER_TIMEOUT),
             link_wait=handshake_timeout,
+            reboot_limit=reboot_limit,
+            reboot_window=reboot_window,
         )
+        self._rpc.restore_values = restore == "last"
         self._rpc.message_hook = self._message
         self._rpc.restore_provider = self._restore_messages
         # Before the port: a capture that cannot be written fails with nothing opened,
@@ -368,6 +423,7 @@ class Board:
             handshake_timeout=handshake_timeout,
             watchdog_timeout=watchdog_timeout,
             notify=self._notify,
+            session=session,
         )
         self._rpc.attach(self._link)
         if self._capture is not None:
@@ -378,6 +434,7 @@ class Board:
             self._link.open()
             self.info = self._get_info()
             self._rpc.rx_budget = self.info.rx_buffer or None
+            self._send(self._failsafe_config())
         except BaseException:
             self.close()
             raise
@@ -396,6 +453,12 @@ class Board:
         monitor: FrameMonitor | None = None,
         capture: str | os.PathLike[str] | None = None,
         watchdog_timeout: float = WATCHDOG_TIMEOUT,
+        failsafe_timeout: float = FAILSAFE_TIMEOUT,
+        liveness: Liveness = "ping",
+        restore: RestorePolicy = "safe",
+        session: int | None = None,
+        reboot_limit: int = REBOOT_LIMIT,
+        reboot_window: float = REBOOT_WINDOW,
     ) -> Board:
         """Open ``url`` (any pyserial URL), handshake and read the device's info.
 
@@ -406,7 +469,7 @@ class Board:
 
         ``ack_timeout`` and ``max_retries`` bound each command; ``window`` is
         how many commands may await their Ack at once; ``ping=False`` starts
-        without the automatic 1 Hz Ping (see :attr:`pinging`); ``monitor`` is
+        without the automatic Ping (see :attr:`pinging`); ``monitor`` is
         called with every frame in both directions from the first one on
         (on the I/O thread: be quick); ``capture`` is a file that records every
         frame in both directions with its time, the link counters and the events
@@ -414,6 +477,26 @@ class Board:
         monitor --follow`` shows it live), raising :class:`CaptureError` if it
         cannot be written; ``watchdog_timeout`` is how long the device may stay
         silent while answers are due before the link handshakes again.
+
+        ``failsafe_timeout`` (seconds, 0.1..60) is how long the device keeps
+        commanded outputs without a sign of life before it drives them safe;
+        the automatic Ping then comes every ``min(1 s, failsafe_timeout / 4)``.
+        ``liveness="heartbeat"`` makes only :meth:`heartbeat` count as that
+        sign of life (the automatic Ping then only keeps the link up), so a
+        control loop that hangs trips the failsafe, not only a dead process.
+
+        ``restore`` says what happens when the device lost the outputs (it
+        rebooted, or another session took it over): ``"safe"`` re-initialises
+        them (each at its safe value); ``"last"`` also sends each output's
+        last acknowledged value again. Either way calls outstanding at that
+        moment fail with :class:`DeviceRebootedError`; ``reboot_limit``
+        losses within ``reboot_window`` seconds stop restoring
+        (:class:`RebootLoopError`).
+
+        ``session`` resumes a host session (1..2**32-1) that may still own
+        the device's outputs, as the command line does; by default every
+        board is a new session, which releases whatever another session had
+        configured.
         """
         return cls(
             url,
@@ -426,6 +509,12 @@ class Board:
             monitor=monitor,
             capture=capture,
             watchdog_timeout=watchdog_timeout,
+            failsafe_timeout=failsafe_timeout,
+            liveness=liveness,
+            restore=restore,
+            session=session,
+            reboot_limit=reboot_limit,
+            reboot_window=reboot_window,
         )
 
     # --- context and life cycle -------------------------------------------------------
@@ -475,7 +564,7 @@ class Board:
     def servo(
         self,
         pin: int,
-        safe: int | None = None,
+        safe: int | Literal["detach"] | None = None,
         *,
         safe_us: int | None = None,
         min_us: int = SERVO_DEFAULT_MIN_US,
@@ -486,9 +575,11 @@ class Board:
         """Configure ``pin`` as a servo; it moves to its safe position at once.
 
         ``safe`` is in degrees (90 if neither it nor ``safe_us`` is given);
-        ``safe_us`` gives it in microseconds instead. The failsafe and
-        :meth:`stop` return the servo there. Calling it again for the same pin
-        changes the limits and the safe position.
+        ``safe_us`` gives it in microseconds instead; ``safe="detach"`` makes
+        the safe state no pulses at all (the servo goes limp, and starts so).
+        The failsafe and :meth:`stop` return the servo there. Calling it again
+        for the same pin changes the limits and the safe state; with the same
+        ones it changes nothing at the pin (no detour through the safe value).
 
         ``max_speed`` (degrees per second) or ``max_speed_us`` (us per second)
         limits its speed on the device: every later value (write, pose, stop,
@@ -505,7 +596,7 @@ class Board:
     def submit_servo(
         self,
         pin: int,
-        safe: int | None = None,
+        safe: int | Literal["detach"] | None = None,
         *,
         safe_us: int | None = None,
         min_us: int = SERVO_DEFAULT_MIN_US,
@@ -522,7 +613,7 @@ class Board:
     def _servo_init(  # noqa: PLR0917  (servo()'s arguments, checked in one place)
         self,
         pin: int,
-        safe: int | None,
+        safe: int | Literal["detach"] | None,
         safe_us: int | None,
         min_us: int,
         max_us: int,
@@ -552,6 +643,8 @@ class Board:
                     Status.STATUS_OUT_OF_RANGE, f"safe_us {safe_us} is outside [{min_us}, {max_us}]"
                 )
             init.safe_us = safe_us
+        elif safe == "detach":
+            init.safe_detach = True
         else:
             safe = 90 if safe is None else _int("safe", safe)
             if not 0 <= safe <= SERVO_MAX_DEGREES:
@@ -568,7 +661,11 @@ class Board:
                     f"all {self.info.max_servos} servo slots are in use",
                 )
         servo = Servo(self, pin, min_us, max_us, effective_speed(speed))
-        width = init.safe_us if safe_us is not None else servo.to_us(init.safe_degrees)
+        which = init.WhichOneof("safe")
+        if which == "safe_detach":
+            width = 0  # no pulses
+        else:
+            width = init.safe_us if which == "safe_us" else servo.to_us(init.safe_degrees)
         state = _Output(SERVO, msg.SerializeToString(), width, min_us, max_us)
         return msg, lambda: self._set_output(pin, state), servo
 
@@ -597,7 +694,10 @@ class Board:
         return us_per_s
 
     def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
-        """Configure ``pin`` as a digital output; it takes its ``safe`` level at once."""
+        """Configure ``pin`` as a digital output; it takes its ``safe`` level at once.
+
+        Again with the same ``safe`` level, it changes nothing at the pin.
+        """
         msg, on_ok, output = self._digital_init(pin, safe)
         self._send(msg, on_ok)
         return output
@@ -654,6 +754,41 @@ class Board:
             return call.rtt
 
         return msg, rtt
+
+    def heartbeat(self) -> None:
+        """The application's sign of life: restarts the device's failsafe timer.
+
+        With ``liveness="heartbeat"`` it is the only thing that does: call it
+        from the control loop, more often than ``failsafe_timeout``.
+        """
+        msg = ArduinoIn()
+        msg.heartbeat.SetInParent()
+        self._send(msg)
+
+    def release(self, pin: int) -> None:
+        """Release an output: a servo's pulses stop, a digital pin becomes an input.
+
+        The pin is then free for any mode (and a servo's slot for another pin).
+        """
+        pin = self._check_pin(pin)
+        with self._lock:
+            if pin not in self._outputs:
+                raise _reject(Status.STATUS_NOT_INITIALISED, f"pin {pin} is not configured")
+        msg = ArduinoIn()
+        msg.release.pin = pin
+
+        def forget() -> None:
+            self._outputs.pop(pin, None)
+
+        self._send(msg, forget)
+
+    def release_all(self) -> None:
+        """Release every output: the device is as unconfigured as after power-up."""
+        if self._closed:
+            raise BoardClosedError("the board is closed")
+        msg = ArduinoIn()
+        msg.release_all.SetInParent()
+        self._send(msg, self._outputs.clear)
 
     def stop(self) -> None:
         """Emergency stop: every configured output to its safe value at once, latched."""
@@ -837,6 +972,7 @@ class Board:
             handshakes=link.handshakes,
             reconnects=link.reconnects,
             reboots=link.reboots,
+            sessions_lost=link.sessions_lost,
             watchdog_resets=link.watchdog_resets,
             device_desyncs=link.device_events["desync"],
             device_rx_overflows=link.device_events["rx_overflow"],
@@ -952,12 +1088,26 @@ class Board:
             out = self._outputs.get(pin)
             return out.value if out is not None and out.mode is mode else None
 
+    def _failsafe_config(self) -> ArduinoIn:
+        msg = ArduinoIn()
+        msg.configure_failsafe.timeout_ms = round(self.failsafe_timeout * 1000)
+        msg.configure_failsafe.liveness = (
+            pb.LIVENESS_HEARTBEAT if self.liveness == "heartbeat" else pb.LIVENESS_PING
+        )
+        return msg
+
     def _restore_messages(self) -> list[ArduinoIn]:
-        """Every Init, then every last value (called on the I/O thread at a reboot)."""
+        """The failsafe configuration, every Init, then with ``restore="last"`` every
+        last value (called on the I/O thread when the device lost the outputs)."""
         with self._lock:
             outputs = list(self._outputs.values())
-        msgs = []
-        for blob in [o.init for o in outputs] + [o.last for o in outputs if o.last is not None]:
+            if self.restore != "last":
+                self._forget_values()  # they come up at their safe values
+        blobs = [o.init for o in outputs]
+        if self.restore == "last":
+            blobs += [o.last for o in outputs if o.last is not None]
+        msgs = [self._failsafe_config()]
+        for blob in blobs:
             msg = ArduinoIn()
             msg.ParseFromString(blob)
             msgs.append(msg)

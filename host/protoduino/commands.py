@@ -67,6 +67,10 @@ _BOARD_COMMANDS: tuple[Command, ...] = (
     Command("stop"),
     Command("pose"),  # several pin-mode Controls at once (PoseItem: ServoControl, DigitalControl)
     Command("read_outputs", idempotent=True, result="outputs"),
+    Command("configure_failsafe"),
+    Command("heartbeat", idempotent=True),
+    Command("release"),
+    Command("release_all"),
 )
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 MAX_PAYLOAD = 255
 #: COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter.
 MAX_ENCODED_FRAME = 262
@@ -23,6 +23,9 @@ HANDSHAKE_TIMEOUT = 5.0
 WATCHDOG_TIMEOUT = 5.0
 PING_INTERVAL = 1.0
 FAILSAFE_TIMEOUT = 10.0
+#: The range a session may configure its failsafe timeout in (seconds).
+FAILSAFE_MIN = 0.1
+FAILSAFE_MAX = 60.0
 ACK_TIMEOUT = 0.25
 MAX_RETRIES = 3
 SEQ_TOLERANCE = 5
@@ -59,6 +62,16 @@ class ControlCode(IntEnum):
     EVENT = 0x03
 
 
+#: CONTROL payload sizes (section 5). RESET: CODE VERSION SESSION(4).
+#: RESET_ACK: CODE VERSION SCHEMA_ID(4) BOOT_ID(4) FLAGS; its first 6 bytes
+#: (version 1's whole RESET_ACK) are all a RESET of another version gets.
+RESET_SIZE = 6
+RESET_ACK_V1_SIZE = 6
+RESET_ACK_SIZE = 11
+#: RESET_ACK FLAGS: the session was resumed (the device kept its outputs).
+RESET_ACK_RESUMED = 0x01
+
+
 class EventCode(IntEnum):
     """EVENT codes (docs/protocol.md section 5)."""
 
@@ -79,6 +92,12 @@ FIRMWARE_CONSTANTS = (
     "HEADER_SIZE",
     "MIN_PACKET",
     "FAILSAFE_TIMEOUT",
+    "FAILSAFE_MIN",
+    "FAILSAFE_MAX",
+    "RESET_SIZE",
+    "RESET_ACK_V1_SIZE",
+    "RESET_ACK_SIZE",
+    "RESET_ACK_RESUMED",
     "SEQ_DESYNC_THRESHOLD",
     "DEDUPE_WINDOW",
     "SERVO_DEFAULT_MIN_US",

@@ -13,6 +13,8 @@
      +-- AckTimeoutError          no Ack after every retry; also a builtin TimeoutError
      +-- BoardClosedError         the board was closed while, or before, the call ran
      +-- ReentrantCallError       a blocking board call from the I/O thread (a frame monitor)
+     +-- DeviceRebootedError      the device lost its outputs (rebooted, taken over) mid-call
+     |    +-- RebootLoopError       it did so too often: the board stopped restoring
      +-- BuildError               a build step (make, avr-objcopy) failed
      +-- FlashError               avrdude could not upload the firmware
      +-- SimControlError          a simulated board refused an input command (also a ValueError)
@@ -112,6 +114,24 @@ class AckTimeoutError(ProtoduinoError, TimeoutError):
 
 class BoardClosedError(ProtoduinoError):
     """The board is closed."""
+
+
+class DeviceRebootedError(ProtoduinoError):
+    """The device lost this session's outputs while the call was outstanding.
+
+    It rebooted (a new boot id) or another host session took it over. The call
+    may or may not have run before that; it is not sent again. The board has
+    re-initialised every output at its safe value (see ``Board.open``'s
+    ``restore``); the application decides what to command next.
+    """
+
+
+class RebootLoopError(DeviceRebootedError):
+    """The device rebooted too often (a brown-out loop?): the board stopped restoring.
+
+    Every later call raises this; close the board, fix the cause (a servo's
+    inrush current on the Uno's 5 V rail is the classic one), and open it again.
+    """
 
 
 class ReentrantCallError(ProtoduinoError, RuntimeError):

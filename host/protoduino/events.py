@@ -24,14 +24,21 @@ log = logging.getLogger(__name__)
 class EventKind(StrEnum):
     """Every kind of event; ``details`` keys are listed with each."""
 
-    #: The link is (again) up. details: rebooted (bool), handshakes (int)
+    #: The link is (again) up. details: rebooted (bool), lost (bool: the
+    #: device no longer had our outputs), handshakes (int)
     CONNECTED = "connected"
     #: The link went down. details: reason ("port lost", "watchdog", "desync",
     #: "device rebooted", "handshake failed", ...)
     DISCONNECTED = "disconnected"
-    #: The device restarted (EVENT BOOT / NOT_ACTIVE, or its port was reopened).
+    #: The device restarted: its boot id changed. Its outputs were at their
+    #: power-up state until the restore. details: boot_id (int)
     REBOOTED = "rebooted"
-    #: Session restore finished. details: replayed (int), failed (list of str)
+    #: Another host session took the device over (same boot id, our session not
+    #: resumed): it released our outputs. details: boot_id (int)
+    SESSION_LOST = "session_lost"
+    #: Session restore finished: every output re-initialised (at its safe
+    #: value), and with ``restore="last"`` its last acknowledged value sent again.
+    #: details: replayed (int), failed (list of str), values (bool)
     RESTORED = "restored"
     #: The device entered or left its failsafe state. details: active (bool),
     #: cause ("ping_timeout", "stop", "none")
@@ -43,7 +50,8 @@ class EventKind(StrEnum):
     #: The device saw our SEQ jump (details: none) or dropped an over-long frame.
     DEVICE_DESYNC = "device_desync"
     RX_OVERFLOW = "rx_overflow"
-    #: The link failed for good (version or schema mismatch). details: error (str)
+    #: The link failed for good (version or schema mismatch), or the device
+    #: rebooted too often to go on restoring. details: error (str)
     ERROR = "error"
 
 
@@ -77,7 +85,8 @@ class Stats:
     seq_desyncs: int
     handshakes: int
     reconnects: int  # the port was lost and reopened
-    reboots: int  # device restarts detected
+    reboots: int  # device restarts detected (a new boot id)
+    sessions_lost: int  # another session took the device over
     watchdog_resets: int
     device_desyncs: int  # EVENT DESYNC from the device
     device_rx_overflows: int

@@ -8,14 +8,18 @@ but new firmware); CLOSED.
   at 1 s) until a RESET_ACK arrives. The first handshake fails after
   ``handshake_timeout`` with :class:`HandshakeError`; a later one (after a
   reboot or a lost port) reports the failure as an event and keeps trying.
+* Every RESET carries this host's session id; the device's RESET_ACK carries
+  its boot id (new at every power-up) and whether it resumed the session
+  (kept its outputs). That answer alone says what happened while the link was
+  down: the same boot id and "resumed" is a reconnect (nothing to redo); a new
+  boot id is a reboot; the same boot id without "resumed" means another
+  session took the device over. The last two lost the outputs: ``link_up``
+  says ``lost=True`` so that the layer above re-initialises them.
 * Any RESET_ACK, even while ACTIVE (the twin of a resent RESET), means the
   device just cleared its link state: the next expected SEQ is 1.
-* EVENT BOOT or NOT_ACTIVE while ACTIVE: the device rebooted. A reopened port
-  is treated the same (opening an Uno's port resets it; a simulated board whose
-  pseudo-terminal vanished was restarted). The next ``link_up`` then says
-  ``rebooted=True`` so that the session is restored above.
-* SEQ jump of more than SEQ_DESYNC_THRESHOLD, or nothing valid received for
-  WATCHDOG_TIMEOUT while traffic is expected: handshake again.
+* EVENT BOOT or NOT_ACTIVE while ACTIVE, a reopened port, a SEQ jump of more
+  than SEQ_DESYNC_THRESHOLD, or nothing valid received for WATCHDOG_TIMEOUT
+  while traffic is expected: handshake again (the RESET_ACK then tells).
 
 Everything here runs on the transport's I/O thread, except :meth:`open` and
 :meth:`close`. The state is a handful of fields written only by that thread,
@@ -25,6 +29,7 @@ so readers from other threads see a consistent-enough snapshot without locks.
 from __future__ import annotations
 
 import logging
+import secrets
 import threading
 import time
 from collections import Counter
@@ -54,7 +59,7 @@ from .errors import (
 )
 from .events import Event, EventKind
 from .messages import ArduinoOut, parse_out
-from .packets import BadFrame, Packet, parse_control, reset_payload
+from .packets import BadFrame, Control, Packet, parse_control, reset_payload
 from .transport import TransportListener
 
 log = logging.getLogger(__name__)
@@ -101,7 +106,8 @@ class LinkState(StrEnum):
 class LinkListener(Protocol):
     """What the request layer implements; called on the I/O thread."""
 
-    def link_up(self, rebooted: bool) -> None: ...
+    def link_up(self, lost: bool, rebooted: bool) -> None:
+        """The link is ACTIVE; ``lost``: the device no longer has this session's outputs."""
 
     def link_down(self, reason: str) -> None: ...
 
@@ -152,6 +158,7 @@ class Link:
         schema_id: int = SCHEMA_ID,
         version: int = PROTOCOL_VERSION,
         clock: Clock = time.monotonic,
+        session: int | None = None,
     ) -> None:
         self.transport = transport
         #: Every timestamp of the link's own comes from this clock (the I/O thread's ticks
@@ -163,6 +170,14 @@ class Link:
         self.watchdog_timeout = watchdog_timeout
         self.schema_id = schema_id
         self.version = version
+        #: This host's session id (never 0: the device's "no session").
+        self.session = session if session is not None else secrets.randbelow(0xFFFFFFFF) + 1
+        if not 0 < self.session <= 0xFFFFFFFF:
+            raise ValueError(f"session must be 1..2**32-1, not {self.session}")
+        #: The device's boot id at the last handshake (None before the first).
+        self.boot_id: int | None = None
+        #: Whether the first handshake found the session still on the device.
+        self.resumed_at_open = False
         self.state = LinkState.WAIT_ACK
         #: Set by the request layer: the watchdog runs only while the host
         #: expects answers (pings on, or commands outstanding); a device left
@@ -176,7 +191,6 @@ class Link:
         self._hs_reported = False
         self._hs_packets = 0  # good packets received while handshaking (none a RESET_ACK)
         self._was_active = False
-        self._pending_reboot = False
         self._opened = threading.Event()
         #: Why the link is not ACTIVE (what a waiting call should raise), or None.
         self.down_error: ProtoduinoError | None = None
@@ -190,6 +204,7 @@ class Link:
         self.handshakes = 0
         self.reconnects = 0
         self.reboots = 0
+        self.sessions_lost = 0
         self.watchdog_resets = 0
         self.device_events: Counter[str] = Counter()
 
@@ -237,9 +252,7 @@ class Link:
         if self.state in (LinkState.CLOSED, LinkState.FAILED):
             return
         if reopened:
-            self.reconnects += 1
-            if self._was_active:
-                self._pending_reboot = True
+            self.reconnects += 1  # a reboot or not: the RESET_ACK's boot id will say
         self._start_handshake(self._clock())
 
     def transport_lost(self, error: Exception) -> None:
@@ -318,7 +331,9 @@ class Link:
 
     def _send_reset(self, now: float) -> None:
         self.transport.clear_queue()
-        self.transport.send(PacketType.CONTROL, reset_payload(self.version), reset_seq=True)
+        self.transport.send(
+            PacketType.CONTROL, reset_payload(self.version, self.session), reset_seq=True
+        )
         self._hs_next = now + self._hs_delay
         self._hs_delay = min(self._hs_delay * 2, RESET_MAX_RETRY)
 
@@ -361,13 +376,6 @@ class Link:
         self._listener.link_failed(error)
         self._opened.set()
 
-    def _reboot_detected(self, how: str, now: float) -> None:
-        self.reboots += 1
-        self._pending_reboot = True
-        log.warning("%s: device rebooted (%s)", self.transport.name, how)
-        self._notify(Event(EventKind.REBOOTED, f"device rebooted ({how})", {"how": how}))
-        self._restart("device rebooted", now)
-
     def _packet(self, packet: Packet) -> None:
         now = self._clock()
         if packet.type is PacketType.CONTROL:
@@ -377,7 +385,7 @@ class Link:
                 log.warning("%s: bad CONTROL packet: %s", self.transport.name, error)
                 return
             if ctl.code is ControlCode.RESET_ACK:
-                self._reset_ack(ctl.version or 0, ctl.schema_id or 0, now)
+                self._reset_ack(ctl, now)
                 return
             if ctl.code is ControlCode.EVENT and ctl.event in (
                 EventCode.BOOT,
@@ -387,9 +395,14 @@ class Link:
                 self._last_rx = now
                 self.device_events[EventCode(ctl.event).name.lower()] += 1
                 if self.state is LinkState.ACTIVE:
-                    self._reboot_detected(EventCode(ctl.event).name, now)
-                elif self._was_active:
-                    self._pending_reboot = True
+                    # The device lost its link state (a reboot, most likely): the
+                    # handshake's boot id says whether it lost its outputs too.
+                    log.warning(
+                        "%s: device says %s; handshaking again",
+                        self.transport.name,
+                        EventCode(ctl.event).name,
+                    )
+                    self._restart(f"device {EventCode(ctl.event).name}", now)
                 return
         if self.state is not LinkState.ACTIVE:
             self._hs_packets += 1
@@ -441,7 +454,8 @@ class Link:
         else:
             log.info("%s: unknown device event %s", self.transport.name, ctl.event)
 
-    def _reset_ack(self, version: int, schema_id: int, now: float) -> None:
+    def _reset_ack(self, ctl: Control, now: float) -> None:
+        version, schema_id = ctl.version or 0, ctl.schema_id or 0
         self.device_version, self.device_schema_id = version, schema_id
         self._rx_expected = 1
         self._last_rx = now
@@ -453,20 +467,55 @@ class Link:
         if schema_id != self.schema_id:
             self._fail(SchemaMismatchError(self.schema_id, schema_id))
             return
+        if ctl.boot_id is None:
+            log.warning("%s: RESET_ACK without a boot id ignored", self.transport.name)
+            return
         self.handshakes += 1
         self.state = LinkState.ACTIVE
         self.down_error = None
-        rebooted, self._pending_reboot = self._pending_reboot, False
         first = not self._was_active
         self._was_active = True
-        log.info("%s: link active (rebooted=%s)", self.transport.name, rebooted)
+        rebooted = self.boot_id is not None and ctl.boot_id != self.boot_id
+        lost = not first and not ctl.resumed
+        self.boot_id = ctl.boot_id
+        if first:
+            self.resumed_at_open = bool(ctl.resumed)
+        log.info(
+            "%s: link active (boot 0x%08X, session %s)",
+            self.transport.name,
+            ctl.boot_id,
+            "resumed" if ctl.resumed else "new",
+        )
+        if rebooted:
+            self.reboots += 1
+            log.warning(
+                "%s: the device rebooted (boot id 0x%08X)", self.transport.name, ctl.boot_id
+            )
+            self._notify(
+                Event(
+                    EventKind.REBOOTED,
+                    "the device rebooted: its outputs are back at power-up state",
+                    {"boot_id": ctl.boot_id},
+                )
+            )
+        elif lost:
+            self.sessions_lost += 1
+            log.warning("%s: another session took the device over", self.transport.name)
+            self._notify(
+                Event(
+                    EventKind.SESSION_LOST,
+                    "another host session took the device over: it released our outputs",
+                    {"boot_id": ctl.boot_id},
+                )
+            )
         if not first:
             self._notify(
                 Event(
                     EventKind.CONNECTED,
-                    "link up again" + (" (device rebooted)" if rebooted else ""),
-                    {"rebooted": rebooted, "handshakes": self.handshakes},
+                    "link up again"
+                    + (" (device rebooted)" if rebooted else " (outputs lost)" if lost else ""),
+                    {"rebooted": rebooted, "lost": lost, "handshakes": self.handshakes},
                 )
             )
-        self._listener.link_up(rebooted)
+        self._listener.link_up(lost, rebooted)
         self._opened.set()

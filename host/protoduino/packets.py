@@ -16,6 +16,10 @@ from .constants import (
     HEADER_SIZE,
     MAX_PAYLOAD,
     MIN_PACKET,
+    RESET_ACK_RESUMED,
+    RESET_ACK_SIZE,
+    RESET_ACK_V1_SIZE,
+    RESET_SIZE,
     ControlCode,
     EventCode,
     PacketType,
@@ -93,13 +97,24 @@ class Control:
     schema_id: int | None = None
     event: int | None = None  # an EventCode value, or an unknown code to log
     detail: bytes = b""
+    #: RESET (version 2): the host session; None in version 1's shape.
+    session: int | None = None
+    #: RESET_ACK (version 2): this power-up's id and whether the session was
+    #: resumed; None in the short shape a device gives a RESET of another version.
+    boot_id: int | None = None
+    resumed: bool | None = None
 
     def to_json(self) -> dict[str, object]:
         out: dict[str, object] = {"code": self.code.name}
         if self.version is not None:
             out["version"] = self.version
+        if self.session is not None:
+            out["session"] = f"0x{self.session:08X}"
         if self.schema_id is not None:
             out["schema_id"] = f"0x{self.schema_id:08X}"
+        if self.boot_id is not None:
+            out["boot_id"] = f"0x{self.boot_id:08X}"
+            out["resumed"] = self.resumed
         if self.event is not None:
             try:
                 out["event"] = EventCode(self.event).name
@@ -110,12 +125,20 @@ class Control:
         return out
 
 
-def reset_payload(version: int) -> bytes:
-    return bytes((ControlCode.RESET, version))
+def reset_payload(version: int, session: int = 1) -> bytes:
+    """RESET for host ``session``; version 1's shape (CODE VERSION) for version 1."""
+    head = bytes((ControlCode.RESET, version))
+    return head if version < 2 else head + struct.pack(">I", session)
 
 
-def reset_ack_payload(version: int, schema_id: int) -> bytes:
-    return bytes((ControlCode.RESET_ACK, version)) + struct.pack(">I", schema_id)
+def reset_ack_payload(
+    version: int, schema_id: int, boot_id: int | None = None, resumed: bool = False
+) -> bytes:
+    """RESET_ACK; without ``boot_id``, the short shape every version parses."""
+    head = bytes((ControlCode.RESET_ACK, version)) + struct.pack(">I", schema_id)
+    if boot_id is None:
+        return head
+    return head + struct.pack(">IB", boot_id, RESET_ACK_RESUMED if resumed else 0)
 
 
 def heartbeat_payload() -> bytes:
@@ -143,13 +166,28 @@ def parse_control(payload: bytes) -> Control:
         raise ProtocolError(f"unknown CONTROL code 0x{payload[0]:02X}")
     args = payload[1:]
     if code is ControlCode.RESET:
-        if len(args) != 1:
-            raise ProtocolError(f"RESET takes 1 argument byte, got {len(args)}")
-        return Control(code, version=args[0])
+        # Version 1's shape (1 byte) is still parsed: the monitor shows it, and
+        # a device answers it with the short RESET_ACK so the host names the mismatch.
+        if len(args) == 1:
+            return Control(code, version=args[0])
+        if len(args) != RESET_SIZE - 1:
+            raise ProtocolError(f"RESET takes 1 or 5 argument bytes, got {len(args)}")
+        return Control(code, version=args[0], session=int.from_bytes(args[1:5], "big"))
     if code is ControlCode.RESET_ACK:
-        if len(args) != 5:
-            raise ProtocolError(f"RESET_ACK takes 5 argument bytes, got {len(args)}")
-        return Control(code, version=args[0], schema_id=int.from_bytes(args[1:5], "big"))
+        version, n = (args[0] if args else None), len(args)
+        if n == RESET_ACK_V1_SIZE - 1 or (n > RESET_ACK_V1_SIZE - 1 and version != 2):
+            # The short shape; and a later version may add bytes: its VERSION and
+            # SCHEMA_ID still sit here, enough to name the mismatch.
+            return Control(code, version=version, schema_id=int.from_bytes(args[1:5], "big"))
+        if n != RESET_ACK_SIZE - 1:
+            raise ProtocolError(f"RESET_ACK takes 5 or 10 argument bytes, got {n}")
+        return Control(
+            code,
+            version=version,
+            schema_id=int.from_bytes(args[1:5], "big"),
+            boot_id=int.from_bytes(args[5:9], "big"),
+            resumed=bool(args[9] & RESET_ACK_RESUMED),
+        )
     if code is ControlCode.HEARTBEAT:
         raise ProtocolError("HEARTBEAT takes no arguments")
     if not args:

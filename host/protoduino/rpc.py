@@ -32,16 +32,25 @@ I/O thread.
   the next such time, and a late attempt does not delay the next one).
 * While the link is down, nothing is sent: calls wait, bounded by their
   deadline (``call_timeout``), and fail with the link's own error (port lost,
-  device silent) if it does not come back in time. When it comes back, calls
-  that were in flight are sent again with their ids, with a fresh round of
-  retries. A link that failed for good (another protocol version or schema
-  after a reboot) fails every outstanding and later call at once with its
-  error: no deadline is waited out for a link that cannot come back.
-* Session restore: when the link comes back after a reboot, the messages from
-  ``restore_provider`` are sent first, one at a time and in order (an Init
-  must land before its Control), and user calls are held until they are done.
-  A restore message that times out is sent again (RESTORE_RETRIES times): a
+  device silent) if it does not come back in time. When it comes back with
+  the session resumed (a reconnect), calls that were in flight are sent again
+  with their ids, with a fresh round of retries: the device's dedupe window
+  still holds them. A link that failed for good (another protocol version or
+  schema after a reboot) fails every outstanding and later call at once with
+  its error: no deadline is waited out for a link that cannot come back.
+* When it comes back with the outputs lost (a reboot, or another session took
+  the device over), every call that had been sent and changes outputs fails
+  with :class:`DeviceRebootedError`: it may or may not have run on the
+  previous boot, and sending it again could repeat the very command that
+  browned the board out. Calls not sent yet, and Pings, GetInfo and
+  Heartbeats, go out after the restore. Then the messages from
+  ``restore_provider`` are sent, one at a time and in order (an Init must
+  land before its Control), and new calls are held until they are done. A
+  restore message that times out is sent again (RESTORE_RETRIES times): a
   restore that skipped an Init would leave that output dead on the device.
+* Reboot loop: the ``reboot_limit``-th loss of the outputs within
+  ``reboot_window`` seconds stops restoring; every outstanding and later
+  user call fails with :class:`RebootLoopError` and an ERROR event says why.
 * A device that refuses a Control with STATUS_NOT_INITIALISED for an output
   the board configured has restarted unseen (its EVENT BOOT lost, then a
   re-handshake found it again): the restore runs, and that call is sent again
@@ -67,8 +76,10 @@ from .errors import (
     AckTimeoutError,
     BoardClosedError,
     CommandRejectedError,
+    DeviceRebootedError,
     PayloadTooLargeError,
     ProtoduinoError,
+    RebootLoopError,
 )
 from .events import Event, EventKind
 from .framing import frame_size
@@ -82,6 +93,10 @@ FINISHED_MEMORY = 256
 #: A restore message that gets no Ack is sent again (a new call) this many more times:
 #: a restore left half done would leave an output unconfigured on the device.
 RESTORE_RETRIES = 3
+
+#: A reboot loop: this many losses of the outputs within REBOOT_WINDOW seconds.
+REBOOT_LIMIT = 3
+REBOOT_WINDOW = 60.0
 
 Ack = Any  # protoduino_pb2.Ack (protobuf message classes are dynamic)
 
@@ -202,9 +217,13 @@ class Rpc:
         link_wait: float = 5.0,
         clock: Clock = time.monotonic,
         first_id: int | None = None,
+        reboot_limit: int = REBOOT_LIMIT,
+        reboot_window: float = REBOOT_WINDOW,
     ) -> None:
-        if ack_timeout <= 0 or max_retries < 0 or window < 1:
-            raise ValueError("ack_timeout > 0, max_retries >= 0 and window >= 1 are required")
+        if ack_timeout <= 0 or max_retries < 0 or window < 1 or reboot_limit < 1:
+            raise ValueError(
+                "ack_timeout > 0, max_retries >= 0, window >= 1 and reboot_limit >= 1 are required"
+            )
         self.link: LinkPort | None = None
         self._notify = notify
         #: time.monotonic() unless a test injects its own; the I/O thread passes its
@@ -224,6 +243,8 @@ class Rpc:
         self.link_wait = link_wait
         self.message_hook: MessageHook | None = None
         self.restore_provider: RestoreProvider | None = None
+        #: Whether the restore sends last values too (for the RESTORED event only).
+        self.restore_values = False
         self._lock = threading.Lock()
         # Random by default, so that ids from before a host restart do not look like
         # retransmissions to the device's dedupe window; ``first_id`` fixes it (tests).
@@ -248,6 +269,11 @@ class Rpc:
         #: Transmissions of new ids held back by the dedupe guard (a counter, for tests).
         self.guard_holds = 0
         self._closed = False
+        self.reboot_limit = reboot_limit
+        self.reboot_window = reboot_window
+        self._losses: collections.deque[float] = collections.deque()
+        #: Set once a reboot loop was detected: every user call fails with it.
+        self.loop_error: RebootLoopError | None = None
         self._pinging = ping
         self._next_ping = 0.0
         self._ping_call: Call | None = None
@@ -320,6 +346,8 @@ class Rpc:
                 raise BoardClosedError("the board is closed")
             if self._failed is not None:
                 raise self._failed.with_traceback(None)
+            if self.loop_error is not None:
+                raise self.loop_error.with_traceback(None)
             call = self._new_call(msg, on_done)
             (self._urgent if urgent else self._pending).append(call)
             self._pump(self._clock())
@@ -654,19 +682,48 @@ class Rpc:
         call.restored = True
         self._calls[call.message_id] = call
 
-    def link_up(self, rebooted: bool) -> None:
+    def link_up(self, lost: bool, rebooted: bool) -> None:
         with self._lock:
-            self._requeue_inflight()
-            if rebooted:
-                # The device's dedupe window died with it: what went out before
-                # is void, and every call still waiting goes out as if new.
-                self._tx_log.clear()
-                for call in self._calls.values():
-                    call.first_tx = None
-            if rebooted and self.restore_provider is not None:
-                self._begin_restore()
+            if lost:
+                self._outputs_lost(rebooted, self._clock())
+            else:
+                self._requeue_inflight()  # a reconnect: the dedupe window still has them
             self._next_ping = 0.0
             self._pump(self._clock())
+
+    def _outputs_lost(self, rebooted: bool, now: float) -> None:
+        """The device no longer has our outputs (lock held): fail what was outstanding, restore."""
+        what = "rebooted" if rebooted else "was taken over by another session"
+        self._losses.append(now)
+        while self._losses and now - self._losses[0] > self.reboot_window:
+            self._losses.popleft()
+        error: DeviceRebootedError
+        if len(self._losses) >= self.reboot_limit:
+            error = self.loop_error = RebootLoopError(
+                f"the device lost its outputs {len(self._losses)} times within "
+                f"{self.reboot_window:g} s (a reboot loop: a brown-out?); the board stopped "
+                "restoring them: close it, fix the cause and open it again"
+            )
+            log.error("%s", error)
+            self._notify(Event(EventKind.ERROR, str(error), {"error": str(error)}))
+        else:
+            error = DeviceRebootedError(
+                f"the device {what} while the call was outstanding; its outputs are being "
+                "re-initialised at their safe values and the call is not sent again"
+            )
+        self._requeue_inflight()
+        self._tx_log.clear()  # the device's dedupe window is void
+        for call in list(self._calls.values()):
+            call.first_tx = None
+            # Sent to the lost device: it may have run there (and be what reset it).
+            # Never sent, or harmless to repeat: it goes out after the restore.
+            stale = call.sent_at and not command(call.kind).idempotent
+            if (self.loop_error is not None or stale) and call is not self._ping_call:
+                self._finish(call, error=error)
+        self._restore.clear()
+        self._holding = False
+        if self.loop_error is None and self.restore_provider is not None:
+            self._begin_restore()
 
     def _begin_restore(self) -> None:
         """Replay the board's session (lock held); user calls wait until it is done."""
@@ -744,14 +801,20 @@ class Rpc:
 
     def _restored(self) -> None:
         failed = list(self._restore_failed)
-        text = f"session restored: {self._restore_count} commands replayed"
+        text = f"outputs restored: {self._restore_count} commands replayed " + (
+            "(last values included)" if self.restore_values else "(outputs at their safe values)"
+        )
         if failed:
             text += f", {len(failed)} failed ({'; '.join(failed)})"
             log.warning(text)
         else:
             log.info(text)
         self._notify(
-            Event(EventKind.RESTORED, text, {"replayed": self._restore_count, "failed": failed})
+            Event(
+                EventKind.RESTORED,
+                text,
+                {"replayed": self._restore_count, "failed": failed, "values": self.restore_values},
+            )
         )
 
     # --- closing ------------------------------------------------------------------

@@ -154,12 +154,41 @@ void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
 {
     fake_hal_t *hal = ctx;
     if (pin >= hal->info.num_pins || (hal->info.reserved_pins >> pin) & 1u ||
-        hal->servo_us[pin] >= 0) {
+        hal->servo_us[pin] > 0) {
         fprintf(stderr, "fake_hal: digital write on invalid pin %u\n", pin);
         abort();
     }
+    hal->servo_us[pin] = -1; /* a detached servo's pin may become a digital output */
     hal->digital[pin] = level ? 1 : 0;
     hal->digital_writes[pin]++;
+}
+
+void pd_hal_servo_detach(void *ctx, uint8_t channel, uint8_t pin)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= hal->info.num_pins || channel >= hal->info.max_servos || hal->digital[pin] >= 0) {
+        fprintf(stderr, "fake_hal: bad servo detach ch %u pin %u\n", channel, pin);
+        abort();
+    }
+    hal->servo_us[pin] = 0; /* no pulses */
+    hal->servo_writes[pin]++;
+}
+
+void pd_hal_digital_release(void *ctx, uint8_t pin)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= hal->info.num_pins || hal->digital[pin] < 0) {
+        fprintf(stderr, "fake_hal: release of pin %u, not a digital output\n", pin);
+        abort();
+    }
+    hal->digital[pin] = -1;
+    hal->digital_writes[pin]++;
+}
+
+uint32_t pd_hal_boot_id(void *ctx)
+{
+    fake_hal_t *hal = ctx;
+    return ++hal->boots;
 }
 
 void pd_hal_outputs_safe(void *ctx)

@@ -37,6 +37,7 @@ typedef struct fake_hal {
     unsigned outputs_safe_calls; /* pd_hal_outputs_safe() since fake_init */
     bool servo_held;             /* inside pd_hal_servo_hold(true) .. (false) */
     unsigned servo_holds;        /* pd_hal_servo_hold(true) calls since fake_init */
+    uint32_t boots;              /* pd_hal_boot_id() calls: the boot id */
     pd_board_info_t info;
 } fake_hal_t;
 

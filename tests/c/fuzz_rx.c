@@ -68,8 +68,8 @@ static void check_invariants(const fake_hal_t *hal, const pd_core_t *core)
         }
         const pd_servo_t *s = &core->outputs.servo[PD_OWNER_SLOT(owner)];
         int us = hal->servo_us[s->pin];
-        if (s->pin != pin || us < s->min_us || us > s->max_us || s->safe_us < s->min_us ||
-            s->safe_us > s->max_us) {
+        if (s->pin != pin || (us != 0 && (us < s->min_us || us > s->max_us)) ||
+            (s->safe_us != PD_SERVO_SAFE_DETACH && (s->safe_us < s->min_us || s->safe_us > s->max_us))) {
             abort();
         }
     }

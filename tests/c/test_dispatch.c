@@ -316,7 +316,7 @@ static void test_get_info(void)
     const protoduino_DeviceInfo *info = &ack.result.info;
     CHECK(strcmp(info->firmware_version, "0.1.0") == 0);
     CHECK(strcmp(info->board, "fake") == 0);
-    CHECK_EQ(info->protocol_version, 1);
+    CHECK_EQ(info->protocol_version, PD_PROTOCOL_VERSION);
     CHECK_EQ(info->schema_id, PD_SCHEMA_ID);
     CHECK_EQ(info->num_pins, 20);
     CHECK_EQ(info->max_servos, 8);
@@ -331,7 +331,7 @@ static void test_board_limits_from_hal(void)
     t_boot(&d);
     d.hal.info.num_pins = 10;
     d.hal.info.max_servos = 2;
-    t_send_reset(&d, 1);
+    t_send_reset(&d, PD_PROTOCOL_VERSION);
     protoduino_ArduinoIn in = m_digital_init(1, 10, 0);
     CHECK_EQ(t_cmd(&d, &in), S(INVALID_PIN));
     in = m_servo_init_deg(2, 2, 0, 0, 0);

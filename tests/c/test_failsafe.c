@@ -75,10 +75,11 @@ static void test_failsafe_counts_from_handshake_without_ping(void)
 {
     tdev_t d;
     t_boot(&d);
-    d.hal.now_ms = 50000; /* long after boot: an IDLE device has nothing to do */
+    fake_clear(&d.hal);
+    d.hal.now_ms = 50000; /* long after boot: an IDLE device has nothing to make safe */
     pd_core_poll(&d.core);
-    CHECK(!d.core.failsafe.active);
-    t_send_reset(&d, 1);
+    CHECK_EQ(fake_count(&d.hal), 0); /* and no one to tell */
+    t_send_reset(&d, PD_PROTOCOL_VERSION); /* a new session: the timer counts from here */
     protoduino_ArduinoIn in = m_digital_init(1, 13, false);
     t_send_in(&d, &in);
     in = m_digital(2, 13, true);
@@ -208,19 +209,212 @@ static void test_stop(void)
     t_send_in(&d, &in);
     CHECK_EQ(t_status(&d, 20), S(OK));
     CHECK_EQ(t_failsafes(&d, NULL), 0);
-    /* The timer does not fire on top of a Stop. */
-    d.hal.now_ms = 30000;
-    pd_core_poll(&d.core);
-    CHECK_EQ(t_failsafes(&d, NULL), 0);
-    /* Latched: a control moves an output normally; the next Ping clears the flag. */
+    /* Latched: a control moves an output normally... */
     in = m_digital(21, 13, true);
     CHECK_EQ(t_cmd(&d, &in), S(OK));
     CHECK_EQ(d.hal.digital[13], 1);
     CHECK_EQ(d.hal.servo_us[9], 1472);
+    /* ... and the Stop did not stop the timer (defect 1): it fires at the
+     * deadline of the last Ping and takes that output back. */
+    fake_clear(&d.hal);
+    d.hal.now_ms = 1000 + 9999;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.digital[13], 1);
+    d.hal.now_ms = 1000 + 10000;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.digital[13], 0);
+    CHECK_EQ(t_failsafes(&d, &fs), 1);
+    CHECK(fs.active);
+    CHECK_EQ(fs.cause, CAUSE(PING_TIMEOUT));
     fake_clear(&d.hal);
     ping_at(&d, 22, 31000);
     CHECK_EQ(t_failsafes(&d, &fs), 1);
     CHECK(!fs.active);
+}
+
+/* Defect 1: after the timer ran out, no Control runs until a liveness message. */
+static void test_no_commanded_output_without_a_running_timer(void)
+{
+    tdev_t d;
+    setup_outputs(&d);
+    ping_at(&d, 10, 1000);
+    d.hal.now_ms = 11000;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.servo_us[9], 1472);
+    fake_clear(&d.hal);
+    protoduino_ArduinoIn in = m_servo_deg(11, 9, 45);
+    CHECK_EQ(t_cmd(&d, &in), S(FAILSAFE_EXPIRED));
+    in = m_digital(12, 13, true);
+    CHECK_EQ(t_cmd(&d, &in), S(FAILSAFE_EXPIRED));
+    CHECK_EQ(d.hal.servo_us[9], 1472);
+    CHECK_EQ(d.hal.digital[13], 0);
+    /* Inits only drive safe values: allowed. */
+    in = m_digital_init(13, 12, false);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    /* A Ping restarts the timer: controls run again, and are protected again. */
+    ping_at(&d, 14, 12000);
+    in = m_servo_deg(15, 9, 45);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    d.hal.now_ms = 22000;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.servo_us[9], 1472);
+    /* Expired before the poll ran: refused all the same. */
+    ping_at(&d, 16, 23000);
+    d.hal.now_ms = 33000;
+    in = m_servo_deg(17, 9, 45);
+    CHECK_EQ(t_cmd(&d, &in), S(FAILSAFE_EXPIRED));
+}
+
+/* Defect 2: a RESET of the same session is not liveness; a new session's is. */
+static void test_reset_does_not_feed_the_timer(void)
+{
+    tdev_t d;
+    setup_outputs(&d);
+    ping_at(&d, 10, 1000);
+    for (uint32_t t = 2000; t < 11000; t += 1000) {
+        d.hal.now_ms = t;
+        t_send_reset(&d, PD_PROTOCOL_VERSION); /* a deaf host's watchdog */
+        pd_core_poll(&d.core);
+    }
+    CHECK_EQ(d.hal.servo_us[9], 2000);
+    d.hal.now_ms = 11000;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.servo_us[9], 1472);
+    CHECK_EQ(d.hal.digital[13], 0);
+}
+
+static void test_configured_timeout_and_heartbeat_source(void)
+{
+    tdev_t d;
+    setup_outputs(&d);
+    protoduino_ArduinoIn in = {0};
+    in.message_id = 30;
+    in.which_data = protoduino_ArduinoIn_configure_failsafe_tag;
+    in.data.configure_failsafe.timeout_ms = 99; /* below the range */
+    CHECK_EQ(t_cmd(&d, &in), S(INVALID_ARGUMENT));
+    in.message_id = 31;
+    in.data.configure_failsafe.timeout_ms = 60001;
+    CHECK_EQ(t_cmd(&d, &in), S(INVALID_ARGUMENT));
+    in.message_id = 32;
+    in.data.configure_failsafe.timeout_ms = 300;
+    in.data.configure_failsafe.liveness = protoduino_Liveness_LIVENESS_HEARTBEAT;
+    d.hal.now_ms = 5000;
+    CHECK_EQ(t_cmd(&d, &in), S(OK)); /* restarts the timer */
+    in = m_servo_us(33, 9, 2000);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    ping_at(&d, 34, 5200); /* not liveness with LIVENESS_HEARTBEAT */
+    d.hal.now_ms = 5299;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.servo_us[9], 2000);
+    d.hal.now_ms = 5300;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.servo_us[9], 1472);
+    /* A Heartbeat is; it clears the flag like a Ping. */
+    fake_clear(&d.hal);
+    d.hal.now_ms = 6000;
+    memset(&in, 0, sizeof(in));
+    in.message_id = 35;
+    in.which_data = protoduino_ArduinoIn_heartbeat_tag;
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    protoduino_Failsafe fs;
+    CHECK_EQ(t_failsafes(&d, &fs), 1);
+    CHECK(!fs.active);
+    in = m_servo_us(36, 9, 2000);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    d.hal.now_ms = 6299;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.servo_us[9], 2000);
+    d.hal.now_ms = 6300;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.servo_us[9], 1472);
+    /* A new session starts again from the defaults. */
+    t_send_reset_session(&d, 77);
+    CHECK_EQ(d.core.failsafe.timeout_ms, PD_FAILSAFE_TIMEOUT_MS);
+    CHECK(!d.core.failsafe.heartbeat_only);
+}
+
+static void test_servo_safe_detach(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_servo_init_us(1, 9, 0, 0, 1500);
+    in.data.servo_init.which_safe = protoduino_ServoInit_safe_detach_tag;
+    in.data.servo_init.safe.safe_detach = true;
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 0); /* limp from the start */
+    in = m_servo_us(2, 9, 2000);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 2000);
+    in = m_stop(3);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 0);
+    in = m_servo_init_us(4, 9, 0, 0, 1500);
+    in.data.servo_init.which_safe = protoduino_ServoInit_safe_detach_tag;
+    in.data.servo_init.safe.safe_detach = false; /* not a safe state */
+    CHECK_EQ(t_cmd(&d, &in), S(INVALID_ARGUMENT));
+}
+
+static void test_same_init_again_leaves_the_pin_alone(void)
+{
+    tdev_t d;
+    setup_outputs(&d);
+    ping_at(&d, 10, 1000);
+    unsigned servo_writes = d.hal.servo_writes[9];
+    unsigned digital_writes = d.hal.digital_writes[13];
+    protoduino_ArduinoIn in = m_servo_init_deg(20, 9, 0, 0, 90);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_digital_init(21, 13, false);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_writes[9], servo_writes);
+    CHECK_EQ(d.hal.digital_writes[13], digital_writes);
+    CHECK_EQ(d.hal.servo_us[9], 2000);
+    CHECK_EQ(d.hal.digital[13], 1);
+    /* Another configuration does re-init to the (new) safe value. */
+    in = m_digital_init(22, 13, true);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.digital_writes[13], digital_writes + 1u);
+    in = m_servo_init_deg(23, 9, 0, 0, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 544);
+}
+
+static void test_release_and_release_all(void)
+{
+    tdev_t d;
+    setup_outputs(&d);
+    ping_at(&d, 10, 1000);
+    protoduino_ArduinoIn in = {0};
+    in.message_id = 20;
+    in.which_data = protoduino_ArduinoIn_release_tag;
+    in.data.release.pin = 9;
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 0);
+    CHECK_EQ(d.core.outputs.owner[9], 0);
+    in.message_id = 21; /* twice: nothing to release */
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_INITIALISED));
+    in.message_id = 22;
+    in.data.release.pin = 1;
+    CHECK_EQ(t_cmd(&d, &in), S(RESERVED_PIN));
+    /* The freed pin takes another mode; its servo slot is free again. */
+    in = m_digital_init(23, 9, true);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    for (uint32_t pin = 2; pin < 10; pin++) {
+        in = m_servo_init_deg(30 + pin, pin == 9 ? 10 : pin, 0, 0, 90);
+        CHECK_EQ(t_cmd(&d, &in), S(OK));
+    }
+    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 8);
+    memset(&in, 0, sizeof(in));
+    in.message_id = 50;
+    in.which_data = protoduino_ArduinoIn_release_all_tag;
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 0);
+    CHECK_EQ(d.hal.digital[13], -1);
+    CHECK_EQ(d.hal.digital[9], -1);
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        CHECK_EQ(d.core.outputs.owner[pin], 0);
+    }
+    in = m_servo_deg(51, 2, 10);
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_INITIALISED));
 }
 
 static void test_stop_with_nothing_configured(void)
@@ -238,13 +432,15 @@ static void test_failsafe_unit(void)
     pd_failsafe_init(&fs, 100);
     CHECK(!pd_failsafe_due(&fs, 100 + 9999));
     CHECK(pd_failsafe_due(&fs, 100 + 10000));
-    pd_failsafe_set(&fs);
+    pd_failsafe_stop(&fs); /* a Stop leaves the timer running */
+    CHECK(pd_failsafe_due(&fs, 100 + 10000));
+    pd_failsafe_fire(&fs);
     CHECK(!pd_failsafe_due(&fs, 100 + 20000));
-    CHECK(pd_failsafe_ping(&fs, 30000));
-    CHECK(!pd_failsafe_ping(&fs, 30001));
-    pd_failsafe_restart(&fs, 35000);
-    CHECK(!pd_failsafe_due(&fs, 44999));
-    CHECK(pd_failsafe_due(&fs, 45000));
+    CHECK(pd_failsafe_expired(&fs, 100 + 20000));
+    CHECK(pd_failsafe_alive(&fs, 30000));
+    CHECK(!pd_failsafe_alive(&fs, 30001));
+    CHECK(!pd_failsafe_expired(&fs, 40000));
+    CHECK(pd_failsafe_due(&fs, 40001));
 }
 
 const pd_test_case_t pd_tests_failsafe[] = {
@@ -257,6 +453,12 @@ const pd_test_case_t pd_tests_failsafe[] = {
     TEST_CASE(test_failsafe_clock_wraps),
     TEST_CASE(test_stop),
     TEST_CASE(test_stop_with_nothing_configured),
+    TEST_CASE(test_no_commanded_output_without_a_running_timer),
+    TEST_CASE(test_reset_does_not_feed_the_timer),
+    TEST_CASE(test_configured_timeout_and_heartbeat_source),
+    TEST_CASE(test_servo_safe_detach),
+    TEST_CASE(test_same_init_again_leaves_the_pin_alone),
+    TEST_CASE(test_release_and_release_all),
     TEST_CASE(test_failsafe_unit),
     {NULL, NULL},
 };

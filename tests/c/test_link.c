@@ -32,13 +32,18 @@ static void test_reset_ack(void)
     t_send_reset(&d, PD_PROTOCOL_VERSION);
     CHECK_EQ(fake_count(&d.hal), 1);
     const fake_frame_t *f = fake_frame(&d.hal, 0);
-    const uint8_t expect[6] = {PD_CONTROL_RESET_ACK, PD_PROTOCOL_VERSION,
-                               (uint8_t)(PD_SCHEMA_ID >> 24), (uint8_t)(PD_SCHEMA_ID >> 16),
-                               (uint8_t)(PD_SCHEMA_ID >> 8), (uint8_t)PD_SCHEMA_ID};
+    const uint32_t boot = d.core.boot_id;
+    const uint8_t expect[11] = {PD_CONTROL_RESET_ACK, PD_PROTOCOL_VERSION,
+                                (uint8_t)(PD_SCHEMA_ID >> 24), (uint8_t)(PD_SCHEMA_ID >> 16),
+                                (uint8_t)(PD_SCHEMA_ID >> 8), (uint8_t)PD_SCHEMA_ID,
+                                (uint8_t)(boot >> 24), (uint8_t)(boot >> 16),
+                                (uint8_t)(boot >> 8), (uint8_t)boot,
+                                0 /* a new session */};
     CHECK_EQ(f->type, PD_PACKET_CONTROL);
     CHECK_EQ(f->seq, 0);
-    CHECK_EQ(f->len, 6);
-    CHECK(memcmp(f->payload, expect, 6) == 0);
+    CHECK_EQ(f->len, 11);
+    CHECK(memcmp(f->payload, expect, 11) == 0);
+    CHECK_EQ(d.core.session, T_SESSION);
     CHECK(d.core.link.active);
     /* The next frame we send carries SEQ 1. */
     protoduino_ArduinoIn in = m_info(5);
@@ -51,10 +56,75 @@ static void test_reset_other_version_still_answered(void)
     tdev_t d;
     t_boot(&d);
     fake_clear(&d.hal);
-    t_send_reset(&d, 7);
+    t_send_reset(&d, 1); /* a version 1 host: CODE VERSION */
     CHECK_EQ(fake_count(&d.hal), 1);
+    /* The short form every version parses: CODE VERSION SCHEMA_ID; the host judges. */
+    CHECK_EQ(fake_frame(&d.hal, 0)->len, PD_RESET_ACK_V1_SIZE);
     CHECK_EQ(fake_frame(&d.hal, 0)->payload[0], PD_CONTROL_RESET_ACK);
-    CHECK_EQ(fake_frame(&d.hal, 0)->payload[1], PD_PROTOCOL_VERSION); /* ours; the host judges */
+    CHECK_EQ(fake_frame(&d.hal, 0)->payload[1], PD_PROTOCOL_VERSION);
+    CHECK(!d.core.link.active); /* and it commands nothing here */
+    protoduino_ArduinoIn in = m_digital_init(9, 13, true);
+    t_send_in(&d, &in);
+    CHECK_EQ(t_events(&d, PD_EVENT_NOT_ACTIVE), 1);
+    CHECK_EQ(d.hal.digital[13], -1);
+}
+
+static void test_reset_of_another_version_leaves_the_session(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_digital_init(1, 13, true);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    const uint8_t v3[PD_RESET_SIZE] = {PD_CONTROL_RESET, 3, 0, 0, 0, 9};
+    t_send_packet(&d, PD_PACKET_CONTROL, 0, v3, sizeof(v3));
+    CHECK(!d.core.link.active);
+    CHECK_EQ(d.hal.digital[13], 1); /* not released: no session was opened */
+    t_send_reset(&d, PD_PROTOCOL_VERSION);
+    CHECK_EQ(fake_frame(&d.hal, fake_count(&d.hal) - 1)->payload[10], PD_RESET_ACK_RESUMED);
+}
+
+static void test_new_session_releases_same_session_resumes(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_servo_init_deg(1, 9, 0, 0, 90);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    in = m_digital_init(2, 13, true);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    in = m_servo_deg(3, 9, 0);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    /* The same session again (a watchdog re-handshake, a reconnect): all kept. */
+    fake_clear(&d.hal);
+    t_send_reset_session(&d, T_SESSION);
+    CHECK_EQ(fake_frame(&d.hal, 0)->len, PD_RESET_ACK_SIZE);
+    CHECK_EQ(fake_frame(&d.hal, 0)->payload[10], PD_RESET_ACK_RESUMED);
+    CHECK_EQ(d.hal.servo_us[9], 544);
+    CHECK_EQ(d.hal.digital[13], 1);
+    /* Another session: every output released, the pins free for any mode. */
+    fake_clear(&d.hal);
+    t_send_reset_session(&d, 0xABCDEF01u);
+    CHECK_EQ(fake_frame(&d.hal, 0)->payload[10], 0);
+    CHECK_EQ(d.hal.servo_us[9], 0); /* no pulses */
+    CHECK_EQ(d.hal.digital[13], -1); /* an input */
+    CHECK_EQ(d.core.outputs.owner[9], 0);
+    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 0);
+    in = m_digital_init(4, 9, false);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    /* Session 0 is never resumed (it means "none" on the device). */
+    fake_clear(&d.hal);
+    t_send_reset_session(&d, 0);
+    CHECK_EQ(fake_frame(&d.hal, 0)->payload[10], 0);
+    t_send_reset_session(&d, 0);
+    CHECK_EQ(fake_frame(&d.hal, 1)->payload[10], 0);
+}
+
+static void test_boot_id_differs_per_boot(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    uint32_t first = d.core.boot_id;
+    pd_core_init(&d.core, &d.hal);
+    CHECK(d.core.boot_id != first);
 }
 
 static void test_reset_without_version_ignored(void)
@@ -333,6 +403,9 @@ const pd_test_case_t pd_tests_link[] = {
     TEST_CASE(test_boot_event),
     TEST_CASE(test_reset_ack),
     TEST_CASE(test_reset_other_version_still_answered),
+    TEST_CASE(test_reset_of_another_version_leaves_the_session),
+    TEST_CASE(test_new_session_releases_same_session_resumes),
+    TEST_CASE(test_boot_id_differs_per_boot),
     TEST_CASE(test_reset_without_version_ignored),
     TEST_CASE(test_command_before_reset_not_active),
     TEST_CASE(test_reset_again_resets_seq_keeps_outputs),

@@ -50,7 +50,24 @@ void t_send_packet(tdev_t *d, uint8_t type, uint8_t seq, const uint8_t *payload,
 
 void t_send_reset(tdev_t *d, uint8_t version)
 {
+    if (version == PD_PROTOCOL_VERSION) {
+        t_send_reset_session(d, T_SESSION);
+        return;
+    }
+    /* Another version: the shape version 1 used (CODE VERSION). */
     const uint8_t payload[2] = {PD_CONTROL_RESET, version};
+    const uint8_t flush = 0;
+    t_feed(d, &flush, 1);
+    t_send_packet(d, PD_PACKET_CONTROL, 0, payload, sizeof(payload));
+    d->host_seq = 1;
+}
+
+void t_send_reset_session(tdev_t *d, uint32_t session)
+{
+    const uint8_t payload[PD_RESET_SIZE] = {
+        PD_CONTROL_RESET,       PD_PROTOCOL_VERSION,    (uint8_t)(session >> 24),
+        (uint8_t)(session >> 16), (uint8_t)(session >> 8), (uint8_t)session,
+    };
     const uint8_t flush = 0;
     t_feed(d, &flush, 1);
     t_send_packet(d, PD_PACKET_CONTROL, 0, payload, sizeof(payload));

@@ -27,6 +27,9 @@ void t_feed(tdev_t *d, const uint8_t *bytes, size_t len);
 void t_send_packet(tdev_t *d, uint8_t type, uint8_t seq, const uint8_t *payload, size_t len);
 /* RESET with the given version (SEQ 0); the host's SEQ becomes 1. */
 void t_send_reset(tdev_t *d, uint8_t version);
+/* The session every test's host uses unless it says otherwise. */
+#define T_SESSION 0x5E551011u
+void t_send_reset_session(tdev_t *d, uint32_t session);
 /* Encode and send one ArduinoIn as a COMMAND with the host's next SEQ. */
 void t_send_in(tdev_t *d, const protoduino_ArduinoIn *in);
 

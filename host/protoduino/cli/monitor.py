@@ -35,7 +35,7 @@ from ..packets import BadFrame
 from ..transport import FrameRecord
 from . import argtypes
 from .decode import record_json
-from .options import add_port, error, load_url_handlers
+from .options import add_port, error, load_url_handlers, session_of
 
 HELP = "show live decoded traffic (readable lines or JSON) with the link counters"
 
@@ -160,6 +160,7 @@ def open_board_with_monitor(args: argparse.Namespace, sink: Any) -> Board:
         ping=not args.no_ping,
         monitor=sink,
         capture=args.capture,
+        session=session_of(args),
     )
 
 

@@ -7,6 +7,7 @@ import importlib
 import importlib.util
 import sys
 import time
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -41,6 +42,12 @@ def add_port(parser: argparse.ArgumentParser, *, required: bool = True) -> None:
         metavar="S",
         help="seconds to wait for the device to answer (default: %(default)s)",
     )
+    parser.add_argument(
+        "--new-session",
+        action="store_true",
+        help="start a new host session: the device first releases every output that "
+        "earlier commands configured (by default all commands on one port share a session)",
+    )
     add_capture(parser)
 
 
@@ -52,6 +59,20 @@ def add_capture(parser: argparse.ArgumentParser) -> None:
         help="record every frame both ways with its time, the counters and the events "
         "(protoduino decode reads it; monitor --follow shows it live)",
     )
+
+
+def cli_session(port: str) -> int:
+    """The host session every command on ``port`` shares (1..2**32-1, from the port's name).
+
+    One-shot commands build on each other: the device keeps what the previous
+    command configured, and an Init that repeats it changes nothing at the pin.
+    """
+    return zlib.crc32(f"protoduino-cli {port}".encode()) or 1
+
+
+def session_of(args: argparse.Namespace) -> int | None:
+    """The CLI session, or None (a new random one) with --new-session."""
+    return None if getattr(args, "new_session", False) else cli_session(args.port)
 
 
 def load_url_handlers(port: str) -> None:
@@ -79,6 +100,7 @@ def open_board(args: argparse.Namespace, *, ping: bool = True) -> Board:
         handshake_timeout=args.handshake_timeout,
         ping=ping,
         capture=args.capture,
+        session=session_of(args),
     )
 
 
