@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import protoduino
+import protoduino_dev  # noqa: F401  (registers faulty://, which the bad-URL cases use)
 import pytest
 from fakedevice import FakeDevice
 from protoduino import Board
@@ -155,12 +156,13 @@ def test_every_call_on_a_closed_board_raises_board_closed(fake: FakeDevice) -> N
 
 
 def test_device_refusals_when_the_hosts_view_is_stale(sim_board: SimBoard) -> None:
-    """The device keeps its outputs across host sessions: a new Board does not know them."""
+    """A resumed session keeps the device's outputs: a new Board resuming it does not know them."""
     with Board.open(sim_board.port) as first:
         first.digital_output(13)
         for pin in range(2, 10):  # every servo slot
             first.servo(pin)
-    with Board.open(sim_board.port) as second:
+        session = first._link.session
+    with Board.open(sim_board.port, session=session) as second:
         with pytest.raises(protoduino.CommandRejectedError) as info:
             second.servo(13)  # the host sees a free pin; the device a digital output
         assert info.value.status == Status.STATUS_PIN_IN_USE and info.value.sent
@@ -169,6 +171,9 @@ def test_device_refusals_when_the_hosts_view_is_stale(sim_board: SimBoard) -> No
         assert info.value.status == Status.STATUS_NO_FREE_RESOURCE and info.value.sent
         assert second.stats.rejected == 2
         second.servo(9).write(45)  # re-initialising one of the device's servos is fine
+    with Board.open(sim_board.port) as third:  # a new session: the device released them all
+        third.servo(13)
+        third.servo(10)
 
 
 def test_a_servo_object_outlived_by_a_reinit(sim_board: SimBoard) -> None:

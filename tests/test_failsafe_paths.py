@@ -12,6 +12,7 @@ later than T (plus one servo frame for the servo) after the second.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -99,6 +100,30 @@ class Rig:
         return result
 
 
+#: With this set to a file name, every measurement is appended to it as one JSON line
+#: (the figures in docs/reliability.md, "The failsafe in every path").
+FIGURES = os.environ.get("PROTODUINO_FAILSAFE_FIGURES")
+
+
+def _record(
+    sim: SimBoard, timeout: float, alive: tuple[float, float], digital: float, servo: float
+) -> None:
+    if not FIGURES:
+        return
+    test = os.environ.get("PYTEST_CURRENT_TEST", "?").split("::")[-1].split(" ")[0]
+    line = {
+        "test": test,
+        "backend": sim.backend,
+        "timeout": timeout,
+        "window": alive[1] - alive[0],
+        # the failsafe at the pin, from the earliest and the latest the last sign of life was
+        "digital": [digital - alive[1], digital - alive[0]],
+        "servo": [servo - alive[1], servo - alive[0]],
+    }
+    with open(FIGURES, "a") as out:
+        out.write(json.dumps(line) + "\n")
+
+
 def assert_failsafe_on_time(sim: SimBoard, alive: tuple[float, float], timeout: float) -> None:
     """Pins 12 and 9 went safe T after the bracketed sign of life, not before, not later."""
     first, last = alive
@@ -123,6 +148,7 @@ def assert_failsafe_on_time(sim: SimBoard, alive: tuple[float, float], timeout: 
 
     digital = safe_line(12, 0)
     servo = safe_line(9, SAFE_90_US)
+    _record(sim, timeout, alive, digital, servo)
     assert first + timeout - POLL <= digital <= last + timeout + POLL, (alive, digital)
     assert first + timeout - POLL <= servo <= last + timeout + POLL + FRAME, (alive, servo)
 

@@ -357,8 +357,13 @@ def test_fault_kind(kind: str, backend: str, tmp_path: Path) -> None:
         assert result.link["restores"] >= 1 and result.link["reboots_seen"] >= 1
     if kind == "garbage":
         assert sum(result.link["bad_frames"].values()) > 0
-    # Whatever did not time out was acknowledged, and what the trace shows was sent.
-    assert result.ok + result.timed_out + sum(result.rejected.values()) == result.sent, (
+    # A call in flight when the device rebooted fails with DeviceRebootedError and is not
+    # sent again (docs/protocol.md section 7): at most one per call in flight per reboot.
+    rebooted = result.errors.get("DeviceRebootedError", 0)
+    assert rebooted <= scenario.window * result.faults.get("device_resets", 0), result.errors
+    # Whatever did not time out or meet a reboot was acknowledged, and what the trace
+    # shows was sent.
+    assert result.ok + result.timed_out + rebooted + sum(result.rejected.values()) == result.sent, (
         result.errors
     )
     assert result.executed > 0

@@ -6,9 +6,9 @@ from typing import Any
 
 import crcmod.predefined
 import pytest
-from protoduino.constants import PacketType
+from protoduino.constants import ControlCode, PacketType
 from protoduino.framing import StreamDecoder, cobs_decode, cobs_encode, frame_packet
-from protoduino.packets import BadFrame, Packet, build_packet, crc16, parse_packet
+from protoduino.packets import BadFrame, Packet, build_packet, crc16, parse_control, parse_packet
 from wirevectors import INVALID_FRAME_REASONS, load
 
 V = load()
@@ -77,3 +77,15 @@ def test_whole_vector_stream_in_one_go() -> None:
             Packet(PacketType(good["type"]), good["seq"], bytes.fromhex(good["payload"]))
         )
     assert StreamDecoder().feed(stream) == expected
+
+
+def test_version_2_handshake_vectors_parse_field_by_field() -> None:
+    by_name = {v["name"]: bytes.fromhex(v["payload"]) for v in V["packets"]}
+    reset = parse_control(by_name["RESET from host, version 2, session 0x5E551011"])
+    assert (reset.code, reset.version, reset.session) == (ControlCode.RESET, 2, 0x5E551011)
+    ack = parse_control(
+        by_name["RESET_ACK from device, version 2, schema id 0x1A2B3C00, boot id 7, resumed"]
+    )
+    assert (ack.version, ack.schema_id, ack.boot_id, ack.resumed) == (2, 0x1A2B3C00, 7, True)
+    old = parse_control(by_name["RESET_ACK from device, version 1, schema id 0x1A2B3C00"])
+    assert (old.version, old.schema_id, old.boot_id) == (1, 0x1A2B3C00, None)

@@ -66,7 +66,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     static fake_hal_t hal;
     static pd_core_t core;
-    static const uint8_t reset[2] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION};
+    static const uint8_t reset[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION, 0, 0, 0, 1};
     uint8_t seq = 1;
     size_t i = 0;
 

@@ -101,7 +101,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     } else {
         uint8_t seq = 0;
         if (!(mode & 2u)) {
-            const uint8_t reset[2] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION};
+            const uint8_t reset[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION, 0, 0, 0, 1};
             feed_packet(&core, PD_PACKET_CONTROL, seq++, reset, sizeof(reset));
         }
         size_t i = 0;

@@ -116,7 +116,7 @@ def _sample_commands() -> list[bytes]:
 
 def write_corpus(vectors: dict[str, Any], out: Path) -> None:
     """Seeds in the fuzz target's two modes (see tests/c/fuzz_rx.c)."""
-    from protoduino.constants import PacketType
+    from protoduino.constants import PROTOCOL_VERSION, PacketType
     from protoduino.framing import frame_packet
     from protoduino.packets import reset_payload
 
@@ -128,7 +128,7 @@ def write_corpus(vectors: dict[str, Any], out: Path) -> None:
     seeds: list[bytes] = [raw_mode + bytes.fromhex(v["wire"]) for v in vectors["packets"]]
     seeds += [raw_mode + bytes.fromhex(v["wire"]) for v in vectors["invalid_frames"]]
     seeds += [raw_mode + bytes.fromhex(v["encoded"]) + b"\0" for v in vectors["cobs"]]
-    reset = b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(1))
+    reset = b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION, 1))
     session = reset
     for seq, payload in enumerate(commands, start=1):
         seeds.append(raw_mode + reset + frame_packet(PacketType.COMMAND, 1, payload))
