@@ -671,6 +671,8 @@ def run(
             handshake_timeout=scenario.handshake_timeout,
             window=scenario.window,
             monitor=wire,
+            # The resets are the scenario's own fault: not a reboot loop to stop at.
+            reboot_limit=scenario.resets + 1,
         ) as board:
             runner = _Runner(scenario, sim, board, name)
             outputs = _Outputs(board, scenario)
