@@ -606,3 +606,29 @@ def test_a_socket_drop_is_a_reconnect_not_a_reboot(sim: SimBoard) -> None:
             assert sim.trace()[lines:] == []  # the pin never moved
     finally:
         bridge.close()
+
+
+def test_detach_safe_state_and_release_at_the_pins(board: Board, sim: SimBoard) -> None:
+    limp = board.servo(9, safe="detach")  # no pulses until commanded
+    assert limp.value == 0
+    limp.write(30)
+    board.stop()  # its safe state: pulses stop
+    expect_pin(sim, 9, [0, us(30), 0])
+    assert limp.value == 0
+    led = board.digital_output(13)
+    led.on()
+    led.release()  # an input: the trace says 0
+    expect_pin(sim, 13, [0, 1, 0], digital=True)
+    assert led.value is None
+    since = len(sim.trace())
+    arm = board.servo(13)  # the released pin takes another mode
+    expect_pin(sim, 13, [SAFE_90_US], since=since)
+    arm.release()
+    expect_pin(sim, 13, [SAFE_90_US, 0], since=since)
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        arm.write(10)  # released: the device refuses it
+    assert info.value.status == Status.STATUS_NOT_INITIALISED and info.value.sent
+    board.release_all()
+    since = len(sim.trace())
+    board.servo(9).write(60)  # a free slot and pin again
+    expect_pin(sim, 9, [SAFE_90_US, us(60)], since=since)
