@@ -67,7 +67,14 @@ def test_a_session_is_captured_both_ways_and_decoded(
     first = frames[0].item
     assert isinstance(first, Packet) and first.type is PacketType.CONTROL
     sent = [c for c in _commands(records) if c != "ping"]  # the 1 Hz Ping may come anywhere
-    assert sent == ["get_info", "servo_init", "servo_control", "digital_init", "digital_control"]
+    assert sent == [
+        "get_info",
+        "configure_failsafe",
+        "servo_init",
+        "servo_control",
+        "digital_init",
+        "digital_control",
+    ]
     device = [
         parse_out(f.item.payload)
         for f in frames

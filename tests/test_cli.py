@@ -61,7 +61,7 @@ def test_info(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert "link counters" in out
     counters = dict(line.split(maxsplit=1) for line in out.splitlines() if " " in line)
     assert counters["handshakes"] == "1"
-    assert counters["acks"] == "2"  # GetInfo, then the Ping that measured rtt
+    assert counters["acks"] == "3"  # GetInfo, ConfigureFailsafe, then the Ping that measured rtt
     assert main(["info", fake.port, "--json"]) == 0
     obj = json.loads(capsys.readouterr().out)
     assert obj["info"]["num_pins"] == 20
