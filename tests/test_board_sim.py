@@ -632,3 +632,30 @@ def test_detach_safe_state_and_release_at_the_pins(board: Board, sim: SimBoard) 
     since = len(sim.trace())
     board.servo(9).write(60)  # a free slot and pin again
     expect_pin(sim, 9, [SAFE_90_US, us(60)], since=since)
+
+
+def test_a_call_in_flight_at_a_reboot_fails_and_never_reaches_the_new_boot(sim: SimBoard) -> None:
+    """Defect 3 at the pins: the command that (say) browned the board out runs on the old
+    boot only; the call fails with DeviceRebootedError, the servo comes back at its safe
+    value and stays there (it used to be sent again after every reboot until its deadline)."""
+    from protoduino_dev import faults
+
+    name = f"reboot-{os.getpid()}-{id(sim)}"
+    url = f"faulty://{sim.port}?dir=rx&drop=1&paused=1&name={name}"
+    with Board.open(url, ping=False, ack_timeout=1.0) as b:  # room for the reboot
+        rec = Recorder(b)
+        servo = b.servo(9)
+        expect_pin(sim, 9, [SAFE_90_US])
+        line = faults.line(name)
+        assert line is not None
+        line.resume()  # from here every byte from the device is lost: the Ack too
+        call = servo.submit(150)
+        expect_pin(sim, 9, [SAFE_90_US, us(150)])  # it ran on this boot
+        sim.reboot()
+        line.heal()
+        with pytest.raises(protoduino.DeviceRebootedError):
+            call.result(timeout=10)
+        rec.wait(EventKind.RESTORED)
+        b.ping()
+        expect_pin(sim, 9, [SAFE_90_US, us(150), 0, SAFE_90_US])  # never 150 again
+        assert b.stats.reboots == 1

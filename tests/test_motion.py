@@ -116,15 +116,23 @@ def test_device_refusal_names_the_output(board: Board, fake: FakeDevice) -> None
     assert (a.value, b.value) == (us(90), us(90))  # nothing recorded
 
 
-def test_pose_values_are_restored_after_a_reboot(board: Board, fake: FakeDevice) -> None:
-    a = board.servo(3)
-    led = board.digital_output(13)
-    board.pose({a: 33, led: True})
-    restored = len(fake.commands())
-    fake.reboot()
-    assert fake.wait_for(lambda: fake.values == {3: 33, 13: 1}, BOUND)
-    kinds = [r.kind for r in fake.commands()[restored:]]
-    assert kinds[:4] == ["servo_init", "digital_init", "servo_control", "digital_control"]
+def test_pose_values_are_restored_after_a_reboot(fake: FakeDevice) -> None:
+    """With ``restore="last"``; by default a reboot brings the outputs back safe only."""
+    with Board.open(fake.port, restore="last") as board:
+        a = board.servo(3)
+        led = board.digital_output(13)
+        board.pose({a: 33, led: True})
+        restored = len(fake.commands())
+        fake.reboot()
+        assert fake.wait_for(lambda: fake.values == {3: 33, 13: 1}, BOUND)
+        kinds = [r.kind for r in fake.commands()[restored:] if r.kind != "ping"]
+        assert kinds[:5] == [
+            "configure_failsafe",
+            "servo_init",
+            "digital_init",
+            "servo_control",
+            "digital_control",
+        ]
 
 
 def test_a_pose_after_an_unseen_reboot_restores_the_session(board: Board, fake: FakeDevice) -> None:
@@ -286,7 +294,7 @@ def test_failsafe_returns_at_the_speed_limit(sim_board: SimBoard) -> None:
         check_ramp(ramp(sim_board.trace(), 9, mark), 1700, 1500, 1000)
 
 
-def test_read_outputs_in_a_new_session(sim_board: SimBoard) -> None:
+def test_read_outputs_in_a_resumed_session(sim_board: SimBoard) -> None:
     with Board.open(sim_board.port) as board:
         board.servo(3).write(45)
         board.digital_output(13).on()
@@ -296,10 +304,14 @@ def test_read_outputs_in_a_new_session(sim_board: SimBoard) -> None:
             5: protoduino.OutputState(5, "servo", 1234, 1234),
             13: protoduino.OutputState(13, "digital", 1, 1),
         }
-    with Board.open(sim_board.port) as again:  # knows nothing yet: asks the device
+        session = board._link.session
+    # Resuming the session (as the command line does): it knows nothing yet, asks the device.
+    with Board.open(sim_board.port, session=session) as again:
         inherited = again.read_outputs()
         assert inherited[3].value == us(45) and inherited[13].value == 1
         assert inherited[5].value == 1234
+    with Board.open(sim_board.port) as new:  # a new session: the device released them all
+        assert new.read_outputs() == {}
 
 
 def test_aio_pose_and_readback(sim_board: SimBoard) -> None:

@@ -883,7 +883,8 @@ class Board:
 
     def read_outputs(self) -> dict[int, OutputState]:
         """What the device drives now, by pin: every configured output, even one this
-        session did not configure (a new session sees the state it inherits)."""
+        board did not configure (resuming a session, it sees the state it inherits; a
+        new session has released everything)."""
         return _output_states(self._send(self._read_msg()))
 
     def submit_read_outputs(self) -> Future[dict[int, OutputState]]:
