@@ -84,17 +84,18 @@ void pd_hal_digital_release(void *hal, uint8_t pin)
 }
 
 /*
- * The boot counter lives in the first four bytes of EEPROM: read, add one,
- * write back (eeprom_update_dword writes only the bytes that change). At one
- * write per power-up the EEPROM's 100,000 cycles last 100,000 boots; an erased
- * EEPROM (0xFFFFFFFF) starts the count at 0.
+ * A boot counter in the first byte of EEPROM: read, add one, write back. One
+ * byte is enough: the id only has to differ from the previous power-up's (a
+ * host that misses 256 reboots in a row still sees its session not resumed,
+ * protocol.md section 5), and it is the smallest code. At one write per
+ * power-up the cell's 100,000 cycles last 100,000 boots; an erased EEPROM
+ * (0xFF) starts the count at 0.
  */
 uint32_t pd_hal_boot_id(void *hal)
 {
     (void)hal;
-    uint32_t *const counter = (uint32_t *)0;
-    uint32_t id = eeprom_read_dword(counter) + 1u;
-    eeprom_update_dword(counter, id);
+    uint8_t id = (uint8_t)(eeprom_read_byte((const uint8_t *)0) + 1u);
+    eeprom_write_byte((uint8_t *)0, id);
     return id;
 }
 

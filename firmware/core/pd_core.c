@@ -1,5 +1,7 @@
 #include "pd_core.h"
 
+#include <string.h>
+
 void pd_core_init(pd_core_t *core, void *hal)
 {
     core->hal = hal;
@@ -8,8 +10,11 @@ void pd_core_init(pd_core_t *core, void *hal)
     core->report = NULL;
     core->report_pending = 0;
     core->last_tick = (uint8_t)pd_hal_millis(hal);
-    core->session = 0;
-    core->boot_id = pd_hal_boot_id(hal);
+    uint32_t boot = pd_hal_boot_id(hal);
+    for (uint8_t i = 0; i < 4; i++) {
+        core->boot_id[i] = (uint8_t)(boot >> (24 - 8 * i));
+        core->session[i] = 0;
+    }
     pd_link_init(&core->link);
     pd_dedupe_init(&core->dedupe);
     pd_outputs_init(&core->outputs);
@@ -71,9 +76,10 @@ void pd_core_poll(pd_core_t *core)
     }
 }
 
-bool pd_core_open_session(pd_core_t *core, uint32_t session)
+bool pd_core_open_session(pd_core_t *core, const uint8_t session[4])
 {
-    if (session != 0 && session == core->session) {
+    static const uint8_t none[4] = {0, 0, 0, 0};
+    if (memcmp(session, none, 4) != 0 && memcmp(session, core->session, 4) == 0) {
         return true; /* a re-handshake: not a sign of life, the timer runs on */
     }
     /* Another owner: what the previous one configured is not its to command,
@@ -81,6 +87,6 @@ bool pd_core_open_session(pd_core_t *core, uint32_t session)
      * state it has at power-up, which the wiring must tolerate anyway. */
     pd_outputs_release_all(&core->outputs, core->hal);
     pd_failsafe_init(&core->failsafe, pd_hal_millis(core->hal));
-    core->session = session;
+    memcpy(core->session, session, 4);
     return false;
 }

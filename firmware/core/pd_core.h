@@ -46,8 +46,10 @@ typedef bool (*pd_report_fn)(struct pd_core *core, uint8_t slot, protoduino_Ardu
 
 typedef struct pd_core {
     void *hal; /* handed back to every pd_hal_* call */
-    uint32_t boot_id; /* this power-up's, from the HAL (RESET_ACK) */
-    uint32_t session; /* the host session that owns the outputs; 0: none since power-up */
+    /* Both big-endian, as on the wire: RESET_ACK copies one, RESET compares the
+     * other, and the Uno has no 32-bit shifts to spare. */
+    uint8_t boot_id[4]; /* this power-up's, from the HAL */
+    uint8_t session[4]; /* the host session that owns the outputs; 0: none since power-up */
     pd_link_t link;
     pd_dedupe_t dedupe;
     pd_outputs_t outputs;
@@ -88,6 +90,6 @@ void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause);
  * failsafe timer; another one releases every output and starts afresh.
  * Returns whether the session was resumed.
  */
-bool pd_core_open_session(pd_core_t *core, uint32_t session);
+bool pd_core_open_session(pd_core_t *core, const uint8_t session[4]);
 
 #endif /* PD_CORE_H */

@@ -153,13 +153,13 @@ static protoduino_Status cmd_configure_failsafe(pd_core_t *core, pd_cmd_t *cmd)
 {
     const protoduino_ConfigureFailsafe *msg = &cmd->in->data.configure_failsafe;
     uint32_t timeout = msg->timeout_ms ? msg->timeout_ms : PD_FAILSAFE_TIMEOUT_MS;
-    if (timeout < PD_FAILSAFE_MIN_MS || timeout > PD_FAILSAFE_MAX_MS ||
-        (msg->liveness != protoduino_Liveness_LIVENESS_PING &&
-         msg->liveness != protoduino_Liveness_LIVENESS_HEARTBEAT)) {
+    /* One unsigned compare for both bounds: below the minimum wraps above the range. */
+    if ((uint32_t)(timeout - PD_FAILSAFE_MIN_MS) > PD_FAILSAFE_MAX_MS - PD_FAILSAFE_MIN_MS ||
+        (uint32_t)msg->liveness > protoduino_Liveness_LIVENESS_HEARTBEAT) {
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
     core->failsafe.timeout_ms = timeout;
-    core->failsafe.heartbeat_only = msg->liveness == protoduino_Liveness_LIVENESS_HEARTBEAT;
+    core->failsafe.heartbeat_only = msg->liveness != protoduino_Liveness_LIVENESS_PING;
     /* Whoever configures the session is alive; a longer timeout must not count
      * from a liveness message that came under the old one. */
     alive(core, cmd);
@@ -346,8 +346,9 @@ void pd_dispatch_command(pd_core_t *core, const uint8_t *payload, size_t len)
     }
     pd_cmd_t cmd = {&in, &out.data.ack, NULL};
     protoduino_Status status = protoduino_Status_STATUS_UNKNOWN_COMMAND;
-    if (known && (entry.flags & PD_CMD_COMMANDS) &&
-        pd_failsafe_expired(&core->failsafe, pd_hal_millis(core->hal))) {
+    if (known && (entry.flags & PD_CMD_COMMANDS) && core->failsafe.fired) {
+        /* The timer ran out (pd_core_poll acts on it within the millisecond) and no
+         * liveness message came since. */
         status = protoduino_Status_STATUS_FAILSAFE_EXPIRED;
     } else if (known) {
         out.data.ack.which_result = entry.result;

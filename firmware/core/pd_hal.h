@@ -78,7 +78,7 @@ void pd_hal_digital_release(void *hal, uint8_t pin);
 /*
  * An identifier of this power-up, read once by pd_core_init(): it must differ
  * from the previous power-up's, so that a host can tell a reboot from a
- * reconnect (protocol.md section 5). The Uno counts its boots in EEPROM.
+ * reconnect (docs/protocol.md section 5). The Uno counts its boots in EEPROM.
  */
 uint32_t pd_hal_boot_id(void *hal);
 

@@ -109,10 +109,8 @@ static void handle_reset(pd_core_t *core, const uint8_t *payload, uint8_t len)
     link->rx_seq = 1;
     link->tx_flush = true; /* the host may hold a partial frame from before */
     if (len == PD_RESET_SIZE && payload[1] == PD_PROTOCOL_VERSION) {
-        uint32_t session = ((uint32_t)payload[2] << 24) | ((uint32_t)payload[3] << 16) |
-                           ((uint32_t)payload[4] << 8) | payload[5];
-        put_be32(ack + 6, core->boot_id);
-        ack[10] = pd_core_open_session(core, session) ? PD_RESET_ACK_RESUMED : 0u;
+        memcpy(ack + 6, core->boot_id, 4);
+        ack[10] = pd_core_open_session(core, payload + 2) ? PD_RESET_ACK_RESUMED : 0u;
         ack_len = PD_RESET_ACK_SIZE;
         link->active = true;
     } else {

@@ -1,5 +1,6 @@
 #include "pd_outputs.h"
 
+#include <stddef.h>
 #include <string.h>
 
 #include "pd_protocol.h"
@@ -8,6 +9,8 @@
 /* The digital masks hold one bit per pin; a slot fits the owner byte's low nibble. */
 typedef char pd_assert_pins_fit_mask[(PD_MAX_PINS <= 32) ? 1 : -1];
 typedef char pd_assert_servos_fit_slot[(PD_MAX_SERVOS <= PD_MAX_SLOTS) ? 1 : -1];
+/* A servo's settings (pin .. safe_us) are compared as bytes: no padding among them. */
+typedef char pd_assert_servo_settings_packed[(offsetof(pd_servo_t, us) == 8) ? 1 : -1];
 typedef char pd_assert_modes_fit_owner[(PD_MODE_COUNT <= 16) ? 1 : -1];
 
 /*
@@ -233,13 +236,14 @@ protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
         return status;
     }
     limits.pin = (uint8_t)msg->pin;
+    limits.step = (uint8_t)step;
     pd_servo_t *now = &out->servo[channel];
-    if (was != 0 && now->min_us == limits.min_us && now->max_us == limits.max_us &&
-        now->safe_us == limits.safe_us && now->step == step) {
+    if (was != 0 && memcmp(now, &limits, offsetof(pd_servo_t, us)) == 0) {
         /* The same configuration again (a CLI one-shot, a resumed session): the
          * pin keeps what it does, no detour through the safe value. */
         return protoduino_Status_STATUS_OK;
     }
+    limits.step = 0; /* an Init jumps to its safe value, limited or not */
     *now = limits;
     drive_servo(out, hal, channel, limits.safe_us);
     now->step = (uint8_t)step;
@@ -412,32 +416,33 @@ protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
     return protoduino_Status_STATUS_OK;
 }
 
+/* Let go of an owned pin through its mode's release; the pin is free again. */
+static void release_owned(pd_outputs_t *out, void *hal, uint8_t pin)
+{
+    uint8_t owner = out->owner[pin];
+    pd_mode_t entry;
+    mode_entry(PD_OWNER_MODE(owner), &entry);
+    entry.release(out, hal, pin, PD_OWNER_SLOT(owner));
+    out->owner[pin] = 0;
+}
+
 protoduino_Status pd_outputs_release(pd_outputs_t *out, void *hal, uint32_t pin)
 {
     protoduino_Status status = check_pin(hal, pin);
-    if (status != protoduino_Status_STATUS_OK) {
-        return status;
+    if (status == protoduino_Status_STATUS_OK && out->owner[pin] == 0) {
+        status = protoduino_Status_STATUS_NOT_INITIALISED;
     }
-    uint8_t owner = out->owner[pin];
-    if (owner == 0) {
-        return protoduino_Status_STATUS_NOT_INITIALISED;
+    if (status == protoduino_Status_STATUS_OK) {
+        release_owned(out, hal, (uint8_t)pin);
     }
-    pd_mode_t entry;
-    mode_entry(PD_OWNER_MODE(owner), &entry);
-    entry.release(out, hal, (uint8_t)pin, PD_OWNER_SLOT(owner));
-    out->owner[pin] = 0;
-    return protoduino_Status_STATUS_OK;
+    return status;
 }
 
 void pd_outputs_release_all(pd_outputs_t *out, void *hal)
 {
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
-        uint8_t owner = out->owner[pin];
-        if (owner != 0) { /* an owned pin passed check_pin when it was claimed */
-            pd_mode_t entry;
-            mode_entry(PD_OWNER_MODE(owner), &entry);
-            entry.release(out, hal, pin, PD_OWNER_SLOT(owner));
-            out->owner[pin] = 0;
+        if (out->owner[pin] != 0) { /* an owned pin passed check_pin when it was claimed */
+            release_owned(out, hal, pin);
         }
     }
 }

@@ -258,9 +258,11 @@ static void test_no_commanded_output_without_a_running_timer(void)
     d.hal.now_ms = 22000;
     pd_core_poll(&d.core);
     CHECK_EQ(d.hal.servo_us[9], 1472);
-    /* Expired before the poll ran: refused all the same. */
+    /* The device acts on the expiry at its next poll (every millisecond), and from
+     * then on refuses Controls. */
     ping_at(&d, 16, 23000);
     d.hal.now_ms = 33000;
+    pd_core_poll(&d.core);
     in = m_servo_deg(17, 9, 45);
     CHECK_EQ(t_cmd(&d, &in), S(FAILSAFE_EXPIRED));
 }

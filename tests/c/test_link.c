@@ -32,7 +32,7 @@ static void test_reset_ack(void)
     t_send_reset(&d, PD_PROTOCOL_VERSION);
     CHECK_EQ(fake_count(&d.hal), 1);
     const fake_frame_t *f = fake_frame(&d.hal, 0);
-    const uint32_t boot = d.core.boot_id;
+    const uint32_t boot = d.hal.boots; /* the fake's boot id */
     const uint8_t expect[11] = {PD_CONTROL_RESET_ACK, PD_PROTOCOL_VERSION,
                                 (uint8_t)(PD_SCHEMA_ID >> 24), (uint8_t)(PD_SCHEMA_ID >> 16),
                                 (uint8_t)(PD_SCHEMA_ID >> 8), (uint8_t)PD_SCHEMA_ID,
@@ -43,7 +43,9 @@ static void test_reset_ack(void)
     CHECK_EQ(f->seq, 0);
     CHECK_EQ(f->len, 11);
     CHECK(memcmp(f->payload, expect, 11) == 0);
-    CHECK_EQ(d.core.session, T_SESSION);
+    const uint8_t session[4] = {(uint8_t)(T_SESSION >> 24), (uint8_t)(T_SESSION >> 16),
+                                (uint8_t)(T_SESSION >> 8), (uint8_t)T_SESSION};
+    CHECK(memcmp(d.core.session, session, 4) == 0);
     CHECK(d.core.link.active);
     /* The next frame we send carries SEQ 1. */
     protoduino_ArduinoIn in = m_info(5);
@@ -122,9 +124,10 @@ static void test_boot_id_differs_per_boot(void)
 {
     tdev_t d;
     t_boot(&d);
-    uint32_t first = d.core.boot_id;
+    uint8_t first[4];
+    memcpy(first, d.core.boot_id, 4);
     pd_core_init(&d.core, &d.hal);
-    CHECK(d.core.boot_id != first);
+    CHECK(memcmp(d.core.boot_id, first, 4) != 0);
 }
 
 static void test_reset_without_version_ignored(void)
