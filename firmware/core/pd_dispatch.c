@@ -308,43 +308,58 @@ static protoduino_Status run_command(pd_core_t *core, pd_cmd_t *cmd)
     }
 }
 
+static void respond(pd_core_t *core, const protoduino_ArduinoIn *msg, bool decoded);
+
+/*
+ * Decode, then run and answer in respond(), which is kept out of line: the
+ * ArduinoOut it builds is not on the stack while nanopb recurses through a
+ * Pose (the Uno's deepest stack; with both frames together it reached the
+ * static variables).
+ */
 void pd_dispatch_command(pd_core_t *core, const uint8_t *payload, size_t len)
 {
     protoduino_ArduinoIn in = protoduino_ArduinoIn_init_zero;
-    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
     pb_istream_t stream = pb_istream_from_buffer(payload, len);
-
     /* NOINIT: `in` is already all zeros, proto3's defaults; nanopb would walk every
      * field descriptor of ArduinoIn to set them again. */
-    if (!pb_decode_ex(&stream, protoduino_ArduinoIn_fields, &in, PB_DECODE_NOINIT)) {
+    bool decoded = pb_decode_ex(&stream, protoduino_ArduinoIn_fields, &in, PB_DECODE_NOINIT);
+    respond(core, &in, decoded);
+}
+
+static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_ArduinoIn *msg,
+                                              bool decoded)
+{
+    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
+
+    if (!decoded) {
         /* Nothing is executed; the host learns of it twice if it can. */
         core->decode_errors++;
         out.which_data = protoduino_ArduinoOut_decode_error_tag;
         out.data.decode_error.count = core->decode_errors;
         pd_dispatch_send(core, &out);
-        if (in.message_id != 0) {
+        if (msg->message_id != 0) {
             memset(&out, 0, sizeof(out));
-            send_ack(core, &out, in.message_id, protoduino_Status_STATUS_DECODE_ERROR);
+            send_ack(core, &out, msg->message_id, protoduino_Status_STATUS_DECODE_ERROR);
         }
         return;
     }
-    if (in.message_id == 0) {
+    if (msg->message_id == 0) {
         send_ack(core, &out, 0, protoduino_Status_STATUS_INVALID_ARGUMENT);
         return;
     }
 
     pd_command_t entry;
-    bool known = find_command(in.which_data, &entry);
+    bool known = find_command(msg->which_data, &entry);
     bool idempotent = known && (entry.flags & PD_CMD_IDEMPOTENT);
     if (!idempotent) {
-        int seen = pd_dedupe_find(&core->dedupe, in.message_id);
+        int seen = pd_dedupe_find(&core->dedupe, msg->message_id);
         if (seen >= 0) {
             /* A retransmission whose Ack was lost: answer again, do not repeat it. */
-            send_ack(core, &out, in.message_id, (uint8_t)seen);
+            send_ack(core, &out, msg->message_id, (uint8_t)seen);
             return;
         }
     }
-    pd_cmd_t cmd = {&in, &out.data.ack, NULL};
+    pd_cmd_t cmd = {msg, &out.data.ack, NULL};
     protoduino_Status status = protoduino_Status_STATUS_UNKNOWN_COMMAND;
     if (known && (entry.flags & PD_CMD_COMMANDS) && core->failsafe.fired) {
         /* The timer ran out (pd_core_poll acts on it within the millisecond) and no
@@ -358,9 +373,9 @@ void pd_dispatch_command(pd_core_t *core, const uint8_t *payload, size_t len)
         }
     }
     if (!idempotent) {
-        pd_dedupe_add(&core->dedupe, in.message_id, (uint8_t)status);
+        pd_dedupe_add(&core->dedupe, msg->message_id, (uint8_t)status);
     }
-    send_ack(core, &out, in.message_id, (uint8_t)status);
+    send_ack(core, &out, msg->message_id, (uint8_t)status);
     if (cmd.then != NULL) {
         cmd.then(core);
     }
