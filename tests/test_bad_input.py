@@ -161,7 +161,7 @@ def test_device_refusals_when_the_hosts_view_is_stale(sim_board: SimBoard) -> No
         first.digital_output(13)
         for pin in range(2, 10):  # every servo slot
             first.servo(pin)
-        session = first._link.session
+        session = first.session
     with Board.open(sim_board.port, session=session) as second:
         with pytest.raises(protoduino.CommandRejectedError) as info:
             second.servo(13)  # the host sees a free pin; the device a digital output

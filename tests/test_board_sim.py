@@ -286,7 +286,8 @@ def test_a_reboot_loop_stops_restoring(sim: SimBoard) -> None:
         with pytest.raises(protoduino.RebootLoopError):
             servo.write(10)
         # The decision was taken with the handshake, before the event: no restore began.
-        assert not board._rpc._holding and not board._rpc._restore
+        state = board.rpc_state()
+        assert not state.inflight and state.pending == 0
         assert board.stats.reboots == 3
         assert pin_values(sim.trace()[before:], 9) in ([0], [])
 

@@ -235,8 +235,8 @@ def test_a_host_that_cannot_hear_the_device_does_not_keep_outputs_alive(
     """Defect 2: device-to-host cut; the host's watchdog re-handshakes (every RESET used to
     restart the timer). Only the liveness message feeds it: the failsafe fires."""
     t = 2.0  # longer than the RESET backoff (<= 1 s), which the old firmware let feed it
-    with Board.open(deaf_line, failsafe_timeout=t) as board:
-        board._link.watchdog_timeout = 1.0  # re-handshakes start sooner: the test is shorter
+    # watchdog 1 s: the re-handshakes start sooner, the test is shorter.
+    with Board.open(deaf_line, failsafe_timeout=t, watchdog_timeout=1.0) as board:
         rig = Rig(board, sim)
         rig.command()
         name = deaf_line.rsplit("name=", 1)[1]
@@ -263,7 +263,7 @@ CHILD = textwrap.dedent(
     board.servo(9, safe=90).write(10)
     board.digital_output(12, safe=False).on()
     board.digital_output(13, safe=False)
-    print(board._link.session, flush=True)
+    print(board.session, flush=True)
     sys.stdin.read()
     """
 )

@@ -304,7 +304,7 @@ def test_read_outputs_in_a_resumed_session(sim_board: SimBoard) -> None:
             5: protoduino.OutputState(5, "servo", 1234, 1234),
             13: protoduino.OutputState(13, "digital", 1, 1),
         }
-        session = board._link.session
+        session = board.session
     # Resuming the session (as the command line does): it knows nothing yet, asks the device.
     with Board.open(sim_board.port, session=session) as again:
         inherited = again.read_outputs()

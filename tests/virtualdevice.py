@@ -7,7 +7,8 @@ the time of a :class:`ManualClock` it moves itself. So a failing test points
 at one layer (``protoduino.link`` or ``protoduino.rpc``), and every timer verdict is exact.
 
 The device side follows docs/protocol.md as far as those layers can see: RESET -> RESET_ACK
-(version, schema), NOT_ACTIVE before it, SEQ on every packet it sends, one Ack per COMMAND,
+(version, schema, boot id, the session resumed or not), NOT_ACTIVE before it, SEQ on every
+packet it sends, one Ack per COMMAND,
 the dedupe window (a retransmitted id is acknowledged again and not executed again), Ping
 echo, DeviceInfo, EVENT BOOT on a reboot (which forgets the dedupe window). ``lose_next(n)``
 loses the device's next ``n`` packets on the way to the host; ``silent`` loses all of them.
@@ -62,6 +63,9 @@ class VirtualDevice:
         self._active = False
         self._tx_seq = 0
         self._dedupe: collections.OrderedDict[int, Status.ValueType] = collections.OrderedDict()
+        #: Version 2's handshake: the session that owns the device (0: none) and this boot.
+        self.session = 0
+        self.boot_id = 1
 
     # --- PacketPort: what the link calls ---------------------------------------------------
 
@@ -79,11 +83,22 @@ class VirtualDevice:
         # Only queues the answer: the link may hold the request layer's lock while it sends.
         self.received.append((ptype, payload))
         if ptype is PacketType.CONTROL:
-            if parse_control(payload).code is ControlCode.RESET:
+            ctl = parse_control(payload)
+            if ctl.code is ControlCode.RESET:
                 self.resets += 1
-                self._active = True
                 self._tx_seq = 0
-                self._reply(PacketType.CONTROL, reset_ack_payload(self.version, self.schema_id))
+                if ctl.version != self.version or ctl.session is None or self.version < 2:
+                    # Another version (or version 1 itself): the short answer every host reads.
+                    self._active = self.version < 2 and ctl.version == self.version
+                    self._reply(PacketType.CONTROL, reset_ack_payload(self.version, self.schema_id))
+                    return
+                self._active = True
+                resumed = ctl.session != 0 and ctl.session == self.session
+                self.session = ctl.session
+                self._reply(
+                    PacketType.CONTROL,
+                    reset_ack_payload(self.version, self.schema_id, self.boot_id, resumed),
+                )
         elif ptype is PacketType.COMMAND:
             if not self._active:
                 self._reply(PacketType.CONTROL, event_payload(EventCode.NOT_ACTIVE))
@@ -137,6 +152,8 @@ class VirtualDevice:
         self._active = False
         self._tx_seq = 0
         self._dedupe.clear()
+        self.session = 0
+        self.boot_id += 1
         self._reply(PacketType.CONTROL, event_payload(EventCode.BOOT))
 
     # --- the device ----------------------------------------------------------------------------

@@ -556,6 +556,12 @@ class Board:
     def closed(self) -> bool:
         return self._closed
 
+    @property
+    def session(self) -> int:
+        """This board's host session id: pass it as ``session=`` to resume the session
+        (and keep the device's outputs) from another board or process."""
+        return self._link.session
+
     def __repr__(self) -> str:
         return f"Board({self.url!r}, state={self._link.state.value})"
 
