@@ -12,8 +12,9 @@
 /* UART receive ring (a power of two): ~11 ms of line time at 115200 baud,
  * more than the longest frame the core sends takes to transmit. */
 #define PD_AVR_RX_SIZE 128u
-/* UART transmit ring: the replies to one command (PD_TX_RESERVE) and a short report. */
-#define PD_AVR_TX_SIZE 160u
+/* UART transmit ring: the replies to one command (PD_TX_RESERVE) and a short report
+ * (PD_TX_REPORT_ROOM); pd_avr_uart.c checks both fit at compile time. */
+#define PD_AVR_TX_SIZE 176u
 
 void pd_avr_uart_init(uint32_t baud);
 /* The oldest received byte, left in the ring, or -1 if none. */

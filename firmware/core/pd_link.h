@@ -54,6 +54,12 @@ struct pd_core;
  * transmit queue has this much room; every platform's queue holds more.
  */
 #define PD_TX_RESERVE (PD_TX_CONTROL_MAX + PD_TX_FRAME_MAX + PD_TX_NOTICE_MAX)
+/*
+ * A platform's transmit queue holds at least the reserve plus this, so that a
+ * report of up to 16 payload bytes can go out beside it (checked at compile
+ * time by each platform: a larger ArduinoOut makes the reserve grow with it).
+ */
+#define PD_TX_REPORT_ROOM PD_TX_FRAME_BYTES(16u)
 
 /*
  * Diagnostic counters; they wrap, nothing depends on them. No message carries
