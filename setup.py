@@ -2,7 +2,7 @@
 
 ``protoduino._speedups`` (optional C accelerator): where there is no C compiler or no Python
 headers, ``pip install`` still succeeds, and ``protoduino.framing`` logs one warning and uses
-the pure-Python decoder. ``tests/test_framing_props.py`` fails when a compiler and the headers
+the pure-Python decoder. ``tests/unit/test_framing_props.py`` fails when a compiler and the headers
 are present but the module was not built (a build broken by a warning must not pass as a
 skip). It compiles the firmware's own COBS and CRC (``firmware/core``), so both ends of the
 link check frames with the same code. Source paths are relative, as setuptools requires.

@@ -20,7 +20,7 @@ Layout, so that a new measurement is a small addition:
 * ``machine``, ``charts``, ``report``, ``runner``: machine facts, matplotlib charts, the markdown
                 writer and the command line.
 
-The benchmarks only measure; they never assert on time. ``tests/test_bench_smoke.py`` runs
+The benchmarks only measure; they never assert on time. ``tests/e2e/test_bench_smoke.py`` runs
 every one of them for a few iterations to prove the code runs (the board parts with a handful of
 calls; those on the emulated Uno are marked ``avr``).
 """

@@ -4,7 +4,7 @@ The Uno firmware's flash and static RAM, and its cycles per command.
 
 * Footprint: ``make -C firmware avr`` builds ``build/avr/protoduino.elf``; ``avr-size -A``
   gives its sections. Flash = .text + .data (the initial values of .data live in flash),
-  static RAM = .data + .bss, as the firmware's Makefile and tests/test_footprint.py count them.
+  static RAM = .data + .bss, as the firmware's Makefile and tests/c/test_footprint.py count them.
 * Cycles per command: the emulated Uno runs with the runner's ``--stats`` and ``--profile``
   (tools/avrsim). The firmware sleeps whenever it has nothing to do, so its awake cycles are
   its CPU use; between two snapshots, ``N`` commands are sent one at a time through the public
@@ -48,7 +48,7 @@ FLASH_GOAL = 13_212
 RAM_GOAL = 1_069
 #: The Uno's UART transmit ring (PD_AVR_TX_SIZE, firmware/avr/pd_avr.h).
 TX_RING = 176
-#: The tests' hard limit: StandardFirmataPlus (tests/test_footprint.py).
+#: The tests' hard limit: StandardFirmataPlus (tests/c/test_footprint.py).
 FLASH_LIMIT = 15_202
 RAM_LIMIT = 1_274
 #: The ATmega328P: 32 KB flash of which Optiboot keeps 0.5 KB (1 KB here, see tools/avrsim), 2 KB

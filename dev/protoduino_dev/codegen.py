@@ -17,7 +17,7 @@ changes when any message, field, enum or option in the schema changes, but not
 with comments or formatting. Both sides take it from this one computation.
 
 Everything written is deterministic, so the committed files can be compared
-against a fresh run (``tests/test_codegen.py``). The generator tools are dev
+against a fresh run (``tests/contract/test_codegen.py``). The generator tools are dev
 dependencies: this module imports them only when it runs.
 """
 

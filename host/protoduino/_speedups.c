@@ -5,7 +5,7 @@
  * it gives: the same Packet / BadFrame items (instances of the classes in
  * protoduino.packets, PacketType members for `type`), the same reasons and
  * raw bytes, the same `counts` updates, whatever the chunking, with the same
- * bounded memory. tests/test_framing_props.py holds both to a plain
+ * bounded memory. tests/unit/test_framing_props.py holds both to a plain
  * byte-at-a-time reference.
  *
  * Why C: in pure Python the per-frame interpreter work (a call into the
@@ -33,7 +33,7 @@
  *       -o COPY_OF_THE_PACKAGE/protoduino/_speedups$(python3-config --extension-suffix)
  *   PYTHONPATH=COPY_OF_THE_PACKAGE PYTHONMALLOC=malloc ASAN_OPTIONS=detect_leaks=0 \
  *   LD_PRELOAD="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libubsan.so)" \
- *       python -m pytest tests/test_framing_props.py
+ *       python -m pytest tests/unit/test_framing_props.py
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>

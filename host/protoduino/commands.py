@@ -5,7 +5,7 @@ handler, idempotent or not, what its Ack returns) and a pin-mode table
 (``pd_modes`` in firmware/core/pd_outputs.c). Everything the host's layers need
 to know about a command (the request layer: may its duplicate run twice? does
 a session restore have to send an Init before it?) is read from here instead of
-lists of names kept in step across modules. tests/test_commands.py checks that
+lists of names kept in step across modules. tests/contract/test_commands.py checks that
 every ArduinoIn member is declared and that the firmware's table agrees.
 
 How to add a command: one :class:`Command` in ``_BOARD_COMMANDS`` (or, for the

@@ -2,7 +2,7 @@
 
 The one source of them for both sides: ``protoduino gen`` writes the ones the
 firmware uses (:data:`FIRMWARE_CONSTANTS`, :data:`FIRMWARE_ENUMS`) to
-``firmware/generated/pd_protocol.h``, and tests/test_codegen.py fails when the
+``firmware/generated/pd_protocol.h``, and tests/contract/test_codegen.py fails when the
 committed header is stale or carries a constant the firmware does not use.
 """
 

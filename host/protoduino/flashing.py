@@ -2,7 +2,7 @@
 
 ``flash()`` talks to the bootloader exactly as the Arduino IDE does; against the emulated Uno
 started with Optiboot and auto-reset (``protoduino.simboard.runner_command``) the same code
-path writes and verifies the emulated flash (tests/test_flash.py).
+path writes and verifies the emulated flash (tests/e2e/test_flash.py).
 """
 
 from __future__ import annotations

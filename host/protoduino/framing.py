@@ -113,7 +113,7 @@ class PyStreamDecoder:
 
     This is the host's hot path (about one call per serial read), so the
     COBS, length, CRC and TYPE checks of :func:`decode_frame` are inlined here
-    and each chunk is split once; ``tests/test_framing_props.py`` holds the two
+    and each chunk is split once; ``tests/unit/test_framing_props.py`` holds the two
     to the same results.
     """
 

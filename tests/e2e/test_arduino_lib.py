@@ -18,7 +18,7 @@ import pytest
 
 pytestmark = pytest.mark.avr
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 AVR_CORE = Path("/usr/share/arduino/hardware/arduino/avr")
 #: The Uno's flash less Optiboot's 512 B (boards.txt: uno.upload.maximum_size).
 UNO_MAX_SIZE = 32256

@@ -45,7 +45,7 @@ from protoduino.packets import (
 from protoduino.simboard import SimBoard
 from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS
 
-VECTORS = Path(__file__).parent / "vectors" / "wire_v1.json"
+VECTORS = Path(__file__).resolve().parents[1] / "vectors" / "wire_v1.json"
 #: Generous bound for any single reply; the simulated board answers in well under 1 ms.
 REPLY_TIMEOUT = 20.0
 #: Bound for a change to reach the trace (a measured pin reports a digital low after 30 ms).

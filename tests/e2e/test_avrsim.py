@@ -6,7 +6,7 @@ echoes UART bytes; lines like ``S9 1500`` command it. These tests check the
 runner itself: the pty bridge, pulse widths measured at the pin from emulated
 cycles, immunity to simavr's pin re-raise artefact, the trace format, pacing,
 reset, several boards at once and clean exits. The real firmware is covered by
-the shared end-to-end suite and tests/test_flash.py.
+the shared end-to-end suite and tests/e2e/test_flash.py.
 
 Each runner costs about a quarter of a CPU core while it runs, so one board is
 shared per module where the state allows.

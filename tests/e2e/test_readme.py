@@ -34,7 +34,7 @@ from test_remote import Ser2net
 # pyserial 3.5's rfc2217 reader thread uses the old threading setters.
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning:serial.rfc2217")
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+README = Path(__file__).resolve().parents[2] / "README.md"
 UNO_PORT = "/dev/ttyACM0"
 
 #: Each example block, named by a line only it contains.

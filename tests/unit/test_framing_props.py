@@ -32,7 +32,7 @@ from protoduino.constants import MAX_ENCODED_FRAME, MAX_PAYLOAD, PacketType
 from protoduino.framing import PyStreamDecoder, decode_frame, frame_packet
 from protoduino.packets import BadFrame, Packet
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 speedups: ModuleType | None
 try:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ELF = ROOT / "build" / "avr" / "protoduino.elf"
 FLASH_LIMIT = 15_202
 RAM_LIMIT = 1_274

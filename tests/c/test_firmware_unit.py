@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from fuzzing import require_fuzz_tools, run_bounded
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FIRMWARE = ROOT / "firmware"
 FUZZ_BIN = ROOT / "build" / "fuzz" / "pd_fuzz"
 FUZZ_CORPUS = ROOT / "build" / "fuzz" / "corpus"

@@ -576,7 +576,7 @@ def test_soak_command_runs_reports_and_rerenders(
 def test_soak_command_refuses_nonsense(capsys: pytest.CaptureFixture[str]) -> None:
     from protoduino.cli.main import main
 
-    # Usage errors, refused while parsing (tests/test_cli_usage.py has every command's).
+    # Usage errors, refused while parsing (tests/unit/test_cli_usage.py has every command's).
     for argv in (
         ["soak", "--commands", "0", "--kinds", "none"],
         ["soak", "--kinds", "ber,nosuchkind"],

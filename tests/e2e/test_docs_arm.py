@@ -12,7 +12,7 @@ import pytest
 from protoduino.simboard import SimBoard
 from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
-API_MD = Path(__file__).resolve().parent.parent / "docs" / "api.md"
+API_MD = Path(__file__).resolve().parents[2] / "docs" / "api.md"
 
 
 def arm_example() -> str:

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from fuzzing import require_fuzz_tools, run_bounded
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FUZZ_BIN = ROOT / "build" / "fuzz" / "pd_fuzz_dispatch"
 FUZZ_SECONDS = 10
 

@@ -14,7 +14,7 @@ from pathlib import Path
 from protoduino import commands
 from protoduino._generated import protoduino_pb2 as pb
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DISPATCH = ROOT / "firmware" / "core" / "pd_dispatch.c"
 OUTPUTS_H = ROOT / "firmware" / "core" / "pd_outputs.h"
 

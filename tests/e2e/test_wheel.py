@@ -4,7 +4,7 @@
 the simulated board and the emulated Uno's runner (setup.py). The wheel is installed into a new
 venv in a temporary folder, outside the checkout, without the development tools, and the user
 commands run from there: ``demo``, ``sim`` on both backends, and ``flash`` through Optiboot on
-the emulated Uno (the same setup as tests/test_flash.py). Each is judged by what the board did
+the emulated Uno (the same setup as tests/e2e/test_flash.py). Each is judged by what the board did
 (its trace, or the flashed firmware answering the handshake), not by the command's words alone.
 """
 
@@ -28,7 +28,7 @@ from test_flash import handshake, missing_tool, start_blank_uno
 
 pytestmark = [pytest.mark.slow, pytest.mark.avr]
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: Upper bounds only (a build, a pip install, a demo): nothing is judged by them.
 BUILD_TIMEOUT = 600.0
 COMMAND_TIMEOUT = 180.0

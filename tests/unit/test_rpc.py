@@ -37,7 +37,7 @@ def ping_msg(payload: bytes = b"") -> Any:
 
 
 def test_message_ids_increment(board: Board, fake: FakeDevice) -> None:
-    # The wrap past 2**32 - 1 (to 1, never 0): tests/test_layers.py, on a chosen first id.
+    # The wrap past 2**32 - 1 (to 1, never 0): tests/unit/test_layers.py, on a chosen first id.
     first = board.rpc_state().next_id
     for _ in range(3):
         board.ping()
@@ -85,7 +85,7 @@ def test_no_ack_times_out_after_every_retry(board: Board, fake: FakeDevice) -> N
     assert len(pings) == 1 + protoduino.constants.MAX_RETRIES
     assert len({p.msg.message_id for p in pings}) == 1
     # When it fails (exactly call_timeout after the first transmission) is judged on an
-    # injected clock: tests/test_rpc_clock.py and tests/test_layers.py.
+    # injected clock: tests/unit/test_rpc_clock.py and tests/unit/test_layers.py.
     assert info.value.recent_frames  # ring buffer of recent frames attached
     assert any("COMMAND" in line for line in info.value.recent_frames)
     assert board.stats.timeouts == 1
@@ -214,7 +214,7 @@ def test_automatic_ping_and_pause(fake: FakeDevice) -> None:
         )
         count = len(fake.commands("ping"))
         # More than one ping interval without a ping; the exact schedule, and that a pause
-        # sends none at all, are judged on an injected clock in tests/test_layers.py.
+        # sends none at all, are judged on an injected clock in tests/unit/test_layers.py.
         time.sleep(1.3)
         assert len(fake.commands("ping")) == count
         board.pinging = True
@@ -247,7 +247,7 @@ def test_calls_fail_in_time_while_the_port_is_gone(fake: FakeDevice) -> None:
     with Board.open(fake.port, ping=False, handshake_timeout=0.5) as board:
         fake.unplug()
         with pytest.raises(protoduino.TransportError) as info:
-            board.ping()  # when it fails is judged on an injected clock: tests/test_layers.py
+            board.ping()  # when it fails is judged on an injected clock: tests/unit/test_layers.py
         assert "lost" in str(info.value)
         assert board.stats.state == "disconnected"
 

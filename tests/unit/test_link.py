@@ -77,7 +77,7 @@ def test_schema_mismatch_names_both_fingerprints(tmp_path: Path) -> None:
 def test_silent_device_fails_handshake_in_time_after_retries(tmp_path: Path) -> None:
     with FakeDevice(tmp_path, answer_reset=False) as fake:
         # When it fails (exactly at handshake_timeout) is judged on an injected clock:
-        # tests/test_layers.py.
+        # tests/unit/test_layers.py.
         with pytest.raises(protoduino.HandshakeError) as info:
             Board.open(fake.port, handshake_timeout=0.6)
         assert fake.resets >= 3  # RESET resent with backoff: t=0, 0.1, 0.3, ...

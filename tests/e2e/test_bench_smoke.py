@@ -22,7 +22,7 @@ from typing import Any, TypeVar
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:  # bench/ is a top-level folder of the checkout, not installed
     sys.path.insert(0, str(ROOT))
 
@@ -145,7 +145,7 @@ def _damaged(stream: bytes, rng: random.Random) -> bytes:
 @pytest.mark.parametrize("seed", range(4))
 def test_both_decoders_agree_on_a_damaged_bench_stream(seed: int) -> None:
     """The two protoduino rows of the report decode the same stream to the same items;
-    tests/test_framing_props.py holds both to the recovery policy in detail."""
+    tests/unit/test_framing_props.py holds both to the recovery policy in detail."""
     rng = random.Random(seed)
     stream, _ids = protoduino.mixed_stream(600, seed)
     data = _damaged(stream, rng)
