@@ -145,6 +145,10 @@ static void handle_frame(pd_core_t *core)
         PD_STAT_INC(link, drop_cobs); /* the last code byte points past the frame's end */
         return;
     }
+    if (link->rx_out > sizeof(link->rx_buf)) {
+        PD_STAT_INC(link, drop_length); /* longer than any command: not stored whole */
+        return;
+    }
     switch (pd_packet_check(link->rx_buf, link->rx_out, link->rx_crc, &pkt)) {
     case PD_PACKET_OK:
         break;

@@ -40,6 +40,13 @@ struct pd_core;
 
 /* Largest payload the device sends: one ArduinoOut (CONTROL payloads are <= 11 B). */
 #define PD_TX_MAX_PAYLOAD protoduino_ArduinoOut_size
+/* The longest packet the device stores: a COMMAND with the largest ArduinoIn
+ * nanopb can decode (every field bounded in protoduino.options). A longer packet
+ * cannot carry a valid command, so it is dropped as a length error as soon as its
+ * frame ends (docs/protocol.md section 3). Sized so rather than to MAX_PAYLOAD:
+ * the 117 bytes this saves on the Uno are stack, which a Pose's decode next to
+ * its reply needs (with a 260-byte buffer the stack reached the static data). */
+#define PD_RX_PACKET_MAX (PD_MIN_PACKET + protoduino_ArduinoIn_size)
 #define PD_TX_RAW_MAX (PD_MIN_PACKET + PD_TX_MAX_PAYLOAD)
 /* Encoded frame plus an optional leading 0x00 and the delimiter. */
 #define PD_TX_FRAME_BYTES(payload) (PD_COBS_MAX_ENCODED(PD_MIN_PACKET + (payload)) + 2u)
@@ -96,7 +103,7 @@ typedef struct pd_link_stats {
 } pd_link_stats_t;
 
 typedef struct pd_link {
-    uint8_t rx_buf[PD_MIN_PACKET + PD_MAX_PAYLOAD]; /* the packet, decoded as it arrives */
+    uint8_t rx_buf[PD_RX_PACKET_MAX]; /* the packet, decoded as it arrives */
     uint16_t rx_len;  /* encoded bytes of the current frame so far */
     uint16_t rx_out;  /* decoded bytes so far (may pass rx_buf's size: then too long) */
     uint16_t rx_crc;  /* CRC-16 over the decoded bytes so far */

@@ -279,16 +279,23 @@ static void test_overflow_event_and_recovery(void)
     CHECK_EQ(d.core.link.stats.rx_overflow, 1);
 }
 
-static void test_longest_valid_frame_accepted(void)
+static void test_longest_frame_is_no_overflow_but_too_long_for_a_command(void)
 {
-    /* A 255-byte payload encodes to exactly MAX_ENCODED_FRAME bytes. */
+    /* A 255-byte payload encodes to exactly MAX_ENCODED_FRAME bytes: no overflow.
+     * No ArduinoIn is that long, so the device (which stores PD_RX_PACKET_MAX
+     * bytes) drops it as a length error; the longest packet it stores passes. */
     tdev_t d;
     t_active(&d);
     uint8_t payload[PD_MAX_PAYLOAD];
     memset(payload, 0x11, sizeof(payload));
     t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, payload, sizeof(payload));
     CHECK_EQ(d.core.link.stats.rx_overflow, 0);
-    CHECK_EQ(d.core.link.stats.packets, 2); /* the RESET and this one */
+    CHECK_EQ(d.core.link.stats.drop_length, 1);
+    CHECK_EQ(d.core.link.stats.packets, 1); /* the RESET */
+    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, payload,
+                  PD_RX_PACKET_MAX - PD_MIN_PACKET);
+    CHECK_EQ(d.core.link.stats.drop_length, 1);
+    CHECK_EQ(d.core.link.stats.packets, 2);
 }
 
 static void test_noise_and_empty_frames_ignored(void)
@@ -416,7 +423,7 @@ const pd_test_case_t pd_tests_link[] = {
     TEST_CASE(test_seq_desync_event_and_still_processed),
     TEST_CASE(test_seq_wraps),
     TEST_CASE(test_overflow_event_and_recovery),
-    TEST_CASE(test_longest_valid_frame_accepted),
+    TEST_CASE(test_longest_frame_is_no_overflow_but_too_long_for_a_command),
     TEST_CASE(test_noise_and_empty_frames_ignored),
     TEST_CASE(test_data_and_stray_control_dropped),
     TEST_CASE(test_data_only_while_active),
