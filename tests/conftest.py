@@ -8,6 +8,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
+from fakefixtures import board, fake  # noqa: F401  (fixtures, found by pytest by name)
 from hypothesis import settings
 from simfixtures import sim_board  # noqa: F401  (the fixture, found by pytest by name)
 

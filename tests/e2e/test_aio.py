@@ -8,8 +8,6 @@ from __future__ import annotations
 import asyncio
 import functools
 import threading
-from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import protoduino
@@ -22,12 +20,6 @@ from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
 #: Bounds a failing test's wait only.
 BOUND = 10.0
-
-
-@pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device
 
 
 def log_msg(text: str) -> Any:

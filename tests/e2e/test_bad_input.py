@@ -10,8 +10,7 @@ earlier session's configuration, or a Servo object outlived its pin's re-Init.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import protoduino
@@ -21,19 +20,6 @@ from fakedevice import FakeDevice
 from protoduino import Board
 from protoduino.messages import Status
 from protoduino.simboard import SimBoard
-
-
-@pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device
-
-
-@pytest.fixture
-def board(fake: FakeDevice) -> Iterator[Board]:
-    with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
-        yield b
-
 
 WRONG_TYPES: list[tuple[str, Callable[[Board], object]]] = [
     ("servo pin bool", lambda b: b.servo(True)),

@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
@@ -232,9 +232,3 @@ def test_monitor_follows_a_session_another_process_owns(fake: FakeDevice, tmp_pa
         and r.item.type is PacketType.CONTROL
     ]
     assert fake.resets == len(resets) >= 1
-
-
-@pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -14,12 +13,6 @@ from protoduino.simboard import SimBoard
 from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
 
 MINE = ["ports", "ping", "servo", "pin", "info", "monitor", "demo"]
-
-
-@pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))

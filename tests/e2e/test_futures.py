@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from concurrent.futures import Future, wait
 from pathlib import Path
 from typing import Any
@@ -24,18 +24,6 @@ from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
 #: Long enough that a held Ack never times out while a test looks at the futures.
 PATIENT = 5.0
-
-
-@pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device
-
-
-@pytest.fixture
-def board(fake: FakeDevice) -> Iterator[Board]:
-    with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
-        yield b
 
 
 class Holder:

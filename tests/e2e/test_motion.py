@@ -12,7 +12,6 @@ from __future__ import annotations
 import asyncio
 import functools
 import itertools
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,18 +24,6 @@ from protoduino.simboard import SimBoard
 from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
 BOUND = 10.0
-
-
-@pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device
-
-
-@pytest.fixture
-def board(fake: FakeDevice) -> Iterator[Board]:
-    with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
-        yield b
 
 
 def us(degrees: int, lo: int = 544, hi: int = 2400) -> int:

@@ -15,7 +15,7 @@ import collections
 import shutil
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -79,12 +79,6 @@ def stream_writes(board: Board, threads: int = 4, per_thread: int = 15) -> None:
         t.join(60)
     assert not any(t.is_alive() for t in workers)
     assert not errors, errors
-
-
-@pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device
 
 
 def test_fake_device_window_is_the_firmwares() -> None:

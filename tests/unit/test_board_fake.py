@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -15,18 +15,6 @@ from protoduino import Board, Event, EventKind
 from protoduino.events import EVENT_QUEUE_LIMIT
 from protoduino.messages import ArduinoOut, Status
 from protoduino.transport import FrameRecord
-
-
-@pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device
-
-
-@pytest.fixture
-def board(fake: FakeDevice) -> Iterator[Board]:
-    with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
-        yield b
 
 
 class Recorder:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -14,12 +13,6 @@ from protoduino import Board, EventKind
 from protoduino.constants import EventCode, PacketType
 from protoduino.framing import cobs_encode, frame_packet
 from protoduino.packets import build_packet, event_payload
-
-
-@pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device
 
 
 def events_of(board: Board) -> tuple[list[protoduino.Event], threading.Event]:

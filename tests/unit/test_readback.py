@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from pathlib import Path
-
 import protoduino
 import pytest
 from fakedevice import FakeDevice, ack
@@ -12,18 +9,6 @@ from protoduino import Board
 from protoduino.messages import ArduinoOut, Status
 
 BOUND = 5.0
-
-
-@pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device
-
-
-@pytest.fixture
-def board(fake: FakeDevice) -> Iterator[Board]:
-    with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
-        yield b
 
 
 def test_last_acknowledged_values(board: Board, fake: FakeDevice) -> None:

@@ -19,12 +19,6 @@ ACK_TIMEOUT = 0.1
 
 
 @pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
-    with FakeDevice(tmp_path) as device:
-        yield device
-
-
-@pytest.fixture
 def board(fake: FakeDevice) -> Iterator[Board]:
     with Board.open(fake.port, ack_timeout=ACK_TIMEOUT, ping=False) as b:
         yield b
