@@ -47,7 +47,7 @@ log = logging.getLogger(__name__)
 FLASH_GOAL = 13_212
 RAM_GOAL = 1_069
 #: The Uno's UART transmit ring (PD_AVR_TX_SIZE, firmware/avr/pd_avr.h).
-TX_RING = 176
+TX_RING = 148
 #: The tests' hard limit: StandardFirmataPlus (tests/c/test_footprint.py).
 FLASH_LIMIT = 15_202
 RAM_LIMIT = 1_274

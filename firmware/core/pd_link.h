@@ -55,18 +55,22 @@ struct pd_core;
 #define PD_TX_CONTROL_MAX PD_TX_FRAME_BYTES(6u)
 #define PD_TX_NOTICE_MAX PD_TX_FRAME_BYTES(8u)
 /*
- * The most one received frame can make the device send: an EVENT (DESYNC),
- * then the largest Ack and the notice that may follow it (or a DecodeError
- * and its Ack, which are smaller). A frame is acted upon only when the
- * transmit queue has this much room; every platform's queue holds more.
+ * The most one received frame can make the device send: the largest Ack and
+ * the notice that may follow it (or a DecodeError and its Ack, which are
+ * smaller). A frame is acted upon only when the transmit queue has this much
+ * room; every platform's queue holds more. An EVENT DESYNC sent before the Ack
+ * is not counted (every byte of the Uno's ring is stack lost): after a desync,
+ * which a clean line never causes, an Ack may not fit and is retransmitted.
  */
-#define PD_TX_RESERVE (PD_TX_CONTROL_MAX + PD_TX_FRAME_MAX + PD_TX_NOTICE_MAX)
+#define PD_TX_RESERVE (PD_TX_FRAME_MAX + PD_TX_NOTICE_MAX)
 /*
  * A platform's transmit queue holds at least the reserve plus this, so that a
- * report of up to 16 payload bytes can go out beside it (checked at compile
+ * report of up to 7 payload bytes can go out beside it (checked at compile
  * time by each platform: a larger ArduinoOut makes the reserve grow with it).
+ * Only 7: on the Uno every byte of RAM the ring takes is stack lost, and at
+ * 176 B a Pose's decode ran the stack into .bss (the device hung).
  */
-#define PD_TX_REPORT_ROOM PD_TX_FRAME_BYTES(16u)
+#define PD_TX_REPORT_ROOM PD_TX_FRAME_BYTES(7u)
 
 /*
  * Diagnostic counters; they wrap, nothing depends on them. No message carries
