@@ -124,8 +124,15 @@ def _record(
         out.write(json.dumps(line) + "\n")
 
 
-def assert_failsafe_on_time(sim: SimBoard, alive: tuple[float, float], timeout: float) -> None:
-    """Pins 12 and 9 went safe T after the bracketed sign of life, not before, not later."""
+def assert_failsafe_on_time(
+    sim: SimBoard, alive: tuple[float, float], timeout: float, *, commanded_after: float = 0.0
+) -> None:
+    """Pins 12 and 9 went safe T after the bracketed sign of life, not before, not later.
+
+    ``commanded_after``: trace lines up to then are ignored, so that a return to safe
+    from an earlier failsafe (a servo's is dated to its first pulse, a frame before it is
+    written) is never taken for this one.
+    """
     first, last = alive
 
     def safe_line(pin: int, value: int) -> Any:
@@ -134,7 +141,7 @@ def assert_failsafe_on_time(sim: SimBoard, alive: tuple[float, float], timeout: 
             # emulated Uno dates a servo's Init only once it measured two frames of it).
             commanded = False
             for c in trace:
-                if c["pin"] != pin:
+                if c["pin"] != pin or c["t"] <= commanded_after:
                     continue
                 if abs(c["value"] - value) > tol:
                     commanded = True
@@ -180,7 +187,8 @@ def test_after_a_failsafe_controls_wait_for_life_and_are_protected_again(sim: Si
         assert abs(pin_values(sim.trace(), 9)[-1] - SAFE_90_US) <= PULSE_TOLERANCE_US
         alive = rig.bracket(board.ping)  # a sign of life: commands run again ...
         rig.command()
-        assert_failsafe_on_time(sim, (alive[0], alive[1]), t)  # ... protected again
+        # ... protected again: judged from the command after the sign of life
+        assert_failsafe_on_time(sim, alive, t, commanded_after=alive[1])
     assert [e.details["active"] for e in events if e.kind is EventKind.FAILSAFE][:2] == [
         True,
         False,
