@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from protoduino._generated.schema_id import SCHEMA_ID
+from protoduino.commands import command
 from protoduino.constants import (
     DEDUPE_WINDOW,
     PROTOCOL_VERSION,
@@ -242,7 +243,8 @@ class FakeDevice:
         """Ack OK after a minimal execution (pin table, values, ping echo, info)."""
         mid = msg.message_id
         kind = msg.WhichOneof("data")
-        if mid in self.dedupe and kind not in ("ping", "get_info", "heartbeat"):
+        declared = command(kind)
+        if mid in self.dedupe and not declared.idempotent:
             return [ack(mid, self.dedupe[mid])]
         out = ack(mid)
         if kind == "ping":
@@ -257,28 +259,29 @@ class FakeDevice:
             info.max_servos = 8
             info.reserved_pins.extend([0, 1])
             info.rx_buffer = self.rx_buffer
-        elif kind in ("servo_init", "digital_init"):
-            init = getattr(msg, kind)
-            self.pins[init.pin] = kind.split("_")[0]
-        elif kind in ("servo_control", "digital_control"):
+        elif declared.is_init:
+            assert declared.pin_mode is not None
+            self.pins[getattr(msg, kind).pin] = declared.pin_mode.name
+        elif declared.is_control:
+            assert declared.pin_mode is not None
             ctl = getattr(msg, kind)
-            if self.pins.get(ctl.pin) != kind.split("_")[0]:
+            if self.pins.get(ctl.pin) != declared.pin_mode.name:
                 out.ack.status = Status.STATUS_NOT_INITIALISED
             else:
                 self._apply(kind, ctl)
         elif kind == "pose":  # all or nothing; only the pin-mode check (what the tests need)
+            # A PoseItem's oneof member is named after its pin mode ("servo", "digital").
             items = [
-                (f"{i.WhichOneof('output')}_control", getattr(i, i.WhichOneof("output")))
-                for i in msg.pose.items
+                (i.WhichOneof("output"), getattr(i, i.WhichOneof("output"))) for i in msg.pose.items
             ]
-            for n, (item_kind, ctl) in enumerate(items, 1):
-                if self.pins.get(ctl.pin) != item_kind.split("_")[0]:
+            for n, (mode, ctl) in enumerate(items, 1):
+                if self.pins.get(ctl.pin) != mode:
                     out.ack.status = Status.STATUS_NOT_INITIALISED
                     out.ack.refused_item = n
                     break
             else:
-                for item_kind, ctl in items:
-                    self._apply(item_kind, ctl)
+                for mode, ctl in items:
+                    self._apply(f"{mode}_control", ctl)
         self.dedupe[mid] = out.ack.status
         while len(self.dedupe) > DEDUPE_WINDOW:
             self.dedupe.popitem(last=False)

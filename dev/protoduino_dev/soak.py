@@ -51,6 +51,7 @@ from typing import Any
 from urllib.parse import parse_qsl, urlencode
 
 from protoduino.board import Board, DigitalOutput, Servo
+from protoduino.commands import command
 from protoduino.constants import (
     ACK_TIMEOUT,
     FAILSAFE_TIMEOUT,
@@ -878,7 +879,7 @@ def _judge(
     # Executed: the stream's calls whose message id explains a trace line.
     ids_by_value: dict[tuple[int, int], list[_Sent]] = {}
     for sent in wire.sent.values():
-        if sent.kind in ("servo_control", "digital_control") and sent.pin is not None:
+        if command(sent.kind).is_control and sent.pin is not None:
             assert sent.value is not None
             ids_by_value.setdefault((sent.pin, sent.value), []).append(sent)
     firsts = {key: [x.txs[0] for x in sents] for key, sents in ids_by_value.items()}
@@ -948,9 +949,10 @@ def _causes(wire: _Wire, tx_delay: float) -> list[_Cause]:
     for mid in wire.order:
         sent = wire.sent[mid]
         lo, hi = sent.txs[0], sent.txs[-1] + LATENCY + tx_delay
-        if sent.kind in ("servo_control", "digital_control", "servo_init", "digital_init"):
+        declared = command(sent.kind)
+        if declared.is_control or declared.is_init:
             assert sent.pin is not None and sent.value is not None
-            what = "command" if sent.kind.endswith("control") else "init"
+            what = "command" if declared.is_control else "init"
             causes.append(_Cause(sent.pin, sent.value, lo, hi, what, mid))
             if what == "init":
                 configured[sent.pin] = sent.value
@@ -1005,7 +1007,7 @@ class _Failsafe:
         self._inits: dict[int, list[tuple[float, int]]] = {}
         pings: list[tuple[float, float]] = []
         for sent in wire.sent.values():  # in order of first transmission
-            if sent.kind in ("servo_init", "digital_init") and sent.pin is not None:
+            if command(sent.kind).is_init and sent.pin is not None:
                 assert sent.value is not None
                 self._inits.setdefault(sent.pin, []).append((sent.txs[0], sent.value))
             elif sent.kind == "ping" and sent.ack is not None and sent.status == 0:

@@ -47,12 +47,22 @@ class Command:
     pin_mode: PinMode | None = None
 
     @property
+    def is_init(self) -> bool:
+        """It configures a pin (its pin mode's Init)."""
+        return self.pin_mode is not None and self.pin_mode.init == self.kind
+
+    @property
+    def is_control(self) -> bool:
+        """It sets a configured pin's value (its pin mode's Control)."""
+        return self.pin_mode is not None and self.pin_mode.control == self.kind
+
+    @property
     def needs_init(self) -> str | None:
         """For a Control: the Init a restore must send before it (its pin's mode's Init)."""
-        mode = self.pin_mode
-        if mode is None or mode.control != self.kind:
+        if not self.is_control:
             return None
-        return mode.init
+        assert self.pin_mode is not None
+        return self.pin_mode.init
 
 
 DIGITAL = PinMode("digital", init="digital_init", control="digital_control")
