@@ -224,6 +224,55 @@ def test_emulated_time_is_paced_to_real_time(board: Runner) -> None:
     assert 0 < line["t"] <= elapsed_wall + 0.01
 
 
+def _stats(path: Path, runner: Runner) -> dict[str, Any]:
+    """The runner's counters now (SIGUSR2 appends one line to its --stats file)."""
+    before = path.read_text().count("\n") if path.exists() else 0
+    runner.proc.send_signal(signal.SIGUSR2)
+    deadline = time.monotonic() + 10.0  # bounds a failing wait only
+    while time.monotonic() < deadline:
+        lines = path.read_text().splitlines(keepends=True) if path.exists() else []
+        complete = [line for line in lines if line.endswith("\n")]
+        if len(complete) > before:
+            row: dict[str, Any] = json.loads(complete[-1])
+            return row
+        time.sleep(0.01)
+    raise AssertionError("the runner wrote no statistics")
+
+
+#: Main-loop passes per emulated second the pacing allows: a pass runs emulated
+#: time at most 200 us ahead of the wall clock and then waits, or wakes for
+#: host bytes (with the input buffer full, at most one per byte time as the
+#: UART takes them: 10,695 a second). A loop that does not wait makes hundreds
+#: of thousands.
+MAX_PASSES_PER_SECOND = 50_000
+
+
+def test_a_full_input_buffer_is_waited_on_not_polled(
+    built: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """Three times the runner's 4 KB input buffer at once: while the emulated
+    UART takes a byte per byte time, the pty stays readable; polling it for
+    input then returned at once, every pass, and spun a core."""
+    stats = tmp_path / "stats.jsonl"
+    runner = Runner(tmp_path, "--stats", str(stats))
+    sent = 12_000
+    try:
+        start = _stats(stats, runner)
+        runner.port.write(b"x" * sent)  # the pty's buffers take it all at once
+        # The runner's buffer stays full until the pty has nothing left for it.
+        deadline = time.monotonic() + 60.0  # bounds a failing wait only
+        end = _stats(stats, runner)
+        while end["uart_rx_bytes"] - start["uart_rx_bytes"] < sent - 4096:
+            assert time.monotonic() < deadline, end
+            time.sleep(0.05)
+            end = _stats(stats, runner)
+    finally:
+        runner.stop()
+    emulated = end["t"] - start["t"]
+    passes = end["passes"] - start["passes"]
+    assert passes <= MAX_PASSES_PER_SECOND * emulated, (passes, emulated)
+
+
 def test_stopped_pulses_give_a_zero_line(board: Runner) -> None:
     board.command("S10 1300")
     board.wait_for(_servo(10, 1300))

@@ -34,6 +34,14 @@
  * (simavr skips a sleeping core ahead to its next timer and reports the jump
  * to the sleep callback), and the UART bytes each way. Awake cycles divided
  * by the commands sent in between is the firmware's cost per command.
+ * The line also carries the lowest stack pointer seen since the start (sp_min,
+ * checked after every instruction, interrupts included): the Uno has no MMU, and
+ * a stack that grows into the static variables corrupts them silently, so the
+ * tests compare it with the firmware's end of static data (_end); sp_min_pc is
+ * the flash byte address of the instruction after the one that reached it.
+ * passes counts the main loop's passes (a batch of emulation and a wait each):
+ * the pacing bounds them per emulated second, so many more mean a loop that
+ * does not wait (as when a full input buffer left the pty readable forever).
  * --profile FILE: each SIGUSR2 also replaces FILE with the awake cycles spent
  * at each flash address since the previous SIGUSR2 (a flat profile the
  * benchmarks map to the ELF's symbols), written before the --stats line.
@@ -77,7 +85,17 @@
 #define PD_DEFAULT_BAUD 115200U
 #define PD_MAX_HEX 4
 #define PD_BUF_SIZE 4096U
-#define PD_AHEAD_NS 1000000ULL /* emulate up to 1 ms ahead of the wall clock */
+/* Emulated time runs at most this far ahead of the wall clock. A host byte
+ * enters the UART at the emulated time it is read at, so being ahead delays
+ * every byte from the host by that much (1 ms added about 0.5 ms to every
+ * round trip on average); the runner sleeps until the wall clock catches up,
+ * with nanosecond timeouts, so the bound can be small. */
+#define PD_AHEAD_NS 200000ULL
+/* At most this much emulated time per batch, so that a board catching up
+ * after a stall (a loaded machine) keeps exchanging bytes meanwhile. */
+#define PD_BATCH_NS 1000000ULL
+/* Shorter waits are not worth a system call; the next batch makes up for them. */
+#define PD_MIN_WAIT_NS 50000ULL
 #define PD_MCUSR_ADDR 0x54     /* ATmega328P MCUSR in data space */
 #define PD_MCUSR_EXTRF 0x02
 /* The port is announced after this much emulated time: whatever the firmware
@@ -159,6 +177,11 @@ typedef struct {
     uint64_t sleep_cycles; /* cycles skipped while the MCU slept, across resets */
     uint64_t uart_rx;      /* bytes fed into UART0 */
     uint64_t uart_tx;      /* bytes UART0 sent */
+    uint64_t tx_last;      /* cycle of the last byte UART0 sent */
+    uint64_t passes;       /* passes of the main loop: batches and waits */
+    uint16_t sp_min;       /* lowest stack pointer seen since start, a data address */
+    uint32_t sp_min_pc;    /* the flash byte address that reached it */
+    int sp_split;          /* between an OUT to SPH and the OUT to SPL that completes it */
     const char *profile_path; /* --profile: NULL when off */
     uint64_t *profile;        /* awake cycles per flash word */
     size_t profile_words;
@@ -458,6 +481,7 @@ static void pd_uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
     (void)irq;
     pd_sim_t *sim = param;
     sim->uart_tx++;
+    sim->tx_last = pd_cycles(sim);
     pd_fifo_push(&sim->tx, (uint8_t)value);
 }
 
@@ -489,11 +513,13 @@ static void pd_write_stats(pd_sim_t *sim)
     uint64_t sleep = sim->sleep_cycles < cycles ? sim->sleep_cycles : cycles;
     fprintf(sim->stats,
             "{\"t\": %.6f, \"freq\": %u, \"cycles\": %llu, \"sleep_cycles\": %llu, "
-            "\"awake_cycles\": %llu, \"uart_rx_bytes\": %llu, \"uart_tx_bytes\": %llu}\n",
+            "\"awake_cycles\": %llu, \"uart_rx_bytes\": %llu, \"uart_tx_bytes\": %llu, "
+            "\"sp_min\": %u, \"sp_min_pc\": %lu, \"ramend\": %u, \"passes\": %llu}\n",
             (double)cycles / (double)sim->avr->frequency, (unsigned)sim->avr->frequency,
             (unsigned long long)cycles, (unsigned long long)sleep,
             (unsigned long long)(cycles - sleep), (unsigned long long)sim->uart_rx,
-            (unsigned long long)sim->uart_tx);
+            (unsigned long long)sim->uart_tx, (unsigned)sim->sp_min, (unsigned long)sim->sp_min_pc,
+            (unsigned)sim->avr->ramend, (unsigned long long)sim->passes);
     fflush(sim->stats);
 }
 
@@ -544,6 +570,43 @@ static int pd_run_one(pd_sim_t *sim)
         sim->profile[pc / 2U] += spent;
     }
     return state;
+}
+
+/* The I/O address an OUT instruction at `pc` writes, or -1 for another instruction
+ * (OUT A, Rr is 1011 1AAr rrrr AAAA). */
+static int pd_out_address(const avr_t *avr, avr_flashaddr_t pc)
+{
+    if (pc + 1U > avr->flashend) {
+        return -1;
+    }
+    uint16_t op = (uint16_t)(avr->flash[pc] | (avr->flash[pc + 1U] << 8));
+    if ((op & 0xF800U) != 0xB800U) {
+        return -1;
+    }
+    return (int)(((op >> 5) & 0x30U) | (op & 0x0FU));
+}
+
+/* The stack's low-water mark, after the instruction at `pc` ran. A frame is
+ * allocated by writing SP's two halves one after the other (SPH first, with
+ * interrupts held off): in between, SP reads as the new high byte with the old
+ * low byte, up to 255 bytes below anything the program uses; that value is
+ * not a stack depth, so SP is sampled only when both halves agree. */
+static void pd_track_sp(pd_sim_t *sim, avr_flashaddr_t pc)
+{
+    int out = pd_out_address(sim->avr, pc);
+    if (out == R_SPH - 32) {
+        sim->sp_split = 1;
+    } else if (out == R_SPL - 32) {
+        sim->sp_split = 0;
+    }
+    if (sim->sp_split) {
+        return;
+    }
+    uint16_t sp = (uint16_t)(sim->avr->data[R_SPL] | (sim->avr->data[R_SPH] << 8));
+    if (sp < sim->sp_min) {
+        sim->sp_min = sp;
+        sim->sp_min_pc = sim->avr->pc;
+    }
 }
 
 static void pd_set_extrf(pd_sim_t *sim)
@@ -742,6 +805,23 @@ static void pd_start_rx(pd_sim_t *sim)
     }
 }
 
+/* What UART0 sent, to the host (what the pty does not take waits, bounded). */
+static void pd_flush_tx(pd_sim_t *sim)
+{
+    while (sim->tx.len) {
+        size_t chunk = PD_BUF_SIZE - sim->tx.head;
+        if (chunk > sim->tx.len) {
+            chunk = sim->tx.len;
+        }
+        ssize_t n = write(sim->master, sim->tx.data + sim->tx.head, chunk);
+        if (n <= 0) {
+            break; /* nobody reads: the bytes wait in tx (bounded) */
+        }
+        sim->tx.head = (sim->tx.head + (size_t)n) % PD_BUF_SIZE;
+        sim->tx.len -= (size_t)n;
+    }
+}
+
 static void pd_pump_pty(pd_sim_t *sim)
 {
     while (sim->rx.len < PD_BUF_SIZE) {
@@ -758,18 +838,7 @@ static void pd_pump_pty(pd_sim_t *sim)
             pd_fifo_push(&sim->rx, buf[i]);
         }
     }
-    while (sim->tx.len) {
-        size_t chunk = PD_BUF_SIZE - sim->tx.head;
-        if (chunk > sim->tx.len) {
-            chunk = sim->tx.len;
-        }
-        ssize_t n = write(sim->master, sim->tx.data + sim->tx.head, chunk);
-        if (n <= 0) {
-            break; /* nobody reads: the bytes wait in tx (bounded) */
-        }
-        sim->tx.head = (sim->tx.head + (size_t)n) % PD_BUF_SIZE;
-        sim->tx.len -= (size_t)n;
-    }
+    pd_flush_tx(sim);
 }
 
 /* A client opened the port: the Uno's DTR auto-reset. */
@@ -876,7 +945,9 @@ static void pd_run(pd_sim_t *sim)
 {
     const uint64_t start_ns = g_start_ns;
     const double cycles_per_ns = (double)sim->avr->frequency / 1e9;
+    const uint64_t byte_cycles = sim->avr->frequency * 10ULL / PD_DEFAULT_BAUD;
     while (!g_stop) {
+        sim->passes++;
         if (g_reset) {
             g_reset = 0;
             pd_reset_mcu(sim);
@@ -892,16 +963,23 @@ static void pd_run(pd_sim_t *sim)
 
         uint64_t wall_ns = pd_now_ns() - start_ns;
         uint64_t target = (uint64_t)((double)(wall_ns + PD_AHEAD_NS) * cycles_per_ns);
-        /* At most 1 ms of emulated time per batch, so that a board catching up
-         * after a stall (a loaded machine) keeps exchanging bytes meanwhile. */
-        uint64_t batch_end = pd_cycles(sim) + (uint64_t)((double)PD_AHEAD_NS * cycles_per_ns);
+        uint64_t batch_end = pd_cycles(sim) + (uint64_t)((double)PD_BATCH_NS * cycles_per_ns);
         if (target > batch_end) {
             target = batch_end;
         }
         if (!sim->crashed) {
             while (pd_cycles(sim) < target && !g_stop && !g_reset) {
                 sim->last_cycle = sim->avr->cycle;
+                avr_flashaddr_t pc = sim->avr->pc;
                 int state = pd_run_one(sim);
+                pd_track_sp(sim, pc);
+                /* A burst the UART finished (a byte time without a next byte)
+                 * goes to the host now, not at the end of the batch: batches run
+                 * up to 1 ms of emulated time, and the host would see an answer
+                 * late by whatever of the batch remained. */
+                if (sim->tx.len && pd_cycles(sim) - sim->tx_last > byte_cycles) {
+                    pd_flush_tx(sim);
+                }
                 if (sim->reset_seen) {
                     pd_after_reset(sim);
                 }
@@ -936,25 +1014,27 @@ static void pd_run(pd_sim_t *sim)
             sim->port_out = NULL; /* stdout carries nothing else */
         }
 
-        /* Wait for host bytes or until emulated time is due again. */
-        uint64_t ahead_ns = (uint64_t)((double)pd_cycles(sim) / cycles_per_ns);
+        /* Wait for host bytes or until the wall clock reaches emulated time. */
+        uint64_t emulated_ns = (uint64_t)((double)pd_cycles(sim) / cycles_per_ns);
         uint64_t now_ns = pd_now_ns() - start_ns;
-        int timeout_ms = 0;
-        if (ahead_ns > now_ns + PD_AHEAD_NS / 2) {
-            timeout_ms = (int)((ahead_ns - now_ns) / 1000000ULL);
-            if (timeout_ms < 1) {
-                timeout_ms = 1;
-            }
-        }
-        if (timeout_ms > 0) {
+        if (emulated_ns > now_ns + PD_MIN_WAIT_NS) {
+            uint64_t wait_ns = emulated_ns - now_ns;
+            struct timespec timeout = {.tv_sec = (time_t)(wait_ns / 1000000000ULL),
+                                       .tv_nsec = (long)(wait_ns % 1000000000ULL)};
             struct pollfd fds[2 + PD_CONTROL_MAX_CLIENTS + 1] = {
-                {.fd = sim->master, .events = POLLIN}, {.fd = sim->inotify, .events = POLLIN}};
+                {.fd = sim->master, .events = 0}, {.fd = sim->inotify, .events = POLLIN}};
+            /* With the input buffer full the pty stays readable: asking for POLLIN
+             * then would return at once, every pass, and spin a core until the
+             * firmware has taken some bytes (it takes one per byte time). */
+            if (sim->rx.len < PD_BUF_SIZE) {
+                fds[0].events |= POLLIN;
+            }
             if (sim->tx.len) {
                 fds[0].events |= POLLOUT;
             }
             int nfds = sim->inotify >= 0 ? 2 : 1;
             nfds += pd_control_pollfds(&sim->control, fds + nfds);
-            poll(fds, (nfds_t)nfds, timeout_ms);
+            ppoll(fds, (nfds_t)nfds, &timeout, NULL);
             pd_control_service(&sim->control);
         }
     }
@@ -976,6 +1056,7 @@ int main(int argc, char **argv)
     sim->master = -1;
     sim->slave = -1;
     sim->glitch_pin = -1;
+    sim->sp_min = UINT16_MAX;
     pd_control_init(&sim->control);
 
     static const struct option options[] = {

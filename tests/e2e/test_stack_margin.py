@@ -1,0 +1,177 @@
+"""The emulated Uno's stack never comes near its static data.
+
+The ATmega328P has 2 KB of RAM and no MMU: the stack grows down from RAMEND
+towards the static variables, and a stack that reaches them corrupts them
+silently (a transmit ring 28 bytes larger once did exactly that on every Pose:
+the device hung). The runner (tools/avrsim) records the lowest stack pointer
+after every instruction, interrupts included; this test drives every command at
+its largest, several in flight so that the UART interrupts land inside the
+deepest decode, and compares that low-water mark with the end of the firmware's
+static data (the linker's ``_end``, after .data, .bss and .noinit; the firmware has no heap).
+"""
+
+from __future__ import annotations
+
+import json
+import select
+import shutil
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+from concurrent.futures import Future
+from pathlib import Path
+from typing import Any
+
+import pytest
+from protoduino import Board, CommandRejectedError, Servo
+from protoduino.messages import ArduinoIn, Status
+from protoduino.simboard import runner_command
+from protoduino_dev import build
+
+pytestmark = pytest.mark.avr
+
+#: Bytes the stack must keep from the static data at its deepest. The low-water
+#: mark is one run's: an interrupt can still land at that point with a frame of
+#: its own (the UART's data-register-empty interrupt lets the servo interrupt in,
+#: so two frames can nest, about 20 bytes each), so at least that much must be left.
+MIN_MARGIN = 48
+
+STARTUP_TIMEOUT = 10.0
+STATS_TIMEOUT = 10.0  # bounds a failing wait only: the runner writes within ~1 ms
+
+#: The Uno firmware's pins: servos on 2..9 (its eight channels), digital outputs on 10..19.
+SERVO_PINS = range(2, 10)
+DIGITAL_PINS = range(10, 20)
+
+
+def _missing_tool() -> str | None:
+    for tool in ("make", "cc", "avr-gcc", "avr-nm"):
+        if shutil.which(tool) is None:
+            return tool
+    if not Path("/usr/include/simavr/sim_avr.h").exists():
+        return "libsimavr-dev"
+    return None
+
+
+def _symbol(elf: Path, name: str) -> int:
+    """The data-space address of ``name`` in the ELF (avr-nm adds 0x800000 to RAM)."""
+    out = subprocess.run(["avr-nm", str(elf)], check=True, capture_output=True, text=True).stdout
+    for line in out.splitlines():
+        fields = line.split()
+        if len(fields) == 3 and fields[2] == name:
+            return int(fields[0], 16) & 0xFFFF
+    raise AssertionError(f"{name} is not in {elf}")
+
+
+class StatsRunner:
+    """The emulated Uno running the firmware, with the runner's ``--stats FILE``."""
+
+    def __init__(self, elf: Path, stats: Path) -> None:
+        self.stats = stats
+        cmd = runner_command(elf)
+        cmd[-1:-1] = ["--stats", str(stats)]
+        self.proc = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stdin=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
+        assert self.proc.stdout is not None
+        ready, _, _ = select.select([self.proc.stdout], [], [], STARTUP_TIMEOUT)
+        if not ready:
+            self.stop()
+            raise AssertionError("the runner printed no port")
+        self.port = self.proc.stdout.readline().decode().rstrip("\n")
+
+    def snapshot(self) -> dict[str, Any]:
+        """The counters now (SIGUSR2 appends one JSON line)."""
+        before = self._lines()
+        self.proc.send_signal(signal.SIGUSR2)
+        deadline = time.monotonic() + STATS_TIMEOUT
+        while time.monotonic() < deadline:
+            lines = self._lines()
+            if len(lines) > len(before):
+                row: dict[str, Any] = json.loads(lines[-1])
+                return row
+            time.sleep(0.01)
+        raise AssertionError("the runner wrote no statistics")
+
+    def _lines(self) -> list[str]:
+        if not self.stats.exists():
+            return []
+        return [
+            line for line in self.stats.read_text().splitlines(keepends=True) if line.endswith("\n")
+        ]
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        assert self.proc.stdout is not None
+        self.proc.stdout.close()
+
+
+@pytest.fixture
+def uno(tmp_path: Path) -> Iterator[tuple[StatsRunner, Path]]:
+    missing = _missing_tool()
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+    build.build_runner()
+    elf = build.build_firmware()
+    runner = StatsRunner(elf, tmp_path / "stats.jsonl")
+    try:
+        yield runner, elf
+    finally:
+        runner.stop()
+
+
+def _get_info() -> ArduinoIn:
+    msg = ArduinoIn()
+    msg.get_info.SetInParent()
+    return msg
+
+
+def _oversized_pose() -> ArduinoIn:
+    """A Pose with one item more than the firmware's bound (8): nanopb refuses it while it
+    is as deep in the decode as a Pose can take it."""
+    msg = ArduinoIn()
+    for pin in (*SERVO_PINS, 10):
+        msg.pose.items.add().servo.pin = pin
+    return msg
+
+
+def test_every_command_at_its_largest_leaves_the_stack_margin(
+    uno: tuple[StatsRunner, Path],
+) -> None:
+    runner, elf = uno
+    static_end = _symbol(elf, "_end")
+    with Board.open(runner.port, window=4) as board:
+        servos: list[Servo] = [board.servo(pin, safe=90) for pin in SERVO_PINS]
+        outputs = [board.digital_output(pin) for pin in DIGITAL_PINS]
+        for round_ in range(20):
+            # Four of the largest at once: the next frame's bytes arrive (receive
+            # interrupt) and the last Ack leaves (transmit interrupt) during each decode.
+            pose: dict[Servo | Any, int | bool] = {s: 30 + round_ for s in servos}
+            calls: list[Future[Any]] = [
+                board.submit_pose(pose),
+                board.submit_read_outputs(),
+                board.submit_ping(bytes(range(64))),
+                board.submit_pose({o: bool(round_ & 1) for o in outputs[:8]}),
+            ]
+            for call in calls:
+                call.result(timeout=30)
+            board.request(_get_info())
+            with pytest.raises(CommandRejectedError) as refused:
+                board.request(_oversized_pose())
+            assert refused.value.status == Status.STATUS_DECODE_ERROR
+        board.stop()
+        board.release_all()
+    stats = runner.snapshot()
+    margin = stats["sp_min"] - static_end
+    assert stats["sp_min"] <= stats["ramend"], stats  # the stack was used at all
+    assert margin >= MIN_MARGIN, (
+        f"the stack came within {margin} B of the static data "
+        f"(lowest SP 0x{stats['sp_min']:x}, static data ends at 0x{static_end:x})"
+    )
