@@ -530,10 +530,12 @@ def _profile_markdown(c: CycleRun) -> str:
             md_table(["where", "before", "after", "share after"], group_rows, "lrrr"),
             md_table(["function", "cycles per command", "share"], function_rows, "lrr"),
             "What changed: the Ack goes into a transmit ring that an interrupt drains (the "
-            f"polled wait was {BEFORE_GROUPS['frame transmit']:,.0f} cycles); the CRC takes a "
-            "16-entry table, 4 bits a step (32 B of flash); each received byte is COBS-decoded "
-            "and folded into the CRC as it arrives, so at the delimiter only the checks, "
-            "nanopb's decode and the command remain (part 2's round trip). nanopb now decodes "
+            f"polled wait was {BEFORE_GROUPS['frame transmit']:,.0f} cycles); the CRC is "
+            "avr-libc's `_crc_xmodem_update`, a byte a step with no table; each received byte "
+            "is COBS-decoded and folded into the CRC as it arrives, and a command's payload "
+            "goes to nanopb as soon as its last byte is in, so at the delimiter only the rest "
+            "of the decode, the checks and the command remain (part 2's round trip). nanopb "
+            "now decodes "
             "with `PB_DECODE_NOINIT` (the message is zeroed already, so it no longer walks "
             "every field to set defaults), and takes "
             f"{nanopb:,.0f} cycles for a {servo_payload_bytes()}-byte message, most of it in "

@@ -288,8 +288,8 @@ class Budget:
             ],
             [
                 "beyond both: the firmware's work after the command's last byte, the "
-                "emulator's pacing (emulated time up to 1 ms ahead of the wall clock, batches "
-                "of up to 1 ms), the pty, scheduling",
+                "emulator's pacing (emulated time at most 200 us ahead of the wall clock), "
+                "the pty, scheduling",
                 f"{self.beyond:,.0f}",
             ],
             ["= Board p50 on the emulated Uno", f"{self.library:,.0f}"],
@@ -469,16 +469,17 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
         f"The target is {verdict}: {TARGET_RATIO}x the servo write's wire time leaves "
         f"{allowed:,.0f} us above the wire for everything else; the host library takes "
         f"{servo.host:,.0f} us of it and the rest of the round trip {servo.beyond:,.0f} us. The "
-        "firmware COBS-decodes each byte and folds it into the CRC as it arrives, and sends "
-        "its Ack through a ring an interrupt drains; what it still does between the command's "
-        "last byte and the Ack's first is the checks, nanopb's decode, the command and the "
-        "Ack's encoding (part 5 profiles its cycles), so most of its "
+        "firmware COBS-decodes each byte and folds it into the CRC as it arrives, hands a "
+        "command's payload to nanopb as soon as its last byte is in (the CRC and the "
+        "delimiter, 3 byte times, are still on the wire), and sends its Ack through a ring an "
+        "interrupt drains; what it still does between the command's last byte and the Ack's "
+        "first is the rest of nanopb's decode, the checks, the command and the Ack's encoding "
+        "(part 5 profiles its cycles), so most of its "
         f"{servo.awake:,.0f} us awake per command overlaps the wire. The rest is the emulated "
-        "Uno's own: its runner lets emulated time run up to 1 ms ahead of the wall clock and "
-        "sleeps in whole milliseconds between batches, so a host byte enters the emulated UART "
-        "up to 1 ms after it was written, and an answer leaves at the end of a batch: how long "
-        "a round trip takes depends on where in the batches its bytes land (most of the "
-        "histogram's width), and on a loaded machine the runner also waits for a core. "
+        "Uno's own: its runner lets emulated time run at most 200 us ahead of the wall clock "
+        "(a host byte enters the emulated UART up to that much after it was written) and "
+        "hands the host a burst of bytes one byte time after the UART sent the last of them, "
+        "as a line would deliver it; on a loaded machine the runner also waits for a core. "
         f"{echo_text}{_pace_text(avr.pace)}The host library adds {servo.host:,.0f} us (its I/O "
         "thread wakes up to write the command, and the caller wakes up at the Ack), "
         f"{servo.host / servo.library * 100:.0f} % of the round trip. The emulator's share would "

@@ -31,8 +31,13 @@ size_t pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len)
     return i;
 }
 
-/* The lowest pending report slot, if its message can go out now. */
-static void send_report(pd_core_t *core)
+/*
+ * The lowest pending report slot, if its message can go out now. Out of line:
+ * inlined into the main loop, its ArduinoOut and packet buffer (194 B on the
+ * Uno) sat under every command's decode for good, and a Pose's decode is the
+ * Uno's deepest stack.
+ */
+static __attribute__((noinline)) void send_report(pd_core_t *core)
 {
     uint8_t slot = 0;
     while (!((core->report_pending >> slot) & 1u)) {

@@ -51,6 +51,7 @@ typedef struct pd_core {
     uint8_t boot_id[4]; /* this power-up's, from the HAL */
     uint8_t session[4]; /* the host session that owns the outputs; 0: none since power-up */
     pd_link_t link;
+    protoduino_ArduinoIn in; /* the current frame's command, decoded as its payload completes */
     pd_dedupe_t dedupe;
     pd_outputs_t outputs;
     pd_failsafe_t failsafe;

@@ -1,8 +1,7 @@
 /*
  * CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, xorout 0),
- * PROTOCOL.md section 3. A 16-entry table (4 bits per step, 32 B of flash)
- * rather than the 512-byte one a byte per step would need: on the Uno that
- * would take a large part of the flash headroom. The receiver advances it one
+ * docs/protocol.md section 3. A byte per step without a table (avr-libc's
+ * _crc_xmodem_update on the Uno, pd_crc.c). The receiver advances it one
  * byte at a time as bytes arrive (pd_crc16_byte), so at a frame's delimiter
  * only the comparison remains.
  */

@@ -53,7 +53,17 @@ typedef struct pd_command {
 } pd_command_t;
 
 /* A COMMAND packet's payload, received while ACTIVE. */
-void pd_dispatch_command(struct pd_core *core, const uint8_t *payload, size_t len);
+/*
+ * Decode a COMMAND payload into core->in. The link calls it as soon as the
+ * payload's last byte has arrived, before the CRC and the delimiter (3 byte
+ * times, 280 us at 115200 baud), so that nanopb's share of a frame's work
+ * overlaps the wire instead of delaying the Ack. Nothing is executed here.
+ * Returns whether the payload decoded.
+ */
+bool pd_dispatch_decode(struct pd_core *core, const uint8_t *payload, size_t len);
+
+/* Run and answer the checked COMMAND in core->in (`decoded`: what pd_dispatch_decode said). */
+void pd_dispatch_command(struct pd_core *core, bool decoded);
 
 /* Send one ArduinoOut as a DATA packet (only while ACTIVE). */
 bool pd_dispatch_send(struct pd_core *core, const protoduino_ArduinoOut *msg);

@@ -7,8 +7,11 @@
  * collected until a 0x00; an empty frame is ignored; anything else is checked
  * (COBS, length, CRC, type), and dropped and counted by reason if it fails.
  * The work is done as the bytes arrive: each one is COBS-decoded into rx_buf
- * and advances the CRC, so at the delimiter only the checks, the nanopb
- * decode and the command remain (the round trip's share of the device). More than PD_MAX_ENCODED_FRAME bytes without a 0x00 is
+ * and advances the CRC, and a COMMAND's payload is handed to nanopb as soon as
+ * its last byte is in (pd_dispatch_decode), while the CRC and the delimiter are
+ * still on the wire; so at the delimiter only the checks and the command
+ * remain (the round trip's share of the device). Nothing runs unchecked: the
+ * decoded command is used only once the whole packet passed. More than PD_MAX_ENCODED_FRAME bytes without a 0x00 is
  * an overflow: the buffer is discarded, EVENT RX_OVERFLOW is sent and
  * everything up to the next 0x00 is skipped. So a corrupted frame never
  * damages the next one, and no timer is needed.
@@ -114,6 +117,7 @@ typedef struct pd_link {
     uint8_t rx_left;  /* bytes left in the current COBS block; 0: the next one is a code */
     bool rx_zero;     /* the current block implies a 0x00 after it, if another follows */
     bool rx_skipping; /* after an overflow, until the next 0x00 */
+    bool rx_decoded;  /* the current frame's COMMAND payload decoded (pd_dispatch_decode) */
     bool active;      /* IDLE until the first RESET */
     bool tx_flush;    /* send a lone 0x00 before the next frame */
     uint8_t tx_seq;   /* SEQ of the next frame we send */

@@ -283,9 +283,55 @@ static void test_streaming_receiver_agrees_with_whole_frame_decoding(void)
     CHECK(want.packets > 100 && want.drop_cobs > 100 && want.drop_crc > 100);
 }
 
+/*
+ * A COMMAND's payload is decoded as soon as its last byte is in, while the CRC
+ * and the delimiter are still to come; it runs only once the packet passed its
+ * check. A frame whose CRC is wrong was decoded all the same, and must change
+ * nothing and answer nothing.
+ */
+static void test_command_decoded_early_runs_only_after_the_check(void)
+{
+    tdev_t d;
+    t_active(&d);
+    uint8_t wire[64];
+    protoduino_ArduinoIn in = m_digital_init(9, 13, true);
+    size_t n = frame_of(&d, &in, wire, sizeof(wire));
+    CHECK(n > 4);
+
+    /* The frame with one bit of its last byte before the delimiter flipped (a
+     * CRC byte or a COBS code: either way the packet fails its check). */
+    uint8_t bad[64];
+    memcpy(bad, wire, n);
+    bad[n - 2u] = (uint8_t)(bad[n - 2u] ^ 0x01u);
+    if (bad[n - 2u] == 0) {
+        bad[n - 2u] = 0x02u;
+    }
+    /* Up to its payload's last byte: decoded, not run. */
+    size_t fed = 0;
+    while (fed < n - 1u && !d.core.link.rx_decoded) {
+        CHECK(pd_core_rx_byte(&d.core, bad[fed++]));
+    }
+    CHECK(d.core.link.rx_decoded);
+    CHECK(fed < n - 2u); /* the CRC was still to come */
+    CHECK_EQ(d.core.in.message_id, 9u);
+    /* The rest and the delimiter: dropped, nothing run, nothing answered. */
+    t_feed(&d, bad + fed, n - fed);
+    CHECK_EQ(fake_count(&d.hal), 0);
+    CHECK_EQ(d.hal.digital[13], -1);
+    CHECK_EQ(d.core.link.stats.drop_crc + d.core.link.stats.drop_cobs +
+                 d.core.link.stats.drop_length,
+             1u);
+
+    /* The intact frame: run once, answered once. */
+    t_feed(&d, wire, n);
+    CHECK_EQ(t_status(&d, 9), protoduino_Status_STATUS_OK);
+    CHECK_EQ(d.hal.digital[13], 1);
+}
+
 const pd_test_case_t pd_tests_engine[] = {
     TEST_CASE(test_streaming_receiver_agrees_with_whole_frame_decoding),
     TEST_CASE(test_frame_waits_for_transmit_room),
+    TEST_CASE(test_command_decoded_early_runs_only_after_the_check),
     TEST_CASE(test_reserve_holds_the_largest_replies),
     TEST_CASE(test_report_newest_value_replaces_unsent),
     TEST_CASE(test_reply_goes_before_pending_report),
