@@ -5,7 +5,8 @@
  *
  * Opens a pseudo-terminal in raw mode, prints the slave's path (or PATH when
  * --link makes a symlink to it) as the first line on stdout, then runs the
- * core until SIGINT/SIGTERM. SIGUSR1 is a simulated reboot. The pins are
+ * core until SIGINT/SIGTERM or the end of the process that started it.
+ * SIGUSR1 is a simulated reboot. The pins are
  * virtual: every change is written to the trace as one JSON object per line,
  * flushed per line, with t = seconds since the process started (monotonic).
  * --control PATH opens the input-control socket (tools/simcontrol): levels,
@@ -396,7 +397,10 @@ int main(int argc, char **argv)
     pd_core_init(&core, &hal);
     printf("%s\n", link_path ? link_path : slave_name);
     fflush(stdout);
-    while (!sim_stop) {
+    /* The process that started the board owns it: when it is gone (killed
+     * with no chance to stop us), so are we, or boards pile up unseen. */
+    const pid_t owner = getppid();
+    while (!sim_stop && getppid() == owner) {
         if (sim_reboot) {
             sim_reboot = 0;
             sim_release_all(&hal);

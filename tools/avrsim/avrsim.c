@@ -8,7 +8,8 @@
  * The command-line contract is the native simulated board's (firmware/posix/pd_sim.c, as
  * protoduino.simboard runs both):
  * the first stdout line is the port to open (the pty's slave, or --link),
- * SIGINT/SIGTERM exit cleanly, SIGUSR1 resets the MCU while keeping the pty,
+ * SIGINT/SIGTERM exit cleanly (so does the end of the process that started
+ * it), SIGUSR1 resets the MCU while keeping the pty,
  * and --trace writes one JSON line per output change, measured at the pins
  * (servo pulse widths, digital levels, and the duty of the timers' PWM, read
  * from their compare-output IRQs: PWM never goes through the PORT register).
@@ -946,7 +947,10 @@ static void pd_run(pd_sim_t *sim)
     const uint64_t start_ns = g_start_ns;
     const double cycles_per_ns = (double)sim->avr->frequency / 1e9;
     const uint64_t byte_cycles = sim->avr->frequency * 10ULL / PD_DEFAULT_BAUD;
-    while (!g_stop) {
+    /* The process that started the runner owns it: when it is gone (killed
+     * with no chance to stop us), so are we, or runners pile up unseen. */
+    const pid_t owner = getppid();
+    while (!g_stop && getppid() == owner) {
         sim->passes++;
         if (g_reset) {
             g_reset = 0;
