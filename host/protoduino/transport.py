@@ -123,6 +123,9 @@ class Transport:
         self._control: collections.deque[_Outgoing] = collections.deque()
         self._data: collections.deque[_Outgoing] = collections.deque()
         self._wake_r, self._wake_w = os.pipe()
+        # Held while the wake-up pipe is written or closed: a write to a closed
+        # descriptor's number would go to whatever file reused it.
+        self._wake_lock = threading.Lock()
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
         self._decoder = StreamDecoder()
@@ -168,10 +171,7 @@ class Transport:
                 log.error("%s: I/O thread did not stop within %.1f s", self.name, timeout)
         if thread is None or not thread.is_alive():
             self._close_port()
-            for fd in (self._wake_r, self._wake_w):
-                with contextlib.suppress(OSError):
-                    os.close(fd)
-            self._wake_r = self._wake_w = -1
+            self._close_wake_pipe()
 
     @property
     def closed(self) -> bool:
@@ -218,9 +218,19 @@ class Transport:
     # --- the I/O thread -----------------------------------------------------
 
     def _wake(self) -> None:
-        if self._wake_w >= 0:
-            with contextlib.suppress(OSError):  # pipe full: the thread is awake anyway
-                os.write(self._wake_w, b"x")
+        with self._wake_lock:
+            if self._wake_w >= 0:
+                with contextlib.suppress(OSError):  # pipe full: the thread is awake anyway
+                    os.write(self._wake_w, b"x")
+
+    def _close_wake_pipe(self) -> None:
+        with self._wake_lock:
+            fds = (self._wake_r, self._wake_w)
+            self._wake_r = self._wake_w = -1
+        for fd in fds:
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
 
     def _open(self) -> None:
         # pyserial 3.5's rfc2217:// refuses any write timeout (NotImplementedError); its
@@ -332,6 +342,10 @@ class Transport:
             self.last_error = TransportError(f"{self.name}: I/O thread crashed")
         finally:
             self._close_port()
+            if self._stop.is_set():
+                # Closed from this thread (a frame monitor, a listener): close()
+                # could not wait for the thread to end, so the thread cleans up.
+                self._close_wake_pipe()
 
     def _lost(self, error: Exception) -> None:
         log.warning("%s: port lost: %s", self.name, error)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -414,3 +416,32 @@ def test_a_frame_monitor_cannot_call_into_the_board(board: Board, fake: FakeDevi
     assert [p.msg.ping.payload for p in fake.commands("ping")] == [b"main"]
     assert board.stats.timeouts == 0 and board.stats.retransmits == 0
     board.close()  # closing from a monitor is fine too: nothing waits
+
+
+def _open_fds() -> set[int]:
+    return {int(name) for name in os.listdir("/proc/self/fd")}
+
+
+def test_closing_from_a_frame_monitor_leaves_no_descriptor_open(fake: FakeDevice) -> None:
+    # close() from the I/O thread cannot wait for that thread to end; the thread
+    # closes the port and its wake-up pipe itself on the way out.
+    before = _open_fds()
+    earlier = set(threading.enumerate())  # a pty's name may be an earlier test's, too
+    board = Board.open(fake.port, ack_timeout=0.1, ping=False)
+    name = f"protoduino-io[{fake.port}]"
+    (io_thread,) = [t for t in set(threading.enumerate()) - earlier if t.name == name]
+    closed = threading.Event()
+
+    def closer(record: FrameRecord) -> None:
+        if record.direction == "rx" and not closed.is_set():
+            board.close()
+            closed.set()
+
+    board.add_frame_monitor(closer)
+    with contextlib.suppress(protoduino.ProtoduinoError):
+        board.ping(b"last")  # its Ack is the frame the monitor closes on
+    assert closed.wait(10.0)  # bounds a failing wait only
+    io_thread.join(10.0)  # bounds a failing wait only
+    assert not io_thread.is_alive()
+    left = {fd: os.readlink(f"/proc/self/fd/{fd}") for fd in _open_fds() - before}
+    assert left == {}
