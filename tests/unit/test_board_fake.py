@@ -233,22 +233,32 @@ def test_a_reboot_loop_stops_restoring(fake: FakeDevice) -> None:
         assert len(rec.of(EventKind.RESTORED)) == 2
 
 
-def test_stop_and_failsafe_forget_values(board: Board, fake: FakeDevice) -> None:
-    rec = Recorder(board)
-    servo = board.servo(9)
-    servo.write(30)
-    board.stop()
-    fake.reboot()
-    rec.wait(EventKind.RESTORED)
-    assert 9 not in fake.values  # the stop latched it safe; the restore keeps it so
-    servo.write(60)
-    failsafe = ArduinoOut()
-    failsafe.failsafe.active = True
-    failsafe.failsafe.cause = 1  # type: ignore[assignment]
-    fake.send_data(failsafe)
-    event = rec.wait(EventKind.FAILSAFE)
-    assert event.details == {"active": True, "cause": "ping_timeout"}
-    assert board._restore_messages()[-1].WhichOneof("data") == "servo_init"
+def test_stop_and_failsafe_forget_values(fake: FakeDevice) -> None:
+    # Even with restore="last", a value the device overrode with the safe one
+    # (Stop, a failsafe) is not driven again after a reboot.
+    with Board.open(fake.port, ack_timeout=0.1, ping=False, restore="last") as board:
+        rec = Recorder(board)
+        servo = board.servo(9)
+        servo.write(30)
+        board.stop()
+        fake.reboot()
+        rec.wait(EventKind.RESTORED)
+        assert 9 not in fake.values  # the stop latched it safe; the restore keeps it so
+        servo.write(60)
+        assert fake.values[9] == 60
+        failsafe = ArduinoOut()
+        failsafe.failsafe.active = True
+        failsafe.failsafe.cause = 1  # type: ignore[assignment]
+        fake.send_data(failsafe)
+        event = rec.wait(EventKind.FAILSAFE)
+        assert event.details == {"active": True, "cause": "ping_timeout"}
+        mark = len(fake.commands())
+        fake.reboot()
+        restored = rec.wait(EventKind.RESTORED, count=2)
+        assert restored.details["replayed"] == 2  # no value left to replay
+        replay = [r.kind for r in fake.commands()[mark:] if r.kind != "ping"]
+        assert replay[:2] == ["configure_failsafe", "servo_init"]
+        assert 9 not in fake.values
 
 
 def test_log_and_decode_error_events(board: Board, fake: FakeDevice) -> None:
