@@ -393,7 +393,7 @@ class SoakResult:
 # --- recording the wire --------------------------------------------------------------------
 
 
-class _Wire:
+class Wire:
     """Frame monitor: every COMMAND transmitted and every Ack received, by message id."""
 
     def __init__(self, hide: Callable[[FrameRecord], bool] | None = None) -> None:
@@ -412,7 +412,7 @@ class _Wire:
             return
         try:
             if record.direction == "tx" and item.type is PacketType.COMMAND:
-                self._command(record.t, item.payload)
+                self.command(record.t, item.payload)
             elif record.direction == "rx" and item.type is PacketType.DATA:
                 out = ArduinoOut()
                 out.ParseFromString(item.payload)
@@ -423,7 +423,8 @@ class _Wire:
         except Exception as error:  # a monitor must never take the I/O thread down
             self.bad[type(error).__name__] += 1
 
-    def _command(self, t: float, payload: bytes) -> None:
+    def command(self, t: float, payload: bytes) -> None:
+        """Record one COMMAND written at ``t`` (the monitor's path; a made-up run's too)."""
         msg = ArduinoIn()
         msg.ParseFromString(payload)
         mid = msg.message_id
@@ -660,7 +661,7 @@ def run(
     trace = workdir / f"{scenario.name}-{scenario.backend}-{scenario.seed}.trace.jsonl"
     trace.unlink(missing_ok=True)
     name = f"soak-{scenario.name}-{id(scenario):x}-{time.monotonic_ns()}"
-    wire = _Wire(hide)
+    wire = Wire(hide)
     result = SoakResult(scenario, call_bound=scenario.call_bound)
     t0 = time.monotonic()
     with SimBoard(scenario.backend, trace=trace) as sim:
@@ -696,12 +697,12 @@ def run(
     result.duration = time.monotonic() - t0
     if wire.bad:
         result.violations.append(f"frames the monitor could not parse: {dict(wire.bad)}")
-    _judge(result, runner, wire, lines, fs_ping)
+    judge(result, runner, wire, lines, fs_ping)
     _dump(trace.with_suffix("").with_suffix(".wire.jsonl"), runner, wire)
     return result
 
 
-def _dump(path: Path, runner: _Runner, wire: _Wire) -> None:
+def _dump(path: Path, runner: _Runner, wire: Wire) -> None:
     """What the host did, beside the trace, to look into a violation afterwards."""
     with path.open("w") as out:
         for r in runner.reboots:
@@ -768,13 +769,15 @@ def _link_figures(board: Board, runner: _Runner) -> dict[str, Any]:
 # --- judging ---------------------------------------------------------------------------------
 
 
-def _judge(
+def judge(
     result: SoakResult,
     runner: _Runner,
-    wire: _Wire,
+    wire: Wire,
     lines: list[dict[str, Any]],
     fs_ping: tuple[float, float] | None,
 ) -> None:
+    """Fill ``result`` from a run: the calls ``runner`` made, the frames ``wire`` saw and
+    the trace ``lines`` (run() calls it; the judge's own tests feed it made-up runs)."""
     s = runner.s
     traits = BACKEND_TRAITS.get(s.backend, BACKEND_TRAITS["avr"])
     result.trace_lines = len(lines)
@@ -942,7 +945,7 @@ def _tx_delay(s: Scenario) -> float:
     return 0.0
 
 
-def _causes(wire: _Wire, tx_delay: float) -> list[_Cause]:
+def _causes(wire: Wire, tx_delay: float) -> list[_Cause]:
     """Every output change the transmitted commands may cause, with its time window."""
     causes: list[_Cause] = []
     configured: dict[int, int] = {}  # pin -> safe value of its latest Init sent
@@ -1003,7 +1006,7 @@ class _Failsafe:
     FAILSAFE_TIMEOUT before.
     """
 
-    def __init__(self, wire: _Wire) -> None:
+    def __init__(self, wire: Wire) -> None:
         self._inits: dict[int, list[tuple[float, int]]] = {}
         pings: list[tuple[float, float]] = []
         for sent in wire.sent.values():  # in order of first transmission
@@ -1057,7 +1060,7 @@ class _ClockMap:
 
 
 def _setup_offset(
-    calls: list[CallRecord], wire: _Wire, lines: list[dict[str, Any]], traits: BackendTraits
+    calls: list[CallRecord], wire: Wire, lines: list[dict[str, Any]], traits: BackendTraits
 ) -> float | None:
     """A first offset from the setup commands (one unique value per output, clean line).
 
@@ -1097,7 +1100,7 @@ def _setup_offset(
 
 
 def _clock_map(
-    calls: list[CallRecord], wire: _Wire, lines: list[dict[str, Any]], traits: BackendTraits
+    calls: list[CallRecord], wire: Wire, lines: list[dict[str, Any]], traits: BackendTraits
 ) -> _ClockMap | None:
     """Anchor every servo line whose command is unambiguous, walking forward in time."""
     first = _setup_offset(calls, wire, lines, traits)
@@ -1139,7 +1142,7 @@ def _clock_map(
 
 
 def _offset_bounds(
-    calls: list[CallRecord], wire: _Wire, lines: list[dict[str, Any]], clock: _ClockMap
+    calls: list[CallRecord], wire: Wire, lines: list[dict[str, Any]], clock: _ClockMap
 ) -> tuple[float, float] | None:
     """Bounds of (host - trace) time from the failsafe phase's digital writes, or None.
 
@@ -1188,7 +1191,7 @@ def _judge_failsafe(
     result: SoakResult,
     *,
     calls: list[CallRecord],
-    wire: _Wire,
+    wire: Wire,
     lines: list[dict[str, Any]],
     clock: _ClockMap,
     fs_ping: tuple[float, float],

@@ -457,7 +457,7 @@ def _made_up_run(*, reboot: bool, stray: int | None = None, at: float = 2.5) -> 
     from types import SimpleNamespace
 
     scenario = soak.Scenario("made-up", commands=1, servos=1, digitals=0, recovery_commands=1)
-    wire = soak._Wire()
+    wire = soak.Wire()
     lines: list[dict[str, Any]] = []
     ids = iter(range(100, 200))
 
@@ -466,7 +466,7 @@ def _made_up_run(*, reboot: bool, stray: int | None = None, at: float = 2.5) -> 
         build(msg)
         msg.message_id = next(ids)
         for t in txs:
-            wire._command(t, msg.SerializeToString())
+            wire.command(t, msg.SerializeToString())
         sent = wire.sent[msg.message_id]
         sent.ack, sent.status = txs[-1] + 0.001, 0
         if line is not None:
@@ -494,12 +494,12 @@ def _made_up_run(*, reboot: bool, stray: int | None = None, at: float = 2.5) -> 
     xmsg = protoduino.messages.ArduinoIn()
     control(v1)(xmsg)
     xmsg.message_id = x
-    wire._command(1000.100, xmsg.SerializeToString())
+    wire.command(1000.100, xmsg.SerializeToString())
     lines.append({"t": 0.1005, "pin": 3, "mode": "servo", "value": v1})  # ran; Ack lost
     if reboot:
         lines.append({"t": 0.1021, "pin": 3, "mode": "servo", "value": 0})
         send(init, [1000.600], soak.servo_safe(0))  # the restore
-    wire._command(1000.650, xmsg.SerializeToString())  # X again, same id
+    wire.command(1000.650, xmsg.SerializeToString())  # X again, same id
     wire.sent[x].ack, wire.sent[x].status = 1000.651, 0
     lines.append({"t": 0.6505, "pin": 3, "mode": "servo", "value": v1})  # ran again
     send(control(v2), [1000.810], v2)
@@ -510,7 +510,7 @@ def _made_up_run(*, reboot: bool, stray: int | None = None, at: float = 2.5) -> 
         s=scenario, calls=calls, reboots=[1000.101] if reboot else [], cuts=[], heal_at=1000.8
     )
     result = soak.SoakResult(scenario, recovered=True)  # run() sets it from the recovery phase
-    soak._judge(result, runner, wire, sorted(lines, key=lambda e: e["t"]), None)  # type: ignore[arg-type]
+    soak.judge(result, runner, wire, sorted(lines, key=lambda e: e["t"]), None)  # type: ignore[arg-type]
     return result
 
 
