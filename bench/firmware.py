@@ -48,6 +48,8 @@ FLASH_GOAL = 13_212
 RAM_GOAL = 1_069
 #: The Uno's UART transmit ring (PD_AVR_TX_SIZE, firmware/avr/pd_avr.h).
 TX_RING = 148
+#: sizeof(protoduino_ArduinoIn) on the Uno: the command pd_link decodes as its payload completes.
+ARDUINO_IN_BYTES = 104
 #: The tests' hard limit: StandardFirmataPlus (tests/c/test_footprint.py).
 FLASH_LIMIT = 15_202
 RAM_LIMIT = 1_274
@@ -425,7 +427,8 @@ def _footprint_verdict(size: Footprint) -> str:
     return (
         f"Above StandardFirmata's figures ({' and '.join(over)}): the firmware now carries the "
         "motion commands (poses, speed limits, readback) and the I/O engine, whose transmit "
-        f"ring ({TX_RING} B) is its largest RAM item; {margin}\n"
+        f"ring ({TX_RING} B) is its largest RAM item, then the command decoded as its payload "
+        f"completes (one ArduinoIn, {ARDUINO_IN_BYTES} B); {margin}\n"
     )
 
 
