@@ -188,9 +188,24 @@ uint8_t pd_pins_count(const pd_outputs_t *out, uint8_t mode)
     return n;
 }
 
+/*
+ * min + degrees * range / 180, rounded down, in 16-bit arithmetic: the product
+ * reaches 180 * 2200 and would need a 32-bit multiply and divide (libgcc's
+ * __udivmodsi4, about 600 cycles per servo write on the Uno). With range =
+ * 180 q + r, degrees * range / 180 = degrees * q + degrees * r / 180 exactly,
+ * and degrees * r < 180 * 180 fits. The callers have checked degrees <= 180.
+ */
 static uint16_t degrees_to_us(const pd_servo_t *s, uint32_t degrees)
 {
-    return (uint16_t)(s->min_us + degrees * (uint32_t)(s->max_us - s->min_us) / 180u);
+    typedef char fits[((PD_SERVO_LIMIT_MAX_US - PD_SERVO_LIMIT_MIN_US) / 180u *
+                           PD_SERVO_MAX_DEGREES + PD_SERVO_LIMIT_MAX_US <= 0xFFFFu &&
+                       PD_SERVO_MAX_DEGREES <= 180u) ? 1 : -1];
+    (void)sizeof(fits);
+    uint16_t d = (uint16_t)degrees;
+    uint16_t range = (uint16_t)(s->max_us - s->min_us);
+    uint16_t q = range / 180u;
+    uint16_t r = range % 180u;
+    return (uint16_t)(s->min_us + d * q + (uint16_t)(d * r) / 180u);
 }
 
 protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
@@ -225,8 +240,11 @@ protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
 
-    /* The speed limit rounds to whole us per frame, at least 1. */
-    uint32_t step = (msg->max_speed + 25u) / 50u;
+    /* The speed limit rounds to whole us per frame, at least 1. 16-bit division
+     * (max_speed <= PD_SERVO_MAX_SPEED was checked): no 32-bit divide in flash. */
+    typedef char speed_fits[(PD_SERVO_MAX_SPEED + 25u <= 0xFFFFu) ? 1 : -1];
+    (void)sizeof(speed_fits);
+    uint16_t step = (uint16_t)((uint16_t)(msg->max_speed + 25u) / 50u);
     step = msg->max_speed && step == 0 ? 1u : step;
 
     uint8_t was = out->owner[msg->pin];
