@@ -83,8 +83,10 @@ void pd_core_poll(pd_core_t *core)
 
 bool pd_core_open_session(pd_core_t *core, const uint8_t session[4])
 {
-    static const uint8_t none[4] = {0, 0, 0, 0};
-    if (memcmp(session, none, 4) != 0 && memcmp(session, core->session, 4) == 0) {
+    /* "Not zero" by OR-ing the bytes: a const all-zero array to compare with
+     * would sit in the Uno's SRAM (4 B) and take a second memcmp call. */
+    uint8_t any = (uint8_t)(session[0] | session[1] | session[2] | session[3]);
+    if (any != 0 && memcmp(session, core->session, 4) == 0) {
         return true; /* a re-handshake: not a sign of life, the timer runs on */
     }
     /* Another owner: what the previous one configured is not its to command,
