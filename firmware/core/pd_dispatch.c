@@ -7,6 +7,7 @@
 #include "pd_core.h"
 #include "pd_encode.h"
 #include "pd_link.h"
+#include "pd_rom.h"
 #include "pd_schema.h"
 
 void pd_dedupe_init(pd_dedupe_t *dd)
@@ -85,7 +86,11 @@ static void fill_info(pd_core_t *core, protoduino_DeviceInfo *info)
 {
     const pd_board_info_t *board = pd_hal_board_info(core->hal);
 
-    copy_string(info->firmware_version, sizeof(info->firmware_version), PD_FIRMWARE_VERSION);
+    /* In flash: a string literal would be copied into the Uno's SRAM at start-up. */
+    static const char version[] PD_ROM = PD_FIRMWARE_VERSION;
+    typedef char fits[(sizeof(version) <= sizeof(info->firmware_version)) ? 1 : -1];
+    (void)sizeof(fits);
+    pd_rom_copy(info->firmware_version, version, sizeof(version));
     copy_string(info->board, sizeof(info->board), board->board);
     info->protocol_version = PD_PROTOCOL_VERSION;
     info->schema_id = PD_SCHEMA_ID;
