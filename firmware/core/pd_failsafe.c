@@ -2,7 +2,9 @@
 
 #include "pd_protocol.h"
 
-void pd_failsafe_init(pd_failsafe_t *fs, uint32_t now_ms)
+/* Not inlined: LTO put a copy in pd_core_init and one in pd_core_open_session
+ * (50 B of the Uno's flash); neither is on the command path. */
+__attribute__((noinline)) void pd_failsafe_init(pd_failsafe_t *fs, uint32_t now_ms)
 {
     fs->alive_ms = now_ms;
     fs->timeout_ms = PD_FAILSAFE_TIMEOUT_MS;
