@@ -15,9 +15,12 @@ static inline volatile uint8_t *pd_avr_port(uint8_t pin)
     return pin < 8 ? &PORTD : (pin < 14 ? &PORTB : &PORTC);
 }
 
+/* Each port's DDR register sits just below its PORT register (ATmega328P
+ * datasheet, register summary: DDRB 0x24 / PORTB 0x25, DDRC 0x27 / PORTC 0x28,
+ * DDRD 0x2A / PORTD 0x2B): one lookup instead of a second chain of compares. */
 static inline volatile uint8_t *pd_avr_ddr(uint8_t pin)
 {
-    return pin < 8 ? &DDRD : (pin < 14 ? &DDRB : &DDRC);
+    return pd_avr_port(pin) - 1;
 }
 
 static inline uint8_t pd_avr_mask(uint8_t pin)

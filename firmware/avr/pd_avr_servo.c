@@ -155,14 +155,22 @@ ISR(TIMER1_COMPA_vect)
     }
 }
 
+/* A pin's PORT register and bit, not inlined: servo writes and digital pins
+ * share one copy of the lookup. */
+static __attribute__((noinline)) volatile uint8_t *pin_port(uint8_t pin, uint8_t *mask)
+{
+    *mask = pd_avr_mask(pin);
+    return pd_avr_port(pin);
+}
+
 void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
 {
     if (channel >= PD_MAX_SERVOS) {
         return;
     }
     uint16_t ticks = (uint16_t)(us * TICKS_PER_US);
-    volatile uint8_t *port = pd_avr_port(pin);
-    uint8_t mask = pd_avr_mask(pin);
+    uint8_t mask;
+    volatile uint8_t *port = pin_port(pin, &mask);
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
         servo_channel_t *c = &channels[channel];
@@ -173,7 +181,7 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
             if (off_port != port || !(off_mask & mask)) {
                 *port &= (uint8_t)~mask;
             }
-            *pd_avr_ddr(pin) |= mask;
+            *(port - 1) |= mask; /* its DDR (pd_avr_ddr) */
             c->mask = mask;
             c->port = port;
             c->ticks = ticks; /* valid for the next frame, held or not */
@@ -228,9 +236,9 @@ void pd_avr_servo_expedite(void)
 /* One function for both (the pin lookups cost flash each time they are inlined). */
 void pd_avr_pin_set(uint8_t pin, bool output, bool level)
 {
-    volatile uint8_t *port = pd_avr_port(pin);
-    volatile uint8_t *ddr = pd_avr_ddr(pin);
-    uint8_t mask = pd_avr_mask(pin);
+    uint8_t mask;
+    volatile uint8_t *port = pin_port(pin, &mask);
+    volatile uint8_t *ddr = port - 1; /* pd_avr_ddr */
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
         if (!output) {
