@@ -4,7 +4,6 @@
 #include <string.h>
 
 #include "pd_protocol.h"
-#include "pd_rom.h"
 
 /* The digital masks hold one bit per pin; a slot fits the owner byte's low nibble. */
 typedef char pd_assert_pins_fit_mask[(PD_MAX_PINS <= 32) ? 1 : -1];
@@ -12,19 +11,6 @@ typedef char pd_assert_servos_fit_slot[(PD_MAX_SERVOS <= PD_MAX_SLOTS) ? 1 : -1]
 /* A servo's settings (pin .. safe_us) are compared as bytes: no padding among them. */
 typedef char pd_assert_servo_settings_packed[(offsetof(pd_servo_t, us) == 8) ? 1 : -1];
 typedef char pd_assert_modes_fit_owner[(PD_MODE_COUNT <= 16) ? 1 : -1];
-
-/*
- * The pin-mode table: one entry per PD_MODE_x, in that order.
- * slots: how many slots of per-slot state the mode has on this board (0: its
- *        state is kept by pin, any number of its pins may be claimed);
- * safe:  drive one of its pins to the safe value given at its Init;
- * release: let go of one of its pins (the owner table is cleared by the caller).
- */
-typedef struct pd_mode {
-    uint8_t (*slots)(void *hal);
-    void (*safe)(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot);
-    void (*release)(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot);
-} pd_mode_t;
 
 static uint8_t by_pin(void *hal)
 {
@@ -92,15 +78,68 @@ static void digital_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t s
     pd_hal_digital_release(hal, pin);
 }
 
-static const pd_mode_t pd_modes[PD_MODE_COUNT] PD_ROM = {
-    [PD_MODE_FREE] = {by_pin, NULL, NULL},
-    [PD_MODE_DIGITAL] = {by_pin, digital_safe, digital_release},
-    [PD_MODE_SERVO] = {servo_slots, servo_safe, servo_release},
-};
+/*
+ * The pin-mode table: one entry per PD_MODE_x but PD_MODE_FREE (which owns no pin),
+ *   X(mode, slots, safe, release)
+ *   slots:   slots(hal), how many slots of per-slot state the mode has on this
+ *            board (0: its state is kept by pin, any number of its pins may be claimed);
+ *   safe:    safe(out, hal, pin, slot), drive one of its pins to the safe value
+ *            given at its Init;
+ *   release: release(out, hal, pin, slot), let go of one of its pins (the owner
+ *            table is cleared by the caller).
+ *
+ * Why an X-macro expanded into switches and not an array of structs of function
+ * pointers in flash: the array (read with memcpy_P, called through pointers) cost
+ * 90 B more of the Uno's flash, for the same reason as the command table
+ * (pd_dispatch.c): the compiler cannot inline through a pointer.
+ */
+#define PD_MODES(X)                                                          \
+    X(PD_MODE_DIGITAL, by_pin, digital_safe, digital_release)                \
+    X(PD_MODE_SERVO, servo_slots, servo_safe, servo_release)
 
-static void mode_entry(uint8_t mode, pd_mode_t *entry)
+#define PD_MODE_ONE(mode, slots_, safe_, release_) +1
+typedef char pd_assert_every_mode_listed[(0 PD_MODES(PD_MODE_ONE)) == PD_MODE_COUNT - 1 ? 1 : -1];
+#undef PD_MODE_ONE
+
+static uint8_t mode_slots(uint8_t mode, void *hal)
 {
-    pd_rom_copy(entry, &pd_modes[mode], sizeof(*entry));
+    switch (mode) {
+#define PD_MODE_SLOTS(mode_, slots_, safe_, release_)                        \
+    case mode_:                                                              \
+        return slots_(hal);
+        PD_MODES(PD_MODE_SLOTS)
+#undef PD_MODE_SLOTS
+    default:
+        return 0;
+    }
+}
+
+static void mode_safe(uint8_t mode, pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    switch (mode) {
+#define PD_MODE_SAFE(mode_, slots_, safe_, release_)                         \
+    case mode_:                                                              \
+        safe_(out, hal, pin, slot);                                          \
+        break;
+        PD_MODES(PD_MODE_SAFE)
+#undef PD_MODE_SAFE
+    default:
+        break;
+    }
+}
+
+static void mode_release(uint8_t mode, pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    switch (mode) {
+#define PD_MODE_RELEASE(mode_, slots_, safe_, release_)                      \
+    case mode_:                                                              \
+        release_(out, hal, pin, slot);                                       \
+        break;
+        PD_MODES(PD_MODE_RELEASE)
+#undef PD_MODE_RELEASE
+    default:
+        break;
+    }
 }
 
 void pd_outputs_init(pd_outputs_t *out)
@@ -138,9 +177,7 @@ protoduino_Status pd_pins_claim(pd_outputs_t *out, void *hal, uint32_t pin, uint
         *slot = PD_OWNER_SLOT(owner); /* re-init: new settings, same slot */
         return protoduino_Status_STATUS_OK;
     }
-    pd_mode_t entry;
-    mode_entry(mode, &entry);
-    uint8_t slots = entry.slots(hal);
+    uint8_t slots = mode_slots(mode, hal);
     uint8_t free_slot = 0;
     if (slots > 0) {
         /* The lowest slot no pin of this mode holds. */
@@ -438,9 +475,7 @@ protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
 static void release_owned(pd_outputs_t *out, void *hal, uint8_t pin)
 {
     uint8_t owner = out->owner[pin];
-    pd_mode_t entry;
-    mode_entry(PD_OWNER_MODE(owner), &entry);
-    entry.release(out, hal, pin, PD_OWNER_SLOT(owner));
+    mode_release(PD_OWNER_MODE(owner), out, hal, pin, PD_OWNER_SLOT(owner));
     out->owner[pin] = 0;
 }
 
@@ -470,9 +505,7 @@ void pd_outputs_all_safe(pd_outputs_t *out, void *hal)
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
         uint8_t owner = out->owner[pin];
         if (owner != 0) {
-            pd_mode_t entry;
-            mode_entry(PD_OWNER_MODE(owner), &entry);
-            entry.safe(out, hal, pin, PD_OWNER_SLOT(owner));
+            mode_safe(PD_OWNER_MODE(owner), out, hal, pin, PD_OWNER_SLOT(owner));
         }
     }
     pd_hal_outputs_safe(hal);

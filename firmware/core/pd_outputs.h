@@ -11,13 +11,13 @@
  *   Every mode claims and looks up pins through pd_pins_claim() and
  *   pd_pins_owned(), so "pin in use by another mode", "not initialised" and a
  *   re-init keeping its slot are decided in one place for all of them;
- * - the pin-mode table, pd_modes[] in pd_outputs.c: per mode, how many slots it
+ * - the pin-mode table, PD_MODES in pd_outputs.c: per mode, how many slots it
  *   has, how to drive a pin of it to its safe value and how to release it.
  *
  * How to add a pin mode (e.g. PWM):
  *   1. a PD_MODE_x value below (before PD_MODE_COUNT; at most 16 modes);
  *   2. its state, if any, in pd_outputs_t (an array indexed by slot, or a mask by pin);
- *   3. one entry in pd_modes[] (pd_outputs.c): slots, safe and release;
+ *   3. one X(...) entry in PD_MODES (pd_outputs.c): slots, safe and release;
  *   4. its Init/Control functions here, which call pd_pins_claim()/pd_pins_owned(),
  *      and their commands: one entry each in the command table (pd_dispatch.c);
  *   5. on the host, one PinMode declaration in host/protoduino/commands.py.
@@ -39,7 +39,7 @@
 #define PD_MAX_SERVOS 8
 #endif
 
-/* Pin modes: the index into pd_modes[]. PD_MODE_FREE owns nothing. */
+/* Pin modes (the PD_MODES table in pd_outputs.c). PD_MODE_FREE owns nothing. */
 enum {
     PD_MODE_FREE = 0,
     PD_MODE_DIGITAL, /* digital output; state by pin: digital_safe/digital_level */

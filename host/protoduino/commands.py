@@ -2,7 +2,7 @@
 
 The firmware has a command table (``PD_COMMANDS`` in firmware/core/pd_dispatch.c:
 handler, idempotent or not, what its Ack returns) and a pin-mode table
-(``pd_modes`` in firmware/core/pd_outputs.c). Everything the host's layers need
+(``PD_MODES`` in firmware/core/pd_outputs.c). Everything the host's layers need
 to know about a command (the request layer: may its duplicate run twice? does
 a session restore have to send an Init before it?) is read from here instead of
 lists of names kept in step across modules. tests/contract/test_commands.py checks that
