@@ -98,8 +98,11 @@ static void fill_info(pd_core_t *core, protoduino_DeviceInfo *info)
     info->max_servos = board->max_servos;
     info->rx_buffer = board->rx_buffer;
     info->reserved_pins_count = 0;
-    for (uint8_t pin = 0; pin < 32u && pin < board->num_pins; pin++) {
-        if ((board->reserved_pins >> pin) & 1u) {
+    /* The mask shifts one place per pin: a 32-bit shift by a variable count is
+     * a loop on the AVR. */
+    uint32_t reserved = board->reserved_pins;
+    for (uint8_t pin = 0; pin < 32u && pin < board->num_pins; pin++, reserved >>= 1) {
+        if (reserved & 1u) {
             if (info->reserved_pins_count >= sizeof(info->reserved_pins) / sizeof(info->reserved_pins[0])) {
                 break;
             }
