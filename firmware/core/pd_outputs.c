@@ -408,7 +408,9 @@ void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
     typedef char fits[(sizeof(states->servos.bytes) >= 5u * PD_MAX_SERVOS) ? 1 : -1];
     (void)sizeof(fits);
     uint8_t *b = states->servos.bytes;
-    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+    /* `bit` moves one place per pin: a variable 32-bit shift is a loop on the AVR. */
+    uint32_t bit = 1;
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++, bit <<= 1) {
         uint8_t owner = out->owner[pin];
         if (owner == 0) {
             continue;
@@ -421,7 +423,7 @@ void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
             *b++ = (uint8_t)s->target_us;
             *b++ = (uint8_t)(s->target_us >> 8);
         } else if (PD_OWNER_MODE(owner) == PD_MODE_DIGITAL) {
-            states->digital_pins |= 1UL << pin;
+            states->digital_pins |= bit;
         }
     }
     states->servos.size = (pb_size_t)(b - states->servos.bytes);
