@@ -131,7 +131,9 @@ static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
     put_uint(w, protoduino_DeviceInfo_rx_buffer_tag, info->rx_buffer);
 }
 
-static void put_ack(writer_t *w, const protoduino_Ack *ack)
+/* Not inlined into pd_encode_out: 56 B less of the Uno's flash, for one call
+ * per Ack. */
+static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack *ack)
 {
     put_uint(w, protoduino_Ack_message_id_tag, ack->message_id);
     put_uint(w, protoduino_Ack_status_tag, (uint32_t)ack->status);
