@@ -10,22 +10,27 @@
 #include <avr/io.h>
 #include <stdint.h>
 
-static inline volatile uint8_t *pd_avr_port(uint8_t pin)
+/* A pin's PORT register; its bit there in *mask. One chain of compares for both. */
+static inline volatile uint8_t *pd_avr_port(uint8_t pin, uint8_t *mask)
 {
-    return pin < 8 ? &PORTD : (pin < 14 ? &PORTB : &PORTC);
+    volatile uint8_t *port = &PORTD;
+    if (pin >= 14) {
+        pin = (uint8_t)(pin - 14);
+        port = &PORTC;
+    } else if (pin >= 8) {
+        pin = (uint8_t)(pin - 8);
+        port = &PORTB;
+    }
+    *mask = (uint8_t)(1u << pin);
+    return port;
 }
 
-/* Each port's DDR register sits just below its PORT register (ATmega328P
- * datasheet, register summary: DDRB 0x24 / PORTB 0x25, DDRC 0x27 / PORTC 0x28,
- * DDRD 0x2A / PORTD 0x2B): one lookup instead of a second chain of compares. */
-static inline volatile uint8_t *pd_avr_ddr(uint8_t pin)
+/* A port's DDR register, just below its PORT register on every port of the
+ * ATmega328P (datasheet, register summary: DDRB 0x24 / PORTB 0x25, DDRC 0x27 /
+ * PORTC 0x28, DDRD 0x2A / PORTD 0x2B). */
+static inline volatile uint8_t *pd_avr_ddr(volatile uint8_t *port)
 {
-    return pd_avr_port(pin) - 1;
-}
-
-static inline uint8_t pd_avr_mask(uint8_t pin)
-{
-    return (uint8_t)(1u << (pin < 8 ? pin : (pin < 14 ? pin - 8 : pin - 14)));
+    return port - 1;
 }
 
 #endif /* PD_AVR_PINS_H */

@@ -159,8 +159,7 @@ ISR(TIMER1_COMPA_vect)
  * share one copy of the lookup. */
 static __attribute__((noinline)) volatile uint8_t *pin_port(uint8_t pin, uint8_t *mask)
 {
-    *mask = pd_avr_mask(pin);
-    return pd_avr_port(pin);
+    return pd_avr_port(pin, mask);
 }
 
 void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
@@ -181,7 +180,7 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
             if (off_port != port || !(off_mask & mask)) {
                 *port &= (uint8_t)~mask;
             }
-            *(port - 1) |= mask; /* its DDR (pd_avr_ddr) */
+            *pd_avr_ddr(port) |= mask;
             c->mask = mask;
             c->port = port;
             c->ticks = ticks; /* valid for the next frame, held or not */
@@ -238,7 +237,7 @@ void pd_avr_pin_set(uint8_t pin, bool output, bool level)
 {
     uint8_t mask;
     volatile uint8_t *port = pin_port(pin, &mask);
-    volatile uint8_t *ddr = port - 1; /* pd_avr_ddr */
+    volatile uint8_t *ddr = pd_avr_ddr(port);
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
         if (!output) {
