@@ -57,7 +57,14 @@ bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg)
         return false;
     }
     size_t len = pd_encode_out(msg, raw + PD_HEADER_SIZE, PD_TX_MAX_PAYLOAD);
-    if (len == 0 || pd_hal_tx_room(core->hal) < PD_TX_RESERVE + PD_TX_FRAME_BYTES(len)) {
+    /* PD_TX_FRAME_BYTES(len) without its division: at the largest payload its
+     * COBS term n / 254 is 0 (checked here), so it is 0 for every len <= that;
+     * the division would be a libgcc call on the AVR, in flash and per report. */
+    typedef char no_cobs_block[(PD_TX_FRAME_BYTES(PD_TX_MAX_PAYLOAD) ==
+                                PD_MIN_PACKET + PD_TX_MAX_PAYLOAD + 3u) ? 1 : -1];
+    (void)sizeof(no_cobs_block);
+    size_t frame = PD_MIN_PACKET + len + 3u;
+    if (len == 0 || pd_hal_tx_room(core->hal) < PD_TX_RESERVE + frame) {
         return false;
     }
     return pd_link_send(core, PD_PACKET_DATA, raw, len);
