@@ -240,15 +240,19 @@ bool pd_link_rx_byte(pd_core_t *core, uint8_t byte)
     /* Streaming COBS (PROTOCOL.md section 2): a code byte starts a block of
      * code - 1 data bytes; every block but a full one (0xFF) and the last
      * implies a 0x00, emitted here once the next block shows it was not the last. */
+    /* One call of rx_put (inlined: it runs per byte), not one per case: 76 B of
+     * the Uno's flash. */
+    bool put = true;
     if (link->rx_left == 0) {
-        if (link->rx_zero) {
-            rx_put(link, 0);
-        }
+        put = link->rx_zero; /* the previous block's implied 0x00, if any */
         link->rx_left = (uint8_t)(byte - 1u);
         link->rx_zero = byte != 0xFFu;
+        byte = 0;
     } else {
-        rx_put(link, byte);
         link->rx_left--;
+    }
+    if (put) {
+        rx_put(link, byte);
     }
     /* The payload a COMMAND's header announces is all in (the CRC and the
      * delimiter, 3 byte times, are still to come): decode it now. Whether the
