@@ -41,10 +41,17 @@ static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint16_t 
     }
 }
 
-static void drive_digital(pd_outputs_t *out, void *hal, uint8_t pin, bool level)
+/* A pin's bit in a mask set to `on`; not inlined: the level's and the safe
+ * value's updates share it. */
+static __attribute__((noinline)) void put_bit(uint32_t *mask, uint8_t pin, bool on)
 {
     uint32_t bit = 1UL << pin;
-    out->digital_level = level ? (out->digital_level | bit) : (out->digital_level & ~bit);
+    *mask = on ? (*mask | bit) : (*mask & ~bit);
+}
+
+static void drive_digital(pd_outputs_t *out, void *hal, uint8_t pin, bool level)
+{
+    put_bit(&out->digital_level, pin, level);
     pd_hal_digital_write(hal, pin, level);
 }
 
@@ -470,7 +477,7 @@ protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
     if (was && ((out->digital_safe & bit) != 0) == msg->safe_level) {
         return protoduino_Status_STATUS_OK; /* the same configuration: the level stays */
     }
-    out->digital_safe = msg->safe_level ? (out->digital_safe | bit) : (out->digital_safe & ~bit);
+    put_bit(&out->digital_safe, pin, msg->safe_level);
     drive_digital(out, hal, pin, msg->safe_level);
     return protoduino_Status_STATUS_OK;
 }
