@@ -203,12 +203,15 @@ def test_spurious_reraises_leave_the_measurement_alone(board: Runner) -> None:
     level, so pin 10 shows exactly its commanded pulse and nothing else, while
     the test program also rewrites PORTB continuously from its main loop.
     """
-    board.command("S10 1200")
-    first = board.wait_for(_servo(10, 1200))
-    time.sleep(0.5)  # ~25 frames, ~10,000 injected glitches
-    pin10 = [line for line in board.trace() if line["pin"] == 10]
-    assert pin10 == [first]
-    assert abs(first["value"] - 1200) <= 2
+    since = board.command("S10 1200")
+    board.wait_for(_servo(10, 1200), since=since)
+    time.sleep(0.5)  # ~25 frames, ~10,000 injected glitches (more or fewer: same verdict)
+    pin10 = [line for line in board.trace()[since:] if line["pin"] == 10]
+    # Every width measured is the commanded one: a glitch would show as a pulse
+    # of a few microseconds. Within 2 us, since the test program's own interrupt
+    # latency may move an edge by a cycle or two from frame to frame.
+    assert pin10
+    assert all(abs(line["value"] - 1200) <= 2 for line in pin10), pin10
 
 
 def test_emulated_time_is_paced_to_real_time(board: Runner) -> None:
