@@ -29,6 +29,7 @@ import pytest
 import serial
 from protoduino.simboard import runner_command
 from protoduino_dev import build
+from runnerstats import snapshot
 
 pytestmark = pytest.mark.avr
 
@@ -227,21 +228,6 @@ def test_emulated_time_is_paced_to_real_time(board: Runner) -> None:
     assert 0 < line["t"] <= elapsed_wall + 0.01
 
 
-def _stats(path: Path, runner: Runner) -> dict[str, Any]:
-    """The runner's counters now (SIGUSR2 appends one line to its --stats file)."""
-    before = path.read_text().count("\n") if path.exists() else 0
-    runner.proc.send_signal(signal.SIGUSR2)
-    deadline = time.monotonic() + 10.0  # bounds a failing wait only
-    while time.monotonic() < deadline:
-        lines = path.read_text().splitlines(keepends=True) if path.exists() else []
-        complete = [line for line in lines if line.endswith("\n")]
-        if len(complete) > before:
-            row: dict[str, Any] = json.loads(complete[-1])
-            return row
-        time.sleep(0.01)
-    raise AssertionError("the runner wrote no statistics")
-
-
 #: Main-loop passes per emulated second the pacing allows: a pass runs emulated
 #: time at most 200 us ahead of the wall clock and then waits, or wakes for
 #: host bytes (with the input buffer full, at most one per byte time as the
@@ -260,15 +246,15 @@ def test_a_full_input_buffer_is_waited_on_not_polled(
     runner = Runner(tmp_path, "--stats", str(stats))
     sent = 12_000
     try:
-        start = _stats(stats, runner)
+        start = snapshot(runner.proc, stats)
         runner.port.write(b"x" * sent)  # the pty's buffers take it all at once
         # The runner's buffer stays full until the pty has nothing left for it.
         deadline = time.monotonic() + 60.0  # bounds a failing wait only
-        end = _stats(stats, runner)
+        end = snapshot(runner.proc, stats)
         while end["uart_rx_bytes"] - start["uart_rx_bytes"] < sent - 4096:
             assert time.monotonic() < deadline, end
             time.sleep(0.05)
-            end = _stats(stats, runner)
+            end = snapshot(runner.proc, stats)
     finally:
         runner.stop()
     emulated = end["t"] - start["t"]

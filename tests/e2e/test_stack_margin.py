@@ -12,12 +12,10 @@ static data (the linker's ``_end``, after .data, .bss and .noinit; the firmware 
 
 from __future__ import annotations
 
-import json
 import select
 import shutil
 import signal
 import subprocess
-import time
 from collections.abc import Iterator
 from concurrent.futures import Future
 from pathlib import Path
@@ -28,6 +26,7 @@ from protoduino import Board, CommandRejectedError, Servo
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import runner_command
 from protoduino_dev import build
+from runnerstats import snapshot
 
 pytestmark = pytest.mark.avr
 
@@ -38,7 +37,6 @@ pytestmark = pytest.mark.avr
 MIN_MARGIN = 48
 
 STARTUP_TIMEOUT = 10.0
-STATS_TIMEOUT = 10.0  # bounds a failing wait only: the runner writes within ~1 ms
 
 #: The Uno firmware's pins: servos on 2..9 (its eight channels), digital outputs on 10..19.
 SERVO_PINS = range(2, 10)
@@ -82,24 +80,8 @@ class StatsRunner:
         self.port = self.proc.stdout.readline().decode().rstrip("\n")
 
     def snapshot(self) -> dict[str, Any]:
-        """The counters now (SIGUSR2 appends one JSON line)."""
-        before = self._lines()
-        self.proc.send_signal(signal.SIGUSR2)
-        deadline = time.monotonic() + STATS_TIMEOUT
-        while time.monotonic() < deadline:
-            lines = self._lines()
-            if len(lines) > len(before):
-                row: dict[str, Any] = json.loads(lines[-1])
-                return row
-            time.sleep(0.01)
-        raise AssertionError("the runner wrote no statistics")
-
-    def _lines(self) -> list[str]:
-        if not self.stats.exists():
-            return []
-        return [
-            line for line in self.stats.read_text().splitlines(keepends=True) if line.endswith("\n")
-        ]
+        """The counters now."""
+        return snapshot(self.proc, self.stats)
 
     def stop(self) -> None:
         if self.proc.poll() is None:
