@@ -288,7 +288,8 @@ class Budget:
             ],
             [
                 "beyond both: the firmware's work after the command's last byte, the "
-                "emulator's pacing (emulated time at most 200 us ahead of the wall clock), "
+                "emulator's pacing (emulated time at most 50 us ahead of the wall clock, "
+                "answers handed over no earlier than the line delivers them), "
                 "the pty, scheduling",
                 f"{self.beyond:,.0f}",
             ],
@@ -476,10 +477,12 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
         "first is the rest of nanopb's decode, the checks, the command and the Ack's encoding "
         "(part 5 profiles its cycles), so most of its "
         f"{servo.awake:,.0f} us awake per command overlaps the wire. The rest is the emulated "
-        "Uno's own: its runner lets emulated time run at most 200 us ahead of the wall clock "
-        "(a host byte enters the emulated UART up to that much after it was written) and "
-        "hands the host a burst of bytes one byte time after the UART sent the last of them, "
-        "as a line would deliver it; on a loaded machine the runner also waits for a core. "
+        "Uno's own: its runner keeps emulated time at most 50 us ahead of the wall clock (a "
+        "sleeping MCU jumps to its next timer event, so at times more), and a host byte "
+        "enters the emulated UART at the emulated time it is read at, that much late; what "
+        "the UART sends reaches the host no earlier than a line would deliver it (a burst in "
+        "one write once its last byte is due), so the emulator can only lengthen a round "
+        "trip, never shorten it; on a loaded machine the runner also waits for a core. "
         f"{echo_text}{_pace_text(avr.pace)}The host library adds {servo.host:,.0f} us (its I/O "
         "thread wakes up to write the command, and the caller wakes up at the Ack), "
         f"{servo.host / servo.library * 100:.0f} % of the round trip. The emulator's share would "

@@ -228,8 +228,32 @@ def test_emulated_time_is_paced_to_real_time(board: Runner) -> None:
     assert 0 < line["t"] <= elapsed_wall + 0.01
 
 
+#: One byte's time on the line at 115200 baud, 8N1 (the runner counts 10 bits a byte;
+#: simavr's UART takes 11 bits, longer).
+BYTE_S = 10 / 115200
+
+
+def test_an_answer_never_arrives_before_the_line_could_carry_it(
+    built: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """Emulated time runs ahead of the wall clock by up to a pass of the runner's
+    loop; what the UART sends must still reach the host no earlier than a line
+    would deliver it, or round trips would measure shorter than the line allows.
+    A byte and its echo: at least two byte times, whatever the load (a slow
+    machine only makes it longer)."""
+    runner = Runner(tmp_path)  # its own: the echoed bytes make a line the program rejects
+    try:
+        for _ in range(20):
+            start = time.perf_counter()
+            runner.port.write(b"x")
+            assert runner.port.read(1) == b"x"
+            assert time.perf_counter() - start >= 2 * BYTE_S
+    finally:
+        runner.stop()
+
+
 #: Main-loop passes per emulated second the pacing allows: a pass runs emulated
-#: time at most 200 us ahead of the wall clock and then waits, or wakes for
+#: time at most 50 us ahead of the wall clock and then waits, or wakes for
 #: host bytes (with the input buffer full, at most one per byte time as the
 #: UART takes them: 10,695 a second). A loop that does not wait makes hundreds
 #: of thousands.

@@ -86,17 +86,20 @@
 #define PD_DEFAULT_BAUD 115200U
 #define PD_MAX_HEX 4
 #define PD_BUF_SIZE 4096U
-/* Emulated time runs at most this far ahead of the wall clock. A host byte
- * enters the UART at the emulated time it is read at, so being ahead delays
- * every byte from the host by that much (1 ms added about 0.5 ms to every
- * round trip on average); the runner sleeps until the wall clock catches up,
- * with nanosecond timeouts, so the bound can be small. */
-#define PD_AHEAD_NS 200000ULL
+/* Emulated time runs at most this far ahead of the wall clock (a sleeping MCU
+ * jumps to its next timer event, which may be further). A host byte enters
+ * the UART at the emulated time it is read at, so being ahead delays every
+ * byte from the host by that much (at 1 ms, about 0.5 ms on every round trip);
+ * the runner sleeps until the wall clock catches up, with nanosecond timeouts,
+ * so the bound can be small. */
+#define PD_AHEAD_NS 50000ULL
 /* At most this much emulated time per batch, so that a board catching up
  * after a stall (a loaded machine) keeps exchanging bytes meanwhile. */
 #define PD_BATCH_NS 1000000ULL
 /* Shorter waits are not worth a system call; the next batch makes up for them. */
-#define PD_MIN_WAIT_NS 50000ULL
+#define PD_MIN_WAIT_NS 20000ULL
+/* A stream with no pause goes to the host in chunks of at most this much. */
+#define PD_STREAM_NS 1000000ULL
 #define PD_MCUSR_ADDR 0x54     /* ATmega328P MCUSR in data space */
 #define PD_MCUSR_EXTRF 0x02
 /* The port is announced after this much emulated time: whatever the firmware
@@ -168,6 +171,7 @@ typedef struct {
     void (*core_reset)(struct avr_t *avr);
     pd_fifo_t rx; /* host -> MCU */
     pd_fifo_t tx; /* MCU -> host */
+    uint64_t tx_due[PD_BUF_SIZE]; /* per byte in tx: the cycle its last bit has left the UART */
     int rx_timer; /* pd_rx_timer is registered */
     int crashed;
     FILE *port_out; /* the real stdout, for the one port line */
@@ -179,6 +183,8 @@ typedef struct {
     uint64_t uart_rx;      /* bytes fed into UART0 */
     uint64_t uart_tx;      /* bytes UART0 sent */
     uint64_t tx_last;      /* cycle of the last byte UART0 sent */
+    uint64_t byte_cycles;  /* one byte on the line (10 bits at 115200 baud) */
+    int tx_blocked;        /* the pty took no more of tx: wait for it to be writable */
     uint64_t passes;       /* passes of the main loop: batches and waits */
     uint16_t sp_min;       /* lowest stack pointer seen since start, a data address */
     uint32_t sp_min_pc;    /* the flash byte address that reached it */
@@ -483,6 +489,10 @@ static void pd_uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
     pd_sim_t *sim = param;
     sim->uart_tx++;
     sim->tx_last = pd_cycles(sim);
+    if (sim->tx.len < PD_BUF_SIZE) {
+        /* simavr raises the byte as UDR is written, when it starts to go out. */
+        sim->tx_due[(sim->tx.head + sim->tx.len) % PD_BUF_SIZE] = sim->tx_last + sim->byte_cycles;
+    }
     pd_fifo_push(&sim->tx, (uint8_t)value);
 }
 
@@ -806,20 +816,50 @@ static void pd_start_rx(pd_sim_t *sim)
     }
 }
 
-/* What UART0 sent, to the host (what the pty does not take waits, bounded). */
+/* Wall-clock time as a cycle count of the emulated MCU. */
+static uint64_t pd_wall_cycles(const pd_sim_t *sim)
+{
+    return (uint64_t)((double)(pd_now_ns() - g_start_ns) * (double)sim->avr->frequency / 1e9);
+}
+
+/*
+ * What UART0 sent goes to the host no earlier than a line would have delivered
+ * it: emulation runs up to PD_AHEAD_NS ahead of the wall clock, and a byte sent
+ * early would make a round trip look shorter than the line allows. A burst goes
+ * whole once its last byte is due and the UART has been quiet for a byte time
+ * (one write, as a USB-serial bridge passes a short frame on); a stream that
+ * never pauses goes on in chunks once its oldest byte waited PD_STREAM_NS.
+ */
 static void pd_flush_tx(pd_sim_t *sim)
 {
-    while (sim->tx.len) {
+    if (!sim->tx.len) {
+        return;
+    }
+    uint64_t wall = pd_wall_cycles(sim);
+    size_t due = 0;
+    while (due < sim->tx.len && sim->tx_due[(sim->tx.head + due) % PD_BUF_SIZE] <= wall) {
+        due++;
+    }
+    uint64_t stream = (uint64_t)((double)PD_STREAM_NS * (double)sim->avr->frequency / 1e9);
+    int burst_done = due == sim->tx.len && pd_cycles(sim) - sim->tx_last > sim->byte_cycles;
+    int stream_late = due > 0 && wall - sim->tx_due[sim->tx.head] >= stream;
+    if (!burst_done && !stream_late) {
+        return;
+    }
+    while (due) {
         size_t chunk = PD_BUF_SIZE - sim->tx.head;
-        if (chunk > sim->tx.len) {
-            chunk = sim->tx.len;
+        if (chunk > due) {
+            chunk = due;
         }
         ssize_t n = write(sim->master, sim->tx.data + sim->tx.head, chunk);
         if (n <= 0) {
+            sim->tx_blocked = 1;
             break; /* nobody reads: the bytes wait in tx (bounded) */
         }
+        sim->tx_blocked = 0;
         sim->tx.head = (sim->tx.head + (size_t)n) % PD_BUF_SIZE;
         sim->tx.len -= (size_t)n;
+        due -= (size_t)n;
     }
 }
 
@@ -946,7 +986,7 @@ static void pd_run(pd_sim_t *sim)
 {
     const uint64_t start_ns = g_start_ns;
     const double cycles_per_ns = (double)sim->avr->frequency / 1e9;
-    const uint64_t byte_cycles = sim->avr->frequency * 10ULL / PD_DEFAULT_BAUD;
+    sim->byte_cycles = sim->avr->frequency * 10ULL / PD_DEFAULT_BAUD;
     /* The process that started the runner owns it: when it is gone (killed
      * with no chance to stop us), so are we, or runners pile up unseen. */
     const pid_t owner = getppid();
@@ -977,13 +1017,6 @@ static void pd_run(pd_sim_t *sim)
                 avr_flashaddr_t pc = sim->avr->pc;
                 int state = pd_run_one(sim);
                 pd_track_sp(sim, pc);
-                /* A burst the UART finished (a byte time without a next byte)
-                 * goes to the host now, not at the end of the batch: batches run
-                 * up to 1 ms of emulated time, and the host would see an answer
-                 * late by whatever of the batch remained. */
-                if (sim->tx.len && pd_cycles(sim) - sim->tx_last > byte_cycles) {
-                    pd_flush_tx(sim);
-                }
                 if (sim->reset_seen) {
                     pd_after_reset(sim);
                 }
@@ -1021,6 +1054,15 @@ static void pd_run(pd_sim_t *sim)
         /* Wait for host bytes or until the wall clock reaches emulated time. */
         uint64_t emulated_ns = (uint64_t)((double)pd_cycles(sim) / cycles_per_ns);
         uint64_t now_ns = pd_now_ns() - start_ns;
+        if (sim->tx.len) {
+            /* Wake when the last byte sent is due, to hand the host its burst. */
+            uint64_t due_ns =
+                (uint64_t)((double)sim->tx_due[(sim->tx.head + sim->tx.len - 1) % PD_BUF_SIZE] /
+                           cycles_per_ns);
+            if (due_ns < emulated_ns) {
+                emulated_ns = due_ns > now_ns ? due_ns : now_ns;
+            }
+        }
         if (emulated_ns > now_ns + PD_MIN_WAIT_NS) {
             uint64_t wait_ns = emulated_ns - now_ns;
             struct timespec timeout = {.tv_sec = (time_t)(wait_ns / 1000000000ULL),
@@ -1033,7 +1075,9 @@ static void pd_run(pd_sim_t *sim)
             if (sim->rx.len < PD_BUF_SIZE) {
                 fds[0].events |= POLLIN;
             }
-            if (sim->tx.len) {
+            /* POLLOUT only once the pty refused bytes: it is writable otherwise,
+             * and bytes not yet due must not end the wait. */
+            if (sim->tx_blocked) {
                 fds[0].events |= POLLOUT;
             }
             int nfds = sim->inotify >= 0 ? 2 : 1;
