@@ -67,7 +67,8 @@ WARMUP = 5
 #: is 10 * 8 * 17 cycles; polled transmit waits that long for each byte after the first.
 UART_BYTE_CYCLES = 10 * 8 * 17
 #: Each timed call starts after a random pause of up to this (seconds): back-to-back calls
-#: would lock onto the emulator's 1 ms batches at whatever phase they happen to start with, and
+#: would lock onto the emulated Uno's timers (1 ms clock tick, 20 ms servo frames) and the
+#: emulator's loop at whatever phase they happen to start with, and
 #: a run's median would depend on that luck; random starts sample every phase, as an
 #: application's commands would.
 MAX_GAP = 0.002
@@ -258,7 +259,7 @@ class Budget:
 
     The host library's share is measured on the simulated board (library minus raw client
     there), where nothing else moves: on the emulated Uno the difference of two medians drowns
-    in the spread the emulator's 1 ms batches give.
+    in the spread the emulator's pacing and the Uno's timers give.
     """
 
     command_bytes: float
@@ -384,7 +385,8 @@ def run(ctx: Context) -> SectionResult:
         f"Wall-clock time of one call through the public API (`Servo.write`, `Board.ping()`), "
         f"one at a time, {ctx.samples} samples per case after {WARMUP} untimed ones, each "
         f"after a random pause of 0 to {MAX_GAP * 1e3:g} ms so that the calls do not lock onto "
-        "the emulator's 1 ms batches; "
+        "the emulated Uno's timers and the emulator's loop (a core that idled that long also "
+        "takes its time to wake, as an application's would); "
         f"percentiles by nearest rank. The wire time is the lower bound: the command's and the "
         "Ack's bytes counted as the Board sent and received them (its message ids start at "
         "random: 15 starts in 16 are 5-byte varints, the others make frames a byte shorter "
