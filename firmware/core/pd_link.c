@@ -256,10 +256,10 @@ bool pd_link_rx_byte(pd_core_t *core, uint8_t byte)
     }
     /* The payload a COMMAND's header announces is all in (the CRC and the
      * delimiter, 3 byte times, are still to come): decode it now. Whether the
-     * header told the truth, the packet check at the delimiter decides. */
-    if (link->rx_out == PD_HEADER_SIZE + (uint16_t)link->rx_buf[1] &&
+     * header told the truth, the packet check at the delimiter decides. Checked
+     * only when a byte was stored, so rx_out reaches the value once per frame. */
+    if (put && link->rx_out == PD_HEADER_SIZE + (uint16_t)link->rx_buf[1] &&
         link->rx_out <= sizeof(link->rx_buf) - 2u && link->rx_buf[0] == PD_PACKET_COMMAND) {
-        /* rx_out passes this value once per frame, with TYPE and LEN stored. */
         link->rx_decoded = pd_dispatch_decode(core, link->rx_buf + PD_HEADER_SIZE, link->rx_buf[1]);
     }
     return true;

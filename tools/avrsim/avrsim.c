@@ -185,6 +185,7 @@ typedef struct {
     uint64_t tx_last;      /* cycle of the last byte UART0 sent */
     uint64_t byte_cycles;  /* one byte on the line (10 bits at 115200 baud) */
     int tx_blocked;        /* the pty took no more of tx: wait for it to be writable */
+    size_t tx_ready;       /* leading bytes of tx already due (their due cycles only grow) */
     uint64_t passes;       /* passes of the main loop: batches and waits */
     uint16_t sp_min;       /* lowest stack pointer seen since start, a data address */
     uint32_t sp_min_pc;    /* the flash byte address that reached it */
@@ -836,10 +837,13 @@ static void pd_flush_tx(pd_sim_t *sim)
         return;
     }
     uint64_t wall = pd_wall_cycles(sim);
-    size_t due = 0;
-    while (due < sim->tx.len && sim->tx_due[(sim->tx.head + due) % PD_BUF_SIZE] <= wall) {
-        due++;
+    /* Only the bytes not yet known due are looked at: with nobody reading, a full
+     * tx would otherwise be scanned whole on every pass. */
+    while (sim->tx_ready < sim->tx.len &&
+           sim->tx_due[(sim->tx.head + sim->tx_ready) % PD_BUF_SIZE] <= wall) {
+        sim->tx_ready++;
     }
+    size_t due = sim->tx_ready;
     uint64_t stream = (uint64_t)((double)PD_STREAM_NS * (double)sim->avr->frequency / 1e9);
     int burst_done = due == sim->tx.len && pd_cycles(sim) - sim->tx_last > sim->byte_cycles;
     int stream_late = due > 0 && wall - sim->tx_due[sim->tx.head] >= stream;
@@ -859,6 +863,7 @@ static void pd_flush_tx(pd_sim_t *sim)
         sim->tx_blocked = 0;
         sim->tx.head = (sim->tx.head + (size_t)n) % PD_BUF_SIZE;
         sim->tx.len -= (size_t)n;
+        sim->tx_ready -= (size_t)n;
         due -= (size_t)n;
     }
 }
