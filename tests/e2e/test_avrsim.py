@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+import random
 import select
 import shutil
 import signal
@@ -56,9 +57,11 @@ def built() -> tuple[Path, Path]:
 class Runner:
     """One avrsim process with the test program, its trace and its port."""
 
-    def __init__(self, tmp: Path, *extra: str, link: Path | None = None) -> None:
+    def __init__(
+        self, tmp: Path, *extra: str, link: Path | None = None, program: Path = build.TEST_PROGRAM
+    ) -> None:
         self.trace_path = tmp / f"trace-{id(self)}.jsonl"
-        cmd = runner_command(build.TEST_PROGRAM, trace=self.trace_path, link=link)
+        cmd = runner_command(program, trace=self.trace_path, link=link)
         cmd[-1:-1] = list(extra)
         self.started = time.monotonic()
         self.proc = subprocess.Popen(
@@ -252,6 +255,14 @@ def test_an_answer_never_arrives_before_the_line_could_carry_it(
         runner.stop()
 
 
+#: How far ahead of the wall clock emulated time may run (tools/avrsim PD_AHEAD_NS),
+#: and so how late a host byte may enter the UART after the runner read it.
+MAX_RX_LAG_S = 50e-6
+
+#: Passes per emulated second of a sleeping board: about one per timer event (the
+#: firmware's tick is 1 kHz; 1,200 measured), not one per 50 us.
+MAX_IDLE_PASSES_PER_SECOND = 5_000
+
 #: Main-loop passes per emulated second the pacing allows: a pass runs emulated
 #: time at most 50 us ahead of the wall clock and then waits, or wakes for
 #: host bytes (with the input buffer full, at most one per byte time as the
@@ -284,6 +295,45 @@ def test_a_full_input_buffer_is_waited_on_not_polled(
     emulated = end["t"] - start["t"]
     passes = end["passes"] - start["passes"]
     assert passes <= MAX_PASSES_PER_SECOND * emulated, (passes, emulated)
+
+
+def test_a_host_byte_enters_the_uart_when_it_is_read_while_the_mcu_sleeps(
+    built: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """The firmware sleeps between interrupts, and simavr skips a sleeping core
+    ahead to its next cycle timer (the firmware's 1 ms tick). Emulated time was
+    then up to a millisecond ahead of the wall clock, and a byte from the host
+    entered the UART that much after it was written: every round trip measured
+    on the emulated Uno paid it (280 us at the median), although no real Uno
+    would. The runner now stops a sleeping core at its pacing target, so a byte
+    enters at most PD_AHEAD_NS (50 us) after the wall-clock time it was read at,
+    whatever the load: that bound is the runner's own arithmetic on its own
+    clocks (rx_lag_max), so the test's pauses vary only the phase, not the verdict."""
+    stats = tmp_path / "stats.jsonl"
+    runner = Runner(tmp_path, "--stats", str(stats), program=build.build_firmware())
+    rng = random.Random(11)
+    sent = 60
+    try:
+        start = snapshot(runner.proc, stats)
+        for _ in range(sent):
+            # A lone frame delimiter: the firmware ignores it and goes back to sleep.
+            runner.port.write(b"\x00")
+            time.sleep(rng.uniform(0.0, 0.003))  # phases against the tick; not judged
+        deadline = time.monotonic() + 30.0  # bounds a failing wait only
+        end = snapshot(runner.proc, stats)
+        while end["uart_rx_bytes"] - start["uart_rx_bytes"] < sent:
+            assert time.monotonic() < deadline, end
+            time.sleep(0.02)
+            end = snapshot(runner.proc, stats)
+        time.sleep(0.3)  # idle: its length does not change the verdict below
+        idle = snapshot(runner.proc, stats)
+    finally:
+        runner.stop()
+    assert end["rx_lag_max"] <= end["freq"] * MAX_RX_LAG_S + 1, end
+    # Nor does the runner wake an idle board every PD_AHEAD_NS (20,000 passes a
+    # second): it waits for the next timer event, the firmware's 1 ms tick.
+    emulated = idle["t"] - end["t"]
+    assert idle["passes"] - end["passes"] <= MAX_IDLE_PASSES_PER_SECOND * emulated, (end, idle)
 
 
 def test_stopped_pulses_give_a_zero_line(board: Runner) -> None:

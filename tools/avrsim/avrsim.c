@@ -63,6 +63,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/inotify.h>
+#include <sys/prctl.h>
 #include <sys/stat.h>
 #include <termios.h>
 #include <time.h>
@@ -86,12 +87,14 @@
 #define PD_DEFAULT_BAUD 115200U
 #define PD_MAX_HEX 4
 #define PD_BUF_SIZE 4096U
-/* Emulated time runs at most this far ahead of the wall clock (a sleeping MCU
- * jumps to its next timer event, which may be further). A host byte enters
- * the UART at the emulated time it is read at, so being ahead delays every
- * byte from the host by that much (at 1 ms, about 0.5 ms on every round trip);
- * the runner sleeps until the wall clock catches up, with nanosecond timeouts,
- * so the bound can be small. */
+/* Emulated time runs at most this far ahead of the wall clock, a sleeping MCU
+ * included (pd_pace_timer). A host byte enters the UART no earlier than the
+ * wall-clock time it was read at, and no later than the emulated time then, so
+ * being ahead delays every byte from the host by up to that much: a sleeping
+ * MCU that skipped to its next timer event (the 1 ms tick) added 280 us at the
+ * median to every round trip, which the firmware did not cost. The runner
+ * sleeps until the wall clock catches up, with nanosecond timeouts, so the
+ * bound can be small. */
 #define PD_AHEAD_NS 50000ULL
 /* At most this much emulated time per batch, so that a board catching up
  * after a stall (a loaded machine) keeps exchanging bytes meanwhile. */
@@ -184,6 +187,10 @@ typedef struct {
     uint64_t uart_tx;      /* bytes UART0 sent */
     uint64_t tx_last;      /* cycle of the last byte UART0 sent */
     uint64_t byte_cycles;  /* one byte on the line (10 bits at 115200 baud) */
+    uint64_t pace_at;      /* pd_pace_timer's cycle, in pd_cycles terms; 0 when not set */
+    uint64_t rx_read_at;   /* wall clock (in cycles) when the burst now entering was read */
+    int rx_first;          /* the next byte pd_rx_timer feeds starts a burst */
+    uint64_t rx_lag_max;   /* most cycles a burst's first byte entered after rx_read_at */
     int tx_blocked;        /* the pty took no more of tx: wait for it to be writable */
     size_t tx_ready;       /* leading bytes of tx already due (their due cycles only grow) */
     uint64_t passes;       /* passes of the main loop: batches and waits */
@@ -491,8 +498,11 @@ static void pd_uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
     sim->uart_tx++;
     sim->tx_last = pd_cycles(sim);
     if (sim->tx.len < PD_BUF_SIZE) {
-        /* simavr raises the byte as UDR is written, when it starts to go out. */
-        sim->tx_due[(sim->tx.head + sim->tx.len) % PD_BUF_SIZE] = sim->tx_last + sim->byte_cycles;
+        /* simavr raises the byte as UDR is written, when it starts to go out; it
+         * is on the line for the UART's own byte time (11 bits in simavr 1.6). */
+        uint64_t per_byte = sim->uart && sim->uart->cycles_per_byte ? sim->uart->cycles_per_byte
+                                                                     : sim->byte_cycles;
+        sim->tx_due[(sim->tx.head + sim->tx.len) % PD_BUF_SIZE] = sim->tx_last + per_byte;
     }
     pd_fifo_push(&sim->tx, (uint8_t)value);
 }
@@ -526,12 +536,14 @@ static void pd_write_stats(pd_sim_t *sim)
     fprintf(sim->stats,
             "{\"t\": %.6f, \"freq\": %u, \"cycles\": %llu, \"sleep_cycles\": %llu, "
             "\"awake_cycles\": %llu, \"uart_rx_bytes\": %llu, \"uart_tx_bytes\": %llu, "
-            "\"sp_min\": %u, \"sp_min_pc\": %lu, \"ramend\": %u, \"passes\": %llu}\n",
+            "\"sp_min\": %u, \"sp_min_pc\": %lu, \"ramend\": %u, \"passes\": %llu, "
+            "\"rx_lag_max\": %llu}\n",
             (double)cycles / (double)sim->avr->frequency, (unsigned)sim->avr->frequency,
             (unsigned long long)cycles, (unsigned long long)sleep,
             (unsigned long long)(cycles - sleep), (unsigned long long)sim->uart_rx,
             (unsigned long long)sim->uart_tx, (unsigned)sim->sp_min, (unsigned long)sim->sp_min_pc,
-            (unsigned)sim->avr->ramend, (unsigned long long)sim->passes);
+            (unsigned)sim->avr->ramend, (unsigned long long)sim->passes,
+            (unsigned long long)sim->rx_lag_max);
     fflush(sim->stats);
 }
 
@@ -780,6 +792,12 @@ static void pd_connect(pd_sim_t *sim)
     }
 }
 
+/* Wall-clock time as a cycle count of the emulated MCU. */
+static uint64_t pd_wall_cycles(const pd_sim_t *sim)
+{
+    return (uint64_t)((double)(pd_now_ns() - g_start_ns) * (double)sim->avr->frequency / 1e9);
+}
+
 /* One byte from the host into the UART per byte time, as a wire would. It
  * runs as a simavr cycle timer, so bytes arrive on time even while the MCU
  * sleeps (a sleeping core skips ahead to its next timer event). */
@@ -799,6 +817,13 @@ static avr_cycle_count_t pd_rx_timer(struct avr_t *avr, avr_cycle_count_t when, 
         }
     }
     avr_irq_t *in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    if (sim->rx_first) {
+        sim->rx_first = 0;
+        uint64_t at = sim->cycle_base + when;
+        if (at > sim->rx_read_at && at - sim->rx_read_at > sim->rx_lag_max) {
+            sim->rx_lag_max = at - sim->rx_read_at;
+        }
+    }
     uint8_t b = sim->rx.data[sim->rx.head];
     sim->rx.head = (sim->rx.head + 1) % PD_BUF_SIZE;
     sim->rx.len--;
@@ -809,19 +834,59 @@ static avr_cycle_count_t pd_rx_timer(struct avr_t *avr, avr_cycle_count_t when, 
     return when + per_byte;
 }
 
+/* Host bytes start into the UART at the emulated time that matches the wall
+ * clock's now, or at once if emulation is ahead of it: never at an emulated
+ * time before they were written, which a runner behind the wall clock (it
+ * waited, or the machine is loaded) would otherwise give them. */
 static void pd_start_rx(pd_sim_t *sim)
 {
     if (sim->rx.len && !sim->rx_timer && !sim->crashed) {
         sim->rx_timer = 1;
-        avr_cycle_timer_register(sim->avr, 1, pd_rx_timer, sim);
+        uint64_t wall = pd_wall_cycles(sim);
+        uint64_t now = pd_cycles(sim);
+        sim->rx_read_at = wall;
+        sim->rx_first = 1;
+        avr_cycle_timer_register(sim->avr, wall > now ? wall - now : 1, pd_rx_timer, sim);
     }
 }
 
-/* Wall-clock time as a cycle count of the emulated MCU. */
-static uint64_t pd_wall_cycles(const pd_sim_t *sim)
+/* Does nothing: it is there so that a sleeping MCU, which simavr skips ahead to
+ * its next cycle timer, stops at the pass's target (PD_AHEAD_NS). */
+static avr_cycle_count_t pd_pace_timer(struct avr_t *avr, avr_cycle_count_t when, void *param)
 {
-    return (uint64_t)((double)(pd_now_ns() - g_start_ns) * (double)sim->avr->frequency / 1e9);
+    (void)avr;
+    (void)when;
+    ((pd_sim_t *)param)->pace_at = 0;
+    return 0;
 }
+
+static void pd_set_pace(pd_sim_t *sim, uint64_t target)
+{
+    if (sim->pace_at == target) {
+        return;
+    }
+    avr_cycle_timer_cancel(sim->avr, pd_pace_timer, sim);
+    uint64_t now = pd_cycles(sim);
+    sim->pace_at = target;
+    avr_cycle_timer_register(sim->avr, target > now ? target - now : 1, pd_pace_timer, sim);
+}
+
+/* The cycle (pd_cycles terms) of the soonest cycle timer other than the pace
+ * timer: the next thing that can wake a sleeping MCU, short of host bytes and
+ * the control socket, which end the runner's wait. UINT64_MAX when none. The
+ * whole pool (sim_cycle_timers.h, at most 64) is looked at: its order is
+ * simavr's business. */
+static uint64_t pd_next_event(const pd_sim_t *sim)
+{
+    uint64_t next = UINT64_MAX;
+    for (avr_cycle_timer_slot_p t = sim->avr->cycle_timers.timer; t; t = t->next) {
+        if (t->timer != pd_pace_timer && sim->cycle_base + t->when < next) {
+            next = sim->cycle_base + t->when;
+        }
+    }
+    return next;
+}
+
 
 /*
  * What UART0 sent goes to the host no earlier than a line would have delivered
@@ -1017,6 +1082,7 @@ static void pd_run(pd_sim_t *sim)
             target = batch_end;
         }
         if (!sim->crashed) {
+            pd_set_pace(sim, target);
             while (pd_cycles(sim) < target && !g_stop && !g_reset) {
                 sim->last_cycle = sim->avr->cycle;
                 avr_flashaddr_t pc = sim->avr->pc;
@@ -1059,6 +1125,17 @@ static void pd_run(pd_sim_t *sim)
         /* Wait for host bytes or until the wall clock reaches emulated time. */
         uint64_t emulated_ns = (uint64_t)((double)pd_cycles(sim) / cycles_per_ns);
         uint64_t now_ns = pd_now_ns() - start_ns;
+        if (!sim->crashed && sim->avr->state == cpu_Sleeping) {
+            /* Nothing happens before the next timer event: the next pass is due
+             * when its target reaches that, not every PD_AHEAD_NS (an idle
+             * board would wake 20,000 times a second). */
+            uint64_t next = pd_next_event(sim);
+            uint64_t next_ns = next == UINT64_MAX ? emulated_ns + PD_BATCH_NS
+                                                  : (uint64_t)((double)next / cycles_per_ns);
+            if (next_ns > emulated_ns + PD_AHEAD_NS) {
+                emulated_ns = next_ns - PD_AHEAD_NS;
+            }
+        }
         if (sim->tx.len) {
             /* Wake when the last byte sent is due, to hand the host its burst. */
             uint64_t due_ns =
@@ -1096,6 +1173,9 @@ static void pd_run(pd_sim_t *sim)
 int main(int argc, char **argv)
 {
     g_start_ns = pd_now_ns();
+    /* Wake-ups on time: the default 50 us of timer slack would hand the host
+     * its bytes up to that late, and host bytes would enter the UART late. */
+    prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
     pd_sim_t *sim = &g_sim;
     const char *trace_path = NULL;
     const char *stats_path = NULL;
