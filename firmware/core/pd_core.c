@@ -16,6 +16,7 @@ void pd_core_init(pd_core_t *core, void *hal)
         core->session[i] = 0;
     }
     pd_link_init(&core->link);
+    pd_dispatch_clear(core);
     pd_dedupe_init(&core->dedupe);
     pd_outputs_init(&core->outputs);
     pd_failsafe_init(&core->failsafe, pd_hal_millis(hal));

@@ -11,27 +11,31 @@
 /* Every nested message fits a one-byte length: patched in place afterwards. */
 typedef char pd_assert_out_small[(protoduino_ArduinoOut_size < 128) ? 1 : -1];
 
+/*
+ * No bounds check per byte: pd_encode_out takes only a buffer that holds the
+ * largest ArduinoOut (nanopb's protoduino_ArduinoOut_size, from the same
+ * bounds this encoder enforces: every bytes, string and repeated field is
+ * checked against its static size before it is written). A check per byte was
+ * a fifth of an Ack's cycles on the Uno, between the command's delimiter and
+ * the Ack's first byte.
+ */
 typedef struct writer {
-    uint8_t *buf;
-    size_t cap;
-    size_t len;
-    bool ok;
+    uint8_t *p; /* the next byte */
+    bool ok;    /* false: a field out of its bounds, nothing to send */
 } writer_t;
 
 static void put(writer_t *w, uint8_t byte)
 {
-    if (w->len < w->cap) {
-        w->buf[w->len++] = byte;
-    } else {
-        w->ok = false;
-    }
+    *w->p++ = byte;
 }
 
 static void put_varint(writer_t *w, uint32_t value)
 {
     while (value >= 0x80u) {
         put(w, (uint8_t)(value | 0x80u));
-        value >>= 7;
+        /* value >>= 7 as a byte move and a shift by one: a 32-bit shift by 7 is
+         * a 7-pass loop at -Os, four times per message_id on the Uno. */
+        value = ((value >> 8) << 1) | ((uint8_t)value >> 7);
     }
     put(w, (uint8_t)value);
 }
@@ -78,24 +82,18 @@ static void put_string(writer_t *w, uint8_t tag, const char *s, size_t max)
 }
 
 /* Start a nested message; returns where its length byte goes. */
-static size_t open_msg(writer_t *w, uint8_t tag)
+static uint8_t *open_msg(writer_t *w, uint8_t tag)
 {
     put_tag(w, tag, WT_LEN);
-    size_t at = w->len;
+    uint8_t *at = w->p;
     put(w, 0);
     return at;
 }
 
-static void close_msg(writer_t *w, size_t at)
+/* Its length fits one byte: the whole ArduinoOut is under 128 (asserted above). */
+static void close_msg(writer_t *w, uint8_t *at)
 {
-    if (w->ok) {
-        size_t n = w->len - at - 1u;
-        if (n < 0x80u) {
-            w->buf[at] = (uint8_t)n;
-        } else {
-            w->ok = false;
-        }
-    }
+    *at = (uint8_t)(w->p - at - 1);
 }
 
 static void put_fixed32(writer_t *w, uint8_t tag, uint32_t v)
@@ -122,7 +120,7 @@ static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
     if (count > sizeof(info->reserved_pins) / sizeof(info->reserved_pins[0])) {
         w->ok = false;
     } else if (count > 0) {
-        size_t at = open_msg(w, protoduino_DeviceInfo_reserved_pins_tag); /* packed */
+        uint8_t *at = open_msg(w, protoduino_DeviceInfo_reserved_pins_tag); /* packed */
         for (pb_size_t i = 0; i < count; i++) {
             put_varint(w, info->reserved_pins[i]);
         }
@@ -145,12 +143,12 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
         put_bytes(w, protoduino_Ack_ping_echo_tag, ack->result.ping_echo.bytes,
                   ack->result.ping_echo.size);
     } else if (ack->which_result == protoduino_Ack_info_tag) {
-        size_t at = open_msg(w, protoduino_Ack_info_tag);
+        uint8_t *at = open_msg(w, protoduino_Ack_info_tag);
         put_info(w, &ack->result.info);
         close_msg(w, at);
     } else if (ack->which_result == protoduino_Ack_outputs_tag) {
         const protoduino_OutputStates *st = &ack->result.outputs;
-        size_t at = open_msg(w, protoduino_Ack_outputs_tag);
+        uint8_t *at = open_msg(w, protoduino_Ack_outputs_tag);
         if (st->servos.size > sizeof(st->servos.bytes)) {
             w->ok = false;
         } else if (st->servos.size > 0) {
@@ -165,9 +163,12 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
 
 size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap)
 {
-    writer_t w = {buf, cap, 0, true};
-    size_t at;
+    writer_t w = {buf, true};
+    uint8_t *at;
 
+    if (cap < protoduino_ArduinoOut_size) {
+        return 0; /* the largest message might not fit: see writer_t */
+    }
     switch (msg->which_data) {
     case protoduino_ArduinoOut_ack_tag:
         at = open_msg(&w, protoduino_ArduinoOut_ack_tag);
@@ -194,5 +195,5 @@ size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap)
     default:
         break; /* no member set: the empty message */
     }
-    return w.ok ? w.len : 0;
+    return w.ok ? (size_t)(w.p - buf) : 0;
 }

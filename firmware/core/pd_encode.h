@@ -22,8 +22,11 @@
 
 #include "protoduino.pb.h"
 
-/* Encode `msg` into buf (capacity cap). Returns the length, or 0 if it does
- * not fit (an empty ArduinoOut also encodes to 0 bytes; the core never sends one). */
+/* Encode `msg` into buf (capacity cap). Returns the length, or 0 if cap is
+ * below protoduino_ArduinoOut_size (the largest message: any message fits a
+ * buffer that size, and is written without a bounds check per byte) or a field
+ * is out of its bounds (an empty ArduinoOut also encodes to 0 bytes; the core
+ * never sends one). */
 size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap);
 
 #endif /* PD_ENCODE_H */

@@ -23,6 +23,17 @@ static __attribute__((noinline)) void rx_restart(pd_link_t *link)
     link->rx_left = 0;
     link->rx_zero = false;
     link->rx_decoded = false;
+    link->rx_in_used = false;
+}
+
+/* The end of a frame, handled or dropped: core->in back to zeros for the next
+ * decode (pd_dispatch_clear says why here), and the receiver restarted. */
+static void rx_finish(pd_core_t *core)
+{
+    if (core->link.rx_in_used) {
+        pd_dispatch_clear(core);
+    }
+    rx_restart(&core->link);
 }
 
 void pd_link_init(pd_link_t *link)
@@ -223,14 +234,14 @@ bool pd_link_rx_byte(pd_core_t *core, uint8_t byte)
             }
             handle_frame(core);
         }
-        rx_restart(link);
+        rx_finish(core);
         return true;
     }
     if (link->rx_skipping) {
         return true;
     }
     if (link->rx_len >= PD_MAX_ENCODED_FRAME) {
-        rx_restart(link);
+        rx_finish(core);
         link->rx_skipping = true;
         PD_STAT_INC(link, rx_overflow);
         pd_link_send_event(core, PD_EVENT_RX_OVERFLOW);
@@ -260,6 +271,7 @@ bool pd_link_rx_byte(pd_core_t *core, uint8_t byte)
      * only when a byte was stored, so rx_out reaches the value once per frame. */
     if (put && link->rx_out == PD_HEADER_SIZE + (uint16_t)link->rx_buf[1] &&
         link->rx_out <= sizeof(link->rx_buf) - 2u && link->rx_buf[0] == PD_PACKET_COMMAND) {
+        link->rx_in_used = true;
         link->rx_decoded = pd_dispatch_decode(core, link->rx_buf + PD_HEADER_SIZE, link->rx_buf[1]);
     }
     return true;

@@ -247,12 +247,13 @@ static __attribute__((noinline)) uint16_t degrees_to_us(const pd_servo_t *s, uin
 {
     typedef char fits[((PD_SERVO_LIMIT_MAX_US - PD_SERVO_LIMIT_MIN_US) / 180u *
                            PD_SERVO_MAX_DEGREES + PD_SERVO_LIMIT_MAX_US <= 0xFFFFu &&
+                       PD_SERVO_LIMIT_MAX_US - PD_SERVO_LIMIT_MIN_US < 180u * 180u &&
                        PD_SERVO_MAX_DEGREES <= 180u) ? 1 : -1];
     (void)sizeof(fits);
     uint16_t range = (uint16_t)(s->max_us - s->min_us);
-    uint16_t q = range / 180u;
-    uint16_t r = range % 180u;
-    return (uint16_t)(s->min_us + degrees * q + (uint16_t)(degrees * r) / 180u);
+    uint16_t q = pd_div180(range);
+    uint16_t r = (uint16_t)(range - q * 180u);
+    return (uint16_t)(s->min_us + degrees * q + pd_div180((uint16_t)(degrees * r)));
 }
 
 /* Not inlined (into respond(), its only caller): 58 B less of the Uno's flash

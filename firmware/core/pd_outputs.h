@@ -134,4 +134,18 @@ void pd_outputs_release_all(pd_outputs_t *out, void *hal);
  * speed-limited servo moves there at its speed. */
 void pd_outputs_all_safe(pd_outputs_t *out, void *hal);
 
+/*
+ * x / 180 for x < 32,400 (180 * 180), without a division: (x * 23,302) >> 22
+ * is exact there (23,302 / 2^22 exceeds 1/180 by under 7.4e-8, so the error
+ * stays below 0.0024 while the fraction it could push over 1 is at most
+ * 179/180; tests/c checks every x). A 16 x 16 -> 32 bit multiply takes a few
+ * cycles on the AVR's hardware multiplier; libgcc's __udivmodhi4, about 190,
+ * twice per servo write, between the command's delimiter and its Ack.
+ */
+static inline uint16_t pd_div180(uint16_t x)
+{
+    /* The high half, then 6 more: a 32-bit shift by 22 is a 22-pass loop at -Os. */
+    return (uint16_t)((uint16_t)(((uint32_t)x * 23302u) >> 16) >> 6);
+}
+
 #endif /* PD_OUTPUTS_H */

@@ -52,6 +52,39 @@ static void test_degrees_to_us(void)
     }
 }
 
+static void test_div180_exact_below_180_squared(void)
+{
+    for (uint32_t x = 0; x < 180u * 180u; x++) {
+        CHECK_EQ(pd_div180((uint16_t)x), x / 180u);
+    }
+}
+
+/* Every degree over the ranges where the 16-bit split (range = 180 q + r) changes shape. */
+static void test_degrees_to_us_every_degree(void)
+{
+    const uint32_t mins[] = {PD_SERVO_LIMIT_MIN_US, 544, 1000};
+    const uint32_t ranges[] = {1, 179, 180, 181, 359, 360, 1000, 1799, 1856, 2199};
+    uint32_t id = 1;
+    for (size_t m = 0; m < sizeof(mins) / sizeof(mins[0]); m++) {
+        for (size_t k = 0; k < sizeof(ranges) / sizeof(ranges[0]); k++) {
+            uint32_t lo = mins[m];
+            uint32_t hi = lo + ranges[k];
+            if (hi > PD_SERVO_LIMIT_MAX_US) {
+                continue;
+            }
+            tdev_t d;
+            t_active(&d);
+            protoduino_ArduinoIn in = m_servo_init_deg(id++, 9, lo, hi, 0);
+            CHECK_EQ(t_cmd(&d, &in), S(OK));
+            for (uint32_t deg = 0; deg <= 180; deg++) {
+                in = m_servo_deg(id++, 9, deg);
+                CHECK_EQ(t_cmd(&d, &in), S(OK));
+                CHECK_EQ(d.hal.servo_us[9], lo + deg * (hi - lo) / 180u);
+            }
+        }
+    }
+}
+
 static void test_invalid_pin(void)
 {
     tdev_t d;
@@ -475,6 +508,8 @@ const pd_test_case_t pd_tests_dispatch[] = {
     TEST_CASE(test_ack_ok_every_command),
     TEST_CASE(test_servo_init_defaults_and_safe_at_once),
     TEST_CASE(test_degrees_to_us),
+    TEST_CASE(test_div180_exact_below_180_squared),
+    TEST_CASE(test_degrees_to_us_every_degree),
     TEST_CASE(test_invalid_pin),
     TEST_CASE(test_reserved_pin),
     TEST_CASE(test_not_initialised),
