@@ -13,6 +13,7 @@
  */
 #include <avr/interrupt.h>
 #include <avr/io.h>
+#include <string.h>
 #include <util/atomic.h>
 
 #include "pd_avr.h"
@@ -102,12 +103,23 @@ bool pd_avr_uart_write(const uint8_t *data, uint16_t len)
     if (len > pd_avr_uart_tx_room()) {
         return false;
     }
+    /* Up to the ring's end, then from its start: memcpy rather than a wrap
+     * test per byte, on the path from a command's delimiter to its Ack's first
+     * byte. The ISR reads only below tx_head, so these bytes are the main
+     * loop's own until tx_head moves: no volatile access needed for them. */
     uint8_t head = tx_head;
-    for (uint16_t i = 0; i < len; i++) {
-        tx_buf[head] = data[i];
-        head = (uint8_t)(head + 1u == PD_AVR_TX_SIZE ? 0u : head + 1u);
+    uint8_t *ring = (uint8_t *)tx_buf;
+    uint8_t first = (uint8_t)(PD_AVR_TX_SIZE - head);
+    if (len < first) {
+        first = (uint8_t)len;
     }
-    tx_head = head; /* one byte: the ISR sees the whole frame or none of it */
+    memcpy(ring + head, data, first);
+    memcpy(ring, data + first, (uint8_t)(len - first));
+    uint16_t next = (uint16_t)(head + len); /* up to 2 x 147: past a byte */
+    if (next >= PD_AVR_TX_SIZE) {
+        next = (uint16_t)(next - PD_AVR_TX_SIZE);
+    }
+    tx_head = (uint8_t)next; /* one byte: the ISR sees the whole frame or none of it */
     UCSR0B |= _BV(UDRIE0);
     return true;
 }

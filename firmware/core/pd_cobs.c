@@ -4,31 +4,40 @@
 
 size_t pd_cobs_encode(const uint8_t *src, size_t len, uint8_t *dst, size_t cap)
 {
-    size_t out = 1;         /* next free byte of dst */
-    size_t code_at = 0;     /* where the current block's code byte goes */
-    uint8_t code = 1;       /* 1 + bytes in the current block */
-    bool after_full = false; /* nothing since the last full (0xFF) block */
-
+    /* Pointers, not indexes: on the Uno every Ack goes through here between a
+     * command's delimiter and the Ack's first byte, and 16-bit index arithmetic
+     * per byte was twice the work. */
     if (cap == 0) {
         return 0;
     }
-    for (size_t i = 0; i < len; i++) {
+    const uint8_t *const src_end = src + len;
+    uint8_t *const end = dst + cap;
+    uint8_t *out = dst + 1;  /* next free byte of dst; never past end */
+    uint8_t *code_at = dst;  /* where the current block's code byte goes; may reach end */
+    uint8_t code = 1;        /* 1 + bytes in the current block */
+    bool after_full = false; /* nothing since the last full (0xFF) block */
+
+    while (src != src_end) {
+        uint8_t b = *src++;
         after_full = false;
-        if (src[i] != 0) {
-            if (out >= cap) {
+        if (b != 0) {
+            if (out >= end) {
                 return 0;
             }
-            dst[out++] = src[i];
+            *out++ = b;
             code++;
         }
-        if (src[i] == 0 || code == 0xFF) {
+        if (b == 0 || code == 0xFF) {
             /* Close the block; a full one (254 bytes) implies no zero. */
-            after_full = (src[i] != 0);
-            if (code_at >= cap) {
+            after_full = (b != 0);
+            if (code_at >= end) {
                 return 0;
             }
-            dst[code_at] = code;
-            code_at = out++;
+            *code_at = code;
+            code_at = out;
+            if (out != end) {
+                out++; /* at end, out and code_at both say full: the next write fails */
+            }
             code = 1;
         }
     }
@@ -38,13 +47,13 @@ size_t pd_cobs_encode(const uint8_t *src, size_t len, uint8_t *dst, size_t cap)
      * and the shared vectors pin this shorter form.
      */
     if (after_full) {
-        return code_at;
+        return (size_t)(code_at - dst);
     }
-    if (code_at >= cap) {
+    if (code_at >= end) {
         return 0;
     }
-    dst[code_at] = code;
-    return out;
+    *code_at = code;
+    return (size_t)(out - dst);
 }
 
 int pd_cobs_decode(const uint8_t *src, size_t len, uint8_t *dst, size_t cap)

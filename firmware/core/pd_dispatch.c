@@ -17,13 +17,15 @@ void pd_dedupe_init(pd_dedupe_t *dd)
 
 int pd_dedupe_find(const pd_dedupe_t *dd, uint32_t id)
 {
-    /* Every new command scans the whole window and finds nothing: its low
-     * byte first (ids count up, so it tells them apart), the rest only on a
-     * match. A 32-bit compare per entry was 380 of the Uno's cycles between a
-     * command's delimiter and its Ack. */
-    const uint8_t low = (uint8_t)id;
+    /* Every new command scans the whole window and finds nothing: one byte
+     * of each id first (ids count up, so their first bytes in memory, the low
+     * ones on the Uno, tell them apart; on any byte order it is only a filter,
+     * the whole compare decides), the rest only on a match. A 32-bit compare
+     * per entry was 380 of the Uno's cycles between a command's delimiter and
+     * its Ack. */
+    const uint8_t first = *(const uint8_t *)&id;
     for (uint8_t i = 0; i < dd->count; i++) {
-        if ((uint8_t)dd->id[i] == low && dd->id[i] == id) {
+        if (*(const uint8_t *)&dd->id[i] == first && dd->id[i] == id) {
             return dd->status[i];
         }
     }
