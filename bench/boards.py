@@ -163,6 +163,10 @@ class CycleStats:
     uart_rx: int
     uart_tx: int
     wall: float  # time.perf_counter() when the line appeared
+    #: First bytes the UART sent after a host burst's last byte, and their cycles since that
+    #: byte was ready in UDR0: the firmware's answer time (tools/avrsim/README.md).
+    answers: int = 0
+    answer_cycles: int = 0
 
     def __sub__(self, other: CycleStats) -> CycleStats:
         return CycleStats(
@@ -172,6 +176,8 @@ class CycleStats:
             self.uart_rx - other.uart_rx,
             self.uart_tx - other.uart_tx,
             self.wall - other.wall,
+            self.answers - other.answers,
+            self.answer_cycles - other.answer_cycles,
         )
 
     @property
@@ -213,6 +219,8 @@ class CycleCounter:
                     int(row["uart_rx_bytes"]),
                     int(row["uart_tx_bytes"]),
                     time.perf_counter(),
+                    int(row["answers"]),
+                    int(row["answer_cycles"]),
                 )
             time.sleep(0.002)
         raise TimeoutError(f"the runner wrote no statistics to {self.path} in time")

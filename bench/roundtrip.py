@@ -128,6 +128,9 @@ class BoardRun:
     raw: dict[str, list[float]] = field(default_factory=dict)
     #: avr only: awake cycles per command (idle load removed) and the idle awake share.
     cycles: dict[str, float] = field(default_factory=dict)
+    #: avr only: the firmware's answer time per command, in cycles: from the command's last
+    #: byte ready in the UART to the Ack's first byte leaving (the runner's counters, a mean).
+    answer: dict[str, float] = field(default_factory=dict)
     idle_share: float | None = None
     #: avr only: emulated time over wall time across the timed library blocks.
     pace: float | None = None
@@ -215,6 +218,9 @@ def measure_board(
         for kind, blocks in awake.items():
             total = sum(n for _d, n in blocks)
             run.cycles[kind] = sum(busy_cycles(d, run.idle_share) for d, _n in blocks) / total
+            answers = sum(d.answers for d, _n in blocks)
+            if answers:
+                run.answer[kind] = sum(d.answer_cycles for d, _n in blocks) / answers
     return run
 
 
@@ -267,14 +273,16 @@ class Budget:
     wire: float
     awake: float  # the firmware's awake time per command
     awake_cycles: float
+    answer: float  # the firmware's answer time: command's last byte in to the Ack's first out
+    answer_cycles: float
     host: float  # the host library's own time (simulated board: library p50 - raw p50)
     library: float  # Board p50 on the emulated Uno
 
     @property
     def beyond(self) -> float:
-        """The round trip beyond the wire and the host library: the firmware's work after
-        the command's last byte, the emulator's pacing, the pty, scheduling."""
-        return self.library - self.wire - self.host
+        """The round trip beyond the wire, the firmware's answer time and the host library:
+        the emulator's pacing, the pty, the raw I/O, scheduling."""
+        return self.library - self.wire - self.answer - self.host
 
     def rows(self) -> list[list[str]]:
         return [
@@ -284,14 +292,19 @@ class Budget:
                 f"{self.wire:,.0f}",
             ],
             [
+                "the firmware's answer time: from the command's last byte ready in the UART to "
+                f"the Ack's first byte leaving ({self.answer_cycles:,.0f} cycles at 16 MHz, "
+                "the emulator's count, mean over the calls)",
+                f"{self.answer:,.0f}",
+            ],
+            [
                 "host library (on the simulated board: Board p50 minus raw client p50)",
                 f"{self.host:,.0f}",
             ],
             [
-                "beyond both: the firmware's work after the command's last byte, the "
-                "emulator's pacing (emulated time at most 50 us ahead of the wall clock, "
-                "answers handed over no earlier than the line delivers them), "
-                "the pty, scheduling",
+                "the rest: the emulator's pacing (a host byte enters the UART at most 50 us "
+                "after it was read; answers handed over no earlier than the line delivers "
+                "them), the pty both ways, the raw I/O, scheduling",
                 f"{self.beyond:,.0f}",
             ],
             ["= Board p50 on the emulated Uno", f"{self.library:,.0f}"],
@@ -313,16 +326,19 @@ def host_overhead(run: BoardRun, kind: str) -> float:
 def budget(run: BoardRun, kind: str, host: float) -> Budget | None:
     """The median round trip of ``kind`` on the emulated Uno, split (None without cycles);
     ``host`` is the host library's share in us."""
-    if kind not in run.cycles:
+    if kind not in run.cycles or kind not in run.answer:
         return None
     command, ack = run.wire_bytes[kind]
     cycles = run.cycles[kind]
+    answer = run.answer[kind]
     return Budget(
         command_bytes=command,
         ack_bytes=ack,
         wire=EMULATED_BYTE_US * (command + ack),
         awake=cycles / UNO_HZ * 1e6,
         awake_cycles=cycles,
+        answer=answer / UNO_HZ * 1e6,
+        answer_cycles=answer,
         host=host,
         library=Percentiles.of(run.library[kind]).p50 * 1e6,
     )
@@ -470,18 +486,18 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
     verdict = "met" if target.met else "missed"
     out.append(
         f"The target is {verdict}: {TARGET_RATIO}x the servo write's wire time leaves "
-        f"{allowed:,.0f} us above the wire for everything else; the host library takes "
-        f"{servo.host:,.0f} us of it and the rest of the round trip {servo.beyond:,.0f} us. The "
-        "firmware COBS-decodes each byte and folds it into the CRC as it arrives, hands a "
-        "command's payload to nanopb as soon as its last byte is in (the CRC and the "
-        "delimiter, 3 byte times, are still on the wire), and sends its Ack through a ring an "
-        "interrupt drains; what it still does between the command's last byte and the Ack's "
-        "first is the rest of nanopb's decode, the checks, the command and the Ack's encoding "
-        "(part 5 profiles its cycles), so most of its "
-        f"{servo.awake:,.0f} us awake per command overlaps the wire. The rest is the emulated "
-        "Uno's own: its runner keeps emulated time at most 50 us ahead of the wall clock (a "
-        "sleeping MCU included), and a host byte enters the emulated UART at most that much "
-        "after the runner read it (its wake-up on the pty comes first); what "
+        f"{allowed:,.0f} us above the wire for everything else; the firmware's answer time "
+        f"takes {servo.answer:,.0f} us of it, the host library {servo.host:,.0f} us and the "
+        f"rest of the round trip {servo.beyond:,.0f} us. The firmware COBS-decodes each byte "
+        "and folds it into the CRC as it arrives, hands a command's payload to nanopb as soon "
+        "as its last byte is in (the CRC and the delimiter, 3 byte times, are still on the "
+        "wire), and sends its Ack through a ring an interrupt drains; its answer time is "
+        "what remains after the command's last byte: the end of nanopb's decode, the checks, "
+        "the command, and the Ack's encoding, CRC and COBS (part 5 profiles the cycles), so "
+        f"most of its {servo.awake:,.0f} us awake per command overlaps the wire. The rest is "
+        "the emulated Uno's own: its runner keeps emulated time at most 50 us ahead of the "
+        "wall clock (a sleeping MCU included), and a host byte enters the emulated UART at "
+        "most that much after the runner read it (its wake-up on the pty comes first); what "
         "the UART sends reaches the host no earlier than a line would deliver it (a burst in "
         "one write once its last byte is due), so the emulator can only lengthen a round "
         "trip, never shorten it; on a loaded machine the runner also waits for a core. "

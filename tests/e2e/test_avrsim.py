@@ -336,6 +336,31 @@ def test_a_host_byte_enters_the_uart_when_it_is_read_while_the_mcu_sleeps(
     assert idle["passes"] - end["passes"] <= MAX_IDLE_PASSES_PER_SECOND * emulated, (end, idle)
 
 
+def test_answer_time_runs_from_the_last_byte_in_to_the_first_byte_out(
+    built: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """The runner's answer counters (what the bench reports as the firmware's answer
+    time): one per host burst answered, counted in emulated cycles from the burst's last
+    byte ready in UDR0 to the next byte the UART sends. The test program echoes each
+    byte from its main loop, within a few dozen cycles; a clock started at the first byte
+    of a burst, or at the byte's entry into simavr's FIFO, would count a byte time more."""
+    stats = tmp_path / "stats.jsonl"
+    runner = Runner(tmp_path, "--stats", str(stats))
+    calls = 20
+    try:
+        start = snapshot(runner.proc, stats)
+        for _ in range(calls):
+            runner.port.write(b"y")
+            assert runner.port.read(1) == b"y"
+        end = snapshot(runner.proc, stats)
+    finally:
+        runner.stop()
+    answers = end["answers"] - start["answers"]
+    cycles = end["answer_cycles"] - start["answer_cycles"]
+    assert answers == calls, (start, end)
+    assert 0 < cycles / answers < end["freq"] * BYTE_S / 4, (start, end)
+
+
 def test_stopped_pulses_give_a_zero_line(board: Runner) -> None:
     board.command("S10 1300")
     board.wait_for(_servo(10, 1300))

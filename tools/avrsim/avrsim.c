@@ -191,6 +191,9 @@ typedef struct {
     uint64_t rx_read_at;   /* wall clock (in cycles) when the burst now entering was read */
     int rx_first;          /* the next byte pd_rx_timer feeds starts a burst */
     uint64_t rx_lag_max;   /* most cycles a burst's first byte entered after rx_read_at */
+    uint64_t rx_last_at;   /* cycle the last byte of a host burst was ready in UDR0; 0: none */
+    uint64_t answers;      /* UART bytes sent first after a host burst's last byte */
+    uint64_t answer_cycles; /* their cycles since that last byte: the MCU's answer time */
     int tx_blocked;        /* the pty took no more of tx: wait for it to be writable */
     size_t tx_ready;       /* leading bytes of tx already due (their due cycles only grow) */
     uint64_t passes;       /* passes of the main loop: batches and waits */
@@ -491,12 +494,31 @@ static void pd_ddr_hook(struct avr_irq_t *irq, uint32_t value, void *param)
     pd_port_sample(&g_sim, param, (uint8_t)value);
 }
 
+/* The receive-complete interrupt raised: a byte is ready in UDR0. The last one
+ * of a host burst (none left here, none more in simavr's FIFO) starts the
+ * clock that the next byte the UART sends stops (pd_uart_out_hook). */
+static void pd_rxc_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    pd_sim_t *sim = param;
+    const uart_fifo_t *in = &sim->uart->input;
+    if (value && sim->rx.len == 0 &&
+        ((in->write - in->read) & (uart_fifo_fifo_size - 1U)) <= 1U) {
+        sim->rx_last_at = pd_cycles(sim);
+    }
+}
+
 static void pd_uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
     pd_sim_t *sim = param;
     sim->uart_tx++;
     sim->tx_last = pd_cycles(sim);
+    if (sim->rx_last_at) {
+        sim->answers++;
+        sim->answer_cycles += sim->tx_last - sim->rx_last_at;
+        sim->rx_last_at = 0;
+    }
     if (sim->tx.len < PD_BUF_SIZE) {
         /* simavr raises the byte as UDR is written, when it starts to go out; it
          * is on the line for the UART's own byte time (11 bits in simavr 1.6). */
@@ -537,13 +559,14 @@ static void pd_write_stats(pd_sim_t *sim)
             "{\"t\": %.6f, \"freq\": %u, \"cycles\": %llu, \"sleep_cycles\": %llu, "
             "\"awake_cycles\": %llu, \"uart_rx_bytes\": %llu, \"uart_tx_bytes\": %llu, "
             "\"sp_min\": %u, \"sp_min_pc\": %lu, \"ramend\": %u, \"passes\": %llu, "
-            "\"rx_lag_max\": %llu}\n",
+            "\"rx_lag_max\": %llu, \"answers\": %llu, \"answer_cycles\": %llu}\n",
             (double)cycles / (double)sim->avr->frequency, (unsigned)sim->avr->frequency,
             (unsigned long long)cycles, (unsigned long long)sleep,
             (unsigned long long)(cycles - sleep), (unsigned long long)sim->uart_rx,
             (unsigned long long)sim->uart_tx, (unsigned)sim->sp_min, (unsigned long)sim->sp_min_pc,
             (unsigned)sim->avr->ramend, (unsigned long long)sim->passes,
-            (unsigned long long)sim->rx_lag_max);
+            (unsigned long long)sim->rx_lag_max, (unsigned long long)sim->answers,
+            (unsigned long long)sim->answer_cycles);
     fflush(sim->stats);
 }
 
@@ -661,6 +684,7 @@ static void pd_after_reset(pd_sim_t *sim)
     sim->reset_seen = 0;
     pd_tame_extint(sim);
     sim->rx_timer = 0; /* a reset cancels every cycle timer */
+    sim->pace_at = 0;
     pd_start_rx(sim);
     if (sim->avr->cycle < sim->last_cycle) {
         sim->cycle_base += sim->last_cycle;
@@ -786,6 +810,9 @@ static void pd_connect(pd_sim_t *sim)
     sim->uart = (avr_uart_t *)pd_find_io(avr, "uart", '0');
     uint32_t flags = 0; /* no stdio echo of the UART, no usleep when polled */
     avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    if (sim->uart) {
+        avr_irq_register_notify(&sim->uart->rxc.irq[AVR_INT_IRQ_PENDING], pd_rxc_hook, sim);
+    }
     avr_irq_t *out = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT);
     if (out) {
         avr_irq_register_notify(out, pd_uart_out_hook, sim);
