@@ -119,6 +119,9 @@ bool pd_avr_uart_write(const uint8_t *data, uint16_t len)
     if (next >= PD_AVR_TX_SIZE) {
         next = (uint16_t)(next - PD_AVR_TX_SIZE);
     }
+    /* The copies are plain stores, which the compiler may move past a volatile
+     * one: they must all be done before tx_head hands the bytes to the ISR. */
+    __asm__ __volatile__("" ::: "memory");
     tx_head = (uint8_t)next; /* one byte: the ISR sees the whole frame or none of it */
     UCSR0B |= _BV(UDRIE0);
     return true;
