@@ -63,6 +63,8 @@ typedef struct sim_hal {
     sim_input_t input[PD_MAX_PINS];
     FILE *trace;
     struct timespec start;
+    double wall_read; /* the wall clock's seconds at the last reading of the board's */
+    double board;     /* the board's seconds then (sim_elapsed) */
     uint8_t mode[PD_MAX_PINS];
     uint16_t value[PD_MAX_PINS];
     uint8_t tx[SIM_TX_SIZE];
@@ -81,11 +83,30 @@ static const pd_board_info_t sim_board = {
 static volatile sig_atomic_t sim_stop;
 static volatile sig_atomic_t sim_reboot;
 
-static double sim_elapsed(const sim_hal_t *hal)
+/*
+ * The board's clock, in seconds since start: the host's monotonic clock, except
+ * that a gap between two readings longer than SIM_MAX_STEP counts as that. An
+ * MCU's time passes while it runs; this process does not run while a loaded
+ * host keeps it waiting, and on the wall clock its failsafe (checked once a
+ * loop pass) then looked late by however long that was: a test of the failsafe's
+ * timing saw 0.15 ms over its 3 ms bound on a busy machine. With the cap, the
+ * board fires within SIM_MAX_STEP of its deadline on its own clock, as the
+ * emulated Uno does on its emulated one, whatever the load. The loop reads the
+ * clock every pass (poll() waits 1 ms at most), so on a host that keeps up no
+ * gap reaches the cap and the board's clock is the wall clock.
+ */
+#define SIM_MAX_STEP 0.0015
+
+static double sim_elapsed(sim_hal_t *hal)
 {
     struct timespec now;
     clock_gettime(CLOCK_MONOTONIC, &now);
-    return (double)(now.tv_sec - hal->start.tv_sec) + (double)(now.tv_nsec - hal->start.tv_nsec) / 1e9;
+    double wall =
+        (double)(now.tv_sec - hal->start.tv_sec) + (double)(now.tv_nsec - hal->start.tv_nsec) / 1e9;
+    double step = wall - hal->wall_read;
+    hal->board += step < SIM_MAX_STEP ? step : SIM_MAX_STEP;
+    hal->wall_read = wall;
+    return hal->board;
 }
 
 static void sim_trace(sim_hal_t *hal, uint8_t pin, uint8_t mode, uint16_t value)

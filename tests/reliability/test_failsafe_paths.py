@@ -195,6 +195,25 @@ def test_after_a_failsafe_controls_wait_for_life_and_are_protected_again(sim: Si
     ]
 
 
+def test_a_board_the_host_stalls_keeps_its_failsafe_on_its_own_clock(sim: SimBoard) -> None:
+    """The board's process stopped (SIGSTOP) past its failsafe deadline, as a loaded
+    host can keep it waiting: once it runs again, the failsafe is still dated T after the
+    last sign of life on the board's clock. The native board's clock counts a gap between
+    two of its readings as 1.5 ms at most (pd_sim.c, SIM_MAX_STEP); on the wall clock it
+    fired at the resume, the whole stop late. The emulated Uno's time is emulated cycles."""
+    t = 1.0  # room for the commands that follow the sign of life on a busy machine
+    with Board.open(sim.port, ping=False, failsafe_timeout=t) as board:
+        rig = Rig(board, sim)
+        rig.command()
+        alive = rig.bracket(board.ping)
+        os.kill(sim.pid, signal.SIGSTOP)
+        try:
+            time.sleep(t + 0.5)  # the stop outlasts the deadline; its length is not judged
+        finally:
+            os.kill(sim.pid, signal.SIGCONT)
+        assert_failsafe_on_time(sim, alive, t)
+
+
 def test_ping_false_explicit_ping_is_the_only_life(sim: SimBoard) -> None:
     t = 1.0  # room for the commands that follow the sign of life on a busy machine
     with Board.open(sim.port, ping=False, failsafe_timeout=t) as board:
