@@ -914,7 +914,6 @@ static uint64_t pd_next_event(const pd_sim_t *sim)
     return next;
 }
 
-
 /*
  * What UART0 sent goes to the host no earlier than a line would have delivered
  * it: emulation runs up to PD_AHEAD_NS ahead of the wall clock, and a byte sent
