@@ -17,10 +17,7 @@ from __future__ import annotations
 import json
 import os
 import random
-import select
-import shutil
 import signal
-import subprocess
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -28,6 +25,7 @@ from typing import Any
 
 import pytest
 import serial
+from boardprocess import BoardProcess, missing_tool
 from protoduino.simboard import runner_command
 from protoduino_dev import build
 from runnerstats import snapshot
@@ -37,18 +35,13 @@ pytestmark = pytest.mark.avr
 STARTUP_TIMEOUT = 10.0
 
 
-def _missing_tool() -> str | None:
-    for tool in ("make", "cc", "avr-gcc"):
-        if shutil.which(tool) is None:
-            return tool
-    if not Path("/usr/include/simavr/sim_avr.h").exists():
-        return "libsimavr-dev"
-    return None
+#: What building and running the runner with its test program takes.
+RUNNER_TOOLS = ("make", "cc", "avr-gcc")
 
 
 @pytest.fixture(scope="module")
 def built() -> tuple[Path, Path]:
-    missing = _missing_tool()
+    missing = missing_tool(*RUNNER_TOOLS, simavr=True)
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
     return build.build_runner(), build.build_test_program()
@@ -64,16 +57,9 @@ class Runner:
         cmd = runner_command(program, trace=self.trace_path, link=link)
         cmd[-1:-1] = list(extra)
         self.started = time.monotonic()
-        self.proc = subprocess.Popen(
-            cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL
-        )
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], STARTUP_TIMEOUT)
-        if not ready:
-            self.proc.kill()
-            self.proc.wait()
-            raise AssertionError("the runner printed no port")
-        self.first_line = self.proc.stdout.readline().decode().rstrip("\n")
+        self.process = BoardProcess(cmd, startup=STARTUP_TIMEOUT)
+        self.proc = self.process.proc
+        self.first_line = self.process.port
         self.port = serial.Serial(self.first_line, 115200, timeout=0.2)
 
     def command(self, line: str) -> int:
@@ -111,18 +97,10 @@ class Runner:
         raise AssertionError(f"no matching trace line in {self.trace()}")
 
     def stop(self, sig: int = signal.SIGTERM) -> int:
+        """Close the port, signal the runner, and return its exit status (it must exit)."""
         self.port.close()
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-        try:
-            rc = self.proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-            raise
-        finally:
-            assert self.proc.stdout is not None
-            self.proc.stdout.close()
+        rc = self.process.stop(sig, timeout=5)
+        assert rc is not None
         return rc
 
 

@@ -16,10 +16,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from boardprocess import missing_tool
 from protoduino.errors import SimControlError
 from protoduino.simcontrol import SimControl
 from protoduino_dev import build
-from test_avrsim import Runner, _missing_tool
+from test_avrsim import RUNNER_TOOLS, Runner
 
 pytestmark = pytest.mark.avr
 
@@ -56,7 +57,7 @@ class InputRunner(Runner):
 
 @pytest.fixture(scope="module")
 def uno(tmp_path_factory: pytest.TempPathFactory) -> Iterator[InputRunner]:
-    missing = _missing_tool()
+    missing = missing_tool(*RUNNER_TOOLS, simavr=True)
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
     build.build_runner()

@@ -10,8 +10,6 @@ handshakes with the freshly flashed firmware using the host codec.
 from __future__ import annotations
 
 import os
-import select
-import shutil
 import subprocess
 import sys
 import time
@@ -21,6 +19,7 @@ from pathlib import Path
 import protoduino
 import pytest
 import serial
+from boardprocess import BoardProcess, missing_tool
 from protoduino.constants import PROTOCOL_VERSION, ControlCode, PacketType
 from protoduino.flashing import strip_to_hex
 from protoduino.framing import StreamDecoder, frame_packet
@@ -33,15 +32,14 @@ pytestmark = pytest.mark.avr
 FLASH_TIMEOUT = 120.0
 
 
-def missing_tool() -> str | None:
-    for tool in ("make", "cc", "avr-gcc", "avr-objcopy", "avrdude"):
-        if shutil.which(tool) is None:
-            return tool
-    if not Path("/usr/include/simavr/sim_avr.h").exists():
-        return "libsimavr-dev"
-    if not (Path(build.AVRSIM_DIR).exists() and Path("/usr/share/arduino").exists()):
+def missing_flash_tool() -> str | None:
+    """What flashing the emulated Uno through Optiboot needs and this machine lacks."""
+    missing = missing_tool("make", "cc", "avr-gcc", "avr-objcopy", "avrdude", simavr=True)
+    if missing is None and not (
+        Path(build.AVRSIM_DIR).exists() and Path("/usr/share/arduino").exists()
+    ):
         return "arduino-core-avr (Optiboot sources)"
-    return None
+    return missing
 
 
 def _protoduino(*args: str, timeout: float = FLASH_TIMEOUT) -> subprocess.CompletedProcess[str]:
@@ -55,35 +53,16 @@ def _protoduino(*args: str, timeout: float = FLASH_TIMEOUT) -> subprocess.Comple
     )
 
 
-class EmulatedUno:
+class EmulatedUno(BoardProcess):
     """An emulated Uno process (runner) and its port."""
 
-    def __init__(self, cmd: list[str]) -> None:
-        self.proc = subprocess.Popen(
-            cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL
-        )
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], 10.0)
-        if not ready:
-            self.close()
-            raise AssertionError("the runner printed no port")
-        self.port = self.proc.stdout.readline().decode().strip()
-
     def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-        try:
-            self.proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        assert self.proc.stdout is not None
-        self.proc.stdout.close()
+        self.stop(timeout=5, strict=False)
 
 
 @pytest.fixture(scope="module")
 def tools() -> None:
-    missing = missing_tool()
+    missing = missing_flash_tool()
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
     build.build_runner()

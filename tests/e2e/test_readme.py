@@ -28,7 +28,7 @@ from protoduino.simboard import SimBoard, runner_command
 from protoduino_dev import build
 from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
 from test_flash import EmulatedUno as UnoProcess
-from test_flash import missing_tool
+from test_flash import missing_flash_tool
 from test_remote import Ser2net
 
 # pyserial 3.5's rfc2217 reader thread uses the old threading setters.
@@ -102,7 +102,7 @@ def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 @pytest.fixture
 def blank_uno(tmp_path: Path) -> Iterator[tuple[UnoProcess, Path]]:
     """An emulated Uno with only Optiboot in its flash, reset on open, writing a trace."""
-    missing = missing_tool()
+    missing = missing_flash_tool()
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
     build.build_runner()

@@ -12,9 +12,6 @@ static data (the linker's ``_end``, after .data, .bss and .noinit; the firmware 
 
 from __future__ import annotations
 
-import select
-import shutil
-import signal
 import subprocess
 from collections.abc import Iterator
 from concurrent.futures import Future
@@ -22,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from boardprocess import BoardProcess, missing_tool
 from protoduino import Board, CommandRejectedError, Servo
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import runner_command
@@ -43,15 +41,6 @@ SERVO_PINS = range(2, 10)
 DIGITAL_PINS = range(10, 20)
 
 
-def _missing_tool() -> str | None:
-    for tool in ("make", "cc", "avr-gcc", "avr-nm"):
-        if shutil.which(tool) is None:
-            return tool
-    if not Path("/usr/include/simavr/sim_avr.h").exists():
-        return "libsimavr-dev"
-    return None
-
-
 def _symbol(elf: Path, name: str) -> int:
     """The data-space address of ``name`` in the ELF (avr-nm adds 0x800000 to RAM)."""
     out = subprocess.run(["avr-nm", str(elf)], check=True, capture_output=True, text=True).stdout
@@ -62,42 +51,23 @@ def _symbol(elf: Path, name: str) -> int:
     raise AssertionError(f"{name} is not in {elf}")
 
 
-class StatsRunner:
+class StatsRunner(BoardProcess):
     """The emulated Uno running the firmware, with the runner's ``--stats FILE``."""
 
     def __init__(self, elf: Path, stats: Path) -> None:
         self.stats = stats
         cmd = runner_command(elf)
         cmd[-1:-1] = ["--stats", str(stats)]
-        self.proc = subprocess.Popen(
-            cmd, stdout=subprocess.PIPE, stdin=subprocess.DEVNULL, stderr=subprocess.DEVNULL
-        )
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], STARTUP_TIMEOUT)
-        if not ready:
-            self.stop()
-            raise AssertionError("the runner printed no port")
-        self.port = self.proc.stdout.readline().decode().rstrip("\n")
+        super().__init__(cmd, startup=STARTUP_TIMEOUT)
 
     def snapshot(self) -> dict[str, Any]:
         """The counters now."""
         return snapshot(self.proc, self.stats)
 
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-        try:
-            self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        assert self.proc.stdout is not None
-        self.proc.stdout.close()
-
 
 @pytest.fixture
 def uno(tmp_path: Path) -> Iterator[tuple[StatsRunner, Path]]:
-    missing = _missing_tool()
+    missing = missing_tool("make", "cc", "avr-gcc", "avr-nm", simavr=True)
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
     build.build_runner()
@@ -106,7 +76,7 @@ def uno(tmp_path: Path) -> Iterator[tuple[StatsRunner, Path]]:
     try:
         yield runner, elf
     finally:
-        runner.stop()
+        runner.stop(strict=False)
 
 
 def _get_info() -> ArduinoIn:

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import json
 import os
-import select
-import shutil
 import subprocess
 import sys
 import time
@@ -23,8 +21,9 @@ from pathlib import Path
 
 import protoduino
 import pytest
+from boardprocess import BoardProcess, missing_tool
 from protoduino.packets import parse_control
-from test_flash import handshake, missing_tool, start_blank_uno
+from test_flash import handshake, missing_flash_tool, start_blank_uno
 
 pytestmark = [pytest.mark.slow, pytest.mark.avr]
 
@@ -65,12 +64,10 @@ class Installed:
 
 
 def _missing() -> str | None:
-    for tool in ("make", "gcc", "avr-gcc", "avr-objcopy"):
-        if shutil.which(tool) is None:
-            return tool
-    if not (ROOT / ".deps" / "nanopb" / "pb_decode.c").exists():
+    missing = missing_tool("make", "gcc", "avr-gcc", "avr-objcopy")
+    if missing is None and not (ROOT / ".deps" / "nanopb" / "pb_decode.c").exists():
         return "the nanopb C runtime (./tools/dev.sh setup fetches it)"
-    return missing_tool()
+    return missing or missing_flash_tool()
 
 
 @pytest.fixture(scope="module")
@@ -152,28 +149,19 @@ def test_demo(installed: Installed) -> None:
     assert len(set(servo)) > 5 and servo[-1] == 1472, servo
 
 
-class SimProcess:
+class SimProcess(BoardProcess):
     """``protoduino sim`` from the installed venv, with its trace."""
 
     def __init__(self, installed: Installed, backend: str, trace: Path) -> None:
         self.trace_path = trace
-        self.proc = subprocess.Popen(
+        super().__init__(
             [installed.program("protoduino"), "sim", "--backend", backend, "--trace", str(trace)],
+            startup=30.0,
+            what="protoduino sim",
             cwd=installed.cwd,
             env=installed.env(),
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
         )
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], 30.0)
-        if not ready:
-            self.close()
-            raise AssertionError("protoduino sim printed no port")
-        self.port = self.proc.stdout.readline().decode().strip()
-        if not self.port:
-            self.close()
-            raise AssertionError("protoduino sim exited before printing its port")
 
     def wait_for(self, pin: int, value: int, tolerance: int, timeout: float = 10.0) -> None:
         """Until the trace shows ``pin`` at ``value``; the timeout only bounds a failure."""
@@ -188,16 +176,7 @@ class SimProcess:
         raise AssertionError(f"pin {pin} never reached {value}: the trace shows {seen}")
 
     def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-        try:
-            self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        for stream in (self.proc.stdout, self.proc.stderr):
-            if stream is not None:
-                stream.close()
+        self.stop(strict=False)
 
 
 @pytest.fixture(params=["native", "avr"])
