@@ -15,12 +15,10 @@ Every wait here is bounded; every process and port is closed by a context manage
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import random
 import select
 import shutil
-import signal
 import statistics
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -36,6 +34,7 @@ from protoduino.messages import ArduinoIn, ArduinoOut
 from protoduino.packets import Packet, parse_control, reset_payload
 from protoduino.simboard import BACKENDS as BACKEND_TABLE
 from protoduino.simboard import Backend, SimBoard
+from protoduino_dev import runnerstats
 
 #: The boards, in report order: (backend, label).
 BACKENDS: tuple[tuple[str, str], ...] = (
@@ -197,33 +196,18 @@ class CycleCounter:
         self.sim = sim
         self.path = path
 
-    def _lines(self) -> list[str]:
-        try:
-            text = self.path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            return []
-        return [line for line in text.splitlines(keepends=True) if line.endswith("\n")]
-
     def snapshot(self) -> CycleStats:
-        before = len(self._lines())
-        os.kill(self.sim.pid, signal.SIGUSR2)
-        deadline = time.monotonic() + STATS_TIMEOUT
-        while time.monotonic() < deadline:
-            lines = self._lines()
-            if len(lines) > before:
-                row = json.loads(lines[-1])
-                return CycleStats(
-                    float(row["t"]),
-                    int(row["cycles"]),
-                    int(row["awake_cycles"]),
-                    int(row["uart_rx_bytes"]),
-                    int(row["uart_tx_bytes"]),
-                    time.perf_counter(),
-                    int(row["answers"]),
-                    int(row["answer_cycles"]),
-                )
-            time.sleep(0.002)
-        raise TimeoutError(f"the runner wrote no statistics to {self.path} in time")
+        row = runnerstats.snapshot(self.sim.pid, self.path, STATS_TIMEOUT)
+        return CycleStats(
+            float(row["t"]),
+            int(row["cycles"]),
+            int(row["awake_cycles"]),
+            int(row["uart_rx_bytes"]),
+            int(row["uart_tx_bytes"]),
+            time.perf_counter(),
+            int(row["answers"]),
+            int(row["answer_cycles"]),
+        )
 
 
 @dataclass(frozen=True, slots=True)

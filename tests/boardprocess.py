@@ -54,10 +54,6 @@ class BoardProcess:
             self.stop(strict=False)
             raise AssertionError(f"{what} exited before printing its port")
 
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
     def stop(
         self, sig: int = signal.SIGTERM, *, timeout: float = 10.0, strict: bool = True
     ) -> int | None:

@@ -28,7 +28,7 @@ import serial
 from boardprocess import BoardProcess, missing_tool
 from protoduino.simboard import runner_command
 from protoduino_dev import build
-from runnerstats import snapshot
+from protoduino_dev.runnerstats import snapshot
 
 pytestmark = pytest.mark.avr
 
@@ -259,15 +259,15 @@ def test_a_full_input_buffer_is_waited_on_not_polled(
     runner = Runner(tmp_path, "--stats", str(stats))
     sent = 12_000
     try:
-        start = snapshot(runner.proc, stats)
+        start = snapshot(runner.proc.pid, stats)
         runner.port.write(b"x" * sent)  # the pty's buffers take it all at once
         # The runner's buffer stays full until the pty has nothing left for it.
         deadline = time.monotonic() + 60.0  # bounds a failing wait only
-        end = snapshot(runner.proc, stats)
+        end = snapshot(runner.proc.pid, stats)
         while end["uart_rx_bytes"] - start["uart_rx_bytes"] < sent - 4096:
             assert time.monotonic() < deadline, end
             time.sleep(0.05)
-            end = snapshot(runner.proc, stats)
+            end = snapshot(runner.proc.pid, stats)
     finally:
         runner.stop()
     emulated = end["t"] - start["t"]
@@ -292,19 +292,19 @@ def test_a_host_byte_enters_the_uart_when_it_is_read_while_the_mcu_sleeps(
     rng = random.Random(11)
     sent = 60
     try:
-        start = snapshot(runner.proc, stats)
+        start = snapshot(runner.proc.pid, stats)
         for _ in range(sent):
             # A lone frame delimiter: the firmware ignores it and goes back to sleep.
             runner.port.write(b"\x00")
             time.sleep(rng.uniform(0.0, 0.003))  # phases against the tick; not judged
         deadline = time.monotonic() + 30.0  # bounds a failing wait only
-        end = snapshot(runner.proc, stats)
+        end = snapshot(runner.proc.pid, stats)
         while end["uart_rx_bytes"] - start["uart_rx_bytes"] < sent:
             assert time.monotonic() < deadline, end
             time.sleep(0.02)
-            end = snapshot(runner.proc, stats)
+            end = snapshot(runner.proc.pid, stats)
         time.sleep(0.3)  # idle: its length does not change the verdict below
-        idle = snapshot(runner.proc, stats)
+        idle = snapshot(runner.proc.pid, stats)
     finally:
         runner.stop()
     assert end["rx_lag_max"] <= end["freq"] * MAX_RX_LAG_S + 1, end
@@ -326,11 +326,11 @@ def test_answer_time_runs_from_the_last_byte_in_to_the_first_byte_out(
     runner = Runner(tmp_path, "--stats", str(stats))
     calls = 20
     try:
-        start = snapshot(runner.proc, stats)
+        start = snapshot(runner.proc.pid, stats)
         for _ in range(calls):
             runner.port.write(b"y")
             assert runner.port.read(1) == b"y"
-        end = snapshot(runner.proc, stats)
+        end = snapshot(runner.proc.pid, stats)
     finally:
         runner.stop()
     answers = end["answers"] - start["answers"]

@@ -24,7 +24,7 @@ from protoduino import Board, CommandRejectedError, Servo
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import runner_command
 from protoduino_dev import build
-from runnerstats import snapshot
+from protoduino_dev.runnerstats import snapshot
 
 pytestmark = pytest.mark.avr
 
@@ -62,7 +62,7 @@ class StatsRunner(BoardProcess):
 
     def snapshot(self) -> dict[str, Any]:
         """The counters now."""
-        return snapshot(self.proc, self.stats)
+        return snapshot(self.proc.pid, self.stats)
 
 
 @pytest.fixture

@@ -831,7 +831,7 @@ static uint64_t pd_wall_cycles(const pd_sim_t *sim)
 static avr_cycle_count_t pd_rx_timer(struct avr_t *avr, avr_cycle_count_t when, void *param)
 {
     pd_sim_t *sim = param;
-    avr_cycle_count_t per_byte = avr->frequency * 10ULL / PD_DEFAULT_BAUD;
+    const avr_cycle_count_t per_byte = sim->byte_cycles;
     if (!sim->rx.len) {
         sim->rx_timer = 0;
         return 0;
