@@ -14,7 +14,7 @@
 #define PD_AVR_RX_SIZE 128u
 /* UART transmit ring: the replies to one command (PD_TX_RESERVE) and a short report
  * (PD_TX_REPORT_ROOM); pd_avr_uart.c checks both fit at compile time. */
-#define PD_AVR_TX_SIZE 148u
+#define PD_AVR_TX_SIZE 156u
 
 void pd_avr_uart_init(uint32_t baud);
 /* The oldest received byte, left in the ring, or -1 if none. */

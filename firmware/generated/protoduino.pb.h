@@ -54,6 +54,11 @@ typedef PB_BYTES_ARRAY_T(64) protoduino_Ping_payload_t;
  payload is echoed back in the Ack (link test and throughput probe). */
 typedef struct _protoduino_Ping {
     protoduino_Ping_payload_t payload;
+    /* The epoch of the latest failsafe this host has seen (Failsafe.epoch):
+ only a liveness message carrying the device's current epoch clears an
+ expired failsafe, so a Ping sent before the failsafe fired (and held up
+ on the way) can never re-arm the outputs. 0 before any failsafe. */
+    uint8_t failsafe_epoch;
 } protoduino_Ping;
 
 /* Configure a servo output. It moves to its safe position at once, unless
@@ -139,7 +144,7 @@ typedef struct _protoduino_ConfigureFailsafe {
 /* The application's own sign of life: feeds the failsafe timer whatever the
  liveness source, and is the only thing that does with LIVENESS_HEARTBEAT. */
 typedef struct _protoduino_Heartbeat {
-    char dummy_field;
+    uint8_t failsafe_epoch; /* as Ping.failsafe_epoch */
 } protoduino_Heartbeat;
 
 /* Release one output: the pin returns to its power-up state (a servo's
@@ -198,6 +203,18 @@ typedef struct _protoduino_OutputStates {
     uint32_t digital_levels; /* bit N: the level pin N drives */
 } protoduino_OutputStates;
 
+/* Sent when the safe state is entered (active = true) and when the next
+ liveness message clears the flag (active = false). Outputs stay at their safe values until
+ each is commanded again. */
+typedef struct _protoduino_Failsafe {
+    bool active;
+    protoduino_FailsafeCause cause;
+    /* Counts the safe states the device entered since boot (timeout or Stop),
+ 1 for the first, modulo 256; the host sends the latest it saw back in its
+ liveness messages (Ping.failsafe_epoch). */
+    uint8_t epoch;
+} protoduino_Failsafe;
+
 typedef PB_BYTES_ARRAY_T(64) protoduino_Ack_ping_echo_t;
 typedef struct _protoduino_Ack {
     uint32_t message_id;
@@ -208,16 +225,14 @@ typedef struct _protoduino_Ack {
         protoduino_DeviceInfo info; /* answer to GetInfo */
         protoduino_OutputStates outputs; /* answer to ReadOutputs */
     } result;
+    /* On the Ack of a Ping or Heartbeat: the device's failsafe state after that
+ message (the latest failsafe entered, and whether it is still active);
+ absent while none was entered since boot. A host learns here of a
+ failsafe whose event it missed. */
+    bool has_failsafe;
+    protoduino_Failsafe failsafe;
     uint32_t refused_item; /* a refused Pose: its offending item, counted from 1 */
 } protoduino_Ack;
-
-/* Sent when the safe state is entered (active = true) and when the next
- liveness message clears the flag (active = false). Outputs stay at their safe values until
- each is commanded again. */
-typedef struct _protoduino_Failsafe {
-    bool active;
-    protoduino_FailsafeCause cause;
-} protoduino_Failsafe;
 
 /* A COMMAND packet whose payload did not decode; nothing was executed. */
 typedef struct _protoduino_DecodeError {
@@ -290,7 +305,7 @@ extern "C" {
 
 
 /* Initializer values for message structs */
-#define protoduino_Ping_init_default             {{0, {0}}}
+#define protoduino_Ping_init_default             {{0, {0}}, 0}
 #define protoduino_ServoInit_init_default        {0, 0, 0, 0, {0}, 0}
 #define protoduino_ServoControl_init_default     {0, 0, {0}}
 #define protoduino_DigitalInit_init_default      {0, 0}
@@ -307,12 +322,12 @@ extern "C" {
 #define protoduino_ArduinoIn_init_default        {0, 0, {protoduino_Ping_init_default}}
 #define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_OutputStates_init_default     {{0, {0}}, 0, 0}
-#define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, 0}
-#define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN}
+#define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_default, 0}
+#define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN, 0}
 #define protoduino_DecodeError_init_default      {0}
 #define protoduino_Log_init_default              {_protoduino_LogLevel_MIN, ""}
 #define protoduino_ArduinoOut_init_default       {0, {protoduino_Ack_init_default}}
-#define protoduino_Ping_init_zero                {{0, {0}}}
+#define protoduino_Ping_init_zero                {{0, {0}}, 0}
 #define protoduino_ServoInit_init_zero           {0, 0, 0, 0, {0}, 0}
 #define protoduino_ServoControl_init_zero        {0, 0, {0}}
 #define protoduino_DigitalInit_init_zero         {0, 0}
@@ -329,14 +344,15 @@ extern "C" {
 #define protoduino_ArduinoIn_init_zero           {0, 0, {protoduino_Ping_init_zero}}
 #define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_OutputStates_init_zero        {{0, {0}}, 0, 0}
-#define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, 0}
-#define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN}
+#define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_zero, 0}
+#define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN, 0}
 #define protoduino_DecodeError_init_zero         {0}
 #define protoduino_Log_init_zero                 {_protoduino_LogLevel_MIN, ""}
 #define protoduino_ArduinoOut_init_zero          {0, {protoduino_Ack_init_zero}}
 
 /* Field tags (for use in manual encoding/decoding) */
 #define protoduino_Ping_payload_tag              1
+#define protoduino_Ping_failsafe_epoch_tag       2
 #define protoduino_ServoInit_pin_tag             1
 #define protoduino_ServoInit_min_us_tag          2
 #define protoduino_ServoInit_max_us_tag          3
@@ -356,6 +372,7 @@ extern "C" {
 #define protoduino_Pose_items_tag                1
 #define protoduino_ConfigureFailsafe_timeout_ms_tag 1
 #define protoduino_ConfigureFailsafe_liveness_tag 2
+#define protoduino_Heartbeat_failsafe_epoch_tag  1
 #define protoduino_Release_pin_tag               1
 #define protoduino_ArduinoIn_message_id_tag      1
 #define protoduino_ArduinoIn_ping_tag            2
@@ -382,14 +399,16 @@ extern "C" {
 #define protoduino_OutputStates_servos_tag       1
 #define protoduino_OutputStates_digital_pins_tag 2
 #define protoduino_OutputStates_digital_levels_tag 3
+#define protoduino_Failsafe_active_tag           1
+#define protoduino_Failsafe_cause_tag            2
+#define protoduino_Failsafe_epoch_tag            3
 #define protoduino_Ack_message_id_tag            1
 #define protoduino_Ack_status_tag                2
 #define protoduino_Ack_ping_echo_tag             3
 #define protoduino_Ack_info_tag                  4
 #define protoduino_Ack_outputs_tag               30
+#define protoduino_Ack_failsafe_tag              5
 #define protoduino_Ack_refused_item_tag          31
-#define protoduino_Failsafe_active_tag           1
-#define protoduino_Failsafe_cause_tag            2
 #define protoduino_DecodeError_count_tag         1
 #define protoduino_Log_level_tag                 1
 #define protoduino_Log_text_tag                  2
@@ -400,7 +419,8 @@ extern "C" {
 
 /* Struct field encoding specification for nanopb */
 #define protoduino_Ping_FIELDLIST(X, a) \
-X(a, STATIC,   SINGULAR, BYTES,    payload,           1)
+X(a, STATIC,   SINGULAR, BYTES,    payload,           1) \
+X(a, STATIC,   SINGULAR, UINT32,   failsafe_epoch,    2)
 #define protoduino_Ping_CALLBACK NULL
 #define protoduino_Ping_DEFAULT NULL
 
@@ -470,7 +490,7 @@ X(a, STATIC,   SINGULAR, UENUM,    liveness,          2)
 #define protoduino_ConfigureFailsafe_DEFAULT NULL
 
 #define protoduino_Heartbeat_FIELDLIST(X, a) \
-
+X(a, STATIC,   SINGULAR, UINT32,   failsafe_epoch,    1)
 #define protoduino_Heartbeat_CALLBACK NULL
 #define protoduino_Heartbeat_DEFAULT NULL
 
@@ -539,16 +559,19 @@ X(a, STATIC,   SINGULAR, UINT32,   message_id,        1) \
 X(a, STATIC,   SINGULAR, UENUM,    status,            2) \
 X(a, STATIC,   ONEOF,    BYTES,    (result,ping_echo,result.ping_echo),   3) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (result,info,result.info),   4) \
+X(a, STATIC,   OPTIONAL, MESSAGE,  failsafe,          5) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (result,outputs,result.outputs),  30) \
 X(a, STATIC,   SINGULAR, UINT32,   refused_item,     31)
 #define protoduino_Ack_CALLBACK NULL
 #define protoduino_Ack_DEFAULT NULL
 #define protoduino_Ack_result_info_MSGTYPE protoduino_DeviceInfo
+#define protoduino_Ack_failsafe_MSGTYPE protoduino_Failsafe
 #define protoduino_Ack_result_outputs_MSGTYPE protoduino_OutputStates
 
 #define protoduino_Failsafe_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, BOOL,     active,            1) \
-X(a, STATIC,   SINGULAR, UENUM,    cause,             2)
+X(a, STATIC,   SINGULAR, UENUM,    cause,             2) \
+X(a, STATIC,   SINGULAR, UINT32,   epoch,             3)
 #define protoduino_Failsafe_CALLBACK NULL
 #define protoduino_Failsafe_DEFAULT NULL
 
@@ -623,20 +646,20 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_Ack_size                      104
+#define protoduino_Ack_size                      113
 #define protoduino_ArduinoIn_size                138
-#define protoduino_ArduinoOut_size               106
+#define protoduino_ArduinoOut_size               115
 #define protoduino_ConfigureFailsafe_size        8
 #define protoduino_DecodeError_size              6
 #define protoduino_DeviceInfo_size               87
 #define protoduino_DigitalControl_size           8
 #define protoduino_DigitalInit_size              8
-#define protoduino_Failsafe_size                 4
+#define protoduino_Failsafe_size                 7
 #define protoduino_GetInfo_size                  0
-#define protoduino_Heartbeat_size                0
+#define protoduino_Heartbeat_size                3
 #define protoduino_Log_size                      51
 #define protoduino_OutputStates_size             52
-#define protoduino_Ping_size                     66
+#define protoduino_Ping_size                     69
 #define protoduino_PoseItem_size                 14
 #define protoduino_Pose_size                     128
 #define protoduino_ReadOutputs_size              0

@@ -44,7 +44,7 @@
  * to the pty when it can take them, never waiting for it. The same size as the
  * Uno's ring, so the core holds back received frames on the same occasions.
  */
-#define SIM_TX_SIZE 148u
+#define SIM_TX_SIZE 156u
 typedef char sim_assert_tx_room[SIM_TX_SIZE >= PD_TX_RESERVE + PD_TX_REPORT_ROOM ? 1 : -1];
 
 enum { SIM_PIN_UNUSED = 0, SIM_PIN_SERVO, SIM_PIN_DIGITAL };

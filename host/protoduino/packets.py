@@ -175,9 +175,10 @@ def parse_control(payload: bytes) -> Control:
         return Control(code, version=args[0], session=int.from_bytes(args[1:5], "big"))
     if code is ControlCode.RESET_ACK:
         version, n = (args[0] if args else None), len(args)
-        if n == RESET_ACK_V1_SIZE - 1 or (n > RESET_ACK_V1_SIZE - 1 and version != 2):
+        if n >= RESET_ACK_V1_SIZE - 1 and n != RESET_ACK_SIZE - 1:
             # The short shape; and a later version may add bytes: its VERSION and
-            # SCHEMA_ID still sit here, enough to name the mismatch.
+            # SCHEMA_ID still sit here, enough to name the mismatch (versions 2
+            # and 3 share the long shape: the host compares VERSION after this).
             return Control(code, version=version, schema_id=int.from_bytes(args[1:5], "big"))
         if n != RESET_ACK_SIZE - 1:
             raise ProtocolError(f"RESET_ACK takes 5 or 10 argument bytes, got {n}")

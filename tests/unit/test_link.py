@@ -43,7 +43,7 @@ def test_version_mismatch_names_both_versions(tmp_path: Path) -> None:
         Board.open(str(tmp_path / "fake-tty"))
     assert info.value.host_version == protoduino.PROTOCOL_VERSION
     assert info.value.device_version == 7
-    assert "2" in str(info.value) and "7" in str(info.value)
+    assert str(protoduino.PROTOCOL_VERSION) in str(info.value) and "7" in str(info.value)
     assert isinstance(info.value, protoduino.LinkError)
 
 
@@ -51,8 +51,8 @@ def test_version_1_firmware_gets_the_clear_version_error(tmp_path: Path) -> None
     """A version 1 device answers our RESET with its 6-byte RESET_ACK: the host names both."""
     with FakeDevice(tmp_path, version=1), pytest.raises(protoduino.VersionMismatchError) as info:
         Board.open(str(tmp_path / "fake-tty"))
-    assert (info.value.host_version, info.value.device_version) == (2, 1)
-    assert "host speaks 2, device speaks 1" in str(info.value)
+    assert (info.value.host_version, info.value.device_version) == (protoduino.PROTOCOL_VERSION, 1)
+    assert f"host speaks {protoduino.PROTOCOL_VERSION}, device speaks 1" in str(info.value)
 
 
 def test_schema_mismatch_names_both_fingerprints(tmp_path: Path) -> None:
