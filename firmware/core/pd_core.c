@@ -19,6 +19,8 @@ void pd_core_init(pd_core_t *core, void *hal)
     pd_dispatch_clear(core);
     pd_dedupe_init(&core->dedupe);
     pd_outputs_init(&core->outputs);
+    core->failsafe.epoch = 0; /* counts since power-up; a new session keeps it */
+    core->failsafe.cause = 0;
     pd_failsafe_init(&core->failsafe, pd_hal_millis(hal));
     pd_link_send_event(core, PD_EVENT_BOOT);
 }
@@ -61,7 +63,7 @@ void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause)
     } else {
         pd_failsafe_fire(&core->failsafe);
     }
-    pd_dispatch_send_failsafe(core, true, cause); /* dropped while IDLE: no one to tell */
+    pd_dispatch_send_failsafe(core); /* dropped while IDLE: no one to tell (a Ping's Ack will) */
 }
 
 void pd_core_poll(pd_core_t *core)

@@ -77,12 +77,20 @@ bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg)
     return pd_link_send(core, PD_PACKET_DATA, raw, len);
 }
 
-bool pd_dispatch_send_failsafe(pd_core_t *core, bool active, protoduino_FailsafeCause cause)
+/* The device's failsafe state: the latest safe state entered (its cause and
+ * epoch) and whether it still holds. */
+static void failsafe_state(const pd_core_t *core, protoduino_Failsafe *fs)
+{
+    fs->active = core->failsafe.active;
+    fs->cause = (protoduino_FailsafeCause)core->failsafe.cause;
+    fs->epoch = core->failsafe.epoch;
+}
+
+bool pd_dispatch_send_failsafe(pd_core_t *core)
 {
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
     out.which_data = protoduino_ArduinoOut_failsafe_tag;
-    out.data.failsafe.active = active;
-    out.data.failsafe.cause = cause;
+    failsafe_state(core, &out.data.failsafe);
     return pd_dispatch_send(core, &out);
 }
 
@@ -135,32 +143,39 @@ static __attribute__((noinline)) void send_ack(pd_core_t *core, protoduino_Ardui
     pd_dispatch_send(core, out);
 }
 
-static void notify_failsafe_cleared(pd_core_t *core)
+/* After a Stop's Ack, or a liveness message's that cleared the flag: the
+ * state as it is now (active with the new epoch, or cleared). */
+static void notify_failsafe(pd_core_t *core)
 {
-    pd_dispatch_send_failsafe(core, false, protoduino_FailsafeCause_FAILSAFE_CAUSE_NONE);
-}
-
-static void notify_stopped(pd_core_t *core)
-{
-    pd_dispatch_send_failsafe(core, true, protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP);
+    pd_dispatch_send_failsafe(core);
 }
 
 /* --- command handlers: each returns the Ack status ------------------------ */
 
-/* A liveness message: restarts the failsafe timer, clears its flag. */
-static void alive(pd_core_t *core, pd_cmd_t *cmd)
+/*
+ * A liveness message carrying the failsafe epoch its host has seen: restarts
+ * the failsafe timer and clears its flag if that is the current epoch (a stale
+ * one changes nothing). Its Ack then carries the failsafe state once any safe
+ * state was entered since power-up, so that a host that missed the event (or
+ * sent the message before it) learns of it and can send the epoch back.
+ */
+static void alive(pd_core_t *core, pd_cmd_t *cmd, uint8_t epoch, bool counts)
 {
-    if (pd_failsafe_alive(&core->failsafe, pd_hal_millis(core->hal))) {
-        cmd->then = notify_failsafe_cleared;
+    if (counts &&
+        pd_failsafe_alive(&core->failsafe, pd_hal_millis(core->hal), epoch) == PD_ALIVE_CLEARED) {
+        cmd->then = notify_failsafe;
+    }
+    if (core->failsafe.epoch != 0) {
+        cmd->ack->has_failsafe = true;
+        failsafe_state(core, &cmd->ack->failsafe);
     }
 }
 
 static protoduino_Status cmd_ping(pd_core_t *core, pd_cmd_t *cmd)
 {
     const protoduino_Ping *ping = &cmd->in->data.ping;
-    if (!core->failsafe.heartbeat_only) {
-        alive(core, cmd); /* liveness unless the session wants the application's Heartbeat */
-    }
+    /* Liveness unless the session wants the application's Heartbeat. */
+    alive(core, cmd, ping->failsafe_epoch, !core->failsafe.heartbeat_only);
     cmd->ack->result.ping_echo.size = ping->payload.size;
     memcpy(cmd->ack->result.ping_echo.bytes, ping->payload.bytes, ping->payload.size);
     return protoduino_Status_STATUS_OK;
@@ -168,7 +183,7 @@ static protoduino_Status cmd_ping(pd_core_t *core, pd_cmd_t *cmd)
 
 static protoduino_Status cmd_heartbeat(pd_core_t *core, pd_cmd_t *cmd)
 {
-    alive(core, cmd); /* whatever the liveness source */
+    alive(core, cmd, cmd->in->data.heartbeat.failsafe_epoch, true); /* whatever the source */
     return protoduino_Status_STATUS_OK;
 }
 
@@ -184,9 +199,10 @@ static protoduino_Status cmd_configure_failsafe(pd_core_t *core, pd_cmd_t *cmd)
     }
     core->failsafe.timeout_ms = timeout;
     core->failsafe.heartbeat_only = msg->liveness != protoduino_Liveness_LIVENESS_PING;
-    /* Whoever configures the session is alive; a longer timeout must not count
-     * from a liveness message that came under the old one. */
-    alive(core, cmd);
+    /* A longer timeout must not count from a liveness message that came under
+     * the old one; but a configuration carries no epoch, so it never clears an
+     * expired failsafe (one held up on the way could otherwise re-arm it). */
+    pd_failsafe_restart(&core->failsafe, pd_hal_millis(core->hal));
     return protoduino_Status_STATUS_OK;
 }
 
@@ -249,7 +265,7 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
 {
     pd_outputs_all_safe(&core->outputs, core->hal);
     pd_failsafe_stop(&core->failsafe); /* the timer keeps running */
-    cmd->then = notify_stopped;
+    cmd->then = notify_failsafe;
     return protoduino_Status_STATUS_OK;
 }
 
@@ -375,6 +391,7 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
     protoduino_ArduinoOut out;
     out.data.ack.which_result = 0;
     out.data.ack.refused_item = 0;
+    out.data.ack.has_failsafe = false;
     /* msg is core->in, a constant address once LTO sees the whole program: the
      * AVR would then reach every field with 4-byte lds/sts instead of 2-byte
      * loads relative to a pointer register (108 B of flash). The empty asm

@@ -79,7 +79,7 @@ bool pd_dispatch_send(struct pd_core *core, const protoduino_ArduinoOut *msg);
  */
 bool pd_dispatch_send_spare(struct pd_core *core, const protoduino_ArduinoOut *msg);
 
-/* ArduinoOut.failsafe{active, cause}. */
-bool pd_dispatch_send_failsafe(struct pd_core *core, bool active, protoduino_FailsafeCause cause);
+/* ArduinoOut.failsafe: the failsafe state now (active, cause, epoch). */
+bool pd_dispatch_send_failsafe(struct pd_core *core);
 
 #endif /* PD_DISPATCH_H */

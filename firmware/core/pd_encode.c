@@ -129,6 +129,16 @@ static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
     put_uint(w, protoduino_DeviceInfo_rx_buffer_tag, info->rx_buffer);
 }
 
+/* A Failsafe's fields (the event, and an Ack's failsafe state). */
+static void put_failsafe(writer_t *w, uint8_t tag, const protoduino_Failsafe *fs)
+{
+    uint8_t *at = open_msg(w, tag);
+    put_uint(w, protoduino_Failsafe_active_tag, fs->active ? 1u : 0u);
+    put_uint(w, protoduino_Failsafe_cause_tag, (uint32_t)fs->cause);
+    put_uint(w, protoduino_Failsafe_epoch_tag, fs->epoch);
+    close_msg(w, at);
+}
+
 /* Not inlined into pd_encode_out: 56 B less of the Uno's flash, for one call
  * per Ack. */
 static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack *ack)
@@ -146,7 +156,13 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
         uint8_t *at = open_msg(w, protoduino_Ack_info_tag);
         put_info(w, &ack->result.info);
         close_msg(w, at);
-    } else if (ack->which_result == protoduino_Ack_outputs_tag) {
+    }
+    /* Field 5 sits between the oneof's members 3/4 and 30, in field order as
+     * pb_encode writes them. */
+    if (ack->has_failsafe) {
+        put_failsafe(w, protoduino_Ack_failsafe_tag, &ack->failsafe);
+    }
+    if (ack->which_result == protoduino_Ack_outputs_tag) {
         const protoduino_OutputStates *st = &ack->result.outputs;
         uint8_t *at = open_msg(w, protoduino_Ack_outputs_tag);
         if (st->servos.size > sizeof(st->servos.bytes)) {
@@ -176,10 +192,7 @@ size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap)
         close_msg(&w, at);
         break;
     case protoduino_ArduinoOut_failsafe_tag:
-        at = open_msg(&w, protoduino_ArduinoOut_failsafe_tag);
-        put_uint(&w, protoduino_Failsafe_active_tag, msg->data.failsafe.active ? 1u : 0u);
-        put_uint(&w, protoduino_Failsafe_cause_tag, (uint32_t)msg->data.failsafe.cause);
-        close_msg(&w, at);
+        put_failsafe(&w, protoduino_ArduinoOut_failsafe_tag, &msg->data.failsafe);
         break;
     case protoduino_ArduinoOut_decode_error_tag:
         at = open_msg(&w, protoduino_ArduinoOut_decode_error_tag);

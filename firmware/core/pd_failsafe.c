@@ -1,6 +1,7 @@
 #include "pd_failsafe.h"
 
 #include "pd_protocol.h"
+#include "protoduino.pb.h"
 
 /* Not inlined: LTO put a copy in pd_core_init and one in pd_core_open_session
  * (50 B of the Uno's flash); neither is on the command path. */
@@ -13,13 +14,23 @@ __attribute__((noinline)) void pd_failsafe_init(pd_failsafe_t *fs, uint32_t now_
     fs->heartbeat_only = false;
 }
 
-bool pd_failsafe_alive(pd_failsafe_t *fs, uint32_t now_ms)
+uint8_t pd_failsafe_alive(pd_failsafe_t *fs, uint32_t now_ms, uint8_t epoch)
 {
+    if (epoch != fs->epoch) {
+        return PD_ALIVE_STALE; /* sent before the latest safe state: not a sign of life after it */
+    }
     bool was_active = fs->active;
     fs->alive_ms = now_ms;
     fs->fired = false;
     fs->active = false;
-    return was_active;
+    return was_active ? PD_ALIVE_CLEARED : PD_ALIVE_OK;
+}
+
+void pd_failsafe_restart(pd_failsafe_t *fs, uint32_t now_ms)
+{
+    if (!fs->fired) {
+        fs->alive_ms = now_ms;
+    }
 }
 
 bool pd_failsafe_expired(const pd_failsafe_t *fs, uint32_t now_ms)
@@ -36,9 +47,13 @@ void pd_failsafe_fire(pd_failsafe_t *fs)
 {
     fs->fired = true;
     fs->active = true;
+    fs->epoch++;
+    fs->cause = protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT;
 }
 
 void pd_failsafe_stop(pd_failsafe_t *fs)
 {
     fs->active = true;
+    fs->epoch++;
+    fs->cause = protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP;
 }

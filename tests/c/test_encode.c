@@ -120,8 +120,26 @@ static void test_encode_failsafe_decode_error_log(void)
              cause++) {
             out.data.failsafe.active = active;
             out.data.failsafe.cause = (protoduino_FailsafeCause)cause;
-            CHECK_EQ(compare(&out), 0);
+            const uint8_t epochs[] = {0, 1, 127, 128, 255};
+            for (size_t e = 0; e < sizeof(epochs); e++) {
+                out.data.failsafe.epoch = epochs[e];
+                CHECK_EQ(compare(&out), 0);
+            }
         }
+    }
+    /* An Ack's failsafe state, alone and beside each result (field 5 goes
+     * between the oneof's members 3/4 and 30). */
+    const pb_size_t results[] = {0, protoduino_Ack_ping_echo_tag, protoduino_Ack_info_tag,
+                                 protoduino_Ack_outputs_tag};
+    for (size_t r = 0; r < 4; r++) {
+        out = ack(7, protoduino_Status_STATUS_OK);
+        out.data.ack.which_result = results[r];
+        out.data.ack.has_failsafe = true;
+        out.data.ack.failsafe.active = true;
+        out.data.ack.failsafe.cause = protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT;
+        out.data.ack.failsafe.epoch = 200;
+        out.data.ack.refused_item = 3;
+        CHECK_EQ(compare(&out), 0);
     }
     memset(&out, 0, sizeof(out));
     out.which_data = protoduino_ArduinoOut_decode_error_tag;

@@ -66,6 +66,7 @@ static void test_reserve_holds_the_largest_replies(void)
     fake_clear(&d.hal);
     d.hal.tx_room = PD_TX_RESERVE;
     in = m_ping(2, payload, sizeof(payload));
+    in.data.ping.failsafe_epoch = 1; /* the Stop's: this host saw it */
     t_send_in(&d, &in);
     CHECK_EQ(t_status(&d, 2), protoduino_Status_STATUS_OK);
     protoduino_Failsafe fs;

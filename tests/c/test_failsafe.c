@@ -22,10 +22,21 @@ static void setup_outputs(tdev_t *d)
     fake_clear(&d->hal);
 }
 
+/* A Ping from a host that saw every Failsafe event so far: it carries the
+ * device's current epoch (the stale-epoch tests build theirs by hand). */
 static void ping_at(tdev_t *d, uint32_t id, uint32_t now)
 {
     d->hal.now_ms = now;
     protoduino_ArduinoIn in = m_ping(id, NULL, 0);
+    in.data.ping.failsafe_epoch = d->core.failsafe.epoch;
+    t_send_in(d, &in);
+}
+
+static void ping_epoch_at(tdev_t *d, uint32_t id, uint32_t now, uint8_t epoch)
+{
+    d->hal.now_ms = now;
+    protoduino_ArduinoIn in = m_ping(id, NULL, 0);
+    in.data.ping.failsafe_epoch = epoch;
     t_send_in(d, &in);
 }
 
@@ -317,6 +328,7 @@ static void test_configured_timeout_and_heartbeat_source(void)
     memset(&in, 0, sizeof(in));
     in.message_id = 35;
     in.which_data = protoduino_ArduinoIn_heartbeat_tag;
+    in.data.heartbeat.failsafe_epoch = d.core.failsafe.epoch;
     CHECK_EQ(t_cmd(&d, &in), S(OK));
     protoduino_Failsafe fs;
     CHECK_EQ(t_failsafes(&d, &fs), 1);
@@ -439,10 +451,116 @@ static void test_failsafe_unit(void)
     pd_failsafe_fire(&fs);
     CHECK(!pd_failsafe_due(&fs, 100 + 20000));
     CHECK(pd_failsafe_expired(&fs, 100 + 20000));
-    CHECK(pd_failsafe_alive(&fs, 30000));
-    CHECK(!pd_failsafe_alive(&fs, 30001));
+    fs.epoch = 0; /* pd_core_init's job */
+    pd_failsafe_init(&fs, 100);
+    pd_failsafe_stop(&fs);
+    CHECK_EQ(fs.epoch, 1);
+    pd_failsafe_fire(&fs);
+    CHECK_EQ(fs.epoch, 2);
+    CHECK_EQ(fs.cause, CAUSE(PING_TIMEOUT));
+    CHECK_EQ(pd_failsafe_alive(&fs, 30000, 1), PD_ALIVE_STALE); /* from before the fire */
+    CHECK(fs.fired && fs.active);
+    CHECK_EQ(pd_failsafe_alive(&fs, 30000, 2), PD_ALIVE_CLEARED);
+    CHECK_EQ(pd_failsafe_alive(&fs, 30001, 2), PD_ALIVE_OK);
     CHECK(!pd_failsafe_expired(&fs, 40000));
     CHECK(pd_failsafe_due(&fs, 40001));
+    pd_failsafe_fire(&fs);
+    pd_failsafe_restart(&fs, 50000); /* a configuration never clears a fired failsafe */
+    CHECK(fs.fired && pd_failsafe_expired(&fs, 50000));
+    fs.epoch = 255;
+    pd_failsafe_fire(&fs);
+    CHECK_EQ(fs.epoch, 0); /* modulo 256 */
+}
+
+/*
+ * Issue 20, item 1: bytes held up on the way (a paused ser2net, a Wi-Fi outage
+ * that TCP survives) reach the device after its failsafe fired. The Pings and
+ * the Control among them were written before the host knew of it: none may
+ * clear the failsafe or move an output; the Pings' Acks tell the host the
+ * state; the host's next Ping with that epoch re-arms, and only then a Control
+ * runs.
+ */
+static void test_late_pings_never_rearm(void)
+{
+    tdev_t d;
+    setup_outputs(&d);
+    ping_at(&d, 10, 1000);
+    d.hal.now_ms = 11000;
+    pd_core_poll(&d.core); /* fires: epoch 1 */
+    CHECK_EQ(d.hal.servo_us[9], 1472);
+    protoduino_Failsafe fs;
+    CHECK_EQ(t_failsafes(&d, &fs), 1);
+    CHECK(fs.active);
+    CHECK_EQ(fs.epoch, 1);
+    CHECK_EQ(fs.cause, CAUSE(PING_TIMEOUT));
+    fake_clear(&d.hal);
+    /* The held-up bytes: two Pings and a Control, all from before the failsafe. */
+    ping_epoch_at(&d, 11, 21000, 0);
+    ping_epoch_at(&d, 12, 21001, 0);
+    /* Each late Ping's Ack carries the state: active, epoch 1. */
+    protoduino_Ack ack;
+    CHECK_EQ(t_acks(&d, 12, &ack), 1);
+    CHECK(ack.has_failsafe);
+    CHECK(ack.failsafe.active);
+    CHECK_EQ(ack.failsafe.epoch, 1);
+    CHECK_EQ(ack.failsafe.cause, CAUSE(PING_TIMEOUT));
+    CHECK_EQ(t_failsafes(&d, NULL), 0); /* nothing cleared */
+    protoduino_ArduinoIn in = m_servo_us(13, 9, 2000);
+    CHECK_EQ(t_cmd(&d, &in), S(FAILSAFE_EXPIRED));
+    CHECK_EQ(d.hal.servo_us[9], 1472);
+    CHECK(d.core.failsafe.fired);
+    /* A late ConfigureFailsafe does not clear it either. */
+    memset(&in, 0, sizeof(in));
+    in.message_id = 14;
+    in.which_data = protoduino_ArduinoIn_configure_failsafe_tag;
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK(d.core.failsafe.fired);
+    /* Nor a late Heartbeat. */
+    memset(&in, 0, sizeof(in));
+    in.message_id = 15;
+    in.which_data = protoduino_ArduinoIn_heartbeat_tag;
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK(d.core.failsafe.fired);
+    /* The host that saw it sends epoch 1: cleared after the Ack, and a Control runs. */
+    fake_clear(&d.hal);
+    ping_epoch_at(&d, 16, 22000, 1);
+    CHECK_EQ(t_acks(&d, 16, &ack), 1);
+    CHECK(ack.has_failsafe);
+    CHECK(!ack.failsafe.active);
+    CHECK_EQ(t_failsafes(&d, &fs), 1);
+    CHECK(!fs.active);
+    CHECK_EQ(fs.epoch, 1);
+    in = m_servo_us(17, 9, 2000);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[9], 2000);
+}
+
+/* A Stop is a safe state too: Pings from before it no longer feed the timer,
+ * which fires at the deadline of the last Ping that knew the epoch. */
+static void test_stop_advances_the_epoch(void)
+{
+    tdev_t d;
+    setup_outputs(&d);
+    ping_at(&d, 10, 1000);
+    protoduino_ArduinoIn in = m_stop(11);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.core.failsafe.epoch, 1);
+    ping_epoch_at(&d, 12, 5000, 0); /* written before the Stop */
+    protoduino_Ack ack;
+    CHECK_EQ(t_acks(&d, 12, &ack), 1);
+    CHECK(ack.has_failsafe && ack.failsafe.active);
+    CHECK_EQ(ack.failsafe.cause, CAUSE(STOP));
+    d.hal.now_ms = 11000;
+    pd_core_poll(&d.core);
+    CHECK(d.core.failsafe.fired); /* from the Ping at 1000, not the one at 5000 */
+    CHECK_EQ(d.core.failsafe.epoch, 2);
+    /* No safe state since power-up: the Ack carries no failsafe field. */
+    tdev_t fresh;
+    t_active(&fresh);
+    in = m_ping(1, NULL, 0);
+    t_send_in(&fresh, &in);
+    CHECK_EQ(t_acks(&fresh, 1, &ack), 1);
+    CHECK(!ack.has_failsafe);
 }
 
 const pd_test_case_t pd_tests_failsafe[] = {
@@ -452,6 +570,8 @@ const pd_test_case_t pd_tests_failsafe[] = {
     TEST_CASE(test_other_commands_do_not_feed_the_timer),
     TEST_CASE(test_ping_clears_flag_outputs_stay_latched),
     TEST_CASE(test_duplicate_ping_counts_as_liveness),
+    TEST_CASE(test_late_pings_never_rearm),
+    TEST_CASE(test_stop_advances_the_epoch),
     TEST_CASE(test_failsafe_clock_wraps),
     TEST_CASE(test_stop),
     TEST_CASE(test_stop_with_nothing_configured),

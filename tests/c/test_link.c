@@ -77,8 +77,8 @@ static void test_reset_of_another_version_leaves_the_session(void)
     t_active(&d);
     protoduino_ArduinoIn in = m_digital_init(1, 13, true);
     CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
-    const uint8_t v3[PD_RESET_SIZE] = {PD_CONTROL_RESET, 3, 0, 0, 0, 9};
-    t_send_packet(&d, PD_PACKET_CONTROL, 0, v3, sizeof(v3));
+    const uint8_t other[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION + 1, 0, 0, 0, 9};
+    t_send_packet(&d, PD_PACKET_CONTROL, 0, other, sizeof(other));
     CHECK(!d.core.link.active);
     CHECK_EQ(d.hal.digital[13], 1); /* not released: no session was opened */
     t_send_reset(&d, PD_PROTOCOL_VERSION);
@@ -336,7 +336,7 @@ static void test_data_only_while_active(void)
     tdev_t d;
     t_boot(&d);
     fake_clear(&d.hal);
-    CHECK(!pd_dispatch_send_failsafe(&d.core, true, protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP));
+    CHECK(!pd_dispatch_send_failsafe(&d.core));
     CHECK_EQ(fake_count(&d.hal), 0);
     CHECK(pd_link_send_event(&d.core, PD_EVENT_DESYNC)); /* CONTROL goes in any state */
     CHECK_EQ(fake_count(&d.hal), 1);
