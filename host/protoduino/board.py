@@ -393,6 +393,11 @@ class Board:
         self.url = url
         self._lock = threading.Lock()
         self._outputs: dict[int, _Output] = {}
+        #: The failsafe as last reported to the application: whether a safe state
+        #: holds, and the device's epoch for it (each is reported once, whether its
+        #: event arrived or a liveness Ack told of it).
+        self._failsafe_active = False
+        self._failsafe_epoch: int | None = None
         self._closed = False
         self._rpc = Rpc(
             notify=self._notify,
@@ -405,6 +410,8 @@ class Board:
             link_wait=handshake_timeout,
             reboot_limit=reboot_limit,
             reboot_window=reboot_window,
+            failsafe_timeout=self.failsafe_timeout,
+            heartbeat_liveness=liveness == "heartbeat",
         )
         self._rpc.restore_values = restore == "last"
         self._rpc.message_hook = self._message
@@ -1106,10 +1113,23 @@ class Board:
     def _restore_messages(self) -> list[ArduinoIn]:
         """The failsafe configuration, every Init, then with ``restore="last"`` every
         last value (called on the I/O thread when the device lost the outputs)."""
+        lapsed = self._rpc.liveness_lapsed()
         with self._lock:
             outputs = list(self._outputs.values())
+            # The device lost its state: a failsafe it reports now is a new one.
+            self._failsafe_active, self._failsafe_epoch = False, None
             if self.restore != "last":
                 self._forget_values()  # they come up at their safe values
+            elif lapsed and any(o.last is not None for o in outputs):
+                # No liveness message was acknowledged within the timeout: the device
+                # may have gone safe unheard before it lost the outputs, and a restore
+                # never undoes a safe state (issue 20, item 2).
+                log.warning(
+                    "%s: no liveness acknowledged within the failsafe timeout before the "
+                    "outputs were lost: restoring safe values only",
+                    self.url,
+                )
+                self._forget_values()
         blobs = [o.init for o in outputs]
         if self.restore == "last":
             blobs += [o.last for o in outputs if o.last is not None]
@@ -1139,15 +1159,7 @@ class Board:
         """A DATA message other than an Ack (I/O thread)."""
         kind = msg.WhichOneof("data")
         if kind == "failsafe":
-            fs = msg.failsafe
-            cause = {1: "ping_timeout", 2: "stop"}.get(fs.cause, "none")
-            if fs.active:
-                with self._lock:
-                    self._forget_values()
-                text = f"failsafe active ({cause}): outputs at their safe values"
-            else:
-                text = "failsafe cleared (outputs stay safe until commanded)"
-            self._notify(Event(EventKind.FAILSAFE, text, {"active": fs.active, "cause": cause}))
+            self._failsafe_state(msg.failsafe)
         elif kind == "log":
             level = ("debug", "info", "warning", "error")[min(msg.log.level, 3)]
             self._notify(
@@ -1168,6 +1180,34 @@ class Board:
             )
         else:
             log.info("%s: unhandled device message %s", self.url, kind)
+
+    def _failsafe_state(self, fs: Any) -> None:
+        """The device's failsafe state, from its event or a liveness Ack (I/O thread).
+
+        Reported on change only: a safe state once per epoch (whichever of its
+        event and a Ping's Ack told first; an Ack tells of one whose event was
+        lost), and its clearing once.
+        """
+        cause = {1: "ping_timeout", 2: "stop"}.get(fs.cause, "none")
+        with self._lock:
+            if fs.active:
+                if self._failsafe_active and self._failsafe_epoch == fs.epoch:
+                    return
+                self._forget_values()
+            elif not self._failsafe_active:
+                self._failsafe_epoch = fs.epoch
+                return
+            self._failsafe_active, self._failsafe_epoch = fs.active, fs.epoch
+        if fs.active:
+            text = f"failsafe active ({cause}): outputs at their safe values"
+        else:
+            text = "failsafe cleared (outputs stay safe until commanded)"
+            cause = "none"
+        self._notify(
+            Event(
+                EventKind.FAILSAFE, text, {"active": fs.active, "cause": cause, "epoch": fs.epoch}
+            )
+        )
 
     def _notify(self, event: Event) -> None:
         log.debug("%s: event %s", self.url, event)

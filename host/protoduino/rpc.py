@@ -71,7 +71,14 @@ from typing import Any, Protocol
 
 from .clock import Clock
 from .commands import command
-from .constants import ACK_TIMEOUT, DEDUPE_WINDOW, MAX_PAYLOAD, MAX_RETRIES, PING_INTERVAL
+from .constants import (
+    ACK_TIMEOUT,
+    DEDUPE_WINDOW,
+    FAILSAFE_TIMEOUT,
+    MAX_PAYLOAD,
+    MAX_RETRIES,
+    PING_INTERVAL,
+)
 from .errors import (
     AckTimeoutError,
     BoardClosedError,
@@ -99,6 +106,7 @@ REBOOT_LIMIT = 3
 REBOOT_WINDOW = 60.0
 
 Ack = Any  # protoduino_pb2.Ack (protobuf message classes are dynamic)
+Failsafe = Any  # protoduino_pb2.Failsafe
 
 
 class Call:
@@ -109,6 +117,7 @@ class Call:
         "attempts",
         "deadline",
         "done",
+        "epoch",
         "error",
         "first_tx",
         "kind",
@@ -150,6 +159,8 @@ class Call:
         #: Sent again after a restore the device's refusal started (at most once).
         self.restored = False
         self.rtt: float | None = None
+        #: A liveness message's failsafe epoch (Ping, Heartbeat), None for other kinds.
+        self.epoch: int | None = None
         self.ack: Ack | None = None
         #: The device's refusing Ack, if it refused the call (``error`` is then set).
         self.refusal: Ack | None = None
@@ -219,6 +230,8 @@ class Rpc:
         first_id: int | None = None,
         reboot_limit: int = REBOOT_LIMIT,
         reboot_window: float = REBOOT_WINDOW,
+        failsafe_timeout: float = FAILSAFE_TIMEOUT,
+        heartbeat_liveness: bool = False,
     ) -> None:
         if ack_timeout <= 0 or max_retries < 0 or window < 1 or reboot_limit < 1:
             raise ValueError(
@@ -274,6 +287,17 @@ class Rpc:
         self._losses: collections.deque[float] = collections.deque()
         #: Set once a reboot loop was detected: every user call fails with it.
         self.loop_error: RebootLoopError | None = None
+        #: The device's failsafe timeout and whether only a Heartbeat feeds it (the
+        #: session's ConfigureFailsafe): what tells when a failsafe may have fired unseen.
+        self.failsafe_timeout = failsafe_timeout
+        self.heartbeat_liveness = heartbeat_liveness
+        #: The latest failsafe epoch the device reported (an event or a liveness Ack):
+        #: every Ping and Heartbeat carries it back (protocol.md section 7, failsafe epochs).
+        self.failsafe_epoch = 0
+        #: Until when the device's failsafe timer surely ran: the first transmission of
+        #: the last liveness message it acknowledged as one, plus the timeout. None: no
+        #: such message since the session began.
+        self._armed_until: float | None = None
         self._pinging = ping
         self._next_ping = 0.0
         self._ping_call: Call | None = None
@@ -383,10 +407,17 @@ class Rpc:
                 f"command of {len(payload)} bytes exceeds MAX_PAYLOAD ({MAX_PAYLOAD})"
             )
         kind = msg.WhichOneof("data") or "empty"
+        epoch: int | None = None
+        if kind in ("ping", "heartbeat"):
+            # The latest failsafe this host saw: only then may it re-arm the device.
+            epoch = self.failsafe_epoch
+            getattr(msg, kind).failsafe_epoch = epoch
+            payload = msg.SerializeToString()
         now = self._clock()
         call = Call(
             mid, kind, payload, submitted=now, deadline=now + self.call_timeout, on_done=on_done
         )
+        call.epoch = epoch
         self._calls[mid] = call
         self.commands += 1
         return call
@@ -574,6 +605,9 @@ class Rpc:
 
     def link_message(self, msg: ArduinoOut) -> None:
         if msg.WhichOneof("data") != "ack":
+            if msg.WhichOneof("data") == "failsafe":
+                with self._lock:
+                    self._failsafe_seen(msg.failsafe)
             if self.message_hook is not None:
                 self.message_hook(msg)
             return
@@ -594,6 +628,7 @@ class Rpc:
             if ack.status == 0:
                 if call.kind == "ping":
                     self.rtt = call.rtt
+                self._liveness_acked(call, ack)
                 self._finish(call, ack=ack)
             elif self._lost_session(call, ack):
                 if not self._holding:  # the first such answer: restore, then send again
@@ -613,6 +648,51 @@ class Rpc:
                     ),
                 )
             self._pump(now)
+
+    def _failsafe_seen(self, fs: Failsafe) -> None:
+        """The device's failsafe state, from its event or a liveness Ack (lock held)."""
+        if fs.epoch != self.failsafe_epoch:
+            self.failsafe_epoch = fs.epoch
+            if fs.active:
+                self._next_ping = 0.0  # send the epoch back at once: the device re-arms
+
+    def _liveness_acked(self, call: Call, ack: Ack) -> None:
+        """Note what an acknowledged call tells of the failsafe (lock held).
+
+        A Ping's or Heartbeat's Ack carries the device's failsafe state once one
+        was entered since power-up: a failsafe whose event was lost (a host
+        stalled past its re-handshake, a device-to-host cut) is learned here and
+        reported like the event (the Board sees it through ``message_hook``).
+        The message fed the timer if it carried the device's epoch and is the
+        session's liveness source; a ConfigureFailsafe restarts a timer that has
+        not run out (the host sends it right after opening a session).
+        """
+        if call.epoch is not None:
+            device = ack.failsafe.epoch if ack.HasField("failsafe") else 0
+            if ack.HasField("failsafe"):
+                self._failsafe_seen(ack.failsafe)
+                if self.message_hook is not None:
+                    out = ArduinoOut()
+                    out.failsafe.CopyFrom(ack.failsafe)
+                    self.message_hook(out)
+            counts = call.kind == "heartbeat" or not self.heartbeat_liveness
+            if not (counts and call.epoch == device):
+                return
+        elif call.kind != "configure_failsafe":
+            return
+        until = call.round_start + self.failsafe_timeout
+        if self._armed_until is None or until > self._armed_until:
+            self._armed_until = until
+
+    def liveness_lapsed(self) -> bool:
+        """May the device's failsafe have fired without this host hearing of it?
+
+        True when no liveness message was acknowledged within the last failsafe
+        timeout: the device may have driven its outputs safe and, having then
+        rebooted or lost the session, can no longer say so. A restore must then
+        not send the values from before (protocol.md section 7, restore policy).
+        """
+        return self._armed_until is None or self._clock() >= self._armed_until
 
     def _lost_session(self, call: Call, ack: Ack) -> bool:
         """Did the device refuse ``call`` because it lost what the board configured?
@@ -684,6 +764,8 @@ class Rpc:
 
     def link_up(self, lost: bool, rebooted: bool) -> None:
         with self._lock:
+            if rebooted:
+                self.failsafe_epoch = 0  # a new power-up counts its failsafes from 0
             if lost:
                 self._outputs_lost(rebooted, self._clock())
             else:

@@ -251,7 +251,7 @@ def test_stop_and_failsafe_forget_values(fake: FakeDevice) -> None:
         failsafe.failsafe.cause = 1  # type: ignore[assignment]
         fake.send_data(failsafe)
         event = rec.wait(EventKind.FAILSAFE)
-        assert event.details == {"active": True, "cause": "ping_timeout"}
+        assert event.details == {"active": True, "cause": "ping_timeout", "epoch": 0}
         mark = len(fake.commands())
         fake.reboot()
         restored = rec.wait(EventKind.RESTORED, count=2)
