@@ -25,9 +25,11 @@ name      a name to find the open port by, from code that did not open it: :func
 
 From code, the port (``line(name)`` for one opened elsewhere, e.g. inside a
 ``Board``) can be cut (``port.cut(seconds)``), paused and resumed
-(``port.pause()``, ``port.resume()``) and healed for good (``port.heal()``:
-faults off, cuts cancelled). ``port.stats`` counts what was injected. The
-*device reset* fault is not a line fault: the board harness
+(``port.pause()``, ``port.resume()``), healed for good (``port.heal()``:
+faults off, cuts cancelled), and held (``port.hold("tx"|"rx"|"both")``: every
+byte kept back until ``port.release()`` delivers them all, late and in order, as
+a stalled ser2net or Wi-Fi link does to a TCP connection). ``port.stats``
+counts what was injected. The *device reset* fault is not a line fault: the board harness
 (``SimBoard.reboot()``) provides it.
 
 The inner URL may not carry a query string of its own: the last ``?`` starts
@@ -125,6 +127,10 @@ class FaultyLine(Protocol):
     def resume(self) -> None: ...
 
     def heal(self) -> None: ...
+
+    def hold(self, direction: str = "both") -> None: ...
+
+    def release(self) -> None: ...
 
 
 _lines: weakref.WeakValueDictionary[str, FaultyLine] = weakref.WeakValueDictionary()

@@ -34,6 +34,11 @@ class Serial(SerialBase):
         self._delayed: deque[tuple[float, bytes]] = deque()
         self._tx_delayed: deque[tuple[float, bytes]] = deque()
         self._paused = False
+        # hold(): bytes kept back, in order, until release() (a stalled network).
+        self._hold_tx = False
+        self._hold_rx = False
+        self._held_tx: list[bytes] = []
+        self._held_rx = bytearray()
         self._lock = threading.Lock()
         self._tx_lock = threading.Lock()
         self.stats: Counter[str] = Counter()
@@ -121,6 +126,36 @@ class Serial(SerialBase):
         if self._cut is not None:
             self._cut.cancel()
 
+    def hold(self, direction: str = "both") -> None:
+        """Keep every byte crossing the line in ``direction`` (tx, rx or both) until
+        :meth:`release`: nothing is lost, everything arrives late and in order, as
+        over a TCP connection whose far end (a ser2net, a Wi-Fi link) stalled."""
+        if direction not in ("tx", "rx", "both"):
+            raise ValueError(f"direction must be tx, rx or both, not {direction!r}")
+        if direction in ("tx", "both"):
+            with self._tx_lock:
+                self._hold_tx = True
+        if direction in ("rx", "both"):
+            with self._lock:
+                self._hold_rx = True
+
+    def release(self) -> None:
+        """Deliver what :meth:`hold` kept, in order, and stop holding."""
+        with self._tx_lock:
+            self._hold_tx = False
+            now = time.monotonic()
+            self._tx_delayed.extend((now, chunk) for chunk in self._held_tx)
+            self.stats["held_tx_bytes"] += sum(len(c) for c in self._held_tx)
+            self._held_tx.clear()
+        with self._lock:
+            self._hold_rx = False
+            self.stats["held_rx_bytes"] += len(self._held_rx)
+            if self._delayed:
+                self._delayed.append((self._delayed[-1][0], bytes(self._held_rx)))
+            else:
+                self._pending += self._held_rx
+            self._held_rx.clear()
+
     @property
     def in_waiting(self) -> int:
         inner = self._require()
@@ -154,6 +189,9 @@ class Serial(SerialBase):
         if self._rx is not None and not self._paused:
             data = self._rx.apply(data)
         with self._lock:
+            if self._hold_rx:
+                self._held_rx += data
+                return
             delay = self._cfg.delay > 0 and self._cfg.applies_to("rx") and not self._paused
             if delay:
                 self.stats["delayed_bytes"] += len(data)
@@ -183,6 +221,20 @@ class Serial(SerialBase):
             return len(raw)
         active = not self._paused
         out = self._tx.apply(raw) if self._tx is not None and active else raw
+        with self._tx_lock:
+            if self._hold_tx:
+                self._held_tx.append(out)
+                return len(raw)
+            if self._tx_delayed and not (self._cfg.delay > 0 and active):
+                # Released or delayed bytes go first; written under the lock so that
+                # nothing overtakes them.
+                while self._tx_delayed:
+                    chunk = self._tx_delayed.popleft()[1]
+                    if chunk:
+                        inner.write(chunk)
+                if out:
+                    inner.write(out)
+                return len(raw)
         if self._cfg.delay > 0 and self._cfg.applies_to("tx") and active:
             # Latency, not a slower line: the bytes leave later, in order, from
             # the next read or write (the caller polls reads continuously).
@@ -203,6 +255,8 @@ class Serial(SerialBase):
         inner = self._require()
         now = time.monotonic()
         with self._tx_lock:
+            if self._hold_tx:
+                return
             while self._tx_delayed and (everything or self._tx_delayed[0][0] <= now):
                 _, chunk = self._tx_delayed.popleft()
                 if chunk:
