@@ -151,22 +151,27 @@ def test_a_failsafe_whose_event_is_lost_is_still_reported(
 def test_restore_last_never_undoes_a_failsafe_it_did_not_hear_of(
     sim_board: SimBoard, line_url: tuple[str, str]
 ) -> None:
-    """Item 2: the failsafe fires while the line is held, the device reboots before the
-    host heard anything: restore="last" must bring the servo up at its safe width only,
-    never the value from before the failsafe."""
+    """Item 2: the device-to-host direction cut (its FAILSAFE event is lost for good), the
+    other held; the failsafe fires, the device reboots, then the line heals: the host never
+    heard of the failsafe, so restore="last" must bring the servo up at its safe width
+    only, never the value from before the failsafe (the host infers it: no liveness
+    message was acknowledged within the timeout before the outputs were lost)."""
     url, name = line_url
+    url = url.replace("?", "?dir=rx&drop=1&", 1)
     with Board.open(url, failsafe_timeout=0.5, watchdog_timeout=3.0, restore="last") as board:
         events = Events(board)
         servo = board.servo(9, safe=90)
         servo.write(30)
         wait_for_pin(sim_board, 9, lambda v: bool(v) and near(v[-1], AFTER_US))
         line = _line(name)
-        line.hold("both")
+        line.resume()  # every byte from the device is lost from now on
+        line.hold("tx")
         values = wait_for_pin(sim_board, 9, lambda v: near(v[-1], SAFE_US))
         sim_board.reboot()
         # The reboot releases the servo: its pulses stop (the trace shows 0).
         values = wait_for_pin(sim_board, 9, lambda v: len(v) > len(values) and v[-1] == 0)
         mark = len(values)
+        line.heal()
         line.release()
         events.wait(lambda: any(e.kind is EventKind.RESTORED for e in events.events), "the restore")
         restored = [e for e in events.events if e.kind is EventKind.RESTORED][-1]
@@ -175,3 +180,4 @@ def test_restore_last_never_undoes_a_failsafe_it_did_not_hear_of(
         assert all(near(v, SAFE_US) for v in after), after
         assert servo.value == SAFE_US
         assert restored.details["replayed"] == 2  # ConfigureFailsafe and the Init, no value
+        assert not any(f["active"] for f in events.failsafes())  # its event never came
