@@ -135,7 +135,7 @@ def test_stop_latches_until_commanded(board: Board, sim: SimBoard) -> None:
     rec = Recorder(board)
     board.stop()
     event = rec.wait(EventKind.FAILSAFE)[0]
-    assert event.details == {"active": True, "cause": "stop"}
+    assert event.details == {"active": True, "cause": "stop", "epoch": 1}
     servo.write(180)  # a control moves it normally again
     expect_pin(sim, 9, [SAFE_90_US, us(0), SAFE_90_US, us(180)])
     expect_pin(sim, 13, [0, 1, 0], digital=True)  # the LED stays safe until commanded

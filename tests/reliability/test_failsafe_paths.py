@@ -302,7 +302,12 @@ def _raw_marker(port: str, session: int) -> None:
     ser = serial.Serial(port, baudrate=115200, timeout=0.05)
     try:
         decoder = StreamDecoder()
-        ser.write(b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(2, session)))
+        ser.write(
+            b"\0"
+            + frame_packet(
+                PacketType.CONTROL, 0, reset_payload(protoduino.PROTOCOL_VERSION, session)
+            )
+        )
         msg = ArduinoIn(message_id=0x7E57)
         msg.digital_control.pin, msg.digital_control.level = 13, True
         sent = False
