@@ -33,6 +33,7 @@ from typing import Any, TypeVar
 from . import board as _board
 from .board import OutputState
 from .constants import SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
+from .errors import ArgumentError
 from .events import Event, Stats
 
 T = TypeVar("T")
@@ -247,7 +248,7 @@ class Board:
     def events(self, maxsize: int = EVENT_BUFFER) -> EventStream:
         """Every event from now on, until the board is closed: ``async for e in board.events()``."""
         if maxsize < 1:
-            raise ValueError("maxsize must be at least 1")
+            raise ArgumentError("maxsize must be at least 1")
         return EventStream(self, maxsize)
 
     def __repr__(self) -> str:

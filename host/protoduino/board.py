@@ -76,6 +76,8 @@ from .constants import (
     WATCHDOG_TIMEOUT,
 )
 from .errors import (
+    ArgumentError,
+    ArgumentTypeError,
     BoardClosedError,
     CommandRejectedError,
     ProtocolError,
@@ -206,7 +208,7 @@ class _Output:
 
 def _int(name: str, value: object) -> int:
     if isinstance(value, bool) or not isinstance(value, Integral):
-        raise TypeError(f"{name} must be an int, not {type(value).__name__}")
+        raise ArgumentTypeError(f"{name} must be an int, not {type(value).__name__}")
     return int(value)
 
 
@@ -222,7 +224,7 @@ def _level(name: str, value: object) -> bool:
         if int(value) in (0, 1):
             return bool(value)
         raise _reject(Status.STATUS_OUT_OF_RANGE, f"{name} {int(value)} is not a level (0 or 1)")
-    raise TypeError(f"{name} must be a bool, not {type(value).__name__}")
+    raise ArgumentTypeError(f"{name} must be a bool, not {type(value).__name__}")
 
 
 def _reject(status: int, text: str) -> CommandRejectedError:
@@ -379,14 +381,14 @@ class Board:
         reboot_window: float = REBOOT_WINDOW,
     ) -> None:
         if not FAILSAFE_MIN <= failsafe_timeout <= FAILSAFE_MAX:
-            raise ValueError(
+            raise ArgumentError(
                 f"failsafe_timeout must be {FAILSAFE_MIN:g}..{FAILSAFE_MAX:g} s, "
                 f"not {failsafe_timeout!r}"
             )
         if liveness not in ("ping", "heartbeat"):
-            raise ValueError(f"liveness must be 'ping' or 'heartbeat', not {liveness!r}")
+            raise ArgumentError(f"liveness must be 'ping' or 'heartbeat', not {liveness!r}")
         if restore not in ("safe", "last"):
-            raise ValueError(f"restore must be 'safe' or 'last', not {restore!r}")
+            raise ArgumentError(f"restore must be 'safe' or 'last', not {restore!r}")
         self.failsafe_timeout = float(failsafe_timeout)
         self.liveness: Liveness = liveness
         self.restore: RestorePolicy = restore
@@ -631,7 +633,7 @@ class Board:
         min_us = _int("min_us", min_us) or SERVO_DEFAULT_MIN_US
         max_us = _int("max_us", max_us) or SERVO_DEFAULT_MAX_US
         if safe is not None and safe_us is not None:
-            raise TypeError("give safe (degrees) or safe_us, not both")
+            raise ArgumentTypeError("give safe (degrees) or safe_us, not both")
         if min_us < SERVO_LIMIT_MIN_US or max_us > SERVO_LIMIT_MAX_US or min_us >= max_us:
             raise _reject(
                 Status.STATUS_INVALID_ARGUMENT,
@@ -679,10 +681,12 @@ class Board:
     def _speed(degrees_per_s: float | None, us_per_s: int | None, span_us: int) -> int:
         """A speed limit as ServoInit.max_speed (us per second, 0: none), checked."""
         if degrees_per_s is not None and us_per_s is not None:
-            raise TypeError("give max_speed (degrees/s) or max_speed_us, not both")
+            raise ArgumentTypeError("give max_speed (degrees/s) or max_speed_us, not both")
         if degrees_per_s is not None:
             if isinstance(degrees_per_s, bool) or not isinstance(degrees_per_s, int | float):
-                raise TypeError(f"max_speed must be a number, not {type(degrees_per_s).__name__}")
+                raise ArgumentTypeError(
+                    f"max_speed must be a number, not {type(degrees_per_s).__name__}"
+                )
             if not degrees_per_s > 0:  # also NaN
                 raise _reject(Status.STATUS_INVALID_ARGUMENT, "max_speed must be above 0")
             us_per_s = max(1, round(degrees_per_s * span_us / SERVO_MAX_DEGREES))
@@ -742,7 +746,7 @@ class Board:
 
     def _ping(self, payload: object) -> tuple[ArduinoIn, Callable[[Call], float]]:
         if not isinstance(payload, bytes | bytearray | memoryview):  # bytes(5) is 5 zeros
-            raise TypeError(f"payload must be bytes, not {type(payload).__name__}")
+            raise ArgumentTypeError(f"payload must be bytes, not {type(payload).__name__}")
         sent = bytes(payload)
         if len(sent) > MAX_PING_PAYLOAD:
             raise _reject(
@@ -837,7 +841,7 @@ class Board:
         if self._closed:
             raise BoardClosedError("the board is closed")
         if not isinstance(targets, Mapping):
-            raise TypeError(
+            raise ArgumentTypeError(
                 f"a pose is a mapping of outputs to values, not {type(targets).__name__}"
             )
         if not 1 <= len(targets) <= MAX_POSE_ITEMS:
@@ -850,9 +854,11 @@ class Board:
         records: list[tuple[int, bytes, int]] = []  # pin, its Control (for a restore), value
         for output, target in targets.items():
             if not isinstance(output, Servo | DigitalOutput):
-                raise TypeError(f"a pose sets Servo and DigitalOutput objects, not {output!r}")
+                raise ArgumentTypeError(
+                    f"a pose sets Servo and DigitalOutput objects, not {output!r}"
+                )
             if output.board is not self:
-                raise ValueError(f"{output!r} belongs to another board")
+                raise ArgumentError(f"{output!r} belongs to another board")
             item = msg.pose.items.add()
             try:
                 if output.pin in (o.pin for o in outputs):
@@ -863,7 +869,7 @@ class Board:
                     error.status, f"pose: {output!r}: {error}", sent=False, output=output
                 ) from None
             except TypeError as error:
-                raise TypeError(f"pose: {output!r}: {error}") from None
+                raise ArgumentTypeError(f"pose: {output!r}: {error}") from None
             outputs.append(output)
             records.append((output.pin, control.SerializeToString(), width))
 

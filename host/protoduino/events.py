@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
+from .errors import ArgumentError
+
 log = logging.getLogger(__name__)
 
 
@@ -156,7 +158,7 @@ class EventDispatcher:
         self, name: str, *, limit: int = EVENT_QUEUE_LIMIT, close_wait: float = CLOSE_WAIT
     ) -> None:
         if limit < 1:
-            raise ValueError("limit must be at least 1")
+            raise ArgumentError("limit must be at least 1")
         self.name = name
         self.limit = limit
         self.close_wait = close_wait

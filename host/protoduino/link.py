@@ -49,6 +49,7 @@ from .constants import (
     PacketType,
 )
 from .errors import (
+    ArgumentError,
     HandshakeError,
     LinkError,
     ProtocolError,
@@ -173,7 +174,7 @@ class Link:
         #: This host's session id (never 0: the device's "no session").
         self.session = session if session is not None else secrets.randbelow(0xFFFFFFFF) + 1
         if not 0 < self.session <= 0xFFFFFFFF:
-            raise ValueError(f"session must be 1..2**32-1, not {self.session}")
+            raise ArgumentError(f"session must be 1..2**32-1, not {self.session}")
         #: The device's boot id at the last handshake (None before the first).
         self.boot_id: int | None = None
         #: Whether the first handshake found the session still on the device.

@@ -50,7 +50,7 @@ from types import TracebackType
 from typing import IO, Any
 
 from . import programs
-from .errors import BuildError, TransportError
+from .errors import ArgumentError, BuildError, TransportError
 from .flashing import MCU
 from .simcontrol import SimControl
 
@@ -151,7 +151,7 @@ def _backend(name: str) -> Backend:
     try:
         return BACKENDS[name]
     except KeyError:
-        raise ValueError(
+        raise ArgumentError(
             f"unknown simulated board backend {name!r}; choose from {', '.join(BACKENDS)}"
         ) from None
 
