@@ -28,7 +28,7 @@ import collections
 from collections.abc import Mapping
 from concurrent.futures import Future
 from types import TracebackType
-from typing import Any, TypeVar
+from typing import Any, SupportsFloat, TypeVar
 
 from . import board as _board
 from .board import OutputState
@@ -65,10 +65,10 @@ class Servo:
     def value(self) -> int | None:
         return self.sync.value
 
-    async def write(self, degrees: int) -> None:
+    async def write(self, degrees: SupportsFloat) -> None:
         await _wait(self.sync.submit(degrees))
 
-    async def write_us(self, us: int) -> None:
+    async def write_us(self, us: SupportsFloat) -> None:
         await _wait(self.sync.submit_us(us))
 
     def __repr__(self) -> str:
@@ -238,7 +238,7 @@ class Board:
     async def stop(self) -> None:
         await _wait(self.sync.submit_stop())
 
-    async def pose(self, targets: Mapping[_Output, int | bool]) -> None:
+    async def pose(self, targets: Mapping[_Output, _board.PoseValue]) -> None:
         """:meth:`protoduino.Board.pose`; the outputs may be these or the blocking ones."""
         await _wait(self.sync.submit_pose({_sync(o): v for o, v in targets.items()}))
 

@@ -45,15 +45,17 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import os
 import struct
 import threading
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass
-from numbers import Integral
+from decimal import Decimal
+from numbers import Integral, Real
 from types import TracebackType
-from typing import Any, Literal, TypeVar
+from typing import Any, Literal, SupportsFloat, TypeVar
 
 from ._generated import protoduino_pb2 as pb
 from .capture import CaptureWriter
@@ -125,6 +127,9 @@ class OutputState:
 
 
 T = TypeVar("T")
+
+#: A pose's value for one output: degrees (any real number) or a digital level.
+PoseValue = SupportsFloat | bool
 
 
 def _no_value(call: Call) -> None:
@@ -212,6 +217,60 @@ def _int(name: str, value: object) -> int:
     return int(value)
 
 
+#: Real numbers: numbers.Real (int, float, Fraction, numpy's) and Decimal, which the
+#: numbers tower leaves out although its values are real.
+_REAL = (Real, Decimal)
+
+
+def _whole(name: str, value: object) -> int:
+    """A real number (int, float, Fraction, Decimal, a numpy float) rounded to a whole one.
+
+    Inverse kinematics and filters produce floats; the wire carries whole degrees
+    and microseconds. The rounding is ``round()``'s: to the nearest whole number, a
+    half to the even one (44.5 -> 44, 45.5 -> 46), exact for a Fraction or a
+    Decimal. NaN and infinities are refused (there is no nearest whole number), and
+    so is a bool: ``True`` is no angle.
+    """
+    if isinstance(value, bool) or not isinstance(value, _REAL):
+        raise ArgumentTypeError(f"{name} must be a real number, not {type(value).__name__}")
+    if isinstance(value, Integral):
+        return int(value)
+    if not math.isfinite(value):
+        raise _reject(Status.STATUS_OUT_OF_RANGE, f"{name} {value!r} is not a finite number")
+    return int(round(value))  # noqa: RUF046  (numpy < 2 rounds a float32 to a float32)
+
+
+def _session(value: object) -> int:
+    """A host session id: an int 1..2**32-1 (a bool or a float is refused, not truncated)."""
+    session = _int("session", value)
+    if not 0 < session <= 0xFFFFFFFF:
+        raise ArgumentError(f"session must be 1..2**32-1, not {session}")
+    return session
+
+
+def _failsafe_ms(value: object) -> int:
+    """A failsafe timeout (seconds, any real number) as the whole milliseconds the device keeps.
+
+    ``Decimal("0.1")`` is 100 ms like ``0.1``: the check is on the value rounded to the
+    millisecond, which is what ConfigureFailsafe carries, so no binary float edge
+    decides it. A bool is refused (``True`` is no duration), and so are NaN and infinities.
+    """
+    if isinstance(value, bool) or not isinstance(value, _REAL):
+        raise ArgumentTypeError(
+            f"failsafe_timeout must be a number of seconds, not {type(value).__name__}"
+        )
+    low, high = round(FAILSAFE_MIN * 1000), round(FAILSAFE_MAX * 1000)
+    try:
+        ms = round(float(value) * 1000)
+    except (OverflowError, ValueError):  # an infinity, NaN
+        ms = -1
+    if not low <= ms <= high:
+        raise ArgumentError(
+            f"failsafe_timeout must be {FAILSAFE_MIN:g}..{FAILSAFE_MAX:g} s, not {value!r}"
+        )
+    return ms
+
+
 def _level(name: str, value: object) -> bool:
     """A digital level: True/False, or the ints 1/0; anything else is refused, never clamped.
 
@@ -256,8 +315,7 @@ class Servo:
         return self.board._value(self.pin, SERVO)
 
     def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
-        degrees = _int("degrees", value)
-        msg, us = self._degrees(degrees)
+        msg, us = self._degrees(value)
         item.servo.CopyFrom(msg.servo_control)
         return msg, us
 
@@ -265,24 +323,31 @@ class Servo:
         """The pulse width the device makes for ``degrees`` (its own integer formula)."""
         return self.min_us + degrees * (self.max_us - self.min_us) // SERVO_MAX_DEGREES
 
-    def write(self, degrees: int) -> None:
-        """Move to ``degrees`` (0..180, mapped linearly onto [min_us, max_us])."""
+    def write(self, degrees: SupportsFloat) -> None:
+        """Move to ``degrees`` (0..180, mapped linearly onto [min_us, max_us]).
+
+        Any real number: it is rounded to the nearest whole degree first, a half to
+        the even one (``round()``), which must then be within 0..180.
+        """
         self.board._control(self.pin, *self._degrees(degrees))
 
-    def write_us(self, us: int) -> None:
-        """Set the pulse width in microseconds (within [min_us, max_us])."""
+    def write_us(self, us: SupportsFloat) -> None:
+        """Set the pulse width in microseconds (within [min_us, max_us]).
+
+        Any real number, rounded to the nearest whole microsecond as :meth:`write` rounds.
+        """
         self.board._control(self.pin, *self._us(us))
 
-    def submit(self, degrees: int) -> Future[None]:
+    def submit(self, degrees: SupportsFloat) -> Future[None]:
         """:meth:`write` without waiting: a future resolved by the Ack."""
         return self.board._control_future(self.pin, *self._degrees(degrees))
 
-    def submit_us(self, us: int) -> Future[None]:
+    def submit_us(self, us: SupportsFloat) -> Future[None]:
         """:meth:`write_us` without waiting: a future resolved by the Ack."""
         return self.board._control_future(self.pin, *self._us(us))
 
-    def _degrees(self, degrees: int) -> tuple[ArduinoIn, int]:
-        degrees = _int("degrees", degrees)
+    def _degrees(self, value: object) -> tuple[ArduinoIn, int]:
+        degrees = _whole("degrees", value)
         if not 0 <= degrees <= SERVO_MAX_DEGREES:
             raise _reject(Status.STATUS_OUT_OF_RANGE, f"{degrees} degrees is outside 0..180")
         msg = ArduinoIn()
@@ -290,8 +355,8 @@ class Servo:
         msg.servo_control.degrees = degrees
         return msg, self.to_us(degrees)
 
-    def _us(self, us: int) -> tuple[ArduinoIn, int]:
-        us = _int("us", us)
+    def _us(self, value: object) -> tuple[ArduinoIn, int]:
+        us = _whole("us", value)
         if not self.min_us <= us <= self.max_us:
             raise _reject(
                 Status.STATUS_OUT_OF_RANGE,
@@ -380,16 +445,16 @@ class Board:
         reboot_limit: int = REBOOT_LIMIT,
         reboot_window: float = REBOOT_WINDOW,
     ) -> None:
-        if not FAILSAFE_MIN <= failsafe_timeout <= FAILSAFE_MAX:
-            raise ArgumentError(
-                f"failsafe_timeout must be {FAILSAFE_MIN:g}..{FAILSAFE_MAX:g} s, "
-                f"not {failsafe_timeout!r}"
-            )
+        # Every option is checked before anything is opened or started: a wrong one
+        # raises here, with no thread to stop (a float session once crashed the I/O thread).
+        failsafe_ms = _failsafe_ms(failsafe_timeout)
+        if session is not None:
+            session = _session(session)
         if liveness not in ("ping", "heartbeat"):
             raise ArgumentError(f"liveness must be 'ping' or 'heartbeat', not {liveness!r}")
         if restore not in ("safe", "last"):
             raise ArgumentError(f"restore must be 'safe' or 'last', not {restore!r}")
-        self.failsafe_timeout = float(failsafe_timeout)
+        self.failsafe_timeout = failsafe_ms / 1000
         self.liveness: Liveness = liveness
         self.restore: RestorePolicy = restore
         self.url = url
@@ -814,11 +879,12 @@ class Board:
         msg.stop.SetInParent()
         return msg
 
-    def pose(self, targets: Mapping[Servo | DigitalOutput, int | bool]) -> None:
+    def pose(self, targets: Mapping[Servo | DigitalOutput, PoseValue]) -> None:
         """Set several outputs in one command, all or nothing.
 
-        ``targets`` maps each output to its value: degrees (int) for a
-        :class:`Servo`, a level for a :class:`DigitalOutput`. The device checks
+        ``targets`` maps each output to its value: degrees for a :class:`Servo`
+        (any real number, rounded as :meth:`Servo.write` rounds), a level for a
+        :class:`DigitalOutput`. The device checks
         every value before it applies any; the servos' new widths start at the
         same servo frame (digital levels change at once, as the command runs).
         A refusal, on the host or by the device, raises
@@ -830,13 +896,13 @@ class Board:
             self._rpc.wait(call)
         value(call)
 
-    def submit_pose(self, targets: Mapping[Servo | DigitalOutput, int | bool]) -> Future[None]:
+    def submit_pose(self, targets: Mapping[Servo | DigitalOutput, PoseValue]) -> Future[None]:
         """:meth:`pose` without waiting: a future resolved by the Ack."""
         msg, on_ok, value = self._pose(targets)
         return self._future(msg, on_ok, value)
 
     def _pose(
-        self, targets: Mapping[Servo | DigitalOutput, int | bool]
+        self, targets: Mapping[Servo | DigitalOutput, PoseValue]
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[Call], None]]:
         if self._closed:
             raise BoardClosedError("the board is closed")
@@ -1103,7 +1169,7 @@ class Board:
 
     def _failsafe_config(self) -> ArduinoIn:
         msg = ArduinoIn()
-        msg.configure_failsafe.timeout_ms = round(self.failsafe_timeout * 1000)
+        msg.configure_failsafe.timeout_ms = round(self.failsafe_timeout * 1000)  # whole ms
         msg.configure_failsafe.liveness = (
             pb.LIVENESS_HEARTBEAT if self.liveness == "heartbeat" else pb.LIVENESS_PING
         )
@@ -1146,7 +1212,10 @@ class Board:
         kind = msg.WhichOneof("data")
         if kind == "failsafe":
             fs = msg.failsafe
-            cause = {1: "ping_timeout", 2: "stop"}.get(fs.cause, "none")
+            # The wire names one timeout cause, whatever the liveness source: the host
+            # names it for what expired (with liveness="heartbeat" no Ping could stop it).
+            timeout = "heartbeat_timeout" if self.liveness == "heartbeat" else "ping_timeout"
+            cause = {1: timeout, 2: "stop"}.get(fs.cause, "none")
             if fs.active:
                 with self._lock:
                     self._forget_values()
