@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 from collections.abc import Mapping
 from concurrent.futures import Future
 from types import TracebackType
@@ -47,8 +48,37 @@ async def _wait(future: Future[T]) -> T:
 
 
 async def open(url: str, **options: Any) -> Board:
-    """Open ``url`` like :meth:`protoduino.Board.open` (same keywords); the loop runs on."""
-    return Board(await asyncio.to_thread(_board.Board.open, url, **options))
+    """Open ``url`` like :meth:`protoduino.Board.open` (same keywords); the loop runs on.
+
+    Cancelling it (``asyncio.wait_for(aio.open(url), 0.5)`` timing out, ``task.cancel()``)
+    at any point leaves nothing running: the open runs on a worker thread, which a
+    cancellation cannot stop, so it is abandoned there (:class:`protoduino.board.OpenCancel`)
+    and the cancellation completes once the board's threads are gone and the port is free.
+    A board the open had just returned is closed likewise.
+    """
+    cancel = _board.OpenCancel()
+    opening = asyncio.ensure_future(
+        asyncio.to_thread(_board.Board.open, url, cancel=cancel, **options)
+    )
+    try:
+        sync = await asyncio.shield(opening)
+    except asyncio.CancelledError:
+        closing = asyncio.ensure_future(asyncio.to_thread(cancel.cancel))
+        await _settle(closing, opening)
+        raise
+    return Board(sync)
+
+
+async def _settle(*futures: asyncio.Future[Any]) -> None:
+    """Wait until every one of ``futures`` is done, whatever they raise, even if cancelled again.
+
+    A second cancellation while the open is being abandoned must not leave it half
+    done: the caller re-raises its own cancellation once everything stopped.
+    """
+    both = asyncio.gather(*futures, return_exceptions=True)
+    while not both.done():
+        with contextlib.suppress(asyncio.CancelledError):
+            await asyncio.shield(both)
 
 
 class Servo:

@@ -422,6 +422,43 @@ class DigitalOutput:
         return f"DigitalOutput(pin={self.pin})"
 
 
+class OpenCancel:
+    """Abandons a :meth:`Board.open` in progress from another thread.
+
+    Pass one as ``Board.open(..., cancel=c)``; ``c.cancel()`` then closes the board
+    being opened: the open raises :class:`BoardClosedError` (from wherever it was:
+    opening the port, the handshake, reading the device's info) and, once
+    ``cancel()`` returned, nothing of it runs: no I/O or event thread, no Ping, the
+    port's lock released. A cancel that comes after the open returned closes the
+    board it returned, so the race between the two ends the same way.
+    :func:`protoduino.aio.open` uses one when its task is cancelled. ``cancel()``
+    blocks while the board closes (its threads are joined: see :meth:`Board.close`).
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._board: Board | None = None
+        self._cancelled = False
+
+    @property
+    def cancelled(self) -> bool:
+        return self._cancelled
+
+    def cancel(self) -> None:
+        with self._lock:
+            self._cancelled = True
+            board = self._board
+        if board is not None:
+            board.close()
+
+    def _attach(self, board: Board) -> None:
+        """Called by the board being opened, before it starts anything cancel() must stop."""
+        with self._lock:
+            if self._cancelled:
+                raise BoardClosedError("the open was cancelled")
+            self._board = board
+
+
 class Board:
     """A connected device. Use :meth:`open`; close it (or use ``with``) when done."""
 
@@ -444,6 +481,7 @@ class Board:
         session: int | None = None,
         reboot_limit: int = REBOOT_LIMIT,
         reboot_window: float = REBOOT_WINDOW,
+        cancel: OpenCancel | None = None,
     ) -> None:
         # Every option is checked before anything is opened or started: a wrong one
         # raises here, with no thread to stop (a float session once crashed the I/O thread).
@@ -497,7 +535,12 @@ class Board:
             self._capture.set_stats(lambda: self.stats)
         # Started only now: a constructor above that refuses its options leaves no thread.
         self._events = EventDispatcher(url)
+        # From here on anything that ends the open early (an error, a KeyboardInterrupt
+        # at any point, a cancel from another thread) closes what was started: a
+        # half-open board that pinged on would keep the device's outputs driven.
         try:
+            if cancel is not None:
+                cancel._attach(self)
             self._link.open()
             self.info = self._get_info()
             self._rpc.rx_budget = self.info.rx_buffer or None
@@ -526,6 +569,7 @@ class Board:
         session: int | None = None,
         reboot_limit: int = REBOOT_LIMIT,
         reboot_window: float = REBOOT_WINDOW,
+        cancel: OpenCancel | None = None,
     ) -> Board:
         """Open ``url`` (any pyserial URL), handshake and read the device's info.
 
@@ -564,6 +608,13 @@ class Board:
         the device's outputs, as the command line does; by default every
         board is a new session, which releases whatever another session had
         configured.
+
+        ``cancel`` (an :class:`OpenCancel`) lets another thread abandon the open.
+        However it ends early (an error, a ``KeyboardInterrupt`` at any point, a
+        cancel), nothing of the board is left running: no thread, no Ping, and
+        the port is free again. Options are checked before anything starts: a
+        wrong type raises :class:`ArgumentTypeError`, a wrong value
+        :class:`ArgumentError`.
         """
         return cls(
             url,
@@ -582,6 +633,7 @@ class Board:
             session=session,
             reboot_limit=reboot_limit,
             reboot_window=reboot_window,
+            cancel=cancel,
         )
 
     # --- context and life cycle -------------------------------------------------------
