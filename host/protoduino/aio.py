@@ -36,6 +36,8 @@ from .board import OutputState
 from .constants import SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
 from .errors import ArgumentError
 from .events import Event, Stats
+from .messages import ArduinoIn
+from .rpc import Ack
 
 T = TypeVar("T")
 
@@ -101,6 +103,9 @@ class Servo:
     async def write_us(self, us: SupportsFloat) -> None:
         await _wait(self.sync.submit_us(us))
 
+    async def release(self) -> None:
+        await _wait(self.sync.submit_release())
+
     def __repr__(self) -> str:
         return f"aio.{self.sync!r}"
 
@@ -124,6 +129,9 @@ class DigitalOutput:
 
     async def off(self) -> None:
         await self.write(False)
+
+    async def release(self) -> None:
+        await _wait(self.sync.submit_release())
 
     def __repr__(self) -> str:
         return f"aio.{self.sync!r}"
@@ -267,6 +275,24 @@ class Board:
 
     async def stop(self) -> None:
         await _wait(self.sync.submit_stop())
+
+    async def heartbeat(self) -> None:
+        """:meth:`protoduino.Board.heartbeat`: the loop runs on while the Ack comes back.
+
+        With ``liveness="heartbeat"`` a control loop awaits this every cycle (or
+        submits it and checks later: ``board.sync.submit_heartbeat()``).
+        """
+        await _wait(self.sync.submit_heartbeat())
+
+    async def release(self, pin: int) -> None:
+        await _wait(self.sync.submit_release(pin))
+
+    async def release_all(self) -> None:
+        await _wait(self.sync.submit_release_all())
+
+    async def request(self, msg: ArduinoIn) -> Ack:
+        """:meth:`protoduino.Board.request`, awaited."""
+        return await _wait(self.sync.submit_request(msg))
 
     async def pose(self, targets: Mapping[_Output, _board.PoseValue]) -> None:
         """:meth:`protoduino.Board.pose`; the outputs may be these or the blocking ones."""

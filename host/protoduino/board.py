@@ -371,6 +371,10 @@ class Servo:
         """Release the servo: its pulses stop (limp) and the pin is free for any mode."""
         self.board.release(self.pin)
 
+    def submit_release(self) -> Future[None]:
+        """:meth:`release` without waiting: a future resolved by the Ack."""
+        return self.board.submit_release(self.pin)
+
     def __repr__(self) -> str:
         return f"Servo(pin={self.pin}, min_us={self.min_us}, max_us={self.max_us})"
 
@@ -417,6 +421,10 @@ class DigitalOutput:
     def release(self) -> None:
         """Release the pin: it becomes an input, as at power-up, free for any mode."""
         self.board.release(self.pin)
+
+    def submit_release(self) -> Future[None]:
+        """:meth:`release` without waiting: a future resolved by the Ack."""
+        return self.board.submit_release(self.pin)
 
     def __repr__(self) -> str:
         return f"DigitalOutput(pin={self.pin})"
@@ -888,15 +896,36 @@ class Board:
         With ``liveness="heartbeat"`` it is the only thing that does: call it
         from the control loop, more often than ``failsafe_timeout``.
         """
+        self._send(self._heartbeat_msg())
+
+    def submit_heartbeat(self) -> Future[None]:
+        """:meth:`heartbeat` without waiting: a future resolved by the Ack.
+
+        The sign of life is the message reaching the device, so a control loop
+        that must not block (an asyncio loop, a real-time thread) calls this
+        and carries on; a failed future says the heartbeat did not arrive.
+        """
+        return self._future(self._heartbeat_msg(), None, _no_value)
+
+    def _heartbeat_msg(self) -> ArduinoIn:
+        if self._closed:
+            raise BoardClosedError("the board is closed")
         msg = ArduinoIn()
         msg.heartbeat.SetInParent()
-        self._send(msg)
+        return msg
 
     def release(self, pin: int) -> None:
         """Release an output: a servo's pulses stop, a digital pin becomes an input.
 
         The pin is then free for any mode (and a servo's slot for another pin).
         """
+        self._send(*self._release(pin))
+
+    def submit_release(self, pin: int) -> Future[None]:
+        """:meth:`release` without waiting: a future resolved by the Ack."""
+        return self._future(*self._release(pin), _no_value)
+
+    def _release(self, pin: int) -> tuple[ArduinoIn, Callable[[], None]]:
         pin = self._check_pin(pin)
         with self._lock:
             if pin not in self._outputs:
@@ -907,15 +936,22 @@ class Board:
         def forget() -> None:
             self._outputs.pop(pin, None)
 
-        self._send(msg, forget)
+        return msg, forget
 
     def release_all(self) -> None:
         """Release every output: the device is as unconfigured as after power-up."""
+        self._send(*self._release_all())
+
+    def submit_release_all(self) -> Future[None]:
+        """:meth:`release_all` without waiting: a future resolved by the Ack."""
+        return self._future(*self._release_all(), _no_value)
+
+    def _release_all(self) -> tuple[ArduinoIn, Callable[[], None]]:
         if self._closed:
             raise BoardClosedError("the board is closed")
         msg = ArduinoIn()
         msg.release_all.SetInParent()
-        self._send(msg, self._outputs.clear)
+        return msg, self._outputs.clear
 
     def stop(self) -> None:
         """Emergency stop: every configured output to its safe value at once, latched."""
@@ -1078,6 +1114,12 @@ class Board:
         :class:`CommandRejectedError`, as every command does.
         """
         return self._rpc.call(msg)
+
+    def submit_request(self, msg: ArduinoIn) -> Future[Ack]:
+        """:meth:`request` without waiting: a future of the Ack (or of its error)."""
+        if self._closed:
+            raise BoardClosedError("the board is closed")
+        return self._future(msg, None, lambda call: call.result())
 
     @property
     def stats(self) -> Stats:
