@@ -145,8 +145,12 @@ def _returning(obj: T) -> Callable[[Call], T]:
 
 
 def _output_states(call: Call) -> dict[int, OutputState]:
-    """Decode OutputStates (docs/protocol.md: 5 bytes per servo, then the digital masks)."""
-    states = call.result().outputs
+    return decode_output_states(call.result().outputs)
+
+
+def decode_output_states(states: Any) -> dict[int, OutputState]:
+    """Decode an ``OutputStates`` readback by pin (docs/protocol.md: 5 bytes per servo,
+    then the digital masks); :class:`ProtocolError` for a servos field of a wrong size."""
     blob = bytes(states.servos)
     if len(blob) % 5:
         raise ProtocolError(f"OutputStates.servos of {len(blob)} bytes is not 5 per servo")
