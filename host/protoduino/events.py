@@ -43,7 +43,7 @@ class EventKind(StrEnum):
     #: details: replayed (int), failed (list of str), values (bool)
     RESTORED = "restored"
     #: The device entered or left its failsafe state. details: active (bool),
-    #: cause ("ping_timeout", "stop", "none")
+    #: cause ("ping_timeout", or "heartbeat_timeout" with liveness="heartbeat"; "stop", "none")
     FAILSAFE = "failsafe"
     #: A text from the firmware. details: level ("debug".."error"), text (str)
     LOG = "log"
