@@ -677,11 +677,17 @@ class Board:
             if self._closed:
                 return
             self._closed = True
-        self._rpc.close()
-        self._link.close()
-        if self._capture is not None:
-            self._capture.close()  # after the I/O thread stopped: the last frame is in
-        self._events.close()
+        # Each step runs even if one before it was interrupted (a second Ctrl-C while an
+        # open that the first one cut short closes): no thread may be left behind.
+        try:
+            self._rpc.close()
+            self._link.close()
+        finally:
+            try:
+                if self._capture is not None:
+                    self._capture.close()  # after the I/O thread stopped: the last frame is in
+            finally:
+                self._events.close()
 
     @property
     def closed(self) -> bool:

@@ -50,6 +50,7 @@ from .constants import (
 )
 from .errors import (
     ArgumentError,
+    ArgumentTypeError,
     BoardClosedError,
     HandshakeError,
     LinkError,
@@ -173,6 +174,9 @@ class Link:
         self.schema_id = schema_id
         self.version = version
         #: This host's session id (never 0: the device's "no session").
+        if session is not None and (isinstance(session, bool) or not isinstance(session, int)):
+            # struct.pack in the I/O thread would fail on it, far from the caller.
+            raise ArgumentTypeError(f"session must be an int, not {type(session).__name__}")
         self.session = session if session is not None else secrets.randbelow(0xFFFFFFFF) + 1
         if not 0 < self.session <= 0xFFFFFFFF:
             raise ArgumentError(f"session must be 1..2**32-1, not {self.session}")
