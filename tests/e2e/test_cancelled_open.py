@@ -156,7 +156,9 @@ def test_an_interrupted_open_leaves_nothing_running(sim_board: SimBoard) -> None
             if board is not None:
                 board.close()
         _nothing_left(sim_board, session)
-    assert caught >= 3  # the RESET, the RESET_ACK, GetInfo: the open was surely still running
+    # The first six frames (RESET, RESET_ACK, GetInfo, its Ack, ConfigureFailsafe, its Ack)
+    # are seen before the open can return: the interrupt lands in it every time.
+    assert caught >= 6
     _failsafe_fires(sim_board)
 
 
