@@ -7,10 +7,12 @@ here, so the blocking and the awaited calls have the same checks, bounds,
 retries, session restore and errors, and may be mixed on one board (from other
 threads too).
 
-Only two steps run on a worker thread (:func:`asyncio.to_thread`): opening (the
-handshake is the link's own blocking loop) and closing (it joins the board's
-threads). Cancelling an awaited command does not recall it: once submitted it
-is sent and acknowledged like any other; only the wait is abandoned.
+Only opening and closing run on a worker thread (:func:`asyncio.to_thread`): the
+handshake is the link's own blocking loop, and closing joins the board's
+threads. A cancelled open is abandoned on that thread and closed (see
+:func:`open`): nothing of it runs on. Cancelling an awaited command does not
+recall it: once submitted it is sent and acknowledged like any other; only the
+wait is abandoned.
 
 Events: ``async for event in board.events()`` sees every :class:`Event` from
 the moment it starts iterating until the board is closed (then the iteration
