@@ -7,10 +7,12 @@ here, so the blocking and the awaited calls have the same checks, bounds,
 retries, session restore and errors, and may be mixed on one board (from other
 threads too).
 
-Only two steps run on a worker thread (:func:`asyncio.to_thread`): opening (the
-handshake is the link's own blocking loop) and closing (it joins the board's
-threads). Cancelling an awaited command does not recall it: once submitted it
-is sent and acknowledged like any other; only the wait is abandoned.
+Only opening and closing run on a worker thread (:func:`asyncio.to_thread`): the
+handshake is the link's own blocking loop, and closing joins the board's
+threads. A cancelled open is abandoned on that thread and closed (see
+:func:`open`): nothing of it runs on. Cancelling an awaited command does not
+recall it: once submitted it is sent and acknowledged like any other; only the
+wait is abandoned.
 
 Events: ``async for event in board.events()`` sees every :class:`Event` from
 the moment it starts iterating until the board is closed (then the iteration
@@ -25,15 +27,19 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 from collections.abc import Mapping
 from concurrent.futures import Future
 from types import TracebackType
-from typing import Any, TypeVar
+from typing import Any, SupportsFloat, TypeVar
 
 from . import board as _board
 from .board import OutputState
 from .constants import SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
+from .errors import ArgumentError
 from .events import Event, Stats
+from .messages import ArduinoIn
+from .rpc import Ack
 
 T = TypeVar("T")
 
@@ -46,8 +52,37 @@ async def _wait(future: Future[T]) -> T:
 
 
 async def open(url: str, **options: Any) -> Board:
-    """Open ``url`` like :meth:`protoduino.Board.open` (same keywords); the loop runs on."""
-    return Board(await asyncio.to_thread(_board.Board.open, url, **options))
+    """Open ``url`` like :meth:`protoduino.Board.open` (same keywords); the loop runs on.
+
+    Cancelling it (``asyncio.wait_for(aio.open(url), 0.5)`` timing out, ``task.cancel()``)
+    at any point leaves nothing running: the open runs on a worker thread, which a
+    cancellation cannot stop, so it is abandoned there (:class:`protoduino.board.OpenCancel`)
+    and the cancellation completes once the board's threads are gone and the port is free.
+    A board the open had just returned is closed likewise.
+    """
+    cancel = _board.OpenCancel()
+    opening = asyncio.ensure_future(
+        asyncio.to_thread(_board.Board.open, url, cancel=cancel, **options)
+    )
+    try:
+        sync = await asyncio.shield(opening)
+    except asyncio.CancelledError:
+        closing = asyncio.ensure_future(asyncio.to_thread(cancel.cancel))
+        await _settle(closing, opening)
+        raise
+    return Board(sync)
+
+
+async def _settle(*futures: asyncio.Future[Any]) -> None:
+    """Wait until every one of ``futures`` is done, whatever they raise, even if cancelled again.
+
+    A second cancellation while the open is being abandoned must not leave it half
+    done: the caller re-raises its own cancellation once everything stopped.
+    """
+    both = asyncio.gather(*futures, return_exceptions=True)
+    while not both.done():
+        with contextlib.suppress(asyncio.CancelledError):
+            await asyncio.shield(both)
 
 
 class Servo:
@@ -64,11 +99,14 @@ class Servo:
     def value(self) -> int | None:
         return self.sync.value
 
-    async def write(self, degrees: int) -> None:
+    async def write(self, degrees: SupportsFloat) -> None:
         await _wait(self.sync.submit(degrees))
 
-    async def write_us(self, us: int) -> None:
+    async def write_us(self, us: SupportsFloat) -> None:
         await _wait(self.sync.submit_us(us))
+
+    async def release(self) -> None:
+        await _wait(self.sync.submit_release())
 
     def __repr__(self) -> str:
         return f"aio.{self.sync!r}"
@@ -93,6 +131,9 @@ class DigitalOutput:
 
     async def off(self) -> None:
         await self.write(False)
+
+    async def release(self) -> None:
+        await _wait(self.sync.submit_release())
 
     def __repr__(self) -> str:
         return f"aio.{self.sync!r}"
@@ -237,7 +278,25 @@ class Board:
     async def stop(self) -> None:
         await _wait(self.sync.submit_stop())
 
-    async def pose(self, targets: Mapping[_Output, int | bool]) -> None:
+    async def heartbeat(self) -> None:
+        """:meth:`protoduino.Board.heartbeat`: the loop runs on while the Ack comes back.
+
+        With ``liveness="heartbeat"`` a control loop awaits this every cycle (or
+        submits it and checks later: ``board.sync.submit_heartbeat()``).
+        """
+        await _wait(self.sync.submit_heartbeat())
+
+    async def release(self, pin: int) -> None:
+        await _wait(self.sync.submit_release(pin))
+
+    async def release_all(self) -> None:
+        await _wait(self.sync.submit_release_all())
+
+    async def request(self, msg: ArduinoIn) -> Ack:
+        """:meth:`protoduino.Board.request`, awaited."""
+        return await _wait(self.sync.submit_request(msg))
+
+    async def pose(self, targets: Mapping[_Output, _board.PoseValue]) -> None:
         """:meth:`protoduino.Board.pose`; the outputs may be these or the blocking ones."""
         await _wait(self.sync.submit_pose({_sync(o): v for o, v in targets.items()}))
 
@@ -247,7 +306,7 @@ class Board:
     def events(self, maxsize: int = EVENT_BUFFER) -> EventStream:
         """Every event from now on, until the board is closed: ``async for e in board.events()``."""
         if maxsize < 1:
-            raise ValueError("maxsize must be at least 1")
+            raise ArgumentError("maxsize must be at least 1")
         return EventStream(self, maxsize)
 
     def __repr__(self) -> str:

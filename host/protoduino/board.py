@@ -45,15 +45,17 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import os
 import struct
 import threading
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass
-from numbers import Integral
+from decimal import Decimal
+from numbers import Integral, Real
 from types import TracebackType
-from typing import Any, Literal, TypeVar
+from typing import Any, Literal, SupportsFloat, TypeVar
 
 from ._generated import protoduino_pb2 as pb
 from .capture import CaptureWriter
@@ -76,6 +78,8 @@ from .constants import (
     WATCHDOG_TIMEOUT,
 )
 from .errors import (
+    ArgumentError,
+    ArgumentTypeError,
     BoardClosedError,
     CommandRejectedError,
     ProtocolError,
@@ -124,6 +128,9 @@ class OutputState:
 
 T = TypeVar("T")
 
+#: A pose's value for one output: degrees (any real number) or a digital level.
+PoseValue = SupportsFloat | bool
+
 
 def _no_value(call: Call) -> None:
     call.result()  # raises the call's error, if any
@@ -138,8 +145,12 @@ def _returning(obj: T) -> Callable[[Call], T]:
 
 
 def _output_states(call: Call) -> dict[int, OutputState]:
-    """Decode OutputStates (docs/protocol.md: 5 bytes per servo, then the digital masks)."""
-    states = call.result().outputs
+    return decode_output_states(call.result().outputs)
+
+
+def decode_output_states(states: Any) -> dict[int, OutputState]:
+    """Decode an ``OutputStates`` readback by pin (docs/protocol.md: 5 bytes per servo,
+    then the digital masks); :class:`ProtocolError` for a servos field of a wrong size."""
     blob = bytes(states.servos)
     if len(blob) % 5:
         raise ProtocolError(f"OutputStates.servos of {len(blob)} bytes is not 5 per servo")
@@ -206,8 +217,62 @@ class _Output:
 
 def _int(name: str, value: object) -> int:
     if isinstance(value, bool) or not isinstance(value, Integral):
-        raise TypeError(f"{name} must be an int, not {type(value).__name__}")
+        raise ArgumentTypeError(f"{name} must be an int, not {type(value).__name__}")
     return int(value)
+
+
+#: Real numbers: numbers.Real (int, float, Fraction, numpy's) and Decimal, which the
+#: numbers tower leaves out although its values are real.
+_REAL = (Real, Decimal)
+
+
+def _whole(name: str, value: object) -> int:
+    """A real number (int, float, Fraction, Decimal, a numpy float) rounded to a whole one.
+
+    Inverse kinematics and filters produce floats; the wire carries whole degrees
+    and microseconds. The rounding is ``round()``'s: to the nearest whole number, a
+    half to the even one (44.5 -> 44, 45.5 -> 46), exact for a Fraction or a
+    Decimal. NaN and infinities are refused (there is no nearest whole number), and
+    so is a bool: ``True`` is no angle.
+    """
+    if isinstance(value, bool) or not isinstance(value, _REAL):
+        raise ArgumentTypeError(f"{name} must be a real number, not {type(value).__name__}")
+    if isinstance(value, Integral):
+        return int(value)
+    if not math.isfinite(value):
+        raise _reject(Status.STATUS_OUT_OF_RANGE, f"{name} {value!r} is not a finite number")
+    return int(round(value))  # noqa: RUF046  (numpy < 2 rounds a float32 to a float32)
+
+
+def _session(value: object) -> int:
+    """A host session id: an int 1..2**32-1 (a bool or a float is refused, not truncated)."""
+    session = _int("session", value)
+    if not 0 < session <= 0xFFFFFFFF:
+        raise ArgumentError(f"session must be 1..2**32-1, not {session}")
+    return session
+
+
+def _failsafe_ms(value: object) -> int:
+    """A failsafe timeout (seconds, any real number) as the whole milliseconds the device keeps.
+
+    ``Decimal("0.1")`` is 100 ms like ``0.1``: the check is on the value rounded to the
+    millisecond, which is what ConfigureFailsafe carries, so no binary float edge
+    decides it. A bool is refused (``True`` is no duration), and so are NaN and infinities.
+    """
+    if isinstance(value, bool) or not isinstance(value, _REAL):
+        raise ArgumentTypeError(
+            f"failsafe_timeout must be a number of seconds, not {type(value).__name__}"
+        )
+    low, high = round(FAILSAFE_MIN * 1000), round(FAILSAFE_MAX * 1000)
+    try:
+        ms = round(float(value) * 1000)
+    except (OverflowError, ValueError):  # an infinity, NaN
+        ms = -1
+    if not low <= ms <= high:
+        raise ArgumentError(
+            f"failsafe_timeout must be {FAILSAFE_MIN:g}..{FAILSAFE_MAX:g} s, not {value!r}"
+        )
+    return ms
 
 
 def _level(name: str, value: object) -> bool:
@@ -222,7 +287,7 @@ def _level(name: str, value: object) -> bool:
         if int(value) in (0, 1):
             return bool(value)
         raise _reject(Status.STATUS_OUT_OF_RANGE, f"{name} {int(value)} is not a level (0 or 1)")
-    raise TypeError(f"{name} must be a bool, not {type(value).__name__}")
+    raise ArgumentTypeError(f"{name} must be a bool, not {type(value).__name__}")
 
 
 def _reject(status: int, text: str) -> CommandRejectedError:
@@ -254,8 +319,7 @@ class Servo:
         return self.board._value(self.pin, SERVO)
 
     def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
-        degrees = _int("degrees", value)
-        msg, us = self._degrees(degrees)
+        msg, us = self._degrees(value)
         item.servo.CopyFrom(msg.servo_control)
         return msg, us
 
@@ -263,24 +327,31 @@ class Servo:
         """The pulse width the device makes for ``degrees`` (its own integer formula)."""
         return self.min_us + degrees * (self.max_us - self.min_us) // SERVO_MAX_DEGREES
 
-    def write(self, degrees: int) -> None:
-        """Move to ``degrees`` (0..180, mapped linearly onto [min_us, max_us])."""
+    def write(self, degrees: SupportsFloat) -> None:
+        """Move to ``degrees`` (0..180, mapped linearly onto [min_us, max_us]).
+
+        Any real number: it is rounded to the nearest whole degree first, a half to
+        the even one (``round()``), which must then be within 0..180.
+        """
         self.board._control(self.pin, *self._degrees(degrees))
 
-    def write_us(self, us: int) -> None:
-        """Set the pulse width in microseconds (within [min_us, max_us])."""
+    def write_us(self, us: SupportsFloat) -> None:
+        """Set the pulse width in microseconds (within [min_us, max_us]).
+
+        Any real number, rounded to the nearest whole microsecond as :meth:`write` rounds.
+        """
         self.board._control(self.pin, *self._us(us))
 
-    def submit(self, degrees: int) -> Future[None]:
+    def submit(self, degrees: SupportsFloat) -> Future[None]:
         """:meth:`write` without waiting: a future resolved by the Ack."""
         return self.board._control_future(self.pin, *self._degrees(degrees))
 
-    def submit_us(self, us: int) -> Future[None]:
+    def submit_us(self, us: SupportsFloat) -> Future[None]:
         """:meth:`write_us` without waiting: a future resolved by the Ack."""
         return self.board._control_future(self.pin, *self._us(us))
 
-    def _degrees(self, degrees: int) -> tuple[ArduinoIn, int]:
-        degrees = _int("degrees", degrees)
+    def _degrees(self, value: object) -> tuple[ArduinoIn, int]:
+        degrees = _whole("degrees", value)
         if not 0 <= degrees <= SERVO_MAX_DEGREES:
             raise _reject(Status.STATUS_OUT_OF_RANGE, f"{degrees} degrees is outside 0..180")
         msg = ArduinoIn()
@@ -288,8 +359,8 @@ class Servo:
         msg.servo_control.degrees = degrees
         return msg, self.to_us(degrees)
 
-    def _us(self, us: int) -> tuple[ArduinoIn, int]:
-        us = _int("us", us)
+    def _us(self, value: object) -> tuple[ArduinoIn, int]:
+        us = _whole("us", value)
         if not self.min_us <= us <= self.max_us:
             raise _reject(
                 Status.STATUS_OUT_OF_RANGE,
@@ -303,6 +374,10 @@ class Servo:
     def release(self) -> None:
         """Release the servo: its pulses stop (limp) and the pin is free for any mode."""
         self.board.release(self.pin)
+
+    def submit_release(self) -> Future[None]:
+        """:meth:`release` without waiting: a future resolved by the Ack."""
+        return self.board.submit_release(self.pin)
 
     def __repr__(self) -> str:
         return f"Servo(pin={self.pin}, min_us={self.min_us}, max_us={self.max_us})"
@@ -351,8 +426,49 @@ class DigitalOutput:
         """Release the pin: it becomes an input, as at power-up, free for any mode."""
         self.board.release(self.pin)
 
+    def submit_release(self) -> Future[None]:
+        """:meth:`release` without waiting: a future resolved by the Ack."""
+        return self.board.submit_release(self.pin)
+
     def __repr__(self) -> str:
         return f"DigitalOutput(pin={self.pin})"
+
+
+class OpenCancel:
+    """Abandons a :meth:`Board.open` in progress from another thread.
+
+    Pass one as ``Board.open(..., cancel=c)``; ``c.cancel()`` then closes the board
+    being opened: the open raises :class:`BoardClosedError` (from wherever it was:
+    opening the port, the handshake, reading the device's info) and, once
+    ``cancel()`` returned, nothing of it runs: no I/O or event thread, no Ping, the
+    port's lock released. A cancel that comes after the open returned closes the
+    board it returned, so the race between the two ends the same way.
+    :func:`protoduino.aio.open` uses one when its task is cancelled. ``cancel()``
+    blocks while the board closes (its threads are joined: see :meth:`Board.close`).
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._board: Board | None = None
+        self._cancelled = False
+
+    @property
+    def cancelled(self) -> bool:
+        return self._cancelled
+
+    def cancel(self) -> None:
+        with self._lock:
+            self._cancelled = True
+            board = self._board
+        if board is not None:
+            board.close()
+
+    def _attach(self, board: Board) -> None:
+        """Called by the board being opened, before it starts anything cancel() must stop."""
+        with self._lock:
+            if self._cancelled:
+                raise BoardClosedError("the open was cancelled")
+            self._board = board
 
 
 class Board:
@@ -377,17 +493,18 @@ class Board:
         session: int | None = None,
         reboot_limit: int = REBOOT_LIMIT,
         reboot_window: float = REBOOT_WINDOW,
+        cancel: OpenCancel | None = None,
     ) -> None:
-        if not FAILSAFE_MIN <= failsafe_timeout <= FAILSAFE_MAX:
-            raise ValueError(
-                f"failsafe_timeout must be {FAILSAFE_MIN:g}..{FAILSAFE_MAX:g} s, "
-                f"not {failsafe_timeout!r}"
-            )
+        # Every option is checked before anything is opened or started: a wrong one
+        # raises here, with no thread to stop (a float session once crashed the I/O thread).
+        failsafe_ms = _failsafe_ms(failsafe_timeout)
+        if session is not None:
+            session = _session(session)
         if liveness not in ("ping", "heartbeat"):
-            raise ValueError(f"liveness must be 'ping' or 'heartbeat', not {liveness!r}")
+            raise ArgumentError(f"liveness must be 'ping' or 'heartbeat', not {liveness!r}")
         if restore not in ("safe", "last"):
-            raise ValueError(f"restore must be 'safe' or 'last', not {restore!r}")
-        self.failsafe_timeout = float(failsafe_timeout)
+            raise ArgumentError(f"restore must be 'safe' or 'last', not {restore!r}")
+        self.failsafe_timeout = failsafe_ms / 1000
         self.liveness: Liveness = liveness
         self.restore: RestorePolicy = restore
         self.url = url
@@ -437,7 +554,12 @@ class Board:
             self._capture.set_stats(lambda: self.stats)
         # Started only now: a constructor above that refuses its options leaves no thread.
         self._events = EventDispatcher(url)
+        # From here on anything that ends the open early (an error, a KeyboardInterrupt
+        # at any point, a cancel from another thread) closes what was started: a
+        # half-open board that pinged on would keep the device's outputs driven.
         try:
+            if cancel is not None:
+                cancel._attach(self)
             self._link.open()
             self.info = self._get_info()
             self._rpc.rx_budget = self.info.rx_buffer or None
@@ -466,6 +588,7 @@ class Board:
         session: int | None = None,
         reboot_limit: int = REBOOT_LIMIT,
         reboot_window: float = REBOOT_WINDOW,
+        cancel: OpenCancel | None = None,
     ) -> Board:
         """Open ``url`` (any pyserial URL), handshake and read the device's info.
 
@@ -504,6 +627,13 @@ class Board:
         the device's outputs, as the command line does; by default every
         board is a new session, which releases whatever another session had
         configured.
+
+        ``cancel`` (an :class:`OpenCancel`) lets another thread abandon the open.
+        However it ends early (an error, a ``KeyboardInterrupt`` at any point, a
+        cancel), nothing of the board is left running: no thread, no Ping, and
+        the port is free again. Options are checked before anything starts: a
+        wrong type raises :class:`ArgumentTypeError`, a wrong value
+        :class:`ArgumentError`.
         """
         return cls(
             url,
@@ -522,6 +652,7 @@ class Board:
             session=session,
             reboot_limit=reboot_limit,
             reboot_window=reboot_window,
+            cancel=cancel,
         )
 
     # --- context and life cycle -------------------------------------------------------
@@ -553,11 +684,17 @@ class Board:
             if self._closed:
                 return
             self._closed = True
-        self._rpc.close()
-        self._link.close()
-        if self._capture is not None:
-            self._capture.close()  # after the I/O thread stopped: the last frame is in
-        self._events.close()
+        # Each step runs even if one before it was interrupted (a second Ctrl-C while an
+        # open that the first one cut short closes): no thread may be left behind.
+        try:
+            self._rpc.close()
+            self._link.close()
+        finally:
+            try:
+                if self._capture is not None:
+                    self._capture.close()  # after the I/O thread stopped: the last frame is in
+            finally:
+                self._events.close()
 
     @property
     def closed(self) -> bool:
@@ -638,7 +775,7 @@ class Board:
         min_us = _int("min_us", min_us) or SERVO_DEFAULT_MIN_US
         max_us = _int("max_us", max_us) or SERVO_DEFAULT_MAX_US
         if safe is not None and safe_us is not None:
-            raise TypeError("give safe (degrees) or safe_us, not both")
+            raise ArgumentTypeError("give safe (degrees) or safe_us, not both")
         if min_us < SERVO_LIMIT_MIN_US or max_us > SERVO_LIMIT_MAX_US or min_us >= max_us:
             raise _reject(
                 Status.STATUS_INVALID_ARGUMENT,
@@ -686,10 +823,12 @@ class Board:
     def _speed(degrees_per_s: float | None, us_per_s: int | None, span_us: int) -> int:
         """A speed limit as ServoInit.max_speed (us per second, 0: none), checked."""
         if degrees_per_s is not None and us_per_s is not None:
-            raise TypeError("give max_speed (degrees/s) or max_speed_us, not both")
+            raise ArgumentTypeError("give max_speed (degrees/s) or max_speed_us, not both")
         if degrees_per_s is not None:
             if isinstance(degrees_per_s, bool) or not isinstance(degrees_per_s, int | float):
-                raise TypeError(f"max_speed must be a number, not {type(degrees_per_s).__name__}")
+                raise ArgumentTypeError(
+                    f"max_speed must be a number, not {type(degrees_per_s).__name__}"
+                )
             if not degrees_per_s > 0:  # also NaN
                 raise _reject(Status.STATUS_INVALID_ARGUMENT, "max_speed must be above 0")
             us_per_s = max(1, round(degrees_per_s * span_us / SERVO_MAX_DEGREES))
@@ -749,7 +888,7 @@ class Board:
 
     def _ping(self, payload: object) -> tuple[ArduinoIn, Callable[[Call], float]]:
         if not isinstance(payload, bytes | bytearray | memoryview):  # bytes(5) is 5 zeros
-            raise TypeError(f"payload must be bytes, not {type(payload).__name__}")
+            raise ArgumentTypeError(f"payload must be bytes, not {type(payload).__name__}")
         sent = bytes(payload)
         if len(sent) > MAX_PING_PAYLOAD:
             raise _reject(
@@ -774,15 +913,36 @@ class Board:
         With ``liveness="heartbeat"`` it is the only thing that does: call it
         from the control loop, more often than ``failsafe_timeout``.
         """
+        self._send(self._heartbeat_msg())
+
+    def submit_heartbeat(self) -> Future[None]:
+        """:meth:`heartbeat` without waiting: a future resolved by the Ack.
+
+        The sign of life is the message reaching the device, so a control loop
+        that must not block (an asyncio loop, a real-time thread) calls this
+        and carries on; a failed future says the heartbeat did not arrive.
+        """
+        return self._future(self._heartbeat_msg(), None, _no_value)
+
+    def _heartbeat_msg(self) -> ArduinoIn:
+        if self._closed:
+            raise BoardClosedError("the board is closed")
         msg = ArduinoIn()
         msg.heartbeat.SetInParent()
-        self._send(msg)
+        return msg
 
     def release(self, pin: int) -> None:
         """Release an output: a servo's pulses stop, a digital pin becomes an input.
 
         The pin is then free for any mode (and a servo's slot for another pin).
         """
+        self._send(*self._release(pin))
+
+    def submit_release(self, pin: int) -> Future[None]:
+        """:meth:`release` without waiting: a future resolved by the Ack."""
+        return self._future(*self._release(pin), _no_value)
+
+    def _release(self, pin: int) -> tuple[ArduinoIn, Callable[[], None]]:
         pin = self._check_pin(pin)
         with self._lock:
             if pin not in self._outputs:
@@ -793,15 +953,22 @@ class Board:
         def forget() -> None:
             self._outputs.pop(pin, None)
 
-        self._send(msg, forget)
+        return msg, forget
 
     def release_all(self) -> None:
         """Release every output: the device is as unconfigured as after power-up."""
+        self._send(*self._release_all())
+
+    def submit_release_all(self) -> Future[None]:
+        """:meth:`release_all` without waiting: a future resolved by the Ack."""
+        return self._future(*self._release_all(), _no_value)
+
+    def _release_all(self) -> tuple[ArduinoIn, Callable[[], None]]:
         if self._closed:
             raise BoardClosedError("the board is closed")
         msg = ArduinoIn()
         msg.release_all.SetInParent()
-        self._send(msg, self._outputs.clear)
+        return msg, self._outputs.clear
 
     def stop(self) -> None:
         """Emergency stop: every configured output to its safe value at once, latched."""
@@ -817,11 +984,12 @@ class Board:
         msg.stop.SetInParent()
         return msg
 
-    def pose(self, targets: Mapping[Servo | DigitalOutput, int | bool]) -> None:
+    def pose(self, targets: Mapping[Servo | DigitalOutput, PoseValue]) -> None:
         """Set several outputs in one command, all or nothing.
 
-        ``targets`` maps each output to its value: degrees (int) for a
-        :class:`Servo`, a level for a :class:`DigitalOutput`. The device checks
+        ``targets`` maps each output to its value: degrees for a :class:`Servo`
+        (any real number, rounded as :meth:`Servo.write` rounds), a level for a
+        :class:`DigitalOutput`. The device checks
         every value before it applies any; the servos' new widths start at the
         same servo frame (digital levels change at once, as the command runs).
         A refusal, on the host or by the device, raises
@@ -833,18 +1001,18 @@ class Board:
             self._rpc.wait(call)
         value(call)
 
-    def submit_pose(self, targets: Mapping[Servo | DigitalOutput, int | bool]) -> Future[None]:
+    def submit_pose(self, targets: Mapping[Servo | DigitalOutput, PoseValue]) -> Future[None]:
         """:meth:`pose` without waiting: a future resolved by the Ack."""
         msg, on_ok, value = self._pose(targets)
         return self._future(msg, on_ok, value)
 
     def _pose(
-        self, targets: Mapping[Servo | DigitalOutput, int | bool]
+        self, targets: Mapping[Servo | DigitalOutput, PoseValue]
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[Call], None]]:
         if self._closed:
             raise BoardClosedError("the board is closed")
         if not isinstance(targets, Mapping):
-            raise TypeError(
+            raise ArgumentTypeError(
                 f"a pose is a mapping of outputs to values, not {type(targets).__name__}"
             )
         if not 1 <= len(targets) <= MAX_POSE_ITEMS:
@@ -857,9 +1025,11 @@ class Board:
         records: list[tuple[int, bytes, int]] = []  # pin, its Control (for a restore), value
         for output, target in targets.items():
             if not isinstance(output, Servo | DigitalOutput):
-                raise TypeError(f"a pose sets Servo and DigitalOutput objects, not {output!r}")
+                raise ArgumentTypeError(
+                    f"a pose sets Servo and DigitalOutput objects, not {output!r}"
+                )
             if output.board is not self:
-                raise ValueError(f"{output!r} belongs to another board")
+                raise ArgumentError(f"{output!r} belongs to another board")
             item = msg.pose.items.add()
             try:
                 if output.pin in (o.pin for o in outputs):
@@ -870,7 +1040,7 @@ class Board:
                     error.status, f"pose: {output!r}: {error}", sent=False, output=output
                 ) from None
             except TypeError as error:
-                raise TypeError(f"pose: {output!r}: {error}") from None
+                raise ArgumentTypeError(f"pose: {output!r}: {error}") from None
             outputs.append(output)
             records.append((output.pin, control.SerializeToString(), width))
 
@@ -961,6 +1131,12 @@ class Board:
         :class:`CommandRejectedError`, as every command does.
         """
         return self._rpc.call(msg)
+
+    def submit_request(self, msg: ArduinoIn) -> Future[Ack]:
+        """:meth:`request` without waiting: a future of the Ack (or of its error)."""
+        if self._closed:
+            raise BoardClosedError("the board is closed")
+        return self._future(msg, None, lambda call: call.result())
 
     @property
     def stats(self) -> Stats:
@@ -1104,7 +1280,7 @@ class Board:
 
     def _failsafe_config(self) -> ArduinoIn:
         msg = ArduinoIn()
-        msg.configure_failsafe.timeout_ms = round(self.failsafe_timeout * 1000)
+        msg.configure_failsafe.timeout_ms = round(self.failsafe_timeout * 1000)  # whole ms
         msg.configure_failsafe.liveness = (
             pb.LIVENESS_HEARTBEAT if self.liveness == "heartbeat" else pb.LIVENESS_PING
         )
@@ -1188,7 +1364,10 @@ class Board:
         event and a Ping's Ack told first; an Ack tells of one whose event was
         lost), and its clearing once.
         """
-        cause = {1: "ping_timeout", 2: "stop"}.get(fs.cause, "none")
+        # The wire names one timeout cause, whatever the liveness source: the host
+        # names it for what expired (with liveness="heartbeat" no Ping could stop it).
+        timeout = "heartbeat_timeout" if self.liveness == "heartbeat" else "ping_timeout"
+        cause = {1: timeout, 2: "stop"}.get(fs.cause, "none")
         with self._lock:
             if fs.active:
                 if self._failsafe_active and self._failsafe_epoch == fs.epoch:

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from typing import IO, Any, get_args
 
 from ._generated.schema_id import SCHEMA_ID
-from .errors import CaptureError
+from .errors import ArgumentError, CaptureError
 from .events import Event, Stats
 from .framing import cobs_encode, decode_frame
 from .packets import BadFrame, ErrorReason, Packet, build_packet
@@ -214,7 +214,7 @@ def _record(obj: dict[str, Any]) -> Record | None:
         elif error in get_args(ErrorReason):
             item = BadFrame(error, raw)
         else:
-            raise ValueError(f"unknown drop reason {error!r}")
+            raise ArgumentError(f"unknown drop reason {error!r}")
         return CapturedFrame(t, str(obj["dir"]), item)
     if "stats" in obj:
         return CapturedStats(t, dict(obj["stats"]))

@@ -19,6 +19,14 @@
      +-- FlashError               avrdude could not upload the firmware
      +-- SimControlError          a simulated board refused an input command (also a ValueError)
      +-- CaptureError             a capture file cannot be written or read
+     +-- ArgumentError            a value refused before anything ran; also a builtin ValueError
+     +-- ArgumentTypeError        an argument of the wrong type; also a builtin TypeError
+
+A refusal the device would give too (a pin that does not exist, an angle outside
+0..180) is a :class:`CommandRejectedError` with ``sent=False``; ArgumentError and
+ArgumentTypeError are for the rest: options of ``Board.open`` (``session=1.5``),
+a value of the wrong type (``servo.write("45")``), an unknown name. Being
+ValueError and TypeError too, they are caught by code written for the builtins.
 
 Third-party exceptions (pyserial, protobuf) are wrapped at the boundary with
 ``raise ... from error`` so callers need to catch only ``ProtoduinoError``.
@@ -156,3 +164,11 @@ class SimControlError(ProtoduinoError, ValueError):
 
 class CaptureError(ProtoduinoError):
     """A capture file cannot be written, or what was read is not a capture."""
+
+
+class ArgumentError(ProtoduinoError, ValueError):
+    """A value protoduino refuses (out of range, an unknown name), before anything is sent."""
+
+
+class ArgumentTypeError(ProtoduinoError, TypeError):
+    """An argument of a type protoduino does not take (``session=True``, ``degrees="45"``)."""

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
+from .errors import ArgumentError
+
 log = logging.getLogger(__name__)
 
 
@@ -41,7 +43,7 @@ class EventKind(StrEnum):
     #: details: replayed (int), failed (list of str), values (bool)
     RESTORED = "restored"
     #: The device entered or left its failsafe state. details: active (bool),
-    #: cause ("ping_timeout", "stop", "none")
+    #: cause ("ping_timeout", or "heartbeat_timeout" with liveness="heartbeat"; "stop", "none")
     FAILSAFE = "failsafe"
     #: A text from the firmware. details: level ("debug".."error"), text (str)
     LOG = "log"
@@ -156,7 +158,7 @@ class EventDispatcher:
         self, name: str, *, limit: int = EVENT_QUEUE_LIMIT, close_wait: float = CLOSE_WAIT
     ) -> None:
         if limit < 1:
-            raise ValueError("limit must be at least 1")
+            raise ArgumentError("limit must be at least 1")
         self.name = name
         self.limit = limit
         self.close_wait = close_wait

@@ -49,6 +49,9 @@ from .constants import (
     PacketType,
 )
 from .errors import (
+    ArgumentError,
+    ArgumentTypeError,
+    BoardClosedError,
     HandshakeError,
     LinkError,
     ProtocolError,
@@ -171,9 +174,12 @@ class Link:
         self.schema_id = schema_id
         self.version = version
         #: This host's session id (never 0: the device's "no session").
+        if session is not None and (isinstance(session, bool) or not isinstance(session, int)):
+            # struct.pack in the I/O thread would fail on it, far from the caller.
+            raise ArgumentTypeError(f"session must be an int, not {type(session).__name__}")
         self.session = session if session is not None else secrets.randbelow(0xFFFFFFFF) + 1
         if not 0 < self.session <= 0xFFFFFFFF:
-            raise ValueError(f"session must be 1..2**32-1, not {self.session}")
+            raise ArgumentError(f"session must be 1..2**32-1, not {self.session}")
         #: The device's boot id at the last handshake (None before the first).
         self.boot_id: int | None = None
         #: Whether the first handshake found the session still on the device.
@@ -192,6 +198,10 @@ class Link:
         self._hs_packets = 0  # good packets received while handshaking (none a RESET_ACK)
         self._was_active = False
         self._opened = threading.Event()
+        #: Held while open() starts the transport and while close() marks the link closed,
+        #: so a close from another thread never misses a transport that is starting.
+        self._life = threading.Lock()
+        self._hs_rx = 0  # transport.rx_since_open when this handshake started
         #: Why the link is not ACTIVE (what a waiting call should raise), or None.
         self.down_error: ProtoduinoError | None = None
         self.device_version: int | None = None
@@ -211,20 +221,36 @@ class Link:
     # --- called from user threads --------------------------------------------
 
     def open(self) -> None:
-        """Open the port and handshake; raises if either fails within handshake_timeout."""
+        """Open the port and handshake; raises if either fails within handshake_timeout.
+
+        :meth:`close` from another thread abandons it: it raises
+        :class:`BoardClosedError` at once, and the port and the I/O thread are released.
+        """
         self.down_error = HandshakeError(self._no_answer_text())
-        self.transport.start(self)  # raises TransportError for a port that cannot open
+        with self._life:  # a close() either comes first (nothing starts) or waits for start()
+            if self.state is LinkState.CLOSED:
+                raise BoardClosedError("the board was closed while it was opening")
+            self.transport.start(self)  # raises TransportError for a port that cannot open
         # The I/O thread enforces the deadline; the margin covers scheduling only.
         if not self._opened.wait(self.handshake_timeout + 2.0):
             self.down_error = HandshakeError(self._no_answer_text())
+        if self.closed:  # close() from another thread woke the wait
+            raise BoardClosedError("the board was closed while it was opening")
         if self.state is not LinkState.ACTIVE:
             error = self.down_error or HandshakeError(self._no_answer_text())
             self.close()
             raise error
 
     def close(self) -> None:
-        self.state = LinkState.CLOSED
+        """Stop the I/O thread and close the port; an :meth:`open` in progress raises."""
+        with self._life:
+            self.state = LinkState.CLOSED
+        self._opened.set()  # wakes an open() waiting for the handshake
         self.transport.close()
+
+    @property
+    def closed(self) -> bool:
+        return self.state is LinkState.CLOSED
 
     @property
     def active(self) -> bool:
@@ -309,12 +335,22 @@ class Link:
     # --- internals (I/O thread) -----------------------------------------------
 
     def _no_answer_text(self) -> str:
-        heard = describe_received(
+        if self._was_active:
+            # This device has answered this board before: it is protoduino firmware on the
+            # right port at the right speed. Say what is known, not the first-open checklist.
+            heard = max(0, self.transport.rx_since_open - self._hs_rx)
+            return (
+                f"the device on {self.transport.url} answered this board before, but not its "
+                f"RESET for {self.handshake_timeout:g} s (meanwhile received {heard} bytes, "
+                f"{self._hs_packets} frames, no RESET_ACK): the link stalled or the device "
+                "stopped answering; still trying"
+            )
+        heard_text = describe_received(
             self.transport.rx_since_open, self.transport.rx_head, self._hs_packets
         )
         return (
             f"the device on {self.transport.url} did not answer RESET within "
-            f"{self.handshake_timeout:g} s ({heard}); check that the protoduino firmware is "
+            f"{self.handshake_timeout:g} s ({heard_text}); check that the protoduino firmware is "
             "flashed, the port and baud rate are right, and nothing else holds the port"
         )
 
@@ -325,6 +361,7 @@ class Link:
         self._hs_delay = RESET_FIRST_RETRY
         self._hs_reported = False
         self._hs_packets = 0
+        self._hs_rx = self.transport.rx_since_open
         if not self._opened.is_set():
             self.down_error = HandshakeError(self._no_answer_text())
         self._send_reset(now)

@@ -16,7 +16,16 @@ topic                  encoding      what
                                      message or why it was dropped
 /protoduino/stats      json          the link counters (plot retransmits, rtt...)
 /protoduino/events     json          the board's events (reboot, failsafe, ...)
+/protoduino/outputs    json          each readback (``read_outputs``) decoded:
+                                     ``servos``: pin, ``us`` (width now),
+                                     ``target_us``; ``digital``: pin, ``level``
 =====================  ============  =============================================
+
+The readback's servo widths travel packed in a ``bytes`` field (5 bytes per servo,
+to keep the Uno's encoder small), which no viewer can plot; ``/protoduino/outputs``
+carries them decoded as numbers. In Foxglove a servo's width is the message path
+``/protoduino/outputs.servos[:]{pin==9}.us`` (and ``.target_us``), a digital level
+``/protoduino/outputs.digital[:]{pin==13}.level``.
 
 Log times are the capture's UNIX times in nanoseconds.
 """
@@ -28,6 +37,7 @@ import os
 from collections.abc import Iterable
 from typing import Any
 
+from .board import decode_output_states
 from .capture import CapturedEvent, CapturedFrame, CapturedStats, CaptureHeader, Record
 from .constants import PacketType
 from .errors import CaptureError, ProtocolError
@@ -39,6 +49,7 @@ DEVICE = "/protoduino/device"
 FRAMES = "/protoduino/frames"
 STATS = "/protoduino/stats"
 EVENTS = "/protoduino/events"
+OUTPUTS = "/protoduino/outputs"
 
 _JSON_SCHEMAS: dict[str, dict[str, Any]] = {
     FRAMES: {
@@ -56,6 +67,30 @@ _JSON_SCHEMAS: dict[str, dict[str, Any]] = {
     EVENTS: {
         "type": "object",
         "properties": {"event": {"type": "string"}, "text": {"type": "string"}},
+    },
+    OUTPUTS: {
+        "type": "object",
+        "properties": {
+            "message_id": {"type": "integer"},
+            "servos": {
+                "type": "array",
+                "items": {
+                    "type": "object",
+                    "properties": {
+                        "pin": {"type": "integer"},
+                        "us": {"type": "integer"},
+                        "target_us": {"type": "integer"},
+                    },
+                },
+            },
+            "digital": {
+                "type": "array",
+                "items": {
+                    "type": "object",
+                    "properties": {"pin": {"type": "integer"}, "level": {"type": "integer"}},
+                },
+            },
+        },
     },
 }
 
@@ -122,7 +157,10 @@ def write_mcap(records: Iterable[Record], path: str | os.PathLike[str]) -> dict[
                     if item.type is PacketType.COMMAND:
                         add(COMMANDS, record.t, parse_in(item.payload).SerializeToString())
                     elif item.type is PacketType.DATA:
-                        add(DEVICE, record.t, parse_out(item.payload).SerializeToString())
+                        data = parse_out(item.payload)
+                        add(DEVICE, record.t, data.SerializeToString())
+                        if _is_readback(data):
+                            add(OUTPUTS, record.t, _json(_readback(data)))
                 except ProtocolError:
                     pass  # already on /protoduino/frames with its error
             elif isinstance(record, CapturedStats):
@@ -135,6 +173,26 @@ def write_mcap(records: Iterable[Record], path: str | os.PathLike[str]) -> dict[
                 )
         writer.finish()  # type: ignore[no-untyped-call]
     return counts
+
+
+def _is_readback(out: ArduinoOut) -> bool:
+    return out.WhichOneof("data") == "ack" and out.ack.WhichOneof("result") == "outputs"
+
+
+def _readback(out: ArduinoOut) -> dict[str, Any]:
+    """A readback's OutputStates as plain numbers, decoded as the board decodes it."""
+    states = decode_output_states(out.ack.outputs)
+    return {
+        "message_id": out.ack.message_id,
+        "servos": [
+            {"pin": s.pin, "us": s.value, "target_us": s.target}
+            for s in states.values()
+            if s.mode == "servo"
+        ],
+        "digital": [
+            {"pin": s.pin, "level": s.value} for s in states.values() if s.mode == "digital"
+        ],
+    }
 
 
 def _frame(record: CapturedFrame) -> dict[str, Any]:

@@ -24,7 +24,7 @@ from .constants import (
     EventCode,
     PacketType,
 )
-from .errors import PayloadTooLargeError, ProtocolError
+from .errors import ArgumentError, PayloadTooLargeError, ProtocolError
 
 #: Why a frame was dropped. "cobs" and "overflow" come from the framing layer.
 ErrorReason = Literal["cobs", "crc", "length", "type", "overflow"]
@@ -63,7 +63,7 @@ def build_packet(ptype: PacketType, seq: int, payload: bytes = b"") -> bytes:
             "protocol version 1 has no fragmentation"
         )
     if not 0 <= seq <= 0xFF:
-        raise ValueError(f"seq must be 0..255, not {seq}")
+        raise ArgumentError(f"seq must be 0..255, not {seq}")
     body = bytes((ptype, len(payload), seq)) + payload
     return body + crc16(body).to_bytes(2, "big")
 

@@ -17,7 +17,7 @@ import importlib.util
 from importlib import resources
 from pathlib import Path
 
-from .errors import BuildError
+from .errors import ArgumentError, BuildError
 
 NATIVE_SIM = "pd_sim"
 RUNNER = "avrsim"
@@ -42,7 +42,7 @@ def bundled(name: str) -> Path | None:
 def locate(name: str) -> Path:
     """The path of program ``name``, built first when the development tools are installed."""
     if name not in NAMES:
-        raise ValueError(f"unknown program {name!r}; choose from {', '.join(NAMES)}")
+        raise ArgumentError(f"unknown program {name!r}; choose from {', '.join(NAMES)}")
     if importlib.util.find_spec("protoduino_dev") is not None:
         from protoduino_dev.build import build_program
 

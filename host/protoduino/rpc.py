@@ -81,6 +81,7 @@ from .constants import (
 )
 from .errors import (
     AckTimeoutError,
+    ArgumentError,
     BoardClosedError,
     CommandRejectedError,
     DeviceRebootedError,
@@ -234,7 +235,7 @@ class Rpc:
         heartbeat_liveness: bool = False,
     ) -> None:
         if ack_timeout <= 0 or max_retries < 0 or window < 1 or reboot_limit < 1:
-            raise ValueError(
+            raise ArgumentError(
                 "ack_timeout > 0, max_retries >= 0, window >= 1 and reboot_limit >= 1 are required"
             )
         self.link: LinkPort | None = None
@@ -262,7 +263,7 @@ class Rpc:
         # Random by default, so that ids from before a host restart do not look like
         # retransmissions to the device's dedupe window; ``first_id`` fixes it (tests).
         if first_id is not None and not 1 <= first_id <= 0xFFFFFFFF:
-            raise ValueError("first_id must be 1 .. 2**32-1 (0 is never a message id)")
+            raise ArgumentError("first_id must be 1 .. 2**32-1 (0 is never a message id)")
         self._next_id = first_id or secrets.randbelow(0xFFFFFFFF) + 1
         self._calls: dict[int, Call] = {}
         self._inflight: dict[int, Call] = {}

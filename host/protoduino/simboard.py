@@ -50,7 +50,7 @@ from types import TracebackType
 from typing import IO, Any
 
 from . import programs
-from .errors import BuildError, TransportError
+from .errors import ArgumentError, BuildError, TransportError
 from .flashing import MCU
 from .simcontrol import SimControl
 
@@ -151,7 +151,7 @@ def _backend(name: str) -> Backend:
     try:
         return BACKENDS[name]
     except KeyError:
-        raise ValueError(
+        raise ArgumentError(
             f"unknown simulated board backend {name!r}; choose from {', '.join(BACKENDS)}"
         ) from None
 
@@ -184,15 +184,16 @@ class SimBoard:
         self,
         backend: str = "native",
         *,
-        trace: Path | None = None,
-        link: Path | None = None,
-        control: Path | None = None,
+        trace: str | os.PathLike[str] | None = None,
+        link: str | os.PathLike[str] | None = None,
+        control: str | os.PathLike[str] | None = None,
     ) -> None:
         self._backend = _backend(backend)
         self.backend = backend
-        self.trace_path = trace
-        self.link = link
-        self._control_path = control
+        # A str names a file as well as a Path does (trace() reads it as a Path).
+        self.trace_path = None if trace is None else Path(trace)
+        self.link = None if link is None else Path(link)
+        self._control_path = None if control is None else Path(control)
         self._control_dir: Path | None = None
         self._control: SimControl | None = None
         self._proc: subprocess.Popen[bytes] | None = None

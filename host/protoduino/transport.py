@@ -65,6 +65,53 @@ NO_WRITE_TIMEOUT = REMOTE_URLS = ("rfc2217://",)
 RX_HEAD = 64
 
 
+def open_port(url: str, *, baudrate: int = 115200) -> Any:
+    """Open ``url`` as every protoduino user of a port does: holding its lock.
+
+    pyserial takes ``flock(LOCK_EX | LOCK_NB)`` on a serial port or pty (``exclusive=True``)
+    before it configures anything: a second opener fails with :class:`PortInUseError`, and
+    the first one's line is untouched (two hosts would re-handshake each other in turn).
+    Any other failure is a :class:`TransportError`. The port reads without waiting
+    (``timeout=0``); a write gives up after WRITE_TIMEOUT.
+    """
+    # pyserial 3.5's rfc2217:// refuses any write timeout (NotImplementedError); its
+    # socket's own 5 s timeout bounds a write there instead.
+    no_write_timeout = url.lower().startswith(NO_WRITE_TIMEOUT)
+    try:
+        return serial.serial_for_url(
+            url,
+            baudrate=baudrate,
+            timeout=0,
+            write_timeout=None if no_write_timeout else WRITE_TIMEOUT,
+            exclusive=True,
+        )
+    except Exception as error:  # any URL handler's failure, in the ProtoduinoError tree
+        if getattr(error, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK):
+            # pyserial's "Could not exclusively lock port": the lock is held
+            raise PortInUseError(
+                f"cannot open {url}: port in use by another program (another "
+                "protoduino Board or `protoduino monitor`, in this or another process); "
+                "close it first"
+            ) from error
+        hint = ""
+        if no_write_timeout and "option 'control'" in str(error):
+            hint = (
+                " (a server in front of a pseudo-terminal or of a port without modem "
+                "lines never acknowledges modem control: add ?ign_set_control to the URL)"
+            )
+        raise TransportError(f"cannot open {url}: {error}{hint}") from error
+
+
+def check_port_free(url: str, *, baudrate: int = 115200) -> None:
+    """Raise :class:`PortInUseError` if a running board (or monitor) holds ``url``.
+
+    For a tool that opens the port by other means (avrdude, which takes no lock):
+    the lock is taken as every board takes it, then let go at once. Opening a
+    real Uno's port resets it (DTR), as the tool is about to do anyway.
+    """
+    open_port(url, baudrate=baudrate).close()
+
+
 class TransportListener(Protocol):
     """What the link implements; every method runs on the I/O thread."""
 
@@ -233,42 +280,13 @@ class Transport:
                     os.close(fd)
 
     def _open(self) -> None:
-        # pyserial 3.5's rfc2217:// refuses any write timeout (NotImplementedError); its
-        # socket's own 5 s timeout bounds a write there instead.
-        no_write_timeout = self.url.lower().startswith(NO_WRITE_TIMEOUT)
+        self._port = open_port(self.url, baudrate=self.baudrate)
         try:
-            port = serial.serial_for_url(
-                self.url,
-                baudrate=self.baudrate,
-                timeout=0,
-                write_timeout=None if no_write_timeout else WRITE_TIMEOUT,
-                # pyserial takes flock(LOCK_EX | LOCK_NB) on a serial port or pty before
-                # it configures anything: a second opener fails, and the first one's line
-                # is untouched (two hosts would re-handshake each other in turn).
-                exclusive=True,
-            )
-            self._port = port
             # docs/protocol.md 2: a lone 0x00 flushes the receiver's half-filled buffer.
             self._write_raw(DELIMITER)
         except Exception as error:  # any URL handler's failure, in the ProtoduinoError tree
-            in_use = self._port is None and getattr(error, "errno", None) in (
-                errno.EAGAIN,
-                errno.EWOULDBLOCK,
-            )  # pyserial's "Could not exclusively lock port": the lock is held
             self._close_port()
-            if in_use:
-                raise PortInUseError(
-                    f"cannot open {self.url}: port in use by another program (another "
-                    "protoduino Board or `protoduino monitor`, in this or another process); "
-                    "close it first"
-                ) from error
-            hint = ""
-            if no_write_timeout and "option 'control'" in str(error):
-                hint = (
-                    " (a server in front of a pseudo-terminal or of a port without modem "
-                    "lines never acknowledges modem control: add ?ign_set_control to the URL)"
-                )
-            raise TransportError(f"cannot open {self.url}: {error}{hint}") from error
+            raise TransportError(f"cannot open {self.url}: {error}") from error
         self._decoder.reset()
         self.rx_since_open = 0
         self.rx_head = b""

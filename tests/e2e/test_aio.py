@@ -175,3 +175,49 @@ def test_aio_reaches_the_pins(sim_board: SimBoard) -> None:
         want = 544 + (120 + pin) * (2400 - 544) // 180
         wait_for_pin(sim_board, pin, functools.partial(ends_near, want))
     wait_for_pin(sim_board, 13, lambda v: 1 in v)
+
+
+def test_heartbeat_and_release_do_not_block_the_loop(fake: FakeDevice) -> None:
+    """Issue 20, item 12: heartbeat(), release(), release_all() are awaited, the loop free."""
+    released = threading.Event()
+    held = ("heartbeat", "release", "release_all")
+
+    def hold(msg: Any) -> list[Any]:
+        replies = fake.default_reply(msg)
+        if msg.WhichOneof("data") in held:
+            threading.Thread(target=send, args=(replies,)).start()
+            return []
+        return replies
+
+    def send(replies: list[Any]) -> None:
+        released.wait(BOUND)
+        for out in replies:
+            fake.send_data(out)
+
+    async def main() -> None:
+        async with await aio.open(
+            fake.port, ack_timeout=BOUND, ping=False, liveness="heartbeat"
+        ) as board:
+            servo = await board.servo(9)
+            led = await board.digital_output(13)
+            await board.digital_output(12)
+            fake.handler = hold
+            before = len(fake.commands())
+            calls = asyncio.gather(
+                board.heartbeat(), servo.release(), board.release(12), led.release()
+            )
+            ticks = 0
+            while len(fake.commands()) < before + 4:  # the loop runs while the Acks are held
+                ticks += 1
+                await asyncio.sleep(0.01)
+            assert not calls.done() and ticks > 0
+            released.set()
+            await calls
+            assert servo.value is None and led.value is None  # forgotten at the Acks
+            await board.digital_output(13)
+            await board.release_all()
+            kinds = [r.kind for r in fake.commands()[before:]]
+            assert kinds.count("heartbeat") == 1 and kinds.count("release") == 3
+            assert kinds[-1] == "release_all"
+
+    asyncio.run(asyncio.wait_for(main(), BOUND))

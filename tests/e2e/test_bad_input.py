@@ -58,7 +58,7 @@ def test_wrong_types_on_output_objects(board: Board, fake: FakeDevice) -> None:
         lambda: servo.write(True),  # a bool is no angle
         lambda: servo.write("90"),  # type: ignore[arg-type]
         lambda: servo.write(None),  # type: ignore[arg-type]
-        lambda: servo.write_us(1500.0),  # type: ignore[arg-type]
+        lambda: servo.write_us(b"1500"),  # type: ignore[arg-type]
         lambda: servo.write_us(False),
         lambda: led.write("on"),  # type: ignore[arg-type]
         lambda: led.write(None),  # type: ignore[arg-type]

@@ -99,7 +99,7 @@ def test_argument_errors_raise_at_once(board: Board, fake: FakeDevice) -> None:
             action()
         assert info.value.status == status and info.value.sent is False
     with pytest.raises(TypeError):
-        servo.submit(4.5)  # type: ignore[arg-type]
+        servo.submit("4.5")  # type: ignore[arg-type]
     with pytest.raises(TypeError):
         led.submit("on")  # type: ignore[arg-type]
     assert len(fake.commands()) == before  # nothing went out

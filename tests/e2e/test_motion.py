@@ -68,7 +68,7 @@ def test_pose_checked_before_sending(board: Board, fake: FakeDevice) -> None:
         board.pose({a: 10, twin: 20})
     assert info.value.output is twin and info.value.status == Status.STATUS_INVALID_ARGUMENT
     with pytest.raises(TypeError):
-        board.pose({a: 4.5})  # type: ignore[dict-item]
+        board.pose({a: "4.5"})  # type: ignore[dict-item]
     with pytest.raises(TypeError):
         board.pose({led: "on"})  # type: ignore[dict-item]
     with pytest.raises(TypeError):

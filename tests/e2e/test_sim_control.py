@@ -99,3 +99,22 @@ def test_cli_sim_control_option(sim_board: SimBoard) -> None:
         proc.stdout.close()
     assert not path.exists()
     folder.rmdir()
+
+
+def test_paths_given_as_str_work_like_paths(tmp_path: Path) -> None:
+    """``SimBoard(trace="file.jsonl")``: a str names the trace (issue 20, item 13)."""
+    from protoduino import Board
+
+    trace = str(tmp_path / "trace.jsonl")
+    short = tempfile.mkdtemp(prefix="pd-")  # a socket path must stay under 108 bytes
+    with SimBoard("native", trace=trace, control=os.path.join(short, "c.sock")) as sim:
+        sim.start()
+        assert sim.trace_path == Path(trace)
+        with Board.open(sim.port) as board:
+            board.digital_output(13, safe=True)
+        deadline = time.monotonic() + 30.0
+        while not any(c["pin"] == 13 and c["value"] == 1 for c in sim.trace()):
+            assert time.monotonic() < deadline, f"the trace shows {sim.trace()}"
+            time.sleep(0.02)
+        assert sim.set_level(2, 1) > 0  # the control socket at the str path answers
+    os.rmdir(short)

@@ -94,7 +94,7 @@ def test_control_checks(board: Board, fake: FakeDevice) -> None:
             action()
         assert info.value.status == Status.STATUS_OUT_OF_RANGE and not info.value.sent
     with pytest.raises(TypeError):
-        servo.write(4.5)  # type: ignore[arg-type]
+        servo.write("4.5")  # type: ignore[arg-type]
     with pytest.raises(TypeError):
         board.servo("9")  # type: ignore[arg-type]
     with pytest.raises(TypeError):

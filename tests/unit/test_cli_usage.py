@@ -31,6 +31,8 @@ BAD: list[tuple[list[str], str]] = [
     (["info", P, "--ack-timeout", "0"], "0 is out of range (want > 0)"),
     (["info", P, "--ack-timeout", "inf"], "inf is out of range"),
     (["info", P, "--ack-timeout", "soon"], "'soon' is not a number"),
+    (["outputs", P, "--ack-timeout", "0"], "0 is out of range (want > 0)"),
+    (["outputs", P, "--json=yes"], "ignored explicit argument"),
     (["servo", P, "-1", "90"], "-1 is out of range"),
     (["servo", P, "9", "181"], "181 degrees is outside 0..180"),
     (["servo", P, "9", "-5"], "-5 degrees is outside 0..180"),

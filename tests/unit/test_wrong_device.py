@@ -80,3 +80,31 @@ def test_descriptions() -> None:
     )
     assert describe_received(90, bytes(range(1, 65)), 0).endswith("0f 10 ...")
     assert describe_received(40, b"\x01\x02", 2) == "received 2 protoduino frames but no RESET_ACK"
+
+
+def test_a_device_that_answered_before_is_not_blamed_on_the_firmware(tmp_path: Path) -> None:
+    """Issue 20, item 1: a re-handshake that times out says what is known, not "flash it"."""
+    from fakedevice import FakeDevice
+    from protoduino import Event, EventKind
+
+    with FakeDevice(tmp_path) as fake:
+        board = Board.open(fake.port, ack_timeout=0.1, handshake_timeout=0.3, ping=False)
+        with board:
+            failed = threading.Event()
+            texts: list[str] = []
+
+            def record(event: Event) -> None:
+                if event.kind is EventKind.DISCONNECTED and "RESET" in event.text:
+                    texts.append(event.text)
+                    failed.set()
+
+            board.on_event(record)
+            fake.answer_reset = False
+            fake.reboot()  # EVENT BOOT: the board handshakes again, and hears nothing
+            assert failed.wait(30.0)
+            with pytest.raises(HandshakeError) as info:
+                board.ping()  # waits for the link, then fails with the same reason
+    for text in (texts[0], str(info.value)):
+        assert "firmware is flashed" not in text
+        assert "answered this board before" in text
+        assert "0.3 s" in text

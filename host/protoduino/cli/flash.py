@@ -27,9 +27,19 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .. import programs
-    from ..errors import BuildError, FlashError
+    from ..errors import BuildError, FlashError, PortInUseError, TransportError
     from ..flashing import flash, strip_to_hex
+    from ..transport import check_port_free
 
+    try:
+        # Before anything else: avrdude takes no lock, and resetting the board under a
+        # running program (a robot mid-move) is what the lock is there to prevent.
+        check_port_free(args.port, baudrate=args.baud)
+    except PortInUseError as error:
+        print(f"protoduino flash: {error}; nothing flashed", file=sys.stderr)
+        return 1
+    except TransportError:
+        pass  # a port that cannot open at all: flash() says why, in avrdude's terms
     try:
         with tempfile.TemporaryDirectory(prefix="protoduino-flash-") as tmp:
             if args.hex is None:

@@ -47,6 +47,7 @@ COMMANDS: dict[str, str] = {
     "servo": f"{__package__}.servo",
     "pin": f"{__package__}.pin",
     "info": f"{__package__}.info",
+    "outputs": f"{__package__}.outputs",
     "monitor": f"{__package__}.monitor",
     "flash": f"{__package__}.flash",
     "sim": f"{__package__}.sim",

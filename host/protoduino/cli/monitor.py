@@ -35,7 +35,7 @@ from ..packets import BadFrame
 from ..transport import FrameRecord
 from . import argtypes
 from .decode import record_json
-from .options import add_port, error, load_url_handlers, session_of
+from .options import add_port, error, open_board
 
 HELP = "show live decoded traffic (readable lines or JSON) with the link counters"
 
@@ -151,17 +151,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def open_board_with_monitor(args: argparse.Namespace, sink: Any) -> Board:
-    load_url_handlers(args.port)
-    return Board.open(
-        args.port,
-        baudrate=args.baud,
-        ack_timeout=args.ack_timeout,
-        handshake_timeout=args.handshake_timeout,
-        ping=not args.no_ping,
-        monitor=sink,
-        capture=args.capture,
-        session=session_of(args),
-    )
+    return open_board(args, ping=not args.no_ping, monitor=sink)
 
 
 def print_stats(board: Board, as_json: bool) -> None:

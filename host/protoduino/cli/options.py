@@ -14,6 +14,7 @@ from pathlib import Path
 from ..board import Board
 from ..constants import ACK_TIMEOUT, HANDSHAKE_TIMEOUT
 from ..errors import ProtoduinoError, TransportError
+from ..transport import FrameMonitor
 from . import argtypes
 
 
@@ -45,8 +46,8 @@ def add_port(parser: argparse.ArgumentParser, *, required: bool = True) -> None:
     parser.add_argument(
         "--new-session",
         action="store_true",
-        help="start a new host session: the device first releases every output that "
-        "earlier commands configured (by default all commands on one port share a session)",
+        help="start afresh: the device first releases every output (ReleaseAll); what "
+        "this command configures stays in the port's session, for the next command",
     )
     add_capture(parser)
 
@@ -70,9 +71,27 @@ def cli_session(port: str) -> int:
     return zlib.crc32(f"protoduino-cli {port}".encode()) or 1
 
 
-def session_of(args: argparse.Namespace) -> int | None:
-    """The CLI session, or None (a new random one) with --new-session."""
-    return None if getattr(args, "new_session", False) else cli_session(args.port)
+def session_of(args: argparse.Namespace) -> int:
+    """The session of every command on the port, ``--new-session`` included.
+
+    The rule (README, "The command line"): no command takes the device over from the
+    command line's own session. ``--new-session`` does not start another session (the
+    next plain command, even a read-only ``info``, would then take the device over and
+    release what it configured): it releases every output within the port's session
+    (:func:`start_afresh`), so the next command resumes what it left.
+    """
+    return cli_session(args.port)
+
+
+def start_afresh(board: Board, args: argparse.Namespace) -> None:
+    """With ``--new-session``: release every output first (closing the board if that fails)."""
+    if not getattr(args, "new_session", False):
+        return
+    try:
+        board.release_all()
+    except BaseException:
+        board.close()
+        raise
 
 
 def load_url_handlers(port: str) -> None:
@@ -91,17 +110,23 @@ def load_url_handlers(port: str) -> None:
     importlib.import_module("protoduino_dev")  # registers faulty://
 
 
-def open_board(args: argparse.Namespace, *, ping: bool = True) -> Board:
+def open_board(
+    args: argparse.Namespace, *, ping: bool = True, monitor: FrameMonitor | None = None
+) -> Board:
+    """The board of a command: the port's session, the link options, ``--new-session``."""
     load_url_handlers(args.port)
-    return Board.open(
+    board = Board.open(
         args.port,
         baudrate=args.baud,
         ack_timeout=args.ack_timeout,
         handshake_timeout=args.handshake_timeout,
         ping=ping,
+        monitor=monitor,
         capture=args.capture,
         session=session_of(args),
     )
+    start_afresh(board, args)
+    return board
 
 
 def error(command: str, message: object) -> int:

@@ -1,0 +1,81 @@
+"""Every error the package raises is in the tree of protoduino.errors (issue 20, item 13).
+
+docs/architecture.md promises that catching ``ProtoduinoError`` catches everything protoduino
+raises. A builtin ValueError or TypeError raised by the package would escape it: the AST walk
+below finds every ``raise`` of one, so a new bare one fails here rather than in an application.
+"""
+
+from __future__ import annotations
+
+import ast
+import inspect
+from pathlib import Path
+
+import protoduino
+import protoduino.errors
+
+PACKAGE = Path(protoduino.__file__).parent
+#: Builtins that must be raised as their protoduino subclass (ArgumentError, ...).
+BUILTINS = {"ValueError", "TypeError"}
+
+
+def _raised_name(node: ast.Raise) -> str | None:
+    exc = node.exc
+    if isinstance(exc, ast.Call):
+        exc = exc.func
+    return exc.id if isinstance(exc, ast.Name) else None
+
+
+def _bare_raises() -> list[str]:
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if "_generated" in path.parts:
+            continue
+        tree = ast.parse(path.read_text(), filename=str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Raise) and _raised_name(node) in BUILTINS:
+                found.append(f"{path.relative_to(PACKAGE)}:{node.lineno}")
+    return found
+
+
+def test_the_walk_finds_a_bare_raise(tmp_path: Path) -> None:
+    """The walk itself: it sees ``raise ValueError(...)`` and ``raise TypeError``."""
+    source = "def f(x):\n    if x:\n        raise ValueError('no')\n    raise TypeError\n"
+    raises = sorted(
+        (n for n in ast.walk(ast.parse(source)) if isinstance(n, ast.Raise)),
+        key=lambda n: n.lineno,
+    )
+    assert [_raised_name(n) for n in raises] == ["ValueError", "TypeError"]
+
+
+def test_no_builtin_value_or_type_error_is_raised_by_the_package() -> None:
+    assert _bare_raises() == []
+
+
+def test_argument_errors_are_the_builtins_too() -> None:
+    assert issubclass(protoduino.ArgumentError, ValueError)
+    assert issubclass(protoduino.ArgumentError, protoduino.ProtoduinoError)
+    assert issubclass(protoduino.ArgumentTypeError, TypeError)
+    assert issubclass(protoduino.ArgumentTypeError, protoduino.ProtoduinoError)
+
+
+def test_every_error_of_the_tree_is_importable_from_protoduino() -> None:
+    tree = {
+        name
+        for name, cls in inspect.getmembers(protoduino.errors, inspect.isclass)
+        if issubclass(cls, protoduino.ProtoduinoError)
+    }
+    assert {"SimControlError", "BuildError", "FlashError", "CaptureError"} <= tree
+    for name in tree:
+        assert getattr(protoduino, name) is getattr(protoduino.errors, name), name
+        assert name in protoduino.__all__, name
+
+
+def test_the_docstring_tree_names_every_error() -> None:
+    """The tree drawn in errors.py (and docs/api.md) lists every class."""
+    doc = protoduino.errors.__doc__ or ""
+    api = (PACKAGE.parents[1] / "docs" / "api.md").read_text()
+    for name, cls in inspect.getmembers(protoduino.errors, inspect.isclass):
+        if issubclass(cls, protoduino.ProtoduinoError):
+            assert name in doc, name
+            assert name in api, name
