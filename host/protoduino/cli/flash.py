@@ -25,21 +25,30 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _is_elf(path: Path) -> bool:
+    try:
+        with path.open("rb") as f:
+            return f.read(4) == b"\x7fELF"
+    except OSError:
+        return False  # flash() says why it cannot read it
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import programs
     from ..errors import BuildError, FlashError
-    from ..flashing import flash, strip_to_hex
+    from ..flashing import check_hex, flash, strip_to_hex
 
     try:
         with tempfile.TemporaryDirectory(prefix="protoduino-flash-") as tmp:
             if args.hex is None:
                 # In a source checkout this builds it first (make -C firmware avr).
                 hex_file = programs.locate(programs.FIRMWARE_HEX)
-            elif args.hex.suffix == ".elf":
+            elif args.hex.suffix == ".elf" or _is_elf(args.hex):
                 # An ELF may carry .eeprom or simavr's .mmcu: convert without them.
                 hex_file = strip_to_hex(args.hex, Path(tmp) / "firmware.hex")
             else:
                 hex_file = args.hex
+            check_hex(hex_file)  # before saying "uploading", and before avrdude
             print(f"protoduino flash: uploading {hex_file} to {args.port}", file=sys.stderr)
             flash(args.port, hex_file, baud=args.baud, progress=sys.stderr)
     except (BuildError, FlashError) as error:

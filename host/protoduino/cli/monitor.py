@@ -44,7 +44,14 @@ from ..packets import BadFrame
 from ..transport import FrameRecord
 from . import argtypes
 from .decode import record_json
-from .options import add_port, error, load_url_handlers, session_of
+from .options import (
+    add_port,
+    capture_max_bytes,
+    capture_verdict,
+    error,
+    load_url_handlers,
+    session_of,
+)
 
 HELP = "show live decoded traffic (readable lines or JSON) with the link counters"
 
@@ -156,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         print_stats(board, args.json)
         board.close()
-    return 0
+    return capture_verdict("monitor", board, 0)
 
 
 def open_board_with_monitor(args: argparse.Namespace, sink: Any) -> Board:
@@ -169,6 +176,7 @@ def open_board_with_monitor(args: argparse.Namespace, sink: Any) -> Board:
         ping=not args.no_ping,
         monitor=sink,
         capture=args.capture,
+        capture_max_bytes=capture_max_bytes(args),
         session=session_of(args),
     )
 
