@@ -1,0 +1,149 @@
+"""A capture that cannot be written, and one that must stay small (issue 20, item 8).
+
+A robot keeps running when its capture's disk fills up: the board goes on, the loss is one
+CAPTURE_LOST event and counters in ``board.stats``, and a command that captured exits 1 at
+its end. A full disk is a small tmpfs mounted for the test (CI runs as root); ``/dev/full``
+fails the header, so there the open is refused. ``capture_max_bytes`` rotates the file.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import subprocess
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from fakedevice import FakeDevice
+from protoduino import Board, CaptureError
+from protoduino.capture import CaptureEnd, CaptureHeader, Damage, read_capture
+from protoduino.cli.main import main
+from protoduino.events import Event, EventKind
+
+#: tmpfs takes whole pages: this leaves the capture one 4 KiB page after the filler.
+DISK = 64 * 1024
+FILLER = DISK - 4096
+#: Bounds a wait that fails only.
+DEADLINE = 30.0
+
+
+@pytest.fixture
+def full_disk(tmp_path: Path) -> Iterator[Path]:
+    """A 64 KiB tmpfs with 4 KiB free: a capture on it fills it after a few dozen frames."""
+    if os.geteuid() != 0 or shutil.which("mount") is None or shutil.which("umount") is None:
+        pytest.skip("mounting a tmpfs needs root and mount(8) (CI has both)")
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    done = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size={DISK}", "tmpfs", str(disk)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if done.returncode != 0:
+        pytest.skip(f"mount -t tmpfs was refused here: {done.stderr.strip()}")
+    try:
+        (disk / "filler").write_bytes(b"x" * FILLER)
+        yield disk
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], check=False)
+
+
+def _wait(condition: Callable[[], bool]) -> bool:
+    deadline = time.monotonic() + DEADLINE
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return condition()
+
+
+def test_a_full_disk_stops_the_capture_not_the_board(fake: FakeDevice, full_disk: Path) -> None:
+    cap = full_disk / "robot.jsonl"
+    events: list[Event] = []
+    lock = threading.Lock()
+
+    def lost() -> list[Event]:
+        with lock:
+            return [e for e in events if e.kind is EventKind.CAPTURE_LOST]
+
+    def collect(event: Event) -> None:
+        with lock:
+            events.append(event)
+
+    with Board.open(fake.port, capture=cap) as board:
+        board.on_event(collect)
+        for _ in range(2000):  # a bound; the page fills after a few dozen frames
+            board.ping()
+            if board.stats.capture_error is not None:
+                break
+        stats = board.stats
+        assert stats.capture_error == os.strerror(errno.ENOSPC)
+        assert stats.capture_lost >= 1 and stats.capture_lost_bytes > 0
+        for _ in range(20):
+            board.ping()  # the board goes on
+        assert board.stats.capture_lost > stats.capture_lost  # and what it misses is counted
+        assert _wait(lambda: bool(lost()))
+        assert board.stats.state == "active"
+    reported = lost()
+    assert len(reported) == 1, reported  # once, however many records were lost after it
+    assert reported[0].details["errno"] == errno.ENOSPC
+    assert reported[0].details["path"] == str(cap)
+    # What was written before the disk filled reads back whole (the last line may be torn,
+    # which is no damage); nothing came after the failed write.
+    damage: list[Damage] = []
+    records = list(
+        read_capture(cap.read_bytes().splitlines(keepends=True), on_damage=damage.append)
+    )
+    assert damage == []
+    assert isinstance(records[0], CaptureHeader)
+    assert not any(isinstance(r, CaptureEnd) for r in records)
+
+
+def test_a_command_whose_capture_stopped_exits_1(
+    fake: FakeDevice, full_disk: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cap = full_disk / "ping.jsonl"
+    rc = main(["ping", fake.port, "-c", "200", "-i", "0", "-q", "--capture", str(cap)])
+    out, err = capsys.readouterr()
+    assert "200 sent, 200 answered, 0 lost" in out  # the command itself did its work
+    assert rc == 1
+    assert "protoduino ping: the capture stopped: No space left on device" in err
+    assert "records (" in err and "bytes) were not written" in err
+
+
+def test_a_capture_whose_header_cannot_be_written_opens_nothing(fake: FakeDevice) -> None:
+    if not Path("/dev/full").exists():
+        pytest.skip("/dev/full is missing")
+    with pytest.raises(CaptureError, match="cannot write the capture /dev/full: No space left"):
+        Board.open(fake.port, capture="/dev/full")
+    assert fake.resets == 0
+
+
+def test_capture_max_bytes_rotates_to_a_second_part(fake: FakeDevice, tmp_path: Path) -> None:
+    cap = tmp_path / "c.jsonl"
+    old = tmp_path / "c.jsonl.1"
+    with Board.open(fake.port, capture=cap, capture_max_bytes=4096) as board:
+        for _ in range(300):
+            board.ping()
+    assert cap.stat().st_size <= 4096 and old.stat().st_size <= 4096
+    newer = list(read_capture(cap.read_bytes().splitlines(keepends=True)))
+    older = list(read_capture(old.read_bytes().splitlines(keepends=True)))
+    first, last = older[0], newer[0]
+    assert isinstance(first, CaptureHeader) and isinstance(last, CaptureHeader)
+    assert last.part == first.part + 1 >= 3  # 300 pings fill more than two 4 KiB parts
+    end = older[-1]
+    assert isinstance(end, CaptureEnd) and end.rotated
+    final = newer[-1]
+    assert isinstance(final, CaptureEnd) and not final.rotated
+    with pytest.raises(ValueError, match="max_bytes must be an int >= 4096"):
+        Board.open(fake.port, capture=tmp_path / "x.jsonl", capture_max_bytes=100)
+
+
+def test_capture_max_goes_with_capture(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        main(["ping", "/dev/null", "--capture-max", "1"])
+    assert exit_.value.code == 2
+    assert "--capture-max goes with --capture FILE" in capsys.readouterr().err
