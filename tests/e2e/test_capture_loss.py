@@ -23,6 +23,7 @@ from protoduino import Board, CaptureError
 from protoduino.capture import CaptureEnd, CaptureHeader, Damage, read_capture
 from protoduino.cli.main import main
 from protoduino.events import Event, EventKind
+from protoduino.simboard import SimBoard
 
 #: tmpfs takes whole pages: this leaves the capture one 4 KiB page after the filler.
 DISK = 64 * 1024
@@ -147,3 +148,21 @@ def test_capture_max_goes_with_capture(capsys: pytest.CaptureFixture[str]) -> No
         main(["ping", "/dev/null", "--capture-max", "1"])
     assert exit_.value.code == 2
     assert "--capture-max goes with --capture FILE" in capsys.readouterr().err
+
+
+def test_a_capture_grows_about_160_bytes_per_command(tmp_path: Path) -> None:
+    """docs/api.md's growth figures rest on this: a servo command and its Ack take about
+    160 bytes of capture (the counters line, once a second, comes on top)."""
+    cap = tmp_path / "c.jsonl"
+    with SimBoard("native") as sim, Board.open(sim.start(), capture=cap, ping=False) as board:
+        servo = board.servo(9)
+        before = cap.stat().st_size
+        for n in range(500):
+            servo.write_us(1000 + n)
+        frames = [
+            line for line in cap.read_bytes().splitlines(keepends=True)[1:] if b'"frame"' in line
+        ]
+        size = cap.stat().st_size - before
+    per_command = sum(len(line) for line in frames[-1000:]) / 500
+    assert 140 <= per_command <= 180, per_command
+    assert size >= 500 * per_command  # the counters lines add to it, nothing else is left out
