@@ -123,11 +123,11 @@ def flash(
     it comes. Raises FlashError with a plain explanation when the port does not
     exist, no bootloader answers, or the upload fails.
     """
+    if not os.path.exists(port):
+        raise FlashError(f"serial port {port} does not exist: check the port name")
     if not hex_file.is_file():
         raise FlashError(f"no firmware file {hex_file}")
     check_hex(hex_file)
-    if not os.path.exists(port):
-        raise FlashError(f"serial port {port} does not exist: check the port name")
     avrdude = shutil.which("avrdude")
     if avrdude is None:
         raise FlashError(

@@ -36,7 +36,7 @@ def _is_elf(path: Path) -> bool:
 def run(args: argparse.Namespace) -> int:
     from .. import programs
     from ..errors import BuildError, FlashError
-    from ..flashing import check_hex, flash, strip_to_hex
+    from ..flashing import flash, strip_to_hex
 
     try:
         with tempfile.TemporaryDirectory(prefix="protoduino-flash-") as tmp:
@@ -48,7 +48,6 @@ def run(args: argparse.Namespace) -> int:
                 hex_file = strip_to_hex(args.hex, Path(tmp) / "firmware.hex")
             else:
                 hex_file = args.hex
-            check_hex(hex_file)  # before saying "uploading", and before avrdude
             print(f"protoduino flash: uploading {hex_file} to {args.port}", file=sys.stderr)
             flash(args.port, hex_file, baud=args.baud, progress=sys.stderr)
     except (BuildError, FlashError) as error:
