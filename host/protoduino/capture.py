@@ -313,11 +313,11 @@ class RawLine:
 class Damage:
     """A line of a capture that was skipped, or read with something wrong before it."""
 
-    line: int
+    line: int  # 0: not one line (parts of a rotated capture missed)
     reason: str
 
     def __str__(self) -> str:
-        return f"line {self.line}: {self.reason}"
+        return f"line {self.line}: {self.reason}" if self.line else self.reason
 
 
 class LineSplitter:
@@ -588,7 +588,32 @@ def follow(
             if isinstance(record, CaptureEnd):
                 if not record.rotated:
                     return
-                tail.reopen()
+                missed = tail.next_part(header.part + 1 if header is not None else 1)
+                if missed:
+                    _damage(
+                        on_damage,
+                        Damage(
+                            0,
+                            f"{missed} part(s) of the capture were rotated away before they "
+                            "could be read (a capture_max_bytes too small for this rate?)",
+                        ),
+                    )
+
+
+def _part_of(name: str) -> int | None:
+    """The part number in the header of capture file ``name``; None if it has none yet."""
+    try:
+        with open(name, "rb") as f:
+            first = f.readline(MAX_LINE + 1)
+    except OSError:
+        return None
+    if not first.endswith(b"\n"):
+        return None
+    try:
+        record = _parse(RawLine(1, first[:-1], len(first) - 1))
+    except (_LineError, CaptureError):
+        return None
+    return record.part if isinstance(record, CaptureHeader) else None
 
 
 class _Tail:
@@ -606,6 +631,8 @@ class _Tail:
         self.stop = stop
         self.on_wait = on_wait
         self.fd: int | None = None
+        #: The file open now: PATH, or PATH.1 for a part that rotated before it was read.
+        self.name = path
         self.regular = False
         self.pos = 0
         self.splitter = LineSplitter()
@@ -639,17 +666,48 @@ class _Tail:
             os.close(fd)
             raise CaptureError(f"{self.path} is a directory, not a capture")
         self.fd = fd
+        self.name = self.path
         self.regular = stat.S_ISREG(st.st_mode)
         self.pos = 0
         self.splitter = LineSplitter()
         self.ready.clear()
         return True
 
-    def reopen(self) -> None:
-        """The writer rotated: the next part is (or soon will be) at PATH."""
+    def next_part(self, part: int) -> int:
+        """After a rotation mark: open ``part``, wherever it is now; how many were missed.
+
+        The writer renames the full part to PATH.1 and starts the next at PATH,
+        so the next part is at PATH, or already at PATH.1 if the writer rotated
+        again since (it is then complete and read to its own rotation mark), or
+        gone if it rotated twice: then the oldest part still there is read, and
+        the parts in between are missed. Until the writer has written the new
+        part's header it is waited for quietly.
+        """
         self.close()
-        if self.open():
-            self.started_over = True
+        while not self.stop():
+            found = [(p, name) for name in (self.path + ".1", self.path) if (p := _part_of(name))]
+            for p, name in found:
+                if p >= part and self._open_name(name):
+                    self.started_over = True
+                    return p - part
+            time.sleep(self.poll)
+        return 0
+
+    def _open_name(self, name: str) -> bool:
+        try:
+            fd = os.open(name, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+        except FileNotFoundError:
+            return False  # renamed between the look and the open: look again
+        except OSError as error:
+            raise CaptureError(f"cannot read the capture {name}: {_reason(error)}") from error
+        self.fd = fd
+        self.name = name
+        self.regular = True
+        self.pos = 0
+        self.splitter = LineSplitter()
+        self.ready.clear()
+        self._skip_partial = False
+        return True
 
     def close(self) -> None:
         fd, self.fd = self.fd, None
@@ -714,7 +772,7 @@ class _Tail:
                         continue
                     self.ready.append(line)
                 continue
-            if self.regular and self._restarted():
+            if self.regular and self.name == self.path and self._restarted():
                 continue
             time.sleep(self.poll)
 

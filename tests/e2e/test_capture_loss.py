@@ -20,7 +20,14 @@ from pathlib import Path
 import pytest
 from fakedevice import FakeDevice
 from protoduino import Board, CaptureError
-from protoduino.capture import CaptureEnd, CaptureHeader, Damage, read_capture
+from protoduino.capture import (
+    CapturedFrame,
+    CaptureEnd,
+    CaptureHeader,
+    Damage,
+    follow,
+    read_capture,
+)
 from protoduino.cli.main import main
 from protoduino.events import Event, EventKind
 from protoduino.simboard import SimBoard
@@ -166,3 +173,72 @@ def test_a_capture_grows_about_160_bytes_per_command(tmp_path: Path) -> None:
     per_command = sum(len(line) for line in frames[-1000:]) / 500
     assert 140 <= per_command <= 180, per_command
     assert size >= 500 * per_command  # the counters lines add to it, nothing else is left out
+
+
+def test_follow_reads_every_frame_across_live_rotations(fake: FakeDevice, tmp_path: Path) -> None:
+    """A follower started before the capture exists waits for it, then goes from part to
+    part as the writer rotates, and misses no frame of the session silently: a part that was
+    rotated away before it could be read (two rotations within one poll) is reported."""
+    cap = tmp_path / "live.jsonl"
+    seen: list[object] = []
+    damage: list[Damage] = []
+    stop = threading.Event()
+
+    def read() -> None:
+        for record in follow(
+            cap, from_start=True, poll=0.005, stop=stop.is_set, on_damage=damage.append
+        ):
+            seen.append(record)
+
+    follower = threading.Thread(target=read)
+    follower.start()
+    try:
+        with Board.open(fake.port, capture=cap, capture_max_bytes=16384) as board:
+            # The handshake fits in part 1: the follower is on it before the pings fill it.
+            assert _wait(lambda: bool(seen)), "the follower never found the capture"
+            for _ in range(600):
+                board.ping()
+        sent = board.stats  # after the close: every frame is in the capture
+        follower.join(DEADLINE)  # ends at the last part's end mark; the bound is for a failure
+        assert not follower.is_alive(), "the follower did not see the end of the session"
+    finally:
+        stop.set()
+        follower.join()
+    parts = [r.part for r in seen if isinstance(r, CaptureHeader)]
+    missed = sum(int(d.reason.split()[0]) for d in damage)
+    assert all("rotated away before they could be read" in d.reason for d in damage)
+    assert parts == sorted(parts) and parts[0] == 1 and len(parts) + missed == parts[-1] >= 3
+    ends = [r for r in seen if isinstance(r, CaptureEnd)]
+    assert [e.rotated for e in ends] == [True] * (len(parts) - 1) + [False]
+    if not missed:  # the usual case: every frame the host sent, none twice
+        sent_frames = [r for r in seen if isinstance(r, CapturedFrame) and r.direction == "tx"]
+        assert len(sent_frames) == sent.tx_packets
+
+
+def test_follow_reports_parts_rotated_away_unread(tmp_path: Path) -> None:
+    cap = tmp_path / "c.jsonl"
+    header = '{"capture":"protoduino","version":1,"url":"u","schema_id":1,"started":1.0%s}\n'
+    cap.write_text(header % "")
+    damage: list[Damage] = []
+    records = follow(cap, poll=0.01, on_damage=damage.append)
+    assert isinstance(next(records), CaptureHeader)
+    # Before the follower looks again, the writer rotated three times: parts 2 and 3 are gone.
+    with cap.open("a") as f:
+        f.write('{"t":2.0,"end":true,"rotated":true}\n')
+    cap.rename(tmp_path / "part1")  # renamed, later replaced: the follower's file lives on
+    rotated = '{"t":3,"end":true,"rotated":true}\n'
+    (tmp_path / "c.jsonl.1").write_text(header % ',"part":4' + rotated)
+    (tmp_path / "part5").write_text(header % ',"part":5' + '{"t":4.0,"end":true}\n')
+    (tmp_path / "part5").rename(cap)
+    assert next(records) == CaptureEnd(2.0, rotated=True)
+    part4 = next(records)
+    assert isinstance(part4, CaptureHeader) and part4.part == 4
+    assert [str(d) for d in damage] == [
+        "2 part(s) of the capture were rotated away before they could be read "
+        "(a capture_max_bytes too small for this rate?)"
+    ]
+    assert next(records) == CaptureEnd(3.0, rotated=True)
+    part5 = next(records)
+    assert isinstance(part5, CaptureHeader) and part5.part == 5
+    assert next(records) == CaptureEnd(4.0)
+    assert list(records) == []

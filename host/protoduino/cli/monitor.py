@@ -218,7 +218,8 @@ def follow_capture(args: argparse.Namespace) -> int:
             on_wait=on_wait,
         ):
             if isinstance(record, CaptureHeader):
-                t0 = record.started
+                if record.part == 1 or not headers:  # a later part goes on on the same clock
+                    t0 = record.started
                 since_header = 0
                 headers += 1
                 if not args.json:
@@ -234,7 +235,7 @@ def follow_capture(args: argparse.Namespace) -> int:
                     )
                 continue
             if isinstance(record, CaptureEnd):
-                if not since_header and not args.from_start:
+                if not since_header and headers == 1 and not args.from_start:
                     when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(record.t))
                     print(
                         f"protoduino monitor: {args.follow}: its session had already closed at "
