@@ -20,14 +20,9 @@ from pathlib import Path
 import pytest
 from fakedevice import FakeDevice
 from protoduino import Board, CaptureError
-from protoduino.capture import (
-    CapturedFrame,
-    CaptureEnd,
-    CaptureHeader,
-    Damage,
-    follow,
-    read_capture,
-)
+from protoduino.capture import CapturedFrame, CaptureEnd, CaptureHeader
+from protoduino.capturefollow import follow
+from protoduino.capturereader import Damage, read_capture
 from protoduino.cli.main import main
 from protoduino.events import Event, EventKind
 from protoduino.simboard import SimBoard

@@ -13,7 +13,8 @@ import tracemalloc
 from pathlib import Path
 
 import pytest
-from protoduino.capture import MAX_LINE, CaptureEnd, CaptureHeader, follow
+from protoduino.capture import MAX_LINE, CaptureEnd, CaptureHeader
+from protoduino.capturefollow import follow
 from protoduino.cli.main import main
 
 HEADER = '{"capture":"protoduino","version":1,"url":"u","schema_id":1,"started":1.0}\n'

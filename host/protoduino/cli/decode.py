@@ -28,13 +28,9 @@ from ..capture import (
     CapturedStats,
     CaptureEnd,
     CaptureHeader,
-    Damage,
-    LineSplitter,
-    RawLine,
     Record,
-    is_capture,
-    read_capture,
 )
+from ..capturereader import Damage, LineSplitter, RawLine, is_capture, read_capture
 from ..errors import ProtoduinoError
 from ..framing import StreamDecoder
 from ..messages import packet_to_json

@@ -34,9 +34,9 @@ from ..capture import (
     CapturedStats,
     CaptureEnd,
     CaptureHeader,
-    Damage,
-    follow,
 )
+from ..capturefollow import follow
+from ..capturereader import Damage
 from ..errors import ProtoduinoError
 from ..events import Event
 from ..messages import packet_to_json
