@@ -52,6 +52,10 @@ def test_decode_refuses_a_text_file_that_is_no_capture(
     rc, objs, err = _decode(capsys, plain)
     assert rc == 1 and objs == []
     assert "is not a capture and holds no protoduino frame" in err
+    empty = tmp_path / "empty.jsonl"
+    empty.touch()
+    rc, objs, err = _decode(capsys, empty)
+    assert rc == 1 and objs == [] and f"{empty} is empty" in err
 
 
 def test_decode_reports_a_copy_truncated_capture(

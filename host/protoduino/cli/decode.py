@@ -121,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         nuls, head = _skip_nuls(f)
+        if not head and not nuls:
+            return error("decode", f"{name} is empty")
         if is_capture(head):
             return _capture(args, name, f, nuls, head)
         if args.mcap is not None:
