@@ -53,6 +53,9 @@ from .options import (
     session_of,
 )
 
+#: Damaged capture lines reported one by one; the rest are counted.
+DAMAGE_SHOWN = 10
+
 HELP = "show live decoded traffic (readable lines or JSON) with the link counters"
 
 
@@ -204,7 +207,8 @@ def follow_capture(args: argparse.Namespace) -> int:
     def on_damage(damage: Damage) -> None:
         nonlocal damaged
         damaged += 1
-        print(f"protoduino monitor: {args.follow}: {damage}", file=sys.stderr, flush=True)
+        if damaged <= DAMAGE_SHOWN:  # a file of garbage must not flood the terminal
+            print(f"protoduino monitor: {args.follow}: {damage}", file=sys.stderr, flush=True)
 
     def on_wait(text: str) -> None:
         print(f"protoduino monitor: {text} (Ctrl-C or --duration ends the wait)", file=sys.stderr)
@@ -262,7 +266,8 @@ def follow_capture(args: argparse.Namespace) -> int:
     except ProtoduinoError as exc:
         return error("monitor", exc)
     if damaged:
-        return error("monitor", f"{args.follow}: {damaged} damaged line(s) skipped")
+        hidden = f" ({damaged - DAMAGE_SHOWN} not shown)" if damaged > DAMAGE_SHOWN else ""
+        return error("monitor", f"{args.follow}: {damaged} damaged line(s) skipped{hidden}")
     if not headers:
         return error("monitor", f"{args.follow}: no capture came within --duration")
     return 0
