@@ -388,6 +388,8 @@ class Board:
             raise ValueError(f"liveness must be 'ping' or 'heartbeat', not {liveness!r}")
         if restore not in ("safe", "last"):
             raise ValueError(f"restore must be 'safe' or 'last', not {restore!r}")
+        if capture_max_bytes is not None and capture is None:
+            raise ValueError("capture_max_bytes bounds a capture: give capture= too")
         self.failsafe_timeout = float(failsafe_timeout)
         self.liveness: Liveness = liveness
         self.restore: RestorePolicy = restore

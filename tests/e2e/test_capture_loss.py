@@ -143,6 +143,8 @@ def test_capture_max_bytes_rotates_to_a_second_part(fake: FakeDevice, tmp_path: 
     assert isinstance(final, CaptureEnd) and not final.rotated
     with pytest.raises(ValueError, match="max_bytes must be an int >= 4096"):
         Board.open(fake.port, capture=tmp_path / "x.jsonl", capture_max_bytes=100)
+    with pytest.raises(ValueError, match="give capture= too"):
+        Board.open(fake.port, capture_max_bytes=100_000)
 
 
 def test_capture_max_goes_with_capture(capsys: pytest.CaptureFixture[str]) -> None:
