@@ -17,6 +17,8 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
+from protoduino import simboard
+
 #: simavr's development headers: the runner (tools/avrsim) is built against them.
 SIMAVR_HEADER = Path("/usr/include/simavr/sim_avr.h")
 
@@ -37,13 +39,25 @@ class BoardProcess:
 
     ``startup`` bounds only how long a board that prints nothing is waited for;
     ``popen`` goes to :class:`subprocess.Popen` (cwd, env, stderr: DEVNULL unless given).
+    The board is owned by the test process (``protoduino.simboard.owned``: it ends when
+    the test process does, however it ends); ``owned=False`` for a command that is not a
+    board program itself.
     """
 
     def __init__(
-        self, cmd: list[str], *, startup: float = 10.0, what: str = "the runner", **popen: Any
+        self,
+        cmd: list[str],
+        *,
+        startup: float = 10.0,
+        what: str = "the runner",
+        owned: bool = True,
+        **popen: Any,
     ) -> None:
         popen.setdefault("stderr", subprocess.DEVNULL)
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, **popen)
+        if owned:
+            cmd = simboard.owned(cmd)
+        stdin = subprocess.PIPE if owned else subprocess.DEVNULL
+        self.proc = subprocess.Popen(cmd, stdin=stdin, stdout=subprocess.PIPE, **popen)
         assert self.proc.stdout is not None
         ready, _, _ = select.select([self.proc.stdout], [], [], startup)
         if not ready:
@@ -74,6 +88,6 @@ class BoardProcess:
                 raise
             return None
         finally:
-            for stream in (self.proc.stdout, self.proc.stderr):
+            for stream in (self.proc.stdin, self.proc.stdout, self.proc.stderr):
                 if stream is not None:
                     stream.close()

@@ -1,11 +1,12 @@
 /*
  * The simulated board: the portable core behind a POSIX HAL.
  *
- *   pd_sim [--trace FILE] [--link PATH] [--control PATH]
+ *   pd_sim [--trace FILE] [--link PATH] [--control PATH] [--owner-fd FD]
  *
  * Opens a pseudo-terminal in raw mode, prints the slave's path (or PATH when
  * --link makes a symlink to it) as the first line on stdout, then runs the
- * core until SIGINT/SIGTERM or the end of the process that started it.
+ * core until SIGINT/SIGTERM/SIGHUP, or with --owner-fd until its owner is
+ * gone (pd_owner.h says the rule).
  * SIGUSR1 is a simulated reboot. The pins are
  * virtual: every change is written to the trace as one JSON object per line,
  * flushed per line, with t = seconds since the process started (monotonic).
@@ -38,6 +39,7 @@
 
 #include "pd_control.h"
 #include "pd_core.h"
+#include "pd_owner.h"
 
 /*
  * The transmit queue, as on the Uno: frames wait here and the loop moves them
@@ -305,7 +307,8 @@ static void on_signal(int sig)
 
 static int usage(void)
 {
-    fprintf(stderr, "usage: pd_sim [--trace FILE] [--link PATH] [--control PATH]\n");
+    fprintf(stderr,
+            "usage: pd_sim [--trace FILE] [--link PATH] [--control PATH] [--owner-fd FD]\n");
     return 2;
 }
 
@@ -354,6 +357,7 @@ int main(int argc, char **argv)
     const char *trace_path = NULL;
     const char *link_path = NULL;
     const char *control_path = NULL;
+    int owner_fd = -1;
     static pd_control_t control;
     static sim_hal_t hal;
     static pd_core_t core;
@@ -370,6 +374,11 @@ int main(int argc, char **argv)
             link_path = argv[++i];
         } else if (strcmp(argv[i], "--control") == 0 && i + 1 < argc) {
             control_path = argv[++i];
+        } else if (strcmp(argv[i], "--owner-fd") == 0 && i + 1 < argc) {
+            owner_fd = pd_owner_parse(argv[++i], "pd_sim");
+            if (owner_fd < 0) {
+                return 2;
+            }
         } else {
             return usage();
         }
@@ -382,6 +391,7 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     sigaction(SIGUSR1, &sa, NULL);
+    pd_owner_hangup(&sa);
     signal(SIGPIPE, SIG_IGN);
 
     if (trace_path) {
@@ -418,10 +428,9 @@ int main(int argc, char **argv)
     pd_core_init(&core, &hal);
     printf("%s\n", link_path ? link_path : slave_name);
     fflush(stdout);
-    /* The process that started the board owns it: when it is gone (killed
-     * with no chance to stop us), so are we, or boards pile up unseen. */
-    const pid_t owner = getppid();
-    while (!sim_stop && getppid() == owner) {
+    /* An owned board ends with its owner (killed with no chance to stop us),
+     * or boards pile up unseen; one started on purpose runs until stopped. */
+    while (!sim_stop && !pd_owner_gone(owner_fd)) {
         if (sim_reboot) {
             sim_reboot = 0;
             sim_release_all(&hal);

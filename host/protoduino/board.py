@@ -486,6 +486,7 @@ class Board:
         ping: bool = True,
         monitor: FrameMonitor | None = None,
         capture: str | os.PathLike[str] | None = None,
+        capture_max_bytes: int | None = None,
         watchdog_timeout: float = WATCHDOG_TIMEOUT,
         failsafe_timeout: float = FAILSAFE_TIMEOUT,
         liveness: Liveness = "ping",
@@ -504,6 +505,8 @@ class Board:
             raise ArgumentError(f"liveness must be 'ping' or 'heartbeat', not {liveness!r}")
         if restore not in ("safe", "last"):
             raise ArgumentError(f"restore must be 'safe' or 'last', not {restore!r}")
+        if capture_max_bytes is not None and capture is None:
+            raise ArgumentError("capture_max_bytes bounds a capture: give capture= too")
         self.failsafe_timeout = failsafe_ms / 1000
         self.liveness: Liveness = liveness
         self.restore: RestorePolicy = restore
@@ -535,7 +538,11 @@ class Board:
         self._rpc.restore_provider = self._restore_messages
         # Before the port: a capture that cannot be written fails with nothing opened,
         # and the handshake is in it.
-        self._capture = CaptureWriter(capture, url) if capture is not None else None
+        self._capture = (
+            CaptureWriter(capture, url, max_bytes=capture_max_bytes)
+            if capture is not None
+            else None
+        )
         self._transport = Transport(url, baudrate=baudrate)
         if monitor is not None:
             self._transport.add_monitor(monitor)
@@ -554,6 +561,8 @@ class Board:
             self._capture.set_stats(lambda: self.stats)
         # Started only now: a constructor above that refuses its options leaves no thread.
         self._events = EventDispatcher(url)
+        if self._capture is not None:
+            self._capture.on_lost = self._capture_lost
         # From here on anything that ends the open early (an error, a KeyboardInterrupt
         # at any point, a cancel from another thread) closes what was started: a
         # half-open board that pinged on would keep the device's outputs driven.
@@ -581,6 +590,7 @@ class Board:
         ping: bool = True,
         monitor: FrameMonitor | None = None,
         capture: str | os.PathLike[str] | None = None,
+        capture_max_bytes: int | None = None,
         watchdog_timeout: float = WATCHDOG_TIMEOUT,
         failsafe_timeout: float = FAILSAFE_TIMEOUT,
         liveness: Liveness = "ping",
@@ -605,7 +615,11 @@ class Board:
         frame in both directions with its time, the link counters and the events
         (:mod:`protoduino.capture`; ``protoduino decode`` reads it, ``protoduino
         monitor --follow`` shows it live), raising :class:`CaptureError` if it
-        cannot be written; ``watchdog_timeout`` is how long the device may stay
+        cannot be created; a write that fails later (a full disk) stops the
+        capture, not the board: one :attr:`EventKind.CAPTURE_LOST` event, and
+        ``stats.capture_lost`` counts what was not recorded;
+        ``capture_max_bytes`` rotates it (PATH.1) before it grows past that
+        many bytes; ``watchdog_timeout`` is how long the device may stay
         silent while answers are due before the link handshakes again.
 
         ``failsafe_timeout`` (seconds, 0.1..60) is how long the device keeps
@@ -645,6 +659,7 @@ class Board:
             ping=ping,
             monitor=monitor,
             capture=capture,
+            capture_max_bytes=capture_max_bytes,
             watchdog_timeout=watchdog_timeout,
             failsafe_timeout=failsafe_timeout,
             liveness=liveness,
@@ -1141,7 +1156,7 @@ class Board:
     @property
     def stats(self) -> Stats:
         """A snapshot of the link counters."""
-        link, rpc, tr = self._link, self._rpc, self._transport
+        link, rpc, tr, capture = self._link, self._rpc, self._transport, self._capture
         dropped = tr.decoder_counts
         dropped.pop("packets", None)
         if link.direction_drops:
@@ -1177,6 +1192,13 @@ class Board:
             pings=rpc.pings,
             ping_failures=rpc.ping_failures,
             events_dropped=dict(self._events.dropped),
+            capture_lost=capture.lost_records if capture is not None else 0,
+            capture_lost_bytes=capture.lost_bytes if capture is not None else 0,
+            capture_error=(
+                (capture.error.strerror or str(capture.error))
+                if capture is not None and capture.error is not None
+                else None
+            ),
             rtt=rpc.rtt,
             last_ping=rpc.last_ping,
         )
@@ -1385,6 +1407,18 @@ class Board:
         self._notify(
             Event(
                 EventKind.FAILSAFE, text, {"active": fs.active, "cause": cause, "epoch": fs.epoch}
+            )
+        )
+
+    def _capture_lost(self, error: OSError) -> None:
+        """The capture stopped on a write error (whatever thread wrote): said once."""
+        assert self._capture is not None
+        reason = error.strerror or str(error)
+        self._notify(
+            Event(
+                EventKind.CAPTURE_LOST,
+                f"the capture {self._capture.path} stopped: {reason}; the board goes on without it",
+                {"path": self._capture.path, "error": reason, "errno": error.errno},
             )
         )
 

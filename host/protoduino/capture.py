@@ -1,11 +1,16 @@
 """Capture files: every frame of a session in both directions, with timestamps.
 
-A capture is JSON Lines, written as the session runs and flushed line by line,
-so that another process can follow it live (``protoduino monitor --follow``)
-without touching the port, and ``protoduino decode`` can read it afterwards:
+This module is the format, its records and the writer; reading is
+:mod:`protoduino.capturereader`, following a live one :mod:`protoduino.capturefollow`.
+
+A capture is JSON Lines, each line written with one ``write(2)`` as it
+happens, so that another process can follow it live (``protoduino monitor
+--follow``) without touching the port, and ``protoduino decode`` can read it
+afterwards:
 
 * the first line is the header: ``{"capture": "protoduino", "version": 1,
-  "url": ..., "schema_id": ..., "started": UNIX_TIME}``;
+  "url": ..., "schema_id": ..., "started": UNIX_TIME}``, plus ``"part": N``
+  from the second part of a rotated capture on;
 * a frame: ``{"t": UNIX_TIME, "dir": "tx"|"rx", "frame": HEX}``, the frame
   as it crossed the wire (COBS-encoded, without its 0x00 delimiter), plus
   ``"error": REASON`` for a frame the receiver dropped;
@@ -13,7 +18,9 @@ without touching the port, and ``protoduino decode`` can read it afterwards:
   flow and once at the end: ``{"t": ..., "stats": {...}}`` (:class:`Stats`);
 * a board event (reboot, failsafe, ...): ``{"t": ..., "event": KIND,
   "text": ..., "details": {...}}``;
-* the last line, when the session closes: ``{"t": ..., "end": true}``.
+* the last line, when the session closes: ``{"t": ..., "end": true}``; or,
+  when the part reached ``max_bytes``, ``{"t": ..., "end": true, "rotated":
+  true}`` and the session goes on in the next part (:class:`CaptureWriter`).
 
 Text rather than a binary format: a capture is small (a frame is tens of
 bytes), survives a crash mid-line (the reader skips a torn last line), and
@@ -23,23 +30,32 @@ MCAP for Foxglove (:mod:`protoduino.mcapexport`).
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import os
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import IO, Any, get_args
+from typing import Any
 
 from ._generated.schema_id import SCHEMA_ID
 from .errors import ArgumentError, CaptureError
 from .events import Event, Stats
-from .framing import cobs_encode, decode_frame
-from .packets import BadFrame, ErrorReason, Packet, build_packet
+from .framing import cobs_encode
+from .packets import BadFrame, Packet, build_packet
 from .transport import FrameRecord
+
+log = logging.getLogger(__name__)
 
 MAGIC = "protoduino"
 VERSION = 1
+#: A longer line is refused unread (a record is at most a few kilobytes): reading stays
+#: in bounded memory whatever the file holds.
+MAX_LINE = 65536
+#: The smallest ``max_bytes`` a capture may have (a header and a few records).
+MIN_PART = 4096
 #: Default seconds between two stats lines while frames flow.
 STATS_EVERY = 1.0
 
@@ -49,6 +65,8 @@ class CaptureHeader:
     url: str
     schema_id: int
     started: float  # UNIX time
+    version: int = VERSION
+    part: int = 1  # 2, 3, ... after rotations (max_bytes)
 
 
 @dataclass(frozen=True, slots=True)
@@ -75,6 +93,8 @@ class CapturedEvent:
 @dataclass(frozen=True, slots=True)
 class CaptureEnd:
     t: float
+    #: The part ended because it reached max_bytes; the session goes on in the next part.
+    rotated: bool = False
 
 
 Record = CaptureHeader | CapturedFrame | CapturedStats | CapturedEvent | CaptureEnd
@@ -91,9 +111,23 @@ class CaptureWriter:
     """Appends a session's frames, counters and events to a capture file.
 
     :meth:`frame` is a transport frame monitor: it runs on the I/O thread, so
-    it only formats one short line and writes it (the file is line-buffered;
-    a reader following the file sees each frame as it happens). ``stats`` is
-    asked for the link counters at most every ``stats_every`` seconds.
+    it only formats one short line and writes it with one ``write(2)`` (no
+    buffer in between: a reader following the file sees each frame as it
+    happens). ``stats`` is asked for the link counters at most every
+    ``stats_every`` seconds.
+
+    A capture that cannot be created, or whose header cannot be written,
+    raises :class:`CaptureError` here, before anything else is opened. A write
+    that fails later (a full disk) must not stop a robot: the capture stops,
+    the session goes on, ``on_lost`` is called once with the ``OSError``, and
+    every record from the failed one on is counted in :attr:`lost_records` and
+    :attr:`lost_bytes`.
+
+    ``max_bytes`` bounds the file: before the line that would take it past
+    ``max_bytes``, the part ends with a rotation mark (an end line with
+    ``"rotated": true``), is renamed ``PATH.1`` (replacing an older one) and a
+    new part starts at PATH with its own header (``"part": N``). So at most
+    twice ``max_bytes`` stay on disk, the newest records always among them.
     """
 
     def __init__(
@@ -104,28 +138,43 @@ class CaptureWriter:
         stats: Callable[[], Stats] | None = None,
         stats_every: float = STATS_EVERY,
         schema_id: int = SCHEMA_ID,
+        max_bytes: int | None = None,
+        on_lost: Callable[[OSError], None] | None = None,
     ) -> None:
+        if max_bytes is not None and (
+            isinstance(max_bytes, bool) or not isinstance(max_bytes, int) or max_bytes < MIN_PART
+        ):
+            raise ArgumentError(
+                f"capture max_bytes must be an int >= {MIN_PART}, not {max_bytes!r}"
+            )
         self.path = os.fspath(path)
+        self.url = url
+        self.max_bytes = max_bytes
+        self.on_lost = on_lost
+        self._schema_id = schema_id
         self._stats = stats
         self._stats_every = stats_every
         self._lock = threading.Lock()
         # time.monotonic() (the frames' clock) to UNIX time, fixed once per capture.
         self._offset = time.time() - time.monotonic()
         self._next_stats = 0.0
+        self._fd: int | None = None
+        self._size = 0  # bytes in the current part
+        self._closed = False
+        #: The current part: 1, then one more at each rotation.
+        self.part = 1
+        #: Why the capture stopped (None while it records).
+        self.error: OSError | None = None
+        #: Records (lines) not written since it stopped, and their bytes.
+        self.lost_records = 0
+        self.lost_bytes = 0
         try:
-            self._file: IO[str] | None = open(  # noqa: SIM115 - closed in close()
-                self.path, "w", encoding="utf-8", buffering=1
-            )
+            self._start_part()
         except OSError as error:
-            raise CaptureError(f"cannot write the capture {self.path}: {error.strerror}") from error
-        header = {
-            "capture": MAGIC,
-            "version": VERSION,
-            "url": url,
-            "schema_id": schema_id,
-            "started": round(time.time(), 6),
-        }
-        self._write(header)
+            self._close_fd()
+            raise CaptureError(
+                f"cannot write the capture {self.path}: {reason_of(error)}"
+            ) from error
 
     def set_stats(self, stats: Callable[[], Stats]) -> None:
         self._stats = stats
@@ -161,143 +210,86 @@ class CaptureWriter:
 
     def close(self) -> None:
         """The final counters and the end mark; idempotent."""
-        if self._file is None:
+        if self._closed:
             return
         self.write_stats()
         self._write({"t": round(time.time(), 6), "end": True})
         with self._lock:
-            file, self._file = self._file, None
-        if file is not None:
-            file.close()
+            self._closed = True
+            self._close_fd()
+
+    # -- writing -------------------------------------------------------------
+
+    def _start_part(self) -> None:
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o666)
+        self._size = 0
+        header: dict[str, Any] = {
+            "capture": MAGIC,
+            "version": VERSION,
+            "url": self.url,
+            "schema_id": self._schema_id,
+            "started": round(time.time(), 6),
+        }
+        if self.part > 1:
+            header["part"] = self.part
+        self._put(_line(header))
+
+    def _put(self, data: bytes) -> None:
+        """All of ``data`` (a nearly full disk takes part of it, then fails)."""
+        assert self._fd is not None
+        view = memoryview(data)
+        while view:
+            view = view[os.write(self._fd, view) :]
+        self._size += len(data)
+
+    def _rotate(self) -> None:
+        mark = _line({"t": round(time.time(), 6), "end": True, "rotated": True})
+        self._put(mark)
+        self._close_fd()
+        os.replace(self.path, self.path + ".1")
+        self.part += 1
+        self._start_part()
+
+    def _close_fd(self) -> None:
+        fd, self._fd = self._fd, None
+        if fd is not None:
+            os.close(fd)
 
     def _write(self, obj: dict[str, Any]) -> None:
-        line = json.dumps(obj, separators=(",", ":"), default=str) + "\n"
+        line = _line(obj)
+        lost: OSError | None = None
         with self._lock:
-            if self._file is None:
+            if self._closed:
+                return
+            if self._fd is None:
+                self.lost_records += 1
+                self.lost_bytes += len(line)
                 return
             try:
-                self._file.write(line)
-            except OSError:  # disk full: the session goes on, the capture stops
-                self._file = None
+                # The rotation mark (about 50 bytes) fits in the part too.
+                if self.max_bytes is not None and self._size + len(line) + 64 > self.max_bytes:
+                    self._rotate()
+                self._put(line)
+            except OSError as error:
+                lost = self.error = error
+                self.lost_records += 1
+                self.lost_bytes += len(line)
+                with contextlib.suppress(OSError):
+                    self._close_fd()
+        if lost is not None:
+            log.warning(
+                "the capture %s stopped: %s; the session goes on without it",
+                self.path,
+                reason_of(lost),
+            )
+            if self.on_lost is not None:
+                self.on_lost(lost)
 
 
-def is_capture(head: bytes) -> bool:
-    """Whether a file starting with ``head`` is a capture (not raw wire bytes)."""
-    return head.lstrip().startswith(b'{"capture"')
+def _line(obj: dict[str, Any]) -> bytes:
+    return (json.dumps(obj, separators=(",", ":"), default=str) + "\n").encode()
 
 
-def parse_line(line: str) -> Record | None:
-    """One capture line as a record; None for a blank or torn line (a crash mid-write)."""
-    line = line.strip()
-    if not line:
-        return None
-    try:
-        obj = json.loads(line)
-    except ValueError:
-        return None
-    if not isinstance(obj, dict):
-        return None
-    return _record(obj)
-
-
-def _record(obj: dict[str, Any]) -> Record | None:
-    if obj.get("capture") == MAGIC:
-        if obj.get("version") != VERSION:
-            raise CaptureError(f"capture version {obj.get('version')} (this reads {VERSION})")
-        return CaptureHeader(str(obj.get("url", "")), int(obj["schema_id"]), float(obj["started"]))
-    t = float(obj.get("t", 0.0))
-    if "frame" in obj:
-        raw = bytes.fromhex(obj["frame"])
-        error = obj.get("error")
-        if error is None:
-            item = decode_frame(raw)
-        elif error in get_args(ErrorReason):
-            item = BadFrame(error, raw)
-        else:
-            raise ArgumentError(f"unknown drop reason {error!r}")
-        return CapturedFrame(t, str(obj["dir"]), item)
-    if "stats" in obj:
-        return CapturedStats(t, dict(obj["stats"]))
-    if "event" in obj:
-        return CapturedEvent(t, str(obj["event"]), str(obj.get("text", "")), obj.get("details", {}))
-    if obj.get("end"):
-        return CaptureEnd(t)
-    return None
-
-
-def read_capture(lines: Iterable[str]) -> Iterator[Record]:
-    """Every record of a capture; raises :class:`CaptureError` if it is not one."""
-    first = True
-    for number, line in enumerate(lines, 1):
-        try:
-            record = parse_line(line)
-        except (KeyError, ValueError, TypeError) as error:
-            raise CaptureError(f"line {number} is not a capture record: {error}") from error
-        if record is None:
-            continue
-        if first and not isinstance(record, CaptureHeader):
-            raise CaptureError("not a protoduino capture (no header line)")
-        first = False
-        yield record
-
-
-def follow(
-    path: str | os.PathLike[str],
-    *,
-    from_start: bool = False,
-    poll: float = 0.05,
-    stop: Callable[[], bool] = lambda: False,
-) -> Iterator[Record]:
-    """Records as another process appends them, until its end mark or ``stop()``.
-
-    Reads the header first; then, unless ``from_start``, skips what is already
-    there (live traffic only). Only whole lines are parsed: a line still being
-    written waits for its newline. A capture that shrinks was started again by
-    a new session (the writer truncates it): reading starts over at its new
-    header, which is yielded like the first. Never opens the port, only the file.
-    """
-    try:
-        f = open(path, encoding="utf-8")  # noqa: SIM115 - closed below
-    except OSError as error:
-        raise CaptureError(
-            f"cannot read the capture {os.fspath(path)}: {error.strerror}"
-        ) from error
-    with f:
-        header = None
-        pending = ""
-        while header is None:
-            pending += f.readline()
-            if pending.endswith("\n"):
-                header = parse_line(pending)
-                if not isinstance(header, CaptureHeader):
-                    raise CaptureError(f"{os.fspath(path)} is not a protoduino capture")
-                pending = ""
-            elif stop():
-                return
-            else:
-                time.sleep(poll)
-        if not from_start:
-            f.seek(0, os.SEEK_END)  # before the header is handed out: nothing older follows it
-        yield header
-        while not stop():
-            chunk = f.readline()
-            if not chunk:
-                if os.fstat(f.fileno()).st_size < f.tell():  # a new session's capture
-                    f.seek(0)
-                    pending = ""
-                    continue
-                time.sleep(poll)
-                continue
-            pending += chunk
-            if not pending.endswith("\n"):
-                continue
-            line, pending = pending, ""
-            try:
-                record = parse_line(line)
-            except (KeyError, ValueError, TypeError):
-                continue
-            if record is None:
-                continue
-            yield record
-            if isinstance(record, CaptureEnd):
-                return
+def reason_of(error: OSError) -> str:
+    """An OSError as the OS says it (``No space left on device``)."""
+    return error.strerror or str(error)

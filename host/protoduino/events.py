@@ -52,6 +52,9 @@ class EventKind(StrEnum):
     #: The device saw our SEQ jump (details: none) or dropped an over-long frame.
     DEVICE_DESYNC = "device_desync"
     RX_OVERFLOW = "rx_overflow"
+    #: The capture file could not be written (a full disk): it stopped, the board
+    #: goes on; once per board. details: path (str), error (str), errno (int)
+    CAPTURE_LOST = "capture_lost"
     #: The link failed for good (version or schema mismatch), or the device
     #: rebooted too often to go on restoring. details: error (str)
     ERROR = "error"
@@ -105,6 +108,11 @@ class Stats:
     ping_failures: int
     #: Events the callbacks never saw because the event queue was full, by kind.
     events_dropped: Mapping[str, int]
+    #: Capture records (lines) not written since a write failed, their bytes, and why
+    #: (``capture_error``: None while the capture records, or without one).
+    capture_lost: int
+    capture_lost_bytes: int
+    capture_error: str | None
     rtt: float | None  # last Ping round trip (seconds)
     last_ping: float | None  # time.monotonic() of the last acknowledged automatic Ping
 

@@ -44,6 +44,50 @@ def strip_to_hex(elf: Path, out: Path) -> Path:
     return out
 
 
+def check_hex(path: Path) -> None:
+    """Refuse a file that is not Intel hex, before avrdude (which would first spend a
+    minute on the bootloader, or erase the chip) reads it.
+
+    Every line is a record ``:LLAAAATT<data>CC``: hex digits, the length ``LL``
+    matching the data, the checksum ``CC`` making the record's bytes sum to 0,
+    and the last record the end-of-file one (type 01). A dozen lines here rather
+    than a dependency: avrdude does the real parsing, this only stops a wrong file.
+    """
+    try:
+        f = path.open("rb")
+    except OSError as error:
+        raise FlashError(f"cannot read the firmware file {path}: {error.strerror}") from error
+    last_type = None
+    with f:
+        for number, raw in enumerate(f, 1):
+            line = raw.strip()
+            if not line:
+                continue
+            problem = _hex_record_problem(line)
+            if problem is not None:
+                raise FlashError(
+                    f"{path} is not an Intel hex file (line {number}: {problem}); give the "
+                    "firmware's .hex, or its .elf"
+                )
+            last_type = int(line[7:9], 16)
+    if last_type != 1:
+        raise FlashError(f"{path} is not a whole Intel hex file: no end-of-file record")
+
+
+def _hex_record_problem(line: bytes) -> str | None:
+    if not line.startswith(b":"):
+        return "a record starts with ':'"
+    try:
+        record = bytes.fromhex(line[1:].decode("ascii"))
+    except (UnicodeDecodeError, ValueError):
+        return "not hex digits"
+    if len(record) < 5 or len(record) != record[0] + 5:
+        return "its length does not match its byte count"
+    if sum(record) & 0xFF:
+        return "bad checksum"
+    return None
+
+
 def _explain_failure(port: str, output: str) -> str:
     lowered = output.lower()
     if "can't open device" in lowered or "ser_open" in lowered:
@@ -83,6 +127,7 @@ def flash(
         raise FlashError(f"serial port {port} does not exist: check the port name")
     if not hex_file.is_file():
         raise FlashError(f"no firmware file {hex_file}")
+    check_hex(hex_file)
     avrdude = shutil.which("avrdude")
     if avrdude is None:
         raise FlashError(

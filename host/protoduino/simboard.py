@@ -12,10 +12,21 @@ Where the programs come from (a wheel's bundled copies, or built from the
 sources in a checkout) is :mod:`protoduino.programs`' business.
 
 Each backend is one entry in :data:`BACKENDS`: how to build it and the command
-that runs it. Every backend's program takes ``--trace FILE``, ``--link PATH``
-and ``--control PATH``, prints the port to open as its first line on stdout,
-reboots on SIGUSR1 (or its own equivalent, see :meth:`SimBoard.reboot`) and
-exits cleanly on SIGTERM.
+that runs it. Every backend's program takes ``--trace FILE``, ``--link PATH``,
+``--control PATH`` and ``--owner-fd FD``, prints the port to open as its first
+line on stdout, reboots on SIGUSR1 (or its own equivalent, see
+:meth:`SimBoard.reboot`) and exits cleanly on SIGTERM, SIGINT and SIGHUP
+(unless SIGHUP was ignored, as ``nohup`` does).
+
+A board's lifetime is one rule. A board a program starts for itself (a
+:class:`SimBoard`: ``protoduino demo``, a test, a user's script) is OWNED: it
+gets the read end of a pipe as ``--owner-fd 0`` (its stdin) whose write end
+only the owner holds, and exits when that reads end-of-file, i.e. when the
+owner is gone however it died (SIGKILL included); it runs in its own process
+group, so a Ctrl-C meant for the owner reaches the owner, which then closes
+its Board before it stops the board. A board a user starts on purpose
+(``protoduino sim``, in the foreground or ``--detach``) has no owner and runs
+until it is stopped (Ctrl-C, SIGTERM, ``protoduino sim --stop PIDFILE``).
 
 The board's inputs are driven through its control socket
 (:mod:`protoduino.simcontrol`): :meth:`SimBoard.set_level`,
@@ -47,7 +58,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any
+from typing import Any
 
 from . import programs
 from .errors import ArgumentError, BuildError, TransportError
@@ -172,8 +183,38 @@ def command(
     return _backend(backend).command(trace, link, control)
 
 
+#: The option that makes a board owned: its stdin is the owner's pipe.
+OWNER_FD = ["--owner-fd", "0"]
+
+
+def owned(cmd: list[str]) -> list[str]:
+    """``cmd`` (a board's command line) as an owned board: run it with ``stdin=PIPE`` and
+    keep that pipe open for as long as the board may live (see the module docstring)."""
+    return [cmd[0], *OWNER_FD, *cmd[1:]]
+
+
+def read_port(proc: subprocess.Popen[bytes], deadline: float, what: str) -> str:
+    """The first stdout line of a starting board: the port it made."""
+    assert proc.stdout is not None
+    fd = proc.stdout.fileno()
+    line = b""
+    while not line.endswith(b"\n"):
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            raise TransportError(f"{what} printed no port in time")
+        ready, _, _ = select.select([fd], [], [], min(remaining, 0.1))
+        if not ready:
+            continue
+        chunk = os.read(fd, 256)
+        if not chunk:
+            code = proc.wait(timeout=STOP_TIMEOUT)
+            raise TransportError(f"{what} exited (code {code}) before printing its port")
+        line += chunk
+    return line.split(b"\n", 1)[0].decode().strip()
+
+
 class SimBoard:
-    """One simulated board process; a context manager whose exit stops it.
+    """One simulated board process, owned by this one; a context manager whose exit stops it.
 
     ``control`` is where its input-control socket listens; by default a
     fresh temporary directory holds it (a Unix socket path must stay under
@@ -211,10 +252,14 @@ class SimBoard:
             self._control_dir = Path(tempfile.mkdtemp(prefix="protoduino-"))
             self._control_path = self._control_dir / "control"
         self._control = SimControl(self._control_path)
-        cmd = self._backend.command(self.trace_path, self.link, self._control_path)
+        cmd = owned(self._backend.command(self.trace_path, self.link, self._control_path))
         logger.debug("starting %s", " ".join(cmd))
         # stderr is inherited: the board writes there only when something is wrong.
-        self._proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE)
+        # stdin is the owner's pipe (module docstring); its own process group keeps a
+        # terminal's Ctrl-C for this process, which stops the board after its Board closed.
+        self._proc = subprocess.Popen(
+            cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, process_group=0
+        )
         try:
             self._port = self._read_port(deadline)
         except BaseException:
@@ -224,25 +269,8 @@ class SimBoard:
         return self._port
 
     def _read_port(self, deadline: float) -> str:
-        proc = self._proc
-        assert proc is not None and proc.stdout is not None
-        fd = proc.stdout.fileno()
-        line = b""
-        while not line.endswith(b"\n"):
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise TransportError(f"the {self.backend} board printed no port in time")
-            ready, _, _ = select.select([fd], [], [], min(remaining, 0.1))
-            if not ready:
-                continue
-            chunk = os.read(fd, 256)
-            if not chunk:
-                code = proc.wait(timeout=STOP_TIMEOUT)
-                raise TransportError(
-                    f"the {self.backend} board exited (code {code}) before printing its port"
-                )
-            line += chunk
-        return line.split(b"\n", 1)[0].decode().strip()
+        assert self._proc is not None
+        return read_port(self._proc, deadline, f"the {self.backend} board")
 
     @property
     def port(self) -> str:
@@ -321,9 +349,9 @@ class SimBoard:
 
     def _reap(self, proc: subprocess.Popen[bytes]) -> None:
         proc.wait()
-        stdout: IO[bytes] | None = proc.stdout
-        if stdout is not None:
-            stdout.close()
+        for stream in (proc.stdin, proc.stdout):
+            if stream is not None:
+                stream.close()
         if self._control is not None:
             self._control.close()
         if self._control_dir is not None:

@@ -18,9 +18,9 @@ from protoduino.capture import (
     CapturedStats,
     CaptureEnd,
     CaptureHeader,
-    follow,
-    read_capture,
 )
+from protoduino.capturefollow import follow
+from protoduino.capturereader import read_capture
 from protoduino.cli.main import main
 from protoduino.constants import PacketType
 from protoduino.messages import parse_in, parse_out

@@ -96,7 +96,8 @@ def test_servo_refuses_bad_values_before_sending(
         main(["servo", fake.port, "9", "200"])
     assert usage.value.code == 2
     assert "outside 0..180" in capsys.readouterr().err
-    assert main(["servo", fake.port, "0", "90"]) == 1  # reserved pin, refused by the host
+    # A reserved pin is a bad value too (2), refused by the host once it has the device's info.
+    assert main(["servo", fake.port, "0", "90"]) == 2
     assert "STATUS_RESERVED_PIN" in capsys.readouterr().err
     assert fake.commands("servo_init") == []
 

@@ -3,13 +3,14 @@
  *
  *   avrsim [--trace FILE] [--link PATH] [--control PATH] [--hex FILE]...
  *          [--boot ADDR] [--auto-reset] [--glitch PIN] [--stats FILE]
- *          [--profile FILE] [--mcu NAME] [--freq HZ] [FIRMWARE.elf]
+ *          [--profile FILE] [--mcu NAME] [--freq HZ] [--owner-fd FD] [FIRMWARE.elf]
  *
  * The command-line contract is the native simulated board's (firmware/posix/pd_sim.c, as
  * protoduino.simboard runs both):
  * the first stdout line is the port to open (the pty's slave, or --link),
- * SIGINT/SIGTERM exit cleanly (so does the end of the process that started
- * it), SIGUSR1 resets the MCU while keeping the pty,
+ * SIGINT/SIGTERM (and SIGHUP unless ignored) exit cleanly, so does the end of
+ * the owner with --owner-fd (tools/simcontrol/pd_owner.h), SIGUSR1 resets the
+ * MCU while keeping the pty,
  * and --trace writes one JSON line per output change, measured at the pins
  * (servo pulse widths, digital levels, and the duty of the timers' PWM, read
  * from their compare-output IRQs: PWM never goes through the PORT register).
@@ -80,6 +81,7 @@
 #include <sim_regbit.h>
 
 #include "pd_control.h"
+#include "pd_owner.h"
 #include "pd_pins.h"
 
 #define PD_DEFAULT_MCU "atmega328p"
@@ -207,6 +209,7 @@ typedef struct {
     pd_input_t input[PD_PINS_COUNT];
     uint8_t ext_mask[3]; /* per port: pins held by the control socket */
     uint8_t ext_value[3];
+    int owner_fd; /* --owner-fd: the owner's pipe, or -1 */
 } pd_sim_t;
 
 static pd_sim_t g_sim;
@@ -1052,9 +1055,11 @@ static void pd_usage(FILE *f)
     fprintf(f,
             "usage: avrsim [--trace FILE] [--link PATH] [--control PATH] [--hex FILE]...\n"
             "              [--boot ADDR] [--auto-reset] [--glitch PIN] [--stats FILE]\n"
-            "              [--profile FILE] [--mcu NAME] [--freq HZ] [FIRMWARE.elf]\n"
+            "              [--profile FILE] [--mcu NAME] [--freq HZ] [--owner-fd FD]\n"
+            "              [FIRMWARE.elf]\n"
             "Runs an emulated Arduino Uno with UART0 on a pseudo-terminal; prints the\n"
             "port as the first stdout line. SIGUSR1 resets the MCU, SIGINT/SIGTERM exit;\n"
+            "--owner-fd FD: exit when FD (the owner's pipe) reads end-of-file;\n"
             "with --stats, SIGUSR2 and the exit append cycle and UART counters to FILE;\n"
             "with --profile, SIGUSR2 writes awake cycles per flash address to FILE;\n"
             "--control PATH: a Unix socket taking JSON input commands, one per line.\n");
@@ -1083,10 +1088,9 @@ static void pd_run(pd_sim_t *sim)
     const uint64_t start_ns = g_start_ns;
     const double cycles_per_ns = (double)sim->avr->frequency / 1e9;
     sim->byte_cycles = sim->avr->frequency * 10ULL / PD_DEFAULT_BAUD;
-    /* The process that started the runner owns it: when it is gone (killed
-     * with no chance to stop us), so are we, or runners pile up unseen. */
-    const pid_t owner = getppid();
-    while (!g_stop && getppid() == owner) {
+    /* An owned runner ends with its owner (killed with no chance to stop us),
+     * or runners pile up unseen; one started on purpose runs until stopped. */
+    while (!g_stop && !pd_owner_gone(sim->owner_fd)) {
         sim->passes++;
         if (g_reset) {
             g_reset = 0;
@@ -1215,6 +1219,7 @@ int main(int argc, char **argv)
     sim->master = -1;
     sim->slave = -1;
     sim->glitch_pin = -1;
+    sim->owner_fd = -1;
     sim->sp_min = UINT16_MAX;
     pd_control_init(&sim->control);
 
@@ -1224,7 +1229,7 @@ int main(int argc, char **argv)
         {"mcu", required_argument, NULL, 'm'},   {"freq", required_argument, NULL, 'f'},
         {"auto-reset", no_argument, NULL, 'r'},  {"glitch", required_argument, NULL, 'g'},
         {"stats", required_argument, NULL, 's'}, {"profile", required_argument, NULL, 'p'},
-        {"control", required_argument, NULL, 'c'},
+        {"control", required_argument, NULL, 'c'}, {"owner-fd", required_argument, NULL, 'o'},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -1272,6 +1277,12 @@ int main(int argc, char **argv)
             break;
         case 'c':
             control_path = optarg;
+            break;
+        case 'o':
+            sim->owner_fd = pd_owner_parse(optarg, "avrsim");
+            if (sim->owner_fd < 0) {
+                return 2;
+            }
             break;
         case 'h':
             pd_usage(stdout);
@@ -1399,6 +1410,7 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     sigaction(SIGUSR1, &sa, NULL);
+    pd_owner_hangup(&sa);
     if (sim->stats || sim->profile) {
         sigaction(SIGUSR2, &sa, NULL); /* otherwise SIGUSR2 keeps its default */
     }

@@ -3,6 +3,12 @@
 Starts the simulated board, sweeps a servo, blinks a pin, then stops pinging
 and waits for the device's failsafe to put both outputs back to their safe
 values, and finally reads the board's own trace to show what the pins did.
+
+Ctrl-C ends it cleanly: the simulated board is owned by this process and runs
+in its own process group (:mod:`protoduino.simboard`), so the terminal's SIGINT
+reaches only the demo, which closes its Board, then stops the board, and exits
+with status 130. (Were the board interrupted too, its port would vanish under
+the open Board: a "device disconnected" warning that says nothing true.)
 """
 
 from __future__ import annotations
@@ -19,7 +25,7 @@ from ..constants import FAILSAFE_TIMEOUT
 from ..errors import ProtoduinoError
 from ..events import Event, EventKind
 from ..simboard import BACKENDS
-from .options import add_capture, error
+from .options import add_capture, capture_max_bytes, capture_verdict, error
 
 HELP = "run the demo on the simulated board: sweep a servo, blink a pin, watch the failsafe"
 
@@ -58,16 +64,20 @@ def run(args: argparse.Namespace) -> int:
             with SimBoard(args.backend, trace=trace_path) as sim:
                 port = sim.start()
                 clock.say(f"simulated board on {port} (pid {sim.pid})")
-                ok = _demo(port, clock, args.capture)
+                ok = _demo(port, clock, args)
                 trace = sim.trace()
         except ProtoduinoError as exc:
             return error("demo", exc)
+        except KeyboardInterrupt:
+            clock.say("interrupted: the Board is closed and the simulated board stopped")
+            return 130
         return 0 if _report(trace, clock) and ok else 1
 
 
-def _demo(port: str, clock: _Clock, capture: Path | None) -> bool:
+def _demo(port: str, clock: _Clock, args: argparse.Namespace) -> bool:
     events: queue.Queue[Event] = queue.Queue()
-    with Board.open(port, capture=capture) as board:
+    board = Board.open(port, capture=args.capture, capture_max_bytes=capture_max_bytes(args))
+    with board:
         info = board.info
         clock.say(
             f"connected: {info.board} firmware {info.firmware_version}, protocol "
@@ -113,7 +123,7 @@ def _demo(port: str, clock: _Clock, capture: Path | None) -> bool:
             f"link: {stats.commands} commands, {stats.acks} acks, {stats.retransmits} "
             f"retransmits, {stats.timeouts} timeouts, {stats.pings} pings"
         )
-    return True
+    return capture_verdict("demo", board, 0) == 0
 
 
 def _wait_for(

@@ -25,6 +25,14 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _is_elf(path: Path) -> bool:
+    try:
+        with path.open("rb") as f:
+            return f.read(4) == b"\x7fELF"
+    except OSError:
+        return False  # flash() says why it cannot read it
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import programs
     from ..errors import BuildError, FlashError, PortInUseError, TransportError
@@ -45,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
             if args.hex is None:
                 # In a source checkout this builds it first (make -C firmware avr).
                 hex_file = programs.locate(programs.FIRMWARE_HEX)
-            elif args.hex.suffix == ".elf":
+            elif args.hex.suffix == ".elf" or _is_elf(args.hex):
                 # An ELF may carry .eeprom or simavr's .mmcu: convert without them.
                 hex_file = strip_to_hex(args.hex, Path(tmp) / "firmware.hex")
             else:

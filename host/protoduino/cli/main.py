@@ -29,6 +29,7 @@ from typing import NoReturn
 
 from .. import __version__
 from ..errors import ProtoduinoError
+from .options import capture_check
 
 log = logging.getLogger("protoduino.cli")
 
@@ -118,6 +119,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if unknown and not getattr(args, "_any_arguments", False):
         parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     if args._check is not None and (problem := args._check(args)) is not None:
+        args._parser.error(problem)
+    if (problem := capture_check(args)) is not None:
         args._parser.error(problem)
     verbose = args.verbose + args.verbose_after
     level = logging.WARNING - 10 * min(verbose, 2)

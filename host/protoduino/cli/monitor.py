@@ -8,6 +8,13 @@ events; the counters come every ``--stats-every`` seconds and at the end.
 instead (one started with ``--capture CAPTURE`` or ``Board.open(capture=)``):
 it reads the capture as it grows, never the port, and shows the same lines,
 with that session's own counters as it records them (about once a second).
+It follows like ``tail -F``: a capture that does not exist yet is waited for,
+one that a new session restarts or that rotates (``--capture-max``) is read on
+from its new header; it ends at the session's end mark, at ``--duration`` or
+Ctrl-C (a FIFO with no writer too). A capture whose session had already closed
+is said so, and the command exits 0 at once. A damaged line (binary garbage,
+not JSON, too long or nested too deep) is reported on stderr and skipped; the
+command then exits 1 at the end.
 """
 
 from __future__ import annotations
@@ -15,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import queue
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -26,8 +34,9 @@ from ..capture import (
     CapturedStats,
     CaptureEnd,
     CaptureHeader,
-    follow,
 )
+from ..capturefollow import follow
+from ..capturereader import Damage
 from ..errors import ProtoduinoError
 from ..events import Event
 from ..messages import packet_to_json
@@ -35,7 +44,15 @@ from ..packets import BadFrame
 from ..transport import FrameRecord
 from . import argtypes
 from .decode import record_json
-from .options import add_port, error, open_board
+from .options import (
+    add_port,
+    capture_verdict,
+    error,
+    open_board,
+)
+
+#: Damaged capture lines reported one by one; the rest are counted.
+DAMAGE_SHOWN = 10
 
 HELP = "show live decoded traffic (readable lines or JSON) with the link counters"
 
@@ -147,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         print_stats(board, args.json)
         board.close()
-    return 0
+    return capture_verdict("monitor", board, 0)
 
 
 def open_board_with_monitor(args: argparse.Namespace, sink: Any) -> Board:
@@ -162,22 +179,64 @@ def print_stats(board: Board, as_json: bool) -> None:
 
 
 def follow_capture(args: argparse.Namespace) -> int:
-    """Print a capture's records as its writer appends them, until it ends or --duration."""
+    """Print a capture's records as its writer appends them, until it ends or --duration.
+
+    Waits for a capture that does not exist yet (like ``tail -F``); says so and
+    exits 0 at once for one that had already ended; reports each damaged line
+    on stderr, skips it and goes on, and then exits 1 at the end.
+    """
     deadline = time.monotonic() + args.duration if args.duration > 0 else float("inf")
     t0 = 0.0
+    damaged = 0
+    since_header = 0
+    headers = 0
+
+    def on_damage(damage: Damage) -> None:
+        nonlocal damaged
+        damaged += 1
+        if damaged <= DAMAGE_SHOWN:  # a file of garbage must not flood the terminal
+            print(f"protoduino monitor: {args.follow}: {damage}", file=sys.stderr, flush=True)
+
+    def on_wait(text: str) -> None:
+        print(f"protoduino monitor: {text} (Ctrl-C or --duration ends the wait)", file=sys.stderr)
+
     try:
         for record in follow(
-            args.follow, from_start=args.from_start, stop=lambda: time.monotonic() >= deadline
+            args.follow,
+            from_start=args.from_start,
+            stop=lambda: time.monotonic() >= deadline,
+            on_damage=on_damage,
+            on_wait=on_wait,
         ):
             if isinstance(record, CaptureHeader):
-                t0 = record.started
+                if record.part == 1 or not headers:  # a later part goes on on the same clock
+                    t0 = record.started
+                since_header = 0
+                headers += 1
                 if not args.json:
-                    print(f"following {args.follow}: the session on {record.url}", flush=True)
+                    part = f" (part {record.part})" if record.part > 1 else ""
+                    print(f"following {args.follow}: the session on {record.url}{part}", flush=True)
+                continue
+            if isinstance(record, CaptureEnd) and record.rotated:
+                if not args.json:
+                    print(
+                        f"{record.t - t0:10.3f} ROTATED the capture goes on in a new part "
+                        f"(this one is now {args.follow}.1)",
+                        flush=True,
+                    )
                 continue
             if isinstance(record, CaptureEnd):
-                if not args.json:
+                if not since_header and headers == 1 and not args.from_start:
+                    when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(record.t))
+                    print(
+                        f"protoduino monitor: {args.follow}: its session had already closed at "
+                        f"{when}: nothing more will come (--from-start shows it all)",
+                        file=sys.stderr,
+                    )
+                elif not args.json:
                     print(f"{record.t - t0:10.3f} END     the session closed", flush=True)
                 break
+            since_header += 1
             if args.json:
                 obj = record_json(record)
                 obj["t"] = round(obj["t"] - t0, 6)
@@ -193,4 +252,9 @@ def follow_capture(args: argparse.Namespace) -> int:
         pass
     except ProtoduinoError as exc:
         return error("monitor", exc)
+    if damaged:
+        hidden = f" ({damaged - DAMAGE_SHOWN} not shown)" if damaged > DAMAGE_SHOWN else ""
+        return error("monitor", f"{args.follow}: {damaged} damaged line(s) skipped{hidden}")
+    if not headers:
+        return error("monitor", f"{args.follow}: no capture came within --duration")
     return 0

@@ -12,10 +12,15 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..board import Board
+from ..capture import MIN_PART
 from ..constants import ACK_TIMEOUT, HANDSHAKE_TIMEOUT
-from ..errors import ProtoduinoError, TransportError
+from ..errors import CommandRejectedError, ProtoduinoError, TransportError
+from ..messages import Status
 from ..transport import FrameMonitor
 from . import argtypes
+
+#: Refusals that mean a value on the command line is wrong for this device: exit status 2.
+BAD_VALUE = frozenset({Status.STATUS_INVALID_PIN, Status.STATUS_RESERVED_PIN})
 
 
 def add_port(parser: argparse.ArgumentParser, *, required: bool = True) -> None:
@@ -60,6 +65,44 @@ def add_capture(parser: argparse.ArgumentParser) -> None:
         help="record every frame both ways with its time, the counters and the events "
         "(protoduino decode reads it; monitor --follow shows it live)",
     )
+    parser.add_argument(
+        "--capture-max",
+        type=argtypes.number(MIN_PART / 1e6, name="megabytes"),
+        metavar="MB",
+        help="with --capture: before FILE grows past MB megabytes it is renamed FILE.1 "
+        "(replacing an older one) and a new FILE goes on (default: no limit; a capture "
+        "grows about 160 bytes per command, 300 MB an hour at the Uno link's full rate)",
+    )
+
+
+def capture_max_bytes(args: argparse.Namespace) -> int | None:
+    """--capture-max in bytes, or None."""
+    mb = getattr(args, "capture_max", None)
+    return None if mb is None else round(mb * 1e6)
+
+
+def capture_check(args: argparse.Namespace) -> str | None:
+    """--capture-max goes with --capture."""
+    if getattr(args, "capture_max", None) is not None and getattr(args, "capture", None) is None:
+        return "--capture-max goes with --capture FILE"
+    return None
+
+
+def capture_verdict(command: str, board: Board, rc: int) -> int:
+    """``rc``, or 1 with a message if the session's capture stopped (a full disk).
+
+    The command itself ran to its end (a robot keeps going); its exit status
+    says the record of it is incomplete.
+    """
+    stats = board.stats
+    if stats.capture_error is None:
+        return rc
+    error(
+        command,
+        f"the capture stopped: {stats.capture_error}; {stats.capture_lost} records "
+        f"({stats.capture_lost_bytes} bytes) were not written",
+    )
+    return rc or 1
 
 
 def cli_session(port: str) -> int:
@@ -123,6 +166,7 @@ def open_board(
         ping=ping,
         monitor=monitor,
         capture=args.capture,
+        capture_max_bytes=capture_max_bytes(args),
         session=session_of(args),
     )
     start_afresh(board, args)
@@ -137,12 +181,24 @@ def error(command: str, message: object) -> int:
 def with_board(
     command: str, args: argparse.Namespace, body: Callable[[Board], int], *, ping: bool = True
 ) -> int:
-    """Open the board, run ``body``, close it; a ProtoduinoError becomes exit status 1."""
+    """Open the board, run ``body``, close it; a ProtoduinoError becomes exit status 1,
+    and so does a capture that stopped (:func:`capture_verdict`)."""
     try:
-        with open_board(args, ping=ping) as board:
-            return body(board)
+        board = open_board(args, ping=ping)
     except ProtoduinoError as exc:
         return error(command, exc)
+    try:
+        with board:
+            rc = body(board)
+    except CommandRejectedError as exc:
+        # A pin the device does not have or keeps for itself is a bad value on the
+        # command line like any other (exit status 2), found out only from its info.
+        rc = error(command, exc)
+        if exc.status in BAD_VALUE:
+            rc = 2
+    except ProtoduinoError as exc:
+        rc = error(command, exc)
+    return capture_verdict(command, board, rc)
 
 
 def hold(board: Board, seconds: float) -> None:

@@ -1,4 +1,11 @@
-"""``protoduino ping PORT``: round-trip time statistics over the acknowledged link."""
+"""``protoduino ping PORT``: round-trip time statistics over the acknowledged link.
+
+Like ping(8), Ctrl-C ends the run early and still prints the summary of the
+pings sent so far (the one interrupted is not counted). The exit status is the
+same either way: 0 when every ping counted was answered, 1 when one was lost
+(ping(8) exits 0 once any reply came; a lost Ping here is worth a non-zero
+status, as a script checks a link with it).
+"""
 
 from __future__ import annotations
 
@@ -43,20 +50,26 @@ def run(args: argparse.Namespace) -> int:
     def body(board: Board) -> int:
         rtts: list[float] = []
         lost = 0
-        for n in range(args.count):
-            if n:
-                time.sleep(args.interval)
-            try:
-                rtt = board.ping(payload)
-            except AckTimeoutError as error:
-                lost += 1
+        interrupted = False
+        try:
+            for n in range(args.count):
+                if n:
+                    time.sleep(args.interval)
+                try:
+                    rtt = board.ping(payload)
+                except AckTimeoutError as error:
+                    lost += 1
+                    if not args.quiet:
+                        print(f"ping {n + 1}: timeout ({error})")
+                    continue
+                rtts.append(rtt)
                 if not args.quiet:
-                    print(f"ping {n + 1}: timeout ({error})")
-                continue
-            rtts.append(rtt)
-            if not args.quiet:
-                print(f"ping {n + 1}: {len(payload)} bytes, rtt {rtt * 1000:.3f} ms")
-        print(f"--- {args.port}: {args.count} sent, {len(rtts)} answered, {lost} lost")
+                    print(f"ping {n + 1}: {len(payload)} bytes, rtt {rtt * 1000:.3f} ms")
+        except KeyboardInterrupt:
+            interrupted = True
+        sent = len(rtts) + lost
+        note = " (interrupted)" if interrupted else ""
+        print(f"--- {args.port}: {sent} sent, {len(rtts)} answered, {lost} lost{note}")
         if rtts:
             dev = statistics.pstdev(rtts) if len(rtts) > 1 else 0.0
             print(
@@ -65,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{dev * 1000:.3f} ms"
             )
         stats = board.stats
-        print(f"retransmits {stats.retransmits}, timeouts {stats.timeouts}")
+        print(f"retransmits {stats.retransmits}, timeouts {stats.timeouts}", flush=True)
         return 0 if not lost else 1
 
     return with_board("ping", args, body)

@@ -16,7 +16,9 @@ CLONE_CHIPS = {(0x1A86, 0x7523): "CH340", (0x0403, 0x6001): "FTDI FT232R"}
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--json", action="store_true", help="one JSON object per port")
+    parser.add_argument(
+        "--json", action="store_true", help="one JSON array, an object per port ([] for none)"
+    )
     parser.add_argument("--all", action="store_true", help="include ports without a USB id")
 
 
@@ -32,6 +34,7 @@ def classify(vid: int | None, pid: int | None) -> str:
 def run(args: argparse.Namespace) -> int:
     ports = sorted(list_ports.comports(), key=lambda p: p.device)
     shown = 0
+    found: list[dict[str, object]] = []
     for port in ports:
         if port.vid is None and not args.all:
             continue
@@ -39,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
         kind = classify(port.vid, port.pid)
         usb = f"{port.vid:04x}:{port.pid:04x}" if port.vid is not None else ""
         if args.json:
-            obj = {
+            obj: dict[str, object] = {
                 "device": port.device,
                 "description": port.description,
                 "usb_id": usb or None,
@@ -47,12 +50,14 @@ def run(args: argparse.Namespace) -> int:
                 "arduino": kind == "arduino",
                 "kind": kind or None,
             }
-            print(json.dumps(obj))
+            found.append(obj)
         else:
             mark = {"arduino": "*", "clone?": "?"}.get(kind, " ")
             print(f"{mark} {port.device:<20} {usb:<10} {port.description}")
-    if not shown and not args.json:
+    if args.json:
+        print(json.dumps(found))
+    elif not shown:
         print("no USB serial ports found (--all lists the others)")
-    elif shown and not args.json:
+    else:
         print("(* Arduino USB id, ? USB-serial chip used by clones)")
     return 0
