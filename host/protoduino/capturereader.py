@@ -26,7 +26,7 @@ from .capture import (
     CaptureHeader,
     Record,
 )
-from .errors import ArgumentError, CaptureError
+from .errors import ArgumentError, ArgumentTypeError, CaptureError
 from .framing import decode_frame
 from .packets import BadFrame, ErrorReason
 
@@ -222,7 +222,7 @@ def _record(obj: dict[str, Any]) -> Record | None:
 
 def _mapping(value: object) -> dict[str, Any]:
     if not isinstance(value, dict):
-        raise TypeError(f"a JSON {type(value).__name__} where an object belongs")
+        raise ArgumentTypeError(f"a JSON {type(value).__name__} where an object belongs")
     return value
 
 

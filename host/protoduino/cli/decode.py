@@ -31,7 +31,7 @@ from ..capture import (
     Record,
 )
 from ..capturereader import Damage, LineSplitter, RawLine, is_capture, read_capture
-from ..errors import ProtoduinoError
+from ..errors import ArgumentError, ProtoduinoError
 from ..framing import StreamDecoder
 from ..messages import packet_to_json
 from ..packets import BadFrame, Packet
@@ -200,12 +200,12 @@ def _unhex(chunks: Iterator[bytes]) -> Iterator[bytes]:
         try:
             digits = carry + "".join(chunk.decode("ascii").split())
         except UnicodeDecodeError:
-            raise ValueError("not ASCII") from None
+            raise ArgumentError("not ASCII") from None
         cut = len(digits) - len(digits) % 2
         carry = digits[cut:]
         yield bytes.fromhex(digits[:cut])
     if carry:
-        raise ValueError("an odd number of hex digits")
+        raise ArgumentError("an odd number of hex digits")
 
 
 def _capture(args: argparse.Namespace, name: str, f: IO[bytes], nuls: int, head: bytes) -> int:
