@@ -353,7 +353,7 @@ class Bridge:
         try:
             route.handle(sample)
         except BadCommandError as error:
-            self._bad(route.topic, "out of range", error)
+            self._bad(route.topic, "invalid", error)
         except CommandRejectedError as error:
             self.health.count("refused")
             log.warning("%s: the device refused it: %s", route.topic, error)
