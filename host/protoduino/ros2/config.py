@@ -465,8 +465,9 @@ class _Section:
         value = self._get(key)
         if value is None or value in ("", "/"):
             return default
-        name = check_topic(self._at(key), value)
-        return name.strip("/")
+        if not isinstance(value, str):
+            raise ConfigError(f"{self._at(key)} must be a string, not {value!r}")
+        return check_topic(self._at(key), value.strip("/"), absolute_ok=False)
 
     def optional(self, key: str, build: Callable[[_Section], T]) -> T | None:
         """The sub-mapping ``key`` built by ``build`` (every key of it read), or None."""
