@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from protoduino import Board
 from protoduino.simboard import SimBoard
 from simfixtures import pin_values, wait_for_pin
 
@@ -474,3 +475,93 @@ def test_a_killed_bridge_trips_the_device_failsafe(
     bridge.kill()
     wait_for_pin(sim, 9, lambda v: v[-1:] == [SAFE_90_US])
     wait_for_pin(sim, 13, lambda v: v[-1:] == [0])
+
+
+# --- what waits for issue 21's pins API (PWM outputs, inputs) ---------------------------
+
+DRIVE = """
+namespace: {ns}
+failsafe_timeout: {failsafe}
+drive:
+  wheel_base: 0.2
+  max_speed: 0.5
+  timeout: 0.5
+  left: {{pwm: 3, direction: 4}}
+  right: {{pwm: 11, direction: 12}}
+"""
+
+
+def _needs(method: str) -> None:
+    # Checked when the test runs, so that it runs by itself once the Board has it.
+    if not hasattr(Board, method):
+        pytest.skip(f"Board.{method} is missing (issue 21's pins API has not landed)")
+
+
+def _twist(linear: float, angular: float) -> Any:
+    def vector(x: float = 0.0, z: float = 0.0) -> Any:
+        return ros("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)
+
+    return ros("geometry_msgs/msg/Twist", linear=vector(x=linear), angular=vector(z=angular))
+
+
+def test_cmd_vel_drives_the_motors_and_a_stale_one_stops_them(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+) -> None:
+    _needs("pwm_output")
+    sim = sim_board
+    ns = _namespace(sim, "drive")
+    run_bridge(DRIVE.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+    cmd_vel(_twist(0.25, 0.0))  # both wheels ahead at half speed: 127.5 -> 128
+    wait_for_pin(sim, 3, now_at(128))
+    wait_for_pin(sim, 11, now_at(128))
+    assert pin_values(sim.trace(), 4)[-1] == 1 and pin_values(sim.trace(), 12)[-1] == 1
+    cmd_vel(_twist(0.0, 2.5))  # in place, to the left: left wheel back at 0.25 m/s
+    wait_for_pin(sim, 4, now_at(0))
+    wait_for_pin(sim, 3, now_at(128))
+    last = [c for c in sim.trace() if c["pin"] in (3, 4, 11, 12)][-1]["t"]
+    # No more Twists: the watchdog stops both motors (duty 0), 0.5 s after the last one.
+    wait_for_pin(sim, 3, now_at(0))
+    wait_for_pin(sim, 11, now_at(0))
+    stopped = [c for c in sim.trace() if c["pin"] in (3, 11) and c["value"] == 0][-1]["t"]
+    assert stopped - last >= 0.5 - 0.05, (last, stopped)
+
+
+INPUTS = """
+namespace: {ns}
+failsafe_timeout: {failsafe}
+digital_inputs:
+  - {{pin: 2, topic: bumper, pull_up: true}}
+analog_inputs:
+  - {{pin: A0, topic: battery, scale: 0.01, threshold: 2}}
+"""
+
+
+def test_inputs_are_published(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+) -> None:
+    _needs("digital_input")
+    _needs("analog_input")
+    sim = sim_board
+    ns = _namespace(sim, "inputs")
+    run_bridge(INPUTS.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    bumper = graph.subscriber(f"/{ns}/bumper", "std_msgs/msg/Bool", BEST_EFFORT)
+    battery = graph.subscriber(f"/{ns}/battery", "std_msgs/msg/Float32", BEST_EFFORT)
+    seen: dict[str, list[Any]] = {"bumper": [], "battery": []}
+
+    def saw(name: str, reader: DataReader[Any], ok: Callable[[Any], bool]) -> None:
+        """Wait for a sample that ``ok`` accepts, among those that come from now on."""
+        seen[name].clear()
+
+        def check() -> bool:
+            seen[name] += [s.cdr.decode().data for s in reader.take(N=100)]
+            return any(ok(v) for v in seen[name])
+
+        _until(check, f"{name} sample")
+
+    sim.set_level(2, 0)  # the bumper pressed, to ground
+    saw("bumper", bumper, lambda v: v is False or v == 0)
+    sim.set_level(2, 1)
+    saw("bumper", bumper, lambda v: v is True or v == 1)
+    sim.set_analog(14, 700)
+    saw("battery", battery, lambda v: abs(v - 7.0) < 1e-4)
