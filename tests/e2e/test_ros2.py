@@ -565,3 +565,59 @@ def test_inputs_are_published(
     saw("bumper", bumper, lambda v: v is True or v == 1)
     sim.set_analog(14, 700)
     saw("battery", battery, lambda v: abs(v - 7.0) < 1e-4)
+
+
+# --- a bridge that hangs --------------------------------------------------------------
+
+
+def test_a_hung_bridge_trips_the_failsafe_while_the_link_stays_up(sim_board: SimBoard) -> None:
+    """The loop stuck (not the process): the board's I/O thread still pings and the link
+    stays up, but only the loop's heartbeat keeps the outputs, so the device drives them safe.
+
+    The bridge runs in this process (the API), with its own topics: a namespace and a
+    relative diagnostics topic no other test uses.
+    """
+    import threading
+
+    from protoduino.ros2 import Bridge, parse_config
+
+    sim = sim_board
+    os.environ.setdefault("CYCLONEDDS_URI", LOOPBACK)
+    config = parse_config(
+        {
+            "namespace": _namespace(sim, "hang"),
+            "domain_id": DOMAIN,
+            "failsafe_timeout": 0.5,
+            "diagnostics_topic": "diagnostics",
+            "servos": [{"pin": 9, "topic": "pan", "safe": 90}],
+        }
+    )
+    hang, hung, release = threading.Event(), threading.Event(), threading.Event()
+    with Bridge(sim.port, config) as bridge:
+        real_take = bridge._take_all
+
+        def take_or_hang() -> None:
+            if hang.is_set():
+                hung.set()
+                release.wait()  # stuck until the test ends
+            real_take()
+
+        bridge._take_all = take_or_hang  # type: ignore[method-assign]
+        loop = threading.Thread(target=bridge.run, name="bridge-loop")
+        loop.start()
+        try:
+            bridge._servos[9].write(10)
+            wait_for_pin(sim, 9, now_at(to_us(10)))
+            assert bridge.board is not None
+            pings = bridge.board.stats.pings
+            hang.set()
+            _until(hung.is_set, "the loop to hang")
+            wait_for_pin(sim, 9, now_at(SAFE_90_US))
+            _until(lambda: bridge.health.failsafe_active, "the FAILSAFE event")
+            _until(lambda: bridge.board is not None and bridge.board.stats.pings > pings, "pings")
+            assert bridge.board.stats.state == "active"
+        finally:
+            bridge.stop()
+            release.set()
+            loop.join(10)
+        assert not loop.is_alive()
