@@ -534,6 +534,8 @@ digital_inputs:
   - {{pin: 2, topic: bumper, pull_up: true}}
 analog_inputs:
   - {{pin: A0, topic: battery, scale: 0.01, threshold: 2}}
+counters:
+  - {{pins: [3], topic: encoders}}
 """
 
 
@@ -542,12 +544,14 @@ def test_inputs_are_published(
 ) -> None:
     _needs("digital_input")
     _needs("analog_input")
+    _needs("counter")
     sim = sim_board
     ns = _namespace(sim, "inputs")
     run_bridge(INPUTS.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
     bumper = graph.subscriber(f"/{ns}/bumper", "std_msgs/msg/Bool", BEST_EFFORT)
     battery = graph.subscriber(f"/{ns}/battery", "std_msgs/msg/Float32", BEST_EFFORT)
-    seen: dict[str, list[Any]] = {"bumper": [], "battery": []}
+    encoders = graph.subscriber(f"/{ns}/encoders", "std_msgs/msg/Int32MultiArray", BEST_EFFORT)
+    seen: dict[str, list[Any]] = {"bumper": [], "battery": [], "encoders": []}
 
     def saw(name: str, reader: DataReader[Any], ok: Callable[[Any], bool]) -> None:
         """Wait for a sample that ``ok`` accepts, among those that come from now on."""
@@ -565,6 +569,8 @@ def test_inputs_are_published(
     saw("bumper", bumper, lambda v: v is True or v == 1)
     sim.set_analog(14, 700)
     saw("battery", battery, lambda v: abs(v - 7.0) < 1e-4)
+    sim.pulses(3, 25, 1000)  # 25 rising edges on the encoder's pin
+    saw("encoders", encoders, lambda v: list(v) == [25])
 
 
 # --- a bridge that hangs --------------------------------------------------------------
