@@ -600,15 +600,15 @@ def test_a_hung_bridge_trips_the_failsafe_while_the_link_stays_up(sim_board: Sim
     )
     hang, hung, release = threading.Event(), threading.Event(), threading.Event()
     with Bridge(sim.port, config) as bridge:
-        real_take = bridge._take_all
+        real_take = bridge._take
 
-        def take_or_hang() -> None:
+        def take_or_hang(route: Any) -> None:
             if hang.is_set():
                 hung.set()
                 release.wait()  # stuck until the test ends
-            real_take()
+            real_take(route)
 
-        bridge._take_all = take_or_hang  # type: ignore[method-assign]
+        bridge._take = take_or_hang  # type: ignore[method-assign]
         loop = threading.Thread(target=bridge.run, name="bridge-loop")
         loop.start()
         try:

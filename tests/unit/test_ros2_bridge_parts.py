@@ -522,6 +522,7 @@ def test_diagnostics() -> None:
         {
             "bad_messages": "0",
             "forwarded": "0",
+            "superseded": "0",
             "refused_by_device": "0",
             "stops": "0",
             "cmd_vel_stale_stops": "0",
@@ -548,3 +549,42 @@ def test_diagnostics() -> None:
 def test_the_report_is_stamped_with_the_wall_clock() -> None:
     report = Health("x", "y").report(_stats(), now=1700000000.25)
     assert (report.header.stamp.sec, report.header.stamp.nanosec) == (1700000000, 250000000)
+
+
+# --- the loop's handling of one topic -------------------------------------------------
+
+
+class FakeReader:
+    """Hands out queued samples one at a time; an exception in the queue is raised by take."""
+
+    def __init__(self, queue: list[Any]) -> None:
+        self.queue = queue
+
+    def take(self, N: int = 1) -> list[Any]:  # noqa: N803  (cyclonedds' name)
+        if not self.queue:
+            return []
+        item = self.queue.pop(0)
+        if isinstance(item, Exception):
+            raise item
+        return [item]
+
+
+def test_the_newest_valid_command_of_a_topic_wins_and_bad_ones_are_counted() -> None:
+    from protoduino.ros2.bridge import Bridge, _Route
+
+    bridge = Bridge("unused", parse_config({}))  # nothing opens before start()
+    done: list[float] = []
+
+    def prepare(message: msgs.Float64) -> Callable[[], None]:
+        value = servo_degrees(message.data, ServoConfig(9, "pan"))
+        return lambda: done.append(value)
+
+    samples: list[Any] = [msgs.Float64(d) for d in (10.0, 20.0, 500.0, 30.0)]
+    samples.insert(1, UnicodeDecodeError("utf-8", b"\xff", 0, 1, "invalid start byte"))
+    samples.append(msgs.Float64(math.nan))
+    bridge._take(_Route("/pan", FakeReader(samples), prepare))  # type: ignore[arg-type]
+    assert done == [30]  # one command sent: the newest valid one
+    assert bridge.health.forwarded == 1 and bridge.health.superseded == 2
+    assert dict(bridge.health.bad) == {"/pan: undecodable": 1, "/pan: invalid": 2}
+    bridge._take(_Route("/pan", FakeReader([]), prepare))  # type: ignore[arg-type]
+    assert done == [30]  # nothing waiting: nothing sent

@@ -5,10 +5,10 @@ the outputs the configuration names, creates the DDS topics (ROS 2 names,
 types and QoS: :mod:`.dds`, :mod:`.msgs`) and runs one loop
 (:meth:`Bridge.run`) that
 
-* waits for commands on the subscribed topics and carries them out (a
-  servo's Float64, an arm's JointState as one pose, a digital output's Bool,
-  STOP, ``/cmd_vel``), refusing bad ones (logged, counted on /diagnostics,
-  nothing moves);
+* waits for commands on the subscribed topics and carries out the newest
+  valid one of each (a servo's Float64, an arm's JointState as one pose, a
+  digital output's Bool, STOP, ``/cmd_vel``), refusing bad ones (logged,
+  counted on /diagnostics, nothing moves);
 * sends the device's heartbeat every ``failsafe_timeout / 4``: only this loop
   keeps the outputs alive, so a bridge that hangs or dies lets the device's
   failsafe drive them safe (the board's automatic Ping only keeps the link up);
@@ -52,7 +52,7 @@ from . import inputs
 from .config import BridgeConfig, ConfigError, ServoConfig
 from .dds import DEFAULT_QOS, SENSOR_QOS, dds_topic, ros_topic
 from .diagnostics import Health
-from .drive import BadCommandError, DiffDrive, Motor
+from .drive import BadCommandError, DiffDrive, Motor, twist_to_wheels
 from .msgs import Bool, DiagnosticArray, Empty, Float32, Float64, Int32MultiArray, JointState, Twist
 
 log = logging.getLogger(__name__)
@@ -117,13 +117,19 @@ def joint_pose(message: Any, joints: Mapping[str, ServoConfig]) -> dict[int, int
     }
 
 
+#: What a valid command does, once it is the newest of its topic.
+Action = Callable[[], None]
+#: Checks one sample (raising BadCommandError) and returns its action (None: nothing to do).
+Prepare = Callable[[Any], Action | None]
+
+
 @dataclass
 class _Route:
-    """One subscribed topic: its reader and what a sample does."""
+    """One subscribed topic: its reader and how a sample becomes an action."""
 
     topic: str  # the ROS name, for logs and /diagnostics
     reader: DataReader[Any]
-    handle: Callable[[Any], None]
+    prepare: Prepare
 
 
 class Bridge:
@@ -168,6 +174,7 @@ class Bridge:
         #: Set from the event thread when the device drove its outputs safe on its own.
         self._device_safe = threading.Event()
         self._diag_lock = threading.Lock()
+        self._next_beat = 0.0
         self._undo: list[Callable[[], None]] = []
 
     # --- life cycle ----------------------------------------------------------------
@@ -250,7 +257,7 @@ class Bridge:
         topic = Topic(self._participant, dds_topic(self.config.namespace, name), kind, qos=qos)
         return DataWriter(self._participant, topic, qos=qos)
 
-    def _subscribe(self, name: str, kind: type[Any], handle: Callable[[Any], None]) -> None:
+    def _subscribe(self, name: str, kind: type[Any], prepare: Prepare) -> None:
         assert self._participant is not None and self._waitset is not None
         topic = Topic(
             self._participant, dds_topic(self.config.namespace, name), kind, qos=DEFAULT_QOS
@@ -258,7 +265,7 @@ class Bridge:
         reader: DataReader[Any] = DataReader(self._participant, topic, qos=DEFAULT_QOS)
         mask = SampleState.Any | ViewState.Any | InstanceState.Any
         self._waitset.attach(ReadCondition(reader, mask))
-        self._routes.append(_Route(ros_topic(self.config.namespace, name), reader, handle))
+        self._routes.append(_Route(ros_topic(self.config.namespace, name), reader, prepare))
 
     def _configure_outputs(self, board: Board) -> None:
         config = self.config
@@ -301,31 +308,39 @@ class Bridge:
         """Carry out commands, heartbeat, watch /cmd_vel, report, until :meth:`stop`."""
         if self.board is None or self._waitset is None or self._wake is None:
             raise RuntimeError("start() the bridge first")
-        beat = self.config.failsafe_timeout / BEATS_PER_TIMEOUT
-        next_beat = self.clock()
+        # Locals: close() from another thread drops the attributes, not these.
+        waitset, wake = self._waitset, self._wake
+        self._next_beat = self.clock()
         next_report = self.clock()
         while not self._stopping.is_set():
+            self._beat_if_due()
             now = self.clock()
-            if now >= next_beat:
-                self._heartbeat()
-                next_beat = now + beat
             if now >= next_report:
                 self.publish_diagnostics()
                 next_report = now + self.config.diagnostics_period
-            due = min(next_beat, next_report)
+            due = min(self._next_beat, next_report)
             if self.drive is not None and (stale := self.drive.deadline()) is not None:
                 due = min(due, stale)
             wait = max(0.0, due - self.clock())
-            self._waitset.wait(duration(seconds=wait) if wait > 0 else 0)
-            self._wake.set(False)
+            waitset.wait(duration(seconds=wait) if wait > 0 else 0)
+            wake.set(False)
             if self._device_safe.is_set():
                 self._device_safe.clear()
                 if self.drive is not None:
                     self.drive.forget()
-            self._take_all()
+            for route in self._routes:
+                if self._stopping.is_set():
+                    break
+                self._take(route)
+                self._beat_if_due()  # a slow device must not starve the heartbeat
             self._check_drive()
 
-    def _heartbeat(self) -> None:
+    def _beat_if_due(self) -> None:
+        """Send the heartbeat when it is due (every failsafe_timeout / 4)."""
+        now = self.clock()
+        if now < self._next_beat:
+            return
+        self._next_beat = now + self.config.failsafe_timeout / BEATS_PER_TIMEOUT
         assert self.board is not None
         try:
             self.board.heartbeat()
@@ -333,25 +348,41 @@ class Bridge:
             # The link is down or the device stopped answering: its failsafe will act.
             log.warning("heartbeat failed: %s", error)
 
-    def _take_all(self) -> None:
-        for route in self._routes:
-            for _ in range(TAKE_PER_PASS):
-                try:
-                    samples = route.reader.take(N=1)
-                except Exception as error:  # bytes that are no such message
-                    self._bad(route.topic, "undecodable", error)
-                    continue
-                if not samples:
-                    break
-                sample = samples[0]
-                info = getattr(sample, "sample_info", None)
-                if info is not None and not info.valid_data:
-                    continue  # an instance's state change, no data
-                self._handle(route, sample)
+    def _take(self, route: _Route) -> None:
+        """Every sample waiting on one topic checked (bad ones counted); the newest valid one
+        carried out. The others are superseded: a servo, a level or a Twist is a state, and
+        only the latest matters (the newest wins, as for the sensors), so a publisher faster
+        than the device never builds a backlog of stale commands."""
+        action: Action | None = None
+        valid = 0
+        for _ in range(TAKE_PER_PASS):
+            try:
+                samples = route.reader.take(N=1)  # one at a time: a bad one costs only itself
+            except Exception as error:  # bytes that are no such message
+                self._bad(route.topic, "undecodable", error)
+                continue
+            if not samples:
+                break
+            sample = samples[0]
+            info = getattr(sample, "sample_info", None)
+            if info is not None and not info.valid_data:
+                continue  # an instance's state change, no data
+            try:
+                prepared = route.prepare(sample)
+            except BadCommandError as error:
+                self._bad(route.topic, "invalid", error)
+                continue
+            if prepared is not None:
+                action = prepared
+                valid += 1
+        if valid > 1:
+            self.health.count("superseded", valid - 1)
+        if action is not None:
+            self._carry_out(route, action)
 
-    def _handle(self, route: _Route, sample: Any) -> None:
+    def _carry_out(self, route: _Route, action: Action) -> None:
         try:
-            route.handle(sample)
+            action()
         except BadCommandError as error:
             self._bad(route.topic, "invalid", error)
         except CommandRejectedError as error:
@@ -380,39 +411,53 @@ class Bridge:
 
     # --- handlers ------------------------------------------------------------------
 
-    def _servo_handler(self, config: ServoConfig) -> Callable[[Float64], None]:
+    def _servo_handler(self, config: ServoConfig) -> Prepare:
         servo = self._servos[config.pin]
 
-        def handle(message: Float64) -> None:
-            servo.write(servo_degrees(message.data, config))
+        def prepare(message: Float64) -> Action:
+            degrees = servo_degrees(message.data, config)
+            return lambda: servo.write(degrees)
 
-        return handle
+        return prepare
 
-    def _on_joints(self, message: JointState) -> None:
-        assert self.board is not None
+    def _on_joints(self, message: JointState) -> Action:
         pose = joint_pose(message, self.config.joints)
-        self.board.pose({self._servos[pin]: degrees for pin, degrees in pose.items()})
+        targets: dict[Servo | DigitalOutput, int | bool] = {
+            self._servos[pin]: degrees for pin, degrees in pose.items()
+        }
+
+        def move() -> None:
+            assert self.board is not None
+            self.board.pose(targets)
+
+        return move
 
     @staticmethod
-    def _digital_handler(out: DigitalOutput) -> Callable[[Bool], None]:
-        def handle(message: Bool) -> None:
-            out.write(bool(message.data))
+    def _digital_handler(out: DigitalOutput) -> Prepare:
+        def prepare(message: Bool) -> Action:
+            level = bool(message.data)
+            return lambda: out.write(level)
 
-        return handle
+        return prepare
 
-    def _on_stop(self, message: Empty | Bool) -> None:
-        assert self.board is not None
+    def _on_stop(self, message: Empty | Bool) -> Action | None:
         if isinstance(message, Bool) and not message.data:
-            return  # Bool false: not a stop
+            return None  # Bool false: not a stop
+        return self._stop
+
+    def _stop(self) -> None:
+        assert self.board is not None
         self.board.stop()
         self.health.count("stops")
         if self.drive is not None:
             self.drive.forget()
         log.warning("STOP: every output driven safe")
 
-    def _on_twist(self, message: Twist) -> None:
+    def _on_twist(self, message: Twist) -> Action:
         assert self.drive is not None
-        self.drive.command(message.linear.x, message.angular.z)
+        drive = self.drive
+        left, right = twist_to_wheels(message.linear.x, message.angular.z, drive.config)
+        return lambda: drive.apply(left, right)
 
     # --- events and diagnostics ----------------------------------------------------
 

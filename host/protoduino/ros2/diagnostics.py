@@ -9,7 +9,8 @@ share the one ``/diagnostics`` topic, as ROS 2's diagnostic aggregator expects:
   (ping or heartbeat timeout, stop, interlock), reboots and lost sessions;
   ERROR while a failsafe is active;
 * ``<name>: bridge``: the messages it refused (by topic and reason), the
-  commands the device refused, the stale ``cmd_vel`` stops; WARN when a
+  commands the device refused, those a newer one of the same topic replaced
+  before they were sent, the stale ``cmd_vel`` stops; WARN when a
   message was refused since the previous report.
 
 :class:`Health` collects the counts from both the bridge's loop and the
@@ -87,6 +88,7 @@ class Health:
         self._bad_reported = 0
         self.refused = 0  # commands the device (or the board's checks) refused
         self.forwarded = 0  # commands that reached the device
+        self.superseded = 0  # valid commands a newer one of the same topic replaced unsent
         self.stale_stops = 0
         self.stops = 0
         self.failsafe_active = False
@@ -168,6 +170,7 @@ class Health:
         values: dict[str, Any] = {
             "bad_messages": self.bad_total,
             "forwarded": self.forwarded,
+            "superseded": self.superseded,
             "refused_by_device": self.refused,
             "stops": self.stops,
             "cmd_vel_stale_stops": self.stale_stops,

@@ -141,7 +141,10 @@ class DiffDrive:
 
     def command(self, linear_x: float, angular_z: float) -> None:
         """Apply one Twist; :class:`BadCommandError` leaves the motors as they were."""
-        left, right = twist_to_wheels(linear_x, angular_z, self.config)
+        self.apply(*twist_to_wheels(linear_x, angular_z, self.config))
+
+    def apply(self, left: WheelCommand, right: WheelCommand) -> None:
+        """Apply a Twist already converted (:func:`twist_to_wheels`); feeds the watchdog."""
         self.left.apply(left)
         self.right.apply(right)
         self.last = self.clock()
