@@ -588,3 +588,37 @@ def test_the_newest_valid_command_of_a_topic_wins_and_bad_ones_are_counted() -> 
     assert dict(bridge.health.bad) == {"/pan: undecodable": 1, "/pan: invalid": 2}
     bridge._take(_Route("/pan", FakeReader([]), prepare))  # type: ignore[arg-type]
     assert done == [30]  # nothing waiting: nothing sent
+
+
+# --- the command line -----------------------------------------------------------------
+
+
+def test_the_command_refuses_a_bad_config_before_any_port(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from protoduino.cli.main import main
+
+    path = tmp_path / "robot.yaml"
+    path.write_text("servos: [{pin: 9}]\n")
+    with pytest.raises(SystemExit) as exited:
+        main(["ros2", "/dev/no-such-port", "--config", str(path)])
+    assert exited.value.code == 2
+    err = capsys.readouterr().err
+    assert "servos[0]: give it a topic" in err and err.count("\n") == 1
+
+
+def test_without_cyclonedds_the_command_says_what_to_install(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import sys
+
+    from protoduino.cli.main import main
+
+    path = tmp_path / "robot.yaml"
+    path.write_text("servos: [{pin: 9, topic: pan}]\n")
+    for name in [m for m in sys.modules if m.startswith("cyclonedds")]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.delitem(sys.modules, "protoduino.ros2.bridge", raising=False)
+    monkeypatch.setitem(sys.modules, "cyclonedds", None)  # as if not installed
+    assert main(["ros2", "/dev/no-such-port", "--config", str(path)]) == 1
+    assert "needs cyclonedds: pip install 'protoduino[ros2]'" in capsys.readouterr().err
