@@ -622,3 +622,31 @@ def test_without_cyclonedds_the_command_says_what_to_install(
     monkeypatch.setitem(sys.modules, "cyclonedds", None)  # as if not installed
     assert main(["ros2", "/dev/no-such-port", "--config", str(path)]) == 1
     assert "needs cyclonedds: pip install 'protoduino[ros2]'" in capsys.readouterr().err
+
+
+def test_a_clean_close_stops_the_outputs_before_closing_the_board() -> None:
+    from protoduino.errors import AckTimeoutError
+    from protoduino.ros2.bridge import Bridge
+
+    calls: list[str] = []
+
+    class Board:
+        closed = False
+
+        def __init__(self, stop_fails: bool = False) -> None:
+            self.stop_fails = stop_fails
+
+        def stop(self) -> None:
+            calls.append("stop")
+            if self.stop_fails:
+                raise AckTimeoutError("the link is down")
+
+        def close(self) -> None:
+            calls.append("close")
+
+    for fails in (False, True):  # a stop that fails still closes (the failsafe takes over)
+        calls.clear()
+        bridge = Bridge("unused", parse_config({}))
+        bridge.board = Board(fails)  # type: ignore[assignment]
+        bridge.close()
+        assert calls == ["stop", "close"]

@@ -2,8 +2,8 @@
 
 The configuration is read and checked before the port is opened (a bad one is
 a usage error, exit status 2). The bridge runs in the foreground; SIGINT and
-SIGTERM end it cleanly (the board is closed, and the device's failsafe takes
-its outputs safe once the heartbeats stop). docs/ros2.md has the details.
+SIGTERM end it cleanly (every output driven safe by the device's Stop, then the
+board closed). docs/ros2.md has the details.
 """
 
 from __future__ import annotations

@@ -62,6 +62,7 @@ BEATS_PER_TIMEOUT = 4
 #: Samples taken from one topic per pass, so that a flood on one cannot starve the others.
 TAKE_PER_PASS = 64
 
+PWM_METHOD = "pwm_output"
 PWM_MISSING = (
     "the configuration has a drive, which needs Board.pwm_output (the PWM outputs of "
     "issue 21, 'pins'); this protoduino's Board has no pwm_output yet"
@@ -70,7 +71,7 @@ PWM_MISSING = (
 
 def check_board_type(board: type[Any] | object, config: BridgeConfig) -> None:
     """Refuse, before opening anything, a configuration the Board cannot carry out."""
-    if config.drive is not None and not hasattr(board, "pwm_output"):
+    if config.drive is not None and not hasattr(board, PWM_METHOD):
         raise ConfigError(PWM_MISSING)
     inputs.check_board(board, config)
 
@@ -138,8 +139,7 @@ class Bridge:
     ``Bridge(port, config)`` checks the configuration against the Board API;
     :meth:`start` (or ``with``) opens the board and the DDS entities;
     :meth:`run` loops until :meth:`stop` (from another thread or a signal
-    handler); :meth:`close` releases everything (the device's failsafe then
-    drives the outputs safe once the heartbeats are missed).
+    handler); :meth:`close` drives every output safe and releases everything.
     ``board_options`` go to :meth:`Board.open` (``liveness`` and
     ``failsafe_timeout`` are the bridge's own).
     """
@@ -237,12 +237,22 @@ class Bridge:
             self._wake.set(True)
 
     def close(self) -> None:
-        """Stop subscriptions and close the board; the DDS entities go with the object."""
+        """Stop subscriptions, drive every output safe (the device's Stop), close the board.
+
+        A bridge that shuts down cleanly stops the robot at once rather than a failsafe
+        timeout later; one that cannot (the link is down) leaves it to the failsafe. The
+        DDS entities go with the object.
+        """
         self.stop()
         for undo in self._undo:
             undo()
         self._undo.clear()
         if self.board is not None:
+            if not self.board.closed:
+                try:
+                    self.board.stop()
+                except ProtoduinoError as error:
+                    log.warning("outputs not stopped on close (the failsafe will): %s", error)
             self.board.close()
         self._routes.clear()
         self._writers.clear()
@@ -282,7 +292,7 @@ class Bridge:
         self._subscribe(config.stop.topic, stop_type, self._on_stop)
         if config.drive is not None:
             drive = config.drive
-            make_pwm: Any = board.pwm_output  # type: ignore[attr-defined]  # issue 21
+            make_pwm: Any = getattr(board, PWM_METHOD)  # issue 21's; no stub for it yet
             motors = [
                 Motor(m, make_pwm(m.pwm, safe=0), board.digital_output(m.direction, safe=False))
                 for m in (drive.left, drive.right)
