@@ -576,7 +576,9 @@ def test_inputs_are_published(
 # --- a bridge that hangs --------------------------------------------------------------
 
 
-def test_a_hung_bridge_trips_the_failsafe_while_the_link_stays_up(sim_board: SimBoard) -> None:
+def test_a_hung_bridge_trips_the_failsafe_while_the_link_stays_up(
+    sim_board: SimBoard, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """The loop stuck (not the process): the board's I/O thread still pings and the link
     stays up, but only the loop's heartbeat keeps the outputs, so the device drives them safe.
 
@@ -588,7 +590,7 @@ def test_a_hung_bridge_trips_the_failsafe_while_the_link_stays_up(sim_board: Sim
     from protoduino.ros2 import Bridge, parse_config
 
     sim = sim_board
-    os.environ.setdefault("CYCLONEDDS_URI", LOOPBACK)
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
     config = parse_config(
         {
             "namespace": _namespace(sim, "hang"),
