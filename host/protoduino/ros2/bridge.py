@@ -432,9 +432,8 @@ class Bridge:
 
     def _on_joints(self, message: JointState) -> Action:
         pose = joint_pose(message, self.config.joints)
-        targets: dict[Servo | DigitalOutput, int | bool] = {
-            self._servos[pin]: degrees for pin, degrees in pose.items()
-        }
+        # Keys typed loosely: Board.pose's mapping type grows with each output kind.
+        targets: dict[Any, int] = {self._servos[pin]: degrees for pin, degrees in pose.items()}
 
         def move() -> None:
             assert self.board is not None
