@@ -18,12 +18,7 @@ pytest.importorskip("rosbags", reason="rosbags is not installed")
 import numpy as np
 from protoduino.events import Event, EventKind, Stats
 from protoduino.ros2 import msgs
-from protoduino.ros2.bridge import (
-    PWM_MISSING,
-    check_board_type,
-    joint_pose,
-    servo_degrees,
-)
+from protoduino.ros2.bridge import PWM_MISSING, check_board_type
 from protoduino.ros2.config import (
     BridgeConfig,
     ConfigError,
@@ -51,6 +46,7 @@ from protoduino.ros2.inputs import (
     int32,
     wire,
 )
+from protoduino.ros2.servos import joint_pose, servo_degrees
 from rosbags.typesys import Stores, get_typestore
 
 TYPES = get_typestore(Stores.ROS2_HUMBLE)
@@ -283,13 +279,12 @@ def test_a_drive_needs_pwm_outputs_on_the_board() -> None:
 
 
 def test_servo_degrees() -> None:
-    servo = ServoConfig(9, "pan")
-    assert servo_degrees(45.0, servo) == 45
-    assert servo_degrees(44.5, servo) == 44  # half to even
-    assert servo_degrees(180.0, servo) == 180
+    assert servo_degrees(45.0) == 45
+    assert servo_degrees(44.5) == 44  # half to even
+    assert servo_degrees(180.0) == 180
     for bad in (-0.1, 180.01, math.nan, math.inf):
         with pytest.raises(BadCommandError):
-            servo_degrees(bad, servo)
+            servo_degrees(bad)
 
 
 def _joint_state(names: list[str], positions: list[float]) -> Any:
@@ -576,7 +571,7 @@ def test_the_newest_valid_command_of_a_topic_wins_and_bad_ones_are_counted() -> 
     done: list[float] = []
 
     def prepare(message: msgs.Float64) -> Callable[[], None]:
-        value = servo_degrees(message.data, ServoConfig(9, "pan"))
+        value = servo_degrees(message.data)
         return lambda: done.append(value)
 
     samples: list[Any] = [msgs.Float64(d) for d in (10.0, 20.0, 500.0, 30.0)]

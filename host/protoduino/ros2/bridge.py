@@ -23,7 +23,6 @@ Inputs are published from the board's event thread as they change
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -54,6 +53,7 @@ from .dds import DEFAULT_QOS, SENSOR_QOS, dds_topic, ros_topic
 from .diagnostics import Health
 from .drive import BadCommandError, DiffDrive, Motor, twist_to_wheels
 from .msgs import Bool, DiagnosticArray, Empty, Float32, Float64, Int32MultiArray, JointState, Twist
+from .servos import joint_pose, servo_degrees
 
 log = logging.getLogger(__name__)
 
@@ -74,48 +74,6 @@ def check_board_type(board: type[Any] | object, config: BridgeConfig) -> None:
     if config.drive is not None and not hasattr(board, PWM_METHOD):
         raise ConfigError(PWM_MISSING)
     inputs.check_board(board, config)
-
-
-def servo_degrees(value: float, servo: ServoConfig) -> int:
-    """A Float64 in degrees as the whole degree the servo goes to (round half to even).
-
-    Raises :class:`BadCommandError` when it is not a finite number within 0..180.
-    """
-    del servo  # every servo takes 0..180; its pulse widths are its own business
-    if not math.isfinite(value):
-        raise BadCommandError(f"{value!r} degrees is not a finite number")
-    if not 0.0 <= value <= 180.0:
-        raise BadCommandError(f"{value:g} degrees is outside 0..180")
-    return round(value)
-
-
-def joint_degrees(position: float, servo: ServoConfig) -> int:
-    """A joint position (radians, REP 103) as the servo's whole degree: zero + degrees(position)."""
-    if not math.isfinite(position):
-        raise BadCommandError(f"joint position {position!r} is not a finite number")
-    degrees = servo.zero + math.degrees(position)
-    if not -1e-9 <= degrees <= 180.0 + 1e-9:
-        raise BadCommandError(
-            f"joint position {position:g} rad is {degrees:g} degrees on the servo, outside 0..180"
-        )
-    return min(180, max(0, round(degrees)))
-
-
-def joint_pose(message: Any, joints: Mapping[str, ServoConfig]) -> dict[int, int]:
-    """A JointState's names and positions as servo pin -> degrees, all checked (all or nothing)."""
-    names, positions = list(message.name), list(message.position)
-    if not names:
-        raise BadCommandError("a JointState with no joints")
-    if len(names) != len(positions):
-        raise BadCommandError(f"{len(names)} names but {len(positions)} positions")
-    if len(set(names)) != len(names):
-        raise BadCommandError(f"a joint named twice in {names}")
-    unknown = [n for n in names if n not in joints]
-    if unknown:
-        raise BadCommandError(f"unknown joint(s) {unknown} (this board has {sorted(joints)})")
-    return {
-        joints[n].pin: joint_degrees(p, joints[n]) for n, p in zip(names, positions, strict=True)
-    }
 
 
 #: What a valid command does, once it is the newest of its topic.
@@ -425,7 +383,7 @@ class Bridge:
         servo = self._servos[config.pin]
 
         def prepare(message: Float64) -> Action:
-            degrees = servo_degrees(message.data, config)
+            degrees = servo_degrees(message.data)
             return lambda: servo.write(degrees)
 
         return prepare

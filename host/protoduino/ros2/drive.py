@@ -27,7 +27,8 @@ MAX_DUTY = 255
 
 
 class BadCommandError(ValueError):
-    """A message the bridge refuses (logged, counted, nothing moves)."""
+    """A message the bridge refuses, a Twist here or a servo command (:mod:`.servos`):
+    logged, counted on /diagnostics, nothing moves."""
 
 
 class PwmOutput(Protocol):
