@@ -53,6 +53,7 @@ COMMANDS: dict[str, str] = {
     "flash": f"{__package__}.flash",
     "sim": f"{__package__}.sim",
     "demo": f"{__package__}.demo",
+    "ros2": f"{__package__}.ros2",
     "gen": f"{DEV_PACKAGE}.cli.gen",
     "soak": f"{DEV_PACKAGE}.cli.soak",
 }

@@ -1,0 +1,96 @@
+"""``protoduino ros2 PORT --config robot.yaml``: run the ROS 2 bridge until Ctrl-C or SIGTERM.
+
+The configuration is read and checked before the port is opened (a bad one is
+a usage error, exit status 2). The bridge runs in the foreground; SIGINT and
+SIGTERM end it cleanly (every output driven safe by the device's Stop, then the
+board closed). docs/ros2.md has the details.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from pathlib import Path
+from types import FrameType
+
+from ..errors import ProtoduinoError
+from . import argtypes
+from .options import add_port, error, load_url_handlers, session_of
+
+HELP = "run the ROS 2 bridge: the board's pins as ROS 2 topics on DDS (see docs/ros2.md)"
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    add_port(parser)
+    parser.add_argument(
+        "--config",
+        type=Path,
+        required=True,
+        metavar="FILE",
+        help="robot.yaml: the namespace and which pins are which topics",
+    )
+    parser.add_argument(
+        "--domain-id",
+        type=argtypes.integer(0, 232, name="domain id"),
+        metavar="N",
+        help="DDS domain (default: the config's domain_id, else $ROS_DOMAIN_ID, else 0)",
+    )
+
+
+def check(args: argparse.Namespace) -> str | None:
+    """The configuration is read here: a bad one is refused before any port opens."""
+    from ..ros2.config import load_config
+
+    try:
+        config = load_config(args.config)
+    except ProtoduinoError as exc:
+        return str(exc)
+    if args.domain_id is not None:
+        from dataclasses import replace
+
+        config = replace(config, domain_id=args.domain_id)
+    args.ros2_config = config
+    return None
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import ros2
+
+    try:
+        bridge_type = ros2.Bridge
+        load_url_handlers(args.port)
+        bridge = bridge_type(
+            args.port,
+            args.ros2_config,
+            board_options={
+                "baudrate": args.baud,
+                "ack_timeout": args.ack_timeout,
+                "handshake_timeout": args.handshake_timeout,
+                "capture": args.capture,
+                "session": session_of(args),
+            },
+        )
+    except ProtoduinoError as exc:
+        return error("ros2", exc)
+
+    def stop(signum: int, frame: FrameType | None) -> None:
+        bridge.stop()
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    try:
+        with bridge:
+            topics = bridge.topics()
+            print(
+                f"protoduino ros2: {args.port} on DDS domain "
+                f"{bridge.config.resolved_domain()}, {len(topics)} topics:",
+                flush=True,
+            )
+            for name, kind in sorted(topics.items()):
+                print(f"  {name}  {kind}", flush=True)
+            bridge.run()
+    except ProtoduinoError as exc:
+        return error("ros2", exc)
+    print("protoduino ros2: stopped", file=sys.stderr)
+    return 0

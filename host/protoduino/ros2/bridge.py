@@ -1,0 +1,453 @@
+"""The bridge: one board on a ROS 2 graph over Cyclone DDS.
+
+:class:`Bridge` opens the board with ``liveness="heartbeat"``, configures
+the outputs the configuration names, creates the DDS topics (ROS 2 names,
+types and QoS: :mod:`.dds`, :mod:`.msgs`) and runs one loop
+(:meth:`Bridge.run`) that
+
+* waits for commands on the subscribed topics and carries out the newest
+  valid one of each (a servo's Float64, an arm's JointState as one pose, a
+  digital output's Bool, STOP, ``/cmd_vel``), refusing bad ones (logged,
+  counted on /diagnostics, nothing moves);
+* sends the device's heartbeat every ``failsafe_timeout / 4``: only this loop
+  keeps the outputs alive, so a bridge that hangs or dies lets the device's
+  failsafe drive them safe (the board's automatic Ping only keeps the link up);
+* stops the motors when ``/cmd_vel`` went quiet for its timeout;
+* publishes /diagnostics every ``diagnostics_period``, and at once from the
+  board's event thread when a failsafe, reboot or link change happens.
+
+Inputs are published from the board's event thread as they change
+(:mod:`.inputs`).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any
+
+from cyclonedds.core import (
+    GuardCondition,
+    InstanceState,
+    ReadCondition,
+    SampleState,
+    ViewState,
+    WaitSet,
+)
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from ..board import Board, DigitalOutput, Servo
+from ..errors import CommandRejectedError, ProtoduinoError
+from ..events import Event, EventKind
+from . import inputs
+from .config import BridgeConfig, ConfigError, ServoConfig
+from .dds import DEFAULT_QOS, SENSOR_QOS, dds_topic, ros_topic
+from .diagnostics import Health
+from .drive import BadCommandError, DiffDrive, Motor, twist_to_wheels
+from .msgs import Bool, DiagnosticArray, Empty, Float32, Float64, Int32MultiArray, JointState, Twist
+from .servos import joint_pose, servo_degrees
+
+log = logging.getLogger(__name__)
+
+#: Heartbeats per failsafe timeout: one or two lost to a slow moment must not trip it.
+BEATS_PER_TIMEOUT = 4
+#: Samples taken from one topic per pass, so that a flood on one cannot starve the others.
+TAKE_PER_PASS = 64
+
+PWM_METHOD = "pwm_output"
+PWM_MISSING = (
+    "the configuration has a drive, which needs Board.pwm_output (the PWM outputs of "
+    "issue 21, 'pins'); this protoduino's Board has no pwm_output yet"
+)
+
+
+def check_board_type(board: type[Any] | object, config: BridgeConfig) -> None:
+    """Refuse, before opening anything, a configuration the Board cannot carry out."""
+    if config.drive is not None and not hasattr(board, PWM_METHOD):
+        raise ConfigError(PWM_MISSING)
+    inputs.check_board(board, config)
+
+
+#: What a valid command does, once it is the newest of its topic.
+Action = Callable[[], None]
+#: Checks one sample (raising BadCommandError) and returns its action (None: nothing to do).
+Prepare = Callable[[Any], Action | None]
+
+
+@dataclass
+class _Route:
+    """One subscribed topic: its reader and how a sample becomes an action."""
+
+    topic: str  # the ROS name, for logs and /diagnostics
+    reader: DataReader[Any]
+    prepare: Prepare
+
+
+class Bridge:
+    """One board on ROS 2; see the module docstring.
+
+    ``Bridge(port, config)`` checks the configuration against the Board API;
+    :meth:`start` (or ``with``) opens the board and the DDS entities;
+    :meth:`run` loops until :meth:`stop` (from another thread or a signal
+    handler); :meth:`close` drives every output safe and releases everything.
+    ``board_options`` go to :meth:`Board.open` (``liveness`` and
+    ``failsafe_timeout`` are the bridge's own).
+    """
+
+    def __init__(
+        self,
+        port: str,
+        config: BridgeConfig,
+        *,
+        board_options: Mapping[str, Any] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        check_board_type(Board, config)
+        self.port = port
+        self.config = config
+        self.clock = clock
+        self._board_options = dict(board_options or {})
+        for key in ("liveness", "failsafe_timeout"):
+            if key in self._board_options:
+                raise ConfigError(f"board_options: {key} is the bridge's own setting")
+        self.name = f"protoduino {config.namespace or port}"
+        self.health = Health(self.name, port)
+        self.board: Board | None = None
+        self.drive: DiffDrive | None = None
+        self._servos: dict[int, Servo] = {}
+        self._routes: list[_Route] = []
+        self._writers: dict[str, DataWriter[Any]] = {}
+        self._participant: DomainParticipant | None = None
+        self._waitset: WaitSet | None = None
+        self._wake: GuardCondition | None = None
+        self._stopping = threading.Event()
+        #: Set from the event thread when the device drove its outputs safe on its own.
+        self._device_safe = threading.Event()
+        self._diag_lock = threading.Lock()
+        self._next_beat = 0.0
+        self._undo: list[Callable[[], None]] = []
+
+    # --- life cycle ----------------------------------------------------------------
+
+    def __enter__(self) -> Bridge:
+        self.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def start(self) -> None:
+        """Open the board, configure every output, create the DDS topics."""
+        config = self.config
+        try:
+            self.board = Board.open(
+                self.port,
+                liveness="heartbeat",
+                failsafe_timeout=config.failsafe_timeout,
+                **self._board_options,
+            )
+            self._participant = DomainParticipant(config.resolved_domain())
+            self._waitset = WaitSet(self._participant)
+            self._wake = GuardCondition(self._participant)
+            self._waitset.attach(self._wake)
+            self._writers[config.diagnostics_topic] = self._writer(
+                config.diagnostics_topic, DiagnosticArray, DEFAULT_QOS
+            )
+            self._configure_outputs(self.board)
+            self._configure_inputs(self.board)
+            self._undo.append(self.board.on_event(self._on_event))
+        except BaseException:
+            self.close()
+            raise
+        log.info(
+            "bridge up: %s on DDS domain %d, topics %s",
+            self.port,
+            config.resolved_domain(),
+            ", ".join(sorted(self.topics())),
+        )
+
+    def topics(self) -> dict[str, str]:
+        """Every ROS topic of the bridge -> its ROS 2 type (``pkg/msg/Type``)."""
+        found: dict[str, str] = {}
+        for route in self._routes:
+            found[route.topic] = _ros_type(route.reader.topic.data_type)
+        for name, writer in self._writers.items():
+            found[ros_topic(self.config.namespace, name)] = _ros_type(writer.topic.data_type)
+        return found
+
+    def stop(self) -> None:
+        """Make :meth:`run` return (thread-safe; callable from a signal handler)."""
+        self._stopping.set()
+        if self._wake is not None:
+            self._wake.set(True)
+
+    def close(self) -> None:
+        """Stop subscriptions, drive every output safe (the device's Stop), close the board.
+
+        A bridge that shuts down cleanly stops the robot at once rather than a failsafe
+        timeout later; one that cannot (the link is down) leaves it to the failsafe. The
+        DDS entities go with the object.
+        """
+        self.stop()
+        for undo in self._undo:
+            undo()
+        self._undo.clear()
+        if self.board is not None:
+            if not self.board.closed:
+                try:
+                    self.board.stop()
+                except ProtoduinoError as error:
+                    log.warning("outputs not stopped on close (the failsafe will): %s", error)
+            self.board.close()
+        self._routes.clear()
+        self._writers.clear()
+        self._waitset = None
+        self._wake = None
+        self._participant = None
+
+    # --- setup ---------------------------------------------------------------------
+
+    def _writer(self, name: str, kind: type[Any], qos: Any) -> DataWriter[Any]:
+        assert self._participant is not None
+        topic = Topic(self._participant, dds_topic(self.config.namespace, name), kind, qos=qos)
+        return DataWriter(self._participant, topic, qos=qos)
+
+    def _subscribe(self, name: str, kind: type[Any], prepare: Prepare) -> None:
+        assert self._participant is not None and self._waitset is not None
+        topic = Topic(
+            self._participant, dds_topic(self.config.namespace, name), kind, qos=DEFAULT_QOS
+        )
+        reader: DataReader[Any] = DataReader(self._participant, topic, qos=DEFAULT_QOS)
+        mask = SampleState.Any | ViewState.Any | InstanceState.Any
+        self._waitset.attach(ReadCondition(reader, mask))
+        self._routes.append(_Route(ros_topic(self.config.namespace, name), reader, prepare))
+
+    def _configure_outputs(self, board: Board) -> None:
+        config = self.config
+        for s in config.servos:
+            self._servos[s.pin] = board.servo(s.pin, safe=s.safe, min_us=s.min_us, max_us=s.max_us)
+            if s.topic is not None:
+                self._subscribe(s.topic, Float64, self._servo_handler(s))
+        if config.joints:
+            self._subscribe(config.joint_topic, JointState, self._on_joints)
+        for d in config.digital_outputs:
+            out = board.digital_output(d.pin, safe=d.safe)
+            self._subscribe(d.topic, Bool, self._digital_handler(out))
+        stop_type = Empty if config.stop.type == "Empty" else Bool
+        self._subscribe(config.stop.topic, stop_type, self._on_stop)
+        if config.drive is not None:
+            drive = config.drive
+            make_pwm: Any = getattr(board, PWM_METHOD)  # issue 21's; no stub for it yet
+            motors = [
+                Motor(m, make_pwm(m.pwm, safe=0), board.digital_output(m.direction, safe=False))
+                for m in (drive.left, drive.right)
+            ]
+            self.drive = DiffDrive(drive, motors[0], motors[1], self.clock)
+            self._subscribe(drive.topic, Twist, self._on_twist)
+
+    def _configure_inputs(self, board: Board) -> None:
+        config = self.config
+        publishers: dict[str, inputs.Publish] = {}
+        for d in config.digital_inputs:
+            publishers[d.topic] = self._writer(d.topic, Bool, SENSOR_QOS).write
+        for a in config.analog_inputs:
+            publishers[a.topic] = self._writer(a.topic, Float32, SENSOR_QOS).write
+        for c in config.counters:
+            publishers[c.topic] = self._writer(c.topic, Int32MultiArray, SENSOR_QOS).write
+        if publishers:
+            self._undo += inputs.wire(board, config, publishers)
+
+    # --- the loop ------------------------------------------------------------------
+
+    def run(self) -> None:
+        """Carry out commands, heartbeat, watch /cmd_vel, report, until :meth:`stop`."""
+        if self.board is None or self._waitset is None or self._wake is None:
+            raise RuntimeError("start() the bridge first")
+        # Locals: close() from another thread drops the attributes, not these.
+        waitset, wake = self._waitset, self._wake
+        self._next_beat = self.clock()
+        next_report = self.clock()
+        while not self._stopping.is_set():
+            self._beat_if_due()
+            now = self.clock()
+            if now >= next_report:
+                self.publish_diagnostics()
+                next_report = now + self.config.diagnostics_period
+            due = min(self._next_beat, next_report)
+            if self.drive is not None and (stale := self.drive.deadline()) is not None:
+                due = min(due, stale)
+            wait = max(0.0, due - self.clock())
+            waitset.wait(duration(seconds=wait) if wait > 0 else 0)
+            wake.set(False)
+            if self._device_safe.is_set():
+                self._device_safe.clear()
+                if self.drive is not None:
+                    self.drive.forget()
+            for route in self._routes:
+                if self._stopping.is_set():
+                    break
+                self._take(route)
+                self._beat_if_due()  # a slow device must not starve the heartbeat
+            self._check_drive()
+
+    def _beat_if_due(self) -> None:
+        """Send the heartbeat when it is due (every failsafe_timeout / 4)."""
+        now = self.clock()
+        if now < self._next_beat:
+            return
+        self._next_beat = now + self.config.failsafe_timeout / BEATS_PER_TIMEOUT
+        assert self.board is not None
+        try:
+            self.board.heartbeat()
+        except ProtoduinoError as error:
+            # The link is down or the device stopped answering: its failsafe will act.
+            log.warning("heartbeat failed: %s", error)
+
+    def _take(self, route: _Route) -> None:
+        """Every sample waiting on one topic checked (bad ones counted); the newest valid one
+        carried out. The others are superseded: a servo, a level or a Twist is a state, and
+        only the latest matters (the newest wins, as for the sensors), so a publisher faster
+        than the device never builds a backlog of stale commands."""
+        action: Action | None = None
+        valid = 0
+        for _ in range(TAKE_PER_PASS):
+            try:
+                samples = route.reader.take(N=1)  # one at a time: a bad one costs only itself
+            except Exception as error:  # bytes that are no such message
+                self._bad(route.topic, "undecodable", error)
+                continue
+            if not samples:
+                break
+            sample = samples[0]
+            info = getattr(sample, "sample_info", None)
+            if info is not None and not info.valid_data:
+                continue  # an instance's state change, no data
+            try:
+                prepared = route.prepare(sample)
+            except BadCommandError as error:
+                self._bad(route.topic, "invalid", error)
+                continue
+            if prepared is not None:
+                action = prepared
+                valid += 1
+        if valid > 1:
+            self.health.count("superseded", valid - 1)
+        if action is not None:
+            self._carry_out(route, action)
+
+    def _carry_out(self, route: _Route, action: Action) -> None:
+        try:
+            action()
+        except BadCommandError as error:
+            self._bad(route.topic, "invalid", error)
+        except CommandRejectedError as error:
+            self.health.count("refused")
+            log.warning("%s: the device refused it: %s", route.topic, error)
+        except ProtoduinoError as error:
+            self.health.count("refused")
+            log.warning("%s: not carried out: %s", route.topic, error)
+        else:
+            self.health.count("forwarded")
+
+    def _bad(self, topic: str, reason: str, error: BaseException) -> None:
+        first = not self.health.bad[f"{topic}: {reason}"]
+        self.health.bad_message(topic, reason)
+        (log.warning if first else log.debug)("%s: dropped (%s): %s", topic, reason, error)
+
+    def _check_drive(self) -> None:
+        if self.drive is None:
+            return
+        try:
+            if self.drive.check():
+                self.health.count("stale_stops")
+                log.info("cmd_vel: no Twist for %g s: motors stopped", self.drive.config.timeout)
+        except ProtoduinoError as error:
+            log.warning("cmd_vel: stopping the motors failed: %s", error)
+
+    # --- handlers ------------------------------------------------------------------
+
+    def _servo_handler(self, config: ServoConfig) -> Prepare:
+        servo = self._servos[config.pin]
+
+        def prepare(message: Float64) -> Action:
+            degrees = servo_degrees(message.data)
+            return lambda: servo.write(degrees)
+
+        return prepare
+
+    def _on_joints(self, message: JointState) -> Action:
+        pose = joint_pose(message, self.config.joints)
+        # Keys typed loosely: Board.pose's mapping type grows with each output kind.
+        targets: dict[Any, int] = {self._servos[pin]: degrees for pin, degrees in pose.items()}
+
+        def move() -> None:
+            assert self.board is not None
+            self.board.pose(targets)
+
+        return move
+
+    @staticmethod
+    def _digital_handler(out: DigitalOutput) -> Prepare:
+        def prepare(message: Bool) -> Action:
+            level = bool(message.data)
+            return lambda: out.write(level)
+
+        return prepare
+
+    def _on_stop(self, message: Empty | Bool) -> Action | None:
+        if isinstance(message, Bool) and not message.data:
+            return None  # Bool false: not a stop
+        return self._stop
+
+    def _stop(self) -> None:
+        assert self.board is not None
+        self.board.stop()
+        self.health.count("stops")
+        if self.drive is not None:
+            self.drive.forget()
+        log.warning("STOP: every output driven safe")
+
+    def _on_twist(self, message: Twist) -> Action:
+        assert self.drive is not None
+        drive = self.drive
+        left, right = twist_to_wheels(message.linear.x, message.angular.z, drive.config)
+        return lambda: drive.apply(left, right)
+
+    # --- events and diagnostics ----------------------------------------------------
+
+    def _on_event(self, event: Event) -> None:
+        if event.kind is EventKind.FAILSAFE and event.details.get("active"):
+            self._device_safe.set()
+        if self.health.event(event):
+            self.publish_diagnostics()
+
+    def publish_diagnostics(self) -> None:
+        """Publish the /diagnostics report now (any thread)."""
+        board = self.board
+        writer = self._writers.get(self.config.diagnostics_topic)
+        if board is None or writer is None:
+            return
+        with self._diag_lock:
+            try:
+                writer.write(self.health.report(board.stats))
+            except Exception:  # DDS refused it; the next period tries again
+                log.exception("publishing /diagnostics failed")
+
+
+def _ros_type(kind: type[Any]) -> str:
+    """``pkg::msg::dds_::Type_`` -> ``pkg/msg/Type``."""
+    pkg, sub, _, name = kind.__idl_typename__.replace(".", "::").split("::")
+    return f"{pkg}/{sub}/{name.rstrip('_')}"

@@ -1,0 +1,647 @@
+"""The ROS 2 bridge's pure parts: robot.yaml, the drive's kinematics and watchdog, the
+messages (checked byte for byte against rosbags' independent CDR codec), inputs to
+messages, /diagnostics, and the refusals of what the Board cannot do yet."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing")
+pytest.importorskip("rosbags", reason="rosbags is not installed")
+
+import numpy as np
+from protoduino.events import Event, EventKind, Stats
+from protoduino.ros2 import msgs
+from protoduino.ros2.bridge import PWM_MISSING, check_board_type
+from protoduino.ros2.config import (
+    BridgeConfig,
+    ConfigError,
+    DriveConfig,
+    MotorConfig,
+    ServoConfig,
+    load_config,
+    parse_config,
+)
+from protoduino.ros2.dds import dds_topic, ros_topic
+from protoduino.ros2.diagnostics import ERROR, OK, WARN, Health
+from protoduino.ros2.drive import (
+    BadCommandError,
+    DiffDrive,
+    Motor,
+    WheelCommand,
+    twist_to_wheels,
+    wheel_command,
+    wheel_speeds,
+)
+from protoduino.ros2.inputs import (
+    analog_message,
+    bool_message,
+    counters_message,
+    int32,
+    wire,
+)
+from protoduino.ros2.servos import joint_pose, servo_degrees
+from rosbags.typesys import Stores, get_typestore
+
+TYPES = get_typestore(Stores.ROS2_HUMBLE)
+
+FULL: dict[str, Any] = {
+    "namespace": "robot1",
+    "domain_id": 7,
+    "failsafe_timeout": 0.5,
+    "servos": [
+        {"pin": 9, "topic": "servo/pan", "joint": "pan", "safe": 80},
+        {"pin": 10, "joint": "tilt", "zero": 45, "min_us": 600, "max_us": 2300},
+    ],
+    "digital_outputs": [{"pin": 13, "topic": "led", "safe": True}],
+    "stop": {"topic": "estop", "type": "Bool"},
+    "drive": {
+        "wheel_base": 0.2,
+        "max_speed": 0.5,
+        "left": {"pwm": 3, "direction": 4},
+        "right": {"pwm": 11, "direction": 12, "invert": True},
+    },
+    "digital_inputs": [{"pin": 2, "topic": "bumper", "pull_up": True, "debounce_ms": 5}],
+    "analog_inputs": [{"pin": "A0", "topic": "battery", "scale": 0.01, "offset": 0.5}],
+    "counters": [{"pins": [5, 6]}],
+}
+
+
+# --- robot.yaml ------------------------------------------------------------------------
+
+
+def test_a_full_configuration() -> None:
+    config = parse_config(FULL)
+    assert config.namespace == "robot1" and config.resolved_domain() == 7
+    assert config.servos[0] == ServoConfig(9, "servo/pan", "pan", 80)
+    assert config.joints == {"pan": config.servos[0], "tilt": config.servos[1]}
+    assert config.servos[1].zero == 45.0 and config.servos[1].min_us == 600
+    assert config.stop.type == "Bool" and config.stop.topic == "estop"
+    assert config.drive == DriveConfig(
+        MotorConfig(3, 4), MotorConfig(11, 12, invert=True), 0.2, 0.5
+    )
+    assert config.drive.timeout == 0.5 and config.drive.topic == "cmd_vel"
+    assert config.analog_inputs[0].pin == 14  # A0
+    assert config.counters[0].pins == (5, 6) and config.counters[0].topic == "sensors/encoders"
+
+
+def test_the_yaml_file(tmp_path: Path) -> None:
+    path = tmp_path / "robot.yaml"
+    path.write_text("namespace: /r2/\nservos:\n  - {pin: 9, topic: pan}\n")
+    config = load_config(path)
+    assert config.namespace == "r2" and config.servos == (ServoConfig(9, "pan"),)
+    path.write_text("servos: [pin: 9\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_config(path)
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(tmp_path / "missing.yaml")
+
+
+def test_an_empty_configuration_bridges_stop_and_diagnostics_only() -> None:
+    config = parse_config({})
+    assert config == BridgeConfig()
+    assert config.stop.topic == "stop" and config.diagnostics_topic == "/diagnostics"
+
+
+def test_domain_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("ROS_DOMAIN_ID", "42")
+    assert parse_config({}).resolved_domain() == 42
+    assert parse_config({"domain_id": 3}).resolved_domain() == 3
+    monkeypatch.setenv("ROS_DOMAIN_ID", "300")
+    with pytest.raises(ConfigError, match=r"0\.\.232"):
+        parse_config({}).resolved_domain()
+
+
+def _with(**changes: Any) -> dict[str, Any]:
+    return {**FULL, **changes}
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"servo": []}, "unknown key"),  # a typo never silently bridges nothing
+        (_with(servos=[{"pin": 9, "topic": "a", "speed": 3}]), r"servos\[0\]: unknown key"),
+        (_with(servos=[{"pin": 9}]), "a topic .* or a joint"),
+        (_with(servos=[{"pin": 9, "topic": "a", "safe": 181}]), "safe must be 0..180"),
+        (_with(servos=[{"pin": 9, "topic": "a", "min_us": 2000, "max_us": 1000}]), "min_us"),
+        (_with(servos=[{"pin": 13, "topic": "a"}]), "pin 13 is both"),
+        (_with(servos=[{"pin": 9, "topic": "led"}]), "topic 'led' is both"),
+        (_with(servos=[{"pin": 9, "topic": "9lives"}]), "not a ROS 2 topic name"),
+        (_with(servos=[{"pin": 9, "topic": "a//b"}]), "not a ROS 2 topic name"),
+        (_with(servos=[{"pin": True, "topic": "a"}]), "pin number"),
+        (_with(servos=[{"pin": 9, "joint": "j"}, {"pin": 8, "joint": "j"}]), "joint name"),
+        (_with(servos=[{"pin": p, "joint": f"j{p}"} for p in range(20, 29)]), "at most 8"),
+        (_with(stop={"type": "String"}), "one of Empty, Bool"),
+        (_with(drive={**FULL["drive"], "wheel_base": None}), "wheel_base is required"),
+        (_with(namespace="a b"), "not a ROS 2 topic name"),
+        (_with(drive={**FULL["drive"], "max_speed": 0}), "max_speed must be above 0"),
+        (_with(drive={**FULL["drive"], "timeout": float("nan")}), "finite"),
+        (_with(drive={**FULL["drive"], "right": None}), "right is required"),
+        (_with(failsafe_timeout=0.01), "failsafe_timeout must be >= 0.1"),
+        (_with(domain_id=233), "0..232"),
+        (_with(counters=[{"pins": []}]), "non-empty list"),
+        (_with(analog_inputs=[{"pin": 14, "topic": "b", "threshold": 2000}]), "0..1023"),
+        ([1, 2], "must be a mapping"),
+    ],
+)
+def test_bad_configurations_are_refused_naming_the_key(data: Any, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        parse_config(data)
+
+
+def test_topic_names() -> None:
+    assert dds_topic("robot1", "servo/pan") == "rt/robot1/servo/pan"
+    assert dds_topic("", "cmd_vel") == "rt/cmd_vel"
+    assert dds_topic("robot1", "/diagnostics") == "rt/diagnostics"
+    assert ros_topic("robot1", "led") == "/robot1/led"
+
+
+# --- the drive -------------------------------------------------------------------------
+
+DRIVE = DriveConfig(MotorConfig(3, 4), MotorConfig(11, 12), wheel_base=0.2, max_speed=0.5)
+
+
+def test_kinematics() -> None:
+    assert wheel_speeds(0.3, 0.0, 0.2) == (0.3, 0.3)
+    assert wheel_speeds(0.0, 1.0, 0.2) == pytest.approx((-0.1, 0.1))  # left back, right ahead
+    assert wheel_speeds(0.2, -1.0, 0.2) == pytest.approx((0.3, 0.1))  # a right turn
+    assert twist_to_wheels(0.5, 0.0, DRIVE) == (WheelCommand(255, True), WheelCommand(255, True))
+    assert twist_to_wheels(-0.25, 0.0, DRIVE) == (
+        WheelCommand(128, False),  # 127.5 rounds to even
+        WheelCommand(128, False),
+    )
+    assert twist_to_wheels(0.0, 2.5, DRIVE) == (WheelCommand(128, False), WheelCommand(128, True))
+    assert twist_to_wheels(0.0, 0.0, DRIVE) == (WheelCommand(0, True), WheelCommand(0, True))
+    assert wheel_command(0.001, 0.5) == WheelCommand(1, True)
+
+
+@pytest.mark.parametrize(
+    ("linear", "angular"),
+    [(0.51, 0.0), (-0.6, 0.0), (0.4, 2.0), (0.0, 5.1), (math.nan, 0.0), (0.0, math.inf)],
+)
+def test_twists_the_drive_cannot_follow_are_refused_not_clamped(
+    linear: float, angular: float
+) -> None:
+    with pytest.raises(BadCommandError):
+        twist_to_wheels(linear, angular, DRIVE)
+
+
+def test_direction_levels_and_invert() -> None:
+    assert WheelCommand(10, True).level(MotorConfig(3, 4)) is True
+    assert WheelCommand(10, True).level(MotorConfig(3, 4, invert=True)) is False
+    assert WheelCommand(10, False).level(MotorConfig(3, 4, invert=True)) is True
+
+
+class Pin:
+    """A fake output recording what was written, in one log shared by both pins."""
+
+    def __init__(self, name: str, log: list[tuple[str, object]]) -> None:
+        self.name, self.log = name, log
+
+    def write(self, value: Any) -> None:
+        self.log.append((self.name, value))
+
+
+def _motors(log: list[tuple[str, object]]) -> tuple[Motor, Motor]:
+    return (
+        Motor(DRIVE.left, Pin("lpwm", log), Pin("ldir", log)),
+        Motor(DRIVE.right, Pin("rpwm", log), Pin("rdir", log)),
+    )
+
+
+def test_a_motor_never_runs_its_old_duty_the_other_way() -> None:
+    log: list[tuple[str, object]] = []
+    left, _ = _motors(log)
+    left.apply(WheelCommand(200, True))
+    left.apply(WheelCommand(100, True))
+    left.apply(WheelCommand(100, True))  # the same: nothing written
+    left.apply(WheelCommand(50, False))
+    assert log == [
+        ("ldir", True),
+        ("lpwm", 200),
+        ("lpwm", 100),
+        ("lpwm", 0),  # stop before the direction flips
+        ("ldir", False),
+        ("lpwm", 50),
+    ]
+
+
+def test_the_cmd_vel_watchdog_stops_the_motors_once() -> None:
+    log: list[tuple[str, object]] = []
+    now = [100.0]
+    drive = DiffDrive(DRIVE, *_motors(log), clock=lambda: now[0])
+    assert drive.deadline() is None and not drive.check()
+    drive.command(0.25, 0.0)
+    assert drive.deadline() == 100.5
+    log.clear()
+    now[0] = 100.49
+    assert not drive.check() and log == []
+    now[0] = 100.5
+    assert drive.check()
+    assert log == [("lpwm", 0), ("rpwm", 0)] and drive.stale_stops == 1
+    now[0] = 200.0
+    assert not drive.check()  # once per silence
+    with pytest.raises(BadCommandError):
+        drive.command(1.0, 0.0)
+    assert drive.deadline() is None  # a refused Twist does not feed the watchdog
+
+
+def test_after_a_device_stop_the_next_twist_sets_the_direction_again() -> None:
+    log: list[tuple[str, object]] = []
+    drive = DiffDrive(DRIVE, *_motors(log), clock=lambda: 0.0)
+    drive.command(0.25, 0.0)
+    drive.forget()  # the device drove everything safe (direction pins low)
+    log.clear()
+    drive.command(0.25, 0.0)
+    assert log == [("ldir", True), ("lpwm", 128), ("rdir", True), ("rpwm", 128)]
+
+
+def test_a_drive_needs_pwm_outputs_on_the_board() -> None:
+    config = parse_config(FULL)
+    with pytest.raises(ConfigError, match=r"Board\.pwm_output .*issue 21"):
+        check_board_type(object(), dataclasses.replace(config, digital_inputs=()))
+    assert "pwm_output" in PWM_MISSING
+
+    class WithPwm:
+        def pwm_output(self) -> None: ...
+
+    with pytest.raises(ConfigError, match=r"digital_inputs, which needs Board\.digital_input"):
+        check_board_type(WithPwm(), config)
+
+
+# --- servos and joints ---------------------------------------------------------------
+
+
+def test_servo_degrees() -> None:
+    assert servo_degrees(45.0) == 45
+    assert servo_degrees(44.5) == 44  # half to even
+    assert servo_degrees(180.0) == 180
+    for bad in (-0.1, 180.01, math.nan, math.inf):
+        with pytest.raises(BadCommandError):
+            servo_degrees(bad)
+
+
+def _joint_state(names: list[str], positions: list[float]) -> Any:
+    return msgs.JointState(name=names, position=positions)
+
+
+def test_a_joint_state_is_one_checked_pose() -> None:
+    joints = {"pan": ServoConfig(9, joint="pan"), "tilt": ServoConfig(10, joint="tilt", zero=0)}
+    assert joint_pose(_joint_state(["pan", "tilt"], [0.0, math.pi / 2]), joints) == {9: 90, 10: 90}
+    assert joint_pose(_joint_state(["tilt"], [math.pi]), joints) == {10: 180}
+    for names, positions, why in [
+        (["pan", "elbow"], [0.0, 0.0], "unknown joint"),
+        (["pan"], [0.0, 1.0], "1 names but 2 positions"),
+        (["pan", "pan"], [0.0, 0.0], "named twice"),
+        (["tilt"], [-0.1], "outside 0..180"),
+        (["pan"], [math.nan], "finite"),
+        ([], [], "no joints"),
+    ]:
+        with pytest.raises(BadCommandError, match=why):
+            joint_pose(_joint_state(names, positions), joints)
+
+
+# --- the messages against rosbags -------------------------------------------------------
+
+
+def _header(sec: int = 5, nanosec: int = 6, frame: str = "base") -> Any:
+    t = TYPES.types
+    return t["std_msgs/msg/Header"](
+        stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=frame
+    )
+
+
+def _rosbags(msgtype: str, /, **fields: Any) -> bytes:
+    return bytes(TYPES.serialize_cdr(TYPES.types[msgtype](**fields), msgtype))
+
+
+def _cases() -> list[tuple[Any, str, dict[str, Any]]]:
+    t = TYPES.types
+    f64 = np.float64
+    return [
+        (msgs.Bool(data=True), "std_msgs/msg/Bool", {"data": True}),
+        (msgs.Empty(), "std_msgs/msg/Empty", {"structure_needs_at_least_one_member": 0}),
+        (msgs.Float32(data=3.5), "std_msgs/msg/Float32", {"data": 3.5}),
+        (msgs.Float64(data=-1.25), "std_msgs/msg/Float64", {"data": -1.25}),
+        (
+            counters_message([1, -2, 2**32 - 1], parse_config(FULL).counters[0]),
+            "std_msgs/msg/Int32MultiArray",
+            {
+                "layout": t["std_msgs/msg/MultiArrayLayout"](
+                    dim=[t["std_msgs/msg/MultiArrayDimension"](label="pins", size=3, stride=3)],
+                    data_offset=0,
+                ),
+                "data": np.array([1, -2, -1], dtype=np.int32),
+            },
+        ),
+        (
+            msgs.Twist(linear=msgs.Vector3(0.1, 0.2, 0.3), angular=msgs.Vector3(z=-0.5)),
+            "geometry_msgs/msg/Twist",
+            {
+                "linear": t["geometry_msgs/msg/Vector3"](x=0.1, y=0.2, z=0.3),
+                "angular": t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=-0.5),
+            },
+        ),
+        (
+            msgs.JointState(
+                header=msgs.Header(msgs.Time(5, 6), "base"), name=["a", "bc"], position=[1.0, 2.0]
+            ),
+            "sensor_msgs/msg/JointState",
+            {
+                "header": _header(),
+                "name": ["a", "bc"],
+                "position": np.array([1.0, 2.0], dtype=f64),
+                "velocity": np.array([], dtype=f64),
+                "effort": np.array([], dtype=f64),
+            },
+        ),
+        (
+            msgs.DiagnosticArray(
+                header=msgs.Header(msgs.Time(5, 6), "base"),
+                status=[
+                    msgs.DiagnosticStatus(
+                        level=2,
+                        name="n",
+                        message="msg",
+                        hardware_id="hw",
+                        values=[msgs.KeyValue("k", "v"), msgs.KeyValue("key2", "")],
+                    )
+                ],
+            ),
+            "diagnostic_msgs/msg/DiagnosticArray",
+            {
+                "header": _header(),
+                "status": [
+                    t["diagnostic_msgs/msg/DiagnosticStatus"](
+                        level=2,
+                        name="n",
+                        message="msg",
+                        hardware_id="hw",
+                        values=[
+                            t["diagnostic_msgs/msg/KeyValue"](key="k", value="v"),
+                            t["diagnostic_msgs/msg/KeyValue"](key="key2", value=""),
+                        ],
+                    )
+                ],
+            },
+        ),
+    ]
+
+
+@pytest.mark.parametrize(("ours", "name", "fields"), _cases(), ids=lambda c: str(c)[:30])
+def test_the_bridges_cdr_is_rosbags_cdr(ours: Any, name: str, fields: dict[str, Any]) -> None:
+    """Byte for byte what a ROS 2 node (rosbags' Humble definitions) sends, and back."""
+    theirs = _rosbags(name, **fields)
+    assert ours.serialize() == theirs
+    assert type(ours).deserialize(theirs) == ours
+    assert type(ours).__idl_typename__ == "{}::{}::dds_::{}_".format(*name.split("/"))
+
+
+# --- inputs to messages ---------------------------------------------------------------
+
+
+def test_input_messages() -> None:
+    assert bool_message(1) == msgs.Bool(True)
+    battery = parse_config(FULL).analog_inputs[0]
+    assert analog_message(500, battery).data == pytest.approx(5.5)
+    assert [int32(c) for c in (0, 2**31 - 1, 2**31, 2**32 - 1, 2**32 + 5)] == [
+        0,
+        2**31 - 1,
+        -(2**31),
+        -1,
+        5,
+    ]
+
+
+class FakeInput:
+    def __init__(self, value: Any) -> None:
+        self.value = value
+        self.callbacks: list[Callable[[Any], None]] = []
+
+    def read(self) -> Any:
+        return self.value
+
+    def on_change(self, callback: Callable[[Any], None]) -> Callable[[], None]:
+        self.callbacks.append(callback)
+        return lambda: self.callbacks.remove(callback)
+
+    def change(self, value: Any) -> None:
+        self.value = value
+        for callback in list(self.callbacks):
+            callback(type("Reading", (), {"value": value})())
+
+
+class FakeBoard:
+    """The input half of issue 21's Board API, as far as the bridge uses it."""
+
+    def __init__(self) -> None:
+        self.made: dict[int, FakeInput] = {}
+        self.calls: list[tuple[str, int, dict[str, Any]]] = []
+
+    def _make(self, kind: str, pin: int, first: Any, **options: Any) -> FakeInput:
+        self.calls.append((kind, pin, options))
+        self.made[pin] = FakeInput(first)
+        return self.made[pin]
+
+    def digital_input(self, pin: int, **options: Any) -> FakeInput:
+        return self._make("digital", pin, True, **options)
+
+    def analog_input(self, pin: int, **options: Any) -> FakeInput:
+        return self._make("analog", pin, 100, **options)
+
+    def counter(self, pin: int, **options: Any) -> FakeInput:
+        return self._make("counter", pin, 0, **options)
+
+
+def test_inputs_are_wired_to_their_topics() -> None:
+    config = parse_config(FULL)
+    board = FakeBoard()
+    sent: dict[str, list[Any]] = {"bumper": [], "battery": [], "sensors/encoders": []}
+    undo = wire(board, config, {k: v.append for k, v in sent.items()})
+    assert board.calls == [
+        ("digital", 2, {"pull_up": True, "debounce_ms": 5}),
+        ("analog", 14, {"rate_hz": 10.0, "threshold": 0}),
+        ("counter", 5, {}),
+        ("counter", 6, {}),
+    ]
+    board.made[2].change(False)
+    board.made[14].change(300)
+    board.made[6].change(7)
+    board.made[5].change(2**32 - 3)
+    assert sent["bumper"] == [msgs.Bool(True), msgs.Bool(False)]  # the first level, then each
+    assert [round(m.data, 3) for m in sent["battery"]] == [1.5, 3.5]
+    assert [list(m.data) for m in sent["sensors/encoders"]] == [[0, 0], [0, 7], [-3, 7]]
+    for u in undo:
+        u()
+    board.made[2].change(True)
+    assert len(sent["bumper"]) == 2
+
+
+def test_inputs_need_the_board_api() -> None:
+    config = parse_config({"digital_inputs": [{"pin": 2, "topic": "b"}]})
+    with pytest.raises(ConfigError, match=r"Board\.digital_input .*issue 21"):
+        wire(object(), config, {})
+
+
+# --- /diagnostics ---------------------------------------------------------------------
+
+
+def _stats(**changes: Any) -> Stats:
+    fields: dict[str, Any] = {}
+    for f in dataclasses.fields(Stats):
+        fields[f.name] = {} if f.name in ("dropped", "events_dropped") else 0
+    fields.update(state="active", connected=True, rtt=None, last_ping=None)
+    fields.update(changes)
+    return Stats(**fields)
+
+
+def _by_name(report: msgs.DiagnosticArray) -> dict[str, tuple[int, dict[str, str]]]:
+    return {s.name: (s.level, {kv.key: kv.value for kv in s.values}) for s in report.status}
+
+
+def test_diagnostics() -> None:
+    health = Health("protoduino r1", "/dev/ttyACM0")
+    report = _by_name(health.report(_stats(acks=12, dropped={"crc": 2}, rtt=0.004), now=10.25))
+    level, link = report["protoduino r1: link"]
+    assert level == OK and link["acks"] == "12" and link["dropped.crc"] == "2"
+    assert link["rtt"] == "0.004" and "last_ping" not in link
+    assert report["protoduino r1: failsafe"][0] == OK
+    assert report["protoduino r1: bridge"] == (
+        OK,
+        {
+            "bad_messages": "0",
+            "forwarded": "0",
+            "superseded": "0",
+            "refused_by_device": "0",
+            "stops": "0",
+            "cmd_vel_stale_stops": "0",
+        },
+    )
+
+    health.bad_message("/r1/pan", "invalid")
+    urgent = health.event(
+        Event(EventKind.FAILSAFE, "failsafe", {"active": True, "cause": "ping_timeout"})
+    )
+    assert urgent and not health.event(Event(EventKind.LOG, "hello"))
+    report = _by_name(health.report(_stats(state="disconnected")))
+    assert report["protoduino r1: link"][0] == ERROR
+    level, failsafe = report["protoduino r1: failsafe"]
+    assert level == ERROR and failsafe["cause"] == "ping_timeout" and failsafe["failsafes"] == "1"
+    level, bridge = report["protoduino r1: bridge"]
+    assert level == WARN and bridge["bad./r1/pan: invalid"] == "1"
+    # WARN only for refusals since the previous report; the count stays.
+    assert _by_name(health.report(_stats()))["protoduino r1: bridge"][0] == OK
+    health.event(Event(EventKind.FAILSAFE, "over", {"active": False, "cause": "none"}))
+    assert _by_name(health.report(_stats()))["protoduino r1: failsafe"][0] == OK
+
+
+def test_the_report_is_stamped_with_the_wall_clock() -> None:
+    report = Health("x", "y").report(_stats(), now=1700000000.25)
+    assert (report.header.stamp.sec, report.header.stamp.nanosec) == (1700000000, 250000000)
+
+
+# --- the loop's handling of one topic -------------------------------------------------
+
+
+class FakeReader:
+    """Hands out queued samples one at a time; an exception in the queue is raised by take."""
+
+    def __init__(self, queue: list[Any]) -> None:
+        self.queue = queue
+
+    def take(self, N: int = 1) -> list[Any]:  # noqa: N803  (cyclonedds' name)
+        if not self.queue:
+            return []
+        item = self.queue.pop(0)
+        if isinstance(item, Exception):
+            raise item
+        return [item]
+
+
+def test_the_newest_valid_command_of_a_topic_wins_and_bad_ones_are_counted() -> None:
+    from protoduino.ros2.bridge import Bridge, _Route
+
+    bridge = Bridge("unused", parse_config({}))  # nothing opens before start()
+    done: list[float] = []
+
+    def prepare(message: msgs.Float64) -> Callable[[], None]:
+        value = servo_degrees(message.data)
+        return lambda: done.append(value)
+
+    samples: list[Any] = [msgs.Float64(d) for d in (10.0, 20.0, 500.0, 30.0)]
+    samples.insert(1, UnicodeDecodeError("utf-8", b"\xff", 0, 1, "invalid start byte"))
+    samples.append(msgs.Float64(math.nan))
+    bridge._take(_Route("/pan", FakeReader(samples), prepare))  # type: ignore[arg-type]
+    assert done == [30]  # one command sent: the newest valid one
+    assert bridge.health.forwarded == 1 and bridge.health.superseded == 2
+    assert dict(bridge.health.bad) == {"/pan: undecodable": 1, "/pan: invalid": 2}
+    bridge._take(_Route("/pan", FakeReader([]), prepare))  # type: ignore[arg-type]
+    assert done == [30]  # nothing waiting: nothing sent
+
+
+# --- the command line -----------------------------------------------------------------
+
+
+def test_the_command_refuses_a_bad_config_before_any_port(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from protoduino.cli.main import main
+
+    path = tmp_path / "robot.yaml"
+    path.write_text("servos: [{pin: 9}]\n")
+    with pytest.raises(SystemExit) as exited:
+        main(["ros2", "/dev/no-such-port", "--config", str(path)])
+    assert exited.value.code == 2
+    err = capsys.readouterr().err
+    assert "servos[0]: give it a topic" in err and err.count("\n") == 1
+
+
+def test_without_cyclonedds_the_command_says_what_to_install(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import sys
+
+    from protoduino.cli.main import main
+
+    path = tmp_path / "robot.yaml"
+    path.write_text("servos: [{pin: 9, topic: pan}]\n")
+    for name in [m for m in sys.modules if m.startswith("cyclonedds")]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.delitem(sys.modules, "protoduino.ros2.bridge", raising=False)
+    monkeypatch.setitem(sys.modules, "cyclonedds", None)  # as if not installed
+    assert main(["ros2", "/dev/no-such-port", "--config", str(path)]) == 1
+    assert "needs cyclonedds: pip install 'protoduino[ros2]'" in capsys.readouterr().err
+
+
+def test_a_clean_close_stops_the_outputs_before_closing_the_board() -> None:
+    from protoduino.errors import AckTimeoutError
+    from protoduino.ros2.bridge import Bridge
+
+    calls: list[str] = []
+
+    class Board:
+        closed = False
+
+        def __init__(self, stop_fails: bool = False) -> None:
+            self.stop_fails = stop_fails
+
+        def stop(self) -> None:
+            calls.append("stop")
+            if self.stop_fails:
+                raise AckTimeoutError("the link is down")
+
+        def close(self) -> None:
+            calls.append("close")
+
+    for fails in (False, True):  # a stop that fails still closes (the failsafe takes over)
+        calls.clear()
+        bridge = Bridge("unused", parse_config({}))
+        bridge.board = Board(fails)  # type: ignore[assignment]
+        bridge.close()
+        assert calls == ["stop", "close"]
