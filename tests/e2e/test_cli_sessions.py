@@ -44,7 +44,7 @@ def test_a_new_sessions_outputs_survive_read_only_and_refused_commands(
     # ... and what it configured is not released by the commands that follow it.
     assert main(["info", port]) == 0
     assert main(["ping", port, "-c", "1", "-q"]) == 0
-    assert main(["servo", port, "1", "45"]) == 1  # a reserved pin: refused on the host
+    assert main(["servo", port, "1", "45"]) == 2  # a reserved pin: refused (exit status 2)
     assert "STATUS_RESERVED_PIN" in capsys.readouterr().err
     assert main(["outputs", port, "--json"]) == 0
     shown = json.loads(capsys.readouterr().out)

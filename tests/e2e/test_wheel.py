@@ -158,6 +158,7 @@ class SimProcess(BoardProcess):
             [installed.program("protoduino"), "sim", "--backend", backend, "--trace", str(trace)],
             startup=30.0,
             what="protoduino sim",
+            owned=False,  # a board started on purpose has no owner: the fixture stops it
             cwd=installed.cwd,
             env=installed.env(),
             stderr=subprocess.PIPE,

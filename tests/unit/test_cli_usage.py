@@ -57,6 +57,8 @@ BAD: list[tuple[list[str], str]] = [
     (["ping", P, "--capture-max", "5"], "--capture-max goes with --capture FILE"),
     (["ping", P, "--capture", "c.jsonl", "--capture-max", "0.001"], "0.001 is out of range"),
     (["demo", "--backend", "foo"], "invalid choice: 'foo'"),
+    (["ros2", P], "the following arguments are required: --config"),
+    (["ros2", P, "--config", "robot.yaml", "--domain-id", "-1"], "-1 is out of range"),
     (["soak", "--backend", "foo"], "invalid choice: 'foo'"),
     (["soak", "--commands", "-1"], "-1 is out of range"),
     (["soak", "--kinds", "ber,nonsense"], "unknown fault kind(s) ['nonsense']"),
