@@ -10,8 +10,8 @@
 
 typedef char pd_assert_tx_fits_len[(PD_TX_MAX_PAYLOAD <= PD_MAX_PAYLOAD) ? 1 : -1];
 /* The notices PD_TX_RESERVE counts on fit PD_TX_NOTICE_MAX. */
-typedef char pd_assert_notice_fits[(protoduino_Failsafe_size + 2u <= 9u &&
-                                    protoduino_DecodeError_size + 2u <= 9u) ? 1 : -1];
+typedef char pd_assert_notice_fits[(protoduino_Failsafe_size + 2u <= 12u &&
+                                    protoduino_DecodeError_size + 2u <= 12u) ? 1 : -1];
 
 /* The receiver's state at the start of a frame. Not inlined: LTO copied it
  * to its three callers (init, delimiter, overflow): 24 B of the Uno's flash. */

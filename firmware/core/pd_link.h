@@ -54,9 +54,9 @@ struct pd_core;
 /* Encoded frame plus an optional leading 0x00 and the delimiter. */
 #define PD_TX_FRAME_BYTES(payload) (PD_COBS_MAX_ENCODED(PD_MIN_PACKET + (payload)) + 2u)
 #define PD_TX_FRAME_MAX PD_TX_FRAME_BYTES(PD_TX_MAX_PAYLOAD)
-/* A CONTROL frame (payloads are <= 6 B: RESET_ACK) and a notice (Failsafe, DecodeError: <= 9 B). */
+/* A CONTROL frame (payloads are <= 6 B: RESET_ACK) and a notice (Failsafe, DecodeError: <= 12 B). */
 #define PD_TX_CONTROL_MAX PD_TX_FRAME_BYTES(6u)
-#define PD_TX_NOTICE_MAX PD_TX_FRAME_BYTES(9u)
+#define PD_TX_NOTICE_MAX PD_TX_FRAME_BYTES(12u)
 /*
  * The most one received frame can make the device send: the largest Ack and
  * the notice that may follow it (or a DecodeError and its Ack, which are

@@ -87,13 +87,14 @@ static void test_encode_ack_info(void)
     /* Longest strings, every field at its largest. */
     strcpy(info->firmware_version, "123456789012345");
     strcpy(info->board, "abcdefghijklmno");
-    info->protocol_version = 0xFFFFFFFFu;
+    /* (at their widths on the device: protoduino.options) */
+    info->protocol_version = UINT8_MAX;
     info->schema_id = 0xFFFFFFFFu;
-    info->num_pins = 0xFFFFFFFFu;
-    info->max_servos = 0xFFFFFFFFu;
+    info->num_pins = UINT8_MAX;
+    info->max_servos = UINT8_MAX;
     info->reserved_pins_count = 4;
     for (int i = 0; i < 4; i++) {
-        info->reserved_pins[i] = 0xFFFFFFFFu - (uint32_t)i;
+        info->reserved_pins[i] = (uint8_t)(UINT8_MAX - i);
     }
     out.data.ack.message_id = 0xFFFFFFFFu;
     out.data.ack.status = protoduino_Status_STATUS_UNKNOWN_COMMAND;

@@ -77,8 +77,9 @@ static void test_reset_of_another_version_leaves_the_session(void)
     t_active(&d);
     protoduino_ArduinoIn in = m_digital_init(1, 13, true);
     CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
-    const uint8_t v3[PD_RESET_SIZE] = {PD_CONTROL_RESET, 3, 0, 0, 0, 9};
-    t_send_packet(&d, PD_PACKET_CONTROL, 0, v3, sizeof(v3));
+    /* A later version's RESET (the schema commit made this one 3: the test said 3). */
+    const uint8_t later[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION + 1, 0, 0, 0, 9};
+    t_send_packet(&d, PD_PACKET_CONTROL, 0, later, sizeof(later));
     CHECK(!d.core.link.active);
     CHECK_EQ(d.hal.digital[13], 1); /* not released: no session was opened */
     t_send_reset(&d, PD_PROTOCOL_VERSION);
