@@ -75,11 +75,11 @@ from .constants import ACK_TIMEOUT, DEDUPE_WINDOW, MAX_PAYLOAD, MAX_RETRIES, PIN
 from .errors import (
     AckTimeoutError,
     BoardClosedError,
-    CommandRejectedError,
     DeviceRebootedError,
     PayloadTooLargeError,
     ProtoduinoError,
     RebootLoopError,
+    rejection,
 )
 from .events import Event, EventKind
 from .framing import frame_size
@@ -607,7 +607,7 @@ class Rpc:
                 call.refusal = ack  # it may say more (a Pose's refused_item)
                 self._finish(
                     call,
-                    error=CommandRejectedError(
+                    error=rejection(
                         ack.status,
                         f"{call.kind} rejected by the device: {status_name(ack.status)}",
                     ),
