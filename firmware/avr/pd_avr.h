@@ -9,9 +9,12 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-/* UART receive ring (a power of two): ~11 ms of line time at 115200 baud,
- * more than the longest frame the core sends takes to transmit. */
-#define PD_AVR_RX_SIZE 128u
+/* UART receive ring (a power of two): 5.5 ms of line time at 115200 baud, four
+ * servo commands in flight (DeviceInfo.rx_buffer: the host keeps its frames in
+ * flight within it, and a single frame of any length still streams through,
+ * the core taking its bytes as they come). 64 rather than 128: the 64 B went
+ * to the pin modes within the RAM budget (firmware/README.md). */
+#define PD_AVR_RX_SIZE 64u
 /* UART transmit ring: the replies to one command (PD_TX_RESERVE) and a short report
  * (PD_TX_REPORT_ROOM); pd_avr_uart.c checks both fit at compile time. */
 #define PD_AVR_TX_SIZE 156u

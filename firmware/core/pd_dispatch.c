@@ -44,12 +44,12 @@ void pd_dedupe_add(pd_dedupe_t *dd, uint32_t id, uint8_t status)
 
 bool pd_dispatch_send(pd_core_t *core, const protoduino_ArduinoOut *msg)
 {
-    uint8_t raw[PD_TX_RAW_MAX];
+    uint8_t raw[PD_TX_BUF];
 
     if (!core->link.active) {
         return false; /* DATA only while ACTIVE; skip the encoding work */
     }
-    size_t len = pd_encode_out(msg, raw + PD_HEADER_SIZE, PD_TX_MAX_PAYLOAD);
+    size_t len = pd_encode_out(msg, raw + PD_TX_PAYLOAD_AT, PD_TX_MAX_PAYLOAD);
     if (len == 0) {
         return false; /* cannot happen: PD_TX_MAX_PAYLOAD is the message's max size */
     }
@@ -58,12 +58,12 @@ bool pd_dispatch_send(pd_core_t *core, const protoduino_ArduinoOut *msg)
 
 bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg)
 {
-    uint8_t raw[PD_TX_RAW_MAX];
+    uint8_t raw[PD_TX_BUF];
 
     if (!core->link.active) {
         return false;
     }
-    size_t len = pd_encode_out(msg, raw + PD_HEADER_SIZE, PD_TX_MAX_PAYLOAD);
+    size_t len = pd_encode_out(msg, raw + PD_TX_PAYLOAD_AT, PD_TX_MAX_PAYLOAD);
     /* PD_TX_FRAME_BYTES(len) without its division: at the largest payload its
      * COBS term n / 254 is 0 (checked here), so it is 0 for every len <= that;
      * the division would be a libgcc call on the AVR, in flash and per report. */

@@ -138,11 +138,23 @@ void pd_link_init(pd_link_t *link);
 bool pd_link_rx_byte(struct pd_core *core, uint8_t byte);
 
 /*
- * Send one packet whose payload (`len` bytes) already sits at
- * raw + PD_HEADER_SIZE, in a buffer of PD_TX_RAW_MAX bytes. Returns whether
- * the HAL took the whole frame. DATA is refused while IDLE.
+ * The buffer a frame is built in, in place: the lone 0x00 that may go first,
+ * COBS's first code byte, the packet (its payload at PD_TX_PAYLOAD_AT) and the
+ * delimiter. COBS encodes the packet over itself one byte to the left (each
+ * byte is read before the encoder writes there, as no frame reaches a full
+ * 254-byte block), so no second buffer holds the encoded frame: on the Uno
+ * that buffer was 119 B of the stack under every reply, the deepest point.
  */
-bool pd_link_send(struct pd_core *core, uint8_t type, uint8_t *raw, size_t len);
+#define PD_TX_PACKET_AT 2u
+#define PD_TX_PAYLOAD_AT (PD_TX_PACKET_AT + PD_HEADER_SIZE)
+#define PD_TX_BUF (PD_TX_PACKET_AT + PD_TX_RAW_MAX + 1u)
+
+/*
+ * Send one packet whose payload (`len` bytes) already sits at
+ * buf + PD_TX_PAYLOAD_AT, in a buffer of PD_TX_BUF bytes (which it overwrites).
+ * Returns whether the HAL took the whole frame. DATA is refused while IDLE.
+ */
+bool pd_link_send(struct pd_core *core, uint8_t type, uint8_t *buf, size_t len);
 
 /* CONTROL EVENT with the given code (allowed in any state). */
 bool pd_link_send_event(struct pd_core *core, uint8_t event);
