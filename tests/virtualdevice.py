@@ -20,6 +20,7 @@ import collections
 from typing import Any
 
 from protoduino._generated.schema_id import SCHEMA_ID
+from protoduino.commands import PIN_MODES
 from protoduino.constants import DEDUPE_WINDOW, PROTOCOL_VERSION, ControlCode, EventCode, PacketType
 from protoduino.link import Link
 from protoduino.messages import ArduinoIn, ArduinoOut, Status
@@ -178,6 +179,7 @@ class VirtualDevice:
             info.board = "virtual"
             info.num_pins = 20
             info.max_servos = 8
+            info.features = sum(mode.feature_bit for mode in PIN_MODES)
             return out
         if mid in self._dedupe:  # a retransmission: acknowledged again, not executed again
             out.ack.status = self._dedupe[mid]

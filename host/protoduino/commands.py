@@ -125,6 +125,17 @@ def _pin_mode_commands(modes: tuple[PinMode, ...]) -> tuple[Command, ...]:
 COMMANDS: dict[str, Command] = {c.kind: c for c in _BOARD_COMMANDS + _pin_mode_commands(PIN_MODES)}
 
 
+def feature_hint(feature: str) -> str:
+    """Why a mode is refused on a firmware without ``feature``, and how to get it."""
+    name = feature.upper()
+    return (
+        f"the firmware on this device was built without the {feature} feature "
+        f"(FEATURE_{name}); the default firmware has every feature (protoduino flash PORT), "
+        f"a build with `make -C firmware avr FEATURES=...` needs {feature} in FEATURES, and a "
+        f"sketch must not #define PD_FEATURE_{name} 0 before including the library"
+    )
+
+
 def command(kind: str) -> Command:
     """The declaration of ``kind``; an undeclared one is treated as not idempotent."""
     found = COMMANDS.get(kind)

@@ -41,7 +41,8 @@ class EventKind(StrEnum):
     #: details: replayed (int), failed (list of str), values (bool)
     RESTORED = "restored"
     #: The device entered or left its failsafe state. details: active (bool),
-    #: cause ("ping_timeout", "stop", "none")
+    #: cause ("ping_timeout", "stop", "interlock", "none"), and for an interlock
+    #: pin (int: the input that tripped)
     FAILSAFE = "failsafe"
     #: A text from the firmware. details: level ("debug".."error"), text (str)
     LOG = "log"
@@ -105,6 +106,12 @@ class Stats:
     events_dropped: Mapping[str, int]
     rtt: float | None  # last Ping round trip (seconds)
     last_ping: float | None  # time.monotonic() of the last acknowledged automatic Ping
+    #: InputReports received; reports the device replaced by newer ones before it could
+    #: send them (freshness over completeness); input changes an on_change callback never
+    #: saw because a newer value came while it was busy.
+    input_reports: int = 0
+    inputs_coalesced: int = 0
+    input_changes_skipped: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
