@@ -95,6 +95,8 @@ class FakeDevice:
         self.answer_reset = answer_reset
         #: DeviceInfo.rx_buffer (0: not stated, the window alone limits the host).
         self.rx_buffer = 0
+        #: DeviceInfo's board name ("uno" makes the host check Timer1's pins).
+        self.board_name = "fake"
         #: DeviceInfo's features and pin capabilities (the Uno's by default).
         self.features = ALL_FEATURES
         self.pwm_pins = [3, 5, 6, 9, 10, 11]
@@ -286,7 +288,7 @@ class FakeDevice:
             info.firmware_version = "0.1.0"
             info.protocol_version = self.version
             info.schema_id = self.schema_id
-            info.board = "fake"
+            info.board = self.board_name
             info.num_pins = 20
             info.max_servos = 8
             info.reserved_pins.extend([0, 1])
@@ -309,6 +311,12 @@ class FakeDevice:
                 out.ack.status = Status.STATUS_NOT_INITIALISED
             else:
                 self._apply(kind, ctl)
+        elif kind == "release":
+            self.pins.pop(msg.release.pin, None)
+            self.values.pop(msg.release.pin, None)
+        elif kind == "release_all":
+            self.pins.clear()
+            self.values.clear()
         elif kind == "pose":  # all or nothing; only the pin-mode check (what the tests need)
             # A PoseItem's oneof member is named after its pin mode ("servo", "digital").
             items = [

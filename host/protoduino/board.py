@@ -1343,6 +1343,11 @@ class Board:
         self._transport.add_monitor(monitor)
 
     @property
+    def inputs(self) -> InputTable:
+        """The latest value of every input the device reported (see :mod:`protoduino.inputs`)."""
+        return self._inputs
+
+    @property
     def call_timeout(self) -> float:
         """Longest a call takes to fail: its retries, plus waiting for a link that is down."""
         return self._rpc.call_timeout

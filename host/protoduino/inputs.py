@@ -250,6 +250,12 @@ class InputTable:
 
         return current, remove
 
+    def listeners(self, kind: InputKind, pin: int) -> int:
+        """How many waits and iterators listen to this input now (for tests and diagnostics)."""
+        with self._cond:
+            slot = self._slots.get((kind, pin))
+            return 0 if slot is None else len(slot.sinks)
+
     def wait_for(
         self,
         kind: InputKind,
