@@ -99,7 +99,7 @@ class FakeDevice:
         self.board_name = "fake"
         #: DeviceInfo's features and pin capabilities (the Uno's by default).
         self.features = ALL_FEATURES
-        self.pwm_pins = [3, 5, 6, 9, 10, 11]
+        self.pwm_pins = [3, 9, 10, 11]
         self.analog_pins = list(range(14, 20))
         self.counter_pins = [2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]
         #: The inputs' state as the device sees it: levels by pin (1 until set:

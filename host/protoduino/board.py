@@ -307,11 +307,20 @@ def _mask_pins(mask: int) -> tuple[int, ...]:
     return tuple(pin for pin in range(32) if mask >> pin & 1)
 
 
-#: Pins whose PWM needs a timer another mode holds, by DeviceInfo.board: pin -> (the
-#: mode holding it, why). On the Uno Timer1 makes the servo pulses (as Arduino's Servo
-#: library does), so pins 9 and 10 cannot do PWM while a servo runs, nor a servo start
-#: while they do. The device refuses the same with STATUS_TIMER_IN_USE.
-TIMER1_PWM_PINS: dict[str, frozenset[int]] = {"uno": frozenset({9, 10})}
+#: Timers shared with PWM pins, by DeviceInfo.board (the simulated board keeps the
+#: Uno's rules). The device refuses the same with STATUS_TIMER_IN_USE:
+#: Timer1 makes the servo pulses (as Arduino's Servo library does), so pins 9 and 10
+#: cannot do PWM while a servo runs, nor a servo start while they do;
+TIMER1_PWM_PINS: dict[str, frozenset[int]] = {
+    "uno": frozenset({9, 10}),
+    "sim": frozenset({9, 10}),
+}
+#: Timer0 runs the device's millisecond clock (failsafe, debounce, reports), which
+#: PWM on pins 5 and 6 would have to share: never PWM there (docs/protocol.md).
+TIMER0_PWM_PINS: dict[str, frozenset[int]] = {
+    "uno": frozenset({5, 6}),
+    "sim": frozenset({5, 6}),
+}
 
 
 class Servo:
@@ -907,6 +916,13 @@ class Board:
 
     def _pwm_init(self, pin: int, safe: object) -> tuple[ArduinoIn, Callable[[], None], PwmOutput]:
         pin = self._check_pin(pin)
+        self._check_feature(PWM)
+        if pin in TIMER0_PWM_PINS.get(self.info.board, ()):
+            raise _reject(
+                Status.STATUS_TIMER_IN_USE,
+                f"pin {pin}'s PWM timer (Timer0) runs the device's millisecond clock "
+                f"(PWM pins: {', '.join(map(str, self.info.pwm_pins))})",
+            )
         self._check_mode(pin, PWM)
         duty = _rounded("safe", safe)
         if not 0 <= duty <= PWM_MAX_DUTY:

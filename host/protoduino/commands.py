@@ -128,11 +128,12 @@ COMMANDS: dict[str, Command] = {c.kind: c for c in _BOARD_COMMANDS + _pin_mode_c
 def feature_hint(feature: str) -> str:
     """Why a mode is refused on a firmware without ``feature``, and how to get it."""
     name = feature.upper()
+    every = " ".join(mode.feature for mode in PIN_MODES)
     return (
         f"the firmware on this device was built without the {feature} feature "
-        f"(FEATURE_{name}); the default firmware has every feature (protoduino flash PORT), "
-        f"a build with `make -C firmware avr FEATURES=...` needs {feature} in FEATURES, and a "
-        f"sketch must not #define PD_FEATURE_{name} 0 before including the library"
+        f"(FEATURE_{name}). The default firmware has every feature (protoduino flash PORT); "
+        f'a build must name it: make -C firmware avr FEATURES="{every}"; a sketch must '
+        f"not #define PD_FEATURE_{name} 0 before #include <protoduino.h>"
     )
 
 

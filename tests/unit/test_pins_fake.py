@@ -77,7 +77,7 @@ def test_pwm_on_a_pin_without_pwm_is_not_supported(board: Board, fake: FakeDevic
     with pytest.raises(NotSupportedError) as info:
         board.pwm_output(4)
     assert info.value.status == Status.STATUS_NOT_SUPPORTED and not info.value.sent
-    assert "3, 5, 6, 9, 10, 11" in str(info.value)
+    assert "3, 9, 10, 11" in str(info.value)
     assert not isinstance(info.value, FeatureMissingError)
     assert sent(fake, "pwm_init") == []
 
@@ -116,7 +116,7 @@ def test_device_info_lists_features_and_pins(board: Board) -> None:
     assert info.features == {
         "servo", "digital_output", "digital_input", "analog_input", "pwm", "counter"
     }  # fmt: skip
-    assert info.pwm_pins == (3, 5, 6, 9, 10, 11)
+    assert info.pwm_pins == (3, 9, 10, 11)
     assert info.analog_pins == (14, 15, 16, 17, 18, 19)
     assert 2 in info.counter_pins
 
@@ -130,6 +130,9 @@ def test_timer1_is_shared_by_servos_and_pwm_on_9_and_10(fake: FakeDevice) -> Non
                 board.pwm_output(pin)
             assert info.value.status == Status.STATUS_TIMER_IN_USE and not info.value.sent
         board.pwm_output(3)  # Timer2: free
+        for pin in (5, 6):  # Timer0 runs the clock: never
+            with pytest.raises(TimerInUseError):
+                board.pwm_output(pin)
         servo.release()
         board.pwm_output(10)
         with pytest.raises(TimerInUseError):
@@ -154,7 +157,7 @@ def test_a_device_refusal_has_its_named_error(board: Board, fake: FakeDevice) ->
         motor.write(100)
     assert interlock.value.sent and interlock.value.status == Status.STATUS_INTERLOCK_ACTIVE
     with pytest.raises(TimerInUseError):
-        board.pwm_output(5)
+        board.pwm_output(9)
     with pytest.raises(NotSupportedError):
         board.counter(2)
     assert motor.value == 0  # a refused value is not the output's
