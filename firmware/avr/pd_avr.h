@@ -17,7 +17,7 @@
 #define PD_AVR_RX_SIZE 64u
 /* UART transmit ring: the replies to one command (PD_TX_RESERVE) and a short report
  * (PD_TX_REPORT_ROOM); pd_avr_uart.c checks both fit at compile time. */
-#define PD_AVR_TX_SIZE 156u
+#define PD_AVR_TX_SIZE 140u
 
 void pd_avr_uart_init(uint32_t baud);
 /* The oldest received byte, left in the ring, or -1 if none. */
@@ -48,6 +48,10 @@ void pd_avr_servo_hold(bool hold);
 void pd_avr_servo_detach(uint8_t channel);
 /* Start the next servo frame as soon as possible (failsafe, Stop). */
 void pd_avr_servo_expedite(void);
+
+/* PWM (pd_avr_pwm.c): duty 0..255 on pins 3, 9, 10, 11; release: an input again. */
+void pd_avr_pwm_write(uint8_t pin, uint8_t duty);
+void pd_avr_pwm_release(uint8_t pin);
 
 /* output: make `pin` an output at `level` (the level is set before the
  * direction); else an input, without pull-up when level is false (power-up). */

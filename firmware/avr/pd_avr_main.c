@@ -28,6 +28,11 @@ static const pd_board_info_t uno = {
     .max_servos = 8,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* RX, TX: the link itself */
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
+    .pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11),
+    .analog_pins = 0x3FUL << 14,              /* A0..A5 */
+    .counter_pins = 0,                        /* set with the counters (pd_avr_inputs.c) */
+    .servo_timer_pins = (1UL << 9) | (1UL << 10),
+    .clock_timer_pins = (1UL << 5) | (1UL << 6),
 };
 
 uint16_t pd_hal_tx_room(void *hal)
@@ -68,6 +73,27 @@ void pd_hal_digital_write(void *hal, uint8_t pin, bool level)
 {
     (void)hal;
     pd_avr_digital_write(pin, level);
+}
+
+void pd_hal_pwm_write(void *hal, uint8_t pin, uint8_t duty)
+{
+    (void)hal;
+#if PD_FEATURE_PWM
+    pd_avr_pwm_write(pin, duty);
+#else
+    (void)pin;
+    (void)duty;
+#endif
+}
+
+void pd_hal_pwm_release(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_PWM
+    pd_avr_pwm_release(pin);
+#else
+    (void)pin;
+#endif
 }
 
 void pd_hal_servo_detach(void *hal, uint8_t channel, uint8_t pin)
@@ -117,7 +143,9 @@ void pd_avr_setup(void)
     pd_avr_clock_init();
 #endif
     pd_avr_uart_init(115200UL);
-    pd_avr_servo_init();
+    if (PD_FEATURE_SERVO) {
+        pd_avr_servo_init();
+    }
     sei();
     pd_core_init(&core, NULL);
 }

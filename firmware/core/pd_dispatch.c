@@ -71,7 +71,8 @@ bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg)
                                 PD_MIN_PACKET + PD_TX_MAX_PAYLOAD + 3u) ? 1 : -1];
     (void)sizeof(no_cobs_block);
     size_t frame = PD_MIN_PACKET + len + 3u;
-    if (len == 0 || pd_hal_tx_room(core->hal) < PD_TX_RESERVE + frame) {
+    /* A command frame under way is answered first: its Ack must not queue behind this. */
+    if (len == 0 || core->link.rx_len > 0 || pd_hal_tx_room(core->hal) < frame) {
         return false;
     }
     return pd_link_send(core, PD_PACKET_DATA, raw, len);
@@ -111,6 +112,10 @@ static void fill_info(pd_core_t *core, protoduino_DeviceInfo *info)
     info->num_pins = board->num_pins;
     info->max_servos = board->max_servos;
     info->rx_buffer = board->rx_buffer;
+    info->features = PD_FEATURES;
+    info->pwm_pins = PD_FEATURE_PWM ? board->pwm_pins : 0u;
+    info->analog_pins = PD_FEATURE_ANALOG_INPUT ? board->analog_pins : 0u;
+    info->counter_pins = PD_FEATURE_COUNTER ? board->counter_pins : 0u;
     info->reserved_pins_count = 0;
     /* The mask shifts one place per pin: a 32-bit shift by a variable count is
      * a loop on the AVR. */
@@ -228,6 +233,16 @@ static protoduino_Status cmd_digital_control(pd_core_t *core, pd_cmd_t *cmd)
     return pd_outputs_digital_control(&core->outputs, core->hal, &cmd->in->data.digital_control);
 }
 
+static protoduino_Status cmd_pwm_init(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_outputs_pwm_init(&core->outputs, core->hal, &cmd->in->data.pwm_init);
+}
+
+static protoduino_Status cmd_pwm_control(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_outputs_pwm_control(&core->outputs, core->hal, &cmd->in->data.pwm_control);
+}
+
 static protoduino_Status cmd_pose(pd_core_t *core, pd_cmd_t *cmd)
 {
     uint8_t bad;
@@ -255,11 +270,14 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
 
 /*
  * The command table: one entry per ArduinoIn.data member,
- *   X(name, flags, result)
+ *   X(name, feature, flags, result)
  *   name    the member: its tag is protoduino_ArduinoIn_<name>_tag, its
  *           handler cmd_<name>(core, cmd), which returns the Ack status
  *           (anything but OK: nothing changed) and may set cmd->then to send
  *           something after the Ack;
+ *   feature 1, or the PD_FEATURE_x switch (pd_features.h) of the pin mode it
+ *           belongs to: built without it, the command is answered
+ *           STATUS_NOT_SUPPORTED and its handler is left out of the build;
  *   flags   PD_CMD_IDEMPOTENT: running it twice changes nothing, so it is
  *           neither looked up in nor recorded in the dedupe window (a repeat
  *           is answered in full; the window is left to commands that move
@@ -289,25 +307,27 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
 #define PD_CMD_COMMANDS 0x02u
 
 #define PD_COMMANDS(X)                                                       \
-    X(ping, PD_CMD_IDEMPOTENT, protoduino_Ack_ping_echo_tag)                 \
-    X(get_info, PD_CMD_IDEMPOTENT, protoduino_Ack_info_tag)                  \
-    X(servo_init, 0, 0)                                                      \
-    X(servo_control, PD_CMD_COMMANDS, 0)                                     \
-    X(digital_init, 0, 0)                                                    \
-    X(digital_control, PD_CMD_COMMANDS, 0)                                   \
-    X(stop, 0, 0)                                                            \
-    X(pose, PD_CMD_COMMANDS, 0)                                              \
-    X(read_outputs, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)           \
-    X(configure_failsafe, 0, 0)                                              \
-    X(heartbeat, PD_CMD_IDEMPOTENT, 0)                                       \
-    X(release, 0, 0)                                                         \
-    X(release_all, 0, 0)
+    X(ping, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_ping_echo_tag)              \
+    X(get_info, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_info_tag)               \
+    X(servo_init, PD_FEATURE_SERVO, 0, 0)                                    \
+    X(servo_control, PD_FEATURE_SERVO, PD_CMD_COMMANDS, 0)                   \
+    X(digital_init, PD_FEATURE_DIGITAL_OUTPUT, 0, 0)                         \
+    X(digital_control, PD_FEATURE_DIGITAL_OUTPUT, PD_CMD_COMMANDS, 0)        \
+    X(pwm_init, PD_FEATURE_PWM, 0, 0)                                        \
+    X(pwm_control, PD_FEATURE_PWM, PD_CMD_COMMANDS, 0)                       \
+    X(stop, 1, 0, 0)                                                         \
+    X(pose, 1, PD_CMD_COMMANDS, 0)                                           \
+    X(read_outputs, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)        \
+    X(configure_failsafe, 1, 0, 0)                                           \
+    X(heartbeat, 1, PD_CMD_IDEMPOTENT, 0)                                    \
+    X(release, 1, 0, 0)                                                      \
+    X(release_all, 1, 0, 0)
 
 /* The table entry for `tag` (flags and result; the handler is run by run_command). */
 static bool find_command(pb_size_t tag, pd_command_t *entry)
 {
     switch (tag) {
-#define PD_FIND(name, flags_, result_)                                       \
+#define PD_FIND(name, feature_, flags_, result_)                             \
     case protoduino_ArduinoIn_##name##_tag:                                  \
         entry->flags = (flags_);                                             \
         entry->result = (result_);                                           \
@@ -322,9 +342,9 @@ static bool find_command(pb_size_t tag, pd_command_t *entry)
 static protoduino_Status run_command(pd_core_t *core, pd_cmd_t *cmd)
 {
     switch (cmd->in->which_data) {
-#define PD_RUN(name, flags_, result_)                                        \
+#define PD_RUN(name, feature_, flags_, result_)                              \
     case protoduino_ArduinoIn_##name##_tag:                                  \
-        return cmd_##name(core, cmd);
+        return (feature_) ? cmd_##name(core, cmd) : protoduino_Status_STATUS_NOT_SUPPORTED;
         PD_COMMANDS(PD_RUN)
 #undef PD_RUN
     default:

@@ -73,9 +73,9 @@ void pd_dispatch_command(struct pd_core *core, bool decoded);
 bool pd_dispatch_send(struct pd_core *core, const protoduino_ArduinoOut *msg);
 
 /*
- * Send an unsolicited message (a report) only if the transmit queue keeps
- * PD_TX_RESERVE of room after it, so it never delays a reply's room. Returns
- * whether it was queued.
+ * Send an unsolicited message (a report) if it fits the transmit queue and no
+ * command frame is being received (pd_link.h says why no reserve is kept
+ * beside it). Returns whether it was queued.
  */
 bool pd_dispatch_send_spare(struct pd_core *core, const protoduino_ArduinoOut *msg);
 

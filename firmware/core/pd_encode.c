@@ -127,6 +127,10 @@ static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
         close_msg(w, at);
     }
     put_uint(w, protoduino_DeviceInfo_rx_buffer_tag, info->rx_buffer);
+    put_uint(w, protoduino_DeviceInfo_features_tag, info->features);
+    put_fixed32(w, protoduino_DeviceInfo_pwm_pins_tag, info->pwm_pins);
+    put_fixed32(w, protoduino_DeviceInfo_analog_pins_tag, info->analog_pins);
+    put_fixed32(w, protoduino_DeviceInfo_counter_pins_tag, info->counter_pins);
 }
 
 /* Not inlined into pd_encode_out: 56 B less of the Uno's flash, for one call
@@ -156,6 +160,16 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
         }
         put_fixed32(w, protoduino_OutputStates_digital_pins_tag, st->digital_pins);
         put_fixed32(w, protoduino_OutputStates_digital_levels_tag, st->digital_levels);
+        put_fixed32(w, protoduino_OutputStates_pwm_pins_tag, st->pwm_pins);
+        if (st->pwm_duties_count > sizeof(st->pwm_duties)) {
+            w->ok = false;
+        } else if (st->pwm_duties_count > 0) {
+            uint8_t *duties = open_msg(w, protoduino_OutputStates_pwm_duties_tag); /* packed */
+            for (pb_size_t i = 0; i < st->pwm_duties_count; i++) {
+                put_varint(w, st->pwm_duties[i]);
+            }
+            close_msg(w, duties);
+        }
         close_msg(w, at);
     }
     put_uint(w, protoduino_Ack_refused_item_tag, ack->refused_item);

@@ -67,13 +67,13 @@ struct pd_core;
  */
 #define PD_TX_RESERVE (PD_TX_FRAME_MAX + PD_TX_NOTICE_MAX)
 /*
- * A platform's transmit queue holds at least the reserve plus this, so that a
- * report of up to 7 payload bytes can go out beside it (checked at compile
- * time by each platform: a larger ArduinoOut makes the reserve grow with it).
- * Only 7: on the Uno every byte of RAM the ring takes is stack lost, and at
- * 176 B a Pose's decode ran the stack into .bss (the device hung).
+ * A platform's transmit queue holds at least the reserve (checked at compile
+ * time by each platform). A report goes in whenever it fits and no command
+ * frame is arriving (pd_dispatch_send_spare): a report queued before a command
+ * makes that command wait for room only until the report has left, which its
+ * Ack would have waited for anyway in the queue's order; the queue need not
+ * keep a reserve beside reports (on the Uno every byte of it is RAM).
  */
-#define PD_TX_REPORT_ROOM PD_TX_FRAME_BYTES(7u)
 
 /*
  * Diagnostic counters; they wrap, nothing depends on them. No message carries

@@ -44,10 +44,10 @@
  * to the pty when it can take them, never waiting for it. The same size as the
  * Uno's ring, so the core holds back received frames on the same occasions.
  */
-#define SIM_TX_SIZE 156u
-typedef char sim_assert_tx_room[SIM_TX_SIZE >= PD_TX_RESERVE + PD_TX_REPORT_ROOM ? 1 : -1];
+#define SIM_TX_SIZE 140u
+typedef char sim_assert_tx_room[SIM_TX_SIZE - 1u >= PD_TX_RESERVE ? 1 : -1];
 
-enum { SIM_PIN_UNUSED = 0, SIM_PIN_SERVO, SIM_PIN_DIGITAL };
+enum { SIM_PIN_UNUSED = 0, SIM_PIN_SERVO, SIM_PIN_DIGITAL, SIM_PIN_PWM };
 
 /* A virtual input pin, as the control socket drives it. */
 typedef struct {
@@ -78,6 +78,13 @@ static const pd_board_info_t sim_board = {
     .max_servos = 8,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* the Uno's UART, for the same semantics */
     .rx_buffer = 512,                         /* one read() of the pty; the pty holds more */
+    /* The Uno's pin capabilities and timer rules, so that a program tested here
+     * meets the same refusals on the board. */
+    .pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11),
+    .analog_pins = 0x3FUL << 14,
+    .counter_pins = 0,
+    .servo_timer_pins = (1UL << 9) | (1UL << 10),
+    .clock_timer_pins = (1UL << 5) | (1UL << 6),
 };
 
 static volatile sig_atomic_t sim_stop;
@@ -118,7 +125,8 @@ static void sim_trace(sim_hal_t *hal, uint8_t pin, uint8_t mode, uint16_t value)
     hal->value[pin] = value;
     if (hal->trace) {
         fprintf(hal->trace, "{\"t\": %.6f, \"pin\": %u, \"mode\": \"%s\", \"value\": %u}\n",
-                sim_elapsed(hal), (unsigned)pin, mode == SIM_PIN_SERVO ? "servo" : "digital",
+                sim_elapsed(hal), (unsigned)pin,
+                mode == SIM_PIN_SERVO ? "servo" : mode == SIM_PIN_PWM ? "pwm" : "digital",
                 (unsigned)value);
         fflush(hal->trace);
     }
@@ -248,6 +256,16 @@ void pd_hal_servo_hold(void *ctx, bool hold)
 void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
 {
     sim_trace(ctx, pin, SIM_PIN_DIGITAL, level ? 1u : 0u);
+}
+
+void pd_hal_pwm_write(void *ctx, uint8_t pin, uint8_t duty)
+{
+    sim_trace(ctx, pin, SIM_PIN_PWM, duty);
+}
+
+void pd_hal_pwm_release(void *ctx, uint8_t pin)
+{
+    sim_trace(ctx, pin, SIM_PIN_PWM, 0); /* an input reads as 0, as on the emulated Uno */
 }
 
 void pd_hal_servo_detach(void *ctx, uint8_t channel, uint8_t pin)

@@ -26,8 +26,14 @@ void fake_init(fake_hal_t *hal)
     for (int pin = 0; pin < PD_MAX_PINS; pin++) {
         hal->servo_us[pin] = -1;
         hal->digital[pin] = -1;
+        hal->pwm[pin] = -1;
     }
     hal->info.board = "fake";
+    /* The Uno's (pd_avr_main.c). */
+    hal->info.pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11);
+    hal->info.analog_pins = 0x3FUL << 14;
+    hal->info.servo_timer_pins = (1UL << 9) | (1UL << 10);
+    hal->info.clock_timer_pins = (1UL << 5) | (1UL << 6);
     hal->info.num_pins = 20;
     hal->info.max_servos = 8;
     hal->info.reserved_pins = 0x3;
@@ -183,6 +189,29 @@ void pd_hal_digital_release(void *ctx, uint8_t pin)
     }
     hal->digital[pin] = -1;
     hal->digital_writes[pin]++;
+}
+
+void pd_hal_pwm_write(void *ctx, uint8_t pin, uint8_t duty)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= hal->info.num_pins || !((hal->info.pwm_pins >> pin) & 1u) ||
+        hal->servo_us[pin] >= 0 || hal->digital[pin] >= 0) {
+        fprintf(stderr, "fake_hal: PWM write on pin %u, not a free PWM pin\n", pin);
+        abort();
+    }
+    hal->pwm[pin] = duty;
+    hal->pwm_writes[pin]++;
+}
+
+void pd_hal_pwm_release(void *ctx, uint8_t pin)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= hal->info.num_pins || hal->pwm[pin] < 0) {
+        fprintf(stderr, "fake_hal: release of pin %u, not a PWM output\n", pin);
+        abort();
+    }
+    hal->pwm[pin] = -1;
+    hal->pwm_writes[pin]++;
 }
 
 uint32_t pd_hal_boot_id(void *ctx)

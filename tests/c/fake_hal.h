@@ -32,6 +32,8 @@ typedef struct fake_hal {
     fake_frame_t frames[FAKE_MAX_FRAMES];
     int servo_us[PD_MAX_PINS];  /* -1: not a servo */
     int digital[PD_MAX_PINS];   /* -1: not a digital output, else 0/1 */
+    int pwm[PD_MAX_PINS];       /* -1: not a PWM output, else its duty */
+    unsigned pwm_writes[PD_MAX_PINS];
     unsigned servo_writes[PD_MAX_PINS];
     unsigned digital_writes[PD_MAX_PINS];
     unsigned outputs_safe_calls; /* pd_hal_outputs_safe() since fake_init */

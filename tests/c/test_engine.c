@@ -109,8 +109,8 @@ static void test_report_newest_value_replaces_unsent(void)
     d.core.report = test_report;
     report_calls = 0;
 
-    /* No room beyond the replies' reserve: the report waits, the bit stays. */
-    d.hal.tx_room = PD_TX_RESERVE + 4u;
+    /* No room for it: the report waits, the bit stays. */
+    d.hal.tx_room = 8u;
     report_value[3] = 1;
     pd_core_report(&d.core, 3);
     pd_core_poll(&d.core);
@@ -148,6 +148,26 @@ static void test_reply_goes_before_pending_report(void)
     CHECK_EQ(out.which_data, protoduino_ArduinoOut_ack_tag);
     CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1);
     CHECK(strcmp(last, "0:42") == 0);
+}
+
+static void test_report_waits_for_a_command_under_way(void)
+{
+    tdev_t d;
+    char last[64] = "";
+    t_active(&d);
+    d.core.report = test_report;
+    report_value[2] = 7;
+    pd_core_report(&d.core, 2);
+    /* Half a command frame is in: the report waits for its Ack. */
+    const uint8_t half[3] = {0x05, 0x01, 0x02};
+    t_feed(&d, half, sizeof(half));
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
+    const uint8_t end = 0x00; /* the frame ends (an invalid one: dropped) */
+    t_feed(&d, &end, 1);
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1);
+    CHECK(strcmp(last, "2:7") == 0);
 }
 
 static void test_one_report_per_pass_lowest_slot_first(void)
@@ -335,6 +355,7 @@ const pd_test_case_t pd_tests_engine[] = {
     TEST_CASE(test_reserve_holds_the_largest_replies),
     TEST_CASE(test_report_newest_value_replaces_unsent),
     TEST_CASE(test_reply_goes_before_pending_report),
+    TEST_CASE(test_report_waits_for_a_command_under_way),
     TEST_CASE(test_one_report_per_pass_lowest_slot_first),
     TEST_CASE(test_no_report_while_idle),
     TEST_CASE(test_periodic_hook_once_per_tick),
