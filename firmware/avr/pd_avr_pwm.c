@@ -1,10 +1,13 @@
 /*
- * PWM outputs on the Uno, as Arduino's analogWrite makes them but in
- * phase-correct mode on both timers: the high time is 2 x OCR of the 510 ticks
- * of a period, so the duty is exactly OCR / 255 (fast PWM's (OCR + 1) / 256
- * would put duty d at d + 1 for small d). 490 Hz (prescaler 64), Arduino's
- * own rate for these pins. Duties 0 and 255 disconnect the timer and drive
- * the pin's level, as analogWrite does.
+ * PWM outputs on the Uno, as Arduino's analogWrite makes them: fast PWM with
+ * TOP 255 and prescaler 64 (976 Hz), high for OCR + 1 of every 256 ticks.
+ * Unlike analogWrite, duty d (of 255) gets the OCR whose (OCR + 1) / 256 is
+ * the closest to d / 255: d - 1 below 128, d from 128 (so a duty is within
+ * half a step of what was asked, and the emulated Uno's trace, which rounds
+ * 255 x high / period, reads d back). Phase-correct PWM would be exact, but
+ * simavr 1.6 makes no compare-output edges in it, so nothing could judge it at
+ * the pin. Duties 0 and 255 disconnect the timer and drive the pin's level, as
+ * analogWrite does.
  *
  *   pins 3 (OC2B) and 11 (OC2A): Timer2, free for PWM;
  *   pins 9 (OC1A) and 10 (OC1B): Timer1, which otherwise makes the servo
@@ -62,12 +65,12 @@ void pd_avr_pwm_write(uint8_t pin, uint8_t duty)
         if (tccra == &TCCR1A && (TIMSK1 & _BV(OCIE1A))) {
             /* Timer1 leaves the servos (none is configured: the core checked). */
             TIMSK1 &= (uint8_t)~_BV(OCIE1A);
-            TCCR1A = _BV(WGM10); /* phase-correct PWM, 8-bit */
-            TCCR1B = _BV(CS11) | _BV(CS10);
+            TCCR1A = _BV(WGM10); /* fast PWM, 8-bit (mode 5) */
+            TCCR1B = _BV(WGM12) | _BV(CS11) | _BV(CS10);
             OCR1AH = 0;
             OCR1BH = 0;
         } else if (tccra == &TCCR2A && !(TCCR2A & _BV(WGM20))) {
-            TCCR2A = _BV(WGM20);
+            TCCR2A = _BV(WGM21) | _BV(WGM20); /* fast PWM, TOP 255 */
             TCCR2B = _BV(CS22); /* clk / 64 on Timer2 */
         }
         if (duty == 0 || duty == 255) {
@@ -77,7 +80,7 @@ void pd_avr_pwm_write(uint8_t pin, uint8_t duty)
             if (tccra == &TCCR1A) {
                 OCR1AH = 0; /* 16-bit registers: the high byte is written first */
             }
-            *ocr = duty;
+            *ocr = duty < 128u ? (uint8_t)(duty - 1u) : duty;
             *tccra |= com;
             pd_avr_pin_set(pin, true, false);
         }
