@@ -755,22 +755,29 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,read_outputs,data.read_outputs),  31)
 #define protoduino_ArduinoIn_data_ping_MSGTYPE protoduino_Ping
 #define protoduino_ArduinoIn_data_servo_init_MSGTYPE protoduino_ServoInit
 #define protoduino_ArduinoIn_data_servo_control_MSGTYPE protoduino_ServoControl
-#define protoduino_ArduinoIn_data_digital_init_MSGTYPE protoduino_DigitalInit
+/* protoduino gen: protoduino_DigitalInit has the shape of protoduino_DigitalControl: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_digital_init_MSGTYPE protoduino_DigitalControl
 #define protoduino_ArduinoIn_data_digital_control_MSGTYPE protoduino_DigitalControl
-#define protoduino_ArduinoIn_data_stop_MSGTYPE protoduino_Stop
-#define protoduino_ArduinoIn_data_get_info_MSGTYPE protoduino_GetInfo
+/* protoduino gen: protoduino_Stop has the shape of protoduino_ClearInterlock: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_stop_MSGTYPE protoduino_ClearInterlock
+/* protoduino gen: protoduino_GetInfo has the shape of protoduino_ClearInterlock: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_get_info_MSGTYPE protoduino_ClearInterlock
 #define protoduino_ArduinoIn_data_configure_failsafe_MSGTYPE protoduino_ConfigureFailsafe
 #define protoduino_ArduinoIn_data_heartbeat_MSGTYPE protoduino_Heartbeat
-#define protoduino_ArduinoIn_data_release_MSGTYPE protoduino_Release
-#define protoduino_ArduinoIn_data_release_all_MSGTYPE protoduino_ReleaseAll
+/* protoduino gen: protoduino_Release has the shape of protoduino_Heartbeat: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_release_MSGTYPE protoduino_Heartbeat
+/* protoduino gen: protoduino_ReleaseAll has the shape of protoduino_ClearInterlock: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_release_all_MSGTYPE protoduino_ClearInterlock
 #define protoduino_ArduinoIn_data_pwm_control_MSGTYPE protoduino_PwmControl
-#define protoduino_ArduinoIn_data_pwm_init_MSGTYPE protoduino_PwmInit
+/* protoduino gen: protoduino_PwmInit has the shape of protoduino_PwmControl: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_pwm_init_MSGTYPE protoduino_PwmControl
 #define protoduino_ArduinoIn_data_digital_input_init_MSGTYPE protoduino_DigitalInputInit
 #define protoduino_ArduinoIn_data_analog_input_init_MSGTYPE protoduino_AnalogInputInit
 #define protoduino_ArduinoIn_data_counter_init_MSGTYPE protoduino_CounterInit
 #define protoduino_ArduinoIn_data_clear_interlock_MSGTYPE protoduino_ClearInterlock
 #define protoduino_ArduinoIn_data_pose_MSGTYPE protoduino_Pose
-#define protoduino_ArduinoIn_data_read_outputs_MSGTYPE protoduino_ReadOutputs
+/* protoduino gen: protoduino_ReadOutputs has the shape of protoduino_ClearInterlock: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_read_outputs_MSGTYPE protoduino_ClearInterlock
 
 #define protoduino_DeviceInfo_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, STRING,   firmware_version,   1) \
