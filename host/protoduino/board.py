@@ -512,6 +512,24 @@ _INPUT_KINDS: dict[str, InputKind] = {
 }
 
 
+def _failsafe_event(fs: pb.Failsafe) -> Event:
+    """The FAILSAFE event for a Failsafe message: its cause, and an interlock's input pin."""
+    cause = {
+        pb.FAILSAFE_CAUSE_PING_TIMEOUT: "ping_timeout",
+        pb.FAILSAFE_CAUSE_STOP: "stop",
+        pb.FAILSAFE_CAUSE_INTERLOCK: "interlock",
+    }.get(fs.cause, "none")
+    details: dict[str, Any] = {"active": fs.active, "cause": cause}
+    if cause == "interlock":
+        details["pin"] = fs.pin
+    if fs.active:
+        why = f"interlock on pin {fs.pin}" if cause == "interlock" else cause
+        text = f"failsafe active ({why}): outputs at their safe values"
+    else:
+        text = "failsafe cleared (outputs stay safe until commanded)"
+    return Event(EventKind.FAILSAFE, text, details)
+
+
 class Board:
     """A connected device. Use :meth:`open`; close it (or use ``with``) when done."""
 
@@ -1622,18 +1640,10 @@ class Board:
                 log.warning("%s: input report dropped: %s", self.url, error)
         elif kind == "failsafe":
             fs = msg.failsafe
-            cause = {1: "ping_timeout", 2: "stop", 3: "interlock"}.get(fs.cause, "none")
-            details: dict[str, Any] = {"active": fs.active, "cause": cause}
-            if cause == "interlock":
-                details["pin"] = fs.pin
             if fs.active:
                 with self._lock:
                     self._forget_values()
-                why = f"interlock on pin {fs.pin}" if cause == "interlock" else cause
-                text = f"failsafe active ({why}): outputs at their safe values"
-            else:
-                text = "failsafe cleared (outputs stay safe until commanded)"
-            self._notify(Event(EventKind.FAILSAFE, text, details))
+            self._notify(_failsafe_event(fs))
         elif kind == "log":
             level = ("debug", "info", "warning", "error")[min(msg.log.level, 3)]
             self._notify(

@@ -132,8 +132,8 @@ def feature_hint(feature: str) -> str:
     return (
         f"the firmware on this device was built without the {feature} feature "
         f"(FEATURE_{name}). The default firmware has every feature (protoduino flash PORT); "
-        f'a build must name it: make -C firmware avr FEATURES="{every}"; a sketch must '
-        f"not #define PD_FEATURE_{name} 0 before #include <protoduino.h>"
+        f'a make build must list it: make -C firmware avr FEATURES="{every}"; the Arduino '
+        f"library must not #define PD_FEATURE_{name} 0 in its src/pd_config.h"
     )
 
 
