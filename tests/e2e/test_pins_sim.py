@@ -1,0 +1,168 @@
+"""PWM outputs through the Board API on both simulated boards, judged at the pin (the trace).
+
+The native board traces the duty it is told; the emulated Uno (the real firmware in
+simavr) traces the duty it measures at the pin, from the timers' compare outputs.
+Both write ``{"pin": N, "mode": "pwm", "value": DUTY}``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from boardprocess import BoardProcess, missing_tool
+from protoduino import Board, Event, EventKind
+from protoduino.errors import FeatureMissingError, NotSupportedError, TimerInUseError
+from protoduino.messages import ArduinoIn, Status
+from protoduino.simboard import SimBoard, runner_command
+from protoduino_dev import build
+
+#: Bounds a failing test's wait only; the verdicts are the trace's.
+BOUND = 30.0
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def sim(sim_board: SimBoard) -> SimBoard:
+    return sim_board
+
+
+@pytest.fixture
+def board(sim: SimBoard) -> Iterator[Board]:
+    with Board.open(sim.port) as b:
+        yield b
+
+
+def pwm_values(trace: list[dict[str, Any]], pin: int) -> list[int]:
+    return [int(e["value"]) for e in trace if e["pin"] == pin and e.get("mode") == "pwm"]
+
+
+def wait_pwm(sim: SimBoard, pin: int, ok: Callable[[list[int]], bool], since: int = 0) -> None:
+    """Wait until the PWM duties ``pin`` took in the trace (from line ``since``) satisfy ``ok``."""
+    deadline = time.monotonic() + BOUND
+    while not ok(pwm_values(sim.trace()[since:], pin)):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"pin {pin}: PWM in the trace {pwm_values(sim.trace(), pin)}")
+        time.sleep(0.02)
+
+
+def events(board: Board) -> list[Event]:
+    seen: list[Event] = []
+    board.on_event(seen.append)
+    return seen
+
+
+def wait_event(seen: list[Event], kind: EventKind) -> Event:
+    deadline = time.monotonic() + BOUND
+    while True:
+        found = [e for e in list(seen) if e.kind is kind]
+        if found:
+            return found[-1]
+        assert time.monotonic() < deadline, f"no {kind} event; got {seen}"
+        time.sleep(0.02)
+
+
+def test_pwm_duty_at_the_pin_and_stop(board: Board, sim: SimBoard) -> None:
+    motor = board.pwm_output(3, safe=0)
+    motor.write(128.4)  # rounded to 128
+    wait_pwm(sim, 3, lambda v: v[-1:] == [128])
+    motor.write(254)
+    wait_pwm(sim, 3, lambda v: v[-1:] == [254])
+    states = board.read_outputs()
+    assert (states[3].mode, states[3].value) == ("pwm", 254)
+    mark = len(sim.trace())
+    board.stop()
+    wait_pwm(sim, 3, lambda v: v[-1:] == [0], since=mark)
+    assert motor.value == 0 and board.read_outputs()[3].value == 0
+
+
+def test_pose_sets_pwm_with_the_others_and_the_failsafe_makes_it_safe(sim: SimBoard) -> None:
+    with Board.open(sim.port, failsafe_timeout=0.3) as board:
+        seen = events(board)
+        motor = board.pwm_output(11, safe=7)
+        led = board.digital_output(13)
+        board.pose({motor: 200, led: True})
+        wait_pwm(sim, 11, lambda v: v[-1:] == [200])
+        mark = len(sim.trace())
+        board.pinging = False  # the device hears nothing more: its failsafe fires
+        event = wait_event(seen, EventKind.FAILSAFE)
+        assert event.details["active"] and event.details["cause"] == "ping_timeout"
+        wait_pwm(sim, 11, lambda v: v[-1:] == [7], since=mark)
+        assert motor.value == 7
+
+
+def _request(board: Board, msg: ArduinoIn) -> int:
+    """The device's own status for ``msg`` (no host check on the way)."""
+    try:
+        board.request(msg)
+    except protoduino.CommandRejectedError as error:
+        return error.status
+    return Status.STATUS_OK
+
+
+def test_host_refusals_are_the_devices(board: Board) -> None:
+    """Each PWM refusal the host makes before sending is the one the device makes."""
+    cases: list[tuple[int, type[protoduino.CommandRejectedError], int]] = [
+        (5, TimerInUseError, Status.STATUS_TIMER_IN_USE),  # Timer0: the clock
+        (6, TimerInUseError, Status.STATUS_TIMER_IN_USE),
+        (4, NotSupportedError, Status.STATUS_NOT_SUPPORTED),  # no PWM there
+    ]
+    board.servo(2)
+    cases.append((9, TimerInUseError, Status.STATUS_TIMER_IN_USE))  # Timer1 makes the pulses
+    for pin, error, status in cases:
+        with pytest.raises(error) as refused:
+            board.pwm_output(pin)
+        assert refused.value.status == status and not refused.value.sent
+        msg = ArduinoIn()
+        msg.pwm_init.pin = pin
+        assert _request(board, msg) == status, pin
+    with pytest.raises(protoduino.CommandRejectedError) as refused:
+        board.pwm_output(3).write(256)
+    msg = ArduinoIn()
+    msg.pwm_control.pin, msg.pwm_control.duty = 3, 256
+    assert _request(board, msg) == refused.value.status == Status.STATUS_OUT_OF_RANGE
+
+
+def test_restore_last_drives_the_last_duty_after_a_reboot(sim: SimBoard) -> None:
+    with Board.open(sim.port, restore="last") as board:
+        seen = events(board)
+        motor = board.pwm_output(10, safe=0)
+        motor.write(180)
+        wait_pwm(sim, 10, lambda v: v[-1:] == [180])
+        mark = len(sim.trace())
+        sim.reboot()
+        wait_event(seen, EventKind.RESTORED)
+        # Released by the reboot, up at its safe duty, then the last duty again.
+        wait_pwm(sim, 10, lambda v: v[-1:] == [180] and 0 in v, since=mark)
+
+
+def test_a_firmware_without_servos_is_refused_by_the_host(tmp_path: Path) -> None:
+    """Built with FEATURES="digital_output pwm": the host refuses a servo before sending,
+    naming the feature and how to build it in; what the build has still works."""
+    missing = missing_tool("make", "cc", "avr-gcc", simavr=True)
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+    build.build_runner()
+    build.make(ROOT / "firmware", "avr", "FEATURES=digital_output pwm")
+    elf = ROOT / "build" / "avr-digital_output-pwm" / "protoduino.elf"
+    trace = tmp_path / "trace.jsonl"
+    runner = BoardProcess(runner_command(elf, trace=trace), startup=10.0)
+    try:
+        with Board.open(runner.port) as board:
+            assert board.info.features == {"digital_output", "pwm"}
+            before = board.stats.commands
+            with pytest.raises(FeatureMissingError) as refused:
+                board.servo(9)
+            assert refused.value.feature == "servo" and not refused.value.sent
+            assert 'FEATURES="servo digital_output' in str(refused.value)
+            assert board.stats.commands == before  # nothing went to the device
+            for make in (lambda: board.digital_input(2), lambda: board.counter(2)):
+                with pytest.raises(FeatureMissingError):
+                    make()
+            board.pwm_output(9).write(77)
+    finally:
+        runner.stop(strict=False)
