@@ -1,8 +1,11 @@
-"""PWM outputs through the Board API on both simulated boards, judged at the pin (the trace).
+"""PWM, inputs, counters and interlocks through the Board API on both simulated boards.
 
-The native board traces the duty it is told; the emulated Uno (the real firmware in
-simavr) traces the duty it measures at the pin, from the timers' compare outputs.
-Both write ``{"pin": N, "mode": "pwm", "value": DUTY}``.
+Outputs are judged at the pin (the trace): the native board traces the duty it is told;
+the emulated Uno (the real firmware in simavr) traces the duty it measures at the pin,
+from the timers' compare outputs. Both write ``{"pin": N, "mode": "pwm", "value": DUTY}``.
+Inputs are driven through the board's control socket (on the emulated Uno: the AVR's
+own pins, interrupts and ADC) and judged through the API: what the firmware's input code
+reported is what ``read()``, ``wait_for`` and ``on_change`` see.
 """
 
 from __future__ import annotations
@@ -16,7 +19,13 @@ import protoduino
 import pytest
 from boardprocess import BoardProcess, missing_tool
 from protoduino import Board, Event, EventKind
-from protoduino.errors import FeatureMissingError, NotSupportedError, TimerInUseError
+from protoduino.errors import (
+    FeatureMissingError,
+    InterlockActiveError,
+    NotSupportedError,
+    TimerInUseError,
+)
+from protoduino.inputs import Reading
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard, runner_command
 from protoduino_dev import build
@@ -166,3 +175,100 @@ def test_a_firmware_without_servos_is_refused_by_the_host(tmp_path: Path) -> Non
             board.pwm_output(9).write(77)
     finally:
         runner.stop(strict=False)
+
+
+# --- inputs ----------------------------------------------------------------------------
+
+
+def equals(wanted: int) -> Callable[[int], bool]:
+    return lambda value: value == wanted
+
+
+def test_digital_input_follows_the_pin(board: Board, sim: SimBoard) -> None:
+    sim.set_level(2, 1)
+    button = board.digital_input(2, pull_up=True, debounce_ms=5)
+    assert button.read() is True
+    changes: list[Reading] = []
+    button.on_change(changes.append)
+    for level in (0, 1, 0):
+        sim.set_level(2, level)
+        assert button.wait_for(bool(level), timeout=BOUND) is bool(level)
+    deadline = time.monotonic() + BOUND
+    while [r.value for r in changes] != [False, True, False]:
+        assert time.monotonic() < deadline, changes
+        time.sleep(0.01)
+    times = [r.time_ms for r in changes]
+    assert times == sorted(times)  # the device's clock, in the order the edges came
+    assert board.stats.input_reports >= 4
+
+
+def test_analog_input_reports_what_the_adc_reads(board: Board, sim: SimBoard) -> None:
+    sim.set_analog(14, 100)
+    pot = board.analog_input(14, rate_hz=200, threshold=2)
+    assert pot.read() == 100
+    for counts in (512, 1023, 0, 7):
+        sim.set_analog(14, counts)
+        assert pot.wait_for(equals(counts), timeout=BOUND) == counts
+    sim.set_analog(14, 8)  # within the threshold: no report for it
+    sim.set_analog(14, 300)
+    assert pot.wait_for(lambda v: v == 300, timeout=BOUND) == 300
+
+
+def test_six_analog_channels_at_once(board: Board, sim: SimBoard) -> None:
+    pots = {pin: board.analog_input(pin, rate_hz=200) for pin in board.info.analog_pins}
+    assert sorted(pots) == [14, 15, 16, 17, 18, 19]
+    for pin in pots:
+        sim.set_analog(pin, 10 * pin)
+    for pin, pot in pots.items():
+        assert pot.wait_for(equals(10 * pin), timeout=BOUND) == 10 * pin
+
+
+def test_counter_counts_every_pulse(board: Board, sim: SimBoard) -> None:
+    sim.set_level(3, 0)
+    wheel = board.counter(3, edge="rising", rate_hz=50)
+    assert wheel.read() == 0
+    sim.pulses(3, 500, 2000)  # 0.25 s of a 2 kHz encoder
+    assert wheel.wait_for(lambda n: n >= 500, timeout=BOUND) == 500
+    sim.pulses(3, 100, 1000)
+    assert wheel.wait_for(lambda n: n >= 600, timeout=BOUND) == 600
+
+
+# --- interlocks ------------------------------------------------------------------------
+
+
+def test_a_bumper_stops_the_motors_on_the_device(sim: SimBoard) -> None:
+    """The issue's new user: a bumper that must stop the drive motors whatever the host does.
+    Judged at the pin: on the emulated Uno the motor's PWM is at 0 within 1 ms of the edge
+    (board time, the trace's clock)."""
+    with Board.open(sim.port) as board:
+        seen = events(board)
+        left, right = board.pwm_output(3, safe=0), board.pwm_output(11, safe=0)
+        sim.set_level(2, 1)
+        bumper = board.digital_input(2, pull_up=True, interlock="low")
+        board.pose({left: 200, right: 150})
+        wait_pwm(sim, 3, lambda v: v[-1:] == [200])
+        wait_pwm(sim, 11, lambda v: v[-1:] == [150])
+        mark = len(sim.trace())
+        hit = sim.set_level(2, 0)  # the bumper closes (to ground)
+        wait_pwm(sim, 3, lambda v: v[-1:] == [0], since=mark)
+        wait_pwm(sim, 11, lambda v: v[-1:] == [0], since=mark)
+        stopped = [e for e in sim.trace()[mark:] if e["pin"] in (3, 11) and e["value"] == 0]
+        reaction = max(e["t"] for e in stopped[:2]) - hit
+        assert 0 <= reaction <= 0.001, f"{reaction * 1000:.3f} ms from the bumper to the motors"
+        event = wait_event(seen, EventKind.FAILSAFE)
+        assert event.details["active"] and event.details["cause"] == "interlock"
+        assert event.details["pin"] == 2
+        assert left.value == 0 and right.value == 0
+        with pytest.raises(InterlockActiveError) as refused:
+            left.write(100)
+        assert refused.value.sent  # the device refused it
+        with pytest.raises(InterlockActiveError):
+            board.pose({left: 100, right: 100})
+        with pytest.raises(InterlockActiveError):
+            board.clear_interlock()  # the bumper is still pressed
+        sim.set_level(2, 1)
+        assert bumper.wait_for(True, timeout=BOUND) is True
+        board.clear_interlock()
+        assert pwm_values(sim.trace()[mark:], 3)[-1] == 0  # safe until commanded
+        left.write(120)
+        wait_pwm(sim, 3, lambda v: v[-1:] == [120], since=mark)
