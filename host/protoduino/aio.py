@@ -454,11 +454,11 @@ class Board:
         return await self._first(Counter(self, await _wait(future)))
 
     async def _first(self, made: InputT) -> InputT:
-        """Wait (up to the call timeout) for an input's first value, reported after its Ack;
+        """Wait (up to the board's round_time) for an input's first value, reported after its Ack;
         a report lost on the line leaves read() None until the next one, as in the blocking
         form."""
         with contextlib.suppress(InputTimeoutError, BoardClosedError):
-            await made._wait(lambda _reading: True, self.sync.call_timeout)
+            await made._wait(lambda _reading: True, self.sync.round_time)
         return made
 
     async def clear_interlock(self) -> None:

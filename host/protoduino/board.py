@@ -1131,7 +1131,7 @@ class Board:
         return on_ok
 
     def _input(self, msg: ArduinoIn, on_ok: Callable[[], None], make: Callable[[], T]) -> T:
-        """Send an input's Init, then wait (up to the call timeout) for its first value.
+        """Send an input's Init, then wait (up to :attr:`round_time`) for its first value.
 
         The device reports the value right after the Init's Ack. Should that report
         be lost on the line, the input is still configured: ``read()`` says None
@@ -1141,7 +1141,7 @@ class Board:
         created = make()
         assert isinstance(created, DigitalInput | AnalogInput | Counter)
         with contextlib.suppress(ProtoduinoError):
-            created._wait(lambda _reading: True, self.call_timeout)
+            created._wait(lambda _reading: True, self.round_time)
         return created
 
     def clear_interlock(self) -> None:
@@ -1375,6 +1375,12 @@ class Board:
         returns at once and is allowed; waiting on its future there is not.
         """
         self._transport.add_monitor(monitor)
+
+    @property
+    def round_time(self) -> float:
+        """How long a call may await its Ack once sent, every retry included:
+        ``ack_timeout * (max_retries + 1)``."""
+        return self._rpc.round_time
 
     @property
     def inputs(self) -> InputTable:

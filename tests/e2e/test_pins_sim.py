@@ -10,6 +10,7 @@ reported is what ``read()``, ``wait_for`` and ``on_change`` see.
 
 from __future__ import annotations
 
+import asyncio
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -18,7 +19,7 @@ from typing import Any
 import protoduino
 import pytest
 from boardprocess import BoardProcess, missing_tool
-from protoduino import Board, Event, EventKind
+from protoduino import Board, Event, EventKind, aio
 from protoduino.errors import (
     FeatureMissingError,
     InterlockActiveError,
@@ -272,3 +273,23 @@ def test_a_bumper_stops_the_motors_on_the_device(sim: SimBoard) -> None:
         assert pwm_values(sim.trace()[mark:], 3)[-1] == 0  # safe until commanded
         left.write(120)
         wait_pwm(sim, 3, lambda v: v[-1:] == [120], since=mark)
+
+
+def test_aio_inputs_without_blocking_the_loop(sim: SimBoard) -> None:
+    async def main() -> None:
+        async with await aio.open(sim.port) as board:
+            await asyncio.to_thread(sim.set_level, 2, 1)
+            button = await board.digital_input(2, pull_up=True)
+            assert button.read() is True
+            motor = await board.pwm_output(3)
+            await motor.write(64)
+            async with button.changes() as changes:
+                await asyncio.to_thread(sim.set_level, 2, 0)
+                async with asyncio.timeout(BOUND):
+                    reading = await anext(changes)
+            assert reading.value is False and reading.pin == 2
+            await asyncio.to_thread(sim.set_level, 2, 1)
+            assert await button.wait_for(True, timeout=BOUND) is True
+        wait_pwm(sim, 3, lambda v: 64 in v)
+
+    asyncio.run(main())
