@@ -30,7 +30,7 @@ static const pd_board_info_t uno = {
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
     .pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11),
     .analog_pins = 0x3FUL << 14,              /* A0..A5 */
-    .counter_pins = 0,                        /* set with the counters (pd_avr_inputs.c) */
+    .counter_pins = (1UL << 2) | (1UL << 3),  /* INT0, INT1 */
     .servo_timer_pins = (1UL << 9) | (1UL << 10),
     .clock_timer_pins = (1UL << 5) | (1UL << 6),
 };
@@ -91,6 +91,92 @@ void pd_hal_pwm_release(void *hal, uint8_t pin)
     (void)hal;
 #if PD_FEATURE_PWM
     pd_avr_pwm_release(pin);
+#else
+    (void)pin;
+#endif
+}
+
+/* Inputs: only the features built reach the drivers (pd_avr_inputs.c). */
+void pd_hal_input_config(void *hal, uint8_t pin, bool pull_up)
+{
+    (void)hal;
+#if PD_FEATURE_DIGITAL_INPUT || PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER
+    pd_avr_input_config(pin, pull_up, true);
+#else
+    (void)pin;
+    (void)pull_up;
+#endif
+}
+
+void pd_hal_input_release(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_DIGITAL_INPUT || PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER
+    pd_avr_input_config(pin, false, false);
+#else
+    (void)pin;
+#endif
+}
+
+bool pd_hal_digital_read(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_DIGITAL_INPUT
+    return pd_avr_pin_read(pin);
+#else
+    (void)pin;
+    return false;
+#endif
+}
+
+void pd_hal_analog_start(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_ANALOG_INPUT
+    pd_avr_analog_start(pin);
+#else
+    (void)pin;
+#endif
+}
+
+bool pd_hal_analog_done(void *hal, uint16_t *counts)
+{
+    (void)hal;
+#if PD_FEATURE_ANALOG_INPUT
+    return pd_avr_analog_done(counts);
+#else
+    *counts = 0;
+    return true;
+#endif
+}
+
+void pd_hal_counter_start(void *hal, uint8_t pin, uint8_t edge)
+{
+    (void)hal;
+#if PD_FEATURE_COUNTER
+    pd_avr_counter_start(pin, edge);
+#else
+    (void)pin;
+    (void)edge;
+#endif
+}
+
+uint32_t pd_hal_counter_read(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_COUNTER
+    return pd_avr_counter_read(pin);
+#else
+    (void)pin;
+    return 0;
+#endif
+}
+
+void pd_hal_counter_stop(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_COUNTER
+    pd_avr_counter_stop(pin);
 #else
     (void)pin;
 #endif

@@ -19,18 +19,16 @@
 #include "pd_avr.h"
 #include "pd_link.h"
 
-#define RX_MASK (PD_AVR_RX_SIZE - 1u)
 
 typedef char pd_assert_tx_size[PD_AVR_TX_SIZE <= 255 ? 1 : -1];
 /* One slot stays free in a ring: the rest must take a command's replies and a report. */
 typedef char pd_assert_tx_room[PD_AVR_TX_SIZE - 1u >= PD_TX_RESERVE ? 1 : -1];
 
-typedef char pd_assert_rx_pow2[(PD_AVR_RX_SIZE & RX_MASK) == 0 && PD_AVR_RX_SIZE <= 256 ? 1 : -1];
+typedef char pd_assert_rx_size[PD_AVR_RX_SIZE <= 255 ? 1 : -1];
 
 static volatile uint8_t rx_buf[PD_AVR_RX_SIZE];
 static volatile uint8_t rx_head; /* written by the ISR */
 static volatile uint8_t rx_tail; /* written by the main loop */
-static volatile uint16_t rx_dropped;
 
 static volatile uint8_t tx_buf[PD_AVR_TX_SIZE];
 static volatile uint8_t tx_head; /* written by the main loop */
@@ -59,10 +57,9 @@ ISR(USART_RX_vect)
 {
     uint8_t byte = UDR0;
     sei();
-    uint8_t next = (uint8_t)((rx_head + 1u) & RX_MASK);
+    uint8_t next = (uint8_t)(rx_head + 1u == PD_AVR_RX_SIZE ? 0u : rx_head + 1u);
     if (next == rx_tail) {
-        rx_dropped++; /* the frame it belonged to fails its CRC; the host retries */
-        return;
+        return; /* lost: the frame it belonged to fails its CRC; the host retries */
     }
     rx_buf[rx_head] = byte;
     rx_head = next;
@@ -79,7 +76,7 @@ int16_t pd_avr_uart_peek(void)
 
 void pd_avr_uart_drop(void)
 {
-    rx_tail = (uint8_t)((rx_tail + 1u) & RX_MASK);
+    rx_tail = (uint8_t)(rx_tail + 1u == PD_AVR_RX_SIZE ? 0u : rx_tail + 1u);
 }
 
 bool pd_avr_uart_rx_empty(void)
@@ -201,14 +198,4 @@ ISR(USART_UDRE_vect, ISR_NAKED)
         "reti\n\t"
         :
         : [idle] "M"(UCSR0B_TX_IDLE), [ucsrb] "n"(_SFR_MEM_ADDR(UCSR0B)));
-}
-
-uint16_t pd_avr_uart_rx_dropped(void)
-{
-    uint16_t n;
-    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
-    {
-        n = rx_dropped;
-    }
-    return n;
 }

@@ -41,6 +41,9 @@ typedef void (*pd_periodic_fn)(struct pd_core *core, uint32_t now_ms);
  */
 typedef bool (*pd_report_fn)(struct pd_core *core, uint8_t slot, protoduino_ArduinoOut *out);
 
+/* The message a report source built went out (NULL: nothing to do). */
+typedef void (*pd_report_sent_fn)(struct pd_core *core, const protoduino_ArduinoOut *out);
+
 /* Report slots: one bit each in pd_core_t.report_pending. */
 #define PD_REPORT_SLOTS 8u
 
@@ -55,9 +58,10 @@ typedef struct pd_core {
     pd_dedupe_t dedupe;
     pd_outputs_t outputs;
     pd_failsafe_t failsafe;
-    uint32_t decode_errors; /* COMMAND payloads that did not decode, since boot */
+    uint16_t decode_errors; /* COMMAND payloads that did not decode, since boot (wraps at 2^16) */
     pd_periodic_fn periodic; /* NULL: none */
-    pd_report_fn report;     /* NULL: no reports */
+    pd_report_fn report;     /* NULL: no reports (pd_core_init: the inputs' InputReport) */
+    pd_report_sent_fn report_sent;
     uint8_t report_pending;  /* bit N: slot N has a value to send */
     uint8_t last_tick;       /* low byte of the millisecond the hook last ran */
 } pd_core_t;

@@ -26,7 +26,8 @@ int pd_dedupe_find(const pd_dedupe_t *dd, uint32_t id)
     const uint8_t first = *(const uint8_t *)&id;
     for (uint8_t i = 0; i < dd->count; i++) {
         if (*(const uint8_t *)&dd->id[i] == first && dd->id[i] == id) {
-            return dd->status[i];
+            uint8_t pair = dd->status[i >> 1];
+            return (i & 1u) ? pair >> 4 : pair & 0x0Fu;
         }
     }
     return -1;
@@ -34,8 +35,12 @@ int pd_dedupe_find(const pd_dedupe_t *dd, uint32_t id)
 
 void pd_dedupe_add(pd_dedupe_t *dd, uint32_t id, uint8_t status)
 {
+    typedef char fits[(_protoduino_Status_MAX < 16) ? 1 : -1];
+    (void)sizeof(fits);
     dd->id[dd->next] = id;
-    dd->status[dd->next] = status;
+    uint8_t *pair = &dd->status[dd->next >> 1];
+    *pair = (dd->next & 1u) ? (uint8_t)((*pair & 0x0Fu) | (status << 4))
+                            : (uint8_t)((*pair & 0xF0u) | (status & 0x0Fu));
     dd->next = (uint8_t)((dd->next + 1u) % PD_DEDUPE_WINDOW);
     if (dd->count < PD_DEDUPE_WINDOW) {
         dd->count++;
@@ -243,6 +248,36 @@ static protoduino_Status cmd_pwm_control(pd_core_t *core, pd_cmd_t *cmd)
     return pd_outputs_pwm_control(&core->outputs, core->hal, &cmd->in->data.pwm_control);
 }
 
+static protoduino_Status cmd_digital_input_init(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_inputs_digital_init(core, &cmd->in->data.digital_input_init);
+}
+
+static protoduino_Status cmd_analog_input_init(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_inputs_analog_init(core, &cmd->in->data.analog_input_init);
+}
+
+static protoduino_Status cmd_counter_init(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_inputs_counter_init(core, &cmd->in->data.counter_init);
+}
+
+static void notify_interlock_cleared(pd_core_t *core)
+{
+    pd_dispatch_send_failsafe(core, false, protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK);
+}
+
+static protoduino_Status cmd_clear_interlock(pd_core_t *core, pd_cmd_t *cmd)
+{
+    bool cleared;
+    protoduino_Status status = pd_inputs_clear_interlock(core, &cleared);
+    if (cleared) {
+        cmd->then = notify_interlock_cleared;
+    }
+    return status;
+}
+
 static protoduino_Status cmd_pose(pd_core_t *core, pd_cmd_t *cmd)
 {
     uint8_t bad;
@@ -315,6 +350,10 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
     X(digital_control, PD_FEATURE_DIGITAL_OUTPUT, PD_CMD_COMMANDS, 0)        \
     X(pwm_init, PD_FEATURE_PWM, 0, 0)                                        \
     X(pwm_control, PD_FEATURE_PWM, PD_CMD_COMMANDS, 0)                       \
+    X(digital_input_init, PD_FEATURE_DIGITAL_INPUT, 0, 0)                    \
+    X(analog_input_init, PD_FEATURE_ANALOG_INPUT, 0, 0)                      \
+    X(counter_init, PD_FEATURE_COUNTER, 0, 0)                                \
+    X(clear_interlock, PD_FEATURE_DIGITAL_INPUT, 0, 0)                       \
     X(stop, 1, 0, 0)                                                         \
     X(pose, 1, PD_CMD_COMMANDS, 0)                                           \
     X(read_outputs, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)        \
@@ -395,6 +434,7 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
     protoduino_ArduinoOut out;
     out.data.ack.which_result = 0;
     out.data.ack.refused_item = 0;
+    out.data.ack.has_failsafe = false;
     /* msg is core->in, a constant address once LTO sees the whole program: the
      * AVR would then reach every field with 4-byte lds/sts instead of 2-byte
      * loads relative to a pointer register (108 B of flash). The empty asm
@@ -436,6 +476,9 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
         /* The timer ran out (pd_core_poll acts on it within the millisecond) and no
          * liveness message came since. */
         status = protoduino_Status_STATUS_FAILSAFE_EXPIRED;
+    } else if (known && (entry.flags & PD_CMD_COMMANDS) && core->outputs.inputs.latched) {
+        /* An interlock tripped: outputs stay safe until ClearInterlock. */
+        status = protoduino_Status_STATUS_INTERLOCK_ACTIVE;
     } else if (known) {
         if (entry.result != 0) {
             memset(&out.data.ack.result, 0, sizeof(out.data.ack.result));

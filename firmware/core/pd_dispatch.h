@@ -25,7 +25,8 @@ struct pd_core;
  */
 typedef struct pd_dedupe {
     uint32_t id[PD_DEDUPE_WINDOW];
-    uint8_t status[PD_DEDUPE_WINDOW];
+    /* Two statuses a byte (every Status is below 16): 8 B of the Uno's RAM. */
+    uint8_t status[(PD_DEDUPE_WINDOW + 1u) / 2u];
     uint8_t next;  /* slot the next entry overwrites */
     uint8_t count; /* valid entries, up to PD_DEDUPE_WINDOW */
 } pd_dedupe_t;

@@ -22,19 +22,17 @@
 #ifndef PD_FEATURE_DIGITAL_OUTPUT
 #define PD_FEATURE_DIGITAL_OUTPUT 1
 #endif
-/* Not built yet (issue 21 in progress): off until their code exists, so that
- * DeviceInfo never claims a mode the firmware cannot do. */
 #ifndef PD_FEATURE_DIGITAL_INPUT
-#define PD_FEATURE_DIGITAL_INPUT 0
+#define PD_FEATURE_DIGITAL_INPUT 1
 #endif
 #ifndef PD_FEATURE_ANALOG_INPUT
-#define PD_FEATURE_ANALOG_INPUT 0
+#define PD_FEATURE_ANALOG_INPUT 1
 #endif
 #ifndef PD_FEATURE_PWM
 #define PD_FEATURE_PWM 1
 #endif
 #ifndef PD_FEATURE_COUNTER
-#define PD_FEATURE_COUNTER 0
+#define PD_FEATURE_COUNTER 1
 #endif
 
 /* DeviceInfo.features: bit N set for each Feature N built in (protoduino.proto, enum Feature). */

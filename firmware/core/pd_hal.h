@@ -95,6 +95,32 @@ void pd_hal_pwm_write(void *hal, uint8_t pin, uint8_t duty);
 void pd_hal_pwm_release(void *hal, uint8_t pin);
 
 /*
+ * Inputs (pd_inputs.c). pd_hal_input_config makes `pin` an input, with its
+ * pull-up if asked, and (where the board can) lets a change of it wake the
+ * main loop; pd_hal_input_release: an input without pull-up, as at power-up.
+ * pd_hal_digital_read: the level at the pin now.
+ */
+void pd_hal_input_config(void *hal, uint8_t pin, bool pull_up);
+void pd_hal_input_release(void *hal, uint8_t pin);
+bool pd_hal_digital_read(void *hal, uint8_t pin);
+
+/*
+ * Analog inputs (pins in analog_pins), one conversion at a time and never
+ * waited for: pd_hal_analog_start begins one, pd_hal_analog_done is true, with
+ * the 10-bit counts, once it has finished (the loop asks again on its next pass).
+ */
+void pd_hal_analog_start(void *hal, uint8_t pin);
+bool pd_hal_analog_done(void *hal, uint16_t *counts);
+
+/*
+ * Pulse counters (pins in counter_pins): count the pin's edges (`edge`: the
+ * Edge enum) from 0, in an interrupt; read the count (wraps at 2^32); stop.
+ */
+void pd_hal_counter_start(void *hal, uint8_t pin, uint8_t edge);
+uint32_t pd_hal_counter_read(void *hal, uint8_t pin);
+void pd_hal_counter_stop(void *hal, uint8_t pin);
+
+/*
  * An identifier of this power-up, read once by pd_core_init(): it must differ
  * from the previous power-up's, so that a host can tell a reboot from a
  * reconnect (docs/protocol.md section 5). The Uno counts its boots in EEPROM.

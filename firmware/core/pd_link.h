@@ -36,13 +36,14 @@
 #include <stdint.h>
 
 #include "pd_cobs.h"
+#include "pd_encode.h"
 #include "pd_protocol.h"
 #include "protoduino.pb.h"
 
 struct pd_core;
 
 /* Largest payload the device sends: one ArduinoOut (CONTROL payloads are <= 11 B). */
-#define PD_TX_MAX_PAYLOAD protoduino_ArduinoOut_size
+#define PD_TX_MAX_PAYLOAD PD_ENCODE_MAX
 /* The longest packet the device stores: a COMMAND with the largest ArduinoIn
  * nanopb can decode (every field bounded in protoduino.options). A longer packet
  * cannot carry a valid command, so it is dropped as a length error as soon as its
@@ -58,14 +59,18 @@ struct pd_core;
 #define PD_TX_CONTROL_MAX PD_TX_FRAME_BYTES(6u)
 #define PD_TX_NOTICE_MAX PD_TX_FRAME_BYTES(12u)
 /*
- * The most one received frame can make the device send: the largest Ack and
- * the notice that may follow it (or a DecodeError and its Ack, which are
- * smaller). A frame is acted upon only when the transmit queue has this much
- * room; every platform's queue holds more. An EVENT DESYNC sent before the Ack
- * is not counted (every byte of the Uno's ring is stack lost): after a desync,
- * which a clean line never causes, an Ack may not fit and is retransmitted.
+ * The most one received frame can make the device send: the largest Ack
+ * alone, or an Ack and the notice that follows it (a Failsafe after a Stop, a
+ * liveness message or a ClearInterlock: of their Acks only a Ping's is large,
+ * its echo and its failsafe state), or a DecodeError and its Ack (smaller).
+ * A frame is acted upon only when the transmit queue has this much room; every
+ * platform's queue holds more. An EVENT DESYNC sent before the Ack is not
+ * counted (every byte of the Uno's ring is RAM): after a desync, which a clean
+ * line never causes, an Ack may not fit and is retransmitted.
  */
-#define PD_TX_RESERVE (PD_TX_FRAME_MAX + PD_TX_NOTICE_MAX)
+#define PD_TX_LIVENESS_ACK_MAX (2u + 8u + 66u + 2u + protoduino_Failsafe_size)
+#define PD_TX_RESERVE                                                        \
+    PD_ENCODE_MAX2(PD_TX_FRAME_MAX, PD_TX_FRAME_BYTES(PD_TX_LIVENESS_ACK_MAX) + PD_TX_NOTICE_MAX)
 /*
  * A platform's transmit queue holds at least the reserve (checked at compile
  * time by each platform). A report goes in whenever it fits and no command

@@ -97,7 +97,7 @@ static void pwm_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 }
 
 /* Inputs have no safe value (the failsafe leaves them reading); released, the
- * pin is an input without pull-up, as at power-up. */
+ * pin is an input without pull-up, as at power-up (pd_inputs.c). */
 static void input_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
     (void)out;
@@ -106,11 +106,37 @@ static void input_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
     (void)slot;
 }
 
-static void input_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+static uint8_t dinput_slots(void *hal)
 {
-    (void)out;
-    (void)slot;
-    pd_hal_digital_release(hal, pin);
+    (void)hal;
+    return PD_MAX_DIGITAL_INPUTS;
+}
+
+static uint8_t ainput_slots(void *hal)
+{
+    (void)hal;
+    return PD_MAX_ANALOG_INPUTS;
+}
+
+static uint8_t counter_slots(void *hal)
+{
+    (void)hal;
+    return PD_MAX_COUNTERS;
+}
+
+static void dinput_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    pd_inputs_release(out, hal, pin, PD_MODE_DIGITAL_INPUT, slot);
+}
+
+static void ainput_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    pd_inputs_release(out, hal, pin, PD_MODE_ANALOG_INPUT, slot);
+}
+
+static void counter_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    pd_inputs_release(out, hal, pin, PD_MODE_COUNTER, slot);
 }
 
 static void servo_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
@@ -150,9 +176,9 @@ static void digital_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t s
     X(PD_MODE_DIGITAL, by_pin, digital_safe, digital_release)                \
     X(PD_MODE_SERVO, servo_slots, servo_safe, servo_release)                 \
     X(PD_MODE_PWM, pwm_slots, pwm_safe, pwm_release)                         \
-    X(PD_MODE_DIGITAL_INPUT, by_pin, input_safe, input_release)              \
-    X(PD_MODE_ANALOG_INPUT, by_pin, input_safe, input_release)               \
-    X(PD_MODE_COUNTER, by_pin, input_safe, input_release)
+    X(PD_MODE_DIGITAL_INPUT, dinput_slots, input_safe, dinput_release)       \
+    X(PD_MODE_ANALOG_INPUT, ainput_slots, input_safe, ainput_release)        \
+    X(PD_MODE_COUNTER, counter_slots, input_safe, counter_release)
 
 #define PD_MODE_ONE(mode, slots_, safe_, release_) +1
 typedef char pd_assert_every_mode_listed[(0 PD_MODES(PD_MODE_ONE)) == PD_MODE_COUNT - 1 ? 1 : -1];
@@ -202,6 +228,7 @@ static void mode_release(uint8_t mode, pd_outputs_t *out, void *hal, uint8_t pin
 void pd_outputs_init(pd_outputs_t *out)
 {
     memset(out, 0, sizeof(*out));
+    pd_inputs_init(&out->inputs);
 }
 
 /* Pin checks shared by every Init and Control, in the contract's order. */

@@ -30,6 +30,7 @@
 
 #include "pd_features.h"
 #include "pd_hal.h"
+#include "pd_inputs.h"
 #include "protoduino.pb.h"
 
 /* Compile-time capacity; a board reports its real figures in pd_board_info_t. */
@@ -92,6 +93,7 @@ typedef struct pd_outputs {
     uint32_t digital_safe;  /* bit N: safe level of pin N */
     uint32_t digital_level; /* bit N: current level of pin N */
     uint32_t stepped_at;    /* pd_hal_millis() of the last speed step */
+    pd_inputs_t inputs;     /* the input modes' state (pd_inputs.h) */
 } pd_outputs_t;
 
 

@@ -107,6 +107,7 @@ static void test_report_newest_value_replaces_unsent(void)
     char last[64] = "";
     t_active(&d);
     d.core.report = test_report;
+    d.core.report_sent = NULL;
     report_calls = 0;
 
     /* No room for it: the report waits, the bit stays. */
@@ -136,6 +137,7 @@ static void test_reply_goes_before_pending_report(void)
     char last[64] = "";
     t_active(&d);
     d.core.report = test_report;
+    d.core.report_sent = NULL;
     report_value[0] = 42;
     pd_core_report(&d.core, 0);
     /* A command arriving in the same pass is answered first; the report follows. */
@@ -156,6 +158,7 @@ static void test_report_waits_for_a_command_under_way(void)
     char last[64] = "";
     t_active(&d);
     d.core.report = test_report;
+    d.core.report_sent = NULL;
     report_value[2] = 7;
     pd_core_report(&d.core, 2);
     /* Half a command frame is in: the report waits for its Ack. */
@@ -176,6 +179,7 @@ static void test_one_report_per_pass_lowest_slot_first(void)
     char last[64] = "";
     t_active(&d);
     d.core.report = test_report;
+    d.core.report_sent = NULL;
     report_value[1] = 10;
     report_value[5] = 50;
     pd_core_report(&d.core, 5);
@@ -195,6 +199,7 @@ static void test_no_report_while_idle(void)
     t_boot(&d);
     fake_clear(&d.hal);
     d.core.report = test_report;
+    d.core.report_sent = NULL;
     pd_core_report(&d.core, 0);
     pd_core_poll(&d.core);
     CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);

@@ -1,0 +1,144 @@
+/*
+ * Inputs on the Uno (pd_hal.h, pd_inputs.c).
+ *
+ * - Digital inputs read PINx. A configured input also wakes the main loop on
+ *   every change (its pin-change interrupt, whose handler does nothing): the
+ *   loop sleeps between interrupts, and without this an input's edge would
+ *   wait for the next 1 ms clock tick to be seen. An interlock reacts within
+ *   one pass of the loop (tens of microseconds), not within a millisecond.
+ * - Analog inputs: one conversion at a time, never waited for; the ADC's
+ *   interrupt (which does nothing either) wakes the loop when it is done, so
+ *   conversions follow each other at the ADC's pace (13 ADC clocks at
+ *   125 kHz: 104 us) rather than the clock tick's. AVCC reference, 10 bits.
+ * - Counters: INT0 (pin 2) and INT1 (pin 3), each edge counted in its
+ *   interrupt (rising, falling or both, chosen in EICRA). What rate loses no
+ *   edge is measured (docs/protocol.md, Counters): an edge is lost only when
+ *   two come before the handler has run once.
+ */
+#include <avr/interrupt.h>
+#include <avr/io.h>
+#include <stdbool.h>
+#include <util/atomic.h>
+
+#include "pd_avr.h"
+#include "pd_avr_pins.h"
+#include "pd_features.h"
+
+#if PD_FEATURE_DIGITAL_INPUT || PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER
+
+/* The pin's pin-change mask register and its bit there (PCINT0..23 follow the ports). */
+static volatile uint8_t *pcmsk(uint8_t pin, uint8_t *bit, uint8_t *group)
+{
+    volatile uint8_t *port = pd_avr_port(pin, bit);
+    if (port == &PORTB) {
+        *group = _BV(PCIE0);
+        return &PCMSK0;
+    }
+    if (port == &PORTC) {
+        *group = _BV(PCIE1);
+        return &PCMSK1;
+    }
+    *group = _BV(PCIE2);
+    return &PCMSK2;
+}
+
+void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
+{
+    uint8_t bit;
+    uint8_t group;
+    volatile uint8_t *mask = pcmsk(pin, &bit, &group);
+    pd_avr_pin_set(pin, false, pull_up); /* an input; PORT's bit is the pull-up */
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        if (wake) {
+            *mask |= bit;
+            PCICR |= group;
+        } else {
+            *mask &= (uint8_t)~bit;
+        }
+    }
+}
+
+bool pd_avr_pin_read(uint8_t pin)
+{
+    uint8_t bit;
+    volatile uint8_t *port = pd_avr_port(pin, &bit);
+    /* PINx sits two below PORTx on every port (datasheet, register summary). */
+    return (*(port - 2) & bit) != 0;
+}
+
+/* They only wake the loop, which reads the pins itself. */
+EMPTY_INTERRUPT(PCINT0_vect);
+EMPTY_INTERRUPT(PCINT1_vect);
+EMPTY_INTERRUPT(PCINT2_vect);
+
+#endif
+
+#if PD_FEATURE_ANALOG_INPUT
+
+void pd_avr_analog_start(uint8_t pin)
+{
+    ADMUX = (uint8_t)(_BV(REFS0) | ((pin - 14u) & 0x07u)); /* AVCC, channel A0..A5 */
+    DIDR0 |= (uint8_t)_BV((pin - 14u) & 0x07u);             /* no digital input buffer there */
+    ADCSRA = _BV(ADEN) | _BV(ADSC) | _BV(ADIE) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0);
+}
+
+bool pd_avr_analog_done(uint16_t *counts)
+{
+    if (ADCSRA & _BV(ADSC)) {
+        return false;
+    }
+    *counts = ADC;
+    return true;
+}
+
+EMPTY_INTERRUPT(ADC_vect);
+
+#endif
+
+#if PD_FEATURE_COUNTER
+
+static volatile uint32_t counts[2]; /* INT0 (pin 2), INT1 (pin 3) */
+
+ISR(INT0_vect)
+{
+    counts[0]++;
+}
+
+ISR(INT1_vect)
+{
+    counts[1]++;
+}
+
+/* EICRA's ISCn1:ISCn0 for an Edge (protoduino.proto): rising 11, falling 10, both 01. */
+static const uint8_t sense[3] = {3u, 2u, 1u};
+
+void pd_avr_counter_start(uint8_t pin, uint8_t edge)
+{
+    uint8_t n = pin == 3u ? 1u : 0u;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        EIMSK &= (uint8_t)~_BV(n);
+        EICRA = (uint8_t)((EICRA & ~(3u << (2u * n))) | (sense[edge < 3u ? edge : 2u] << (2u * n)));
+        EIFR = _BV(n); /* an edge from before does not count */
+        counts[n] = 0;
+        EIMSK |= _BV(n);
+    }
+}
+
+uint32_t pd_avr_counter_read(uint8_t pin)
+{
+    uint32_t n;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        n = counts[pin == 3u ? 1u : 0u];
+    }
+    return n;
+}
+
+void pd_avr_counter_stop(uint8_t pin)
+{
+    EIMSK &= (uint8_t)~_BV(pin == 3u ? 1u : 0u);
+}
+
+#endif
