@@ -12,7 +12,7 @@ from protoduino.cli.ports import classify
 from protoduino.simboard import SimBoard
 from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
 
-MINE = ["ports", "ping", "servo", "pin", "info", "monitor", "demo"]
+MINE = ["ports", "ping", "servo", "pin", "pwm", "read", "watch", "info", "monitor", "demo"]
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
