@@ -19,6 +19,9 @@ void pd_inputs_init(pd_inputs_t *in)
     in->adc_slot = NO_SLOT;
 }
 
+#define PD_ANY_INPUT (PD_FEATURE_DIGITAL_INPUT || PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER)
+
+#if PD_ANY_INPUT
 /* Something changed: a report is due; joining one that is pending counts as coalesced. */
 static void mark_dirty(pd_core_t *core)
 {
@@ -31,6 +34,7 @@ static void mark_dirty(pd_core_t *core)
     pd_core_report(core, PD_INPUTS_SLOT);
 }
 
+#if PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER
 /* The pin that `mode` holds with `slot`; PD_MAX_PINS if none. */
 static uint8_t pin_of(const pd_outputs_t *out, uint8_t mode, uint8_t slot)
 {
@@ -41,6 +45,7 @@ static uint8_t pin_of(const pd_outputs_t *out, uint8_t mode, uint8_t slot)
     }
     return pin;
 }
+#endif
 
 /* The checks an input Init shares: the pin can do `mode` (`capable` is the board's mask). */
 static protoduino_Status claim_input(pd_core_t *core, uint8_t pin, uint8_t mode, uint32_t capable,
@@ -56,6 +61,7 @@ static protoduino_Status claim_input(pd_core_t *core, uint8_t pin, uint8_t mode,
     }
     return pd_pins_claim(out, core->hal, pin, mode, slot);
 }
+#endif /* PD_ANY_INPUT */
 
 /* --- digital inputs and interlocks --------------------------------------- */
 
@@ -213,53 +219,84 @@ protoduino_Status pd_inputs_analog_init(pd_core_t *core, const protoduino_Analog
     a->threshold = msg->threshold;
     a->sent = PD_ANALOG_UNSENT; /* the first sample is reported whatever it is */
     a->sampled_at = (uint16_t)(pd_hal_millis(core->hal) - interval); /* sampled at once */
-    if (in->adc_slot == slot) {
-        in->adc_slot = NO_SLOT; /* a conversion under way for the old settings: its value still counts */
-    }
-    return protoduino_Status_STATUS_OK;
+    return protoduino_Status_STATUS_OK; /* a conversion under way for it still counts */
 }
 
+/* A finished conversion of `slot`: stored; due for a report if it moved past the
+ * threshold, is the first since the Init, or its heartbeat came. */
+static void analog_sampled(pd_inputs_t *in, uint8_t slot, uint16_t counts)
+{
+    pd_ainput_t *a = &in->analog[slot];
+    a->value = counts;
+    uint16_t moved = counts > a->sent ? (uint16_t)(counts - a->sent) : (uint16_t)(a->sent - counts);
+    if (a->heartbeat_left > 0) {
+        a->heartbeat_left--;
+    }
+    if (a->sent == PD_ANALOG_UNSENT || moved > a->threshold || a->heartbeat_left == 0) {
+        in->analog_dirty = (uint8_t)(in->analog_dirty | (1u << slot));
+        in->analog_fresh = 1;
+    }
+}
+
+/* The next input whose period is up, round-robin after `after` (so that no
+ * input starves another when the converter cannot keep up); NO_SLOT if none. */
+static uint8_t analog_due(pd_inputs_t *in, uint8_t after, uint16_t now16)
+{
+    uint8_t slot = after;
+    for (uint8_t n = 0; n < PD_MAX_ANALOG_INPUTS; n++) {
+        slot = (uint8_t)(slot + 1u >= PD_MAX_ANALOG_INPUTS ? 0u : slot + 1u);
+        pd_ainput_t *a = &in->analog[slot];
+        if (a->interval != 0 && (uint16_t)(now16 - a->sampled_at) >= a->interval) {
+            return slot;
+        }
+    }
+    return NO_SLOT;
+}
+
+/*
+ * One conversion at a time, started as soon as the previous one is done: the
+ * due inputs are sampled one after the other, and the samples of one round
+ * (every input due, once) travel in one report, marked when the round ends (no
+ * input due, or the next due one comes round again). A converter that is done
+ * at once (the simulated board's) takes a whole round in one pass.
+ */
 static void poll_analog(pd_core_t *core, uint32_t now)
 {
     pd_outputs_t *out = &core->outputs;
     pd_inputs_t *in = &out->inputs;
     uint16_t now16 = (uint16_t)now;
-    uint16_t counts;
-    if (in->adc_slot != NO_SLOT) {
-        if (!pd_hal_analog_done(core->hal, &counts)) {
-            return; /* one conversion at a time */
-        }
-        pd_ainput_t *a = &in->analog[in->adc_slot];
-        a->value = counts;
-        uint16_t moved = counts > a->sent ? (uint16_t)(counts - a->sent) : (uint16_t)(a->sent - counts);
-        if (a->heartbeat_left > 0) {
-            a->heartbeat_left--;
-        }
-        if (a->sent == PD_ANALOG_UNSENT || moved > a->threshold || a->heartbeat_left == 0) {
-            if (!((in->analog_dirty >> in->adc_slot) & 1u)) {
-                in->analog_dirty = (uint8_t)(in->analog_dirty | (1u << in->adc_slot));
+    for (uint8_t n = 0; n <= PD_MAX_ANALOG_INPUTS; n++) {
+        uint8_t last = in->adc_last;
+        if (in->adc_slot != NO_SLOT) {
+            uint16_t counts;
+            if (!pd_hal_analog_done(core->hal, &counts)) {
+                return;
             }
+            last = in->adc_slot;
+            in->adc_last = last;
+            in->adc_slot = NO_SLOT;
+            if (in->analog[last].interval != 0) { /* not released meanwhile */
+                analog_sampled(in, last, counts);
+            }
+        }
+        uint8_t slot = analog_due(in, last, now16);
+        if (in->analog_fresh && (slot == NO_SLOT || slot <= last)) {
+            in->analog_fresh = 0; /* the round is over: its samples go together */
             mark_dirty(core);
         }
-        in->adc_slot = NO_SLOT;
-    }
-    /* The next input whose period is up; the lowest slot first (each waits at most
-     * one conversion per other input, 0.1 ms each on the Uno). */
-    for (uint8_t slot = 0; slot < PD_MAX_ANALOG_INPUTS; slot++) {
-        pd_ainput_t *a = &in->analog[slot];
-        if (a->interval == 0 || (uint16_t)(now16 - a->sampled_at) < a->interval) {
-            continue;
+        if (slot == NO_SLOT) {
+            return;
         }
         uint8_t pin = pin_of(out, PD_MODE_ANALOG_INPUT, slot);
-        if (pin >= PD_MAX_PINS) {
-            continue;
-        }
+        pd_ainput_t *a = &in->analog[slot];
         /* The period is kept from the schedule, not from when the loop came by. */
         uint16_t late = (uint16_t)(now16 - a->sampled_at - a->interval);
         a->sampled_at = late < a->interval ? (uint16_t)(a->sampled_at + a->interval) : now16;
+        if (pin >= PD_MAX_PINS) {
+            continue; /* cannot happen: a slot with an interval belongs to a pin */
+        }
         in->adc_slot = slot;
         pd_hal_analog_start(core->hal, pin);
-        return;
     }
 }
 
@@ -415,11 +452,9 @@ void pd_inputs_release(pd_outputs_t *outputs, void *hal, uint8_t pin, uint8_t mo
     if (mode == PD_MODE_DIGITAL_INPUT) {
         in->trip_mask &= ~bit;
     } else if (mode == PD_MODE_ANALOG_INPUT) {
-        memset(&in->analog[slot], 0, sizeof(in->analog[slot])); /* interval 0: not sampled */
+        /* Interval 0: not sampled; a conversion under way ends unused (poll_analog). */
+        memset(&in->analog[slot], 0, sizeof(in->analog[slot]));
         in->analog_dirty = (uint8_t)(in->analog_dirty & ~(1u << slot));
-        if (in->adc_slot == slot) {
-            in->adc_slot = NO_SLOT;
-        }
     } else if (mode == PD_MODE_COUNTER) {
         pd_hal_counter_stop(hal, pin);
         memset(&in->counter[slot], 0, sizeof(in->counter[slot]));
