@@ -128,7 +128,7 @@ COMMANDS: dict[str, Command] = {c.kind: c for c in _BOARD_COMMANDS + _pin_mode_c
 def feature_hint(feature: str) -> str:
     """Why a mode is refused on a firmware without ``feature``, and how to get it."""
     name = feature.upper()
-    every = " ".join(mode.feature for mode in PIN_MODES)
+    every = " ".join(m.feature for m in sorted(PIN_MODES, key=lambda m: m.feature_bit))
     return (
         f"the firmware on this device was built without the {feature} feature "
         f"(FEATURE_{name}). The default firmware has every feature (protoduino flash PORT); "
