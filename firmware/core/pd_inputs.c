@@ -257,8 +257,9 @@ static uint8_t analog_due(pd_inputs_t *in, uint8_t after, uint16_t now16)
  * One conversion at a time, started as soon as the previous one is done: the
  * due inputs are sampled one after the other, and the samples of one round
  * (every input due, once) travel in one report, marked when the round ends (no
- * input due, or the next due one comes round again). A converter that is done
- * at once (the simulated board's) takes a whole round in one pass.
+ * input due, or the next due one was sampled in this round already). A
+ * converter that is done at once (the simulated board's) takes a whole round
+ * in one pass.
  */
 static void poll_analog(pd_core_t *core, uint32_t now)
 {
@@ -278,11 +279,15 @@ static void poll_analog(pd_core_t *core, uint32_t now)
             if (in->analog[last].interval != 0) { /* not released meanwhile */
                 analog_sampled(in, last, counts);
             }
+            in->analog_round = (uint8_t)(in->analog_round | (1u << last));
         }
         uint8_t slot = analog_due(in, last, now16);
-        if (in->analog_fresh && (slot == NO_SLOT || slot <= last)) {
-            in->analog_fresh = 0; /* the round is over: its samples go together */
-            mark_dirty(core);
+        if (slot == NO_SLOT || ((in->analog_round >> slot) & 1u)) {
+            in->analog_round = 0; /* the round is over: its samples go together */
+            if (in->analog_fresh) {
+                in->analog_fresh = 0;
+                mark_dirty(core);
+            }
         }
         if (slot == NO_SLOT) {
             return;

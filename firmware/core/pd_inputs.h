@@ -80,6 +80,7 @@ typedef struct pd_inputs {
     uint8_t adc_slot;      /* the analog slot being converted; 0xFF: none */
     uint8_t adc_last;      /* the analog slot converted last (round-robin) */
     uint8_t analog_fresh;  /* samples due for a report since the last round's end */
+    uint8_t analog_round;  /* bit slot: sampled in this round */
     uint8_t latched;       /* an interlock tripped: its pin + 1; 0: none */
     bool digital_dirty;    /* a digital level to report */
     uint16_t coalesced;    /* changes that joined a pending report, since the last sent */
