@@ -98,17 +98,48 @@ EMPTY_INTERRUPT(ADC_vect);
 
 #if PD_FEATURE_COUNTER
 
-static volatile uint32_t counts[2]; /* INT0 (pin 2), INT1 (pin 3) */
+volatile uint32_t pd_avr_counts[2]; /* INT0 (pin 2), INT1 (pin 3) */
+#define counts pd_avr_counts
 
-ISR(INT0_vect)
-{
-    counts[0]++;
-}
+/*
+ * count += 1 with one register: subtracting 0xFF adds one, and the borrow is
+ * set unless that byte wrapped, so each next byte subtracts 0xFF with it (adds
+ * one only after a wrap). The compiler's handler saved seven registers for
+ * the same: every byte of an interrupt's frame can land on the deepest stack
+ * (test_stack_margin), and 36 cycles instead of 53 is a higher edge rate
+ * counted without a loss.
+ */
+#define PD_COUNT_ISR(vector, n)                                              \
+    ISR(vector, ISR_NAKED)                                                   \
+    {                                                                        \
+        __asm__ volatile("push r24\n\t"                                      \
+                         "in r24, __SREG__\n\t"                              \
+                         "push r24\n\t"                                      \
+                         "lds r24, %[c0]\n\t"                                \
+                         "subi r24, 0xFF\n\t"                                \
+                         "sts %[c0], r24\n\t"                                \
+                         "lds r24, %[c1]\n\t"                                \
+                         "sbci r24, 0xFF\n\t"                                \
+                         "sts %[c1], r24\n\t"                                \
+                         "lds r24, %[c2]\n\t"                                \
+                         "sbci r24, 0xFF\n\t"                                \
+                         "sts %[c2], r24\n\t"                                \
+                         "lds r24, %[c3]\n\t"                                \
+                         "sbci r24, 0xFF\n\t"                                \
+                         "sts %[c3], r24\n\t"                                \
+                         "pop r24\n\t"                                       \
+                         "out __SREG__, r24\n\t"                             \
+                         "pop r24\n\t"                                       \
+                         "reti\n\t"                                          \
+                         :                                                   \
+                         : [c0] "i"((uint8_t *)&counts[n] + 0),              \
+                           [c1] "i"((uint8_t *)&counts[n] + 1),              \
+                           [c2] "i"((uint8_t *)&counts[n] + 2),              \
+                           [c3] "i"((uint8_t *)&counts[n] + 3));             \
+    }
 
-ISR(INT1_vect)
-{
-    counts[1]++;
-}
+PD_COUNT_ISR(INT0_vect, 0)
+PD_COUNT_ISR(INT1_vect, 1)
 
 /* EICRA's ISCn1:ISCn0 for an Edge (protoduino.proto): rising 11, falling 10, both 01. */
 static const uint8_t sense[3] = {3u, 2u, 1u};

@@ -6,11 +6,9 @@ void pd_core_init(pd_core_t *core, void *hal)
 {
     core->hal = hal;
     core->decode_errors = 0;
-    core->periodic = NULL;
     core->report = pd_inputs_report;
     core->report_sent = pd_inputs_sent;
     core->report_pending = 0;
-    core->last_tick = (uint8_t)pd_hal_millis(hal);
     uint32_t boot = pd_hal_boot_id(hal);
     for (uint8_t i = 0; i < 4; i++) {
         core->boot_id[i] = (uint8_t)(boot >> (24 - 8 * i));
@@ -79,10 +77,6 @@ void pd_core_poll(pd_core_t *core)
     pd_outputs_step(&core->outputs, core->hal, now);
     /* Every pass, whether a host is connected or not: an interlock acts on its own. */
     pd_inputs_poll(core, now);
-    if (core->periodic != NULL && (uint8_t)now != core->last_tick) {
-        core->last_tick = (uint8_t)now;
-        core->periodic(core, now);
-    }
     if (core->report_pending != 0 && core->report != NULL && core->link.active) {
         send_report(core);
     }

@@ -4,7 +4,7 @@
  * like. The platform's main loop calls pd_core_init() once at power-up, then
  * offers received bytes with pd_core_rx()/pd_core_rx_byte() (keeping those it
  * did not take for the next pass) and calls pd_core_poll() often (at least
- * every few milliseconds: the failsafe, the periodic hook and reports run there).
+ * every few milliseconds: the failsafe, the inputs and reports run there).
  */
 #ifndef PD_CORE_H
 #define PD_CORE_H
@@ -23,15 +23,6 @@
 #define PD_FIRMWARE_VERSION "0.1.0"
 
 struct pd_core;
-
-/*
- * The periodic hook: called by pd_core_poll() at most once per millisecond
- * tick, with the tick. For work that is not a reply (sampling inputs,
- * deciding a report is due). It must do a bounded amount of work per call
- * (e.g. one pin per call, round-robin): the loop's latency is the sum of its
- * parts.
- */
-typedef void (*pd_periodic_fn)(struct pd_core *core, uint32_t now_ms);
 
 /*
  * A report source: fill `out` with the newest value of report slot `slot`,
@@ -59,11 +50,9 @@ typedef struct pd_core {
     pd_outputs_t outputs;
     pd_failsafe_t failsafe;
     uint16_t decode_errors; /* COMMAND payloads that did not decode, since boot (wraps at 2^16) */
-    pd_periodic_fn periodic; /* NULL: none */
     pd_report_fn report;     /* NULL: no reports (pd_core_init: the inputs' InputReport) */
     pd_report_sent_fn report_sent;
     uint8_t report_pending;  /* bit N: slot N has a value to send */
-    uint8_t last_tick;       /* low byte of the millisecond the hook last ran */
 } pd_core_t;
 
 /* Power-up state: nothing configured, link IDLE; sends EVENT BOOT. */
@@ -78,7 +67,7 @@ static inline bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
 /* Offer `len` bytes; returns how many were taken (the rest: offer again later). */
 size_t pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len);
 
-/* Periodic work: the failsafe timer, the periodic hook, at most one report. */
+/* Periodic work: the failsafe timer, speed steps, the inputs (pd_inputs_poll), at most one report. */
 void pd_core_poll(pd_core_t *core);
 
 /* Report slot `slot` has a new value: send it (pd_core_t.report builds it) when the line allows. */

@@ -10,8 +10,9 @@ typedef char pd_assert_pins_fit_mask[(PD_MAX_PINS <= 32) ? 1 : -1];
 typedef char pd_assert_servos_fit_slot[(PD_MAX_SERVOS <= PD_MAX_SLOTS) ? 1 : -1];
 /* Every PWM output's duty fits OutputStates.pwm_duties. */
 typedef char pd_assert_pwm_fit_read[(PD_MAX_PWM <= sizeof(((protoduino_OutputStates *)0)->pwm_duties)) ? 1 : -1];
-/* A servo's settings (pin .. safe_us) are compared as bytes: no padding among them. */
-typedef char pd_assert_servo_settings_packed[(offsetof(pd_servo_t, us) == 8) ? 1 : -1];
+/* A servo's settings (min_us .. step) are compared as bytes: no padding among them. */
+#define PD_SERVO_SETTINGS (offsetof(pd_servo_t, step) + 1u)
+typedef char pd_assert_servo_settings_packed[(PD_SERVO_SETTINGS == 7) ? 1 : -1];
 typedef char pd_assert_modes_fit_owner[(PD_MODE_COUNT <= 16) ? 1 : -1];
 
 static uint8_t by_pin(void *hal)
@@ -26,12 +27,12 @@ static uint8_t servo_slots(void *hal)
     return n < PD_MAX_SERVOS ? n : PD_MAX_SERVOS;
 }
 
-static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint16_t us)
+static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint8_t pin, uint16_t us)
 {
     pd_servo_t *s = &out->servo[channel];
     if (us == PD_SERVO_SAFE_DETACH) { /* no pulses: at once, whatever the speed limit */
         s->us = s->target_us = us;
-        pd_hal_servo_detach(hal, channel, s->pin);
+        pd_hal_servo_detach(hal, channel, pin);
         return;
     }
     s->target_us = us;
@@ -39,7 +40,7 @@ static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint16_t 
      * else pd_outputs_step moves it. */
     if (s->step == 0 || s->us == PD_SERVO_SAFE_DETACH) {
         s->us = us;
-        pd_hal_servo_write(hal, channel, s->pin, us);
+        pd_hal_servo_write(hal, channel, pin, us);
     }
 }
 
@@ -62,8 +63,7 @@ static __attribute__((noinline)) void drive_digital(pd_outputs_t *out, void *hal
 
 static void servo_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
-    (void)pin;
-    drive_servo(out, hal, slot, out->servo[slot].safe_us);
+    drive_servo(out, hal, slot, pin, out->servo[slot].safe_us);
 }
 
 static void digital_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
@@ -359,7 +359,7 @@ pd_outputs_servo_init(pd_outputs_t *out, void *hal, const protoduino_ServoInit *
     if (msg->max_speed > PD_SERVO_MAX_SPEED) {
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
-    pd_servo_t limits = {0, 0, (uint16_t)min_us, (uint16_t)max_us, 0, 0, 0};
+    pd_servo_t limits = {(uint16_t)min_us, (uint16_t)max_us, 0, 0, 0, 0};
     if (msg->which_safe == protoduino_ServoInit_safe_degrees_tag) {
         if (msg->safe.safe_degrees > PD_SERVO_MAX_DEGREES) {
             return protoduino_Status_STATUS_OUT_OF_RANGE;
@@ -392,17 +392,16 @@ pd_outputs_servo_init(pd_outputs_t *out, void *hal, const protoduino_ServoInit *
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
-    limits.pin = (uint8_t)msg->pin;
     limits.step = (uint8_t)step;
     pd_servo_t *now = &out->servo[channel];
-    if (was != 0 && memcmp(now, &limits, offsetof(pd_servo_t, us)) == 0) {
+    if (was != 0 && memcmp(now, &limits, PD_SERVO_SETTINGS) == 0) {
         /* The same configuration again (a CLI one-shot, a resumed session): the
          * pin keeps what it does, no detour through the safe value. */
         return protoduino_Status_STATUS_OK;
     }
     limits.step = 0; /* an Init jumps to its safe value, limited or not */
     *now = limits;
-    drive_servo(out, hal, channel, limits.safe_us);
+    drive_servo(out, hal, channel, (uint8_t)msg->pin, limits.safe_us);
     now->step = (uint8_t)step;
     return protoduino_Status_STATUS_OK;
 }
@@ -436,7 +435,7 @@ servo_control(pd_outputs_t *out, void *hal, const protoduino_ServoControl *msg, 
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
     if (apply) {
-        drive_servo(out, hal, channel, us);
+        drive_servo(out, hal, channel, (uint8_t)msg->pin, us);
     }
     return protoduino_Status_STATUS_OK;
 }
@@ -622,7 +621,11 @@ void pd_outputs_step(pd_outputs_t *out, void *hal, uint32_t now)
         } else {
             s->us = s->us - s->target_us <= s->step ? s->target_us : s->us - s->step;
         }
-        pd_hal_servo_write(hal, ch, s->pin, s->us);
+        uint8_t pin = 0; /* the channel's pin, from the owner table (moving: it has one) */
+        while (pin < PD_MAX_PINS - 1u && out->owner[pin] != PD_OWNER(PD_MODE_SERVO, ch)) {
+            pin++;
+        }
+        pd_hal_servo_write(hal, ch, pin, s->us);
     }
     pd_hal_servo_hold(hal, false);
 }

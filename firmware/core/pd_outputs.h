@@ -71,12 +71,13 @@ enum {
 /* safe_us meaning "the safe state is no pulses at all" (real widths are >= 400). */
 #define PD_SERVO_SAFE_DETACH 0u
 
+/* A servo channel; its pin is the one the owner table gives the channel (the
+ * callers know it: a byte less per channel of the Uno's RAM). */
 typedef struct pd_servo {
-    uint8_t pin;
-    uint8_t step; /* speed limit: most us per servo frame; 0: none */
     uint16_t min_us;
     uint16_t max_us;
     uint16_t safe_us;   /* PD_SERVO_SAFE_DETACH: limp */
+    uint8_t step;       /* speed limit: most us per servo frame; 0: none */
     uint16_t us;        /* the width driven now */
     uint16_t target_us; /* the width it moves to (differs only while speed-limited) */
 } pd_servo_t;

@@ -1,7 +1,6 @@
 /*
  * The I/O engine: the transmit queue's back-pressure on receiving, report
- * slots (newest value wins, never ahead of a reply's room) and the periodic
- * hook. The fake HAL's tx_room stands for the platform's transmit queue.
+ * slots (newest value wins, never ahead of a command's Ack). The fake HAL's tx_room stands for the platform's transmit queue.
  */
 #include <pb_encode.h>
 #include <stdio.h>
@@ -206,34 +205,6 @@ static void test_no_report_while_idle(void)
     CHECK_EQ(fake_count(&d.hal), 0);
 }
 
-static unsigned hook_calls;
-static uint32_t hook_last;
-
-static void test_hook(pd_core_t *core, uint32_t now_ms)
-{
-    (void)core;
-    hook_calls++;
-    hook_last = now_ms;
-}
-
-static void test_periodic_hook_once_per_tick(void)
-{
-    tdev_t d;
-    t_active(&d);
-    hook_calls = 0;
-    d.core.periodic = test_hook;
-    pd_core_poll(&d.core);
-    CHECK_EQ(hook_calls, 0); /* the tick of init already ran its course */
-    d.hal.now_ms += 1;
-    pd_core_poll(&d.core);
-    pd_core_poll(&d.core);
-    CHECK_EQ(hook_calls, 1);
-    CHECK_EQ(hook_last, d.hal.now_ms);
-    d.hal.now_ms += 5; /* a slow pass: one call, not five */
-    pd_core_poll(&d.core);
-    CHECK_EQ(hook_calls, 2);
-}
-
 /*
  * The receiver decodes COBS and advances the CRC byte by byte; the result must
  * be what decoding the whole frame at its delimiter gives (pd_cobs_decode, then
@@ -363,6 +334,5 @@ const pd_test_case_t pd_tests_engine[] = {
     TEST_CASE(test_report_waits_for_a_command_under_way),
     TEST_CASE(test_one_report_per_pass_lowest_slot_first),
     TEST_CASE(test_no_report_while_idle),
-    TEST_CASE(test_periodic_hook_once_per_tick),
     {NULL, NULL},
 };

@@ -6,8 +6,11 @@ silently (a transmit ring 28 bytes larger once did exactly that on every Pose:
 the device hung). The runner (tools/avrsim) records the lowest stack pointer
 after every instruction, interrupts included; this test drives every command at
 its largest, several in flight so that the UART interrupts land inside the
-deepest decode, and compares that low-water mark with the end of the firmware's
-static data (the linker's ``_end``, after .data, .bss and .noinit; the firmware has no heap).
+deepest decode, with every kind of input configured and reporting (the
+control socket moves them all the time: pin-change, counter and ADC interrupts
+land anywhere, and reports compete with the Acks for the transmit ring), and
+compares that low-water mark with the end of the firmware's static data (the
+linker's ``_end``, after .data, .bss and .noinit; the firmware has no heap).
 
 The budget (issue 21, docs/protocol.md and firmware/README.md): the ATmega328P's 2,048 B of
 RAM hold the static data, the deepest stack measured here, and 256 B kept free for the users'
@@ -27,6 +30,7 @@ from boardprocess import BoardProcess, missing_tool
 from protoduino import Board, CommandRejectedError, Servo
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import runner_command
+from protoduino.simcontrol import SimControl
 from protoduino_dev import build
 from protoduino_dev.runnerstats import snapshot
 
@@ -42,9 +46,12 @@ FREE_BYTES = 256
 
 STARTUP_TIMEOUT = 10.0
 
-#: The Uno firmware's pins: servos on 2..9 (its eight channels), digital outputs on 10..19.
-SERVO_PINS = range(2, 10)
-DIGITAL_PINS = range(10, 20)
+#: The Uno firmware's pins: counters on 2 and 3 (INT0, INT1), servos on 4..11 (its eight
+#: channels), digital inputs on 12 and 13, analog inputs on 14..19 (A0..A5).
+COUNTER_PINS = (2, 3)
+SERVO_PINS = range(4, 12)
+DIGITAL_INPUT_PINS = (12, 13)
+ANALOG_PINS = range(14, 20)
 
 
 def _symbol(elf: Path, name: str) -> int:
@@ -60,9 +67,10 @@ def _symbol(elf: Path, name: str) -> int:
 class StatsRunner(BoardProcess):
     """The emulated Uno running the firmware, with the runner's ``--stats FILE``."""
 
-    def __init__(self, elf: Path, stats: Path) -> None:
+    def __init__(self, elf: Path, stats: Path, control: Path) -> None:
         self.stats = stats
-        cmd = runner_command(elf)
+        self.control = control
+        cmd = runner_command(elf, control=control)
         cmd[-1:-1] = ["--stats", str(stats)]
         super().__init__(cmd, startup=STARTUP_TIMEOUT)
 
@@ -78,7 +86,7 @@ def uno(tmp_path: Path) -> Iterator[tuple[StatsRunner, Path]]:
         pytest.skip(f"{missing} is not installed")
     build.build_runner()
     elf = build.build_firmware()
-    runner = StatsRunner(elf, tmp_path / "stats.jsonl")
+    runner = StatsRunner(elf, tmp_path / "stats.jsonl", tmp_path / "control.sock")
     try:
         yield runner, elf
     finally:
@@ -95,7 +103,7 @@ def _oversized_pose() -> ArduinoIn:
     """A Pose with one item more than the firmware's bound (8): nanopb refuses it while it
     is as deep in the decode as a Pose can take it."""
     msg = ArduinoIn()
-    for pin in (*SERVO_PINS, 10):
+    for pin in (*SERVO_PINS, 12):
         msg.pose.items.add().servo.pin = pin
     return msg
 
@@ -105,10 +113,20 @@ def test_every_command_at_its_largest_leaves_the_ram_budget(
 ) -> None:
     runner, elf = uno
     static_end = _symbol(elf, "_end")
-    with Board.open(runner.port, window=4) as board:
+    with Board.open(runner.port, window=4) as board, SimControl(runner.control) as control:
         servos: list[Servo] = [board.servo(pin, safe=90) for pin in SERVO_PINS]
-        outputs = [board.digital_output(pin) for pin in DIGITAL_PINS]
+        for pin in COUNTER_PINS:
+            board.counter(pin, edge="both", rate_hz=1000)
+            control.pulses(pin, 100_000, 5_000)  # 10,000 edges a second each, all test long
+        for pin in DIGITAL_INPUT_PINS:
+            board.digital_input(pin)
+        for pin in ANALOG_PINS:
+            board.analog_input(pin, rate_hz=1000, threshold=0)
         for round_ in range(20):
+            for pin in ANALOG_PINS:
+                control.analog(pin, (round_ * 97 + pin * 31) % 1024)
+            for pin in DIGITAL_INPUT_PINS:
+                control.level(pin, (round_ + pin) & 1)
             # Four of the largest at once: the next frame's bytes arrive (receive
             # interrupt) and the last Ack leaves (transmit interrupt) during each decode.
             pose: dict[Servo | Any, int | bool] = {s: 30 + round_ for s in servos}
@@ -116,7 +134,7 @@ def test_every_command_at_its_largest_leaves_the_ram_budget(
                 board.submit_pose(pose),
                 board.submit_read_outputs(),
                 board.submit_ping(bytes(range(64))),
-                board.submit_pose({o: bool(round_ & 1) for o in outputs[:8]}),
+                board.submit_pose({s: 150 - round_ for s in servos}),
             ]
             for call in calls:
                 call.result(timeout=30)
@@ -124,6 +142,7 @@ def test_every_command_at_its_largest_leaves_the_ram_budget(
             with pytest.raises(CommandRejectedError) as refused:
                 board.request(_oversized_pose())
             assert refused.value.status == Status.STATUS_DECODE_ERROR
+        assert board.stats.input_reports > 20  # the inputs did report meanwhile
         board.stop()
         board.release_all()
     stats = runner.snapshot()
