@@ -495,6 +495,30 @@ def test_motion_section_on_both_boards() -> None:
         assert sum(line.startswith(f"| {method} |") for line in text.splitlines()) == 2
 
 
+@pytest.mark.avr
+def test_inputs_section_on_both_boards() -> None:
+    """Part 7: every edge reached its callback, every channel streamed, every interlock trial
+    stopped the motor at the pin, on both boards; and the avr targets have a verdict."""
+    _need("native")
+    _need("avr")
+    from bench import inputs
+
+    results = inputs.collect(trials=4, seconds=0.3, pings=3)
+    assert [r.backend for r in results] == [b for b, _ in boards.BACKENDS]
+    for result in results:
+        assert result.error is None, result.error
+        assert result.latency_lost == 0 and len(result.latency) == 4
+        assert sorted(result.per_channel) == [14, 15, 16, 17, 18, 19]
+        assert all(rate > 0 for rate in result.per_channel.values())
+        assert len(result.idle_rtt) == 3 and result.stream_rtt
+        assert result.reaction_lost == 0 and len(result.reaction) == 4
+        assert all(r >= 0 for r in result.reaction)
+    # The wire time is priced on a real InputReport frame.
+    (packet,) = [p for p in StreamDecoder().feed(inputs.report_frame()) if isinstance(p, Packet)]
+    report = pb.ArduinoOut.FromString(packet.payload).input_report
+    assert report.digital_pins == 1 << inputs.BUTTON_PIN
+
+
 def test_report_quote_replaces_only_between_markers(tmp_path: Path) -> None:
     from bench import report
 

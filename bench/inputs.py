@@ -1,0 +1,365 @@
+"""Benchmark part 7 (docs/performance.md): inputs.
+
+Three questions about the inputs (docs/api.md, Pins), on both boards:
+
+* Pin change to host callback: a digital input's level is changed through the board's
+  control socket, and the time until its ``on_change`` callback runs on the host is set
+  against the time its InputReport takes on the wire. The edge's time is the board's (the
+  control socket answers with it); host and board clocks are related as in part 6, through
+  an offset measured with digital toggles, whose uncertainty is reported.
+* Analog streaming: six analog inputs sampled at 200 Hz each while the host keeps sending
+  Pings, one after another. The inputs are constant, so a heartbeat of one sampling period
+  makes the device report every sample; the values the host receives per channel per second
+  are counted from the frames, and the Ping round trip is set against the same Ping with no
+  input configured (commands go first: the goal is at most 1.5x).
+* Interlock reaction: a bumper (a digital input with ``interlock="low"``) closes while a
+  motor's PWM runs; the time from the edge to the PWM at 0 at the pin, both on the board's
+  clock (emulated time on the Uno, measured at the pin).
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import logging
+import random
+import statistics
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from tempfile import TemporaryDirectory
+
+from protoduino import Board
+from protoduino.constants import PacketType
+from protoduino.errors import InterlockActiveError, ProtoduinoError
+from protoduino.framing import frame_packet
+from protoduino.inputs import Reading
+from protoduino.messages import ArduinoOut, parse_out
+from protoduino.packets import Packet
+from protoduino.simboard import SimBoard
+from protoduino.transport import FrameRecord
+
+from .boards import BACKENDS, LABELS, BoardUnavailableError, Percentiles, missing_tool
+from .core import Context, Section, SectionResult, Target, fmt_rate, md_table
+from .motion import CLOCK_PIN, Clock, Trace, calibrate
+from .wire import board_byte_us
+
+log = logging.getLogger(__name__)
+
+#: The button of the latency trials, the bumper and the motor of the interlock trials.
+BUTTON_PIN = 2
+BUMPER_PIN = 4
+MOTOR_PIN = 3
+MOTOR_DUTY = 200
+#: Analog streaming: every channel at this rate, for this long, against this goal.
+ANALOG_HZ = 200
+STREAM_SECONDS = 3.0
+TARGET_HZ = 200.0
+TARGET_RTT_RATIO = 1.5
+#: The interlock's goal, on the emulated Uno's clock.
+TARGET_REACTION = 0.001
+#: How long one trial may take to show its result before it counts as lost.
+SETTLE = 5.0
+
+
+def report_frame(digital_pins: int = 1 << BUTTON_PIN) -> bytes:
+    """The InputReport frame a digital change sends, as it goes on the wire."""
+    out = ArduinoOut()
+    out.input_report.time_ms = 123_456  # a few minutes of uptime: a 3-byte varint
+    out.input_report.digital_pins = digital_pins
+    out.input_report.digital_levels = digital_pins
+    return frame_packet(PacketType.DATA, 0, out.SerializeToString())
+
+
+@dataclass(slots=True)
+class BoardResult:
+    backend: str
+    clock: Clock | None = None
+    latency: list[float] = field(default_factory=list)  # edge -> callback (s)
+    latency_lost: int = 0
+    per_channel: dict[int, float] = field(default_factory=dict)  # values/s
+    coalesced: int = 0
+    idle_rtt: list[float] = field(default_factory=list)
+    stream_rtt: list[float] = field(default_factory=list)
+    reaction: list[float] = field(default_factory=list)  # edge -> PWM 0 at the pin (s)
+    reaction_lost: int = 0
+    error: str | None = None
+
+
+def measure_latency(
+    board: Board, sim: SimBoard, clock: Clock, trials: int, rng: random.Random
+) -> tuple[list[float], int]:
+    button = board.digital_input(BUTTON_PIN, pull_up=True)
+    arrivals: list[tuple[bool, float]] = []
+    got = threading.Event()
+
+    def changed(reading: Reading) -> None:  # the board's event thread
+        arrivals.append((bool(reading.value), time.monotonic()))
+        got.set()
+
+    button.on_change(changed)
+    level = bool(button.read())
+    samples: list[float] = []
+    lost = 0
+    for _ in range(trials):
+        time.sleep(rng.uniform(0.0, 0.020))  # edges at every phase of the device's loop
+        level = not level
+        mark = len(arrivals)
+        got.clear()
+        edge = sim.set_level(BUTTON_PIN, int(level))
+        deadline = time.monotonic() + SETTLE
+        while len(arrivals) <= mark and time.monotonic() < deadline:
+            got.wait(0.1)
+        if len(arrivals) <= mark or arrivals[mark][0] != level:
+            lost += 1
+            continue
+        samples.append(arrivals[mark][1] - (edge + clock.offset))
+    button.release()
+    return samples, lost
+
+
+class AnalogCounter:
+    """Analog values received per pin, counted from the frames (a frame monitor)."""
+
+    def __init__(self) -> None:
+        self.counting = False
+        self.values: collections.Counter[int] = collections.Counter()
+
+    def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
+        item = record.item
+        if not self.counting or record.direction != "rx" or not isinstance(item, Packet):
+            return
+        if item.type is not PacketType.DATA:
+            return
+        with contextlib.suppress(ProtoduinoError):
+            msg = parse_out(item.payload)
+            if msg.WhichOneof("data") == "input_report":
+                mask = msg.input_report.analog_pins
+                for pin in range(32):
+                    if mask >> pin & 1:
+                        self.values[pin] += 1
+
+
+def measure_streaming(
+    board: Board, seconds: float, pings: int
+) -> tuple[dict[int, float], int, list[float], list[float]]:
+    idle = [board.ping() for _ in range(pings)]
+    counter = AnalogCounter()
+    board.add_frame_monitor(counter)
+    pots = [
+        board.analog_input(pin, rate_hz=ANALOG_HZ, heartbeat=1 / ANALOG_HZ)
+        for pin in board.info.analog_pins
+    ]
+    coalesced = board.stats.inputs_coalesced
+    streaming: list[float] = []
+    counter.counting = True
+    start = time.monotonic()
+    while time.monotonic() - start < seconds:
+        streaming.append(board.ping())  # commands keep flowing
+    elapsed = time.monotonic() - start
+    counter.counting = False
+    coalesced = board.stats.inputs_coalesced - coalesced
+    for pot in pots:
+        pot.release()
+    rates = {pin: counter.values[pin] / elapsed for pin in board.info.analog_pins}
+    return rates, coalesced, idle, streaming
+
+
+def _pwm_line(trace: Trace, duty: int, since: int) -> tuple[int, float] | None:
+    """The first trace line (index, board time) from index ``since`` on where the motor pin
+    shows ``duty``.
+
+    Lines, not times: the emulated Uno dates a PWM that stopped at the pin's last edge (the
+    end of its last pulse), which comes before the bumper's edge when the edge falls between
+    two pulses; the pin then never went high again after the edge.
+    """
+    deadline = time.monotonic() + SETTLE
+    while time.monotonic() < deadline:
+        events = trace.update()
+        for i in range(since, len(events)):
+            e = events[i]
+            if e["pin"] == MOTOR_PIN and e.get("mode") == "pwm" and int(e["value"]) == duty:
+                return i, float(e["t"])
+        time.sleep(0.002)
+    return None
+
+
+def measure_reaction(
+    board: Board, sim: SimBoard, trace: Trace, trials: int, rng: random.Random
+) -> tuple[list[float], int]:
+    motor = board.pwm_output(MOTOR_PIN, safe=0)
+    sim.set_level(BUMPER_PIN, 1)
+    bumper = board.digital_input(BUMPER_PIN, pull_up=True, interlock="low")
+    samples: list[float] = []
+    lost = 0
+    for _ in range(trials):
+        sim.set_level(BUMPER_PIN, 1)
+        bumper.wait_for(True, timeout=SETTLE)
+        with contextlib.suppress(InterlockActiveError):  # none latched on the first trial
+            board.clear_interlock()
+        mark = len(trace.update())
+        motor.write(MOTOR_DUTY)
+        running = _pwm_line(trace, MOTOR_DUTY, mark)
+        if running is None:
+            lost += 1
+            continue
+        time.sleep(rng.uniform(0.0, 0.020))  # edges at every phase of the PWM period
+        hit = sim.set_level(BUMPER_PIN, 0)
+        stopped = _pwm_line(trace, 0, running[0] + 1)
+        if stopped is None:
+            lost += 1
+            continue
+        # Low for good from stopped[1]: at the edge already (0), or this long after it.
+        samples.append(max(0.0, stopped[1] - hit))
+    sim.set_level(BUMPER_PIN, 1)
+    return samples, lost
+
+
+def collect(trials: int, seconds: float, pings: int, seed: int = 7) -> list[BoardResult]:
+    rng = random.Random(seed)
+    out: list[BoardResult] = []
+    for backend, _label in BACKENDS:
+        result = BoardResult(backend)
+        out.append(result)
+        tool = missing_tool(backend)
+        if tool is not None:
+            result.error = f"`{tool}` is not installed"
+            continue
+        with TemporaryDirectory(prefix="bench-inputs-") as tmp:
+            sim = SimBoard(backend, trace=Path(tmp) / "trace.jsonl")
+            try:
+                sim.start()
+                trace = Trace(Path(tmp) / "trace.jsonl")
+                with Board.open(sim.port) as board:
+                    led = board.digital_output(CLOCK_PIN)
+                    result.clock = calibrate(led, trace)
+                    result.latency, result.latency_lost = measure_latency(
+                        board, sim, result.clock, trials, rng
+                    )
+                    (
+                        result.per_channel,
+                        result.coalesced,
+                        result.idle_rtt,
+                        result.stream_rtt,
+                    ) = measure_streaming(board, seconds, pings)
+                    result.reaction, result.reaction_lost = measure_reaction(
+                        board, sim, trace, trials, rng
+                    )
+            except (ProtoduinoError, BoardUnavailableError, RuntimeError) as error:
+                log.warning("inputs: %s board not run: %s", backend, error)
+                result.error = str(error).splitlines()[0]
+            finally:
+                sim.stop()
+    return out
+
+
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1000:.2f}"
+
+
+def run(ctx: Context) -> SectionResult:
+    trials = max(10, min(200, ctx.samples // 2))
+    pings = max(20, ctx.samples // 5)
+    seconds = STREAM_SECONDS if ctx.samples >= 100 else 1.0
+    results = collect(trials, seconds, pings, ctx.seed)
+    frame = report_frame()
+    parts = [
+        f"**Pin change to callback.** {trials} edges on a digital input (pull-up, no "
+        "debounce), each after a random pause of 0-20 ms: from the edge (the board's time, "
+        "from the control socket) to the host's `on_change` callback (the board's event "
+        "thread), against the wire time of the InputReport that carries it "
+        f"({len(frame)} B framed). Host and board clocks are related through an offset "
+        "measured with digital toggles (part 6); its uncertainty is given per board.\n",
+        f"**Analog streaming.** Six analog inputs at {ANALOG_HZ} Hz each (`rate_hz="
+        f"{ANALOG_HZ}`, a heartbeat of one period so that every sample of the constant "
+        f"inputs is reported) for {seconds:g} s while the host sends Pings one after "
+        "another; the values received per channel per second, the reports the device "
+        "coalesced (replaced before it could send them), and the Ping round trip against "
+        f"{pings} Pings with no input configured.\n",
+        f"**Interlock.** {trials} times: a motor's PWM at {MOTOR_DUTY} on pin {MOTOR_PIN}, "
+        f'then a bumper on pin {BUMPER_PIN} (`interlock="low"`, pull-up) closes; the time '
+        "from its edge until the pin is low for good, both on the board's clock (on the "
+        "emulated Uno: emulated time, measured at the pin; 0 when the edge fell between two "
+        "pulses and no pulse followed it).\n",
+    ]
+    targets: list[Target] = []
+    for result in results:
+        label = LABELS[result.backend]
+        if result.error is not None:
+            parts.append(f"The {label} was not run: {result.error}.\n")
+            continue
+        assert result.clock is not None
+        parts.append(f"### {label[0].upper()}{label[1:]}\n")
+        wire = len(frame) * board_byte_us(result.backend) / 1e6
+        rows = []
+        if result.latency:
+            lat = Percentiles.of(result.latency)
+            rows.append(
+                [
+                    "pin change to callback",
+                    _ms(lat.p50),
+                    _ms(lat.p99),
+                    _ms(wire),
+                    f"{lat.p50 / wire:.1f}x",
+                    str(result.latency_lost),
+                ]
+            )
+        if result.reaction:
+            rea = Percentiles.of(result.reaction)
+            rows.append(
+                [
+                    "bumper edge to PWM 0 at the pin",
+                    _ms(rea.p50),
+                    _ms(rea.p99),
+                    "-",
+                    "-",
+                    str(result.reaction_lost),
+                ]
+            )
+        parts.append(
+            f"Host/board clock offset known within +-{result.clock.half_width * 1000:.2f} ms.\n"
+        )
+        parts.append(md_table(["what", "p50 ms", "p99 ms", "wire ms", "p50 / wire", "lost"], rows))
+        slowest = min(result.per_channel.values(), default=0.0)
+        idle = statistics.median(result.idle_rtt) if result.idle_rtt else 0.0
+        busy = statistics.median(result.stream_rtt) if result.stream_rtt else 0.0
+        ratio = busy / idle if idle > 0 else 0.0
+        channel_rows = [
+            [f"pin {pin}", fmt_rate(rate)] for pin, rate in sorted(result.per_channel.items())
+        ]
+        parts.append(md_table(["analog channel", "values/s received"], channel_rows))
+        parts.append(
+            f"Reports coalesced by the device while streaming: {result.coalesced}. Ping round "
+            f"trip p50: {_ms(idle)} ms idle, {_ms(busy)} ms while streaming ({ratio:.2f}x, "
+            f"{len(result.stream_rtt)} Pings).\n"
+        )
+        if result.backend == "avr":
+            targets += [
+                Target(
+                    "analog values/s per channel, 6 channels, commands flowing (emulated Uno)",
+                    f">= {TARGET_HZ:.0f}",
+                    fmt_rate(slowest),
+                    slowest >= TARGET_HZ,
+                ),
+                Target(
+                    "Ping round trip while 6 channels stream (emulated Uno)",
+                    f"<= {TARGET_RTT_RATIO}x idle",
+                    f"{ratio:.2f}x",
+                    0 < ratio <= TARGET_RTT_RATIO,
+                ),
+            ]
+            if result.reaction:
+                worst = max(result.reaction)
+                targets.append(
+                    Target(
+                        "interlock: bumper edge to motor PWM 0 at the pin (emulated Uno)",
+                        f"<= {TARGET_REACTION * 1000:g} ms emulated time",
+                        f"{_ms(worst)} ms at most",
+                        worst <= TARGET_REACTION,
+                    )
+                )
+    return SectionResult("\n".join(parts), targets=targets)
+
+
+SECTION = Section(7, "inputs", "Inputs: change to callback, analog streaming, interlocks", run)
