@@ -299,3 +299,39 @@ def test_aio_inputs_without_blocking_the_loop(sim: SimBoard) -> None:
         wait_pwm(sim, 3, lambda v: 64 in v)
 
     asyncio.run(main())
+
+
+def test_host_input_refusals_are_the_devices(board: Board) -> None:
+    """Each input refusal the host makes before sending is the one the device makes."""
+    board.servo(9)
+
+    def analog(pin: int, threshold: int = 0, interval_ms: int = 10) -> ArduinoIn:
+        msg = ArduinoIn()
+        init = msg.analog_input_init
+        init.pin, init.threshold, init.interval_ms = pin, threshold, interval_ms
+        return msg
+
+    def digital(pin: int, debounce_ms: int = 0) -> ArduinoIn:
+        msg = ArduinoIn()
+        msg.digital_input_init.pin, msg.digital_input_init.debounce_ms = pin, debounce_ms
+        return msg
+
+    def counter(pin: int) -> ArduinoIn:
+        msg = ArduinoIn()
+        msg.counter_init.pin = pin
+        return msg
+
+    cases: list[tuple[Callable[[], object], ArduinoIn]] = [
+        (lambda: board.analog_input(2), analog(2)),  # no ADC there
+        (lambda: board.analog_input(14, threshold=1024), analog(14, threshold=1024)),
+        (lambda: board.analog_input(14, rate_hz=1000 / 60001), analog(14, interval_ms=60001)),
+        (lambda: board.digital_input(2, debounce_ms=256), digital(2, debounce_ms=256)),
+        (lambda: board.digital_input(9), digital(9)),  # a servo holds it
+        (lambda: board.counter(14), counter(14)),  # no interrupt there
+        (lambda: board.counter(9), counter(9)),
+    ]
+    for host, device in cases:
+        with pytest.raises(protoduino.CommandRejectedError) as refused:
+            host()
+        assert not refused.value.sent
+        assert _request(board, device) == refused.value.status, device
