@@ -20,7 +20,7 @@ exits cleanly on SIGTERM.
 The board's inputs are driven through its control socket
 (:mod:`protoduino.simcontrol`): :meth:`SimBoard.set_level`,
 :meth:`SimBoard.set_analog` and :meth:`SimBoard.pulses`. On the emulated Uno
-they reach the real AVR's pins, pin-change and external interrupts and ADC, so
+they reach the real AVR's pins, external interrupts and ADC, so
 the firmware's own input code (digital inputs, interlocks, analog inputs,
 counters) is what a test exercises; tests/e2e/test_pins_sim.py does so through
 the Board API on both boards.
