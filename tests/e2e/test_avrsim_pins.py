@@ -22,6 +22,7 @@ from boardprocess import BoardProcess, missing_tool
 from protoduino import Board, CommandRejectedError
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import runner_command
+from protoduino.simcontrol import SimControl
 from protoduino_dev import build
 
 pytestmark = pytest.mark.avr
@@ -144,5 +145,42 @@ def test_pwm_on_9_refused_while_a_servo_runs(tools: None) -> None:
             with pytest.raises(CommandRejectedError) as refused:
                 board.request(_pwm_init(5, 0))
             assert refused.value.status == Status.STATUS_TIMER_IN_USE
+    finally:
+        runner.stop(strict=False)
+
+
+#: The highest counted edge rate the firmware is documented to count without a loss, per
+#: counter, with both counters, eight servos and commands running (docs/protocol.md, Counters):
+#: counted edges at least 25 us apart.
+LOSSLESS_EDGES_PER_S = 40_000
+
+
+def test_counters_lose_no_edge_at_the_documented_rate(tools: None, tmp_path: Path) -> None:
+    """Both counters at the documented rate (pin 2 both edges of a 20 kHz square wave, pin 3
+    rising edges of a 40 kHz one) while eight servos pulse and poses keep coming: every edge
+    the control socket made is counted, to the edge."""
+    control = tmp_path / "control.sock"
+    runner = BoardProcess(
+        runner_command(build.build_firmware(), control=control), startup=STARTUP_TIMEOUT
+    )
+    try:
+        with Board.open(runner.port) as board, SimControl(control) as sim:
+            servos = [board.servo(pin, safe=90) for pin in range(4, 12)]
+            both = board.counter(2, edge="both", rate_hz=100)
+            rising = board.counter(3, edge="rising", rate_hz=100)
+            square_hz = LOSSLESS_EDGES_PER_S // 2
+            sim.pulses(2, square_hz // 2, square_hz)  # half a second: 20,000 edges
+            sim.pulses(3, LOSSLESS_EDGES_PER_S // 2, LOSSLESS_EDGES_PER_S)  # 20,000 rising
+            expected = (square_hz, LOSSLESS_EDGES_PER_S // 2)
+            step = 0
+            while (both.read(), rising.read()) != expected and step < 2000:
+                board.pose({s: (step * 7 + i) % 180 for i, s in enumerate(servos)})
+                step += 1
+            assert step >= 10  # commands flowed while the pulses came
+            # Every edge, and not one more (the counts settle at the trains' totals).
+            assert both.wait_for(lambda n: n >= expected[0], timeout=TRACE_TIMEOUT) == expected[0]
+            assert rising.wait_for(lambda n: n >= expected[1], timeout=TRACE_TIMEOUT) == expected[1]
+            board.ping()  # a round trip later (the report interval passed), still exact
+            assert (both.read(), rising.read()) == expected
     finally:
         runner.stop(strict=False)
