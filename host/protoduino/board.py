@@ -480,7 +480,8 @@ class PwmOutput:
     def _duty(self, duty: object) -> tuple[ArduinoIn, int]:
         value = _rounded("duty", duty)
         if not 0 <= value <= PWM_MAX_DUTY:
-            raise _reject(Status.STATUS_OUT_OF_RANGE, f"duty {value} is outside 0..{PWM_MAX_DUTY}")
+            shown = f"{duty} (rounded: {value})" if value != duty else str(value)
+            raise _reject(Status.STATUS_OUT_OF_RANGE, f"duty {shown} is outside 0..{PWM_MAX_DUTY}")
         msg = ArduinoIn()
         msg.pwm_control.pin = self.pin
         msg.pwm_control.duty = value
