@@ -115,7 +115,7 @@ static void fill_info(pd_core_t *core, protoduino_DeviceInfo *info)
     info->protocol_version = PD_PROTOCOL_VERSION;
     info->schema_id = PD_SCHEMA_ID;
     info->num_pins = board->num_pins;
-    info->max_servos = board->max_servos;
+    info->max_servos = PD_FEATURE_SERVO ? board->max_servos : 0u;
     info->rx_buffer = board->rx_buffer;
     info->features = PD_FEATURES;
     info->pwm_pins = PD_FEATURE_PWM ? board->pwm_pins : 0u;

@@ -44,7 +44,11 @@
 #ifndef PD_MAX_PWM
 #define PD_MAX_PWM 4
 #endif
-/* The PWM state is a few bytes per slot, so a build without PWM keeps them. */
+/* A build without servos or PWM keeps one slot of each (the code stays simple), not eight or four. */
+#if !PD_FEATURE_SERVO
+#undef PD_MAX_SERVOS
+#define PD_MAX_SERVOS 1
+#endif
 #if !PD_FEATURE_PWM
 #undef PD_MAX_PWM
 #define PD_MAX_PWM 1
