@@ -78,7 +78,6 @@ from .constants import (
     FAILSAFE_TIMEOUT,
     HANDSHAKE_TIMEOUT,
     INPUT_INTERVAL_MAX_MS,
-    MAX_COUNTERS,
     MAX_RETRIES,
     PING_INTERVAL,
     PWM_MAX_DUTY,
@@ -806,8 +805,7 @@ class Board:
         max_speed_us: int | None,
     ) -> tuple[ArduinoIn, Callable[[], None], Servo]:
         """Check a servo's configuration; its ServoInit, what to record at the Ack, its object."""
-        pin = self._check_pin(pin)
-        self._check_mode(pin, SERVO)
+        pin = self._check_pin(pin, SERVO)
         min_us = _int("min_us", min_us) or SERVO_DEFAULT_MIN_US
         max_us = _int("max_us", max_us) or SERVO_DEFAULT_MAX_US
         if safe is not None and safe_us is not None:
@@ -837,6 +835,12 @@ class Board:
                 raise _reject(Status.STATUS_OUT_OF_RANGE, f"safe {safe} degrees is outside 0..180")
             init.safe_degrees = safe
         with self._lock:
+            pwm = sorted(self._timer1_pins() & self._pins_of(PWM))
+            if pwm:  # checked before the pin itself, as the device does (rule 13)
+                raise _reject(
+                    Status.STATUS_TIMER_IN_USE,
+                    f"pin {pwm[0]} does PWM on the timer the servos need (release it first)",
+                )
             current = self._outputs.get(pin)
             if current is not None and current.mode is not SERVO:
                 raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
@@ -846,13 +850,6 @@ class Board:
                     Status.STATUS_NO_FREE_RESOURCE,
                     f"all {self.info.max_servos} servo slots are in use",
                 )
-            if servos == 0:
-                pwm = sorted(self._timer1_pins() & self._pins_of(PWM))
-                if pwm:
-                    raise _reject(
-                        Status.STATUS_TIMER_IN_USE,
-                        f"pin {pwm[0]} does PWM on the timer the servos need (release it first)",
-                    )
         servo = Servo(self, pin, min_us, max_us, effective_speed(speed))
         which = init.WhichOneof("safe")
         if which == "safe_detach":
@@ -903,8 +900,7 @@ class Board:
     def _digital_init(
         self, pin: int, safe: bool
     ) -> tuple[ArduinoIn, Callable[[], None], DigitalOutput]:
-        pin = self._check_pin(pin)
-        self._check_mode(pin, DIGITAL)
+        pin = self._check_pin(pin, DIGITAL)
         safe = _level("safe", safe)  # bool("no") and bool(2) are True: no guessing
         with self._lock:
             current = self._outputs.get(pin)
@@ -934,20 +930,16 @@ class Board:
         return self._future(msg, on_ok, _returning(output))
 
     def _pwm_init(self, pin: int, safe: object) -> tuple[ArduinoIn, Callable[[], None], PwmOutput]:
-        pin = self._check_pin(pin)
-        self._check_feature(PWM)
+        # The device's order (docs/protocol.md section 7, rule 13).
+        pin = self._check_pin(pin, PWM)
         if pin in TIMER0_PWM_PINS.get(self.info.board, ()):
             raise _reject(
                 Status.STATUS_TIMER_IN_USE,
                 f"pin {pin}'s PWM timer (Timer0) runs the device's millisecond clock "
                 f"(PWM pins: {', '.join(map(str, self.info.pwm_pins))})",
             )
-        self._check_mode(pin, PWM)
+        self._check_capable(pin, PWM)
         duty = _rounded("safe", safe)
-        if not 0 <= duty <= PWM_MAX_DUTY:
-            raise _reject(
-                Status.STATUS_OUT_OF_RANGE, f"safe duty {duty} is outside 0..{PWM_MAX_DUTY}"
-            )
         with self._lock:
             self._check_free(pin, PWM)
             if pin in self._timer1_pins() and any(o.mode is SERVO for o in self._outputs.values()):
@@ -956,6 +948,10 @@ class Board:
                     f"pin {pin}'s PWM timer makes the servo pulses while a servo runs "
                     "(release the servos first, or use another PWM pin)",
                 )
+        if not 0 <= duty <= PWM_MAX_DUTY:
+            raise _reject(
+                Status.STATUS_OUT_OF_RANGE, f"safe duty {duty} is outside 0..{PWM_MAX_DUTY}"
+            )
         msg = ArduinoIn()
         msg.pwm_init.pin = pin
         msg.pwm_init.safe_duty = duty
@@ -1002,10 +998,12 @@ class Board:
     def _digital_input_init(
         self, pin: int, pull_up: object, debounce_ms: object, interlock: object
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], DigitalInput]]:
-        pin = self._check_pin(pin)
-        self._check_mode(pin, DIGITAL_INPUT)
+        # The device's order (docs/protocol.md section 7, rules 11 and 14): the feature,
+        # the arguments, the pin, then whether it is free.
         if not isinstance(pull_up, bool):
             raise TypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
+        pin = _int("pin", pin)
+        self._check_feature(DIGITAL_INPUT)
         debounce = _int("debounce_ms", debounce_ms)
         if not 0 <= debounce <= DEBOUNCE_MAX_MS:
             raise _reject(
@@ -1017,6 +1015,7 @@ class Board:
                 Status.STATUS_INVALID_ARGUMENT,
                 f"interlock must be None, 'low' or 'high', not {interlock!r}",
             )
+        pin = self._check_pin(pin)
         msg = ArduinoIn()
         init = msg.digital_input_init
         init.pin, init.pull_up, init.debounce_ms = pin, pull_up, debounce
@@ -1052,18 +1051,21 @@ class Board:
     def _analog_input_init(
         self, pin: int, rate_hz: object, threshold: object, heartbeat: object
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], AnalogInput]]:
-        pin = self._check_pin(pin)
-        self._check_mode(pin, ANALOG_INPUT)
+        # The device's order (rules 11 and 14): the feature, the pin's number, the
+        # arguments, a reserved pin, the pin's ADC, then whether it is free.
+        pin = self._check_pin(pin, ANALOG_INPUT, reserved=False)
+        interval = _period_ms("rate_hz", rate_hz)
+        beat = _interval_ms("heartbeat", heartbeat)
         counts = _int("threshold", threshold)
         if not 0 <= counts <= ANALOG_MAX:
             raise _reject(
                 Status.STATUS_INVALID_ARGUMENT, f"threshold {counts} is outside 0..{ANALOG_MAX}"
             )
+        self._check_reserved(pin)
+        self._check_capable(pin, ANALOG_INPUT)
         msg = ArduinoIn()
         init = msg.analog_input_init
-        init.pin, init.threshold = pin, counts
-        init.interval_ms = _period_ms("rate_hz", rate_hz)
-        init.heartbeat_ms = _interval_ms("heartbeat", heartbeat)
+        init.pin, init.threshold, init.interval_ms, init.heartbeat_ms = pin, counts, interval, beat
 
         def make() -> AnalogInput:
             return AnalogInput(self._inputs, pin, self.release, self.call_timeout)
@@ -1092,26 +1094,22 @@ class Board:
     def _counter_init(
         self, pin: int, edge: object, pull_up: object, rate_hz: object
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], Counter]]:
-        pin = self._check_pin(pin)
-        self._check_mode(pin, COUNTER)
+        # As an analog input's (rule 14), with the pin's interrupt.
+        if not isinstance(pull_up, bool):
+            raise TypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
+        pin = self._check_pin(pin, COUNTER, reserved=False)
         if edge not in _EDGES:
             raise _reject(
                 Status.STATUS_INVALID_ARGUMENT,
                 f"edge must be 'rising', 'falling' or 'both', not {edge!r}",
             )
-        if not isinstance(pull_up, bool):
-            raise TypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
-        with self._lock:
-            counters = self._pins_of(COUNTER)
-            if pin not in counters and len(counters) >= MAX_COUNTERS:
-                raise _reject(
-                    Status.STATUS_NO_FREE_RESOURCE, f"all {MAX_COUNTERS} counters are in use"
-                )
+        interval = _period_ms("rate_hz", rate_hz)
+        self._check_reserved(pin)
+        self._check_capable(pin, COUNTER)
         msg = ArduinoIn()
         init = msg.counter_init
-        init.pin, init.pull_up = pin, pull_up
+        init.pin, init.pull_up, init.interval_ms = pin, pull_up, interval
         init.edge = _EDGES[edge]
-        init.interval_ms = _period_ms("rate_hz", rate_hz)
 
         def make() -> Counter:
             return Counter(self._inputs, pin, self.release, self.call_timeout)
@@ -1460,18 +1458,26 @@ class Board:
 
     # --- internals ------------------------------------------------------------------------
 
-    def _check_pin(self, pin: object) -> int:
+    def _check_pin(self, pin: object, mode: PinMode | None = None, *, reserved: bool = True) -> int:
+        """The pin as an int, checked as the device does first: ``mode``'s feature built in
+        (rule 11), the pin's number, and (unless ``reserved=False``) not reserved."""
         pin = _int("pin", pin)
         if self._closed:
             raise BoardClosedError("the board is closed")
+        if mode is not None:
+            self._check_feature(mode)
         if not 0 <= pin < self.info.num_pins:
             raise _reject(
                 Status.STATUS_INVALID_PIN,
                 f"pin {pin} does not exist ({self.info.board}: 0..{self.info.num_pins - 1})",
             )
+        if reserved:
+            self._check_reserved(pin)
+        return pin
+
+    def _check_reserved(self, pin: int) -> None:
         if pin in self.info.reserved_pins:
             raise _reject(Status.STATUS_RESERVED_PIN, f"pin {pin} is reserved")
-        return pin
 
     def _check_feature(self, mode: PinMode) -> None:
         if mode.feature not in self.info.features:
@@ -1481,9 +1487,8 @@ class Board:
                 f"({status_name(Status.STATUS_NOT_SUPPORTED)})",
             )
 
-    def _check_mode(self, pin: int, mode: PinMode) -> None:
-        """What the device checks of ``mode`` on ``pin`` before its state: built in, capable."""
-        self._check_feature(mode)
+    def _check_capable(self, pin: int, mode: PinMode) -> None:
+        """``pin`` is in the DeviceInfo mask of the pins that can do ``mode``."""
         if mode.pins:
             capable: tuple[int, ...] = getattr(self.info, mode.pins)
             if pin not in capable:

@@ -52,8 +52,6 @@ DEBOUNCE_MAX_MS = 255
 ANALOG_MAX = 1023
 #: The longest sampling, report or heartbeat interval of an input (ms).
 INPUT_INTERVAL_MAX_MS = 60000
-#: Counters a device runs at once (InputReport.counter_counts' bound).
-MAX_COUNTERS = 4
 
 
 class PacketType(IntEnum):

@@ -302,7 +302,8 @@ def test_aio_inputs_without_blocking_the_loop(sim: SimBoard) -> None:
 
 
 def test_host_input_refusals_are_the_devices(board: Board) -> None:
-    """Each input refusal the host makes before sending is the one the device makes."""
+    """Each input refusal the host makes before sending is the one the device makes, in the
+    device's order of checks (docs/protocol.md section 7, rules 13 and 14)."""
     board.servo(9)
 
     def analog(pin: int, threshold: int = 0, interval_ms: int = 10) -> ArduinoIn:
@@ -321,6 +322,11 @@ def test_host_input_refusals_are_the_devices(board: Board) -> None:
         msg.counter_init.pin = pin
         return msg
 
+    def pwm_init(pin: int, safe: int) -> ArduinoIn:
+        msg = ArduinoIn()
+        msg.pwm_init.pin, msg.pwm_init.safe_duty = pin, safe
+        return msg
+
     cases: list[tuple[Callable[[], object], ArduinoIn]] = [
         (lambda: board.analog_input(2), analog(2)),  # no ADC there
         (lambda: board.analog_input(14, threshold=1024), analog(14, threshold=1024)),
@@ -329,6 +335,15 @@ def test_host_input_refusals_are_the_devices(board: Board) -> None:
         (lambda: board.digital_input(9), digital(9)),  # a servo holds it
         (lambda: board.counter(14), counter(14)),  # no interrupt there
         (lambda: board.counter(9), counter(9)),
+        # Two faults at once: the device's order decides which one is named.
+        (lambda: board.digital_input(1, debounce_ms=300), digital(1, debounce_ms=300)),
+        (lambda: board.digital_input(25), digital(25)),
+        (lambda: board.analog_input(25, threshold=2000), analog(25, threshold=2000)),
+        (lambda: board.analog_input(1, threshold=2000), analog(1, threshold=2000)),
+        (lambda: board.analog_input(1), analog(1)),
+        (lambda: board.pwm_output(5, safe=300), pwm_init(5, 300)),
+        (lambda: board.pwm_output(9, safe=300), pwm_init(9, 300)),  # a servo runs
+        (lambda: board.pwm_output(4, safe=300), pwm_init(4, 300)),
     ]
     for host, device in cases:
         with pytest.raises(protoduino.CommandRejectedError) as refused:
