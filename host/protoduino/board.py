@@ -520,7 +520,7 @@ def _failsafe_event(fs: pb.Failsafe) -> Event:
         pb.FAILSAFE_CAUSE_INTERLOCK: "interlock",
     }.get(fs.cause, "none")
     details: dict[str, Any] = {"active": fs.active, "cause": cause}
-    if cause == "interlock":
+    if cause == "interlock" and fs.active:  # the input that tripped
         details["pin"] = fs.pin
     if fs.active:
         why = f"interlock on pin {fs.pin}" if cause == "interlock" else cause

@@ -438,5 +438,8 @@ def test_interlock_event_names_its_pin_and_forgets_values(board: Board, fake: Fa
     assert motor.value == 0  # the device drove it safe; the host knows
     board.clear_interlock()
     assert len(sent(fake, "clear_interlock")) == 1
+    fake.failsafe(pb.FAILSAFE_CAUSE_INTERLOCK, active=False)  # as the device, after the Ack
+    cleared = rec.wait(EventKind.FAILSAFE, count=2)
+    assert cleared.details == {"active": False, "cause": "interlock"}
     board.submit_clear_interlock().result(30)
     assert len(sent(fake, "clear_interlock")) == 2
