@@ -51,6 +51,10 @@ void pd_avr_servo_expedite(void);
 void pd_avr_pwm_write(uint8_t pin, uint8_t duty);
 void pd_avr_pwm_release(uint8_t pin);
 
+/* Set by an input's interrupt (a pin change, an analog conversion done): the
+ * main loop makes one more pass before it sleeps (pd_avr_loop). */
+extern volatile uint8_t pd_avr_wake;
+
 /* Inputs (pd_avr_inputs.c). wake: a change of the pin wakes the main loop. */
 void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake);
 bool pd_avr_pin_read(uint8_t pin);

@@ -2,14 +2,18 @@
  * Inputs on the Uno (pd_hal.h, pd_inputs.c).
  *
  * - Digital inputs read PINx. A configured input also wakes the main loop on
- *   every change (its pin-change interrupt, whose handler does nothing): the
- *   loop sleeps between interrupts, and without this an input's edge would
- *   wait for the next 1 ms clock tick to be seen. An interlock reacts within
- *   one pass of the loop (tens of microseconds), not within a millisecond.
+ *   every change (its pin-change interrupt): the loop sleeps between
+ *   interrupts, and without this an input's edge would wait for the next 1 ms
+ *   clock tick to be seen. An interlock reacts within one pass of the loop
+ *   (tens of microseconds), not within a millisecond.
  * - Analog inputs: one conversion at a time, never waited for; the ADC's
- *   interrupt (which does nothing either) wakes the loop when it is done, so
- *   conversions follow each other at the ADC's pace (13 ADC clocks at
- *   125 kHz: 104 us) rather than the clock tick's. AVCC reference, 10 bits.
+ *   interrupt wakes the loop when it is done, so conversions follow each other
+ *   at the ADC's pace (13 ADC clocks at 125 kHz: 104 us) rather than the clock
+ *   tick's. AVCC reference, 10 bits.
+ * Both interrupts only set pd_avr_wake: an interrupt that lands after the
+ * loop's pass has read the inputs but before it sleeps must still keep it
+ * awake for one more pass (pd_avr_loop checks the flag with interrupts off),
+ * or the change would wait for the next clock tick after all.
  * - Counters: INT0 (pin 2) and INT1 (pin 3), each edge counted in its
  *   interrupt (rising, falling or both, chosen in EICRA). What rate loses no
  *   edge is measured (docs/protocol.md, Counters): an edge is lost only when
@@ -23,6 +27,8 @@
 #include "pd_avr.h"
 #include "pd_avr_pins.h"
 #include "pd_features.h"
+
+volatile uint8_t pd_avr_wake;
 
 #if PD_FEATURE_DIGITAL_INPUT || PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER
 
@@ -67,10 +73,22 @@ bool pd_avr_pin_read(uint8_t pin)
     return (*(port - 2) & bit) != 0;
 }
 
-/* They only wake the loop, which reads the pins itself. */
-EMPTY_INTERRUPT(PCINT0_vect);
-EMPTY_INTERRUPT(PCINT1_vect);
-EMPTY_INTERRUPT(PCINT2_vect);
+/* pd_avr_wake = 1, touching no flag of SREG: 4 B of stack, 9 cycles. */
+#define PD_WAKE_ISR(vector)                                                  \
+    ISR(vector, ISR_NAKED)                                                   \
+    {                                                                        \
+        __asm__ volatile("push r24\n\t"                                      \
+                         "ldi r24, 1\n\t"                                    \
+                         "sts %[wake], r24\n\t"                              \
+                         "pop r24\n\t"                                       \
+                         "reti\n\t"                                          \
+                         :                                                   \
+                         : [wake] "i"(&pd_avr_wake));                        \
+    }
+
+PD_WAKE_ISR(PCINT0_vect)
+PD_WAKE_ISR(PCINT1_vect)
+PD_WAKE_ISR(PCINT2_vect)
 
 #endif
 
@@ -92,7 +110,7 @@ bool pd_avr_analog_done(uint16_t *counts)
     return true;
 }
 
-EMPTY_INTERRUPT(ADC_vect);
+PD_WAKE_ISR(ADC_vect)
 
 #endif
 

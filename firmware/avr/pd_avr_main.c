@@ -239,6 +239,7 @@ void pd_avr_setup(void)
 void pd_avr_loop(void)
 {
     int16_t byte;
+    pd_avr_wake = 0; /* the inputs are read below: a change from now on sets it again */
     while ((byte = pd_avr_uart_peek()) >= 0 && pd_core_rx_byte(&core, (uint8_t)byte)) {
         pd_avr_uart_drop();
     }
@@ -247,10 +248,11 @@ void pd_avr_loop(void)
     /* Sleep unless a byte slipped in; `sei; sleep` cannot miss the wake-up,
      * because the instruction after sei always runs before any interrupt. A
      * byte the core left (byte >= 0: its replies need transmit room) waits for
-     * the transmit interrupt, which wakes us as the queue drains. */
+     * the transmit interrupt, which wakes us as the queue drains. An input's
+     * interrupt since the pass began (pd_avr_wake) means one more pass first. */
     set_sleep_mode(SLEEP_MODE_IDLE);
     cli();
-    if (byte >= 0 || pd_avr_uart_rx_empty()) {
+    if (!pd_avr_wake && (byte >= 0 || pd_avr_uart_rx_empty())) {
         sleep_enable();
         sei();
         sleep_cpu();

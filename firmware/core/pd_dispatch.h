@@ -74,9 +74,9 @@ void pd_dispatch_command(struct pd_core *core, bool decoded);
 bool pd_dispatch_send(struct pd_core *core, const protoduino_ArduinoOut *msg);
 
 /*
- * Send an unsolicited message (a report) if it fits the transmit queue and no
- * command frame is being received (pd_link.h says why no reserve is kept
- * beside it). Returns whether it was queued.
+ * Send an unsolicited message (a report) if the transmit queue has room for it
+ * and for a reply (PD_TX_RESERVE: on the Uno, if it is empty) and no command
+ * frame is being received (pd_link.h). Returns whether it was queued.
  */
 bool pd_dispatch_send_spare(struct pd_core *core, const protoduino_ArduinoOut *msg);
 

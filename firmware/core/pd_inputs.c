@@ -218,7 +218,10 @@ protoduino_Status pd_inputs_analog_init(pd_core_t *core, const protoduino_Analog
     a->heartbeat_left = a->heartbeat;
     a->threshold = msg->threshold;
     a->sent = PD_ANALOG_UNSENT; /* the first sample is reported whatever it is */
-    a->sampled_at = (uint16_t)(pd_hal_millis(core->hal) - interval); /* sampled at once */
+    /* On the grid of its period (inputs of one period are due together, so their
+     * samples share a report), the last grid point before now: sampled at once. */
+    uint16_t now16 = (uint16_t)pd_hal_millis(core->hal);
+    a->sampled_at = (uint16_t)(now16 - now16 % (uint16_t)interval - (uint16_t)interval);
     return protoduino_Status_STATUS_OK; /* a conversion under way for it still counts */
 }
 
@@ -294,9 +297,11 @@ static void poll_analog(pd_core_t *core, uint32_t now)
         }
         uint8_t pin = pin_of(out, PD_MODE_ANALOG_INPUT, slot);
         pd_ainput_t *a = &in->analog[slot];
-        /* The period is kept from the schedule, not from when the loop came by. */
+        /* The period is kept from the schedule, not from when the loop came by;
+         * fallen behind by a whole period or more, back onto the grid. */
         uint16_t late = (uint16_t)(now16 - a->sampled_at - a->interval);
-        a->sampled_at = late < a->interval ? (uint16_t)(a->sampled_at + a->interval) : now16;
+        a->sampled_at = late < a->interval ? (uint16_t)(a->sampled_at + a->interval)
+                                           : (uint16_t)(now16 - now16 % a->interval);
         if (pin >= PD_MAX_PINS) {
             continue; /* cannot happen: a slot with an interval belongs to a pin */
         }

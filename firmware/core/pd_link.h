@@ -73,11 +73,11 @@ struct pd_core;
     PD_ENCODE_MAX2(PD_TX_FRAME_MAX, PD_TX_FRAME_BYTES(PD_TX_LIVENESS_ACK_MAX) + PD_TX_NOTICE_MAX)
 /*
  * A platform's transmit queue holds at least the reserve (checked at compile
- * time by each platform). A report goes in whenever it fits and no command
- * frame is arriving (pd_dispatch_send_spare): a report queued before a command
- * makes that command wait for room only until the report has left, which its
- * Ack would have waited for anyway in the queue's order; the queue need not
- * keep a reserve beside reports (on the Uno every byte of it is RAM).
+ * time by each platform). A report goes in only when the queue has room for it
+ * and for a reply, and no command frame is arriving (pd_dispatch_send_spare):
+ * on the Uno, whose queue is the reserve, into an empty queue. So a reply
+ * waits behind one report at most, the one on the line, and the queue keeps
+ * no room beside the reserve for reports (every byte of it is the Uno's RAM).
  */
 
 /*
