@@ -11,6 +11,7 @@ reported is what ``read()``, ``wait_for`` and ``on_change`` see.
 from __future__ import annotations
 
 import asyncio
+import random
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -279,6 +280,37 @@ def test_a_bumper_stops_the_motors_on_the_device(sim: SimBoard) -> None:
         assert pwm_values(sim.trace()[mark:], 3)[-1] == 0  # safe until commanded
         left.write(120)
         wait_pwm(sim, 3, lambda v: v[-1:] == [120], since=mark)
+
+
+#: Bumper hits per board in the reaction test, each at another phase of the PWM period.
+BUMPER_TRIALS = 16
+
+
+def test_the_bumper_stops_the_motor_within_1_ms_at_any_phase(sim: SimBoard) -> None:
+    """The 1 ms bound at the pin holds wherever in the PWM period (1.024 ms on the Uno) the
+    edge falls: a duty change that waits for the period's end would miss it there."""
+    rng = random.Random(21)
+    reactions: list[float] = []
+    with Board.open(sim.port) as board:
+        motor = board.pwm_output(3, safe=0)
+        sim.set_level(2, 1)
+        bumper = board.digital_input(2, pull_up=True, interlock="low")
+        for trial in range(BUMPER_TRIALS):
+            if trial:
+                sim.set_level(2, 1)
+                bumper.wait_for(True, timeout=BOUND)
+                board.clear_interlock()
+            mark = len(sim.trace())
+            motor.write(200)
+            wait_pwm(sim, 3, lambda v: v[-1:] == [200], since=mark)
+            running = len(sim.trace())
+            time.sleep(rng.uniform(0.0, 0.005))  # only moves the phase; the verdict is the trace's
+            hit = sim.set_level(2, 0)
+            wait_pwm(sim, 3, lambda v: 0 in v, since=running)
+            low = next(e["t"] for e in sim.trace()[running:] if e["pin"] == 3 and e["value"] == 0)
+            reactions.append(max(0.0, low - hit))
+    slow = [f"{r * 1e6:.0f} us" for r in reactions if r > 0.001]
+    assert not slow, f"{len(slow)} of {BUMPER_TRIALS} hits took over 1 ms: {slow}"
 
 
 def test_aio_inputs_without_blocking_the_loop(sim: SimBoard) -> None:
