@@ -97,6 +97,13 @@ protoduino_Status pd_inputs_digital_init(pd_core_t *core, const protoduino_Digit
         if (msg->interlock == protoduino_Trip_TRIP_HIGH) {
             in->trip_level |= bit;
         }
+        if (level == (msg->interlock == protoduino_Trip_TRIP_HIGH)) {
+            /* Already at its trip level (a bumper pressed as it is configured): it
+             * trips in the loop's next pass, right after this Init's Ack, without
+             * waiting for its debounce (the level has held for who knows how long). */
+            in->level ^= bit;
+            in->digital[slot].since = (uint8_t)(in->digital[slot].since - in->digital[slot].debounce);
+        }
     }
     (void)was;
     in->digital_dirty = true;

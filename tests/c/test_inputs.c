@@ -218,6 +218,34 @@ static void test_interlock_trips_latches_and_clears(void)
     CHECK_EQ(d.hal.pwm[3], 0);
 }
 
+static void test_interlock_configured_while_tripped_trips_after_its_ack(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_pwm_init(1, 11, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_pwm(2, 11, 180);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    d.hal.level[6] = false; /* the bumper is pressed already */
+    fake_clear(&d.hal);
+    in = m_din(3, 6, true, 50, protoduino_Trip_TRIP_LOW);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.pwm[11], 180); /* the Init itself drives nothing */
+    poll_at(&d, d.hal.now_ms);    /* the next pass, no debounce wait */
+    CHECK_EQ(d.hal.pwm[11], 0);
+    protoduino_Failsafe fs;
+    CHECK_EQ(t_failsafes(&d, &fs), 1);
+    CHECK_EQ(fs.cause, protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK);
+    protoduino_ArduinoOut out;
+    CHECK(t_out(&d, 0, &out)); /* the Init's Ack went first */
+    CHECK_EQ(out.which_data, protoduino_ArduinoOut_ack_tag);
+    protoduino_InputReport r;
+    CHECK_EQ(reports(&d, &r), 1);
+    CHECK_EQ(r.digital_levels & (1u << 6), 0); /* the level it reads */
+    in = m_pwm(4, 11, 180);
+    CHECK_EQ(t_cmd(&d, &in), S(INTERLOCK_ACTIVE));
+}
+
 static void test_interlock_with_no_host_connected(void)
 {
     tdev_t d;
@@ -408,6 +436,7 @@ const pd_test_case_t pd_tests_inputs[] = {
     TEST_CASE(test_digital_input_level_reported_after_its_ack),
     TEST_CASE(test_digital_debounce),
     TEST_CASE(test_interlock_trips_latches_and_clears),
+    TEST_CASE(test_interlock_configured_while_tripped_trips_after_its_ack),
     TEST_CASE(test_interlock_with_no_host_connected),
     TEST_CASE(test_analog_first_value_threshold_heartbeat),
     TEST_CASE(test_six_analog_inputs_share_a_slow_converter),
