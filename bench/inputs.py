@@ -4,9 +4,9 @@ Three questions about the inputs (docs/api.md, Pins), on both boards:
 
 * Pin change to host callback: a digital input's level is changed through the board's
   control socket, and the time until its ``on_change`` callback runs on the host is set
-  against the time its InputReport takes on the wire. The edge's time is the board's (the
-  control socket answers with it); host and board clocks are related as in part 6, through
-  an offset measured with digital toggles, whose uncertainty is reported.
+  against the time its InputReport takes on the wire. The edge came after the control
+  command was sent and before its answer arrived, so its host time is the midpoint of that
+  round trip, within half of it (reported).
 * Analog streaming: six analog inputs sampled at 200 Hz each while the host keeps sending
   Pings, one after another. The inputs are constant, so a heartbeat of one sampling period
   makes the device report every sample; the values the host receives per channel per second
@@ -42,7 +42,7 @@ from protoduino.transport import FrameRecord
 
 from .boards import BACKENDS, LABELS, BoardUnavailableError, Percentiles, missing_tool
 from .core import Context, Section, SectionResult, Target, fmt_rate, md_table
-from .motion import CLOCK_PIN, Clock, Trace, calibrate
+from .motion import Trace
 from .wire import board_byte_us
 
 log = logging.getLogger(__name__)
@@ -75,8 +75,9 @@ def report_frame(digital_pins: int = 1 << BUTTON_PIN) -> bytes:
 @dataclass(slots=True)
 class BoardResult:
     backend: str
-    clock: Clock | None = None
     latency: list[float] = field(default_factory=list)  # edge -> callback (s)
+    #: Half of each edge's control-socket round trip: how well its host time is known.
+    edge_uncertainty: list[float] = field(default_factory=list)
     latency_lost: int = 0
     per_channel: dict[int, float] = field(default_factory=dict)  # values/s
     coalesced: int = 0
@@ -88,8 +89,8 @@ class BoardResult:
 
 
 def measure_latency(
-    board: Board, sim: SimBoard, clock: Clock, trials: int, rng: random.Random
-) -> tuple[list[float], int]:
+    board: Board, sim: SimBoard, trials: int, rng: random.Random
+) -> tuple[list[float], int, list[float]]:
     button = board.digital_input(BUTTON_PIN, pull_up=True)
     arrivals: list[tuple[bool, float]] = []
     got = threading.Event()
@@ -102,29 +103,43 @@ def measure_latency(
     level = bool(button.read())
     samples: list[float] = []
     lost = 0
+    half_widths: list[float] = []
     for _ in range(trials):
         time.sleep(rng.uniform(0.0, 0.020))  # edges at every phase of the device's loop
         level = not level
         mark = len(arrivals)
         got.clear()
-        edge = sim.set_level(BUTTON_PIN, int(level))
+        sent = time.monotonic()
+        sim.set_level(BUTTON_PIN, int(level))
+        answered = time.monotonic()
+        edge = (sent + answered) / 2
+        half_widths.append((answered - sent) / 2)
         deadline = time.monotonic() + SETTLE
         while len(arrivals) <= mark and time.monotonic() < deadline:
             got.wait(0.1)
         if len(arrivals) <= mark or arrivals[mark][0] != level:
             lost += 1
             continue
-        samples.append(arrivals[mark][1] - (edge + clock.offset))
+        samples.append(arrivals[mark][1] - edge)
     button.release()
-    return samples, lost
+    return samples, lost, half_widths
 
 
 class AnalogCounter:
-    """Analog values received per pin, counted from the frames (a frame monitor)."""
+    """Analog values received per pin, counted from the frames (a frame monitor), with the
+    device times (InputReport.time_ms) of the first and the last report that carried one."""
 
     def __init__(self) -> None:
         self.counting = False
         self.values: collections.Counter[int] = collections.Counter()
+        self.first_ms: dict[int, int] = {}
+        self.last_ms: dict[int, int] = {}
+
+    def rate(self, pin: int) -> float:
+        """Values per second of the device's clock: (n - 1) over the span of their times."""
+        n = self.values[pin]
+        span = (self.last_ms.get(pin, 0) - self.first_ms.get(pin, 0)) / 1000
+        return (n - 1) / span if n > 1 and span > 0 else 0.0
 
     def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
         item = record.item
@@ -135,10 +150,12 @@ class AnalogCounter:
         with contextlib.suppress(ProtoduinoError):
             msg = parse_out(item.payload)
             if msg.WhichOneof("data") == "input_report":
-                mask = msg.input_report.analog_pins
+                report = msg.input_report
                 for pin in range(32):
-                    if mask >> pin & 1:
+                    if report.analog_pins >> pin & 1:
                         self.values[pin] += 1
+                        self.first_ms.setdefault(pin, report.time_ms)
+                        self.last_ms[pin] = report.time_ms
 
 
 def measure_streaming(
@@ -162,7 +179,8 @@ def measure_streaming(
     coalesced = board.stats.inputs_coalesced - coalesced
     for pot in pots:
         pot.release()
-    rates = {pin: counter.values[pin] / elapsed for pin in board.info.analog_pins}
+    log.debug("analog values received in %.3f s of the host's clock: %s", elapsed, counter.values)
+    rates = {pin: counter.rate(pin) for pin in board.info.analog_pins}
     return rates, coalesced, idle, streaming
 
 
@@ -232,10 +250,8 @@ def collect(trials: int, seconds: float, pings: int, seed: int = 7) -> list[Boar
                 sim.start()
                 trace = Trace(Path(tmp) / "trace.jsonl")
                 with Board.open(sim.port) as board:
-                    led = board.digital_output(CLOCK_PIN)
-                    result.clock = calibrate(led, trace)
-                    result.latency, result.latency_lost = measure_latency(
-                        board, sim, result.clock, trials, rng
+                    result.latency, result.latency_lost, result.edge_uncertainty = measure_latency(
+                        board, sim, trials, rng
                     )
                     (
                         result.per_channel,
@@ -266,16 +282,19 @@ def run(ctx: Context) -> SectionResult:
     frame = report_frame()
     parts = [
         f"**Pin change to callback.** {trials} edges on a digital input (pull-up, no "
-        "debounce), each after a random pause of 0-20 ms: from the edge (the board's time, "
-        "from the control socket) to the host's `on_change` callback (the board's event "
+        "debounce), each after a random pause of 0-20 ms: from the edge (made "
+        "through the control socket) to the host's `on_change` callback (the board's event "
         "thread), against the wire time of the InputReport that carries it "
-        f"({len(frame)} B framed). Host and board clocks are related through an offset "
-        "measured with digital toggles (part 6); its uncertainty is given per board.\n",
+        f"({len(frame)} B framed). The edge's host time is the midpoint of the control "
+        "command's round trip (it took effect between sending and answer): half that round "
+        "trip bounds its error (median and largest given per board).\n",
         f"**Analog streaming.** Six analog inputs at {ANALOG_HZ} Hz each (`rate_hz="
         f"{ANALOG_HZ}`, a heartbeat of one period so that every sample of the constant "
         f"inputs is reported) for {seconds:g} s while the host sends Pings one after "
-        "another; the values received per channel per second, the reports the device "
-        "coalesced (replaced before it could send them), and the Ping round trip against "
+        "another; the values received per channel per second (their number less one over "
+        "the span of their reports' device times, `InputReport.time_ms`, so that where the "
+        "window cuts the 5 ms grid does not count), the reports the device coalesced "
+        "(replaced before it could send them), and the Ping round trip against "
         f"{pings} Pings with no input configured.\n",
         f"**Interlock.** {trials} times: a motor's PWM at {MOTOR_DUTY} on pin {MOTOR_PIN}, "
         f'then a bumper on pin {BUMPER_PIN} (`interlock="low"`, pull-up) closes; the time '
@@ -289,7 +308,6 @@ def run(ctx: Context) -> SectionResult:
         if result.error is not None:
             parts.append(f"The {label} was not run: {result.error}.\n")
             continue
-        assert result.clock is not None
         parts.append(f"### {label[0].upper()}{label[1:]}\n")
         wire = len(frame) * board_byte_us(result.backend) / 1e6
         rows = []
@@ -317,9 +335,12 @@ def run(ctx: Context) -> SectionResult:
                     str(result.reaction_lost),
                 ]
             )
-        parts.append(
-            f"Host/board clock offset known within +-{result.clock.half_width * 1000:.2f} ms.\n"
-        )
+        if result.edge_uncertainty:
+            parts.append(
+                "Each edge's host time known within +-"
+                f"{statistics.median(result.edge_uncertainty) * 1000:.2f} ms (median; at "
+                f"most +-{max(result.edge_uncertainty) * 1000:.2f} ms).\n"
+            )
         parts.append(md_table(["what", "p50 ms", "p99 ms", "wire ms", "p50 / wire", "lost"], rows))
         slowest = min(result.per_channel.values(), default=0.0)
         idle = statistics.median(result.idle_rtt) if result.idle_rtt else 0.0

@@ -11,6 +11,7 @@ reported is what ``read()``, ``wait_for`` and ``on_change`` see.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import random
 import time
 from collections.abc import Callable, Iterator
@@ -21,6 +22,7 @@ import protoduino
 import pytest
 from boardprocess import BoardProcess, missing_tool
 from protoduino import Board, Event, EventKind, aio
+from protoduino.constants import PacketType
 from protoduino.errors import (
     FeatureMissingError,
     InterlockActiveError,
@@ -28,7 +30,8 @@ from protoduino.errors import (
     TimerInUseError,
 )
 from protoduino.inputs import Reading
-from protoduino.messages import ArduinoIn, Status
+from protoduino.messages import ArduinoIn, Status, parse_out
+from protoduino.packets import Packet
 from protoduino.simboard import SimBoard, runner_command
 from protoduino_dev import build
 
@@ -382,3 +385,41 @@ def test_host_input_refusals_are_the_devices(board: Board) -> None:
             host()
         assert not refused.value.sent
         assert _request(board, device) == refused.value.status, device
+
+
+def test_reports_keep_flowing_while_commands_flow_back_to_back(sim: SimBoard) -> None:
+    """Freshness under load: Acks go first, but a host sending commands back to back must
+    still hear its inputs. Judged on the device's clock (the reports' time_ms): every analog
+    channel is reported throughout, never more than GAP_MS apart."""
+    gap_ms = 50
+    with Board.open(sim.port) as board:
+        pots = [
+            board.analog_input(pin, rate_hz=200, heartbeat=0.005) for pin in board.info.analog_pins
+        ]
+        times: dict[int, list[int]] = {pot.pin: [] for pot in pots}
+
+        def record(rec: Any) -> None:  # the I/O thread: collect the reports' device times
+            item = rec.item
+            if rec.direction != "rx" or not isinstance(item, Packet):
+                return
+            if item.type is not PacketType.DATA:
+                return
+            msg = parse_out(item.payload)
+            if msg.WhichOneof("data") == "input_report":
+                for pin, seen in times.items():
+                    if msg.input_report.analog_pins >> pin & 1:
+                        seen.append(msg.input_report.time_ms)
+
+        board.add_frame_monitor(record)
+        pings = 0
+        deadline = time.monotonic() + BOUND
+        while time.monotonic() < deadline:
+            board.ping()
+            pings += 1
+            spans = [t[-1] - t[0] for t in times.values() if t]
+            if len(spans) == len(times) and min(spans) >= 500:  # half a second of device time
+                break
+        for pin, seen in times.items():
+            assert seen, f"pin {pin}: no report in {pings} back-to-back pings"
+            gaps = [b - a for a, b in itertools.pairwise(seen)]
+            assert max(gaps, default=0) <= gap_ms, f"pin {pin}: reports {gaps} ms apart"
