@@ -20,8 +20,9 @@ from typing import Any
 import pytest
 from boardprocess import BoardProcess, missing_tool
 from protoduino import Board, CommandRejectedError
+from protoduino.board import Edge
 from protoduino.messages import ArduinoIn, Status
-from protoduino.simboard import runner_command
+from protoduino.simboard import SimBoard, runner_command
 from protoduino.simcontrol import SimControl
 from protoduino_dev import build
 
@@ -73,8 +74,7 @@ def _pwm(pin: int, duty: int) -> ArduinoIn:
 
 
 def test_a_build_without_servo_refuses_servos(tools: None) -> None:
-    build.make(ROOT / "firmware", "avr", "FEATURES=digital_output pwm")
-    elf = ROOT / "build" / "avr-digital_output-pwm" / "protoduino.elf"
+    elf = build.build_firmware_features(["digital_output", "pwm"])
     runner = _runner(elf)
     try:
         with Board.open(runner.port) as board:
@@ -184,3 +184,38 @@ def test_counters_lose_no_edge_at_the_documented_rate(tools: None, tmp_path: Pat
             assert (both.read(), rising.read()) == expected
     finally:
         runner.stop(strict=False)
+
+
+@pytest.mark.parametrize(
+    ("edge", "pull_up", "expected"),
+    [
+        ("rising", False, 300),
+        ("falling", False, 300),
+        ("both", False, 600),
+        ("rising", True, 300),
+        ("falling", True, 300),
+        ("both", True, 600),
+    ],
+)
+def test_counter_edges_on_both_boards(
+    sim_board: SimBoard, edge: Edge, pull_up: bool, expected: int
+) -> None:
+    """300 pulses from the pin's idle level (low, or high through the pull-up: then each pulse
+    goes low first), counted on the edges asked for, on each board's own input code (the
+    native board counts the control socket's train from its clock, the emulated Uno in its
+    INT1 interrupt); then two single level changes, counted as edges too."""
+    with Board.open(sim_board.port) as board:
+        counter = board.counter(3, edge=edge, pull_up=pull_up, rate_hz=50)
+        assert counter.wait_for(lambda n: n == 0, timeout=TRACE_TIMEOUT) == 0
+        idle = 1 if pull_up else 0
+        sim_board.control.level(3, idle)
+        sim_board.pulses(3, 300, 3_000)
+        assert counter.wait_for(lambda n: n >= expected, timeout=TRACE_TIMEOUT) == expected
+        sim_board.control.level(3, 1 - idle)  # one edge away from idle ...
+        sim_board.control.level(3, idle)  # ... and back
+        away = "rising" if idle == 0 else "falling"
+        more = 2 if edge == "both" else 1
+        total = expected + more
+        assert counter.wait_for(lambda n: n >= total, timeout=TRACE_TIMEOUT) == total
+        board.ping()
+        assert counter.read() == total, (away, edge)
