@@ -10,7 +10,15 @@ See README.md for the API and docs/protocol.md for the wire protocol.
 from __future__ import annotations
 
 from ._generated.schema_id import SCHEMA_ID
-from .board import Board, DeviceInfo, DigitalOutput, OutputState, Servo, effective_speed
+from .board import (
+    Board,
+    DeviceInfo,
+    DigitalOutput,
+    OutputState,
+    PwmOutput,
+    Servo,
+    effective_speed,
+)
 from .constants import PROTOCOL_VERSION
 from .errors import (
     AckTimeoutError,
@@ -18,8 +26,12 @@ from .errors import (
     CaptureError,
     CommandRejectedError,
     DeviceRebootedError,
+    FeatureMissingError,
     HandshakeError,
+    InputTimeoutError,
+    InterlockActiveError,
     LinkError,
+    NotSupportedError,
     PayloadTooLargeError,
     PortInUseError,
     ProtocolError,
@@ -27,10 +39,12 @@ from .errors import (
     RebootLoopError,
     ReentrantCallError,
     SchemaMismatchError,
+    TimerInUseError,
     TransportError,
     VersionMismatchError,
 )
 from .events import Event, EventKind, Stats
+from .inputs import AnalogInput, Counter, DigitalInput, Reading
 
 __version__ = "0.1.0"
 
@@ -38,27 +52,37 @@ __all__ = [
     "PROTOCOL_VERSION",
     "SCHEMA_ID",
     "AckTimeoutError",
+    "AnalogInput",
     "Board",
     "BoardClosedError",
     "CaptureError",
     "CommandRejectedError",
+    "Counter",
     "DeviceInfo",
     "DeviceRebootedError",
+    "DigitalInput",
     "DigitalOutput",
     "Event",
     "EventKind",
+    "FeatureMissingError",
     "HandshakeError",
+    "InputTimeoutError",
+    "InterlockActiveError",
     "LinkError",
+    "NotSupportedError",
     "OutputState",
     "PayloadTooLargeError",
     "PortInUseError",
     "ProtocolError",
     "ProtoduinoError",
+    "PwmOutput",
+    "Reading",
     "RebootLoopError",
     "ReentrantCallError",
     "SchemaMismatchError",
     "Servo",
     "Stats",
+    "TimerInUseError",
     "TransportError",
     "VersionMismatchError",
     "__version__",
