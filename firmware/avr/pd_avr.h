@@ -57,7 +57,8 @@ extern volatile uint8_t pd_avr_wake;
 
 /* Inputs (pd_avr_inputs.c). wake: a change of the pin wakes the main loop. */
 void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake);
-bool pd_avr_pin_read(uint8_t pin);
+/* Every pin's level, bit N for Uno pin N. */
+uint32_t pd_avr_pins_read(void);
 void pd_avr_analog_start(uint8_t pin);
 bool pd_avr_analog_done(uint16_t *counts);
 void pd_avr_counter_start(uint8_t pin, uint8_t edge);

@@ -65,12 +65,10 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
     }
 }
 
-bool pd_avr_pin_read(uint8_t pin)
+uint32_t pd_avr_pins_read(void)
 {
-    uint8_t bit;
-    volatile uint8_t *port = pd_avr_port(pin, &bit);
-    /* PINx sits two below PORTx on every port (datasheet, register summary). */
-    return (*(port - 2) & bit) != 0;
+    /* Uno pins: D0..D7 = PIND, D8..D13 = PINB0..5, A0..A5 (14..19) = PINC0..5. */
+    return (uint32_t)PIND | (uint32_t)(PINB & 0x3Fu) << 8 | (uint32_t)(PINC & 0x3Fu) << 14;
 }
 
 /* pd_avr_wake = 1, touching no flag of SREG: 4 B of stack, 9 cycles. */

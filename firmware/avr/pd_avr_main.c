@@ -118,14 +118,13 @@ void pd_hal_input_release(void *hal, uint8_t pin)
 #endif
 }
 
-bool pd_hal_digital_read(void *hal, uint8_t pin)
+uint32_t pd_hal_digital_read_all(void *hal)
 {
     (void)hal;
 #if PD_FEATURE_DIGITAL_INPUT
-    return pd_avr_pin_read(pin);
+    return pd_avr_pins_read();
 #else
-    (void)pin;
-    return false;
+    return 0;
 #endif
 }
 

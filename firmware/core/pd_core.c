@@ -45,7 +45,8 @@ static __attribute__((noinline)) void send_report(pd_core_t *core)
     }
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
     if (core->report(core, slot, &out)) {
-        if (!pd_dispatch_send_spare(core, &out)) {
+        uint8_t waited = (uint8_t)((uint8_t)pd_hal_millis(core->hal) - core->report_since);
+        if (!pd_dispatch_send_spare(core, &out, waited < PD_REPORT_MAX_WAIT_MS)) {
             return; /* no room yet, or a command arriving: the newest value, later */
         }
         if (core->report_sent != NULL) {
@@ -76,7 +77,9 @@ void pd_core_poll(pd_core_t *core)
     }
     pd_outputs_step(&core->outputs, core->hal, now);
     /* Every pass, whether a host is connected or not: an interlock acts on its own. */
-    pd_inputs_poll(core, now);
+    if (pd_inputs_active(&core->outputs.inputs)) {
+        pd_inputs_poll(core, now);
+    }
     if (core->report_pending != 0 && core->report != NULL && core->link.active) {
         send_report(core);
     }

@@ -53,6 +53,7 @@ typedef struct pd_core {
     pd_report_fn report;     /* NULL: no reports (pd_core_init: the inputs' InputReport) */
     pd_report_sent_fn report_sent;
     uint8_t report_pending;  /* bit N: slot N has a value to send */
+    uint8_t report_since;    /* low byte of the ms report_pending stopped being 0 */
 } pd_core_t;
 
 /* Power-up state: nothing configured, link IDLE; sends EVENT BOOT. */
@@ -73,8 +74,18 @@ void pd_core_poll(pd_core_t *core);
 /* Report slot `slot` has a new value: send it (pd_core_t.report builds it) when the line allows. */
 static inline void pd_core_report(pd_core_t *core, uint8_t slot)
 {
+    if (core->report_pending == 0) {
+        core->report_since = (uint8_t)pd_hal_millis(core->hal);
+    }
     core->report_pending = (uint8_t)(core->report_pending | (1u << slot));
 }
+
+/*
+ * A report gives way to a command frame arriving (its Ack goes first), but not
+ * for longer than this: a host that keeps the line busy with commands must still
+ * hear its inputs (freshness), and the command then waits for one report.
+ */
+#define PD_REPORT_MAX_WAIT_MS 20u
 
 /* Every configured output to its safe value, flag set, event sent (Stop, timeout). */
 void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause);

@@ -61,7 +61,7 @@ bool pd_dispatch_send(pd_core_t *core, const protoduino_ArduinoOut *msg)
     return pd_link_send(core, PD_PACKET_DATA, raw, len);
 }
 
-bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg)
+bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg, bool yield)
 {
     uint8_t raw[PD_TX_BUF];
 
@@ -80,7 +80,7 @@ bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg)
      * And one report at a time, into a queue with room for a reply (on the Uno: an
      * empty one): a reply never waits behind more than the report on the line. */
     uint16_t room = pd_hal_tx_room(core->hal);
-    if (len == 0 || core->link.rx_len > 0 || room < frame || room < PD_TX_RESERVE) {
+    if (len == 0 || (yield && core->link.rx_len > 0) || room < frame || room < PD_TX_RESERVE) {
         return false;
     }
     return pd_link_send(core, PD_PACKET_DATA, raw, len);

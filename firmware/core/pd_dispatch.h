@@ -75,10 +75,10 @@ bool pd_dispatch_send(struct pd_core *core, const protoduino_ArduinoOut *msg);
 
 /*
  * Send an unsolicited message (a report) if the transmit queue has room for it
- * and for a reply (PD_TX_RESERVE: on the Uno, if it is empty) and no command
- * frame is being received (pd_link.h). Returns whether it was queued.
+ * and for a reply (PD_TX_RESERVE: on the Uno, if it is empty) and, if `yield`,
+ * no command frame is being received (pd_link.h). Returns whether it was queued.
  */
-bool pd_dispatch_send_spare(struct pd_core *core, const protoduino_ArduinoOut *msg);
+bool pd_dispatch_send_spare(struct pd_core *core, const protoduino_ArduinoOut *msg, bool yield);
 
 /* ArduinoOut.failsafe{active, cause}. */
 bool pd_dispatch_send_failsafe(struct pd_core *core, bool active, protoduino_FailsafeCause cause);

@@ -98,11 +98,13 @@ void pd_hal_pwm_release(void *hal, uint8_t pin);
  * Inputs (pd_inputs.c). pd_hal_input_config makes `pin` an input, with its
  * pull-up if asked, and (where the board can) lets a change of it wake the
  * main loop; pd_hal_input_release: an input without pull-up, as at power-up.
- * pd_hal_digital_read: the level at the pin now.
+ * pd_hal_digital_read_all: the level at every pin now, bit N for pin N (one
+ * read per pass of the loop, whatever the number of inputs: the Uno reads its
+ * three PIN registers).
  */
 void pd_hal_input_config(void *hal, uint8_t pin, bool pull_up);
 void pd_hal_input_release(void *hal, uint8_t pin);
-bool pd_hal_digital_read(void *hal, uint8_t pin);
+uint32_t pd_hal_digital_read_all(void *hal);
 
 /*
  * Analog inputs (pins in analog_pins), one conversion at a time and never

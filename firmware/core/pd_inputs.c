@@ -86,7 +86,8 @@ protoduino_Status pd_inputs_digital_init(pd_core_t *core, const protoduino_Digit
     pd_hal_input_config(core->hal, pin, msg->pull_up);
     in->digital[slot].debounce = (uint8_t)msg->debounce_ms;
     /* The level now, as it reads: a host knows it at once (the report after the Ack). */
-    bool level = pd_hal_digital_read(core->hal, pin);
+    bool level = (pd_hal_digital_read_all(core->hal) & bit) != 0;
+    in->dpins |= bit;
     in->raw = level ? (in->raw | bit) : (in->raw & ~bit);
     in->level = level ? (in->level | bit) : (in->level & ~bit);
     in->digital[slot].since = (uint8_t)pd_hal_millis(core->hal);
@@ -106,7 +107,6 @@ protoduino_Status pd_inputs_digital_init(pd_core_t *core, const protoduino_Digit
         }
     }
     (void)was;
-    in->digital_dirty = true;
     mark_dirty(core);
     return protoduino_Status_STATUS_OK;
 }
@@ -146,26 +146,35 @@ protoduino_Status pd_inputs_clear_interlock(pd_core_t *core, bool *cleared)
     return protoduino_Status_STATUS_OK;
 }
 
+/*
+ * Every pass of the loop (an interlock reacts within one), so it costs little
+ * while nothing changes: one read of every pin, and the per-pin work only for
+ * a pin whose level changed or whose new level is still being debounced.
+ */
 static void poll_digital(pd_core_t *core, uint32_t now)
 {
     pd_outputs_t *out = &core->outputs;
     pd_inputs_t *in = &out->inputs;
+    uint32_t pins = in->dpins;
+    uint32_t levels = pd_hal_digital_read_all(core->hal) & pins;
+    uint32_t work = ((levels ^ in->raw) | (in->raw ^ in->level)) & pins;
+    if (work == 0) {
+        return;
+    }
     uint8_t now8 = (uint8_t)now;
     uint32_t bit = 1;
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++, bit <<= 1) {
-        uint8_t owner = out->owner[pin];
-        if (owner == 0 || PD_OWNER_MODE(owner) != PD_MODE_DIGITAL_INPUT) {
+        if (!(work & bit)) {
             continue;
         }
-        pd_dinput_t *d = &in->digital[PD_OWNER_SLOT(owner)];
-        bool raw = pd_hal_digital_read(core->hal, pin);
+        pd_dinput_t *d = &in->digital[PD_OWNER_SLOT(out->owner[pin])];
+        bool raw = (levels & bit) != 0;
         if (raw != ((in->raw & bit) != 0)) {
             in->raw ^= bit;
             d->since = now8;
         }
         if (raw != ((in->level & bit) != 0) && (uint8_t)(now8 - d->since) >= d->debounce) {
             in->level ^= bit;
-            in->digital_dirty = true;
             if ((in->trip_mask & bit) && raw == ((in->trip_level & bit) != 0) && !in->latched) {
                 trip(core, pin);
             }
@@ -218,6 +227,7 @@ protoduino_Status pd_inputs_analog_init(pd_core_t *core, const protoduino_Analog
     if (!was) {
         pd_hal_input_config(core->hal, msg->pin, false);
     }
+    in->analog_on = (uint8_t)(in->analog_on | (1u << slot));
     a->interval = (uint16_t)interval;
     /* In 16 bits (both are at most 60000): no 32-bit division in the Uno's flash. */
     uint16_t periods = (uint16_t)(((uint16_t)heartbeat + (uint16_t)interval - 1u) / (uint16_t)interval);
@@ -349,6 +359,7 @@ protoduino_Status pd_inputs_counter_init(pd_core_t *core, const protoduino_Count
         return status;
     }
     pd_counter_t *c = &in->counter[slot];
+    in->counter_on = (uint8_t)(in->counter_on | (1u << slot));
     pd_hal_input_config(core->hal, msg->pin, msg->pull_up);
     pd_hal_counter_start(core->hal, msg->pin, (uint8_t)msg->edge); /* counts from 0 */
     c->sent = 0;
@@ -393,17 +404,30 @@ protoduino_Status pd_inputs_counter_init(pd_core_t *core, const protoduino_Count
 /* Not inlined into the main loop, for the same reason as trip(). */
 __attribute__((noinline)) void pd_inputs_poll(pd_core_t *core, uint32_t now)
 {
+    /* The loop passes after every byte sent or received: what has nothing to do
+     * must cost next to nothing (a servo write's cycles on the Uno). */
+    pd_inputs_t *in = &core->outputs.inputs;
+    bool tick = (uint8_t)now != in->tick; /* analog periods and counter intervals are in ms */
+    in->tick = (uint8_t)now;
 #if PD_FEATURE_DIGITAL_INPUT
-    poll_digital(core, now);
+    if (in->dpins != 0) {
+        poll_digital(core, now);
+    }
 #endif
 #if PD_FEATURE_ANALOG_INPUT
-    poll_analog(core, now);
+    if (in->adc_slot != NO_SLOT || (tick && in->analog_on != 0)) {
+        poll_analog(core, now);
+    }
 #endif
 #if PD_FEATURE_COUNTER
-    poll_counters(core, now);
+    if (tick && in->counter_on != 0) {
+        poll_counters(core, now);
+    }
 #endif
     (void)core;
     (void)now;
+    (void)tick;
+    (void)in;
 }
 
 bool pd_inputs_report(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *msg)
@@ -458,7 +482,6 @@ void pd_inputs_sent(pd_core_t *core, const protoduino_ArduinoOut *msg)
     }
     in->analog_dirty = 0;
     in->counter_dirty = 0;
-    in->digital_dirty = false;
     in->coalesced = 0;
 }
 
@@ -468,11 +491,14 @@ void pd_inputs_release(pd_outputs_t *outputs, void *hal, uint8_t pin, uint8_t mo
     uint32_t bit = 1UL << pin;
     if (mode == PD_MODE_DIGITAL_INPUT) {
         in->trip_mask &= ~bit;
+        in->dpins &= ~bit;
     } else if (mode == PD_MODE_ANALOG_INPUT) {
+        in->analog_on = (uint8_t)(in->analog_on & ~(1u << slot));
         /* Interval 0: not sampled; a conversion under way ends unused (poll_analog). */
         memset(&in->analog[slot], 0, sizeof(in->analog[slot]));
         in->analog_dirty = (uint8_t)(in->analog_dirty & ~(1u << slot));
     } else if (mode == PD_MODE_COUNTER) {
+        in->counter_on = (uint8_t)(in->counter_on & ~(1u << slot));
         pd_hal_counter_stop(hal, pin);
         memset(&in->counter[slot], 0, sizeof(in->counter[slot]));
         in->counter_dirty = (uint8_t)(in->counter_dirty & ~(1u << slot));

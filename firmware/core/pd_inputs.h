@@ -71,6 +71,7 @@ typedef struct pd_inputs {
     pd_dinput_t digital[PD_MAX_DIGITAL_INPUTS];
     pd_ainput_t analog[PD_MAX_ANALOG_INPUTS];
     pd_counter_t counter[PD_MAX_COUNTERS];
+    uint32_t dpins;      /* bit N: pin N is a digital input */
     uint32_t level;      /* bit N: the debounced level of digital input N */
     uint32_t raw;        /* bit N: the level read last */
     uint32_t trip_mask;  /* bit N: digital input N is an interlock */
@@ -82,7 +83,9 @@ typedef struct pd_inputs {
     uint8_t analog_fresh;  /* samples due for a report since the last round's end */
     uint8_t analog_round;  /* bit slot: sampled in this round */
     uint8_t latched;       /* an interlock tripped: its pin + 1; 0: none */
-    bool digital_dirty;    /* a digital level to report */
+    uint8_t analog_on;     /* bit slot: an analog input is configured there */
+    uint8_t counter_on;    /* bit slot: a counter is configured there */
+    uint8_t tick;          /* low byte of the millisecond the timed work last ran */
     uint16_t coalesced;    /* changes that joined a pending report, since the last sent */
 } pd_inputs_t;
 
@@ -98,6 +101,16 @@ protoduino_Status pd_inputs_clear_interlock(struct pd_core *core, bool *cleared)
 
 /* Every loop pass: read the inputs, debounce, trip interlocks, sample, mark dirty. */
 void pd_inputs_poll(struct pd_core *core, uint32_t now);
+
+/*
+ * Whether any input is configured: pd_core_poll calls pd_inputs_poll only then.
+ * The loop passes after every byte sent or received, and the call alone (its
+ * register saves) cost a board without inputs 2,000 cycles per servo write.
+ */
+static inline bool pd_inputs_active(const pd_inputs_t *in)
+{
+    return (in->dpins | in->analog_on | in->counter_on) != 0 || in->adc_slot != 0xFFu;
+}
 
 /* Fill the InputReport with the newest values (the core's report callback for PD_INPUTS_SLOT). */
 bool pd_inputs_report(struct pd_core *core, uint8_t slot, protoduino_ArduinoOut *out);

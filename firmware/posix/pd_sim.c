@@ -334,10 +334,15 @@ void pd_hal_input_release(void *ctx, uint8_t pin)
     (void)pin;
 }
 
-bool pd_hal_digital_read(void *ctx, uint8_t pin)
+uint32_t pd_hal_digital_read_all(void *ctx)
 {
     sim_hal_t *hal = ctx;
-    return pin < PD_MAX_PINS && sim_input_level(&hal->input[pin], sim_elapsed(hal));
+    double now = sim_elapsed(hal);
+    uint32_t levels = 0;
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        levels |= (uint32_t)sim_input_level(&hal->input[pin], now) << pin;
+    }
+    return levels;
 }
 
 void pd_hal_analog_start(void *ctx, uint8_t pin)
@@ -591,6 +596,10 @@ int main(int argc, char **argv)
             struct timespec ms = {0, 1000000};
             nanosleep(&ms, NULL);
         }
+        /* The replies this pass queued go out before the core's poll, as the Uno's
+         * ring drains while its loop runs: a report waits for an empty queue
+         * (pd_dispatch_send_spare), and with a command every pass it would wait for good. */
+        sim_tx_flush(&hal);
         pd_core_poll(&core);
         sim_tx_flush(&hal); /* what this pass queued goes out now, not after the next poll() */
     }

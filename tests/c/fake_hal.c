@@ -245,14 +245,15 @@ void pd_hal_input_release(void *ctx, uint8_t pin)
     hal->input[pin] = -1;
 }
 
-bool pd_hal_digital_read(void *ctx, uint8_t pin)
+uint32_t pd_hal_digital_read_all(void *ctx)
 {
     fake_hal_t *hal = ctx;
-    if (pin >= PD_MAX_PINS || hal->input[pin] < 0) {
-        fprintf(stderr, "fake_hal: read of pin %u, not an input\n", pin);
-        abort();
+    uint32_t levels = 0;
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        levels |= (uint32_t)(hal->level[pin] ? 1u : 0u) << pin;
     }
-    return hal->level[pin];
+    hal->digital_reads++;
+    return levels;
 }
 
 void pd_hal_analog_start(void *ctx, uint8_t pin)

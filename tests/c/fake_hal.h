@@ -37,6 +37,7 @@ typedef struct fake_hal {
     /* Inputs: what the tests put at the pins, and how the core configured them. */
     int input[PD_MAX_PINS];      /* -1: not configured as an input, else 0 / 1 = pull-up */
     bool level[PD_MAX_PINS];     /* the level at the pin (the tests set it) */
+    unsigned digital_reads;      /* pd_hal_digital_read_all() calls */
     uint16_t analog[PD_MAX_PINS]; /* the counts a conversion of the pin gives */
     int adc_pin;                 /* the conversion under way, -1: none */
     unsigned adc_polls;          /* pd_hal_analog_done() calls before it is done (fake_init: 1) */

@@ -172,6 +172,29 @@ static void test_report_waits_for_a_command_under_way(void)
     CHECK(strcmp(last, "2:7") == 0);
 }
 
+static void test_report_gives_way_to_commands_for_a_while_only(void)
+{
+    tdev_t d;
+    char last[64] = "";
+    t_active(&d);
+    d.core.report = test_report;
+    d.core.report_sent = NULL;
+    report_value[1] = 9;
+    pd_core_report(&d.core, 1);
+    const uint8_t partial[2] = {0x05, 0x01}; /* a command frame, forever arriving */
+    t_feed(&d, partial, sizeof(partial));
+    uint32_t t0 = d.hal.now_ms;
+    for (uint32_t ms = 0; ms < PD_REPORT_MAX_WAIT_MS; ms++) {
+        d.hal.now_ms = t0 + ms;
+        pd_core_poll(&d.core);
+    }
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
+    d.hal.now_ms = t0 + PD_REPORT_MAX_WAIT_MS;
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1);
+    CHECK(strcmp(last, "1:9") == 0);
+}
+
 static void test_one_report_per_pass_lowest_slot_first(void)
 {
     tdev_t d;
@@ -332,6 +355,7 @@ const pd_test_case_t pd_tests_engine[] = {
     TEST_CASE(test_report_newest_value_replaces_unsent),
     TEST_CASE(test_reply_goes_before_pending_report),
     TEST_CASE(test_report_waits_for_a_command_under_way),
+    TEST_CASE(test_report_gives_way_to_commands_for_a_while_only),
     TEST_CASE(test_one_report_per_pass_lowest_slot_first),
     TEST_CASE(test_no_report_while_idle),
     {NULL, NULL},
