@@ -41,7 +41,7 @@ from protoduino.simboard import SimBoard
 from protoduino.transport import FrameRecord
 
 from .boards import BACKENDS, LABELS, BoardUnavailableError, Percentiles, missing_tool
-from .core import Context, Section, SectionResult, Target, fmt_rate, md_table
+from .core import Context, Section, SectionResult, Target, md_table
 from .motion import Trace
 from .wire import board_byte_us
 
@@ -80,6 +80,7 @@ class BoardResult:
     edge_uncertainty: list[float] = field(default_factory=list)
     latency_lost: int = 0
     per_channel: dict[int, float] = field(default_factory=dict)  # values/s
+    max_gap_ms: dict[int, int] = field(default_factory=dict)  # longest gap between reports
     coalesced: int = 0
     idle_rtt: list[float] = field(default_factory=list)
     stream_rtt: list[float] = field(default_factory=list)
@@ -134,6 +135,8 @@ class AnalogCounter:
         self.values: collections.Counter[int] = collections.Counter()
         self.first_ms: dict[int, int] = {}
         self.last_ms: dict[int, int] = {}
+        #: The longest time between two reports of a pin's value (device ms).
+        self.max_gap_ms: collections.Counter[int] = collections.Counter()
 
     def rate(self, pin: int) -> float:
         """Values per second of the device's clock: (n - 1) over the span of their times."""
@@ -154,13 +157,16 @@ class AnalogCounter:
                 for pin in range(32):
                     if report.analog_pins >> pin & 1:
                         self.values[pin] += 1
+                        if pin in self.last_ms:
+                            gap = report.time_ms - self.last_ms[pin]
+                            self.max_gap_ms[pin] = max(self.max_gap_ms[pin], gap)
                         self.first_ms.setdefault(pin, report.time_ms)
                         self.last_ms[pin] = report.time_ms
 
 
 def measure_streaming(
     board: Board, seconds: float, pings: int
-) -> tuple[dict[int, float], int, list[float], list[float]]:
+) -> tuple[dict[int, float], dict[int, int], int, list[float], list[float]]:
     idle = [board.ping() for _ in range(pings)]
     counter = AnalogCounter()
     board.add_frame_monitor(counter)
@@ -181,7 +187,8 @@ def measure_streaming(
         pot.release()
     log.debug("analog values received in %.3f s of the host's clock: %s", elapsed, counter.values)
     rates = {pin: counter.rate(pin) for pin in board.info.analog_pins}
-    return rates, coalesced, idle, streaming
+    gaps = {pin: counter.max_gap_ms[pin] for pin in board.info.analog_pins}
+    return rates, gaps, coalesced, idle, streaming
 
 
 def _pwm_line(trace: Trace, duty: int, since: int) -> tuple[int, float] | None:
@@ -255,6 +262,7 @@ def collect(trials: int, seconds: float, pings: int, seed: int = 7) -> list[Boar
                     )
                     (
                         result.per_channel,
+                        result.max_gap_ms,
                         result.coalesced,
                         result.idle_rtt,
                         result.stream_rtt,
@@ -295,7 +303,10 @@ def run(ctx: Context) -> SectionResult:
         "the span of their reports' device times, `InputReport.time_ms`, so that where the "
         "window cuts the 5 ms grid does not count), the reports the device coalesced "
         "(replaced before it could send them), and the Ping round trip against "
-        f"{pings} Pings with no input configured.\n",
+        f"{pings} Pings with no input configured. The samples are {1000 / ANALOG_HZ:g} ms "
+        "apart and a report's time is when it was built, so consecutive reports of a channel "
+        "come 4 to 6 ms apart; a longer gap is a sample that never reached the host (the next "
+        "one replaced it before its report could go out).\n",
         f"**Interlock.** {trials} times: a motor's PWM at {MOTOR_DUTY} on pin {MOTOR_PIN}, "
         f'then a bumper on pin {BUMPER_PIN} (`interlock="low"`, pull-up) closes; the time '
         "from its edge until the pin is low for good, both on the board's clock (on the "
@@ -347,9 +358,15 @@ def run(ctx: Context) -> SectionResult:
         busy = statistics.median(result.stream_rtt) if result.stream_rtt else 0.0
         ratio = busy / idle if idle > 0 else 0.0
         channel_rows = [
-            [f"pin {pin}", fmt_rate(rate)] for pin, rate in sorted(result.per_channel.items())
+            [f"pin {pin}", f"{rate:.1f}", str(result.max_gap_ms.get(pin, 0))]
+            for pin, rate in sorted(result.per_channel.items())
         ]
-        parts.append(md_table(["analog channel", "values/s received"], channel_rows))
+        parts.append(
+            md_table(
+                ["analog channel", "values/s received", "longest gap between reports, ms"],
+                channel_rows,
+            )
+        )
         parts.append(
             f"Reports coalesced by the device while streaming: {result.coalesced}. Ping round "
             f"trip p50: {_ms(idle)} ms idle, {_ms(busy)} ms while streaming ({ratio:.2f}x, "
@@ -360,7 +377,7 @@ def run(ctx: Context) -> SectionResult:
                 Target(
                     "analog values/s per channel, 6 channels, commands flowing (emulated Uno)",
                     f">= {TARGET_HZ:.0f}",
-                    fmt_rate(slowest),
+                    f"{slowest:.1f}",
                     slowest >= TARGET_HZ,
                 ),
                 Target(
