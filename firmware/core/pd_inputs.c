@@ -26,6 +26,7 @@ void pd_inputs_init(pd_inputs_t *in)
 static void mark_dirty(pd_core_t *core)
 {
     pd_inputs_t *in = &core->outputs.inputs;
+    in->taken = pd_hal_millis(core->hal);
     if ((core->report_pending >> PD_INPUTS_SLOT) & 1u) {
         if (in->coalesced != UINT16_MAX) {
             in->coalesced++;
@@ -437,7 +438,9 @@ bool pd_inputs_report(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *msg)
     pd_inputs_t *in = &out->inputs;
     protoduino_InputReport *r = &msg->data.input_report;
     msg->which_data = protoduino_ArduinoOut_input_report_tag;
-    r->time_ms = pd_hal_millis(core->hal);
+    /* When the values were taken: the newest change's time (nothing changed since, or it
+     * would be newer), or now if the report carries a count (read now, below). */
+    r->time_ms = in->taken;
     uint32_t bit = 1;
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++, bit <<= 1) {
         uint8_t owner = out->owner[pin];
@@ -454,6 +457,7 @@ bool pd_inputs_report(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *msg)
         } else if (mode == PD_MODE_COUNTER && ((in->counter_dirty >> s) & 1u)) {
             r->counter_pins |= bit;
             r->counter_counts[r->counter_counts_count++] = pd_hal_counter_read(core->hal, pin);
+            r->time_ms = pd_hal_millis(core->hal);
         }
     }
     r->digital_levels = in->level & r->digital_pins;
@@ -466,7 +470,7 @@ void pd_inputs_sent(pd_core_t *core, const protoduino_ArduinoOut *msg)
     pd_outputs_t *out = &core->outputs;
     pd_inputs_t *in = &out->inputs;
     const protoduino_InputReport *r = &msg->data.input_report;
-    uint16_t now16 = (uint16_t)r->time_ms;
+    uint16_t now16 = (uint16_t)pd_hal_millis(core->hal);
     uint8_t a = 0;
     uint8_t c = 0;
     uint32_t bit = 1;

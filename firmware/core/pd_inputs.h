@@ -87,6 +87,7 @@ typedef struct pd_inputs {
     uint8_t counter_on;    /* bit slot: a counter is configured there */
     uint8_t tick;          /* low byte of the millisecond the timed work last ran */
     uint16_t coalesced;    /* changes that joined a pending report, since the last sent */
+    uint32_t taken;        /* pd_hal_millis() of the newest change due for a report */
 } pd_inputs_t;
 
 void pd_inputs_init(pd_inputs_t *in);

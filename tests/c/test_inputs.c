@@ -399,6 +399,7 @@ static void test_reports_coalesce_while_the_line_is_full(void)
     CHECK_EQ(reports(&d, &r), 1);
     CHECK_EQ(r.digital_levels & (1u << 5), 0); /* the newest level */
     CHECK_EQ(r.coalesced, 3);                  /* four changes, one report */
+    CHECK_EQ(r.time_ms, t + 4);                /* when it was taken, not when it left */
     d.hal.level[5] = true;
     poll_at(&d, t + 6);
     CHECK_EQ(reports(&d, &r), 2);
