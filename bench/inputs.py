@@ -35,7 +35,7 @@ from protoduino.constants import PacketType
 from protoduino.errors import InterlockActiveError, ProtoduinoError
 from protoduino.framing import frame_packet
 from protoduino.inputs import Reading
-from protoduino.messages import ArduinoOut, parse_out
+from protoduino.messages import parse_out
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
 from protoduino.transport import FrameRecord
@@ -63,19 +63,33 @@ TARGET_REACTION = 0.001
 SETTLE = 5.0
 
 
-def report_frame(digital_pins: int = 1 << BUTTON_PIN) -> bytes:
-    """The InputReport frame a digital change sends, as it goes on the wire."""
-    out = ArduinoOut()
-    out.input_report.time_ms = 123_456  # a few minutes of uptime: a 3-byte varint
-    out.input_report.digital_pins = digital_pins
-    out.input_report.digital_levels = digital_pins
-    return frame_packet(PacketType.DATA, 0, out.SerializeToString())
+class ReportFrames:
+    """The size on the wire of every InputReport frame received while ``counting`` (a frame
+    monitor): the report of a low level is shorter (proto3 leaves a zero mask out), and
+    ``time_ms`` grows a byte as the device's uptime does."""
+
+    def __init__(self) -> None:
+        self.counting = False
+        self.sizes: list[int] = []
+
+    def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
+        item = record.item
+        if not self.counting or record.direction != "rx" or not isinstance(item, Packet):
+            return
+        if item.type is PacketType.DATA and item.payload[:1] == REPORT_TAG:
+            self.sizes.append(len(frame_packet(PacketType.DATA, item.seq, item.payload)))
+
+
+#: The first byte of an ArduinoOut holding an InputReport (field 5, length-delimited).
+REPORT_TAG = bytes([5 << 3 | 2])
 
 
 @dataclass(slots=True)
 class BoardResult:
     backend: str
     latency: list[float] = field(default_factory=list)  # edge -> callback (s)
+    #: The wire sizes of the reports that carried the edges (bytes, framed).
+    report_bytes: list[int] = field(default_factory=list)
     #: Half of each edge's control-socket round trip: how well its host time is known.
     edge_uncertainty: list[float] = field(default_factory=list)
     latency_lost: int = 0
@@ -91,8 +105,10 @@ class BoardResult:
 
 def measure_latency(
     board: Board, sim: SimBoard, trials: int, rng: random.Random
-) -> tuple[list[float], int, list[float]]:
+) -> tuple[list[float], int, list[float], list[int]]:
     button = board.digital_input(BUTTON_PIN, pull_up=True)
+    frames = ReportFrames()
+    board.add_frame_monitor(frames)
     arrivals: list[tuple[bool, float]] = []
     got = threading.Event()
 
@@ -110,6 +126,7 @@ def measure_latency(
         level = not level
         mark = len(arrivals)
         got.clear()
+        frames.counting = True
         sent = time.monotonic()
         sim.set_level(BUTTON_PIN, int(level))
         answered = time.monotonic()
@@ -121,9 +138,11 @@ def measure_latency(
         if len(arrivals) <= mark or arrivals[mark][0] != level:
             lost += 1
             continue
+        frames.counting = False
         samples.append(arrivals[mark][1] - edge)
+    frames.counting = False
     button.release()
-    return samples, lost, half_widths
+    return samples, lost, half_widths, frames.sizes
 
 
 class AnalogCounter:
@@ -257,9 +276,12 @@ def collect(trials: int, seconds: float, pings: int, seed: int = 7) -> list[Boar
                 sim.start()
                 trace = Trace(Path(tmp) / "trace.jsonl")
                 with Board.open(sim.port) as board:
-                    result.latency, result.latency_lost, result.edge_uncertainty = measure_latency(
-                        board, sim, trials, rng
-                    )
+                    (
+                        result.latency,
+                        result.latency_lost,
+                        result.edge_uncertainty,
+                        result.report_bytes,
+                    ) = measure_latency(board, sim, trials, rng)
                     (
                         result.per_channel,
                         result.max_gap_ms,
@@ -287,14 +309,13 @@ def run(ctx: Context) -> SectionResult:
     pings = max(20, ctx.samples // 5)
     seconds = STREAM_SECONDS if ctx.samples >= 100 else 1.0
     results = collect(trials, seconds, pings, ctx.seed)
-    frame = report_frame()
     parts = [
         f"**Pin change to callback.** {trials} edges on a digital input (pull-up, no "
         "debounce), each after a random pause of 0-20 ms: from the edge (made "
         "through the control socket) to the host's `on_change` callback (the board's event "
-        "thread), against the wire time of the InputReport that carries it "
-        f"({len(frame)} B framed). The edge's host time is the midpoint of the control "
-        "command's round trip (it took effect between sending and answer): half that round "
+        "thread), against the wire time of the InputReports that carried them (the median "
+        "of their framed sizes, which the table gives). The edge's host time is the midpoint "
+        "of the control command's round trip (it took effect between sending and answer): half that round "
         "trip bounds its error (median and largest given per board).\n",
         f"**Analog streaming.** Six analog inputs at {ANALOG_HZ} Hz each (`rate_hz="
         f"{ANALOG_HZ}`, a heartbeat of one period so that every sample of the constant "
@@ -320,17 +341,18 @@ def run(ctx: Context) -> SectionResult:
             parts.append(f"The {label} was not run: {result.error}.\n")
             continue
         parts.append(f"### {label[0].upper()}{label[1:]}\n")
-        wire = len(frame) * board_byte_us(result.backend) / 1e6
+        size = statistics.median(result.report_bytes) if result.report_bytes else 0
+        wire = size * board_byte_us(result.backend) / 1e6
         rows = []
         if result.latency:
             lat = Percentiles.of(result.latency)
             rows.append(
                 [
-                    "pin change to callback",
+                    f"pin change to callback ({size:g} B report)",
                     _ms(lat.p50),
                     _ms(lat.p99),
                     _ms(wire),
-                    f"{lat.p50 / wire:.1f}x",
+                    f"{lat.p50 / wire:.1f}x" if wire else "-",
                     str(result.latency_lost),
                 ]
             )
