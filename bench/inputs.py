@@ -315,8 +315,8 @@ def run(ctx: Context) -> SectionResult:
         "through the control socket) to the host's `on_change` callback (the board's event "
         "thread), against the wire time of the InputReports that carried them (the median "
         "of their framed sizes, which the table gives). The edge's host time is the midpoint "
-        "of the control command's round trip (it took effect between sending and answer): half that round "
-        "trip bounds its error (median and largest given per board).\n",
+        "of the control command's round trip (it took effect between sending and answer): "
+        "half that round trip bounds its error (median and largest given per board).\n",
         f"**Analog streaming.** Six analog inputs at {ANALOG_HZ} Hz each (`rate_hz="
         f"{ANALOG_HZ}`, a heartbeat of one period so that every sample of the constant "
         f"inputs is reported) for {seconds:g} s while the host sends Pings one after "
