@@ -56,6 +56,10 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
     pd_avr_pin_set(pin, false, pull_up); /* an input; PORT's bit is the pull-up */
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
+        if (pin >= 14u) {
+            /* Its digital input buffer back on (an analog input's conversions turn it off). */
+            DIDR0 &= (uint8_t)~bit;
+        }
         if (wake) {
             *mask |= bit;
             PCICR |= group;
@@ -165,6 +169,10 @@ void pd_avr_counter_start(uint8_t pin, uint8_t edge)
     uint8_t n = pin == 3u ? 1u : 0u;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
+        /* No wake-up per edge (pd_avr_input_config gave it one): the loop reads the
+         * count once per report interval, and at 40,000 edges a second a loop pass
+         * per edge would take the whole CPU. PD2, PD3 are PCINT18, PCINT19. */
+        PCMSK2 &= (uint8_t)~_BV(pin);
         EIMSK &= (uint8_t)~_BV(n);
         EICRA = (uint8_t)((EICRA & ~(3u << (2u * n))) | (sense[edge < 3u ? edge : 2u] << (2u * n)));
         EIFR = _BV(n); /* an edge from before does not count */

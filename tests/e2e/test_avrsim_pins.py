@@ -219,3 +219,19 @@ def test_counter_edges_on_both_boards(
         assert counter.wait_for(lambda n: n >= total, timeout=TRACE_TIMEOUT) == total
         board.ping()
         assert counter.read() == total, (away, edge)
+
+
+def test_a_released_analog_pin_reads_as_a_digital_input(sim_board: SimBoard) -> None:
+    """A0 as an analog input, released, then a digital input: it reads the levels driven at
+    the pin, on both boards. (On a real Uno an analog input also turns the pin's digital
+    input buffer off, DIDR0, and pd_avr_input_config turns it back on; simavr 1.6 does not
+    model DIDR0, so that part is not judged here.)"""
+    with Board.open(sim_board.port) as board:
+        pot = board.analog_input(14, rate_hz=100)
+        sim_board.control.analog(14, 700)
+        assert pot.wait_for(lambda v: v == 700, timeout=TRACE_TIMEOUT) == 700
+        pot.release()
+        button = board.digital_input(14)
+        for level in (True, False, True):
+            sim_board.control.level(14, level)
+            assert button.wait_for(level, timeout=TRACE_TIMEOUT) is level
