@@ -62,8 +62,9 @@ void pd_avr_pwm_write(uint8_t pin, uint8_t duty)
     }
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
-        if (tccra == &TCCR1A && (TIMSK1 & _BV(OCIE1A))) {
-            /* Timer1 leaves the servos (none is configured: the core checked). */
+        if (tccra == &TCCR1A && !(TCCR1A & _BV(WGM10))) {
+            /* Timer1 leaves the servos (none is configured: the core checked), or
+             * starts from its power-up state in a build without servos. */
             TIMSK1 &= (uint8_t)~_BV(OCIE1A);
             TCCR1A = _BV(WGM10); /* fast PWM, 8-bit (mode 5) */
             TCCR1B = _BV(WGM12) | _BV(CS11) | _BV(CS10);

@@ -235,3 +235,18 @@ def test_a_released_analog_pin_reads_as_a_digital_input(sim_board: SimBoard) -> 
         for level in (True, False, True):
             sim_board.control.level(14, level)
             assert button.wait_for(level, timeout=TRACE_TIMEOUT) is level
+
+
+def test_pwm_on_timer1_in_a_build_without_servos(tools: None, tmp_path: Path) -> None:
+    """Without the servo driver Timer1 starts from its power-up state: PWM on 9 still comes
+    out at the duty asked (measured at the pin)."""
+    elf = build.build_firmware_features(["digital_output", "pwm"])
+    trace = tmp_path / "trace.jsonl"
+    runner = _runner(elf, trace)
+    try:
+        with Board.open(runner.port) as board:
+            board.request(_pwm_init(9, 0))
+            board.request(_pwm(9, 100))
+            _wait_for(trace, _is_pwm(9, 100))
+    finally:
+        runner.stop(strict=False)
