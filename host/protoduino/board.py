@@ -100,9 +100,9 @@ from .errors import (
     rejection,
 )
 from .events import Event, EventCallback, EventDispatcher, EventKind, Stats
-from .inputs import AnalogInput, Counter, DigitalInput, InputKind, InputTable
+from .inputs import AnalogInput, Counter, DigitalInput, InputTable
 from .link import Link
-from .messages import ArduinoIn, ArduinoOut, Status, status_name
+from .messages import ArduinoIn, ArduinoOut, InputKind, Status, status_name
 from .rpc import REBOOT_LIMIT, REBOOT_WINDOW, Ack, Call, Rpc, RpcState
 from .transport import FrameMonitor, Transport
 

@@ -28,16 +28,14 @@ import collections
 import math
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Literal, TypeVar
+from typing import Literal, TypeVar
 
 from ._generated import protoduino_pb2 as pb
 from .clock import Clock
 from .errors import BoardClosedError, InputTimeoutError, ProtocolError
-
-#: Which value of a pin a reading is: a digital level, analog counts or a count of edges.
-InputKind = Literal["digital", "analog", "counter"]
+from .messages import InputKind, input_values
 
 #: Values one waiter (``wait_for``, an asyncio iterator) keeps before the oldest is dropped.
 SINK_BUFFER = 64
@@ -63,40 +61,12 @@ class Reading:
         return time.monotonic() - self.received
 
 
-def _pins(mask: int) -> Iterator[int]:
-    """The pins whose bits are set in a DeviceInfo/InputReport mask, lowest first."""
-    pin = 0
-    while mask:
-        if mask & 1:
-            yield pin
-        mask >>= 1
-        pin += 1
-
-
 def decode_report(report: pb.InputReport, received: float) -> list[tuple[InputKind, Reading]]:
-    """Every value an InputReport carries, by kind and pin.
-
-    Raises :class:`ProtocolError` when a mask and its values disagree (the
-    values are packed in pin order, one per bit set).
-    """
+    """Every value an InputReport carries (:func:`protoduino.messages.input_values`) as a
+    :class:`Reading` received at host time ``received``; raises :class:`ProtocolError` for a
+    report whose masks and values disagree."""
     t = report.time_ms
-    found: list[tuple[InputKind, Reading]] = [
-        ("digital", Reading(pin, bool(report.digital_levels >> pin & 1), t, received))
-        for pin in _pins(report.digital_pins)
-    ]
-    packed: tuple[tuple[InputKind, int, Any], ...] = (
-        ("analog", report.analog_pins, report.analog_values),
-        ("counter", report.counter_pins, report.counter_counts),
-    )
-    for kind, mask, values in packed:
-        pins = list(_pins(mask))
-        if len(pins) != len(values):
-            raise ProtocolError(
-                f"InputReport: {len(pins)} {kind} pins in the mask but {len(values)} values"
-            )
-        pairs = zip(pins, values, strict=True)
-        found += [(kind, Reading(pin, int(v), t, received)) for pin, v in pairs]
-    return found
+    return [(kind, Reading(pin, value, t, received)) for kind, pin, value in input_values(report)]
 
 
 Sink = Callable[[Reading], None]

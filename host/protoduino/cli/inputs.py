@@ -11,7 +11,8 @@ import json
 from dataclasses import dataclass
 
 from ..board import Board
-from ..inputs import Input, InputKind, Reading
+from ..inputs import Input, Reading
+from ..messages import InputKind
 from . import argtypes
 
 KINDS: tuple[InputKind, ...] = ("digital", "analog", "counter")

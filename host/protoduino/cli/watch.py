@@ -15,7 +15,8 @@ import time
 from collections.abc import Callable
 
 from ..board import Board
-from ..inputs import InputKind, Reading
+from ..inputs import Reading
+from ..messages import InputKind
 from . import argtypes
 from .inputs import add_input_options, configure, default_kind, show, spec
 from .options import add_port, with_board
