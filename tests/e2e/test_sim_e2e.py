@@ -315,14 +315,15 @@ def test_version_1_host_gets_the_short_answer_and_its_version_error(
     sim_board: SimBoard, host: RawHost
 ) -> None:
     """An old host: RESET in version 1's shape; the device answers in the shape version 1
-    reads (its host then raises VersionMismatchError naming 1 and 2) and commands nothing."""
+    reads (its host then raises VersionMismatchError naming 1 and the device's version) and
+    commands nothing."""
     host.write(b"\0" + frame_packet(PacketType.CONTROL, 0, bytes((ControlCode.RESET, 1))))
     host.seq = 1
     pkt = host.wait(lambda p: _control_code(p) is ControlCode.RESET_ACK)
     assert len(pkt.payload) == 6  # CODE VERSION SCHEMA_ID: version 1's exact shape
     assert pkt.payload[1] == PROTOCOL_VERSION
     error = protoduino.VersionMismatchError(1, pkt.payload[1])
-    assert "host speaks 1, device speaks 2" in str(error)
+    assert f"host speaks 1, device speaks {PROTOCOL_VERSION}" in str(error)
     host.send(_digital_init(5, 13, True))
     host.event(EventCode.NOT_ACTIVE)  # it stayed IDLE
     _quiet(sim_board)
