@@ -216,3 +216,20 @@ def test_the_remote_example(sim_board: SimBoard, tmp_path: Path) -> None:
             assert run(line, {"rfc2217://raspberrypi.local:7000": local}) == 0, line
     finally:
         server.stop()
+
+
+def python_example() -> str:
+    """The README's first Python block (the one that opens /dev/ttyACM0)."""
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+    assert blocks and UNO_PORT in blocks[0]
+    return str(blocks[0])
+
+
+def test_the_python_example_runs(sim_board: SimBoard, capsys: pytest.CaptureFixture[str]) -> None:
+    """As written, with the port swapped: every pin mode it shows exists, on pins that can do
+    it, and none clashes with another (the simulated boards keep the Uno's pin rules)."""
+    code = python_example().replace(f'"{UNO_PORT}"', repr(sim_board.port))
+    exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
+    out = capsys.readouterr().out
+    assert "DeviceInfo(" in out  # print(board.info, board.stats) ran
+    assert any(e["pin"] == 3 and e.get("mode") == "pwm" for e in sim_board.trace())
