@@ -163,16 +163,18 @@ class InputTable:
             slot.reading = None
 
     def forget(self, pin: int) -> None:
-        """The pin was released: its values and callbacks go."""
+        """The pin was released: its values go (``read()`` says None). Its listeners stay:
+        a wait or an iterator on it hears the pin again if it is configured anew."""
         with self._cond:
-            for kind in ("digital", "analog", "counter"):
-                self._slots.pop((kind, pin), None)
-            self._cond.notify_all()
+            for (_kind, slot_pin), slot in self._slots.items():
+                if slot_pin == pin:
+                    slot.reading = None
 
     def clear(self) -> None:
+        """Every pin was released (ReleaseAll): every value goes, the listeners stay."""
         with self._cond:
-            self._slots.clear()
-            self._cond.notify_all()
+            for slot in self._slots.values():
+                slot.reading = None
 
     def close(self) -> None:
         """The board closed: every wait ends with BoardClosedError."""

@@ -443,3 +443,21 @@ def test_interlock_event_names_its_pin_and_forgets_values(board: Board, fake: Fa
     assert cleared.details == {"active": False, "cause": "interlock"}
     board.submit_clear_interlock().result(30)
     assert len(sent(fake, "clear_interlock")) == 2
+
+
+def test_a_wait_survives_a_release_and_a_new_configuration(board: Board, fake: FakeDevice) -> None:
+    """Releasing a pin drops its value, not who listens: a wait hears the pin configured anew."""
+    pot = board.analog_input(14)
+    result: list[int] = []
+    waiter = threading.Thread(target=lambda: result.append(pot.wait_for(lambda v: v == 900, 30)))
+    waiter.start()
+    deadline = time.monotonic() + 30
+    while board.inputs.listeners("analog", 14) == 0:
+        assert time.monotonic() < deadline
+        time.sleep(0.001)
+    board.release_all()
+    assert pot.read() is None
+    fake.analog[14] = 900
+    again = board.analog_input(14)  # its first report carries 900
+    waiter.join(30)
+    assert result == [900] and again.read() == 900
