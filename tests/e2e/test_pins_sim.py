@@ -423,3 +423,28 @@ def test_reports_keep_flowing_while_commands_flow_back_to_back(sim: SimBoard) ->
             assert seen, f"pin {pin}: no report in {pings} back-to-back pings"
             gaps = [b - a for a, b in itertools.pairwise(seen)]
             assert max(gaps, default=0) <= gap_ms, f"pin {pin}: reports {gaps} ms apart"
+
+
+def test_restore_last_never_brings_back_a_duty_from_before_an_interlock(sim: SimBoard) -> None:
+    """restore="last" after a reboot sends the last values, but a value the interlock
+    overrode is gone: the motor comes back at its safe duty, judged at the pin."""
+    with Board.open(sim.port, restore="last") as board:
+        seen = events(board)
+        motor = board.pwm_output(10, safe=0)
+        motor.write(180)
+        wait_pwm(sim, 10, lambda v: v[-1:] == [180])
+        sim.set_level(2, 1)
+        bumper = board.digital_input(2, pull_up=True, interlock="low")
+        sim.set_level(2, 0)
+        wait_event(seen, EventKind.FAILSAFE)
+        sim.set_level(2, 1)
+        bumper.wait_for(True, timeout=BOUND)
+        board.clear_interlock()
+        mark = len(sim.trace())
+        sim.reboot()
+        wait_event(seen, EventKind.RESTORED)
+        assert board.read_outputs()[10].value == 0  # the device drives the safe duty
+        assert motor.value == 0
+        motor.write(50)  # a later change: every earlier one is in the trace before it
+        wait_pwm(sim, 10, lambda v: v[-1:] == [50], since=mark)
+        assert 180 not in pwm_values(sim.trace()[mark:], 10)
