@@ -26,6 +26,8 @@ from protoduino import Board, CommandRejectedError, Servo
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simcontrol import SimControl
 
+from . import stackwalk
+
 #: The ATmega328P's RAM (0x100 .. RAMEND = 0x8FF).
 RAM_BYTES = 2048
 RAM_START = 0x100
@@ -125,18 +127,26 @@ class RamBudget:
     stack: int
     sp_min: int
     sp_min_pc: int
+    #: The call chain at the deepest point (:mod:`protoduino_dev.stackwalk`), when the
+    #: runner kept the stack's bytes (``--stack FILE``); "" otherwise.
+    chain: str = ""
 
     @classmethod
-    def of(cls, elf: Path, stats: dict[str, Any]) -> RamBudget:
-        """From the ELF and the runner's --stats line (``sp_min``, ``sp_min_pc``, ``ramend``)."""
+    def of(cls, elf: Path, stats: dict[str, Any], stack: Path | None = None) -> RamBudget:
+        """From the ELF and the runner's --stats line (``sp_min``, ``sp_min_pc``, ``ramend``),
+        and its --stack file if given."""
         if stats["sp_min"] > stats["ramend"]:
             raise AssertionError(f"the stack was never used: {stats}")
+        chain = ""
+        if stack is not None and stack.exists():
+            chain = stackwalk.describe(stackwalk.walk(elf, stack.read_bytes()))
         # SP points at the next free byte: the bytes above it, up to RAMEND, are in use.
         return cls(
             symbol(elf, "_end") - RAM_START,
             int(stats["ramend"]) - int(stats["sp_min"]),
             int(stats["sp_min"]),
             int(stats["sp_min_pc"]),
+            chain,
         )
 
     @property
@@ -148,8 +158,9 @@ class RamBudget:
         return self.free >= FREE_BYTES
 
     def describe(self) -> str:
+        where = f"; its calls, bytes from RAMEND: {self.chain}" if self.chain else ""
         return (
             f"static {self.static} B + deepest stack {self.stack} B (lowest SP 0x{self.sp_min:x} "
             f"at 0x{self.sp_min_pc:x}) = {self.static + self.stack} B; {self.free} B free "
-            f"(budget: {FREE_BYTES} B free of {RAM_BYTES} B)"
+            f"(budget: {FREE_BYTES} B free of {RAM_BYTES} B){where}"
         )

@@ -36,9 +36,10 @@ class StatsRunner(BoardProcess):
 
     def __init__(self, elf: Path, stats: Path, control: Path) -> None:
         self.stats = stats
+        self.stack = stats.with_suffix(".stack")
         self.control = control
         cmd = runner_command(elf, control=control)
-        cmd[-1:-1] = ["--stats", str(stats)]
+        cmd[-1:-1] = ["--stats", str(stats), "--stack", str(self.stack)]
         super().__init__(cmd, startup=STARTUP_TIMEOUT)
 
     def snapshot(self) -> dict[str, Any]:
@@ -66,7 +67,9 @@ def test_every_command_at_its_largest_leaves_the_ram_budget(
     runner, elf = uno
     with Board.open(runner.port, window=4) as board, SimControl(runner.control) as control:
         exercise(board, control)
-    ram = RamBudget.of(elf, runner.snapshot())
+    ram = RamBudget.of(elf, runner.snapshot(), runner.stack)
+    # The deepest point is where a budget test should look: it names real frames.
+    assert "main" in ram.chain, ram.chain
     with capsys.disabled():  # the figures belong in every test log, not only on failure
         sys.stdout.write(f"\nUno RAM: {ram.describe()}\n")
     assert ram.holds, f"the RAM budget does not hold: {ram.describe()}"
