@@ -270,6 +270,10 @@ def test_a_bumper_stops_the_motors_on_the_device(sim: SimBoard) -> None:
         assert event.details["active"] and event.details["cause"] == "interlock"
         assert event.details["pin"] == 2
         assert left.value == 0 and right.value == 0
+        # The trip's device time: the bumper's own report of the edge.
+        assert bumper.wait_for(False, timeout=BOUND) is False
+        tripped = bumper.reading()
+        assert tripped is not None and tripped.value is False and tripped.time_ms > 0
         with pytest.raises(InterlockActiveError) as refused:
             left.write(100)
         assert refused.value.sent  # the device refused it
