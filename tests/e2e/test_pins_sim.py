@@ -452,3 +452,24 @@ def test_restore_last_never_brings_back_a_duty_from_before_an_interlock(sim: Sim
         motor.write(50)  # a later change: every earlier one is in the trace before it
         wait_pwm(sim, 10, lambda v: v[-1:] == [50], since=mark)
         assert 180 not in pwm_values(sim.trace()[mark:], 10)
+
+
+def test_the_interlock_is_back_after_a_reboot(sim: SimBoard) -> None:
+    """A device that rebooted forgot its interlock; the restore gives it back before the
+    motor can run again, so the bumper still stops it (judged at the pin)."""
+    with Board.open(sim.port) as board:
+        seen = events(board)
+        motor = board.pwm_output(3, safe=0)
+        sim.set_level(2, 1)
+        board.digital_input(2, pull_up=True, interlock="low")
+        sim.reboot()
+        wait_event(seen, EventKind.RESTORED)
+        motor.write(220)
+        wait_pwm(sim, 3, lambda v: v[-1:] == [220])
+        mark = len(sim.trace())
+        sim.set_level(2, 0)
+        wait_pwm(sim, 3, lambda v: v[-1:] == [0], since=mark)
+        event = wait_event(seen, EventKind.FAILSAFE)
+        assert event.details["cause"] == "interlock" and event.details["pin"] == 2
+        with pytest.raises(InterlockActiveError):
+            motor.write(220)
