@@ -8,6 +8,12 @@ window, a pin table so that a reboot forgets the configuration), and every
 reply goes through ``handler`` so a test can drop, duplicate, delay or corrupt
 any of them. ``unplug()``/``replug()`` make the pty disappear and come back
 under the same path, as a USB cable or a killed simulator would.
+
+Pins: every pin mode of the schema is known (PWM and the inputs too), DeviceInfo
+states the Uno's capabilities (``features``, ``pwm_pins``, ... are attributes a
+test may change before the board opens), and the inputs report like the
+firmware: an input's Init is answered by its Ack and then an InputReport with its
+value; ``set_level``, ``set_analog`` and ``pulses`` change an input and report it.
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from protoduino._generated.schema_id import SCHEMA_ID
-from protoduino.commands import command
+from protoduino.commands import PIN_MODES, command
 from protoduino.constants import (
     DEDUPE_WINDOW,
     PROTOCOL_VERSION,
@@ -53,6 +59,18 @@ class Received:
         return str(self.msg.WhichOneof("data"))
 
 
+def mask(pins: list[int] | set[int] | range) -> int:
+    """A DeviceInfo/InputReport pin mask."""
+    bits = 0
+    for pin in pins:
+        bits |= 1 << pin
+    return bits
+
+
+#: DeviceInfo.features with every pin mode built in.
+ALL_FEATURES = sum(mode.feature_bit for mode in PIN_MODES)
+
+
 def ack(message_id: int, status: int = Status.STATUS_OK) -> Any:
     out = ArduinoOut()
     out.ack.message_id = message_id
@@ -77,6 +95,22 @@ class FakeDevice:
         self.answer_reset = answer_reset
         #: DeviceInfo.rx_buffer (0: not stated, the window alone limits the host).
         self.rx_buffer = 0
+        #: DeviceInfo's board name ("uno" makes the host check Timer1's pins).
+        self.board_name = "fake"
+        #: DeviceInfo's features and pin capabilities (the Uno's by default).
+        self.features = ALL_FEATURES
+        self.pwm_pins = [3, 9, 10, 11]
+        self.analog_pins = list(range(14, 20))
+        self.counter_pins = [2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]
+        #: The inputs' state as the device sees it: levels by pin (1 until set:
+        #: a pulled-up open switch), analog counts, edges counted.
+        self.levels: dict[int, int] = {}
+        self.analog: dict[int, int] = {}
+        self.counts: dict[int, int] = {}
+        #: Device clock for InputReport.time_ms (ms); a test moves it as it likes.
+        self.time_ms = 0
+        #: InputReport.coalesced of the next report.
+        self.coalesced = 0
         #: Replies to a decoded, active COMMAND; replace to script faults.
         self.handler: Callable[[Any], Reply] = self.default_reply
         self.received: list[Received] = []
@@ -254,14 +288,22 @@ class FakeDevice:
             info.firmware_version = "0.1.0"
             info.protocol_version = self.version
             info.schema_id = self.schema_id
-            info.board = "fake"
+            info.board = self.board_name
             info.num_pins = 20
             info.max_servos = 8
             info.reserved_pins.extend([0, 1])
             info.rx_buffer = self.rx_buffer
+            info.features = self.features
+            info.pwm_pins = mask(self.pwm_pins)
+            info.analog_pins = mask(self.analog_pins)
+            info.counter_pins = mask(self.counter_pins)
         elif declared.is_init:
             assert declared.pin_mode is not None
-            self.pins[getattr(msg, kind).pin] = declared.pin_mode.name
+            pin = getattr(msg, kind).pin
+            self.pins[pin] = declared.pin_mode.name
+            if declared.pin_mode.is_input:  # its value follows the Ack, as on the device
+                self.dedupe[mid] = out.ack.status
+                return [out, self.report(**{self._report_kind(pin): [pin]})]
         elif declared.is_control:
             assert declared.pin_mode is not None
             ctl = getattr(msg, kind)
@@ -269,6 +311,12 @@ class FakeDevice:
                 out.ack.status = Status.STATUS_NOT_INITIALISED
             else:
                 self._apply(kind, ctl)
+        elif kind == "release":
+            self.pins.pop(msg.release.pin, None)
+            self.values.pop(msg.release.pin, None)
+        elif kind == "release_all":
+            self.pins.clear()
+            self.values.clear()
         elif kind == "pose":  # all or nothing; only the pin-mode check (what the tests need)
             # A PoseItem's oneof member is named after its pin mode ("servo", "digital").
             items = [
@@ -287,9 +335,55 @@ class FakeDevice:
             self.dedupe.popitem(last=False)
         return [out]
 
+    # --- inputs ----------------------------------------------------------------------
+
+    def _report_kind(self, pin: int) -> str:
+        return {"analog_input": "analog", "counter": "counters"}.get(self.pins[pin], "digital")
+
+    def report(self, *, digital: Any = (), analog: Any = (), counters: Any = ()) -> Any:
+        """An InputReport as the firmware builds it: every digital input's level, and
+        the analog inputs and counters named (``digital`` only asks for a report)."""
+        del digital  # every digital input is in every report
+        out = ArduinoOut()
+        rep = out.input_report
+        rep.time_ms = self.time_ms
+        rep.coalesced, self.coalesced = self.coalesced, 0
+        inputs = sorted(p for p, m in self.pins.items() if m == "digital_input")
+        rep.digital_pins = mask(inputs)
+        rep.digital_levels = mask([p for p in inputs if self.levels.get(p, 1)])
+        rep.analog_pins = mask(analog)
+        rep.analog_values.extend(self.analog.get(p, 0) for p in sorted(analog))
+        rep.counter_pins = mask(counters)
+        rep.counter_counts.extend(self.counts.get(p, 0) for p in sorted(counters))
+        return out
+
+    def set_level(self, pin: int, level: int) -> None:
+        """A digital input changes (after its debounce): reported at once."""
+        self.levels[pin] = int(level)
+        self.send_data(self.report())
+
+    def set_analog(self, pin: int, counts: int) -> None:
+        self.analog[pin] = counts
+        self.send_data(self.report(analog=[pin]))
+
+    def pulses(self, pin: int, count: int) -> None:
+        self.counts[pin] = self.counts.get(pin, 0) + count
+        self.send_data(self.report(counters=[pin]))
+
+    def failsafe(self, cause: int, *, active: bool = True, pin: int = 0, epoch: int = 1) -> None:
+        """Send a Failsafe message (an interlock: cause FAILSAFE_CAUSE_INTERLOCK, its pin)."""
+        out = ArduinoOut()
+        out.failsafe.active = active
+        out.failsafe.cause = cause  # type: ignore[assignment]
+        out.failsafe.pin = pin
+        out.failsafe.epoch = epoch
+        self.send_data(out)
+
     def _apply(self, kind: str, ctl: Any) -> None:
         if kind == "digital_control":
             self.values[ctl.pin] = int(ctl.level)
+        elif kind == "pwm_control":
+            self.values[ctl.pin] = ctl.duty
         else:
             self.values[ctl.pin] = getattr(ctl, str(ctl.WhichOneof("value")))
 

@@ -10,8 +10,10 @@ The device side follows docs/protocol.md as far as those layers can see: RESET -
 (version, schema, boot id, the session resumed or not), NOT_ACTIVE before it, SEQ on every
 packet it sends, one Ack per COMMAND,
 the dedupe window (a retransmitted id is acknowledged again and not executed again), Ping
-echo, DeviceInfo, EVENT BOOT on a reboot (which forgets the dedupe window). ``lose_next(n)``
-loses the device's next ``n`` packets on the way to the host; ``silent`` loses all of them.
+echo, DeviceInfo, EVENT BOOT on a reboot (which forgets the dedupe window), and an input's
+value reported in an InputReport right after its Init's Ack (``levels`` holds the digital
+levels). ``lose_next(n)`` loses the device's next ``n`` packets on the way to the host;
+``silent`` loses all of them.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import collections
 from typing import Any
 
 from protoduino._generated.schema_id import SCHEMA_ID
+from protoduino.commands import DIGITAL_INPUT, PIN_MODES, command
 from protoduino.constants import DEDUPE_WINDOW, PROTOCOL_VERSION, ControlCode, EventCode, PacketType
 from protoduino.link import Link
 from protoduino.messages import ArduinoIn, ArduinoOut, Status
@@ -66,6 +69,9 @@ class VirtualDevice:
         #: Version 2's handshake: the session that owns the device (0: none) and this boot.
         self.session = 0
         self.boot_id = 1
+        #: Digital inputs configured, and their levels (1 until a test sets one).
+        self.inputs: set[int] = set()
+        self.levels: dict[int, int] = {}
 
     # --- PacketPort: what the link calls ---------------------------------------------------
 
@@ -105,7 +111,10 @@ class VirtualDevice:
                 return
             msg = ArduinoIn()
             msg.ParseFromString(payload)
+            executed = len(self.executed)
             self._reply(PacketType.DATA, self._answer(msg).SerializeToString())
+            if len(self.executed) > executed and command(str(msg.WhichOneof("data"))).is_init:
+                self._after_init(msg)
 
     def clear_queue(self) -> None:
         pass  # nothing waits: every send reached the device at once
@@ -158,6 +167,24 @@ class VirtualDevice:
 
     # --- the device ----------------------------------------------------------------------------
 
+    def _after_init(self, msg: Any) -> None:
+        """A digital input's Init: its level follows the Ack (protocol.md, Reports)."""
+        declared = command(str(msg.WhichOneof("data")))
+        if declared.pin_mode is not DIGITAL_INPUT:
+            return
+        self.inputs.add(msg.digital_input_init.pin)
+        self.report()
+
+    def report(self) -> None:
+        """Send an InputReport with every digital input's level."""
+        out = ArduinoOut()
+        rep = out.input_report
+        for pin in self.inputs:
+            rep.digital_pins |= 1 << pin
+            if self.levels.get(pin, 1):
+                rep.digital_levels |= 1 << pin
+        self._reply(PacketType.DATA, out.SerializeToString())
+
     def _reply(self, ptype: PacketType, payload: bytes) -> None:
         self._outbox.append(Packet(ptype, self._tx_seq, payload))
         self._tx_seq = (self._tx_seq + 1) & 0xFF
@@ -178,6 +205,7 @@ class VirtualDevice:
             info.board = "virtual"
             info.num_pins = 20
             info.max_servos = 8
+            info.features = sum(mode.feature_bit for mode in PIN_MODES)
             return out
         if mid in self._dedupe:  # a retransmission: acknowledged again, not executed again
             out.ack.status = self._dedupe[mid]

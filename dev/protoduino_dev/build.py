@@ -19,7 +19,7 @@ import contextlib
 import fcntl
 import logging
 import subprocess
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 from protoduino import programs
@@ -107,6 +107,26 @@ def build_firmware() -> Path:
     """Build the firmware's Uno target and return its ELF."""
     make(FIRMWARE_DIR, "avr")
     return FIRMWARE_ELF
+
+
+#: The Uno firmware's build-time features (firmware/Makefile ALL_FEATURES, core/pd_features.h).
+FEATURES = ("servo", "digital_output", "digital_input", "analog_input", "pwm", "counter")
+
+
+def build_firmware_features(features: Iterable[str]) -> Path:
+    """Build the Uno firmware with only ``features`` (``make avr FEATURES=...``); its ELF.
+
+    Such a build goes to ``build/avr-<features, sorted, joined by ->/``; the default one (every
+    feature) is ``build/avr/``, as :func:`build_firmware` builds it.
+    """
+    chosen = sorted(set(features))
+    unknown = set(chosen) - set(FEATURES)
+    if unknown:
+        raise ValueError(f"unknown features {sorted(unknown)} (known: {', '.join(FEATURES)})")
+    if set(chosen) == set(FEATURES):
+        return build_firmware()
+    make(FIRMWARE_DIR, "avr", "FEATURES=" + " ".join(chosen))
+    return BUILD / ("avr-" + "-".join(chosen)) / "protoduino.elf"
 
 
 def build_firmware_hex() -> Path:

@@ -9,12 +9,15 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-/* UART receive ring (a power of two): ~11 ms of line time at 115200 baud,
- * more than the longest frame the core sends takes to transmit. */
-#define PD_AVR_RX_SIZE 128u
+/* UART receive ring: 4 ms of line time at 115200 baud, three servo commands
+ * in flight (DeviceInfo.rx_buffer: the host keeps its frames in flight within
+ * it, and a single frame of any length still streams through, the core taking
+ * its bytes as they come). 48 rather than 128: the 80 B went to the pin modes
+ * within the RAM budget (firmware/README.md). */
+#define PD_AVR_RX_SIZE 48u
 /* UART transmit ring: the replies to one command (PD_TX_RESERVE) and a short report
  * (PD_TX_REPORT_ROOM); pd_avr_uart.c checks both fit at compile time. */
-#define PD_AVR_TX_SIZE 156u
+#define PD_AVR_TX_SIZE 117u
 
 void pd_avr_uart_init(uint32_t baud);
 /* The oldest received byte, left in the ring, or -1 if none. */
@@ -26,8 +29,6 @@ bool pd_avr_uart_rx_empty(void);
 uint8_t pd_avr_uart_tx_room(void);
 /* Queue `len` bytes for transmission, all or none (false: no room); never waits. */
 bool pd_avr_uart_write(const uint8_t *data, uint16_t len);
-/* Bytes lost because the RX ring was full (counted, never reported). */
-uint16_t pd_avr_uart_rx_dropped(void);
 
 /* Timer0 in CTC mode at 1 kHz. Not used inside the Arduino IDE build, whose
  * core owns Timer0 and provides millis(). */
@@ -45,6 +46,24 @@ void pd_avr_servo_hold(bool hold);
 void pd_avr_servo_detach(uint8_t channel);
 /* Start the next servo frame as soon as possible (failsafe, Stop). */
 void pd_avr_servo_expedite(void);
+
+/* PWM (pd_avr_pwm.c): duty 0..255 on pins 3, 9, 10, 11; release: an input again. */
+void pd_avr_pwm_write(uint8_t pin, uint8_t duty);
+void pd_avr_pwm_release(uint8_t pin);
+
+/* Set by an input's interrupt (a pin change, an analog conversion done): the
+ * main loop makes one more pass before it sleeps (pd_avr_loop). */
+extern volatile uint8_t pd_avr_wake;
+
+/* Inputs (pd_avr_inputs.c). wake: a change of the pin wakes the main loop. */
+void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake);
+/* Every pin's level, bit N for Uno pin N. */
+uint32_t pd_avr_pins_read(void);
+void pd_avr_analog_start(uint8_t pin);
+bool pd_avr_analog_done(uint16_t *counts);
+void pd_avr_counter_start(uint8_t pin, uint8_t edge);
+uint32_t pd_avr_counter_read(uint8_t pin);
+void pd_avr_counter_stop(uint8_t pin);
 
 /* output: make `pin` an output at `level` (the level is set before the
  * direction); else an input, without pull-up when level is false (power-up). */

@@ -28,6 +28,11 @@ static const pd_board_info_t uno = {
     .max_servos = 8,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* RX, TX: the link itself */
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
+    .pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11),
+    .analog_pins = 0x3FUL << 14,              /* A0..A5 */
+    .counter_pins = (1UL << 2) | (1UL << 3),  /* INT0, INT1 */
+    .servo_timer_pins = (1UL << 9) | (1UL << 10),
+    .clock_timer_pins = (1UL << 5) | (1UL << 6),
 };
 
 uint16_t pd_hal_tx_room(void *hal)
@@ -68,6 +73,112 @@ void pd_hal_digital_write(void *hal, uint8_t pin, bool level)
 {
     (void)hal;
     pd_avr_digital_write(pin, level);
+}
+
+void pd_hal_pwm_write(void *hal, uint8_t pin, uint8_t duty)
+{
+    (void)hal;
+#if PD_FEATURE_PWM
+    pd_avr_pwm_write(pin, duty);
+#else
+    (void)pin;
+    (void)duty;
+#endif
+}
+
+void pd_hal_pwm_release(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_PWM
+    pd_avr_pwm_release(pin);
+#else
+    (void)pin;
+#endif
+}
+
+/* Inputs: only the features built reach the drivers (pd_avr_inputs.c). */
+void pd_hal_input_config(void *hal, uint8_t pin, bool pull_up)
+{
+    (void)hal;
+#if PD_FEATURE_DIGITAL_INPUT || PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER
+    pd_avr_input_config(pin, pull_up, true);
+#else
+    (void)pin;
+    (void)pull_up;
+#endif
+}
+
+void pd_hal_input_release(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_DIGITAL_INPUT || PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER
+    pd_avr_input_config(pin, false, false);
+#else
+    (void)pin;
+#endif
+}
+
+uint32_t pd_hal_digital_read_all(void *hal)
+{
+    (void)hal;
+#if PD_FEATURE_DIGITAL_INPUT
+    return pd_avr_pins_read();
+#else
+    return 0;
+#endif
+}
+
+void pd_hal_analog_start(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_ANALOG_INPUT
+    pd_avr_analog_start(pin);
+#else
+    (void)pin;
+#endif
+}
+
+bool pd_hal_analog_done(void *hal, uint16_t *counts)
+{
+    (void)hal;
+#if PD_FEATURE_ANALOG_INPUT
+    return pd_avr_analog_done(counts);
+#else
+    *counts = 0;
+    return true;
+#endif
+}
+
+void pd_hal_counter_start(void *hal, uint8_t pin, uint8_t edge)
+{
+    (void)hal;
+#if PD_FEATURE_COUNTER
+    pd_avr_counter_start(pin, edge);
+#else
+    (void)pin;
+    (void)edge;
+#endif
+}
+
+uint32_t pd_hal_counter_read(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_COUNTER
+    return pd_avr_counter_read(pin);
+#else
+    (void)pin;
+    return 0;
+#endif
+}
+
+void pd_hal_counter_stop(void *hal, uint8_t pin)
+{
+    (void)hal;
+#if PD_FEATURE_COUNTER
+    pd_avr_counter_stop(pin);
+#else
+    (void)pin;
+#endif
 }
 
 void pd_hal_servo_detach(void *hal, uint8_t channel, uint8_t pin)
@@ -117,7 +228,9 @@ void pd_avr_setup(void)
     pd_avr_clock_init();
 #endif
     pd_avr_uart_init(115200UL);
-    pd_avr_servo_init();
+    if (PD_FEATURE_SERVO) {
+        pd_avr_servo_init();
+    }
     sei();
     pd_core_init(&core, NULL);
 }
@@ -125,6 +238,7 @@ void pd_avr_setup(void)
 void pd_avr_loop(void)
 {
     int16_t byte;
+    pd_avr_wake = 0; /* the inputs are read below: a change from now on sets it again */
     while ((byte = pd_avr_uart_peek()) >= 0 && pd_core_rx_byte(&core, (uint8_t)byte)) {
         pd_avr_uart_drop();
     }
@@ -133,10 +247,11 @@ void pd_avr_loop(void)
     /* Sleep unless a byte slipped in; `sei; sleep` cannot miss the wake-up,
      * because the instruction after sei always runs before any interrupt. A
      * byte the core left (byte >= 0: its replies need transmit room) waits for
-     * the transmit interrupt, which wakes us as the queue drains. */
+     * the transmit interrupt, which wakes us as the queue drains. An input's
+     * interrupt since the pass began (pd_avr_wake) means one more pass first. */
     set_sleep_mode(SLEEP_MODE_IDLE);
     cli();
-    if (byte >= 0 || pd_avr_uart_rx_empty()) {
+    if (!pd_avr_wake && (byte >= 0 || pd_avr_uart_rx_empty())) {
         sleep_enable();
         sei();
         sleep_cpu();

@@ -6,10 +6,9 @@ void pd_core_init(pd_core_t *core, void *hal)
 {
     core->hal = hal;
     core->decode_errors = 0;
-    core->periodic = NULL;
-    core->report = NULL;
+    core->report = pd_inputs_report;
+    core->report_sent = pd_inputs_sent;
     core->report_pending = 0;
-    core->last_tick = (uint8_t)pd_hal_millis(hal);
     uint32_t boot = pd_hal_boot_id(hal);
     for (uint8_t i = 0; i < 4; i++) {
         core->boot_id[i] = (uint8_t)(boot >> (24 - 8 * i));
@@ -48,8 +47,12 @@ static __attribute__((noinline)) void send_report(pd_core_t *core)
     }
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
     if (core->report(core, slot, &out)) {
-        if (!pd_dispatch_send_spare(core, &out)) {
-            return; /* no room beyond the replies' reserve yet: the newest value, later */
+        uint8_t waited = (uint8_t)((uint8_t)pd_hal_millis(core->hal) - core->report_since);
+        if (!pd_dispatch_send_spare(core, &out, waited < PD_REPORT_MAX_WAIT_MS)) {
+            return; /* no room yet, or a command arriving: the newest value, later */
+        }
+        if (core->report_sent != NULL) {
+            core->report_sent(core, &out);
         }
     }
     core->report_pending = (uint8_t)(core->report_pending & ~(1u << slot));
@@ -75,9 +78,9 @@ void pd_core_poll(pd_core_t *core)
         pd_core_enter_safe(core, protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT);
     }
     pd_outputs_step(&core->outputs, core->hal, now);
-    if (core->periodic != NULL && (uint8_t)now != core->last_tick) {
-        core->last_tick = (uint8_t)now;
-        core->periodic(core, now);
+    /* Every pass, whether a host is connected or not: an interlock acts on its own. */
+    if (pd_inputs_active(&core->outputs.inputs)) {
+        pd_inputs_poll(core, now);
     }
     if (core->report_pending != 0 && core->report != NULL && core->link.active) {
         send_report(core);
@@ -96,6 +99,7 @@ bool pd_core_open_session(pd_core_t *core, const uint8_t session[4])
      * and its safe values are not its to choose. Every output returns to the
      * state it has at power-up, which the wiring must tolerate anyway. */
     pd_outputs_release_all(&core->outputs, core->hal);
+    core->outputs.inputs.latched = 0; /* the interlocks it latched were released with their inputs */
     pd_failsafe_init(&core->failsafe, pd_hal_millis(core->hal));
     memcpy(core->session, session, 4);
     return false;

@@ -4,7 +4,7 @@
  * like. The platform's main loop calls pd_core_init() once at power-up, then
  * offers received bytes with pd_core_rx()/pd_core_rx_byte() (keeping those it
  * did not take for the next pass) and calls pd_core_poll() often (at least
- * every few milliseconds: the failsafe, the periodic hook and reports run there).
+ * every few milliseconds: the failsafe, the inputs and reports run there).
  */
 #ifndef PD_CORE_H
 #define PD_CORE_H
@@ -25,21 +25,15 @@
 struct pd_core;
 
 /*
- * The periodic hook: called by pd_core_poll() at most once per millisecond
- * tick, with the tick. For work that is not a reply (sampling inputs,
- * deciding a report is due). It must do a bounded amount of work per call
- * (e.g. one pin per call, round-robin): the loop's latency is the sum of its
- * parts.
- */
-typedef void (*pd_periodic_fn)(struct pd_core *core, uint32_t now_ms);
-
-/*
  * A report source: fill `out` with the newest value of report slot `slot`,
  * or return false if there is nothing to send after all. Called only when the
  * message can go out at once, so a value is read when it is sent: a newer
  * value replaces one that has not left yet, by construction.
  */
 typedef bool (*pd_report_fn)(struct pd_core *core, uint8_t slot, protoduino_ArduinoOut *out);
+
+/* The message a report source built went out (NULL: nothing to do). */
+typedef void (*pd_report_sent_fn)(struct pd_core *core, const protoduino_ArduinoOut *out);
 
 /* Report slots: one bit each in pd_core_t.report_pending. */
 #define PD_REPORT_SLOTS 8u
@@ -55,11 +49,11 @@ typedef struct pd_core {
     pd_dedupe_t dedupe;
     pd_outputs_t outputs;
     pd_failsafe_t failsafe;
-    uint32_t decode_errors; /* COMMAND payloads that did not decode, since boot */
-    pd_periodic_fn periodic; /* NULL: none */
-    pd_report_fn report;     /* NULL: no reports */
+    uint16_t decode_errors; /* COMMAND payloads that did not decode, since boot (wraps at 2^16) */
+    pd_report_fn report;     /* NULL: no reports (pd_core_init: the inputs' InputReport) */
+    pd_report_sent_fn report_sent;
     uint8_t report_pending;  /* bit N: slot N has a value to send */
-    uint8_t last_tick;       /* low byte of the millisecond the hook last ran */
+    uint8_t report_since;    /* low byte of the ms report_pending stopped being 0 */
 } pd_core_t;
 
 /* Power-up state: nothing configured, link IDLE; sends EVENT BOOT. */
@@ -74,14 +68,28 @@ static inline bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
 /* Offer `len` bytes; returns how many were taken (the rest: offer again later). */
 size_t pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len);
 
-/* Periodic work: the failsafe timer, the periodic hook, at most one report. */
+/* Periodic work: the failsafe timer, speed steps, the inputs (pd_inputs_poll), at most one report. */
 void pd_core_poll(pd_core_t *core);
 
 /* Report slot `slot` has a new value: send it (pd_core_t.report builds it) when the line allows. */
 static inline void pd_core_report(pd_core_t *core, uint8_t slot)
 {
+    if (core->report_pending == 0) {
+        core->report_since = (uint8_t)pd_hal_millis(core->hal);
+    }
     core->report_pending = (uint8_t)(core->report_pending | (1u << slot));
 }
+
+/*
+ * A report gives way to a command frame arriving (its Ack goes first), but not
+ * for longer than this: a host that keeps the line busy with commands must still
+ * hear its inputs (freshness), and the command then waits for one report. About
+ * a short command's time on the line: with 20 ms, six analog inputs at 200 Hz
+ * lost a sample now and then (coalesced) to a host sending Pings back to back
+ * (199.4 values/s per channel, bench part 7); with 2 ms, 200 (one or two samples
+ * in 3,600 coalesced), and the Ping's round trip the same (1.17x its idle value).
+ */
+#define PD_REPORT_MAX_WAIT_MS 2u
 
 /* Every configured output to its safe value, flag set, event sent (Stop, timeout). */
 void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause);

@@ -26,7 +26,8 @@ int pd_dedupe_find(const pd_dedupe_t *dd, uint32_t id)
     const uint8_t first = *(const uint8_t *)&id;
     for (uint8_t i = 0; i < dd->count; i++) {
         if (*(const uint8_t *)&dd->id[i] == first && dd->id[i] == id) {
-            return dd->status[i];
+            uint8_t pair = dd->status[i >> 1];
+            return (i & 1u) ? pair >> 4 : pair & 0x0Fu;
         }
     }
     return -1;
@@ -34,8 +35,12 @@ int pd_dedupe_find(const pd_dedupe_t *dd, uint32_t id)
 
 void pd_dedupe_add(pd_dedupe_t *dd, uint32_t id, uint8_t status)
 {
+    typedef char fits[(_protoduino_Status_MAX < 16) ? 1 : -1];
+    (void)sizeof(fits);
     dd->id[dd->next] = id;
-    dd->status[dd->next] = status;
+    uint8_t *pair = &dd->status[dd->next >> 1];
+    *pair = (dd->next & 1u) ? (uint8_t)((*pair & 0x0Fu) | (status << 4))
+                            : (uint8_t)((*pair & 0xF0u) | (status & 0x0Fu));
     dd->next = (uint8_t)((dd->next + 1u) % PD_DEDUPE_WINDOW);
     if (dd->count < PD_DEDUPE_WINDOW) {
         dd->count++;
@@ -44,26 +49,26 @@ void pd_dedupe_add(pd_dedupe_t *dd, uint32_t id, uint8_t status)
 
 bool pd_dispatch_send(pd_core_t *core, const protoduino_ArduinoOut *msg)
 {
-    uint8_t raw[PD_TX_RAW_MAX];
+    uint8_t raw[PD_TX_BUF];
 
     if (!core->link.active) {
         return false; /* DATA only while ACTIVE; skip the encoding work */
     }
-    size_t len = pd_encode_out(msg, raw + PD_HEADER_SIZE, PD_TX_MAX_PAYLOAD);
+    size_t len = pd_encode_out(msg, raw + PD_TX_PAYLOAD_AT, PD_TX_MAX_PAYLOAD);
     if (len == 0) {
         return false; /* cannot happen: PD_TX_MAX_PAYLOAD is the message's max size */
     }
     return pd_link_send(core, PD_PACKET_DATA, raw, len);
 }
 
-bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg)
+bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg, bool yield)
 {
-    uint8_t raw[PD_TX_RAW_MAX];
+    uint8_t raw[PD_TX_BUF];
 
     if (!core->link.active) {
         return false;
     }
-    size_t len = pd_encode_out(msg, raw + PD_HEADER_SIZE, PD_TX_MAX_PAYLOAD);
+    size_t len = pd_encode_out(msg, raw + PD_TX_PAYLOAD_AT, PD_TX_MAX_PAYLOAD);
     /* PD_TX_FRAME_BYTES(len) without its division: at the largest payload its
      * COBS term n / 254 is 0 (checked here), so it is 0 for every len <= that;
      * the division would be a libgcc call on the AVR, in flash and per report. */
@@ -71,7 +76,11 @@ bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg)
                                 PD_MIN_PACKET + PD_TX_MAX_PAYLOAD + 3u) ? 1 : -1];
     (void)sizeof(no_cobs_block);
     size_t frame = PD_MIN_PACKET + len + 3u;
-    if (len == 0 || pd_hal_tx_room(core->hal) < PD_TX_RESERVE + frame) {
+    /* A command frame under way is answered first: its Ack must not queue behind this.
+     * And one report at a time, into a queue with room for a reply (on the Uno: an
+     * empty one): a reply never waits behind more than the report on the line. */
+    uint16_t room = pd_hal_tx_room(core->hal);
+    if (len == 0 || (yield && core->link.rx_len > 0) || room < frame || room < PD_TX_RESERVE) {
         return false;
     }
     return pd_link_send(core, PD_PACKET_DATA, raw, len);
@@ -81,9 +90,14 @@ bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg)
  * epoch) and whether it still holds. */
 static void failsafe_state(const pd_core_t *core, protoduino_Failsafe *fs)
 {
-    fs->active = core->failsafe.active;
+    /* An interlock's latch holds the safe state until ClearInterlock, whatever
+     * liveness messages came since. */
+    fs->active = core->failsafe.active || core->outputs.inputs.latched != 0;
     fs->cause = (protoduino_FailsafeCause)core->failsafe.cause;
     fs->epoch = core->failsafe.epoch;
+    if (fs->cause == protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK) {
+        fs->pin = core->failsafe.pin;
+    }
 }
 
 bool pd_dispatch_send_failsafe(pd_core_t *core)
@@ -117,8 +131,12 @@ static void fill_info(pd_core_t *core, protoduino_DeviceInfo *info)
     info->protocol_version = PD_PROTOCOL_VERSION;
     info->schema_id = PD_SCHEMA_ID;
     info->num_pins = board->num_pins;
-    info->max_servos = board->max_servos;
+    info->max_servos = PD_FEATURE_SERVO ? board->max_servos : 0u;
     info->rx_buffer = board->rx_buffer;
+    info->features = PD_FEATURES;
+    info->pwm_pins = PD_FEATURE_PWM ? board->pwm_pins : 0u;
+    info->analog_pins = PD_FEATURE_ANALOG_INPUT ? board->analog_pins : 0u;
+    info->counter_pins = PD_FEATURE_COUNTER ? board->counter_pins : 0u;
     info->reserved_pins_count = 0;
     /* The mask shifts one place per pin: a 32-bit shift by a variable count is
      * a loop on the AVR. */
@@ -244,6 +262,42 @@ static protoduino_Status cmd_digital_control(pd_core_t *core, pd_cmd_t *cmd)
     return pd_outputs_digital_control(&core->outputs, core->hal, &cmd->in->data.digital_control);
 }
 
+static protoduino_Status cmd_pwm_init(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_outputs_pwm_init(&core->outputs, core->hal, &cmd->in->data.pwm_init);
+}
+
+static protoduino_Status cmd_pwm_control(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_outputs_pwm_control(&core->outputs, core->hal, &cmd->in->data.pwm_control);
+}
+
+static protoduino_Status cmd_digital_input_init(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_inputs_digital_init(core, &cmd->in->data.digital_input_init);
+}
+
+static protoduino_Status cmd_analog_input_init(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_inputs_analog_init(core, &cmd->in->data.analog_input_init);
+}
+
+static protoduino_Status cmd_counter_init(pd_core_t *core, pd_cmd_t *cmd)
+{
+    return pd_inputs_counter_init(core, &cmd->in->data.counter_init);
+}
+
+static protoduino_Status cmd_clear_interlock(pd_core_t *core, pd_cmd_t *cmd)
+{
+    bool cleared;
+    protoduino_Status status = pd_inputs_clear_interlock(
+        core, cmd->in->data.clear_interlock.failsafe_epoch, &cleared);
+    if (cleared) {
+        cmd->then = notify_failsafe; /* the state now: cleared, unless the timer ran out */
+    }
+    return status;
+}
+
 static protoduino_Status cmd_pose(pd_core_t *core, pd_cmd_t *cmd)
 {
     uint8_t bad;
@@ -271,11 +325,14 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
 
 /*
  * The command table: one entry per ArduinoIn.data member,
- *   X(name, flags, result)
+ *   X(name, feature, flags, result)
  *   name    the member: its tag is protoduino_ArduinoIn_<name>_tag, its
  *           handler cmd_<name>(core, cmd), which returns the Ack status
  *           (anything but OK: nothing changed) and may set cmd->then to send
  *           something after the Ack;
+ *   feature 1, or the PD_FEATURE_x switch (pd_features.h) of the pin mode it
+ *           belongs to: built without it, the command is answered
+ *           STATUS_NOT_SUPPORTED and its handler is left out of the build;
  *   flags   PD_CMD_IDEMPOTENT: running it twice changes nothing, so it is
  *           neither looked up in nor recorded in the dedupe window (a repeat
  *           is answered in full; the window is left to commands that move
@@ -305,25 +362,31 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
 #define PD_CMD_COMMANDS 0x02u
 
 #define PD_COMMANDS(X)                                                       \
-    X(ping, PD_CMD_IDEMPOTENT, protoduino_Ack_ping_echo_tag)                 \
-    X(get_info, PD_CMD_IDEMPOTENT, protoduino_Ack_info_tag)                  \
-    X(servo_init, 0, 0)                                                      \
-    X(servo_control, PD_CMD_COMMANDS, 0)                                     \
-    X(digital_init, 0, 0)                                                    \
-    X(digital_control, PD_CMD_COMMANDS, 0)                                   \
-    X(stop, 0, 0)                                                            \
-    X(pose, PD_CMD_COMMANDS, 0)                                              \
-    X(read_outputs, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)           \
-    X(configure_failsafe, 0, 0)                                              \
-    X(heartbeat, PD_CMD_IDEMPOTENT, 0)                                       \
-    X(release, 0, 0)                                                         \
-    X(release_all, 0, 0)
+    X(ping, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_ping_echo_tag)              \
+    X(get_info, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_info_tag)               \
+    X(servo_init, PD_FEATURE_SERVO, 0, 0)                                    \
+    X(servo_control, PD_FEATURE_SERVO, PD_CMD_COMMANDS, 0)                   \
+    X(digital_init, PD_FEATURE_DIGITAL_OUTPUT, 0, 0)                         \
+    X(digital_control, PD_FEATURE_DIGITAL_OUTPUT, PD_CMD_COMMANDS, 0)        \
+    X(pwm_init, PD_FEATURE_PWM, 0, 0)                                        \
+    X(pwm_control, PD_FEATURE_PWM, PD_CMD_COMMANDS, 0)                       \
+    X(digital_input_init, PD_FEATURE_DIGITAL_INPUT, 0, 0)                    \
+    X(analog_input_init, PD_FEATURE_ANALOG_INPUT, 0, 0)                      \
+    X(counter_init, PD_FEATURE_COUNTER, 0, 0)                                \
+    X(clear_interlock, PD_FEATURE_DIGITAL_INPUT, 0, 0)                       \
+    X(stop, 1, 0, 0)                                                         \
+    X(pose, 1, PD_CMD_COMMANDS, 0)                                           \
+    X(read_outputs, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)        \
+    X(configure_failsafe, 1, 0, 0)                                           \
+    X(heartbeat, 1, PD_CMD_IDEMPOTENT, 0)                                    \
+    X(release, 1, 0, 0)                                                      \
+    X(release_all, 1, 0, 0)
 
 /* The table entry for `tag` (flags and result; the handler is run by run_command). */
 static bool find_command(pb_size_t tag, pd_command_t *entry)
 {
     switch (tag) {
-#define PD_FIND(name, flags_, result_)                                       \
+#define PD_FIND(name, feature_, flags_, result_)                             \
     case protoduino_ArduinoIn_##name##_tag:                                  \
         entry->flags = (flags_);                                             \
         entry->result = (result_);                                           \
@@ -338,9 +401,9 @@ static bool find_command(pb_size_t tag, pd_command_t *entry)
 static protoduino_Status run_command(pd_core_t *core, pd_cmd_t *cmd)
 {
     switch (cmd->in->which_data) {
-#define PD_RUN(name, flags_, result_)                                        \
+#define PD_RUN(name, feature_, flags_, result_)                              \
     case protoduino_ArduinoIn_##name##_tag:                                  \
-        return cmd_##name(core, cmd);
+        return (feature_) ? cmd_##name(core, cmd) : protoduino_Status_STATUS_NOT_SUPPORTED;
         PD_COMMANDS(PD_RUN)
 #undef PD_RUN
     default:
@@ -433,6 +496,9 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
         /* The timer ran out (pd_core_poll acts on it within the millisecond) and no
          * liveness message came since. */
         status = protoduino_Status_STATUS_FAILSAFE_EXPIRED;
+    } else if (known && (entry.flags & PD_CMD_COMMANDS) && core->outputs.inputs.latched) {
+        /* An interlock tripped: outputs stay safe until ClearInterlock. */
+        status = protoduino_Status_STATUS_INTERLOCK_ACTIVE;
     } else if (known) {
         if (entry.result != 0) {
             memset(&out.data.ack.result, 0, sizeof(out.data.ack.result));

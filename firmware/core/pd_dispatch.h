@@ -25,7 +25,8 @@ struct pd_core;
  */
 typedef struct pd_dedupe {
     uint32_t id[PD_DEDUPE_WINDOW];
-    uint8_t status[PD_DEDUPE_WINDOW];
+    /* Two statuses a byte (every Status is below 16): 8 B of the Uno's RAM. */
+    uint8_t status[(PD_DEDUPE_WINDOW + 1u) / 2u];
     uint8_t next;  /* slot the next entry overwrites */
     uint8_t count; /* valid entries, up to PD_DEDUPE_WINDOW */
 } pd_dedupe_t;
@@ -73,11 +74,11 @@ void pd_dispatch_command(struct pd_core *core, bool decoded);
 bool pd_dispatch_send(struct pd_core *core, const protoduino_ArduinoOut *msg);
 
 /*
- * Send an unsolicited message (a report) only if the transmit queue keeps
- * PD_TX_RESERVE of room after it, so it never delays a reply's room. Returns
- * whether it was queued.
+ * Send an unsolicited message (a report) if the transmit queue has room for it
+ * and for a reply (PD_TX_RESERVE: on the Uno, if it is empty) and, if `yield`,
+ * no command frame is being received (pd_link.h). Returns whether it was queued.
  */
-bool pd_dispatch_send_spare(struct pd_core *core, const protoduino_ArduinoOut *msg);
+bool pd_dispatch_send_spare(struct pd_core *core, const protoduino_ArduinoOut *msg, bool yield);
 
 /* ArduinoOut.failsafe: the failsafe state now (active, cause, epoch). */
 bool pd_dispatch_send_failsafe(struct pd_core *core);

@@ -9,12 +9,15 @@
 #define WT_FIXED32 5u
 
 /* Every nested message fits a one-byte length: patched in place afterwards. */
-typedef char pd_assert_out_small[(protoduino_ArduinoOut_size < 128) ? 1 : -1];
+typedef char pd_assert_out_small[(PD_ENCODE_MAX < 128) ? 1 : -1];
+/* The bound covers every member of ArduinoOut that is not an Ack, and is no larger than nanopb's. */
+typedef char pd_assert_bound[(PD_ENCODE_MAX <= protoduino_ArduinoOut_size &&
+                              2u + protoduino_DecodeError_size <= PD_ENCODE_MAX) ? 1 : -1];
 
 /*
  * No bounds check per byte: pd_encode_out takes only a buffer that holds the
- * largest ArduinoOut (nanopb's protoduino_ArduinoOut_size, from the same
- * bounds this encoder enforces: every bytes, string and repeated field is
+ * largest ArduinoOut the device sends (PD_ENCODE_MAX, from nanopb's sizes of the
+ * same bounds this encoder enforces: every bytes, string and repeated field is
  * checked against its static size before it is written). A check per byte was
  * a fifth of an Ack's cycles on the Uno, between the command's delimiter and
  * the Ack's first byte.
@@ -127,6 +130,47 @@ static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
         close_msg(w, at);
     }
     put_uint(w, protoduino_DeviceInfo_rx_buffer_tag, info->rx_buffer);
+    put_uint(w, protoduino_DeviceInfo_features_tag, info->features);
+    put_fixed32(w, protoduino_DeviceInfo_pwm_pins_tag, info->pwm_pins);
+    put_fixed32(w, protoduino_DeviceInfo_analog_pins_tag, info->analog_pins);
+    put_fixed32(w, protoduino_DeviceInfo_counter_pins_tag, info->counter_pins);
+}
+
+/* A packed repeated varint field; omitted when empty, as pb_encode does. */
+static void put_packed(writer_t *w, uint8_t tag, const void *values, uint8_t width,
+                       pb_size_t count, size_t max)
+{
+    if (count > max) {
+        w->ok = false;
+    } else if (count > 0) {
+        uint8_t *at = open_msg(w, tag);
+        const uint8_t *v = values;
+        for (pb_size_t i = 0; i < count; i++, v += width) {
+            uint32_t value = v[0] | (uint32_t)v[1] << 8;
+            if (width == 4u) {
+                value |= (uint32_t)v[2] << 16 | (uint32_t)v[3] << 24;
+            }
+            put_varint(w, value);
+        }
+        close_msg(w, at);
+    }
+}
+
+static __attribute__((noinline)) void put_report(writer_t *w, const protoduino_InputReport *r)
+{
+    typedef char widths[(sizeof(r->analog_values[0]) == 2u &&
+                         sizeof(r->counter_counts[0]) == 4u) ? 1 : -1];
+    (void)sizeof(widths);
+    put_uint(w, protoduino_InputReport_time_ms_tag, r->time_ms);
+    put_fixed32(w, protoduino_InputReport_digital_pins_tag, r->digital_pins);
+    put_fixed32(w, protoduino_InputReport_digital_levels_tag, r->digital_levels);
+    put_fixed32(w, protoduino_InputReport_analog_pins_tag, r->analog_pins);
+    put_packed(w, protoduino_InputReport_analog_values_tag, r->analog_values, 2u,
+               r->analog_values_count, sizeof(r->analog_values) / sizeof(r->analog_values[0]));
+    put_fixed32(w, protoduino_InputReport_counter_pins_tag, r->counter_pins);
+    put_packed(w, protoduino_InputReport_counter_counts_tag, r->counter_counts, 4u,
+               r->counter_counts_count, sizeof(r->counter_counts) / sizeof(r->counter_counts[0]));
+    put_uint(w, protoduino_InputReport_coalesced_tag, r->coalesced);
 }
 
 /* A Failsafe's fields (the event, and an Ack's failsafe state). */
@@ -136,6 +180,7 @@ static void put_failsafe(writer_t *w, uint8_t tag, const protoduino_Failsafe *fs
     put_uint(w, protoduino_Failsafe_active_tag, fs->active ? 1u : 0u);
     put_uint(w, protoduino_Failsafe_cause_tag, (uint32_t)fs->cause);
     put_uint(w, protoduino_Failsafe_epoch_tag, fs->epoch);
+    put_uint(w, protoduino_Failsafe_pin_tag, fs->pin);
     close_msg(w, at);
 }
 
@@ -143,6 +188,19 @@ static void put_failsafe(writer_t *w, uint8_t tag, const protoduino_Failsafe *fs
  * per Ack. */
 static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack *ack)
 {
+    /* The most this Ack's shape can take, checked before anything is written
+     * (PD_ENCODE_ACK_MAX: the shapes the device sends fit). */
+    uint8_t need = ack->which_result == protoduino_Ack_info_tag ? 2u + protoduino_DeviceInfo_size
+                   : ack->which_result == protoduino_Ack_outputs_tag
+                       ? 2u + protoduino_OutputStates_size
+                   : ack->which_result == protoduino_Ack_ping_echo_tag ? 66u
+                                                                       : 0u;
+    need = (uint8_t)(need + (ack->has_failsafe ? 2u + protoduino_Failsafe_size : 0u) +
+                     (ack->refused_item ? 4u : 0u));
+    if (8u + need > PD_ENCODE_ACK_MAX) {
+        w->ok = false;
+        return;
+    }
     put_uint(w, protoduino_Ack_message_id_tag, ack->message_id);
     put_uint(w, protoduino_Ack_status_tag, (uint32_t)ack->status);
     if (ack->which_result == protoduino_Ack_ping_echo_tag) {
@@ -172,6 +230,16 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
         }
         put_fixed32(w, protoduino_OutputStates_digital_pins_tag, st->digital_pins);
         put_fixed32(w, protoduino_OutputStates_digital_levels_tag, st->digital_levels);
+        put_fixed32(w, protoduino_OutputStates_pwm_pins_tag, st->pwm_pins);
+        if (st->pwm_duties_count > sizeof(st->pwm_duties)) {
+            w->ok = false;
+        } else if (st->pwm_duties_count > 0) {
+            uint8_t *duties = open_msg(w, protoduino_OutputStates_pwm_duties_tag); /* packed */
+            for (pb_size_t i = 0; i < st->pwm_duties_count; i++) {
+                put_varint(w, st->pwm_duties[i]);
+            }
+            close_msg(w, duties);
+        }
         close_msg(w, at);
     }
     put_uint(w, protoduino_Ack_refused_item_tag, ack->refused_item);
@@ -182,7 +250,7 @@ size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap)
     writer_t w = {buf, true};
     uint8_t *at;
 
-    if (cap < protoduino_ArduinoOut_size) {
+    if (cap < PD_ENCODE_MAX) {
         return 0; /* the largest message might not fit: see writer_t */
     }
     switch (msg->which_data) {
@@ -193,6 +261,11 @@ size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap)
         break;
     case protoduino_ArduinoOut_failsafe_tag:
         put_failsafe(&w, protoduino_ArduinoOut_failsafe_tag, &msg->data.failsafe);
+        break;
+    case protoduino_ArduinoOut_input_report_tag:
+        at = open_msg(&w, protoduino_ArduinoOut_input_report_tag);
+        put_report(&w, &msg->data.input_report);
+        close_msg(&w, at);
         break;
     case protoduino_ArduinoOut_decode_error_tag:
         at = open_msg(&w, protoduino_ArduinoOut_decode_error_tag);

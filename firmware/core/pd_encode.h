@@ -22,11 +22,29 @@
 
 #include "protoduino.pb.h"
 
+/*
+ * The largest ArduinoOut the device can send, tighter than nanopb's
+ * protoduino_ArduinoOut_size, which adds up every field of an Ack as if all
+ * could be set at once: an Ack carries one result (DeviceInfo, OutputStates or
+ * a ping echo of up to 64 B), a Failsafe only beside a ping echo (the Ack of a
+ * liveness message), a refused item only alone. 16 B less per transmit buffer
+ * and in the Uno's transmit ring. An Ack of another shape is refused by the
+ * encoder before it writes (put_ack), never written past this bound.
+ */
+#define PD_ENCODE_MAX2(a, b) ((a) > (b) ? (a) : (b))
+#define PD_ENCODE_ACK_MAX                                                    \
+    (8u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(2u + protoduino_DeviceInfo_size,     \
+                                        2u + protoduino_OutputStates_size),  \
+                         66u + 2u + protoduino_Failsafe_size))
+#define PD_ENCODE_MAX                                                        \
+    (2u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(PD_ENCODE_ACK_MAX, protoduino_InputReport_size), \
+                         PD_ENCODE_MAX2(protoduino_Log_size, protoduino_Failsafe_size)))
+
 /* Encode `msg` into buf (capacity cap). Returns the length, or 0 if cap is
- * below protoduino_ArduinoOut_size (the largest message: any message fits a
- * buffer that size, and is written without a bounds check per byte) or a field
- * is out of its bounds (an empty ArduinoOut also encodes to 0 bytes; the core
- * never sends one). */
+ * below PD_ENCODE_MAX (the largest message: any message fits a buffer that
+ * size, and is written without a bounds check per byte) or a field is out of
+ * its bounds or an Ack is of no shape the device sends (an empty ArduinoOut
+ * also encodes to 0 bytes; the core never sends one). */
 size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap);
 
 #endif /* PD_ENCODE_H */

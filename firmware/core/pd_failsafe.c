@@ -57,3 +57,11 @@ void pd_failsafe_stop(pd_failsafe_t *fs)
     fs->epoch++;
     fs->cause = protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP;
 }
+
+void pd_failsafe_interlock(pd_failsafe_t *fs, uint8_t pin)
+{
+    fs->active = true;
+    fs->epoch++;
+    fs->cause = protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK;
+    fs->pin = pin;
+}

@@ -35,6 +35,7 @@ typedef struct pd_failsafe {
     bool heartbeat_only; /* LIVENESS_HEARTBEAT: a Ping does not feed the timer */
     uint8_t epoch;       /* safe states entered since power-up, modulo 256 */
     uint8_t cause;       /* the latest one's FailsafeCause */
+    uint8_t pin;         /* an interlock's input pin (cause INTERLOCK) */
 } pd_failsafe_t;
 
 /* A new session (or power-up): default timeout and source, timer from now.
@@ -63,5 +64,8 @@ void pd_failsafe_fire(pd_failsafe_t *fs);
 
 /* Stop: the flag is set, the timer keeps running; a new epoch. */
 void pd_failsafe_stop(pd_failsafe_t *fs);
+
+/* An interlock on `pin` tripped: as a Stop, with its own cause and pin. */
+void pd_failsafe_interlock(pd_failsafe_t *fs, uint8_t pin);
 
 #endif /* PD_FAILSAFE_H */

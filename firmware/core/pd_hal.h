@@ -25,6 +25,15 @@ typedef struct pd_board_info {
     uint8_t max_servos;           /* at most PD_MAX_SERVOS */
     uint32_t reserved_pins;       /* bit N set: pin N is reserved (the Uno's UART: 0, 1) */
     uint16_t rx_buffer;           /* bytes of received frames it buffers (DeviceInfo.rx_buffer) */
+    uint32_t pwm_pins;            /* bit N: pin N can do PWM (DeviceInfo.pwm_pins) */
+    uint32_t analog_pins;         /* bit N: pin N is an analog input */
+    uint32_t counter_pins;        /* bit N: pin N can count pulses */
+    /* PWM pins whose timer drives the servos (the Uno's Timer1: 9, 10): no PWM
+     * there while a servo runs, no servo while one of them does PWM. */
+    uint32_t servo_timer_pins;
+    /* Pins with a timer output whose timer runs the millisecond clock (the
+     * Uno's Timer0: 5, 6): refused with STATUS_TIMER_IN_USE, never in pwm_pins. */
+    uint32_t clock_timer_pins;
 } pd_board_info_t;
 
 /*
@@ -74,6 +83,44 @@ void pd_hal_digital_write(void *hal, uint8_t pin, bool level);
 
 /* A released digital output: the pin becomes an input (no pull-up), as at power-up. */
 void pd_hal_digital_release(void *hal, uint8_t pin);
+
+/*
+ * Make `pin` (in pwm_pins) a PWM output at `duty` 0..255, as Arduino's
+ * analogWrite: 0 and 255 are a steady low and high. The first call for a pin
+ * sets its timer up; later calls change the duty only.
+ */
+void pd_hal_pwm_write(void *hal, uint8_t pin, uint8_t duty);
+
+/* A released PWM output: its timer lets go of it and the pin becomes an input (no pull-up). */
+void pd_hal_pwm_release(void *hal, uint8_t pin);
+
+/*
+ * Inputs (pd_inputs.c). pd_hal_input_config makes `pin` an input, with its
+ * pull-up if asked, and (where the board can) lets a change of it wake the
+ * main loop; pd_hal_input_release: an input without pull-up, as at power-up.
+ * pd_hal_digital_read_all: the level at every pin now, bit N for pin N (one
+ * read per pass of the loop, whatever the number of inputs: the Uno reads its
+ * three PIN registers).
+ */
+void pd_hal_input_config(void *hal, uint8_t pin, bool pull_up);
+void pd_hal_input_release(void *hal, uint8_t pin);
+uint32_t pd_hal_digital_read_all(void *hal);
+
+/*
+ * Analog inputs (pins in analog_pins), one conversion at a time and never
+ * waited for: pd_hal_analog_start begins one, pd_hal_analog_done is true, with
+ * the 10-bit counts, once it has finished (the loop asks again on its next pass).
+ */
+void pd_hal_analog_start(void *hal, uint8_t pin);
+bool pd_hal_analog_done(void *hal, uint16_t *counts);
+
+/*
+ * Pulse counters (pins in counter_pins): count the pin's edges (`edge`: the
+ * Edge enum) from 0, in an interrupt; read the count (wraps at 2^32); stop.
+ */
+void pd_hal_counter_start(void *hal, uint8_t pin, uint8_t edge);
+uint32_t pd_hal_counter_read(void *hal, uint8_t pin);
+void pd_hal_counter_stop(void *hal, uint8_t pin);
 
 /*
  * An identifier of this power-up, read once by pd_core_init(): it must differ

@@ -10,8 +10,8 @@
 
 typedef char pd_assert_tx_fits_len[(PD_TX_MAX_PAYLOAD <= PD_MAX_PAYLOAD) ? 1 : -1];
 /* The notices PD_TX_RESERVE counts on fit PD_TX_NOTICE_MAX. */
-typedef char pd_assert_notice_fits[(protoduino_Failsafe_size + 2u <= 9u &&
-                                    protoduino_DecodeError_size + 2u <= 9u) ? 1 : -1];
+typedef char pd_assert_notice_fits[(protoduino_Failsafe_size + 2u <= 12u &&
+                                    protoduino_DecodeError_size + 2u <= 12u) ? 1 : -1];
 
 /* The receiver's state at the start of a frame. Not inlined: LTO copied it
  * to its three callers (init, delimiter, overflow): 24 B of the Uno's flash. */
@@ -44,12 +44,16 @@ void pd_link_init(pd_link_t *link)
     link->tx_flush = true;
 }
 
-bool pd_link_send(pd_core_t *core, uint8_t type, uint8_t *raw, size_t len)
+bool pd_link_send(pd_core_t *core, uint8_t type, uint8_t *buf, size_t len)
 {
+    /* No full COBS block (254 bytes) in any frame: the in-place encoding's
+     * condition (PD_TX_BUF), and PD_TX_FRAME_BYTES's size. */
+    typedef char no_full_block[(PD_TX_RAW_MAX < 254u &&
+                                PD_TX_BUF == PD_TX_FRAME_MAX) ? 1 : -1];
+    (void)sizeof(no_full_block);
     pd_link_t *link = &core->link;
-    uint8_t frame[PD_TX_FRAME_MAX];
+    uint8_t *raw = buf + PD_TX_PACKET_AT;
     size_t raw_len;
-    size_t pos = 0;
 
     if (type != PD_PACKET_CONTROL && !link->active) {
         PD_STAT_INC(link, tx_failed);
@@ -60,17 +64,20 @@ bool pd_link_send(pd_core_t *core, uint8_t type, uint8_t *raw, size_t len)
         PD_STAT_INC(link, tx_failed);
         return false;
     }
-    if (link->tx_flush) {
-        frame[pos++] = 0;
-    }
-    size_t enc = pd_cobs_encode(raw, raw_len, frame + pos, sizeof(frame) - pos - 1u);
+    /* Encoded over the packet, one byte to its left (PD_TX_BUF says why that is safe). */
+    size_t enc = pd_cobs_encode(raw, raw_len, buf + 1, PD_TX_BUF - 2u);
     if (enc == 0) {
         PD_STAT_INC(link, tx_failed);
         return false;
     }
-    pos += enc;
-    frame[pos++] = 0;
-    if (!pd_hal_write(core->hal, frame, (uint16_t)pos)) {
+    buf[1 + enc] = 0;
+    uint8_t *frame = buf + 1;
+    uint16_t frame_len = (uint16_t)(enc + 1u);
+    if (link->tx_flush) {
+        *--frame = 0;
+        frame_len++;
+    }
+    if (!pd_hal_write(core->hal, frame, frame_len)) {
         /* Keep the SEQ (section 6) and flush whatever part of it went out. */
         PD_STAT_INC(link, tx_failed);
         link->tx_flush = true;
@@ -83,7 +90,7 @@ bool pd_link_send(pd_core_t *core, uint8_t type, uint8_t *raw, size_t len)
 }
 
 /*
- * Out of line: its packet buffer (PD_TX_RAW_MAX) would otherwise join the frame
+ * Out of line: its frame buffer (PD_TX_BUF) would otherwise join the frame
  * of pd_link_rx_byte, which is on the stack under every command's decode and
  * reply; on the Uno that was 115 of the stack's bytes at its deepest point (a
  * Pose's decode), which came within 34 B of the static data.
@@ -91,9 +98,9 @@ bool pd_link_send(pd_core_t *core, uint8_t type, uint8_t *raw, size_t len)
 static __attribute__((noinline)) bool send_control(pd_core_t *core, const uint8_t *payload,
                                                    size_t len)
 {
-    uint8_t raw[PD_TX_RAW_MAX];
-    memcpy(raw + PD_HEADER_SIZE, payload, len);
-    return pd_link_send(core, PD_PACKET_CONTROL, raw, len);
+    uint8_t buf[PD_TX_BUF];
+    memcpy(buf + PD_TX_PAYLOAD_AT, payload, len);
+    return pd_link_send(core, PD_PACKET_CONTROL, buf, len);
 }
 
 bool pd_link_send_event(pd_core_t *core, uint8_t event)

@@ -36,13 +36,14 @@
 #include <stdint.h>
 
 #include "pd_cobs.h"
+#include "pd_encode.h"
 #include "pd_protocol.h"
 #include "protoduino.pb.h"
 
 struct pd_core;
 
 /* Largest payload the device sends: one ArduinoOut (CONTROL payloads are <= 11 B). */
-#define PD_TX_MAX_PAYLOAD protoduino_ArduinoOut_size
+#define PD_TX_MAX_PAYLOAD PD_ENCODE_MAX
 /* The longest packet the device stores: a COMMAND with the largest ArduinoIn
  * nanopb can decode (every field bounded in protoduino.options). A longer packet
  * cannot carry a valid command, so it is dropped as a length error as soon as its
@@ -54,26 +55,30 @@ struct pd_core;
 /* Encoded frame plus an optional leading 0x00 and the delimiter. */
 #define PD_TX_FRAME_BYTES(payload) (PD_COBS_MAX_ENCODED(PD_MIN_PACKET + (payload)) + 2u)
 #define PD_TX_FRAME_MAX PD_TX_FRAME_BYTES(PD_TX_MAX_PAYLOAD)
-/* A CONTROL frame (payloads are <= 6 B: RESET_ACK) and a notice (Failsafe, DecodeError: <= 9 B). */
+/* A CONTROL frame (payloads are <= 6 B: RESET_ACK) and a notice (Failsafe, DecodeError: <= 12 B). */
 #define PD_TX_CONTROL_MAX PD_TX_FRAME_BYTES(6u)
-#define PD_TX_NOTICE_MAX PD_TX_FRAME_BYTES(9u)
+#define PD_TX_NOTICE_MAX PD_TX_FRAME_BYTES(12u)
 /*
- * The most one received frame can make the device send: the largest Ack and
- * the notice that may follow it (or a DecodeError and its Ack, which are
- * smaller). A frame is acted upon only when the transmit queue has this much
- * room; every platform's queue holds more. An EVENT DESYNC sent before the Ack
- * is not counted (every byte of the Uno's ring is stack lost): after a desync,
- * which a clean line never causes, an Ack may not fit and is retransmitted.
+ * The most one received frame can make the device send: the largest Ack
+ * alone, or an Ack and the notice that follows it (a Failsafe after a Stop, a
+ * liveness message or a ClearInterlock: of their Acks only a Ping's is large,
+ * its echo and its failsafe state), or a DecodeError and its Ack (smaller).
+ * A frame is acted upon only when the transmit queue has this much room; every
+ * platform's queue holds more. An EVENT DESYNC sent before the Ack is not
+ * counted (every byte of the Uno's ring is RAM): after a desync, which a clean
+ * line never causes, an Ack may not fit and is retransmitted.
  */
-#define PD_TX_RESERVE (PD_TX_FRAME_MAX + PD_TX_NOTICE_MAX)
+#define PD_TX_LIVENESS_ACK_MAX (2u + 8u + 66u + 2u + protoduino_Failsafe_size)
+#define PD_TX_RESERVE                                                        \
+    PD_ENCODE_MAX2(PD_TX_FRAME_MAX, PD_TX_FRAME_BYTES(PD_TX_LIVENESS_ACK_MAX) + PD_TX_NOTICE_MAX)
 /*
- * A platform's transmit queue holds at least the reserve plus this, so that a
- * report of up to 7 payload bytes can go out beside it (checked at compile
- * time by each platform: a larger ArduinoOut makes the reserve grow with it).
- * Only 7: on the Uno every byte of RAM the ring takes is stack lost, and at
- * 176 B a Pose's decode ran the stack into .bss (the device hung).
+ * A platform's transmit queue holds at least the reserve (checked at compile
+ * time by each platform). A report goes in only when the queue has room for it
+ * and for a reply, and no command frame is arriving (pd_dispatch_send_spare):
+ * on the Uno, whose queue is the reserve, into an empty queue. So a reply
+ * waits behind one report at most, the one on the line, and the queue keeps
+ * no room beside the reserve for reports (every byte of it is the Uno's RAM).
  */
-#define PD_TX_REPORT_ROOM PD_TX_FRAME_BYTES(7u)
 
 /*
  * Diagnostic counters; they wrap, nothing depends on them. No message carries
@@ -138,11 +143,23 @@ void pd_link_init(pd_link_t *link);
 bool pd_link_rx_byte(struct pd_core *core, uint8_t byte);
 
 /*
- * Send one packet whose payload (`len` bytes) already sits at
- * raw + PD_HEADER_SIZE, in a buffer of PD_TX_RAW_MAX bytes. Returns whether
- * the HAL took the whole frame. DATA is refused while IDLE.
+ * The buffer a frame is built in, in place: the lone 0x00 that may go first,
+ * COBS's first code byte, the packet (its payload at PD_TX_PAYLOAD_AT) and the
+ * delimiter. COBS encodes the packet over itself one byte to the left (each
+ * byte is read before the encoder writes there, as no frame reaches a full
+ * 254-byte block), so no second buffer holds the encoded frame: on the Uno
+ * that buffer was 119 B of the stack under every reply, the deepest point.
  */
-bool pd_link_send(struct pd_core *core, uint8_t type, uint8_t *raw, size_t len);
+#define PD_TX_PACKET_AT 2u
+#define PD_TX_PAYLOAD_AT (PD_TX_PACKET_AT + PD_HEADER_SIZE)
+#define PD_TX_BUF (PD_TX_PACKET_AT + PD_TX_RAW_MAX + 1u)
+
+/*
+ * Send one packet whose payload (`len` bytes) already sits at
+ * buf + PD_TX_PAYLOAD_AT, in a buffer of PD_TX_BUF bytes (which it overwrites).
+ * Returns whether the HAL took the whole frame. DATA is refused while IDLE.
+ */
+bool pd_link_send(struct pd_core *core, uint8_t type, uint8_t *buf, size_t len);
 
 /* CONTROL EVENT with the given code (allowed in any state). */
 bool pd_link_send_event(struct pd_core *core, uint8_t event);

@@ -8,8 +8,11 @@
 /* The digital masks hold one bit per pin; a slot fits the owner byte's low nibble. */
 typedef char pd_assert_pins_fit_mask[(PD_MAX_PINS <= 32) ? 1 : -1];
 typedef char pd_assert_servos_fit_slot[(PD_MAX_SERVOS <= PD_MAX_SLOTS) ? 1 : -1];
-/* A servo's settings (pin .. safe_us) are compared as bytes: no padding among them. */
-typedef char pd_assert_servo_settings_packed[(offsetof(pd_servo_t, us) == 8) ? 1 : -1];
+/* Every PWM output's duty fits OutputStates.pwm_duties. */
+typedef char pd_assert_pwm_fit_read[(PD_MAX_PWM <= sizeof(((protoduino_OutputStates *)0)->pwm_duties)) ? 1 : -1];
+/* A servo's settings (min_us .. step) are compared as bytes: no padding among them. */
+#define PD_SERVO_SETTINGS (offsetof(pd_servo_t, step) + 1u)
+typedef char pd_assert_servo_settings_packed[(PD_SERVO_SETTINGS == 7) ? 1 : -1];
 typedef char pd_assert_modes_fit_owner[(PD_MODE_COUNT <= 16) ? 1 : -1];
 
 static uint8_t by_pin(void *hal)
@@ -24,12 +27,12 @@ static uint8_t servo_slots(void *hal)
     return n < PD_MAX_SERVOS ? n : PD_MAX_SERVOS;
 }
 
-static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint16_t us)
+static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint8_t pin, uint16_t us)
 {
     pd_servo_t *s = &out->servo[channel];
     if (us == PD_SERVO_SAFE_DETACH) { /* no pulses: at once, whatever the speed limit */
         s->us = s->target_us = us;
-        pd_hal_servo_detach(hal, channel, s->pin);
+        pd_hal_servo_detach(hal, channel, pin);
         return;
     }
     s->target_us = us;
@@ -37,7 +40,7 @@ static void drive_servo(pd_outputs_t *out, void *hal, uint8_t channel, uint16_t 
      * else pd_outputs_step moves it. */
     if (s->step == 0 || s->us == PD_SERVO_SAFE_DETACH) {
         s->us = us;
-        pd_hal_servo_write(hal, channel, s->pin, us);
+        pd_hal_servo_write(hal, channel, pin, us);
     }
 }
 
@@ -60,14 +63,80 @@ static __attribute__((noinline)) void drive_digital(pd_outputs_t *out, void *hal
 
 static void servo_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
-    (void)pin;
-    drive_servo(out, hal, slot, out->servo[slot].safe_us);
+    drive_servo(out, hal, slot, pin, out->servo[slot].safe_us);
 }
 
 static void digital_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
     (void)slot;
     drive_digital(out, hal, pin, (out->digital_safe >> pin) & 1u);
+}
+
+static uint8_t pwm_slots(void *hal)
+{
+    (void)hal;
+    return PD_MAX_PWM;
+}
+
+static void drive_pwm(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot, uint8_t duty)
+{
+    out->pwm[slot].duty = duty;
+    pd_hal_pwm_write(hal, pin, duty);
+}
+
+static void pwm_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    drive_pwm(out, hal, pin, slot, out->pwm[slot].safe);
+}
+
+static void pwm_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    (void)out;
+    (void)slot;
+    pd_hal_pwm_release(hal, pin);
+}
+
+/* Inputs have no safe value (the failsafe leaves them reading); released, the
+ * pin is an input without pull-up, as at power-up (pd_inputs.c). */
+static void input_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    (void)out;
+    (void)hal;
+    (void)pin;
+    (void)slot;
+}
+
+static uint8_t dinput_slots(void *hal)
+{
+    (void)hal;
+    return PD_MAX_DIGITAL_INPUTS;
+}
+
+static uint8_t ainput_slots(void *hal)
+{
+    (void)hal;
+    return PD_MAX_ANALOG_INPUTS;
+}
+
+static uint8_t counter_slots(void *hal)
+{
+    (void)hal;
+    return PD_MAX_COUNTERS;
+}
+
+static void dinput_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    pd_inputs_release(out, hal, pin, PD_MODE_DIGITAL_INPUT, slot);
+}
+
+static void ainput_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    pd_inputs_release(out, hal, pin, PD_MODE_ANALOG_INPUT, slot);
+}
+
+static void counter_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    pd_inputs_release(out, hal, pin, PD_MODE_COUNTER, slot);
 }
 
 static void servo_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
@@ -105,7 +174,11 @@ static void digital_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t s
  */
 #define PD_MODES(X)                                                          \
     X(PD_MODE_DIGITAL, by_pin, digital_safe, digital_release)                \
-    X(PD_MODE_SERVO, servo_slots, servo_safe, servo_release)
+    X(PD_MODE_SERVO, servo_slots, servo_safe, servo_release)                 \
+    X(PD_MODE_PWM, pwm_slots, pwm_safe, pwm_release)                         \
+    X(PD_MODE_DIGITAL_INPUT, dinput_slots, input_safe, dinput_release)       \
+    X(PD_MODE_ANALOG_INPUT, ainput_slots, input_safe, ainput_release)        \
+    X(PD_MODE_COUNTER, counter_slots, input_safe, counter_release)
 
 #define PD_MODE_ONE(mode, slots_, safe_, release_) +1
 typedef char pd_assert_every_mode_listed[(0 PD_MODES(PD_MODE_ONE)) == PD_MODE_COUNT - 1 ? 1 : -1];
@@ -155,6 +228,7 @@ static void mode_release(uint8_t mode, pd_outputs_t *out, void *hal, uint8_t pin
 void pd_outputs_init(pd_outputs_t *out)
 {
     memset(out, 0, sizeof(*out));
+    pd_inputs_init(&out->inputs);
 }
 
 /* Pin checks shared by every Init and Control, in the contract's order. */
@@ -256,6 +330,18 @@ static __attribute__((noinline)) uint16_t degrees_to_us(const pd_servo_t *s, uin
     return (uint16_t)(s->min_us + degrees * q + pd_div180((uint16_t)(degrees * r)));
 }
 
+bool pd_outputs_timer_pwm(const pd_outputs_t *out, void *hal)
+{
+    uint32_t pins = pd_hal_board_info(hal)->servo_timer_pins;
+    for (uint8_t pin = 0; pins != 0; pin++, pins >>= 1) {
+        if ((pins & 1u) && PD_OWNER_MODE(out->owner[pin]) == PD_MODE_PWM &&
+            out->owner[pin] != 0) {
+            return true;
+        }
+    }
+    return false;
+}
+
 /* Not inlined (into respond(), its only caller): 58 B less of the Uno's flash
  * out of line; a ServoInit is not on the write path. */
 __attribute__((noinline)) protoduino_Status
@@ -273,7 +359,7 @@ pd_outputs_servo_init(pd_outputs_t *out, void *hal, const protoduino_ServoInit *
     if (msg->max_speed > PD_SERVO_MAX_SPEED) {
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
-    pd_servo_t limits = {0, 0, (uint16_t)min_us, (uint16_t)max_us, 0, 0, 0};
+    pd_servo_t limits = {(uint16_t)min_us, (uint16_t)max_us, 0, 0, 0, 0};
     if (msg->which_safe == protoduino_ServoInit_safe_degrees_tag) {
         if (msg->safe.safe_degrees > PD_SERVO_MAX_DEGREES) {
             return protoduino_Status_STATUS_OUT_OF_RANGE;
@@ -297,23 +383,25 @@ pd_outputs_servo_init(pd_outputs_t *out, void *hal, const protoduino_ServoInit *
     uint16_t step = (uint16_t)((uint16_t)(msg->max_speed + 25u) / 50u);
     step = msg->max_speed && step == 0 ? 1u : step;
 
+    if (pd_outputs_timer_pwm(out, hal)) {
+        return protoduino_Status_STATUS_TIMER_IN_USE; /* the servos' timer makes PWM */
+    }
     uint8_t was = out->owner[msg->pin];
     uint8_t channel;
     status = pd_pins_claim(out, hal, msg->pin, PD_MODE_SERVO, &channel);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
-    limits.pin = (uint8_t)msg->pin;
     limits.step = (uint8_t)step;
     pd_servo_t *now = &out->servo[channel];
-    if (was != 0 && memcmp(now, &limits, offsetof(pd_servo_t, us)) == 0) {
+    if (was != 0 && memcmp(now, &limits, PD_SERVO_SETTINGS) == 0) {
         /* The same configuration again (a CLI one-shot, a resumed session): the
          * pin keeps what it does, no detour through the safe value. */
         return protoduino_Status_STATUS_OK;
     }
     limits.step = 0; /* an Init jumps to its safe value, limited or not */
     *now = limits;
-    drive_servo(out, hal, channel, limits.safe_us);
+    drive_servo(out, hal, channel, (uint8_t)msg->pin, limits.safe_us);
     now->step = (uint8_t)step;
     return protoduino_Status_STATUS_OK;
 }
@@ -347,7 +435,7 @@ servo_control(pd_outputs_t *out, void *hal, const protoduino_ServoControl *msg, 
         return protoduino_Status_STATUS_INVALID_ARGUMENT;
     }
     if (apply) {
-        drive_servo(out, hal, channel, us);
+        drive_servo(out, hal, channel, (uint8_t)msg->pin, us);
     }
     return protoduino_Status_STATUS_OK;
 }
@@ -376,6 +464,66 @@ protoduino_Status pd_outputs_digital_control(pd_outputs_t *out, void *hal,
     return digital_control(out, hal, msg, true);
 }
 
+protoduino_Status pd_outputs_pwm_init(pd_outputs_t *out, void *hal, const protoduino_PwmInit *msg)
+{
+    protoduino_Status status = check_pin(hal, msg->pin);
+    if (status != protoduino_Status_STATUS_OK) {
+        return status;
+    }
+    const pd_board_info_t *info = pd_hal_board_info(hal);
+    uint8_t pin = (uint8_t)msg->pin;
+    uint32_t bit = 1UL << pin;
+    uint8_t was = out->owner[pin];
+    if (info->clock_timer_pins & bit) {
+        return protoduino_Status_STATUS_TIMER_IN_USE; /* its timer runs the clock */
+    }
+    if (!(info->pwm_pins & bit)) {
+        return protoduino_Status_STATUS_NOT_SUPPORTED; /* no timer output there */
+    }
+    if (was != 0 && PD_OWNER_MODE(was) != PD_MODE_PWM) {
+        return protoduino_Status_STATUS_PIN_IN_USE;
+    }
+    if ((info->servo_timer_pins & bit) && pd_pins_count(out, PD_MODE_SERVO) > 0) {
+        return protoduino_Status_STATUS_TIMER_IN_USE; /* its timer makes the servo pulses */
+    }
+    if (msg->safe_duty > 255u) {
+        return protoduino_Status_STATUS_OUT_OF_RANGE;
+    }
+    uint8_t slot;
+    status = pd_pins_claim(out, hal, pin, PD_MODE_PWM, &slot);
+    if (status != protoduino_Status_STATUS_OK) {
+        return status;
+    }
+    pd_pwm_t *p = &out->pwm[slot];
+    if (was != 0 && p->safe == msg->safe_duty) {
+        return protoduino_Status_STATUS_OK; /* the same configuration: the duty stays */
+    }
+    p->safe = (uint8_t)msg->safe_duty;
+    drive_pwm(out, hal, pin, slot, p->safe);
+    return protoduino_Status_STATUS_OK;
+}
+
+/* A PwmControl: checked, then (if `apply`) driven. */
+static __attribute__((noinline)) protoduino_Status
+pwm_control(pd_outputs_t *out, void *hal, const protoduino_PwmControl *msg, bool apply)
+{
+    uint8_t slot;
+    protoduino_Status status = pd_pins_owned(out, hal, msg->pin, PD_MODE_PWM, &slot);
+    if (status == protoduino_Status_STATUS_OK && msg->duty > 255u) {
+        status = protoduino_Status_STATUS_OUT_OF_RANGE;
+    }
+    if (status == protoduino_Status_STATUS_OK && apply) {
+        drive_pwm(out, hal, (uint8_t)msg->pin, slot, (uint8_t)msg->duty);
+    }
+    return status;
+}
+
+protoduino_Status pd_outputs_pwm_control(pd_outputs_t *out, void *hal,
+                                         const protoduino_PwmControl *msg)
+{
+    return pwm_control(out, hal, msg, true);
+}
+
 protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino_Pose *msg,
                                   uint8_t *bad)
 {
@@ -392,12 +540,20 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
             const protoduino_PoseItem *item = &msg->items[i];
             protoduino_Status status = protoduino_Status_STATUS_INVALID_ARGUMENT;
             uint32_t pin = 0;
+            /* A mode the build left out: not supported, as its Control would be. */
             if (item->which_output == protoduino_PoseItem_servo_tag) {
-                status = servo_control(out, hal, &item->output.servo, pass);
+                status = PD_FEATURE_SERVO ? servo_control(out, hal, &item->output.servo, pass)
+                                          : protoduino_Status_STATUS_NOT_SUPPORTED;
                 pin = item->output.servo.pin;
             } else if (item->which_output == protoduino_PoseItem_digital_tag) {
-                status = digital_control(out, hal, &item->output.digital, pass);
+                status = PD_FEATURE_DIGITAL_OUTPUT
+                             ? digital_control(out, hal, &item->output.digital, pass)
+                             : protoduino_Status_STATUS_NOT_SUPPORTED;
                 pin = item->output.digital.pin;
+            } else if (item->which_output == protoduino_PoseItem_pwm_tag) {
+                status = PD_FEATURE_PWM ? pwm_control(out, hal, &item->output.pwm, pass)
+                                        : protoduino_Status_STATUS_NOT_SUPPORTED;
+                pin = item->output.pwm.pin;
             }
             if (pass == 0) {
                 /* pin < PD_MAX_PINS <= 32 once the item is valid */
@@ -437,6 +593,9 @@ void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
             *b++ = (uint8_t)(s->target_us >> 8);
         } else if (PD_OWNER_MODE(owner) == PD_MODE_DIGITAL) {
             states->digital_pins |= bit;
+        } else if (PD_OWNER_MODE(owner) == PD_MODE_PWM) {
+            states->pwm_pins |= bit;
+            states->pwm_duties[states->pwm_duties_count++] = out->pwm[PD_OWNER_SLOT(owner)].duty;
         }
     }
     states->servos.size = (pb_size_t)(b - states->servos.bytes);
@@ -462,7 +621,11 @@ void pd_outputs_step(pd_outputs_t *out, void *hal, uint32_t now)
         } else {
             s->us = s->us - s->target_us <= s->step ? s->target_us : s->us - s->step;
         }
-        pd_hal_servo_write(hal, ch, s->pin, s->us);
+        uint8_t pin = 0; /* the channel's pin, from the owner table (moving: it has one) */
+        while (pin < PD_MAX_PINS - 1u && out->owner[pin] != PD_OWNER(PD_MODE_SERVO, ch)) {
+            pin++;
+        }
+        pd_hal_servo_write(hal, ch, pin, s->us);
     }
     pd_hal_servo_hold(hal, false);
 }

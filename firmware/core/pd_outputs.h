@@ -28,7 +28,9 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "pd_features.h"
 #include "pd_hal.h"
+#include "pd_inputs.h"
 #include "protoduino.pb.h"
 
 /* Compile-time capacity; a board reports its real figures in pd_board_info_t. */
@@ -38,12 +40,29 @@
 #ifndef PD_MAX_SERVOS
 #define PD_MAX_SERVOS 8
 #endif
+/* PWM outputs at once (the Uno has four PWM pins it can give: 3, 9, 10, 11). */
+#ifndef PD_MAX_PWM
+#define PD_MAX_PWM 4
+#endif
+/* A build without servos or PWM keeps one slot of each (the code stays simple), not eight or four. */
+#if !PD_FEATURE_SERVO
+#undef PD_MAX_SERVOS
+#define PD_MAX_SERVOS 1
+#endif
+#if !PD_FEATURE_PWM
+#undef PD_MAX_PWM
+#define PD_MAX_PWM 1
+#endif
 
 /* Pin modes (the PD_MODES table in pd_outputs.c). PD_MODE_FREE owns nothing. */
 enum {
     PD_MODE_FREE = 0,
     PD_MODE_DIGITAL, /* digital output; state by pin: digital_safe/digital_level */
     PD_MODE_SERVO,   /* servo output; state by slot (= servo channel): servo[] */
+    PD_MODE_PWM,     /* PWM output; state by slot: pwm[] */
+    PD_MODE_DIGITAL_INPUT, /* inputs (pd_inputs.c); reserved here: an output never takes their pins */
+    PD_MODE_ANALOG_INPUT,
+    PD_MODE_COUNTER,
     PD_MODE_COUNT
 };
 
@@ -56,22 +75,30 @@ enum {
 /* safe_us meaning "the safe state is no pulses at all" (real widths are >= 400). */
 #define PD_SERVO_SAFE_DETACH 0u
 
+/* A servo channel; its pin is the one the owner table gives the channel (the
+ * callers know it: a byte less per channel of the Uno's RAM). */
 typedef struct pd_servo {
-    uint8_t pin;
-    uint8_t step; /* speed limit: most us per servo frame; 0: none */
     uint16_t min_us;
     uint16_t max_us;
     uint16_t safe_us;   /* PD_SERVO_SAFE_DETACH: limp */
+    uint8_t step;       /* speed limit: most us per servo frame; 0: none */
     uint16_t us;        /* the width driven now */
     uint16_t target_us; /* the width it moves to (differs only while speed-limited) */
 } pd_servo_t;
 
+typedef struct pd_pwm {
+    uint8_t safe; /* duty 0..255 the failsafe, Stop and an interlock drive */
+    uint8_t duty; /* the duty driven now */
+} pd_pwm_t;
+
 typedef struct pd_outputs {
     uint8_t owner[PD_MAX_PINS]; /* PD_OWNER(mode, slot); 0 = free */
     pd_servo_t servo[PD_MAX_SERVOS];
+    pd_pwm_t pwm[PD_MAX_PWM];
     uint32_t digital_safe;  /* bit N: safe level of pin N */
     uint32_t digital_level; /* bit N: current level of pin N */
     uint32_t stepped_at;    /* pd_hal_millis() of the last speed step */
+    pd_inputs_t inputs;     /* the input modes' state (pd_inputs.h) */
 } pd_outputs_t;
 
 
@@ -101,6 +128,13 @@ protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
                                           const protoduino_DigitalInit *msg);
 protoduino_Status pd_outputs_digital_control(pd_outputs_t *out, void *hal,
                                              const protoduino_DigitalControl *msg);
+
+/* Whether a pin of the servos' timer (pd_board_info_t.servo_timer_pins) does PWM. */
+bool pd_outputs_timer_pwm(const pd_outputs_t *out, void *hal);
+
+protoduino_Status pd_outputs_pwm_init(pd_outputs_t *out, void *hal, const protoduino_PwmInit *msg);
+protoduino_Status pd_outputs_pwm_control(pd_outputs_t *out, void *hal,
+                                         const protoduino_PwmControl *msg);
 
 /*
  * Several outputs at once, all or nothing: every item is checked (in order,

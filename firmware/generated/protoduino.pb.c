@@ -24,6 +24,24 @@ PB_BIND(protoduino_DigitalControl, protoduino_DigitalControl, AUTO)
 PB_BIND(protoduino_Stop, protoduino_Stop, AUTO)
 
 
+PB_BIND(protoduino_DigitalInputInit, protoduino_DigitalInputInit, AUTO)
+
+
+PB_BIND(protoduino_AnalogInputInit, protoduino_AnalogInputInit, AUTO)
+
+
+PB_BIND(protoduino_CounterInit, protoduino_CounterInit, AUTO)
+
+
+PB_BIND(protoduino_PwmInit, protoduino_PwmInit, AUTO)
+
+
+PB_BIND(protoduino_PwmControl, protoduino_PwmControl, AUTO)
+
+
+PB_BIND(protoduino_ClearInterlock, protoduino_ClearInterlock, AUTO)
+
+
 PB_BIND(protoduino_GetInfo, protoduino_GetInfo, AUTO)
 
 
@@ -63,6 +81,9 @@ PB_BIND(protoduino_Ack, protoduino_Ack, AUTO)
 PB_BIND(protoduino_Failsafe, protoduino_Failsafe, AUTO)
 
 
+PB_BIND(protoduino_InputReport, protoduino_InputReport, AUTO)
+
+
 PB_BIND(protoduino_DecodeError, protoduino_DecodeError, AUTO)
 
 
@@ -70,6 +91,9 @@ PB_BIND(protoduino_Log, protoduino_Log, AUTO)
 
 
 PB_BIND(protoduino_ArduinoOut, protoduino_ArduinoOut, AUTO)
+
+
+
 
 
 

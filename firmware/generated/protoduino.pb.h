@@ -26,8 +26,43 @@ typedef enum _protoduino_Status {
     /* The failsafe timer ran out and no liveness message (Ping or Heartbeat,
  per the session's liveness source) came since: a Control now would leave
  an output commanded with no running timer. Send the liveness message first. */
-    protoduino_Status_STATUS_FAILSAFE_EXPIRED = 10
+    protoduino_Status_STATUS_FAILSAFE_EXPIRED = 10,
+    /* An interlock input tripped (or is still at its trip level): outputs are
+ latched safe until the input is back at its normal level and the host
+ sends ClearInterlock. */
+    protoduino_Status_STATUS_INTERLOCK_ACTIVE = 11,
+    /* The pin's hardware timer is taken by another mode (on the Uno Timer1
+ drives the servos, so pins 9 and 10 cannot do PWM while a servo runs). */
+    protoduino_Status_STATUS_TIMER_IN_USE = 12,
+    /* This pin cannot do this mode on this board (no PWM, ADC or interrupt
+ there), or the firmware was built without the mode's feature. */
+    protoduino_Status_STATUS_NOT_SUPPORTED = 13
 } protoduino_Status;
+
+/* The build-time features a firmware may carry (DeviceInfo.features: bit N
+ set means Feature N is built in). One per pin mode. */
+typedef enum _protoduino_Feature {
+    protoduino_Feature_FEATURE_NONE = 0,
+    protoduino_Feature_FEATURE_SERVO = 1,
+    protoduino_Feature_FEATURE_DIGITAL_OUTPUT = 2,
+    protoduino_Feature_FEATURE_DIGITAL_INPUT = 3,
+    protoduino_Feature_FEATURE_ANALOG_INPUT = 4,
+    protoduino_Feature_FEATURE_PWM = 5,
+    protoduino_Feature_FEATURE_COUNTER = 6
+} protoduino_Feature;
+
+/* When an interlock input trips (protocol.md section 7, Interlocks). */
+typedef enum _protoduino_Trip {
+    protoduino_Trip_TRIP_NONE = 0, /* not an interlock */
+    protoduino_Trip_TRIP_LOW = 1, /* trips when the debounced level is low (a switch to ground with pull-up) */
+    protoduino_Trip_TRIP_HIGH = 2
+} protoduino_Trip;
+
+typedef enum _protoduino_Edge {
+    protoduino_Edge_EDGE_RISING = 0,
+    protoduino_Edge_EDGE_FALLING = 1,
+    protoduino_Edge_EDGE_BOTH = 2
+} protoduino_Edge;
 
 /* Where the failsafe timer's liveness comes from (protocol.md section 7). */
 typedef enum _protoduino_Liveness {
@@ -38,7 +73,8 @@ typedef enum _protoduino_Liveness {
 typedef enum _protoduino_FailsafeCause {
     protoduino_FailsafeCause_FAILSAFE_CAUSE_NONE = 0,
     protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT = 1,
-    protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP = 2
+    protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP = 2,
+    protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK = 3
 } protoduino_FailsafeCause;
 
 typedef enum _protoduino_LogLevel {
@@ -67,7 +103,7 @@ typedef struct _protoduino_Ping {
  Degrees map linearly onto [min_us, max_us]:
    us = min_us + degrees * (max_us - min_us) / 180   (integer division) */
 typedef struct _protoduino_ServoInit {
-    uint32_t pin;
+    uint8_t pin;
     uint32_t min_us; /* 0 means the default, 544 */
     uint32_t max_us; /* 0 means the default, 2400 */
     pb_size_t which_safe;
@@ -83,23 +119,23 @@ typedef struct _protoduino_ServoInit {
 } protoduino_ServoInit;
 
 typedef struct _protoduino_ServoControl {
-    uint32_t pin;
+    uint8_t pin;
     pb_size_t which_value;
     union {
-        uint32_t degrees; /* 0..180 */
-        uint32_t us; /* within the Init's [min_us, max_us] */
+        uint16_t degrees; /* 0..180 */
+        uint16_t us; /* within the Init's [min_us, max_us] */
     } value;
 } protoduino_ServoControl;
 
 /* Configure a digital output. It takes its safe level at once, unless the pin
  is already a digital output with this safe level (then nothing changes). */
 typedef struct _protoduino_DigitalInit {
-    uint32_t pin;
+    uint8_t pin;
     bool safe_level;
 } protoduino_DigitalInit;
 
 typedef struct _protoduino_DigitalControl {
-    uint32_t pin;
+    uint8_t pin;
     bool level;
 } protoduino_DigitalControl;
 
@@ -107,6 +143,50 @@ typedef struct _protoduino_DigitalControl {
 typedef struct _protoduino_Stop {
     char dummy_field;
 } protoduino_Stop;
+
+/* Configure a digital input: reported on every debounced change (InputReport). */
+typedef struct _protoduino_DigitalInputInit {
+    uint8_t pin;
+    bool pull_up;
+    uint16_t debounce_ms; /* 0..255: a level must hold this long to count */
+    protoduino_Trip interlock; /* make it an interlock: a local reaction on the device */
+} protoduino_DigitalInputInit;
+
+/* Configure an analog input (A0..A5 on the Uno: pins 14..19), 10-bit counts. */
+typedef struct _protoduino_AnalogInputInit {
+    uint8_t pin;
+    uint32_t interval_ms; /* sampling period, 1..60000; 0 means 10 */
+    uint16_t threshold; /* report when the value moved by more than this many counts */
+    uint32_t heartbeat_ms; /* ... or this long passed without a report (0: 1000) */
+} protoduino_AnalogInputInit;
+
+/* Configure a pulse counter (wheel encoder): counts edges in an interrupt. */
+typedef struct _protoduino_CounterInit {
+    uint8_t pin;
+    protoduino_Edge edge;
+    bool pull_up;
+    uint32_t interval_ms; /* report the count at most this often when it changed (0: 20) */
+} protoduino_CounterInit;
+
+/* Configure a PWM output (duty 0..255, as Arduino's analogWrite). It takes its
+ safe duty at once, unless already a PWM output with this safe duty. */
+typedef struct _protoduino_PwmInit {
+    uint8_t pin;
+    uint16_t safe_duty; /* 0..255; motors: 0 */
+} protoduino_PwmInit;
+
+typedef struct _protoduino_PwmControl {
+    uint8_t pin;
+    uint16_t duty; /* 0..255 */
+} protoduino_PwmControl;
+
+/* Clear a latched interlock once its input is back at its normal level. */
+typedef struct _protoduino_ClearInterlock {
+    /* As Ping.failsafe_epoch: only a host that has seen the latest safe state
+ (the interlock's trip, or anything after it) may clear the latch, so a
+ ClearInterlock held up on the way never clears a later trip. */
+    uint8_t failsafe_epoch;
+} protoduino_ClearInterlock;
 
 /* Ask for DeviceInfo (returned in the Ack). */
 typedef struct _protoduino_GetInfo {
@@ -121,6 +201,7 @@ typedef struct _protoduino_PoseItem {
     union {
         protoduino_ServoControl servo;
         protoduino_DigitalControl digital;
+        protoduino_PwmControl pwm;
     } output;
 } protoduino_PoseItem;
 
@@ -150,7 +231,7 @@ typedef struct _protoduino_Heartbeat {
 /* Release one output: the pin returns to its power-up state (a servo's
  pulses stop, a digital pin becomes an input) and is free for any mode. */
 typedef struct _protoduino_Release {
-    uint32_t pin;
+    uint8_t pin;
 } protoduino_Release;
 
 /* Release every output: the device is as unconfigured as after power-up. */
@@ -173,6 +254,12 @@ typedef struct _protoduino_ArduinoIn {
         protoduino_Heartbeat heartbeat;
         protoduino_Release release;
         protoduino_ReleaseAll release_all;
+        protoduino_PwmControl pwm_control;
+        protoduino_PwmInit pwm_init;
+        protoduino_DigitalInputInit digital_input_init;
+        protoduino_AnalogInputInit analog_input_init;
+        protoduino_CounterInit counter_init;
+        protoduino_ClearInterlock clear_interlock;
         protoduino_Pose pose;
         protoduino_ReadOutputs read_outputs;
     } data;
@@ -180,16 +267,20 @@ typedef struct _protoduino_ArduinoIn {
 
 typedef struct _protoduino_DeviceInfo {
     char firmware_version[16];
-    uint32_t protocol_version;
+    uint8_t protocol_version;
     uint32_t schema_id;
     char board[16];
-    uint32_t num_pins; /* pins are numbered 0 .. num_pins - 1 */
-    uint32_t max_servos;
+    uint8_t num_pins; /* pins are numbered 0 .. num_pins - 1 */
+    uint8_t max_servos;
     pb_size_t reserved_pins_count;
-    uint32_t reserved_pins[4];
+    uint8_t reserved_pins[4];
     /* Bytes of received frames the device can hold while it works (the Uno's
  receive ring): the host keeps the command frames in flight within it. */
-    uint32_t rx_buffer;
+    uint16_t rx_buffer;
+    uint16_t features; /* bit N: Feature N is built in */
+    uint32_t pwm_pins; /* bit N: pin N can do PWM */
+    uint32_t analog_pins; /* bit N: pin N is an analog input */
+    uint32_t counter_pins; /* bit N: pin N can count pulses */
 } protoduino_DeviceInfo;
 
 typedef PB_BYTES_ARRAY_T(40) protoduino_OutputStates_servos_t;
@@ -201,6 +292,9 @@ typedef struct _protoduino_OutputStates {
     protoduino_OutputStates_servos_t servos;
     uint32_t digital_pins; /* bit N: pin N is a digital output */
     uint32_t digital_levels; /* bit N: the level pin N drives */
+    uint32_t pwm_pins; /* bit N: pin N is a PWM output */
+    pb_size_t pwm_duties_count;
+    uint8_t pwm_duties[6]; /* their duties, in pin order */
 } protoduino_OutputStates;
 
 /* Sent when the safe state is entered (active = true) and when the next
@@ -209,10 +303,11 @@ typedef struct _protoduino_OutputStates {
 typedef struct _protoduino_Failsafe {
     bool active;
     protoduino_FailsafeCause cause;
-    /* Counts the safe states the device entered since boot (timeout or Stop),
- 1 for the first, modulo 256; the host sends the latest it saw back in its
- liveness messages (Ping.failsafe_epoch). */
+    /* Counts the safe states the device entered since boot (timeout, Stop,
+ interlock), 1 for the first, modulo 256; the host sends the latest it
+ saw back in its liveness messages (Ping.failsafe_epoch). */
     uint8_t epoch;
+    uint8_t pin; /* the interlock's input pin (cause INTERLOCK) */
 } protoduino_Failsafe;
 
 typedef PB_BYTES_ARRAY_T(64) protoduino_Ack_ping_echo_t;
@@ -231,8 +326,23 @@ typedef struct _protoduino_Ack {
  failsafe whose event it missed. */
     bool has_failsafe;
     protoduino_Failsafe failsafe;
-    uint32_t refused_item; /* a refused Pose: its offending item, counted from 1 */
+    uint8_t refused_item; /* a refused Pose: its offending item, counted from 1 */
 } protoduino_Ack;
+
+/* The inputs' state, sent when something changed ("newest wins": a report not
+ yet sent is replaced by a newer one, and `coalesced` counts the replaced). */
+typedef struct _protoduino_InputReport {
+    uint32_t time_ms; /* device time (ms, wraps) the values were taken */
+    uint32_t digital_pins; /* bit N: pin N is a digital input (every report) */
+    uint32_t digital_levels; /* bit N: its debounced level */
+    uint32_t analog_pins; /* bit N: pin N's value is in analog_values */
+    pb_size_t analog_values_count;
+    uint16_t analog_values[6]; /* 10-bit counts, in pin order */
+    uint32_t counter_pins; /* bit N: pin N's count is in counter_counts */
+    pb_size_t counter_counts_count;
+    uint32_t counter_counts[4]; /* edges since the CounterInit (wraps at 2^32), in pin order */
+    uint16_t coalesced; /* reports replaced before they were sent, since the last */
+} protoduino_InputReport;
 
 /* A COMMAND packet whose payload did not decode; nothing was executed. */
 typedef struct _protoduino_DecodeError {
@@ -252,6 +362,7 @@ typedef struct _protoduino_ArduinoOut {
         protoduino_Failsafe failsafe;
         protoduino_DecodeError decode_error;
         protoduino_Log log;
+        protoduino_InputReport input_report;
     } data;
 } protoduino_ArduinoOut;
 
@@ -262,16 +373,28 @@ extern "C" {
 
 /* Helper constants for enums */
 #define _protoduino_Status_MIN protoduino_Status_STATUS_OK
-#define _protoduino_Status_MAX protoduino_Status_STATUS_FAILSAFE_EXPIRED
-#define _protoduino_Status_ARRAYSIZE ((protoduino_Status)(protoduino_Status_STATUS_FAILSAFE_EXPIRED+1))
+#define _protoduino_Status_MAX protoduino_Status_STATUS_NOT_SUPPORTED
+#define _protoduino_Status_ARRAYSIZE ((protoduino_Status)(protoduino_Status_STATUS_NOT_SUPPORTED+1))
+
+#define _protoduino_Feature_MIN protoduino_Feature_FEATURE_NONE
+#define _protoduino_Feature_MAX protoduino_Feature_FEATURE_COUNTER
+#define _protoduino_Feature_ARRAYSIZE ((protoduino_Feature)(protoduino_Feature_FEATURE_COUNTER+1))
+
+#define _protoduino_Trip_MIN protoduino_Trip_TRIP_NONE
+#define _protoduino_Trip_MAX protoduino_Trip_TRIP_HIGH
+#define _protoduino_Trip_ARRAYSIZE ((protoduino_Trip)(protoduino_Trip_TRIP_HIGH+1))
+
+#define _protoduino_Edge_MIN protoduino_Edge_EDGE_RISING
+#define _protoduino_Edge_MAX protoduino_Edge_EDGE_BOTH
+#define _protoduino_Edge_ARRAYSIZE ((protoduino_Edge)(protoduino_Edge_EDGE_BOTH+1))
 
 #define _protoduino_Liveness_MIN protoduino_Liveness_LIVENESS_PING
 #define _protoduino_Liveness_MAX protoduino_Liveness_LIVENESS_HEARTBEAT
 #define _protoduino_Liveness_ARRAYSIZE ((protoduino_Liveness)(protoduino_Liveness_LIVENESS_HEARTBEAT+1))
 
 #define _protoduino_FailsafeCause_MIN protoduino_FailsafeCause_FAILSAFE_CAUSE_NONE
-#define _protoduino_FailsafeCause_MAX protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP
-#define _protoduino_FailsafeCause_ARRAYSIZE ((protoduino_FailsafeCause)(protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP+1))
+#define _protoduino_FailsafeCause_MAX protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK
+#define _protoduino_FailsafeCause_ARRAYSIZE ((protoduino_FailsafeCause)(protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK+1))
 
 #define _protoduino_LogLevel_MIN protoduino_LogLevel_LOG_LEVEL_DEBUG
 #define _protoduino_LogLevel_MAX protoduino_LogLevel_LOG_LEVEL_ERROR
@@ -279,6 +402,14 @@ extern "C" {
 
 
 
+
+
+
+
+#define protoduino_DigitalInputInit_interlock_ENUMTYPE protoduino_Trip
+
+
+#define protoduino_CounterInit_edge_ENUMTYPE protoduino_Edge
 
 
 
@@ -300,6 +431,7 @@ extern "C" {
 #define protoduino_Failsafe_cause_ENUMTYPE protoduino_FailsafeCause
 
 
+
 #define protoduino_Log_level_ENUMTYPE protoduino_LogLevel
 
 
@@ -311,6 +443,12 @@ extern "C" {
 #define protoduino_DigitalInit_init_default      {0, 0}
 #define protoduino_DigitalControl_init_default   {0, 0}
 #define protoduino_Stop_init_default             {0}
+#define protoduino_DigitalInputInit_init_default {0, 0, 0, _protoduino_Trip_MIN}
+#define protoduino_AnalogInputInit_init_default  {0, 0, 0, 0}
+#define protoduino_CounterInit_init_default      {0, _protoduino_Edge_MIN, 0, 0}
+#define protoduino_PwmInit_init_default          {0, 0}
+#define protoduino_PwmControl_init_default       {0, 0}
+#define protoduino_ClearInterlock_init_default   {0}
 #define protoduino_GetInfo_init_default          {0}
 #define protoduino_PoseItem_init_default         {0, {protoduino_ServoControl_init_default}}
 #define protoduino_Pose_init_default             {0, {protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default}}
@@ -320,10 +458,11 @@ extern "C" {
 #define protoduino_Release_init_default          {0}
 #define protoduino_ReleaseAll_init_default       {0}
 #define protoduino_ArduinoIn_init_default        {0, 0, {protoduino_Ping_init_default}}
-#define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0}
-#define protoduino_OutputStates_init_default     {{0, {0}}, 0, 0}
+#define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, 0, 0}
+#define protoduino_OutputStates_init_default     {{0, {0}}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
 #define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_default, 0}
-#define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN, 0}
+#define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN, 0, 0}
+#define protoduino_InputReport_init_default      {0, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_DecodeError_init_default      {0}
 #define protoduino_Log_init_default              {_protoduino_LogLevel_MIN, ""}
 #define protoduino_ArduinoOut_init_default       {0, {protoduino_Ack_init_default}}
@@ -333,6 +472,12 @@ extern "C" {
 #define protoduino_DigitalInit_init_zero         {0, 0}
 #define protoduino_DigitalControl_init_zero      {0, 0}
 #define protoduino_Stop_init_zero                {0}
+#define protoduino_DigitalInputInit_init_zero    {0, 0, 0, _protoduino_Trip_MIN}
+#define protoduino_AnalogInputInit_init_zero     {0, 0, 0, 0}
+#define protoduino_CounterInit_init_zero         {0, _protoduino_Edge_MIN, 0, 0}
+#define protoduino_PwmInit_init_zero             {0, 0}
+#define protoduino_PwmControl_init_zero          {0, 0}
+#define protoduino_ClearInterlock_init_zero      {0}
 #define protoduino_GetInfo_init_zero             {0}
 #define protoduino_PoseItem_init_zero            {0, {protoduino_ServoControl_init_zero}}
 #define protoduino_Pose_init_zero                {0, {protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero}}
@@ -342,10 +487,11 @@ extern "C" {
 #define protoduino_Release_init_zero             {0}
 #define protoduino_ReleaseAll_init_zero          {0}
 #define protoduino_ArduinoIn_init_zero           {0, 0, {protoduino_Ping_init_zero}}
-#define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0}
-#define protoduino_OutputStates_init_zero        {{0, {0}}, 0, 0}
+#define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, 0, 0}
+#define protoduino_OutputStates_init_zero        {{0, {0}}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
 #define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_zero, 0}
-#define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN, 0}
+#define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN, 0, 0}
+#define protoduino_InputReport_init_zero         {0, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_DecodeError_init_zero         {0}
 #define protoduino_Log_init_zero                 {_protoduino_LogLevel_MIN, ""}
 #define protoduino_ArduinoOut_init_zero          {0, {protoduino_Ack_init_zero}}
@@ -367,8 +513,26 @@ extern "C" {
 #define protoduino_DigitalInit_safe_level_tag    2
 #define protoduino_DigitalControl_pin_tag        1
 #define protoduino_DigitalControl_level_tag      2
+#define protoduino_DigitalInputInit_pin_tag      1
+#define protoduino_DigitalInputInit_pull_up_tag  2
+#define protoduino_DigitalInputInit_debounce_ms_tag 3
+#define protoduino_DigitalInputInit_interlock_tag 4
+#define protoduino_AnalogInputInit_pin_tag       1
+#define protoduino_AnalogInputInit_interval_ms_tag 2
+#define protoduino_AnalogInputInit_threshold_tag 3
+#define protoduino_AnalogInputInit_heartbeat_ms_tag 4
+#define protoduino_CounterInit_pin_tag           1
+#define protoduino_CounterInit_edge_tag          2
+#define protoduino_CounterInit_pull_up_tag       3
+#define protoduino_CounterInit_interval_ms_tag   4
+#define protoduino_PwmInit_pin_tag               1
+#define protoduino_PwmInit_safe_duty_tag         2
+#define protoduino_PwmControl_pin_tag            1
+#define protoduino_PwmControl_duty_tag           2
+#define protoduino_ClearInterlock_failsafe_epoch_tag 1
 #define protoduino_PoseItem_servo_tag            1
 #define protoduino_PoseItem_digital_tag          2
+#define protoduino_PoseItem_pwm_tag              3
 #define protoduino_Pose_items_tag                1
 #define protoduino_ConfigureFailsafe_timeout_ms_tag 1
 #define protoduino_ConfigureFailsafe_liveness_tag 2
@@ -386,6 +550,12 @@ extern "C" {
 #define protoduino_ArduinoIn_heartbeat_tag       10
 #define protoduino_ArduinoIn_release_tag         11
 #define protoduino_ArduinoIn_release_all_tag     12
+#define protoduino_ArduinoIn_pwm_control_tag     13
+#define protoduino_ArduinoIn_pwm_init_tag        14
+#define protoduino_ArduinoIn_digital_input_init_tag 15
+#define protoduino_ArduinoIn_analog_input_init_tag 16
+#define protoduino_ArduinoIn_counter_init_tag    17
+#define protoduino_ArduinoIn_clear_interlock_tag 18
 #define protoduino_ArduinoIn_pose_tag            30
 #define protoduino_ArduinoIn_read_outputs_tag    31
 #define protoduino_DeviceInfo_firmware_version_tag 1
@@ -396,12 +566,19 @@ extern "C" {
 #define protoduino_DeviceInfo_max_servos_tag     6
 #define protoduino_DeviceInfo_reserved_pins_tag  7
 #define protoduino_DeviceInfo_rx_buffer_tag      8
+#define protoduino_DeviceInfo_features_tag       9
+#define protoduino_DeviceInfo_pwm_pins_tag       10
+#define protoduino_DeviceInfo_analog_pins_tag    11
+#define protoduino_DeviceInfo_counter_pins_tag   12
 #define protoduino_OutputStates_servos_tag       1
 #define protoduino_OutputStates_digital_pins_tag 2
 #define protoduino_OutputStates_digital_levels_tag 3
+#define protoduino_OutputStates_pwm_pins_tag     4
+#define protoduino_OutputStates_pwm_duties_tag   5
 #define protoduino_Failsafe_active_tag           1
 #define protoduino_Failsafe_cause_tag            2
 #define protoduino_Failsafe_epoch_tag            3
+#define protoduino_Failsafe_pin_tag              4
 #define protoduino_Ack_message_id_tag            1
 #define protoduino_Ack_status_tag                2
 #define protoduino_Ack_ping_echo_tag             3
@@ -409,6 +586,14 @@ extern "C" {
 #define protoduino_Ack_outputs_tag               30
 #define protoduino_Ack_failsafe_tag              5
 #define protoduino_Ack_refused_item_tag          31
+#define protoduino_InputReport_time_ms_tag       1
+#define protoduino_InputReport_digital_pins_tag  2
+#define protoduino_InputReport_digital_levels_tag 3
+#define protoduino_InputReport_analog_pins_tag   4
+#define protoduino_InputReport_analog_values_tag 5
+#define protoduino_InputReport_counter_pins_tag  6
+#define protoduino_InputReport_counter_counts_tag 7
+#define protoduino_InputReport_coalesced_tag     8
 #define protoduino_DecodeError_count_tag         1
 #define protoduino_Log_level_tag                 1
 #define protoduino_Log_text_tag                  2
@@ -416,6 +601,7 @@ extern "C" {
 #define protoduino_ArduinoOut_failsafe_tag       2
 #define protoduino_ArduinoOut_decode_error_tag   3
 #define protoduino_ArduinoOut_log_tag            4
+#define protoduino_ArduinoOut_input_report_tag   5
 
 /* Struct field encoding specification for nanopb */
 #define protoduino_Ping_FIELDLIST(X, a) \
@@ -459,6 +645,47 @@ X(a, STATIC,   SINGULAR, BOOL,     level,             2)
 #define protoduino_Stop_CALLBACK NULL
 #define protoduino_Stop_DEFAULT NULL
 
+#define protoduino_DigitalInputInit_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, UINT32,   pin,               1) \
+X(a, STATIC,   SINGULAR, BOOL,     pull_up,           2) \
+X(a, STATIC,   SINGULAR, UINT32,   debounce_ms,       3) \
+X(a, STATIC,   SINGULAR, UENUM,    interlock,         4)
+#define protoduino_DigitalInputInit_CALLBACK NULL
+#define protoduino_DigitalInputInit_DEFAULT NULL
+
+#define protoduino_AnalogInputInit_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, UINT32,   pin,               1) \
+X(a, STATIC,   SINGULAR, UINT32,   interval_ms,       2) \
+X(a, STATIC,   SINGULAR, UINT32,   threshold,         3) \
+X(a, STATIC,   SINGULAR, UINT32,   heartbeat_ms,      4)
+#define protoduino_AnalogInputInit_CALLBACK NULL
+#define protoduino_AnalogInputInit_DEFAULT NULL
+
+#define protoduino_CounterInit_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, UINT32,   pin,               1) \
+X(a, STATIC,   SINGULAR, UENUM,    edge,              2) \
+X(a, STATIC,   SINGULAR, BOOL,     pull_up,           3) \
+X(a, STATIC,   SINGULAR, UINT32,   interval_ms,       4)
+#define protoduino_CounterInit_CALLBACK NULL
+#define protoduino_CounterInit_DEFAULT NULL
+
+#define protoduino_PwmInit_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, UINT32,   pin,               1) \
+X(a, STATIC,   SINGULAR, UINT32,   safe_duty,         2)
+#define protoduino_PwmInit_CALLBACK NULL
+#define protoduino_PwmInit_DEFAULT NULL
+
+#define protoduino_PwmControl_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, UINT32,   pin,               1) \
+X(a, STATIC,   SINGULAR, UINT32,   duty,              2)
+#define protoduino_PwmControl_CALLBACK NULL
+#define protoduino_PwmControl_DEFAULT NULL
+
+#define protoduino_ClearInterlock_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, UINT32,   failsafe_epoch,    1)
+#define protoduino_ClearInterlock_CALLBACK NULL
+#define protoduino_ClearInterlock_DEFAULT NULL
+
 #define protoduino_GetInfo_FIELDLIST(X, a) \
 
 #define protoduino_GetInfo_CALLBACK NULL
@@ -466,11 +693,13 @@ X(a, STATIC,   SINGULAR, BOOL,     level,             2)
 
 #define protoduino_PoseItem_FIELDLIST(X, a) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (output,servo,output.servo),   1) \
-X(a, STATIC,   ONEOF,    MESSAGE,  (output,digital,output.digital),   2)
+X(a, STATIC,   ONEOF,    MESSAGE,  (output,digital,output.digital),   2) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (output,pwm,output.pwm),   3)
 #define protoduino_PoseItem_CALLBACK NULL
 #define protoduino_PoseItem_DEFAULT NULL
 #define protoduino_PoseItem_output_servo_MSGTYPE protoduino_ServoControl
 #define protoduino_PoseItem_output_digital_MSGTYPE protoduino_DigitalControl
+#define protoduino_PoseItem_output_pwm_MSGTYPE protoduino_PwmControl
 
 #define protoduino_Pose_FIELDLIST(X, a) \
 X(a, STATIC,   REPEATED, MESSAGE,  items,             1)
@@ -517,6 +746,12 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,configure_failsafe,data.configure_fails
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,heartbeat,data.heartbeat),  10) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,release,data.release),  11) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,release_all,data.release_all),  12) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,pwm_control,data.pwm_control),  13) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,pwm_init,data.pwm_init),  14) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,digital_input_init,data.digital_input_init),  15) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,analog_input_init,data.analog_input_init),  16) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,counter_init,data.counter_init),  17) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,clear_interlock,data.clear_interlock),  18) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,pose,data.pose),  30) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,read_outputs,data.read_outputs),  31)
 #define protoduino_ArduinoIn_CALLBACK NULL
@@ -524,16 +759,29 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,read_outputs,data.read_outputs),  31)
 #define protoduino_ArduinoIn_data_ping_MSGTYPE protoduino_Ping
 #define protoduino_ArduinoIn_data_servo_init_MSGTYPE protoduino_ServoInit
 #define protoduino_ArduinoIn_data_servo_control_MSGTYPE protoduino_ServoControl
-#define protoduino_ArduinoIn_data_digital_init_MSGTYPE protoduino_DigitalInit
+/* protoduino gen: protoduino_DigitalInit has the shape of protoduino_DigitalControl: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_digital_init_MSGTYPE protoduino_DigitalControl
 #define protoduino_ArduinoIn_data_digital_control_MSGTYPE protoduino_DigitalControl
-#define protoduino_ArduinoIn_data_stop_MSGTYPE protoduino_Stop
+/* protoduino gen: protoduino_Stop has the shape of protoduino_GetInfo: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_stop_MSGTYPE protoduino_GetInfo
 #define protoduino_ArduinoIn_data_get_info_MSGTYPE protoduino_GetInfo
 #define protoduino_ArduinoIn_data_configure_failsafe_MSGTYPE protoduino_ConfigureFailsafe
-#define protoduino_ArduinoIn_data_heartbeat_MSGTYPE protoduino_Heartbeat
-#define protoduino_ArduinoIn_data_release_MSGTYPE protoduino_Release
-#define protoduino_ArduinoIn_data_release_all_MSGTYPE protoduino_ReleaseAll
+/* protoduino gen: protoduino_Heartbeat has the shape of protoduino_ClearInterlock: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_heartbeat_MSGTYPE protoduino_ClearInterlock
+/* protoduino gen: protoduino_Release has the shape of protoduino_ClearInterlock: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_release_MSGTYPE protoduino_ClearInterlock
+/* protoduino gen: protoduino_ReleaseAll has the shape of protoduino_GetInfo: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_release_all_MSGTYPE protoduino_GetInfo
+#define protoduino_ArduinoIn_data_pwm_control_MSGTYPE protoduino_PwmControl
+/* protoduino gen: protoduino_PwmInit has the shape of protoduino_PwmControl: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_pwm_init_MSGTYPE protoduino_PwmControl
+#define protoduino_ArduinoIn_data_digital_input_init_MSGTYPE protoduino_DigitalInputInit
+#define protoduino_ArduinoIn_data_analog_input_init_MSGTYPE protoduino_AnalogInputInit
+#define protoduino_ArduinoIn_data_counter_init_MSGTYPE protoduino_CounterInit
+#define protoduino_ArduinoIn_data_clear_interlock_MSGTYPE protoduino_ClearInterlock
 #define protoduino_ArduinoIn_data_pose_MSGTYPE protoduino_Pose
-#define protoduino_ArduinoIn_data_read_outputs_MSGTYPE protoduino_ReadOutputs
+/* protoduino gen: protoduino_ReadOutputs has the shape of protoduino_GetInfo: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_read_outputs_MSGTYPE protoduino_GetInfo
 
 #define protoduino_DeviceInfo_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, STRING,   firmware_version,   1) \
@@ -543,14 +791,20 @@ X(a, STATIC,   SINGULAR, STRING,   board,             4) \
 X(a, STATIC,   SINGULAR, UINT32,   num_pins,          5) \
 X(a, STATIC,   SINGULAR, UINT32,   max_servos,        6) \
 X(a, STATIC,   REPEATED, UINT32,   reserved_pins,     7) \
-X(a, STATIC,   SINGULAR, UINT32,   rx_buffer,         8)
+X(a, STATIC,   SINGULAR, UINT32,   rx_buffer,         8) \
+X(a, STATIC,   SINGULAR, UINT32,   features,          9) \
+X(a, STATIC,   SINGULAR, FIXED32,  pwm_pins,         10) \
+X(a, STATIC,   SINGULAR, FIXED32,  analog_pins,      11) \
+X(a, STATIC,   SINGULAR, FIXED32,  counter_pins,     12)
 #define protoduino_DeviceInfo_CALLBACK NULL
 #define protoduino_DeviceInfo_DEFAULT NULL
 
 #define protoduino_OutputStates_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, BYTES,    servos,            1) \
 X(a, STATIC,   SINGULAR, FIXED32,  digital_pins,      2) \
-X(a, STATIC,   SINGULAR, FIXED32,  digital_levels,    3)
+X(a, STATIC,   SINGULAR, FIXED32,  digital_levels,    3) \
+X(a, STATIC,   SINGULAR, FIXED32,  pwm_pins,          4) \
+X(a, STATIC,   REPEATED, UINT32,   pwm_duties,        5)
 #define protoduino_OutputStates_CALLBACK NULL
 #define protoduino_OutputStates_DEFAULT NULL
 
@@ -571,9 +825,22 @@ X(a, STATIC,   SINGULAR, UINT32,   refused_item,     31)
 #define protoduino_Failsafe_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, BOOL,     active,            1) \
 X(a, STATIC,   SINGULAR, UENUM,    cause,             2) \
-X(a, STATIC,   SINGULAR, UINT32,   epoch,             3)
+X(a, STATIC,   SINGULAR, UINT32,   epoch,             3) \
+X(a, STATIC,   SINGULAR, UINT32,   pin,               4)
 #define protoduino_Failsafe_CALLBACK NULL
 #define protoduino_Failsafe_DEFAULT NULL
+
+#define protoduino_InputReport_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, UINT32,   time_ms,           1) \
+X(a, STATIC,   SINGULAR, FIXED32,  digital_pins,      2) \
+X(a, STATIC,   SINGULAR, FIXED32,  digital_levels,    3) \
+X(a, STATIC,   SINGULAR, FIXED32,  analog_pins,       4) \
+X(a, STATIC,   REPEATED, UINT32,   analog_values,     5) \
+X(a, STATIC,   SINGULAR, FIXED32,  counter_pins,      6) \
+X(a, STATIC,   REPEATED, UINT32,   counter_counts,    7) \
+X(a, STATIC,   SINGULAR, UINT32,   coalesced,         8)
+#define protoduino_InputReport_CALLBACK NULL
+#define protoduino_InputReport_DEFAULT NULL
 
 #define protoduino_DecodeError_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, UINT32,   count,             1)
@@ -590,13 +857,15 @@ X(a, STATIC,   SINGULAR, STRING,   text,              2)
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,ack,data.ack),   1) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,failsafe,data.failsafe),   2) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,decode_error,data.decode_error),   3) \
-X(a, STATIC,   ONEOF,    MESSAGE,  (data,log,data.log),   4)
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,log,data.log),   4) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,input_report,data.input_report),   5)
 #define protoduino_ArduinoOut_CALLBACK NULL
 #define protoduino_ArduinoOut_DEFAULT NULL
 #define protoduino_ArduinoOut_data_ack_MSGTYPE protoduino_Ack
 #define protoduino_ArduinoOut_data_failsafe_MSGTYPE protoduino_Failsafe
 #define protoduino_ArduinoOut_data_decode_error_MSGTYPE protoduino_DecodeError
 #define protoduino_ArduinoOut_data_log_MSGTYPE protoduino_Log
+#define protoduino_ArduinoOut_data_input_report_MSGTYPE protoduino_InputReport
 
 extern const pb_msgdesc_t protoduino_Ping_msg;
 extern const pb_msgdesc_t protoduino_ServoInit_msg;
@@ -604,6 +873,12 @@ extern const pb_msgdesc_t protoduino_ServoControl_msg;
 extern const pb_msgdesc_t protoduino_DigitalInit_msg;
 extern const pb_msgdesc_t protoduino_DigitalControl_msg;
 extern const pb_msgdesc_t protoduino_Stop_msg;
+extern const pb_msgdesc_t protoduino_DigitalInputInit_msg;
+extern const pb_msgdesc_t protoduino_AnalogInputInit_msg;
+extern const pb_msgdesc_t protoduino_CounterInit_msg;
+extern const pb_msgdesc_t protoduino_PwmInit_msg;
+extern const pb_msgdesc_t protoduino_PwmControl_msg;
+extern const pb_msgdesc_t protoduino_ClearInterlock_msg;
 extern const pb_msgdesc_t protoduino_GetInfo_msg;
 extern const pb_msgdesc_t protoduino_PoseItem_msg;
 extern const pb_msgdesc_t protoduino_Pose_msg;
@@ -617,6 +892,7 @@ extern const pb_msgdesc_t protoduino_DeviceInfo_msg;
 extern const pb_msgdesc_t protoduino_OutputStates_msg;
 extern const pb_msgdesc_t protoduino_Ack_msg;
 extern const pb_msgdesc_t protoduino_Failsafe_msg;
+extern const pb_msgdesc_t protoduino_InputReport_msg;
 extern const pb_msgdesc_t protoduino_DecodeError_msg;
 extern const pb_msgdesc_t protoduino_Log_msg;
 extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
@@ -628,6 +904,12 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_DigitalInit_fields &protoduino_DigitalInit_msg
 #define protoduino_DigitalControl_fields &protoduino_DigitalControl_msg
 #define protoduino_Stop_fields &protoduino_Stop_msg
+#define protoduino_DigitalInputInit_fields &protoduino_DigitalInputInit_msg
+#define protoduino_AnalogInputInit_fields &protoduino_AnalogInputInit_msg
+#define protoduino_CounterInit_fields &protoduino_CounterInit_msg
+#define protoduino_PwmInit_fields &protoduino_PwmInit_msg
+#define protoduino_PwmControl_fields &protoduino_PwmControl_msg
+#define protoduino_ClearInterlock_fields &protoduino_ClearInterlock_msg
 #define protoduino_GetInfo_fields &protoduino_GetInfo_msg
 #define protoduino_PoseItem_fields &protoduino_PoseItem_msg
 #define protoduino_Pose_fields &protoduino_Pose_msg
@@ -641,32 +923,40 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_OutputStates_fields &protoduino_OutputStates_msg
 #define protoduino_Ack_fields &protoduino_Ack_msg
 #define protoduino_Failsafe_fields &protoduino_Failsafe_msg
+#define protoduino_InputReport_fields &protoduino_InputReport_msg
 #define protoduino_DecodeError_fields &protoduino_DecodeError_msg
 #define protoduino_Log_fields &protoduino_Log_msg
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_Ack_size                      113
-#define protoduino_ArduinoIn_size                138
-#define protoduino_ArduinoOut_size               115
+#define protoduino_Ack_size                      109
+#define protoduino_AnalogInputInit_size          19
+#define protoduino_ArduinoIn_size                97
+#define protoduino_ArduinoOut_size               111
+#define protoduino_ClearInterlock_size           3
 #define protoduino_ConfigureFailsafe_size        8
+#define protoduino_CounterInit_size              13
 #define protoduino_DecodeError_size              6
-#define protoduino_DeviceInfo_size               87
-#define protoduino_DigitalControl_size           8
-#define protoduino_DigitalInit_size              8
-#define protoduino_Failsafe_size                 7
+#define protoduino_DeviceInfo_size               83
+#define protoduino_DigitalControl_size           5
+#define protoduino_DigitalInit_size              5
+#define protoduino_DigitalInputInit_size         11
+#define protoduino_Failsafe_size                 10
 #define protoduino_GetInfo_size                  0
 #define protoduino_Heartbeat_size                3
+#define protoduino_InputReport_size              78
 #define protoduino_Log_size                      51
-#define protoduino_OutputStates_size             52
+#define protoduino_OutputStates_size             75
 #define protoduino_Ping_size                     69
-#define protoduino_PoseItem_size                 14
-#define protoduino_Pose_size                     128
+#define protoduino_PoseItem_size                 9
+#define protoduino_Pose_size                     88
+#define protoduino_PwmControl_size               7
+#define protoduino_PwmInit_size                  7
 #define protoduino_ReadOutputs_size              0
 #define protoduino_ReleaseAll_size               0
-#define protoduino_Release_size                  6
-#define protoduino_ServoControl_size             12
-#define protoduino_ServoInit_size                31
+#define protoduino_Release_size                  3
+#define protoduino_ServoControl_size             7
+#define protoduino_ServoInit_size                28
 #define protoduino_Stop_size                     0
 
 #ifdef __cplusplus

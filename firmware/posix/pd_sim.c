@@ -46,10 +46,10 @@
  * to the pty when it can take them, never waiting for it. The same size as the
  * Uno's ring, so the core holds back received frames on the same occasions.
  */
-#define SIM_TX_SIZE 156u
-typedef char sim_assert_tx_room[SIM_TX_SIZE >= PD_TX_RESERVE + PD_TX_REPORT_ROOM ? 1 : -1];
+#define SIM_TX_SIZE 117u
+typedef char sim_assert_tx_room[SIM_TX_SIZE - 1u >= PD_TX_RESERVE ? 1 : -1];
 
-enum { SIM_PIN_UNUSED = 0, SIM_PIN_SERVO, SIM_PIN_DIGITAL };
+enum { SIM_PIN_UNUSED = 0, SIM_PIN_SERVO, SIM_PIN_DIGITAL, SIM_PIN_PWM };
 
 /* A virtual input pin, as the control socket drives it. */
 typedef struct {
@@ -58,6 +58,9 @@ typedef struct {
     uint32_t pulses; /* the current train: 0 = none */
     uint32_t hz;
     double start; /* board seconds of the train's first edge */
+    int8_t edge;  /* counting (the Edge enum), -1: not */
+    uint32_t counted; /* edges counted before the current train (and before start_edges) */
+    uint32_t start_edges; /* the current train's edges of that kind when counting began */
 } sim_input_t;
 
 typedef struct sim_hal {
@@ -72,6 +75,8 @@ typedef struct sim_hal {
     uint8_t tx[SIM_TX_SIZE];
     size_t tx_len; /* bytes queued, from tx[0] */
     uint32_t last_boot_id;
+    uint16_t adc_value;             /* the conversion under way */
+    bool driven[PD_MAX_PINS];       /* the control socket set the pin's level */
 } sim_hal_t;
 
 static const pd_board_info_t sim_board = {
@@ -80,6 +85,13 @@ static const pd_board_info_t sim_board = {
     .max_servos = 8,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* the Uno's UART, for the same semantics */
     .rx_buffer = 512,                         /* one read() of the pty; the pty holds more */
+    /* The Uno's pin capabilities and timer rules, so that a program tested here
+     * meets the same refusals on the board. */
+    .pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11),
+    .analog_pins = 0x3FUL << 14,
+    .counter_pins = (1UL << 2) | (1UL << 3),
+    .servo_timer_pins = (1UL << 9) | (1UL << 10),
+    .clock_timer_pins = (1UL << 5) | (1UL << 6),
 };
 
 static volatile sig_atomic_t sim_stop;
@@ -120,7 +132,8 @@ static void sim_trace(sim_hal_t *hal, uint8_t pin, uint8_t mode, uint16_t value)
     hal->value[pin] = value;
     if (hal->trace) {
         fprintf(hal->trace, "{\"t\": %.6f, \"pin\": %u, \"mode\": \"%s\", \"value\": %u}\n",
-                sim_elapsed(hal), (unsigned)pin, mode == SIM_PIN_SERVO ? "servo" : "digital",
+                sim_elapsed(hal), (unsigned)pin,
+                mode == SIM_PIN_SERVO ? "servo" : mode == SIM_PIN_PWM ? "pwm" : "digital",
                 (unsigned)value);
         fflush(hal->trace);
     }
@@ -157,6 +170,34 @@ static uint8_t sim_input_level(const sim_input_t *in, double now)
     return in->level;
 }
 
+/* Edges of the counter's kind the current train made by board time `now`. The
+ * first edge of a train leaves the level before it; edges come every half period. */
+static uint32_t sim_train_edges(const sim_input_t *in, double now)
+{
+    if (!in->pulses || now < in->start) {
+        return 0;
+    }
+    double halves = (now - in->start) * 2.0 * (double)in->hz;
+    uint64_t all = (uint64_t)halves + 1u;
+    if (all > 2u * (uint64_t)in->pulses) {
+        all = 2u * (uint64_t)in->pulses;
+    }
+    uint64_t first_kind = (in->level == 0) ? (all + 1u) / 2u : all / 2u; /* rising edges */
+    switch (in->edge) {
+    case protoduino_Edge_EDGE_RISING:
+        return (uint32_t)first_kind;
+    case protoduino_Edge_EDGE_FALLING:
+        return (uint32_t)(all - first_kind);
+    default:
+        return (uint32_t)all;
+    }
+}
+
+static uint32_t sim_count(const sim_input_t *in, double now)
+{
+    return in->counted + sim_train_edges(in, now) - in->start_edges;
+}
+
 static const char *sim_control_apply(void *ctx, const pd_control_cmd_t *cmd, double *t)
 {
     sim_hal_t *hal = ctx;
@@ -168,11 +209,24 @@ static const char *sim_control_apply(void *ctx, const pd_control_cmd_t *cmd, dou
     }
     sim_input_t *in = &hal->input[cmd->pin];
     double now = sim_elapsed(hal);
+    if (in->edge >= 0 && cmd->kind != PD_CONTROL_ANALOG) {
+        /* What the train made so far stays counted. */
+        in->counted = sim_count(in, now);
+        in->start_edges = 0;
+    }
     switch (cmd->kind) {
-    case PD_CONTROL_LEVEL:
+    case PD_CONTROL_LEVEL: {
+        hal->driven[cmd->pin] = true;
+        uint8_t before = sim_input_level(in, now);
         in->pulses = 0; /* a level ends any train */
         in->level = (uint8_t)cmd->value;
+        if (in->edge >= 0 && before != in->level &&
+            (in->edge == protoduino_Edge_EDGE_BOTH ||
+             (in->edge == protoduino_Edge_EDGE_RISING) == (in->level != 0))) {
+            in->counted++;
+        }
         break;
+    }
     case PD_CONTROL_ANALOG:
         if (cmd->pin < SIM_FIRST_ANALOG) {
             return "analog inputs are pins 14..19 (A0..A5)";
@@ -180,7 +234,9 @@ static const char *sim_control_apply(void *ctx, const pd_control_cmd_t *cmd, dou
         in->analog = (uint16_t)cmd->value;
         break;
     case PD_CONTROL_PULSES:
+        hal->driven[cmd->pin] = true;
         in->level = sim_input_level(in, now); /* a new train starts from where the pin is */
+        in->pulses = 0;
         in->pulses = cmd->pulses;
         in->hz = cmd->hz;
         in->start = now;
@@ -250,6 +306,84 @@ void pd_hal_servo_hold(void *ctx, bool hold)
 void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
 {
     sim_trace(ctx, pin, SIM_PIN_DIGITAL, level ? 1u : 0u);
+}
+
+void pd_hal_pwm_write(void *ctx, uint8_t pin, uint8_t duty)
+{
+    sim_trace(ctx, pin, SIM_PIN_PWM, duty);
+}
+
+void pd_hal_pwm_release(void *ctx, uint8_t pin)
+{
+    sim_trace(ctx, pin, SIM_PIN_PWM, 0); /* an input reads as 0, as on the emulated Uno */
+}
+
+/* --- inputs: the control socket's virtual pins, on the board's clock ------ */
+
+void pd_hal_input_config(void *ctx, uint8_t pin, bool pull_up)
+{
+    sim_hal_t *hal = ctx;
+    /* An input with a pull-up and nothing driving it reads high, as on the Uno;
+     * a level from the control socket always wins (it drives the pin). */
+    if (pin < PD_MAX_PINS && pull_up && !hal->driven[pin]) {
+        hal->input[pin].level = 1;
+    }
+}
+
+void pd_hal_input_release(void *ctx, uint8_t pin)
+{
+    (void)ctx;
+    (void)pin;
+}
+
+uint32_t pd_hal_digital_read_all(void *ctx)
+{
+    sim_hal_t *hal = ctx;
+    double now = sim_elapsed(hal);
+    uint32_t levels = 0;
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        levels |= (uint32_t)sim_input_level(&hal->input[pin], now) << pin;
+    }
+    return levels;
+}
+
+void pd_hal_analog_start(void *ctx, uint8_t pin)
+{
+    sim_hal_t *hal = ctx;
+    hal->adc_value = pin < PD_MAX_PINS ? hal->input[pin].analog : 0;
+}
+
+bool pd_hal_analog_done(void *ctx, uint16_t *counts)
+{
+    sim_hal_t *hal = ctx;
+    *counts = hal->adc_value; /* a virtual converter is done at once */
+    return true;
+}
+
+void pd_hal_counter_start(void *ctx, uint8_t pin, uint8_t edge)
+{
+    sim_hal_t *hal = ctx;
+    if (pin < PD_MAX_PINS) {
+        sim_input_t *in = &hal->input[pin];
+        in->edge = (int8_t)edge;
+        in->counted = 0;
+        in->start_edges = 0;
+        in->start_edges = sim_train_edges(in, sim_elapsed(hal)); /* a train under way counts from now */
+    }
+}
+
+uint32_t pd_hal_counter_read(void *ctx, uint8_t pin)
+{
+    sim_hal_t *hal = ctx;
+    return pin < PD_MAX_PINS ? sim_count(&hal->input[pin], sim_elapsed(hal)) : 0;
+}
+
+void pd_hal_counter_stop(void *ctx, uint8_t pin)
+{
+    sim_hal_t *hal = ctx;
+    if (pin < PD_MAX_PINS) {
+        hal->input[pin].edge = -1;
+    }
 }
 
 void pd_hal_servo_detach(void *ctx, uint8_t channel, uint8_t pin)
@@ -367,6 +501,9 @@ int main(int argc, char **argv)
     size_t rx_len = 0, rx_off = 0;
 
     clock_gettime(CLOCK_MONOTONIC, &hal.start);
+    for (int pin = 0; pin < PD_MAX_PINS; pin++) {
+        hal.input[pin].edge = -1; /* no counter */
+    }
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
             trace_path = argv[++i];
@@ -435,6 +572,9 @@ int main(int argc, char **argv)
             sim_reboot = 0;
             sim_release_all(&hal);
             hal.tx_len = 0; /* a reset MCU forgets its transmit queue */
+            for (int pin = 0; pin < PD_MAX_PINS; pin++) {
+                hal.input[pin].edge = -1; /* its counters stop; the outside world's levels stay */
+            }
             rx_len = rx_off = 0;
             pd_core_init(&core, &hal);
         }
@@ -465,6 +605,10 @@ int main(int argc, char **argv)
             struct timespec ms = {0, 1000000};
             nanosleep(&ms, NULL);
         }
+        /* The replies this pass queued go out before the core's poll, as the Uno's
+         * ring drains while its loop runs: a report waits for an empty queue
+         * (pd_dispatch_send_spare), and with a command every pass it would wait for good. */
+        sim_tx_flush(&hal);
         pd_core_poll(&core);
         sim_tx_flush(&hal); /* what this pass queued goes out now, not after the next poll() */
     }

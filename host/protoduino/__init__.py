@@ -10,7 +10,15 @@ See README.md for the API and docs/protocol.md for the wire protocol.
 from __future__ import annotations
 
 from ._generated.schema_id import SCHEMA_ID
-from .board import Board, DeviceInfo, DigitalOutput, OutputState, Servo, effective_speed
+from .board import (
+    Board,
+    DeviceInfo,
+    DigitalOutput,
+    OutputState,
+    PwmOutput,
+    Servo,
+    effective_speed,
+)
 from .constants import PROTOCOL_VERSION
 from .errors import (
     AckTimeoutError,
@@ -21,9 +29,13 @@ from .errors import (
     CaptureError,
     CommandRejectedError,
     DeviceRebootedError,
+    FeatureMissingError,
     FlashError,
     HandshakeError,
+    InputTimeoutError,
+    InterlockActiveError,
     LinkError,
+    NotSupportedError,
     PayloadTooLargeError,
     PortInUseError,
     ProtocolError,
@@ -32,10 +44,12 @@ from .errors import (
     ReentrantCallError,
     SchemaMismatchError,
     SimControlError,
+    TimerInUseError,
     TransportError,
     VersionMismatchError,
 )
 from .events import Event, EventKind, Stats
+from .inputs import AnalogInput, Counter, DigitalInput, Reading
 
 __version__ = "0.1.0"
 
@@ -43,6 +57,7 @@ __all__ = [
     "PROTOCOL_VERSION",
     "SCHEMA_ID",
     "AckTimeoutError",
+    "AnalogInput",
     "ArgumentError",
     "ArgumentTypeError",
     "Board",
@@ -50,25 +65,34 @@ __all__ = [
     "BuildError",
     "CaptureError",
     "CommandRejectedError",
+    "Counter",
     "DeviceInfo",
     "DeviceRebootedError",
+    "DigitalInput",
     "DigitalOutput",
     "Event",
     "EventKind",
+    "FeatureMissingError",
     "FlashError",
     "HandshakeError",
+    "InputTimeoutError",
+    "InterlockActiveError",
     "LinkError",
+    "NotSupportedError",
     "OutputState",
     "PayloadTooLargeError",
     "PortInUseError",
     "ProtocolError",
     "ProtoduinoError",
+    "PwmOutput",
+    "Reading",
     "RebootLoopError",
     "ReentrantCallError",
     "SchemaMismatchError",
     "Servo",
     "SimControlError",
     "Stats",
+    "TimerInUseError",
     "TransportError",
     "VersionMismatchError",
     "__version__",

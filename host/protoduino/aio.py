@@ -21,6 +21,16 @@ ends); leaving an ``async with board.events() as events:`` block (or
 events for a consumer that falls behind; beyond that the oldest is dropped and counted in
 :attr:`EventStream.dropped`, so a stalled consumer never grows memory without
 bound nor blocks the board's event thread.
+
+Inputs: ``await board.digital_input(2)`` (and ``analog_input``, ``counter``) returns
+once the first value is known; ``read()`` is the latest value at once (no round
+trip, no await); ``async for reading in button.changes()`` sees each change from
+then on, and ``await button.wait_for(False)`` waits for a condition. Both are fed
+from the I/O thread straight into the loop (``call_soon_threadsafe``), never through
+the event thread, so a slow ``on_event`` callback does not delay them. An iterator
+keeps at most ``maxsize`` readings for a consumer that falls behind and drops the
+oldest (counted in :attr:`InputChanges.dropped`): freshness over completeness, as
+on the device.
 """
 
 from __future__ import annotations
@@ -28,20 +38,23 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from types import TracebackType
 from typing import Any, SupportsFloat, TypeVar
 
 from . import board as _board
-from .board import OutputState
+from . import inputs as _inputs
+from .board import Edge, Interlock, OutputState
 from .constants import SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
-from .errors import ArgumentError
+from .errors import ArgumentError, BoardClosedError, InputTimeoutError
 from .events import Event, Stats
+from .inputs import SINK_BUFFER, Reading
 from .messages import ArduinoIn
 from .rpc import Ack
 
 T = TypeVar("T")
+InputT = TypeVar("InputT", bound="_Input")
 
 #: Events one iterator keeps for a slow consumer before dropping the oldest.
 EVENT_BUFFER = 256
@@ -139,11 +152,185 @@ class DigitalOutput:
         return f"aio.{self.sync!r}"
 
 
-_Output = Servo | DigitalOutput | _board.Servo | _board.DigitalOutput
+class PwmOutput:
+    """An awaitable PWM output; get one from :meth:`Board.pwm_output`."""
+
+    def __init__(self, sync: _board.PwmOutput) -> None:
+        self.sync = sync
+        self.pin = sync.pin
+        self.safe = sync.safe
+
+    @property
+    def value(self) -> int | None:
+        return self.sync.value
+
+    async def write(self, duty: float) -> None:
+        await _wait(self.sync.submit(duty))
+
+    def __repr__(self) -> str:
+        return f"aio.{self.sync!r}"
 
 
-def _sync(output: _Output) -> _board.Servo | _board.DigitalOutput:
-    return output.sync if isinstance(output, Servo | DigitalOutput) else output
+_Output = Servo | DigitalOutput | PwmOutput | _board.Servo | _board.DigitalOutput | _board.PwmOutput
+
+
+def _sync(output: _Output) -> _board.PoseOutput:
+    return output.sync if isinstance(output, Servo | DigitalOutput | PwmOutput) else output
+
+
+class InputChanges:
+    """An async iterator of one input's changes (see the module docstring)."""
+
+    def __init__(self, board: Board, sync: _inputs.Input, maxsize: int) -> None:
+        if maxsize < 1:
+            raise ArgumentError("maxsize must be at least 1")
+        self._loop = asyncio.get_running_loop()
+        self._buffer: collections.deque[Reading | None] = collections.deque()
+        self._maxsize = maxsize
+        self._ready = asyncio.Event()
+        self._board = board
+        #: Readings dropped because this iterator's consumer fell behind.
+        self.dropped = 0
+        table = board.sync.inputs
+        #: The value known when the iterator started (None: none yet).
+        self.current, self._remove = table.add_sink(sync.kind, sync.pin, self._from_thread)
+        board._streams.add(self)
+        if board.closed:
+            self.close()
+
+    def _from_thread(self, reading: Reading) -> None:  # the I/O thread, under the table's lock
+        with contextlib.suppress(RuntimeError):  # the loop is closed: nobody listens any more
+            self._loop.call_soon_threadsafe(self._put, reading)
+
+    def _put(self, reading: Reading | None) -> None:  # the loop's thread
+        if reading is not None and len(self._buffer) >= self._maxsize:
+            self._buffer.popleft()
+            self.dropped += 1
+        self._buffer.append(reading)
+        self._ready.set()
+
+    def close(self) -> None:
+        """End the iteration (after the readings already buffered)."""
+        self._remove()
+        self._board._streams.discard(self)
+        self._put(None)
+
+    async def __aenter__(self) -> InputChanges:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self.close()
+
+    def __aiter__(self) -> InputChanges:
+        return self
+
+    async def __anext__(self) -> Reading:
+        while not self._buffer:
+            self._ready.clear()
+            await self._ready.wait()
+        reading = self._buffer.popleft()
+        if reading is None:
+            self._buffer.append(None)  # stays ended
+            raise StopAsyncIteration
+        return reading
+
+
+class _Input:
+    """What the awaitable inputs share; ``.sync`` is the blocking input object."""
+
+    def __init__(self, board: Board, sync: _inputs.Input) -> None:
+        self._board = board
+        self._input = sync
+        self.pin = sync.pin
+
+    def reading(self) -> Reading | None:
+        """The latest reading at once (no round trip), or None before the first."""
+        return self._input.reading()
+
+    @property
+    def age(self) -> float | None:
+        return self._input.age
+
+    def on_change(self, callback: Callable[[Reading], None]) -> Callable[[], None]:
+        """A callback on the board's event thread (see the blocking input's on_change)."""
+        return self._input.on_change(callback)
+
+    def changes(self, maxsize: int = SINK_BUFFER) -> InputChanges:
+        """Every change from now on, until the board is closed: ``async for r in x.changes()``."""
+        return InputChanges(self._board, self._input, maxsize)
+
+    async def _wait(self, test: Callable[[Reading], bool], timeout: float | None) -> Reading:
+        limit = self._input.timeout if timeout is None else timeout
+        async with self.changes() as changes:
+            current = changes.current
+            if current is not None and test(current):
+                return current
+            try:
+                async with asyncio.timeout(limit):
+                    async for reading in changes:
+                        if test(reading):
+                            return reading
+            except TimeoutError:
+                raise InputTimeoutError(
+                    f"{self._input.kind} input {self.pin}: no matching value within {limit:g} s"
+                ) from None
+        raise BoardClosedError("the board was closed while waiting for an input")
+
+    async def release(self) -> None:
+        """Release the pin (free for any mode); the loop runs on meanwhile."""
+        await asyncio.to_thread(self._input.release)
+
+    def __repr__(self) -> str:
+        return f"aio.{self._input!r}"
+
+
+class DigitalInput(_Input):
+    """An awaitable digital input; get one from :meth:`Board.digital_input`."""
+
+    def __init__(self, board: Board, sync: _inputs.DigitalInput) -> None:
+        super().__init__(board, sync)
+        self.sync = sync
+        self.interlock = sync.interlock
+
+    def read(self) -> bool | None:
+        return self.sync.read()
+
+    async def wait_for(self, level: _inputs.LevelCondition, timeout: float | None = None) -> bool:
+        """Wait until the level is ``level`` (or ``level(value)`` holds), without blocking."""
+        test = _inputs._level_test(level)
+        return bool((await self._wait(lambda r: test(bool(r.value)), timeout)).value)
+
+
+class AnalogInput(_Input):
+    """An awaitable analog input; get one from :meth:`Board.analog_input`."""
+
+    def __init__(self, board: Board, sync: _inputs.AnalogInput) -> None:
+        super().__init__(board, sync)
+        self.sync = sync
+
+    def read(self) -> int | None:
+        return self.sync.read()
+
+    async def wait_for(
+        self, condition: _inputs.ValueCondition, timeout: float | None = None
+    ) -> int:
+        return (await self._wait(lambda r: condition(r.value), timeout)).value
+
+
+class Counter(_Input):
+    """An awaitable pulse counter; get one from :meth:`Board.counter`."""
+
+    def __init__(self, board: Board, sync: _inputs.Counter) -> None:
+        super().__init__(board, sync)
+        self.sync = sync
+
+    def read(self) -> int | None:
+        return self.sync.read()
+
+    async def wait_for(
+        self, condition: _inputs.ValueCondition, timeout: float | None = None
+    ) -> int:
+        return (await self._wait(lambda r: condition(r.value), timeout)).value
 
 
 class EventStream:
@@ -204,7 +391,7 @@ class Board:
 
     def __init__(self, sync: _board.Board) -> None:
         self.sync = sync
-        self._streams: set[EventStream] = set()
+        self._streams: set[EventStream | InputChanges] = set()
 
     @classmethod
     async def open(cls, url: str, **options: Any) -> Board:
@@ -271,6 +458,50 @@ class Board:
 
     async def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
         return DigitalOutput(await _wait(self.sync.submit_digital_output(pin, safe)))
+
+    async def pwm_output(self, pin: int, safe: float = 0) -> PwmOutput:
+        return PwmOutput(await _wait(self.sync.submit_pwm_output(pin, safe)))
+
+    async def digital_input(
+        self,
+        pin: int,
+        *,
+        pull_up: bool = False,
+        debounce_ms: int = 0,
+        interlock: Interlock | None = None,
+    ) -> DigitalInput:
+        """:meth:`protoduino.Board.digital_input`: returns once its first level is known."""
+        future = self.sync.submit_digital_input(
+            pin, pull_up=pull_up, debounce_ms=debounce_ms, interlock=interlock
+        )
+        return await self._first(DigitalInput(self, await _wait(future)))
+
+    async def analog_input(
+        self, pin: int, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
+    ) -> AnalogInput:
+        """:meth:`protoduino.Board.analog_input`: returns once its first value is known."""
+        future = self.sync.submit_analog_input(
+            pin, rate_hz=rate_hz, threshold=threshold, heartbeat=heartbeat
+        )
+        return await self._first(AnalogInput(self, await _wait(future)))
+
+    async def counter(
+        self, pin: int, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
+    ) -> Counter:
+        """:meth:`protoduino.Board.counter`: returns once its first count is known."""
+        future = self.sync.submit_counter(pin, edge=edge, pull_up=pull_up, rate_hz=rate_hz)
+        return await self._first(Counter(self, await _wait(future)))
+
+    async def _first(self, made: InputT) -> InputT:
+        """Wait (up to the board's round_time) for an input's first value, reported after its Ack;
+        a report lost on the line leaves read() None until the next one, as in the blocking
+        form."""
+        with contextlib.suppress(InputTimeoutError, BoardClosedError):
+            await made._wait(lambda _reading: True, self.sync.round_time)
+        return made
+
+    async def clear_interlock(self) -> None:
+        await _wait(self.sync.submit_clear_interlock())
 
     async def ping(self, payload: bytes = b"") -> float:
         return await _wait(self.sync.submit_ping(payload))

@@ -1,4 +1,4 @@
-"""The Board API: servos and digital outputs on a device over a reliable link.
+"""The Board API: a device's pins (servos, digital and PWM outputs, inputs) over a reliable link.
 
 ``Board.open(url)`` opens the port, handshakes, asks the device for its
 :class:`DeviceInfo` and starts the 1 Hz Ping. Every command returns once the
@@ -59,15 +59,29 @@ from typing import Any, Literal, SupportsFloat, TypeVar
 
 from ._generated import protoduino_pb2 as pb
 from .capture import CaptureWriter
-from .commands import DIGITAL, SERVO, PinMode
+from .commands import (
+    ANALOG_INPUT,
+    COUNTER,
+    DIGITAL,
+    DIGITAL_INPUT,
+    PIN_MODES,
+    PWM,
+    SERVO,
+    PinMode,
+    feature_hint,
+)
 from .constants import (
     ACK_TIMEOUT,
+    ANALOG_MAX,
+    DEBOUNCE_MAX_MS,
     FAILSAFE_MAX,
     FAILSAFE_MIN,
     FAILSAFE_TIMEOUT,
     HANDSHAKE_TIMEOUT,
+    INPUT_INTERVAL_MAX_MS,
     MAX_RETRIES,
     PING_INTERVAL,
+    PWM_MAX_DUTY,
     SERVO_DEFAULT_MAX_US,
     SERVO_DEFAULT_MIN_US,
     SERVO_FRAME,
@@ -82,13 +96,16 @@ from .errors import (
     ArgumentTypeError,
     BoardClosedError,
     CommandRejectedError,
+    FeatureMissingError,
     ProtocolError,
     ProtoduinoError,
     ReentrantCallError,
+    rejection,
 )
 from .events import Event, EventCallback, EventDispatcher, EventKind, Stats
+from .inputs import AnalogInput, Counter, DigitalInput, InputTable
 from .link import Link
-from .messages import ArduinoIn, ArduinoOut, Status, status_name
+from .messages import ArduinoIn, ArduinoOut, InputKind, Status, status_name
 from .rpc import REBOOT_LIMIT, REBOOT_WINDOW, Ack, Call, Rpc, RpcState
 from .transport import FrameMonitor, Transport
 
@@ -119,8 +136,8 @@ class OutputState:
     """One configured output as the device drives it now (:meth:`Board.read_outputs`)."""
 
     pin: int
-    mode: str  # "servo" or "digital"
-    #: A servo's pulse width now (us), or a digital level (0, 1).
+    mode: str  # "servo", "digital" or "pwm"
+    #: A servo's pulse width now (us), a digital level (0, 1) or a PWM duty (0..255).
     value: int
     #: Where a servo is going (differs from ``value`` while a speed limit moves it).
     target: int
@@ -150,7 +167,8 @@ def _output_states(call: Call) -> dict[int, OutputState]:
 
 def decode_output_states(states: Any) -> dict[int, OutputState]:
     """Decode an ``OutputStates`` readback by pin (docs/protocol.md: 5 bytes per servo,
-    then the digital masks); :class:`ProtocolError` for a servos field of a wrong size."""
+    the digital masks, then the PWM pins' mask and their duties in pin order);
+    :class:`ProtocolError` for fields that do not agree."""
     blob = bytes(states.servos)
     if len(blob) % 5:
         raise ProtocolError(f"OutputStates.servos of {len(blob)} bytes is not 5 per servo")
@@ -161,6 +179,13 @@ def decode_output_states(states: Any) -> dict[int, OutputState]:
         if states.digital_pins >> pin & 1:
             level = states.digital_levels >> pin & 1
             found[pin] = OutputState(pin, "digital", level, level)
+    pwm_pins = [pin for pin in range(32) if states.pwm_pins >> pin & 1]
+    if len(pwm_pins) != len(states.pwm_duties):
+        raise ProtocolError(
+            f"OutputStates: {len(pwm_pins)} PWM pins but {len(states.pwm_duties)} duties"
+        )
+    for pin, duty in zip(pwm_pins, states.pwm_duties, strict=True):
+        found[pin] = OutputState(pin, "pwm", duty, duty)
     return dict(sorted(found.items()))
 
 
@@ -196,6 +221,12 @@ class DeviceInfo:
     #: Bytes of received frames the device buffers while it works (0: not stated); the
     #: board keeps the command bytes in flight within it.
     rx_buffer: int = 0
+    #: The pin modes built into the firmware, by feature name ("servo", "pwm", ...).
+    features: frozenset[str] = frozenset()
+    #: The pins that can do PWM, that are analog inputs, that can count pulses.
+    pwm_pins: tuple[int, ...] = ()
+    analog_pins: tuple[int, ...] = ()
+    counter_pins: tuple[int, ...] = ()
 
 
 @dataclass(slots=True)
@@ -291,7 +322,68 @@ def _level(name: str, value: object) -> bool:
 
 
 def _reject(status: int, text: str) -> CommandRejectedError:
-    return CommandRejectedError(status, f"{text} ({status_name(status)})", sent=False)
+    return rejection(status, f"{text} ({status_name(status)})", sent=False)
+
+
+def _rounded(name: str, value: object) -> int:
+    """A real number (int, float, Fraction, Decimal, numpy's) to the nearest int.
+
+    Halves go to the even neighbour (Python's round(): 127.5 -> 128, 128.5 ->
+    128). NaN and infinities are refused; bools are not numbers here.
+    """
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise ArgumentTypeError(f"{name} must be a number, not {type(value).__name__}")
+    if isinstance(value, Integral):
+        return int(value)
+    if not math.isfinite(float(value)):
+        raise _reject(Status.STATUS_OUT_OF_RANGE, f"{name} {value} is not a finite number")
+    return int(round(value))  # noqa: RUF046  (round() of a Real is only Integral-like)
+
+
+def _interval_ms(name: str, seconds: object) -> int:
+    """An input's interval in seconds as whole ms, 1..INPUT_INTERVAL_MAX_MS."""
+    if isinstance(seconds, bool) or not isinstance(seconds, Real):
+        raise ArgumentTypeError(f"{name} must be a number of seconds, not {type(seconds).__name__}")
+    value = float(seconds)
+    if not 0 < value <= INPUT_INTERVAL_MAX_MS / 1000:  # also NaN
+        raise _reject(
+            Status.STATUS_INVALID_ARGUMENT,
+            f"{name} {seconds} s is outside 0.001..{INPUT_INTERVAL_MAX_MS // 1000} s",
+        )
+    return max(1, round(value * 1000))
+
+
+def _period_ms(name: str, rate_hz: object) -> int:
+    """A rate in Hz as the device's whole ms between samples (or reports), 1..60000."""
+    if isinstance(rate_hz, bool) or not isinstance(rate_hz, Real):
+        raise ArgumentTypeError(f"{name} must be a number (Hz), not {type(rate_hz).__name__}")
+    rate = float(rate_hz)
+    slowest = 1000 / INPUT_INTERVAL_MAX_MS
+    if not slowest <= rate <= 1000:  # also NaN
+        raise _reject(
+            Status.STATUS_INVALID_ARGUMENT, f"{name} {rate_hz} is outside {slowest:g}..1000 Hz"
+        )
+    return min(INPUT_INTERVAL_MAX_MS, max(1, round(1000 / rate)))
+
+
+def _mask_pins(mask: int) -> tuple[int, ...]:
+    return tuple(pin for pin in range(32) if mask >> pin & 1)
+
+
+#: Timers shared with PWM pins, by DeviceInfo.board (the simulated board keeps the
+#: Uno's rules). The device refuses the same with STATUS_TIMER_IN_USE:
+#: Timer1 makes the servo pulses (as Arduino's Servo library does), so pins 9 and 10
+#: cannot do PWM while a servo runs, nor a servo start while they do;
+TIMER1_PWM_PINS: dict[str, frozenset[int]] = {
+    "uno": frozenset({9, 10}),
+    "sim": frozenset({9, 10}),
+}
+#: Timer0 runs the device's millisecond clock (failsafe, debounce, reports), which
+#: PWM on pins 5 and 6 would have to share: never PWM there (docs/protocol.md).
+TIMER0_PWM_PINS: dict[str, frozenset[int]] = {
+    "uno": frozenset({5, 6}),
+    "sim": frozenset({5, 6}),
+}
 
 
 class Servo:
@@ -471,6 +563,70 @@ class OpenCancel:
             self._board = board
 
 
+class PwmOutput:
+    """A PWM output, duty 0..255 as Arduino's analogWrite; get one from :meth:`Board.pwm_output`."""
+
+    def __init__(self, board: Board, pin: int, safe: int) -> None:
+        self.board = board
+        self.pin = pin
+        #: The duty the failsafe, a Stop and an interlock drive (0: off).
+        self.safe = safe
+
+    @property
+    def value(self) -> int | None:
+        """The duty the device last acknowledged (the safe duty after Init, Stop, failsafe)."""
+        return self.board._value(self.pin, PWM)
+
+    def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
+        msg, duty = self._duty(value)
+        item.pwm.CopyFrom(msg.pwm_control)
+        return msg, duty
+
+    def write(self, duty: float) -> None:
+        """Set the duty, 0 (always low) .. 255 (always high); a real number is rounded
+        to the nearest whole duty (halves to even)."""
+        self.board._control(self.pin, *self._duty(duty))
+
+    def submit(self, duty: float) -> Future[None]:
+        """:meth:`write` without waiting: a future resolved by the Ack."""
+        return self.board._control_future(self.pin, *self._duty(duty))
+
+    def _duty(self, duty: object) -> tuple[ArduinoIn, int]:
+        value = _rounded("duty", duty)
+        if not 0 <= value <= PWM_MAX_DUTY:
+            shown = f"{duty} (rounded: {value})" if value != duty else str(value)
+            raise _reject(Status.STATUS_OUT_OF_RANGE, f"duty {shown} is outside 0..{PWM_MAX_DUTY}")
+        msg = ArduinoIn()
+        msg.pwm_control.pin = self.pin
+        msg.pwm_control.duty = value
+        return msg, value
+
+    def release(self) -> None:
+        """Release the pin: its PWM stops, it becomes an input, free for any mode."""
+        self.board.release(self.pin)
+
+    def __repr__(self) -> str:
+        return f"PwmOutput(pin={self.pin}, safe={self.safe})"
+
+
+#: What a pose sets.
+PoseOutput = Servo | DigitalOutput | PwmOutput
+
+#: An interlock's trip level, as ``digital_input(interlock=...)`` takes it.
+Interlock = Literal["low", "high"]
+#: Which edges a counter counts.
+Edge = Literal["rising", "falling", "both"]
+
+_TRIPS = {None: pb.TRIP_NONE, "low": pb.TRIP_LOW, "high": pb.TRIP_HIGH}
+_EDGES = {"rising": pb.EDGE_RISING, "falling": pb.EDGE_FALLING, "both": pb.EDGE_BOTH}
+#: Input pin modes -> the kind of value their reports carry.
+_INPUT_KINDS: dict[str, InputKind] = {
+    DIGITAL_INPUT.name: "digital",
+    ANALOG_INPUT.name: "analog",
+    COUNTER.name: "counter",
+}
+
+
 class Board:
     """A connected device. Use :meth:`open`; close it (or use ``with``) when done."""
 
@@ -561,6 +717,8 @@ class Board:
             self._capture.set_stats(lambda: self.stats)
         # Started only now: a constructor above that refuses its options leaves no thread.
         self._events = EventDispatcher(url)
+        # Callbacks of inputs run on the event thread, in order with the events.
+        self._inputs = InputTable(self._events.put_job)
         if self._capture is not None:
             self._capture.on_lost = self._capture_lost
         # From here on anything that ends the open early (an error, a KeyboardInterrupt
@@ -703,6 +861,7 @@ class Board:
         # open that the first one cut short closes): no thread may be left behind.
         try:
             self._rpc.close()
+            self._inputs.close()
             self._link.close()
         finally:
             try:
@@ -786,7 +945,7 @@ class Board:
         max_speed_us: int | None,
     ) -> tuple[ArduinoIn, Callable[[], None], Servo]:
         """Check a servo's configuration; its ServoInit, what to record at the Ack, its object."""
-        pin = self._check_pin(pin)
+        pin = self._check_pin(pin, SERVO)
         min_us = _int("min_us", min_us) or SERVO_DEFAULT_MIN_US
         max_us = _int("max_us", max_us) or SERVO_DEFAULT_MAX_US
         if safe is not None and safe_us is not None:
@@ -816,6 +975,12 @@ class Board:
                 raise _reject(Status.STATUS_OUT_OF_RANGE, f"safe {safe} degrees is outside 0..180")
             init.safe_degrees = safe
         with self._lock:
+            pwm = sorted(self._timer1_pins() & self._pins_of(PWM))
+            if pwm:  # checked before the pin itself, as the device does (rule 13)
+                raise _reject(
+                    Status.STATUS_TIMER_IN_USE,
+                    f"pin {pwm[0]} does PWM on the timer the servos need (release it first)",
+                )
             current = self._outputs.get(pin)
             if current is not None and current.mode is not SERVO:
                 raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
@@ -877,7 +1042,7 @@ class Board:
     def _digital_init(
         self, pin: int, safe: bool
     ) -> tuple[ArduinoIn, Callable[[], None], DigitalOutput]:
-        pin = self._check_pin(pin)
+        pin = self._check_pin(pin, DIGITAL)
         safe = _level("safe", safe)  # bool("no") and bool(2) are True: no guessing
         with self._lock:
             current = self._outputs.get(pin)
@@ -888,6 +1053,257 @@ class Board:
         msg.digital_init.safe_level = safe
         state = _Output(DIGITAL, msg.SerializeToString(), int(safe))
         return msg, lambda: self._set_output(pin, state), DigitalOutput(self, pin)
+
+    def pwm_output(self, pin: int, safe: float = 0) -> PwmOutput:
+        """Configure ``pin`` as a PWM output (duty 0..255); it takes its ``safe`` duty at once.
+
+        The failsafe, :meth:`stop` and an interlock drive it back to ``safe`` (0,
+        off, suits a motor). Again with the same ``safe`` duty it changes nothing at
+        the pin. Only the pins in ``info.pwm_pins`` can do PWM; on the Uno pins 9
+        and 10 share Timer1 with the servos (:class:`TimerInUseError` while one runs).
+        """
+        msg, on_ok, output = self._pwm_init(pin, safe)
+        self._send(msg, on_ok)
+        return output
+
+    def submit_pwm_output(self, pin: int, safe: float = 0) -> Future[PwmOutput]:
+        """:meth:`pwm_output` without waiting: a future of the output, resolved by the Ack."""
+        msg, on_ok, output = self._pwm_init(pin, safe)
+        return self._future(msg, on_ok, _returning(output))
+
+    def _pwm_init(self, pin: int, safe: object) -> tuple[ArduinoIn, Callable[[], None], PwmOutput]:
+        # The device's order (docs/protocol.md section 7, rule 13).
+        pin = self._check_pin(pin, PWM)
+        if pin in TIMER0_PWM_PINS.get(self.info.board, ()):
+            raise _reject(
+                Status.STATUS_TIMER_IN_USE,
+                f"pin {pin}'s PWM timer (Timer0) runs the device's millisecond clock "
+                f"(PWM pins: {', '.join(map(str, self.info.pwm_pins))})",
+            )
+        self._check_capable(pin, PWM)
+        duty = _rounded("safe", safe)
+        with self._lock:
+            self._check_free(pin, PWM)
+            if pin in self._timer1_pins() and any(o.mode is SERVO for o in self._outputs.values()):
+                raise _reject(
+                    Status.STATUS_TIMER_IN_USE,
+                    f"pin {pin}'s PWM timer makes the servo pulses while a servo runs "
+                    "(release the servos first, or use another PWM pin)",
+                )
+        if not 0 <= duty <= PWM_MAX_DUTY:
+            raise _reject(
+                Status.STATUS_OUT_OF_RANGE, f"safe duty {duty} is outside 0..{PWM_MAX_DUTY}"
+            )
+        msg = ArduinoIn()
+        msg.pwm_init.pin = pin
+        msg.pwm_init.safe_duty = duty
+        state = _Output(PWM, msg.SerializeToString(), duty)
+        return msg, lambda: self._set_output(pin, state), PwmOutput(self, pin, duty)
+
+    # --- inputs ----------------------------------------------------------------------
+
+    def digital_input(
+        self,
+        pin: int,
+        *,
+        pull_up: bool = False,
+        debounce_ms: int = 0,
+        interlock: Interlock | None = None,
+    ) -> DigitalInput:
+        """Configure ``pin`` as a digital input; returns once its first level is known.
+
+        ``pull_up`` turns on the pin's pull-up (a switch to ground then reads
+        False when closed); ``debounce_ms`` (0..255) is how long a level must
+        hold on the device before it counts. ``interlock="low"`` (or ``"high"``)
+        makes it an interlock: when its debounced level reaches that level, the
+        device itself drives every output safe at once, latches (a FAILSAFE event
+        with cause ``"interlock"`` and this pin), and refuses new values with
+        :class:`InterlockActiveError` until the input is back at its other level
+        and :meth:`clear_interlock` was called.
+        """
+        msg, on_ok, make = self._digital_input_init(pin, pull_up, debounce_ms, interlock)
+        return self._input(msg, on_ok, make)
+
+    def submit_digital_input(
+        self,
+        pin: int,
+        *,
+        pull_up: bool = False,
+        debounce_ms: int = 0,
+        interlock: Interlock | None = None,
+    ) -> Future[DigitalInput]:
+        """:meth:`digital_input` without waiting, resolved by the Ack (before the first level:
+        ``read()`` is None until it arrives, right after)."""
+        msg, on_ok, make = self._digital_input_init(pin, pull_up, debounce_ms, interlock)
+        return self._future(msg, on_ok, _returning(make()))
+
+    def _digital_input_init(
+        self, pin: int, pull_up: object, debounce_ms: object, interlock: object
+    ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], DigitalInput]]:
+        # The device's order (docs/protocol.md section 7, rules 11 and 14): the feature,
+        # the arguments, the pin, then whether it is free.
+        if not isinstance(pull_up, bool):
+            raise ArgumentTypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
+        pin = _int("pin", pin)
+        self._check_feature(DIGITAL_INPUT)
+        debounce = _int("debounce_ms", debounce_ms)
+        if not 0 <= debounce <= DEBOUNCE_MAX_MS:
+            raise _reject(
+                Status.STATUS_INVALID_ARGUMENT,
+                f"debounce_ms {debounce} is outside 0..{DEBOUNCE_MAX_MS}",
+            )
+        if interlock not in _TRIPS:
+            raise _reject(
+                Status.STATUS_INVALID_ARGUMENT,
+                f"interlock must be None, 'low' or 'high', not {interlock!r}",
+            )
+        pin = self._check_pin(pin)
+        msg = ArduinoIn()
+        init = msg.digital_input_init
+        init.pin, init.pull_up, init.debounce_ms = pin, pull_up, debounce
+        init.interlock = _TRIPS[interlock]
+        trip: Interlock | None = interlock  # type: ignore[assignment]
+
+        def make() -> DigitalInput:
+            return DigitalInput(self._inputs, pin, self.release, self.call_timeout, trip)
+
+        return msg, self._input_recorder(pin, DIGITAL_INPUT, msg), make
+
+    def analog_input(
+        self, pin: int, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
+    ) -> AnalogInput:
+        """Configure analog input ``pin`` (``info.analog_pins``; A0 is 14 on the Uno).
+
+        The device samples it ``rate_hz`` times a second (it keeps a whole
+        number of ms between samples, 1..60000) and reports a sample that moved
+        by more than ``threshold`` counts (0..1023), or the value again when
+        ``heartbeat`` seconds passed without a report (so silence still says the
+        device is alive). Returns once its first value is known.
+        """
+        msg, on_ok, make = self._analog_input_init(pin, rate_hz, threshold, heartbeat)
+        return self._input(msg, on_ok, make)
+
+    def submit_analog_input(
+        self, pin: int, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
+    ) -> Future[AnalogInput]:
+        """:meth:`analog_input` without waiting, resolved by the Ack."""
+        msg, on_ok, make = self._analog_input_init(pin, rate_hz, threshold, heartbeat)
+        return self._future(msg, on_ok, _returning(make()))
+
+    def _analog_input_init(
+        self, pin: int, rate_hz: object, threshold: object, heartbeat: object
+    ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], AnalogInput]]:
+        # The device's order (rules 11 and 14): the feature, the pin's number, the
+        # arguments, a reserved pin, the pin's ADC, then whether it is free.
+        pin = self._check_pin(pin, ANALOG_INPUT, reserved=False)
+        interval = _period_ms("rate_hz", rate_hz)
+        beat = _interval_ms("heartbeat", heartbeat)
+        counts = _int("threshold", threshold)
+        if not 0 <= counts <= ANALOG_MAX:
+            raise _reject(
+                Status.STATUS_INVALID_ARGUMENT, f"threshold {counts} is outside 0..{ANALOG_MAX}"
+            )
+        self._check_reserved(pin)
+        self._check_capable(pin, ANALOG_INPUT)
+        msg = ArduinoIn()
+        init = msg.analog_input_init
+        init.pin, init.threshold, init.interval_ms, init.heartbeat_ms = pin, counts, interval, beat
+
+        def make() -> AnalogInput:
+            return AnalogInput(self._inputs, pin, self.release, self.call_timeout)
+
+        return msg, self._input_recorder(pin, ANALOG_INPUT, msg), make
+
+    def counter(
+        self, pin: int, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
+    ) -> Counter:
+        """Count ``edge`` edges on ``pin`` (``info.counter_pins``) in an interrupt.
+
+        The count (since this Init; wraps at 2**32) is reported when it changed,
+        at most ``rate_hz`` times a second. At most 4 counters run at once.
+        Returns once its first count (0) is known.
+        """
+        msg, on_ok, make = self._counter_init(pin, edge, pull_up, rate_hz)
+        return self._input(msg, on_ok, make)
+
+    def submit_counter(
+        self, pin: int, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
+    ) -> Future[Counter]:
+        """:meth:`counter` without waiting, resolved by the Ack."""
+        msg, on_ok, make = self._counter_init(pin, edge, pull_up, rate_hz)
+        return self._future(msg, on_ok, _returning(make()))
+
+    def _counter_init(
+        self, pin: int, edge: object, pull_up: object, rate_hz: object
+    ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], Counter]]:
+        # As an analog input's (rule 14), with the pin's interrupt.
+        if not isinstance(pull_up, bool):
+            raise ArgumentTypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
+        pin = self._check_pin(pin, COUNTER, reserved=False)
+        if edge not in _EDGES:
+            raise _reject(
+                Status.STATUS_INVALID_ARGUMENT,
+                f"edge must be 'rising', 'falling' or 'both', not {edge!r}",
+            )
+        interval = _period_ms("rate_hz", rate_hz)
+        self._check_reserved(pin)
+        self._check_capable(pin, COUNTER)
+        msg = ArduinoIn()
+        init = msg.counter_init
+        init.pin, init.pull_up, init.interval_ms = pin, pull_up, interval
+        init.edge = _EDGES[edge]
+
+        def make() -> Counter:
+            return Counter(self._inputs, pin, self.release, self.call_timeout)
+
+        return msg, self._input_recorder(pin, COUNTER, msg), make
+
+    def _input_recorder(self, pin: int, mode: PinMode, msg: ArduinoIn) -> Callable[[], None]:
+        """Check the pin is free for ``mode``; what to record at the Init's Ack."""
+        with self._lock:
+            self._check_free(pin, mode)
+        state = _Output(mode, msg.SerializeToString(), 0)
+        kind = _INPUT_KINDS[mode.name]
+
+        def on_ok() -> None:
+            self._set_output(pin, state)
+            self._inputs.configure(kind, pin)  # the next report is the new configuration's
+
+        return on_ok
+
+    def _input(self, msg: ArduinoIn, on_ok: Callable[[], None], make: Callable[[], T]) -> T:
+        """Send an input's Init, then wait (up to :attr:`round_time`) for its first value.
+
+        The device reports the value right after the Init's Ack. Should that report
+        be lost on the line, the input is still configured: ``read()`` says None
+        until the next report (a change, or an analog input's heartbeat).
+        """
+        self._send(msg, on_ok)
+        created = make()
+        assert isinstance(created, DigitalInput | AnalogInput | Counter)
+        with contextlib.suppress(ProtoduinoError):
+            created._wait(lambda _reading: True, self.round_time)
+        return created
+
+    def clear_interlock(self) -> None:
+        """Clear a latched interlock, once its input is back at its normal level.
+
+        Refused with :class:`InterlockActiveError` while the input is still at its
+        trip level. The outputs stay at their safe values until commanded again.
+        """
+        self._send(self._clear_interlock_msg())
+
+    def submit_clear_interlock(self) -> Future[None]:
+        """:meth:`clear_interlock` without waiting: a future resolved by the Ack."""
+        return self._future(self._clear_interlock_msg(), None, _no_value)
+
+    def _clear_interlock_msg(self) -> ArduinoIn:
+        if self._closed:
+            raise BoardClosedError("the board is closed")
+        self._check_feature(DIGITAL_INPUT)
+        msg = ArduinoIn()
+        msg.clear_interlock.SetInParent()
+        return msg
 
     # --- board-wide commands -------------------------------------------------------
 
@@ -967,6 +1383,7 @@ class Board:
 
         def forget() -> None:
             self._outputs.pop(pin, None)
+            self._inputs.forget(pin)
 
         return msg, forget
 
@@ -983,7 +1400,12 @@ class Board:
             raise BoardClosedError("the board is closed")
         msg = ArduinoIn()
         msg.release_all.SetInParent()
-        return msg, self._outputs.clear
+
+        def forget() -> None:
+            self._outputs.clear()
+            self._inputs.clear()
+
+        return msg, forget
 
     def stop(self) -> None:
         """Emergency stop: every configured output to its safe value at once, latched."""
@@ -999,12 +1421,12 @@ class Board:
         msg.stop.SetInParent()
         return msg
 
-    def pose(self, targets: Mapping[Servo | DigitalOutput, PoseValue]) -> None:
+    def pose(self, targets: Mapping[PoseOutput, PoseValue]) -> None:
         """Set several outputs in one command, all or nothing.
 
         ``targets`` maps each output to its value: degrees for a :class:`Servo`
         (any real number, rounded as :meth:`Servo.write` rounds), a level for a
-        :class:`DigitalOutput`. The device checks
+        :class:`DigitalOutput`, a duty for a :class:`PwmOutput`. The device checks
         every value before it applies any; the servos' new widths start at the
         same servo frame (digital levels change at once, as the command runs).
         A refusal, on the host or by the device, raises
@@ -1016,13 +1438,13 @@ class Board:
             self._rpc.wait(call)
         value(call)
 
-    def submit_pose(self, targets: Mapping[Servo | DigitalOutput, PoseValue]) -> Future[None]:
+    def submit_pose(self, targets: Mapping[PoseOutput, PoseValue]) -> Future[None]:
         """:meth:`pose` without waiting: a future resolved by the Ack."""
         msg, on_ok, value = self._pose(targets)
         return self._future(msg, on_ok, value)
 
     def _pose(
-        self, targets: Mapping[Servo | DigitalOutput, PoseValue]
+        self, targets: Mapping[PoseOutput, PoseValue]
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[Call], None]]:
         if self._closed:
             raise BoardClosedError("the board is closed")
@@ -1036,12 +1458,12 @@ class Board:
                 f"a pose sets 1 to {MAX_POSE_ITEMS} outputs, not {len(targets)}",
             )
         msg = ArduinoIn()
-        outputs: list[Servo | DigitalOutput] = []
+        outputs: list[PoseOutput] = []
         records: list[tuple[int, bytes, int]] = []  # pin, its Control (for a restore), value
         for output, target in targets.items():
-            if not isinstance(output, Servo | DigitalOutput):
+            if not isinstance(output, Servo | DigitalOutput | PwmOutput):
                 raise ArgumentTypeError(
-                    f"a pose sets Servo and DigitalOutput objects, not {output!r}"
+                    f"a pose sets Servo, DigitalOutput and PwmOutput objects, not {output!r}"
                 )
             if output.board is not self:
                 raise ArgumentError(f"{output!r} belongs to another board")
@@ -1124,6 +1546,17 @@ class Board:
         self._transport.add_monitor(monitor)
 
     @property
+    def round_time(self) -> float:
+        """How long a call may await its Ack once sent, every retry included:
+        ``ack_timeout * (max_retries + 1)``."""
+        return self._rpc.round_time
+
+    @property
+    def inputs(self) -> InputTable:
+        """The latest value of every input the device reported (see :mod:`protoduino.inputs`)."""
+        return self._inputs
+
+    @property
     def call_timeout(self) -> float:
         """Longest a call takes to fail: its retries, plus waiting for a link that is down."""
         return self._rpc.call_timeout
@@ -1201,22 +1634,68 @@ class Board:
             ),
             rtt=rpc.rtt,
             last_ping=rpc.last_ping,
+            input_reports=self._inputs.reports,
+            inputs_coalesced=self._inputs.coalesced,
+            input_changes_skipped=self._inputs.skipped,
         )
 
     # --- internals ------------------------------------------------------------------------
 
-    def _check_pin(self, pin: object) -> int:
+    def _check_pin(self, pin: object, mode: PinMode | None = None, *, reserved: bool = True) -> int:
+        """The pin as an int, checked as the device does first: ``mode``'s feature built in
+        (rule 11), the pin's number, and (unless ``reserved=False``) not reserved."""
         pin = _int("pin", pin)
         if self._closed:
             raise BoardClosedError("the board is closed")
+        if mode is not None:
+            self._check_feature(mode)
         if not 0 <= pin < self.info.num_pins:
             raise _reject(
                 Status.STATUS_INVALID_PIN,
                 f"pin {pin} does not exist ({self.info.board}: 0..{self.info.num_pins - 1})",
             )
+        if reserved:
+            self._check_reserved(pin)
+        return pin
+
+    def _check_reserved(self, pin: int) -> None:
         if pin in self.info.reserved_pins:
             raise _reject(Status.STATUS_RESERVED_PIN, f"pin {pin} is reserved")
-        return pin
+
+    def _check_feature(self, mode: PinMode) -> None:
+        if mode.feature not in self.info.features:
+            raise FeatureMissingError(
+                mode.feature,
+                f"{mode.name.replace('_', ' ')}: {feature_hint(mode.feature)} "
+                f"({status_name(Status.STATUS_NOT_SUPPORTED)})",
+            )
+
+    def _check_capable(self, pin: int, mode: PinMode) -> None:
+        """``pin`` is in the DeviceInfo mask of the pins that can do ``mode``."""
+        if mode.pins:
+            capable: tuple[int, ...] = getattr(self.info, mode.pins)
+            if pin not in capable:
+                raise _reject(
+                    Status.STATUS_NOT_SUPPORTED,
+                    f"pin {pin} cannot be a {mode.name.replace('_', ' ')} pin on this "
+                    f"{self.info.board} (those are {', '.join(map(str, capable)) or 'none'})",
+                )
+
+    def _check_free(self, pin: int, mode: PinMode) -> None:
+        """Refuse a pin another mode holds (lock held); the same mode is a new configuration."""
+        current = self._outputs.get(pin)
+        if current is not None and current.mode is not mode:
+            raise _reject(
+                Status.STATUS_PIN_IN_USE,
+                f"pin {pin} is a {current.mode.name.replace('_', ' ')} pin",
+            )
+
+    def _pins_of(self, mode: PinMode) -> set[int]:
+        """The pins configured as ``mode`` (lock held)."""
+        return {pin for pin, out in self._outputs.items() if out.mode is mode}
+
+    def _timer1_pins(self) -> frozenset[int]:
+        return TIMER1_PWM_PINS.get(self.info.board, frozenset())
 
     def _control(self, pin: int, msg: ArduinoIn, value: int) -> None:
         if self._closed:
@@ -1351,12 +1830,23 @@ class Board:
             max_servos=info.max_servos,
             reserved_pins=tuple(info.reserved_pins),
             rx_buffer=info.rx_buffer,
+            features=frozenset(
+                mode.feature for mode in PIN_MODES if info.features & mode.feature_bit
+            ),
+            pwm_pins=_mask_pins(info.pwm_pins),
+            analog_pins=_mask_pins(info.analog_pins),
+            counter_pins=_mask_pins(info.counter_pins),
         )
 
     def _message(self, msg: ArduinoOut) -> None:
         """A DATA message other than an Ack (I/O thread)."""
         kind = msg.WhichOneof("data")
-        if kind == "failsafe":
+        if kind == "input_report":
+            try:
+                self._inputs.update(msg.input_report)
+            except ProtocolError as error:
+                log.warning("%s: input report dropped: %s", self.url, error)
+        elif kind == "failsafe":
             self._failsafe_state(msg.failsafe)
         elif kind == "log":
             level = ("debug", "info", "warning", "error")[min(msg.log.level, 3)]
@@ -1389,7 +1879,11 @@ class Board:
         # The wire names one timeout cause, whatever the liveness source: the host
         # names it for what expired (with liveness="heartbeat" no Ping could stop it).
         timeout = "heartbeat_timeout" if self.liveness == "heartbeat" else "ping_timeout"
-        cause = {1: timeout, 2: "stop"}.get(fs.cause, "none")
+        cause = {
+            pb.FAILSAFE_CAUSE_PING_TIMEOUT: timeout,
+            pb.FAILSAFE_CAUSE_STOP: "stop",
+            pb.FAILSAFE_CAUSE_INTERLOCK: "interlock",
+        }.get(fs.cause, "none")
         with self._lock:
             if fs.active:
                 if self._failsafe_active and self._failsafe_epoch == fs.epoch:
@@ -1399,16 +1893,17 @@ class Board:
                 self._failsafe_epoch = fs.epoch
                 return
             self._failsafe_active, self._failsafe_epoch = fs.active, fs.epoch
+        details: dict[str, Any] = {"active": fs.active, "cause": cause, "epoch": fs.epoch}
         if fs.active:
-            text = f"failsafe active ({cause}): outputs at their safe values"
+            why = cause
+            if cause == "interlock":  # the input that tripped
+                details["pin"] = fs.pin
+                why = f"interlock on pin {fs.pin}"
+            text = f"failsafe active ({why}): outputs at their safe values"
         else:
             text = "failsafe cleared (outputs stay safe until commanded)"
-            cause = "none"
-        self._notify(
-            Event(
-                EventKind.FAILSAFE, text, {"active": fs.active, "cause": cause, "epoch": fs.epoch}
-            )
-        )
+            details["cause"] = "none"
+        self._notify(Event(EventKind.FAILSAFE, text, details))
 
     def _capture_lost(self, error: OSError) -> None:
         """The capture stopped on a write error (whatever thread wrote): said once."""

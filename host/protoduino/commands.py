@@ -30,6 +30,23 @@ class PinMode:
     name: str  # as in the firmware's PD_MODE_<NAME>
     init: str  # ArduinoIn member that configures a pin for this mode
     control: str | None = None  # ArduinoIn member that sets its value (None: an input)
+    #: The build-time feature that carries it: Feature ``FEATURE_<FEATURE>`` in the
+    #: schema, a bit of DeviceInfo.features. A firmware built without it refuses the
+    #: mode (STATUS_NOT_SUPPORTED), and so does the host, before sending.
+    feature: str = ""
+    #: The DeviceInfo mask of the pins that can do this mode ("pwm_pins", ...); empty:
+    #: any pin that is not reserved.
+    pins: str = ""
+
+    @property
+    def feature_bit(self) -> int:
+        """This mode's bit in DeviceInfo.features."""
+        return 1 << pb.Feature.Value(f"FEATURE_{self.feature.upper()}")
+
+    @property
+    def is_input(self) -> bool:
+        """An input: configured once, its values come in InputReports."""
+        return self.control is None
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,22 +82,33 @@ class Command:
         return self.pin_mode.init
 
 
-DIGITAL = PinMode("digital", init="digital_init", control="digital_control")
-SERVO = PinMode("servo", init="servo_init", control="servo_control")
+DIGITAL = PinMode(
+    "digital", init="digital_init", control="digital_control", feature="digital_output"
+)
+SERVO = PinMode("servo", init="servo_init", control="servo_control", feature="servo")
+PWM = PinMode("pwm", init="pwm_init", control="pwm_control", feature="pwm", pins="pwm_pins")
+DIGITAL_INPUT = PinMode("digital_input", init="digital_input_init", feature="digital_input")
+ANALOG_INPUT = PinMode(
+    "analog_input", init="analog_input_init", feature="analog_input", pins="analog_pins"
+)
+COUNTER = PinMode("counter", init="counter_init", feature="counter", pins="counter_pins")
 
 #: Every pin mode, in the firmware's PD_MODE_* order.
-PIN_MODES: tuple[PinMode, ...] = (DIGITAL, SERVO)
+PIN_MODES: tuple[PinMode, ...] = (DIGITAL, SERVO, PWM, DIGITAL_INPUT, ANALOG_INPUT, COUNTER)
 
 _BOARD_COMMANDS: tuple[Command, ...] = (
     Command("ping", idempotent=True, result="ping_echo"),
     Command("get_info", idempotent=True, result="info"),
     Command("stop"),
-    Command("pose"),  # several pin-mode Controls at once (PoseItem: ServoControl, DigitalControl)
+    Command("pose"),  # several pin-mode Controls at once (PoseItem: servo, digital, pwm)
     Command("read_outputs", idempotent=True, result="outputs"),
     Command("configure_failsafe"),
     Command("heartbeat", idempotent=True),
     Command("release"),
     Command("release_all"),
+    # Not idempotent: a late duplicate must never clear an interlock that tripped
+    # again after the first one ran; the dedupe window answers it instead.
+    Command("clear_interlock"),
 )
 
 
@@ -95,6 +123,18 @@ def _pin_mode_commands(modes: tuple[PinMode, ...]) -> tuple[Command, ...]:
 
 #: ArduinoIn member -> its declaration.
 COMMANDS: dict[str, Command] = {c.kind: c for c in _BOARD_COMMANDS + _pin_mode_commands(PIN_MODES)}
+
+
+def feature_hint(feature: str) -> str:
+    """Why a mode is refused on a firmware without ``feature``, and how to get it."""
+    name = feature.upper()
+    every = " ".join(m.feature for m in sorted(PIN_MODES, key=lambda m: m.feature_bit))
+    return (
+        f"the firmware on this device was built without the {feature} feature "
+        f"(FEATURE_{name}). The default firmware has every feature (protoduino flash PORT); "
+        f'a make build must list it: make -C firmware avr FEATURES="{every}"; the Arduino '
+        f"library must not #define PD_FEATURE_{name} 0 in its src/pd_config.h"
+    )
 
 
 def command(kind: str) -> Command:

@@ -44,6 +44,15 @@ SERVO_FRAME = 0.020
 #: The fastest limit: 255 us per frame.
 SERVO_MAX_SPEED = 12750
 
+#: PWM duty, as Arduino's analogWrite: 0 (always low) .. 255 (always high).
+PWM_MAX_DUTY = 255
+#: A digital input's debounce (ms): a level must hold this long to count.
+DEBOUNCE_MAX_MS = 255
+#: Analog inputs are 10-bit: counts 0..1023.
+ANALOG_MAX = 1023
+#: The longest sampling, report or heartbeat interval of an input (ms).
+INPUT_INTERVAL_MAX_MS = 60000
+
 
 class PacketType(IntEnum):
     """Packet TYPE (docs/protocol.md section 4)."""

@@ -10,6 +10,10 @@
      |    +-- VersionMismatchError  device and host speak different protocol versions
      |    +-- SchemaMismatchError   firmware generated from another .proto schema
      +-- CommandRejectedError     the device (or the host, checking first) refused a command
+     |    +-- InterlockActiveError  an interlock input tripped: outputs latched safe
+     |    +-- TimerInUseError       the pin's hardware timer is taken by another mode
+     |    +-- NotSupportedError     the pin cannot do the mode, or the firmware lacks it
+     |         +-- FeatureMissingError  the firmware was built without the mode (host check)
      +-- AckTimeoutError          no Ack after every retry; also a builtin TimeoutError
      +-- BoardClosedError         the board was closed while, or before, the call ran
      +-- ReentrantCallError       a blocking board call from the I/O thread (a frame monitor)
@@ -21,6 +25,7 @@
      +-- CaptureError             a capture file cannot be written or read
      +-- ArgumentError            a value refused before anything ran; also a builtin ValueError
      +-- ArgumentTypeError        an argument of the wrong type; also a builtin TypeError
+     +-- InputTimeoutError        an input's wait_for saw no matching value in time (TimeoutError)
 
 A refusal the device would give too (a pin that does not exist, an angle outside
 0..180) is a :class:`CommandRejectedError` with ``sent=False``; ArgumentError and
@@ -33,6 +38,8 @@ Third-party exceptions (pyserial, protobuf) are wrapped at the boundary with
 """
 
 from __future__ import annotations
+
+from ._generated import protoduino_pb2 as pb
 
 
 class ProtoduinoError(Exception):
@@ -106,6 +113,56 @@ class CommandRejectedError(ProtoduinoError):
         self.output = output
 
 
+class InterlockActiveError(CommandRejectedError):
+    """STATUS_INTERLOCK_ACTIVE: an interlock input tripped and the outputs are latched safe.
+
+    New values are refused until the input is back at its normal level and
+    ``board.clear_interlock()`` succeeded (which is itself refused with this
+    error while the input is still at its trip level).
+    """
+
+
+class TimerInUseError(CommandRejectedError):
+    """STATUS_TIMER_IN_USE: the pin's hardware timer is taken by another mode.
+
+    On the Uno, Timer1 drives the servos, so pins 9 and 10 cannot do PWM
+    while a servo runs (and no servo starts while they do).
+    """
+
+
+class NotSupportedError(CommandRejectedError):
+    """STATUS_NOT_SUPPORTED: this pin cannot do this mode on this board (no PWM, ADC or
+    interrupt there), or the firmware was built without the mode."""
+
+
+class FeatureMissingError(NotSupportedError):
+    """The firmware on the device was built without the mode's feature; nothing was sent.
+
+    ``feature`` is the feature's name ("pwm", "counter", ...); the message says
+    how to get a firmware that has it.
+    """
+
+    def __init__(self, feature: str, message: str) -> None:
+        super().__init__(pb.STATUS_NOT_SUPPORTED, message, sent=False)
+        self.feature = feature
+
+
+#: The statuses that have a named error.
+_REFUSALS: dict[int, type[CommandRejectedError]] = {
+    pb.STATUS_INTERLOCK_ACTIVE: InterlockActiveError,
+    pb.STATUS_TIMER_IN_USE: TimerInUseError,
+    pb.STATUS_NOT_SUPPORTED: NotSupportedError,
+}
+
+
+def rejection(
+    status: int, message: str, *, sent: bool = True, output: object = None
+) -> CommandRejectedError:
+    """The error for a refusal with ``status``: its named subclass where it has one."""
+    cls = _REFUSALS.get(status, CommandRejectedError)
+    return cls(status, message, sent=sent, output=output)
+
+
 class AckTimeoutError(ProtoduinoError, TimeoutError):
     """No Ack arrived after ACK_TIMEOUT x (MAX_RETRIES + 1).
 
@@ -172,3 +229,7 @@ class ArgumentError(ProtoduinoError, ValueError):
 
 class ArgumentTypeError(ProtoduinoError, TypeError):
     """An argument of a type protoduino does not take (``session=True``, ``degrees="45"``)."""
+
+
+class InputTimeoutError(ProtoduinoError, TimeoutError):
+    """An input's ``wait_for`` saw no value that matched before its timeout."""

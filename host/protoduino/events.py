@@ -43,7 +43,9 @@ class EventKind(StrEnum):
     #: details: replayed (int), failed (list of str), values (bool)
     RESTORED = "restored"
     #: The device entered or left its failsafe state. details: active (bool),
-    #: cause ("ping_timeout", or "heartbeat_timeout" with liveness="heartbeat"; "stop", "none")
+    #: cause ("ping_timeout", or "heartbeat_timeout" with liveness="heartbeat"; "stop",
+    #: "interlock", "none"), epoch (int: the device's count of its safe states since
+    #: power-up), and for an interlock pin (int: the input that tripped)
     FAILSAFE = "failsafe"
     #: A text from the firmware. details: level ("debug".."error"), text (str)
     LOG = "log"
@@ -115,6 +117,12 @@ class Stats:
     capture_error: str | None
     rtt: float | None  # last Ping round trip (seconds)
     last_ping: float | None  # time.monotonic() of the last acknowledged automatic Ping
+    #: InputReports received; reports the device replaced by newer ones before it could
+    #: send them (freshness over completeness); input changes an on_change callback never
+    #: saw because a newer value came while it was busy.
+    input_reports: int = 0
+    inputs_coalesced: int = 0
+    input_changes_skipped: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}

@@ -6,7 +6,8 @@ and renders packets as JSON for ``decode`` and ``monitor``.
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Iterator
+from typing import Any, Literal
 
 from google.protobuf import json_format
 from google.protobuf.message import DecodeError, Message
@@ -36,6 +37,45 @@ def parse_out(payload: bytes) -> pb.ArduinoOut:
         return pb.ArduinoOut.FromString(payload)
     except DecodeError as error:
         raise ProtocolError(f"ArduinoOut does not decode: {error}") from error
+
+
+#: Which value of a pin an InputReport carries: a digital level, analog counts, a count of edges.
+InputKind = Literal["digital", "analog", "counter"]
+
+
+def _pins(mask: int) -> Iterator[int]:
+    """The pins whose bits are set in a DeviceInfo/InputReport mask, lowest first."""
+    pin = 0
+    while mask:
+        if mask & 1:
+            yield pin
+        mask >>= 1
+        pin += 1
+
+
+def input_values(report: pb.InputReport) -> list[tuple[InputKind, int, int]]:
+    """Every value an InputReport carries: (kind, pin, value), a digital level as a bool.
+
+    Every digital input's level is in every report; analog values and counts are packed
+    in pin order, one per bit of their mask. Raises :class:`ProtocolError` when a mask and
+    its values disagree.
+    """
+    found: list[tuple[InputKind, int, int]] = [
+        ("digital", pin, bool(report.digital_levels >> pin & 1))
+        for pin in _pins(report.digital_pins)
+    ]
+    packed: tuple[tuple[InputKind, int, Any], ...] = (
+        ("analog", report.analog_pins, report.analog_values),
+        ("counter", report.counter_pins, report.counter_counts),
+    )
+    for kind, mask, values in packed:
+        pins = list(_pins(mask))
+        if len(pins) != len(values):
+            raise ProtocolError(
+                f"InputReport: {len(pins)} {kind} pins in the mask but {len(values)} values"
+            )
+        found += [(kind, pin, int(v)) for pin, v in zip(pins, values, strict=True)]
+    return found
 
 
 def status_name(status: int) -> str:

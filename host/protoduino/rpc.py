@@ -83,11 +83,11 @@ from .errors import (
     AckTimeoutError,
     ArgumentError,
     BoardClosedError,
-    CommandRejectedError,
     DeviceRebootedError,
     PayloadTooLargeError,
     ProtoduinoError,
     RebootLoopError,
+    rejection,
 )
 from .events import Event, EventKind
 from .framing import frame_size
@@ -107,6 +107,9 @@ REBOOT_LIMIT = 3
 REBOOT_WINDOW = 60.0
 
 Ack = Any  # protoduino_pb2.Ack (protobuf message classes are dynamic)
+#: Commands that carry the latest failsafe epoch the host saw (protocol.md section 7,
+#: failsafe epochs): the liveness messages, and ClearInterlock, which also re-arms.
+EPOCH_KINDS = ("ping", "heartbeat", "clear_interlock")
 Failsafe = Any  # protoduino_pb2.Failsafe
 
 
@@ -409,7 +412,7 @@ class Rpc:
             )
         kind = msg.WhichOneof("data") or "empty"
         epoch: int | None = None
-        if kind in ("ping", "heartbeat"):
+        if kind in EPOCH_KINDS:
             # The latest failsafe this host saw: only then may it re-arm the device.
             epoch = self.failsafe_epoch
             getattr(msg, kind).failsafe_epoch = epoch
@@ -643,7 +646,7 @@ class Rpc:
                 call.refusal = ack  # it may say more (a Pose's refused_item)
                 self._finish(
                     call,
-                    error=CommandRejectedError(
+                    error=rejection(
                         ack.status,
                         f"{call.kind} rejected by the device: {status_name(ack.status)}",
                     ),
@@ -668,7 +671,7 @@ class Rpc:
         session's liveness source; a ConfigureFailsafe restarts a timer that has
         not run out (the host sends it right after opening a session).
         """
-        if call.epoch is not None:
+        if call.kind in ("ping", "heartbeat"):
             device = ack.failsafe.epoch if ack.HasField("failsafe") else 0
             if ack.HasField("failsafe"):
                 self._failsafe_seen(ack.failsafe)

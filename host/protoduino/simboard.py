@@ -31,7 +31,15 @@ until it is stopped (Ctrl-C, SIGTERM, ``protoduino sim --stop PIDFILE``).
 The board's inputs are driven through its control socket
 (:mod:`protoduino.simcontrol`): :meth:`SimBoard.set_level`,
 :meth:`SimBoard.set_analog` and :meth:`SimBoard.pulses`. On the emulated Uno
-they reach the real AVR's pins and ADC, so the firmware's own input code runs.
+they reach the real AVR's pins, external interrupts and ADC, so
+the firmware's own input code (digital inputs, interlocks, analog inputs,
+counters) is what a test exercises; tests/e2e/test_pins_sim.py does so through
+the Board API on both boards.
+
+The trace records every output change, PWM duties included
+(``{"pin": 3, "mode": "pwm", "value": 128}``): the native board writes what it
+is told, the emulated Uno what it measures at the pin (servo pulse widths, and
+PWM duties from the timers' compare outputs).
 
 Typical use, in tests and in ``protoduino demo``::
 

@@ -26,8 +26,19 @@ void fake_init(fake_hal_t *hal)
     for (int pin = 0; pin < PD_MAX_PINS; pin++) {
         hal->servo_us[pin] = -1;
         hal->digital[pin] = -1;
+        hal->pwm[pin] = -1;
+        hal->input[pin] = -1;
+        hal->counter_edge[pin] = -1;
     }
+    hal->adc_pin = -1;
+    hal->adc_polls = 1;
     hal->info.board = "fake";
+    /* The Uno's (pd_avr_main.c). */
+    hal->info.pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11);
+    hal->info.analog_pins = 0x3FUL << 14;
+    hal->info.servo_timer_pins = (1UL << 9) | (1UL << 10);
+    hal->info.clock_timer_pins = (1UL << 5) | (1UL << 6);
+    hal->info.counter_pins = (1UL << 2) | (1UL << 3);
     hal->info.num_pins = 20;
     hal->info.max_servos = 8;
     hal->info.reserved_pins = 0x3;
@@ -183,6 +194,126 @@ void pd_hal_digital_release(void *ctx, uint8_t pin)
     }
     hal->digital[pin] = -1;
     hal->digital_writes[pin]++;
+}
+
+void pd_hal_pwm_write(void *ctx, uint8_t pin, uint8_t duty)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= hal->info.num_pins || !((hal->info.pwm_pins >> pin) & 1u) ||
+        hal->servo_us[pin] >= 0 || hal->digital[pin] >= 0) {
+        fprintf(stderr, "fake_hal: PWM write on pin %u, not a free PWM pin\n", pin);
+        abort();
+    }
+    hal->pwm[pin] = duty;
+    hal->pwm_writes[pin]++;
+}
+
+void pd_hal_pwm_release(void *ctx, uint8_t pin)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= hal->info.num_pins || hal->pwm[pin] < 0) {
+        fprintf(stderr, "fake_hal: release of pin %u, not a PWM output\n", pin);
+        abort();
+    }
+    hal->pwm[pin] = -1;
+    hal->pwm_writes[pin]++;
+}
+
+static void fake_input_pin(const fake_hal_t *hal, uint8_t pin, const char *what)
+{
+    if (pin >= hal->info.num_pins || ((hal->info.reserved_pins >> pin) & 1u) ||
+        hal->digital[pin] >= 0 || hal->pwm[pin] >= 0 || hal->servo_us[pin] >= 0) {
+        fprintf(stderr, "fake_hal: %s on pin %u, not free for an input\n", what, pin);
+        abort();
+    }
+}
+
+void pd_hal_input_config(void *ctx, uint8_t pin, bool pull_up)
+{
+    fake_hal_t *hal = ctx;
+    fake_input_pin(hal, pin, "input config");
+    hal->input[pin] = pull_up ? 1 : 0;
+}
+
+void pd_hal_input_release(void *ctx, uint8_t pin)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= hal->info.num_pins || hal->input[pin] < 0 || hal->counter_edge[pin] >= 0) {
+        fprintf(stderr, "fake_hal: release of pin %u, not an input (or still counting)\n", pin);
+        abort();
+    }
+    hal->input[pin] = -1;
+}
+
+uint32_t pd_hal_digital_read_all(void *ctx)
+{
+    fake_hal_t *hal = ctx;
+    uint32_t levels = 0;
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        levels |= (uint32_t)(hal->level[pin] ? 1u : 0u) << pin;
+    }
+    hal->digital_reads++;
+    return levels;
+}
+
+void pd_hal_analog_start(void *ctx, uint8_t pin)
+{
+    fake_hal_t *hal = ctx;
+    if (hal->adc_pin >= 0 || pin >= PD_MAX_PINS || !((hal->info.analog_pins >> pin) & 1u) ||
+        hal->input[pin] < 0) {
+        fprintf(stderr, "fake_hal: conversion of pin %u (one under way: %d)\n", pin, hal->adc_pin);
+        abort();
+    }
+    hal->adc_pin = pin;
+    hal->adc_left = hal->adc_polls;
+    hal->conversions++;
+}
+
+bool pd_hal_analog_done(void *ctx, uint16_t *counts)
+{
+    fake_hal_t *hal = ctx;
+    if (hal->adc_pin < 0) {
+        fprintf(stderr, "fake_hal: no conversion under way\n");
+        abort();
+    }
+    if (hal->adc_left > 1) {
+        hal->adc_left--;
+        return false;
+    }
+    *counts = hal->analog[hal->adc_pin];
+    hal->adc_pin = -1;
+    return true;
+}
+
+void pd_hal_counter_start(void *ctx, uint8_t pin, uint8_t edge)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= PD_MAX_PINS || !((hal->info.counter_pins >> pin) & 1u) || hal->input[pin] < 0) {
+        fprintf(stderr, "fake_hal: counter on pin %u\n", pin);
+        abort();
+    }
+    hal->counter_edge[pin] = edge;
+    hal->count[pin] = 0;
+}
+
+uint32_t pd_hal_counter_read(void *ctx, uint8_t pin)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= PD_MAX_PINS || hal->counter_edge[pin] < 0) {
+        fprintf(stderr, "fake_hal: counter read on pin %u, not counting\n", pin);
+        abort();
+    }
+    return hal->count[pin];
+}
+
+void pd_hal_counter_stop(void *ctx, uint8_t pin)
+{
+    fake_hal_t *hal = ctx;
+    if (pin >= PD_MAX_PINS || hal->counter_edge[pin] < 0) {
+        fprintf(stderr, "fake_hal: counter stop on pin %u, not counting\n", pin);
+        abort();
+    }
+    hal->counter_edge[pin] = -1;
 }
 
 uint32_t pd_hal_boot_id(void *ctx)

@@ -32,6 +32,19 @@ typedef struct fake_hal {
     fake_frame_t frames[FAKE_MAX_FRAMES];
     int servo_us[PD_MAX_PINS];  /* -1: not a servo */
     int digital[PD_MAX_PINS];   /* -1: not a digital output, else 0/1 */
+    int pwm[PD_MAX_PINS];       /* -1: not a PWM output, else its duty */
+    unsigned pwm_writes[PD_MAX_PINS];
+    /* Inputs: what the tests put at the pins, and how the core configured them. */
+    int input[PD_MAX_PINS];      /* -1: not configured as an input, else 0 / 1 = pull-up */
+    bool level[PD_MAX_PINS];     /* the level at the pin (the tests set it) */
+    unsigned digital_reads;      /* pd_hal_digital_read_all() calls */
+    uint16_t analog[PD_MAX_PINS]; /* the counts a conversion of the pin gives */
+    int adc_pin;                 /* the conversion under way, -1: none */
+    unsigned adc_polls;          /* pd_hal_analog_done() calls before it is done (fake_init: 1) */
+    unsigned adc_left;
+    unsigned conversions;        /* conversions started */
+    int counter_edge[PD_MAX_PINS]; /* -1: not counting, else the Edge */
+    uint32_t count[PD_MAX_PINS];
     unsigned servo_writes[PD_MAX_PINS];
     unsigned digital_writes[PD_MAX_PINS];
     unsigned outputs_safe_calls; /* pd_hal_outputs_safe() since fake_init */

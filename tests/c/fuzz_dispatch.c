@@ -11,7 +11,9 @@
  *   op & 7 = 0..3  a COMMAND packet with those bytes as its payload (an ArduinoIn)
  *            4     a CONTROL packet with those bytes as its payload
  *            5     the bytes as they are, straight into the receiver
- *            6     the clock moves on by len * 50 ms, then a poll (failsafe paths)
+ *            6     the clock moves on by len * 50 ms, the outside world moves the inputs
+ *                  (a level, an analog value, a count, from len's bits), then a poll
+ *                  (failsafe, reports, interlocks)
  *            7     the host's SEQ jumps by len (gaps and desyncs)
  *
  * The device is booted and handshaken (RESET) first. Checked after every
@@ -98,6 +100,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             break;
         case 6:
             hal.now_ms += (uint32_t)len * 50u;
+            hal.level[len % PD_MAX_PINS] = !hal.level[len % PD_MAX_PINS];
+            hal.analog[14u + len % 6u] = (uint16_t)(len * 4u);
+            hal.count[2u + (len & 1u)] += (uint32_t)len;
             pd_core_poll(&core);
             break;
         case 7:
@@ -116,18 +121,27 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         core.dedupe.count > PD_DEDUPE_WINDOW) {
         abort();
     }
-    /* Every servo pin owns its own slot, and its slot points back at it. */
+    /* Every pin of a mode with slots owns a slot of its own (the slot's pin is
+     * the one whose owner byte names it), and a servo drives its pin within limits. */
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
         uint8_t owner = core.outputs.owner[pin];
-        if (owner == 0 || PD_OWNER_MODE(owner) != PD_MODE_SERVO) {
+        if (owner == 0) {
+            continue;
+        }
+        for (uint8_t other = (uint8_t)(pin + 1u); other < PD_MAX_PINS; other++) {
+            if (PD_OWNER_MODE(owner) != PD_MODE_DIGITAL && core.outputs.owner[other] == owner) {
+                abort();
+            }
+        }
+        if (PD_OWNER_MODE(owner) != PD_MODE_SERVO) {
             continue;
         }
         if (PD_OWNER_SLOT(owner) >= PD_MAX_SERVOS) {
             abort();
         }
         const pd_servo_t *s = &core.outputs.servo[PD_OWNER_SLOT(owner)];
-        int us = hal.servo_us[s->pin];
-        if (s->pin != pin || (us != 0 && (us < s->min_us || us > s->max_us))) { /* 0: detached */
+        int us = hal.servo_us[pin];
+        if (us != 0 && (us < s->min_us || us > s->max_us)) { /* 0: detached */
             abort();
         }
     }

@@ -57,18 +57,27 @@ static void check_invariants(const fake_hal_t *hal, const pd_core_t *core)
         core->dedupe.count > PD_DEDUPE_WINDOW) {
         abort();
     }
-    /* Every servo pin owns its own slot, and its slot points back at it. */
+    /* Every pin of a mode with slots owns a slot of its own (the slot's pin is
+     * the one whose owner byte names it), and a servo drives its pin within limits. */
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
         uint8_t owner = core->outputs.owner[pin];
-        if (owner == 0 || PD_OWNER_MODE(owner) != PD_MODE_SERVO) {
+        if (owner == 0) {
+            continue;
+        }
+        for (uint8_t other = (uint8_t)(pin + 1u); other < PD_MAX_PINS; other++) {
+            if (PD_OWNER_MODE(owner) != PD_MODE_DIGITAL && core->outputs.owner[other] == owner) {
+                abort();
+            }
+        }
+        if (PD_OWNER_MODE(owner) != PD_MODE_SERVO) {
             continue;
         }
         if (PD_OWNER_SLOT(owner) >= PD_MAX_SERVOS) {
             abort();
         }
         const pd_servo_t *s = &core->outputs.servo[PD_OWNER_SLOT(owner)];
-        int us = hal->servo_us[s->pin];
-        if (s->pin != pin || (us != 0 && (us < s->min_us || us > s->max_us)) ||
+        int us = hal->servo_us[pin];
+        if ((us != 0 && (us < s->min_us || us > s->max_us)) ||
             (s->safe_us != PD_SERVO_SAFE_DETACH && (s->safe_us < s->min_us || s->safe_us > s->max_us))) {
             abort();
         }

@@ -43,6 +43,8 @@ extern const pd_test_case_t pd_tests_codec[];
 extern const pd_test_case_t pd_tests_link[];
 extern const pd_test_case_t pd_tests_dispatch[];
 extern const pd_test_case_t pd_tests_motion[];
+extern const pd_test_case_t pd_tests_pwm[];
+extern const pd_test_case_t pd_tests_inputs[];
 extern const pd_test_case_t pd_tests_failsafe[];
 extern const pd_test_case_t pd_tests_encode[];
 extern const pd_test_case_t pd_tests_engine[];

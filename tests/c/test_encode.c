@@ -87,13 +87,14 @@ static void test_encode_ack_info(void)
     /* Longest strings, every field at its largest. */
     strcpy(info->firmware_version, "123456789012345");
     strcpy(info->board, "abcdefghijklmno");
-    info->protocol_version = 0xFFFFFFFFu;
+    /* (at their widths on the device: protoduino.options) */
+    info->protocol_version = UINT8_MAX;
     info->schema_id = 0xFFFFFFFFu;
-    info->num_pins = 0xFFFFFFFFu;
-    info->max_servos = 0xFFFFFFFFu;
+    info->num_pins = UINT8_MAX;
+    info->max_servos = UINT8_MAX;
     info->reserved_pins_count = 4;
     for (int i = 0; i < 4; i++) {
-        info->reserved_pins[i] = 0xFFFFFFFFu - (uint32_t)i;
+        info->reserved_pins[i] = (uint8_t)(UINT8_MAX - i);
     }
     out.data.ack.message_id = 0xFFFFFFFFu;
     out.data.ack.status = protoduino_Status_STATUS_UNKNOWN_COMMAND;
@@ -103,6 +104,11 @@ static void test_encode_ack_info(void)
         info->schema_id = count; /* including 0: omitted */
         CHECK_EQ(compare(&out), 0);
     }
+    info->features = UINT16_MAX;
+    info->pwm_pins = 0xFFFFFFFFu;
+    info->analog_pins = 0x000FC000u;
+    info->counter_pins = 0x0000000Cu;
+    CHECK_EQ(compare(&out), 0);
     uint8_t buf[200];
     info->reserved_pins_count = 5;
     CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
@@ -125,21 +131,36 @@ static void test_encode_failsafe_decode_error_log(void)
                 out.data.failsafe.epoch = epochs[e];
                 CHECK_EQ(compare(&out), 0);
             }
+            out.data.failsafe.pin = 19; /* an interlock's */
+            CHECK_EQ(compare(&out), 0);
+            out.data.failsafe.pin = 0;
+            out.data.failsafe.epoch = 0;
         }
     }
-    /* An Ack's failsafe state, alone and beside each result (field 5 goes
-     * between the oneof's members 3/4 and 30). */
-    const pb_size_t results[] = {0, protoduino_Ack_ping_echo_tag, protoduino_Ack_info_tag,
-                                 protoduino_Ack_outputs_tag};
-    for (size_t r = 0; r < 4; r++) {
+    /* An Ack's failsafe state, the shapes the device sends: alone (a Heartbeat's
+     * Ack) and beside the longest ping echo (field 5 goes after the oneof's
+     * member 3, in field order as pb_encode writes them). */
+    for (size_t len = 0; len <= 64; len += 64) {
         out = ack(7, protoduino_Status_STATUS_OK);
-        out.data.ack.which_result = results[r];
         out.data.ack.has_failsafe = true;
         out.data.ack.failsafe.active = true;
-        out.data.ack.failsafe.cause = protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT;
+        out.data.ack.failsafe.cause = protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK;
         out.data.ack.failsafe.epoch = 200;
-        out.data.ack.refused_item = 3;
+        out.data.ack.failsafe.pin = 19;
+        if (len) {
+            out.data.ack.which_result = protoduino_Ack_ping_echo_tag;
+            out.data.ack.result.ping_echo.size = (pb_size_t)len;
+            memset(out.data.ack.result.ping_echo.bytes, 0xA5, len);
+        }
         CHECK_EQ(compare(&out), 0);
+    }
+    /* A shape it never sends (a failsafe state beside DeviceInfo) is refused. */
+    {
+        uint8_t buf[PD_ENCODE_MAX];
+        out = ack(7, protoduino_Status_STATUS_OK);
+        out.data.ack.has_failsafe = true;
+        out.data.ack.which_result = protoduino_Ack_info_tag;
+        CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
     }
     memset(&out, 0, sizeof(out));
     out.which_data = protoduino_ArduinoOut_decode_error_tag;
@@ -172,6 +193,18 @@ static void test_encode_ack_outputs_and_refused_item(void)
     st->digital_pins = 0xFFFFFFFFu;
     st->digital_levels = 0x80000001u;
     CHECK_EQ(compare(&out), 0);
+    st->pwm_pins = 0x00000E08u;
+    for (pb_size_t n = 0; n <= sizeof(st->pwm_duties); n++) {
+        st->pwm_duties_count = n;
+        for (pb_size_t i = 0; i < n; i++) {
+            st->pwm_duties[i] = (uint8_t)(i == 0 ? 0 : 255 - i * 40); /* 0, 127, 128, 255 ... */
+        }
+        CHECK_EQ(compare(&out), 0);
+    }
+    st->pwm_duties_count = sizeof(st->pwm_duties) + 1u; /* corrupt: refused */
+    uint8_t too_many[protoduino_ArduinoOut_size + 8];
+    CHECK_EQ(pd_encode_out(&out, too_many, sizeof(too_many)), 0);
+    st->pwm_duties_count = 0;
     st->servos.size = sizeof(st->servos.bytes) + 1u; /* corrupt: refused */
     uint8_t buf[protoduino_ArduinoOut_size + 8];
     CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
@@ -181,6 +214,65 @@ static void test_encode_ack_outputs_and_refused_item(void)
         out.data.ack.refused_item = items[i]; /* tag 31: two bytes */
         CHECK_EQ(compare(&out), 0);
     }
+}
+
+static void test_encode_input_report(void)
+{
+    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
+    out.which_data = protoduino_ArduinoOut_input_report_tag;
+    protoduino_InputReport *r = &out.data.input_report;
+    CHECK_EQ(compare(&out), 0); /* all defaults */
+    r->time_ms = 0xFFFFFFFFu;
+    r->digital_pins = 0x000FFFFCu;
+    r->digital_levels = 0x00000004u;
+    CHECK_EQ(compare(&out), 0);
+    r->analog_pins = 0x000FC000u;
+    const uint16_t values[] = {0, 1, 127, 128, 1023, 0xFFFFu};
+    for (pb_size_t n = 0; n <= 6; n++) {
+        r->analog_values_count = n;
+        memcpy(r->analog_values, values, sizeof(values));
+        CHECK_EQ(compare(&out), 0);
+    }
+    r->counter_pins = 0x0000000Cu;
+    const uint32_t counts[] = {0, 0xFFFFFFFFu, 16384u, 1u};
+    for (pb_size_t n = 0; n <= 4; n++) {
+        r->counter_counts_count = n;
+        memcpy(r->counter_counts, counts, sizeof(counts));
+        CHECK_EQ(compare(&out), 0);
+    }
+    r->coalesced = 0xFFFFu;
+    CHECK_EQ(compare(&out), 0);
+    uint8_t buf[protoduino_ArduinoOut_size + 8];
+    r->analog_values_count = 7; /* corrupt: refused */
+    CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
+    r->analog_values_count = 0;
+    r->counter_counts_count = 5;
+    CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
+}
+
+static void test_encode_bound_holds_every_ack_shape_sent(void)
+{
+    uint8_t buf[protoduino_ArduinoOut_size + 8];
+    /* The largest of each shape the device sends fits PD_ENCODE_MAX. */
+    protoduino_ArduinoOut out = ack(0xFFFFFFFFu, protoduino_Status_STATUS_NOT_SUPPORTED);
+    out.data.ack.which_result = protoduino_Ack_ping_echo_tag;
+    out.data.ack.result.ping_echo.size = 64;
+    memset(out.data.ack.result.ping_echo.bytes, 0xFF, 64);
+    out.data.ack.has_failsafe = true; /* a liveness message's Ack */
+    out.data.ack.failsafe.active = true;
+    out.data.ack.failsafe.cause = protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK;
+    out.data.ack.failsafe.epoch = 255;
+    out.data.ack.failsafe.pin = 255;
+    size_t n = pd_encode_out(&out, buf, PD_ENCODE_MAX);
+    CHECK(n > 0 && n <= PD_ENCODE_MAX);
+    /* A shape it never sends (a result beside a refused item): refused, nothing written past. */
+    out.data.ack.which_result = protoduino_Ack_info_tag;
+    memset(&out.data.ack.result.info, 0xFF, sizeof(out.data.ack.result.info));
+    out.data.ack.refused_item = 200;
+    memset(buf, 0xA5, sizeof(buf));
+    CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
+    CHECK_EQ(buf[PD_ENCODE_MAX], 0xA5);
+    CHECK(PD_ENCODE_MAX < protoduino_ArduinoOut_size);
 }
 
 static void test_encode_empty(void)
@@ -197,6 +289,8 @@ const pd_test_case_t pd_tests_encode[] = {
     TEST_CASE(test_encode_ack_info),
     TEST_CASE(test_encode_failsafe_decode_error_log),
     TEST_CASE(test_encode_ack_outputs_and_refused_item),
+    TEST_CASE(test_encode_input_report),
+    TEST_CASE(test_encode_bound_holds_every_ack_shape_sent),
     TEST_CASE(test_encode_empty),
     {NULL, NULL},
 };

@@ -1,7 +1,6 @@
 /*
  * The I/O engine: the transmit queue's back-pressure on receiving, report
- * slots (newest value wins, never ahead of a reply's room) and the periodic
- * hook. The fake HAL's tx_room stands for the platform's transmit queue.
+ * slots (newest value wins, never ahead of a command's Ack). The fake HAL's tx_room stands for the platform's transmit queue.
  */
 #include <pb_encode.h>
 #include <stdio.h>
@@ -108,10 +107,11 @@ static void test_report_newest_value_replaces_unsent(void)
     char last[64] = "";
     t_active(&d);
     d.core.report = test_report;
+    d.core.report_sent = NULL;
     report_calls = 0;
 
-    /* No room beyond the replies' reserve: the report waits, the bit stays. */
-    d.hal.tx_room = PD_TX_RESERVE + 4u;
+    /* No room for it: the report waits, the bit stays. */
+    d.hal.tx_room = 8u;
     report_value[3] = 1;
     pd_core_report(&d.core, 3);
     pd_core_poll(&d.core);
@@ -137,6 +137,7 @@ static void test_reply_goes_before_pending_report(void)
     char last[64] = "";
     t_active(&d);
     d.core.report = test_report;
+    d.core.report_sent = NULL;
     report_value[0] = 42;
     pd_core_report(&d.core, 0);
     /* A command arriving in the same pass is answered first; the report follows. */
@@ -151,12 +152,57 @@ static void test_reply_goes_before_pending_report(void)
     CHECK(strcmp(last, "0:42") == 0);
 }
 
+static void test_report_waits_for_a_command_under_way(void)
+{
+    tdev_t d;
+    char last[64] = "";
+    t_active(&d);
+    d.core.report = test_report;
+    d.core.report_sent = NULL;
+    report_value[2] = 7;
+    pd_core_report(&d.core, 2);
+    /* Half a command frame is in: the report waits for its Ack. */
+    const uint8_t half[3] = {0x05, 0x01, 0x02};
+    t_feed(&d, half, sizeof(half));
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
+    const uint8_t end = 0x00; /* the frame ends (an invalid one: dropped) */
+    t_feed(&d, &end, 1);
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1);
+    CHECK(strcmp(last, "2:7") == 0);
+}
+
+static void test_report_gives_way_to_commands_for_a_while_only(void)
+{
+    tdev_t d;
+    char last[64] = "";
+    t_active(&d);
+    d.core.report = test_report;
+    d.core.report_sent = NULL;
+    report_value[1] = 9;
+    pd_core_report(&d.core, 1);
+    const uint8_t partial[2] = {0x05, 0x01}; /* a command frame, forever arriving */
+    t_feed(&d, partial, sizeof(partial));
+    uint32_t t0 = d.hal.now_ms;
+    for (uint32_t ms = 0; ms < PD_REPORT_MAX_WAIT_MS; ms++) {
+        d.hal.now_ms = t0 + ms;
+        pd_core_poll(&d.core);
+    }
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
+    d.hal.now_ms = t0 + PD_REPORT_MAX_WAIT_MS;
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1);
+    CHECK(strcmp(last, "1:9") == 0);
+}
+
 static void test_one_report_per_pass_lowest_slot_first(void)
 {
     tdev_t d;
     char last[64] = "";
     t_active(&d);
     d.core.report = test_report;
+    d.core.report_sent = NULL;
     report_value[1] = 10;
     report_value[5] = 50;
     pd_core_report(&d.core, 5);
@@ -176,38 +222,11 @@ static void test_no_report_while_idle(void)
     t_boot(&d);
     fake_clear(&d.hal);
     d.core.report = test_report;
+    d.core.report_sent = NULL;
     pd_core_report(&d.core, 0);
     pd_core_poll(&d.core);
     CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
     CHECK_EQ(fake_count(&d.hal), 0);
-}
-
-static unsigned hook_calls;
-static uint32_t hook_last;
-
-static void test_hook(pd_core_t *core, uint32_t now_ms)
-{
-    (void)core;
-    hook_calls++;
-    hook_last = now_ms;
-}
-
-static void test_periodic_hook_once_per_tick(void)
-{
-    tdev_t d;
-    t_active(&d);
-    hook_calls = 0;
-    d.core.periodic = test_hook;
-    pd_core_poll(&d.core);
-    CHECK_EQ(hook_calls, 0); /* the tick of init already ran its course */
-    d.hal.now_ms += 1;
-    pd_core_poll(&d.core);
-    pd_core_poll(&d.core);
-    CHECK_EQ(hook_calls, 1);
-    CHECK_EQ(hook_last, d.hal.now_ms);
-    d.hal.now_ms += 5; /* a slow pass: one call, not five */
-    pd_core_poll(&d.core);
-    CHECK_EQ(hook_calls, 2);
 }
 
 /*
@@ -336,8 +355,9 @@ const pd_test_case_t pd_tests_engine[] = {
     TEST_CASE(test_reserve_holds_the_largest_replies),
     TEST_CASE(test_report_newest_value_replaces_unsent),
     TEST_CASE(test_reply_goes_before_pending_report),
+    TEST_CASE(test_report_waits_for_a_command_under_way),
+    TEST_CASE(test_report_gives_way_to_commands_for_a_while_only),
     TEST_CASE(test_one_report_per_pass_lowest_slot_first),
     TEST_CASE(test_no_report_while_idle),
-    TEST_CASE(test_periodic_hook_once_per_tick),
     {NULL, NULL},
 };

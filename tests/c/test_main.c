@@ -20,7 +20,7 @@ void pd_test_fail(const char *file, int line, const char *expr, long long a, lon
 int main(int argc, char **argv)
 {
     const pd_test_case_t *tables[] = {pd_tests_codec, pd_tests_encode, pd_tests_link,
-                                      pd_tests_dispatch, pd_tests_failsafe, pd_tests_motion,
+                                      pd_tests_dispatch, pd_tests_failsafe, pd_tests_motion, pd_tests_pwm, pd_tests_inputs,
                                       pd_tests_engine};
     const char *only = argc > 1 ? argv[1] : NULL; /* run tests whose name contains it */
     int passed = 0;

@@ -19,11 +19,21 @@ DISPATCH = ROOT / "firmware" / "core" / "pd_dispatch.c"
 OUTPUTS_H = ROOT / "firmware" / "core" / "pd_outputs.h"
 
 
-def _firmware_flags() -> dict[str, str]:
+#: One X(name, feature, flags, result) line of PD_COMMANDS.
+_ENTRY = r"X\((\w+),\s*(\w+),\s*([\w|]+),\s*(\w+)\)"
+
+
+def _firmware_table() -> list[tuple[str, str, str, str]]:
     text = DISPATCH.read_text()
     table = re.search(r"#define PD_COMMANDS\(X\)(.*?)\n\n", text, re.S)
-    assert table
-    return dict(re.findall(r"X\((\w+),\s*([\w|]+),", table.group(1)))
+    assert table, "PD_COMMANDS not found in pd_dispatch.c"
+    entries: list[tuple[str, str, str, str]] = re.findall(_ENTRY, table.group(1))
+    assert entries, "PD_COMMANDS has no entries"
+    return entries
+
+
+def _firmware_flags() -> dict[str, str]:
+    return {name: flags for name, _feature, flags, _result in _firmware_table()}
 
 
 def test_only_controls_are_refused_once_the_failsafe_ran_out() -> None:
@@ -36,13 +46,8 @@ def test_only_controls_are_refused_once_the_failsafe_ran_out() -> None:
 
 def _firmware_commands() -> dict[str, tuple[bool, str | None]]:
     """name -> (idempotent, Ack.result member) from the X(...) lines of PD_COMMANDS."""
-    text = DISPATCH.read_text()
-    table = re.search(r"#define PD_COMMANDS\(X\)(.*?)\n\n", text, re.S)
-    assert table, "PD_COMMANDS not found in pd_dispatch.c"
-    entries = re.findall(r"X\((\w+),\s*([\w|]+),\s*(\w+)\)", table.group(1))
-    assert entries, "PD_COMMANDS has no entries"
     out: dict[str, tuple[bool, str | None]] = {}
-    for name, flags, result in entries:
+    for name, _feature, flags, result in _firmware_table():
         assert name not in out, f"{name} is in PD_COMMANDS twice"
         match = re.fullmatch(r"protoduino_Ack_(\w+)_tag", result)
         assert match or result == "0", f"{name}: unexpected result {result}"
@@ -88,3 +93,17 @@ def test_undeclared_command_is_not_idempotent() -> None:
     assert commands.command("no_such_command").idempotent is False
     assert commands.command("servo_control").needs_init == "servo_init"
     assert commands.command("ping").needs_init is None
+
+
+def test_every_command_needs_the_feature_the_host_checks() -> None:
+    """A pin mode's commands need its feature on the device (PD_FEATURE_<NAME>), the one
+    the host checks before sending; ClearInterlock comes with digital inputs; the rest
+    are in every build (1)."""
+    for name, feature, _flags, _result in _firmware_table():
+        mode = commands.COMMANDS[name].pin_mode
+        if mode is not None:
+            assert feature == f"PD_FEATURE_{mode.feature.upper()}", name
+        elif name == "clear_interlock":
+            assert feature == "PD_FEATURE_DIGITAL_INPUT"
+        else:
+            assert feature == "1", name

@@ -495,6 +495,31 @@ def test_motion_section_on_both_boards() -> None:
         assert sum(line.startswith(f"| {method} |") for line in text.splitlines()) == 2
 
 
+@pytest.mark.avr
+def test_inputs_section_on_both_boards() -> None:
+    """Part 7: every edge reached its callback, every channel streamed, every interlock trial
+    stopped the motor at the pin, on both boards; and the avr targets have a verdict."""
+    _need("native")
+    _need("avr")
+    from bench import inputs
+
+    results = inputs.collect(trials=4, seconds=0.3, pings=3)
+    assert [r.backend for r in results] == [b for b, _ in boards.BACKENDS]
+    for result in results:
+        assert result.error is None, result.error
+        assert result.latency_lost == 0 and len(result.latency) == 4
+        assert sorted(result.per_channel) == [14, 15, 16, 17, 18, 19]
+        assert all(rate > 0 for rate in result.per_channel.values())
+        assert len(result.idle_rtt) == 3 and result.stream_rtt
+        assert result.reaction_lost == 0 and len(result.reaction) == 4
+        assert all(r >= 0 for r in result.reaction)
+        # Each edge's report was sized on the wire: a header, the masks, a CRC at least.
+        assert len(result.report_bytes) >= 4 and min(result.report_bytes) >= 12
+    out = pb.ArduinoOut()
+    out.input_report.digital_pins = 1
+    assert out.SerializeToString()[:1] == inputs.REPORT_TAG
+
+
 def test_report_quote_replaces_only_between_markers(tmp_path: Path) -> None:
     from bench import report
 

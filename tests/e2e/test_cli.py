@@ -12,7 +12,7 @@ from protoduino.cli.ports import classify
 from protoduino.simboard import SimBoard
 from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
 
-MINE = ["ports", "ping", "servo", "pin", "info", "monitor", "demo"]
+MINE = ["ports", "ping", "servo", "pin", "pwm", "read", "watch", "info", "monitor", "demo"]
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
@@ -50,6 +50,7 @@ def test_info(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["info", fake.port]) == 0
     out = capsys.readouterr().out
     assert "board             fake" in out
+    assert "pwm_pins          [3, 9, 10, 11]" in out
     # The link counters, as README and --help promise.
     assert "link counters" in out
     counters = dict(line.split(maxsplit=1) for line in out.splitlines() if " " in line)
@@ -59,6 +60,10 @@ def test_info(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
     obj = json.loads(capsys.readouterr().out)
     assert obj["info"]["num_pins"] == 20
     assert obj["stats"]["handshakes"] == 1
+    assert obj["info"]["pwm_pins"] == [3, 9, 10, 11]
+    assert obj["info"]["features"] == sorted(
+        ["servo", "digital_output", "digital_input", "analog_input", "pwm", "counter"]
+    )
 
 
 def test_ping(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:

@@ -59,7 +59,8 @@ def test_pose_checked_before_sending(board: Board, fake: FakeDevice) -> None:
     with pytest.raises(protoduino.CommandRejectedError) as info:
         board.pose({})
     assert info.value.status == Status.STATUS_INVALID_ARGUMENT
-    nine = {board.servo(pin): 0 for pin in range(2, 10)} | {led: False}
+    nine: dict[protoduino.board.PoseOutput, int] = {board.servo(pin): 0 for pin in range(2, 10)}
+    nine[led] = False
     with pytest.raises(protoduino.CommandRejectedError):
         board.pose(nine)  # more than 8 items
     before = len(fake.commands())
@@ -188,7 +189,7 @@ def test_pose_changes_every_joint_in_one_frame(sim_board: SimBoard) -> None:
             wait_for_pin(sim_board, s.pin, functools.partial(ends_near, us(90)))
         start = sim_board.trace()[-1]["t"]
         for round_ in range(3):  # a few poses, at whatever phase of the frame they land
-            targets: dict[protoduino.Servo | protoduino.DigitalOutput, int | bool] = {
+            targets: dict[protoduino.board.PoseOutput, float] = {
                 s: 20 + 40 * round_ + i for i, s in enumerate(servos)
             }
             targets[led] = round_ % 2 == 0

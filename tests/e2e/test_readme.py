@@ -140,13 +140,18 @@ def test_the_real_uno_examples(
             time.sleep(0.02)
 
     lines = block("uno")
-    assert [shlex.split(x)[1] for x in lines] == ["ports", "flash", "info", "servo", "pin"]
+    commands = [shlex.split(x)[1] for x in lines]
+    assert commands == ["ports", "flash", "info", "servo", "pin", "pwm", "read"]
     for line in lines:
         assert run(line, {UNO_PORT: uno.port}) == 0, line
         if " servo " in line:  # servo 9 45: 544 + 45 * (2400 - 544) / 180 us
             wait(9, lambda v: any(abs(x - 1008) <= PULSE_TOLERANCE_US for x in v))
-    wait(13, lambda v: v[-1:] == [1])
+        if " pin " in line:
+            wait(13, lambda v: v[-1:] == [1])
+        if " pwm " in line:  # measured at the pin from the timer's compare output
+            wait(3, lambda v: 128 in v)
     out = capsys.readouterr().out
+    assert "pin 2 digital: 1 (" in out  # nothing drives pin 2: its pull-up reads high
     assert "num_pins          20" in out
     assert "handshakes        1" in out  # info's link counters
 
@@ -211,3 +216,20 @@ def test_the_remote_example(sim_board: SimBoard, tmp_path: Path) -> None:
             assert run(line, {"rfc2217://raspberrypi.local:7000": local}) == 0, line
     finally:
         server.stop()
+
+
+def python_example() -> str:
+    """The README's first Python block (the one that opens /dev/ttyACM0)."""
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+    assert blocks and UNO_PORT in blocks[0]
+    return str(blocks[0])
+
+
+def test_the_python_example_runs(sim_board: SimBoard, capsys: pytest.CaptureFixture[str]) -> None:
+    """As written, with the port swapped: every pin mode it shows exists, on pins that can do
+    it, and none clashes with another (the simulated boards keep the Uno's pin rules)."""
+    code = python_example().replace(f'"{UNO_PORT}"', repr(sim_board.port))
+    exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
+    out = capsys.readouterr().out
+    assert "DeviceInfo(" in out  # print(board.info, board.stats) ran
+    assert any(e["pin"] == 3 and e.get("mode") == "pwm" for e in sim_board.trace())

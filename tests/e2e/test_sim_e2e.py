@@ -315,7 +315,8 @@ def test_version_1_host_gets_the_short_answer_and_its_version_error(
     sim_board: SimBoard, host: RawHost
 ) -> None:
     """An old host: RESET in version 1's shape; the device answers in the shape version 1
-    reads (its host then raises VersionMismatchError naming 1 and 3) and commands nothing."""
+    reads (its host then raises VersionMismatchError naming 1 and the device's version) and
+    commands nothing."""
     host.write(b"\0" + frame_packet(PacketType.CONTROL, 0, bytes((ControlCode.RESET, 1))))
     host.seq = 1
     pkt = host.wait(lambda p: _control_code(p) is ControlCode.RESET_ACK)

@@ -24,7 +24,7 @@ from protoduino.errors import (
 )
 from protoduino.events import Event, EventKind
 from protoduino.link import Link, LinkState
-from protoduino.messages import ArduinoIn
+from protoduino.messages import ArduinoIn, ArduinoOut
 from protoduino.rpc import Rpc
 from virtualdevice import ManualClock, VirtualDevice
 
@@ -225,3 +225,27 @@ def test_a_call_fails_with_the_port_error_while_the_port_is_gone() -> None:
     assert isinstance(call.error, TransportError) and "vanished" in str(call.error)
     assert stack.clock() - start <= bound + 0.001
     assert commands(stack.device) == 0
+
+
+def test_input_reports_reach_the_message_hook_and_are_no_acks() -> None:
+    """An InputReport after an Init's Ack, and one between a command and its Ack, go to
+    the board's hook; the request layer matches Acks as before and counts no stray one."""
+    stack = Stack(VirtualDevice())
+    reports: list[ArduinoOut] = []
+    stack.rpc.message_hook = reports.append
+    stack.link.open()
+    msg = ArduinoIn()
+    msg.digital_input_init.pin = 2
+    call = stack.rpc.submit(msg)
+    assert stack.device.deliver() == 2  # the Ack, then the level
+    assert call.done.is_set() and call.error is None
+    assert [r.WhichOneof("data") for r in reports] == ["input_report"]
+    assert reports[0].input_report.digital_pins == 1 << 2
+    assert reports[0].input_report.digital_levels == 1 << 2
+    stack.device.levels[2] = 0
+    stack.device.report()  # a change, queued before the next command's Ack
+    second = stack.rpc.submit(digital_init(13))
+    assert stack.device.deliver() == 2
+    assert second.done.is_set() and second.error is None
+    assert reports[-1].input_report.digital_levels == 0
+    assert stack.rpc.acks == 2 and stack.rpc.unknown_acks == 0 and stack.rpc.late_acks == 0

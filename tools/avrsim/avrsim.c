@@ -202,6 +202,9 @@ typedef struct {
     uint16_t sp_min;       /* lowest stack pointer seen since start, a data address */
     uint32_t sp_min_pc;    /* the flash byte address that reached it */
     int sp_split;          /* between an OUT to SPH and the OUT to SPL that completes it */
+    const char *stack_path; /* --stack: NULL when off */
+    uint8_t sp_min_stack[4096]; /* the stack's bytes, SP + 1 .. RAMEND, when sp_min was reached */
+    size_t sp_min_len;
     const char *profile_path; /* --profile: NULL when off */
     uint64_t *profile;        /* awake cycles per flash word */
     size_t profile_words;
@@ -556,6 +559,15 @@ static void pd_write_stats(pd_sim_t *sim)
     if (!sim->stats) {
         return;
     }
+    if (sim->stack_path) {
+        /* --stack: the deepest stack's bytes, for protoduino_dev.stackwalk (replaced),
+         * before the line that says it is there. */
+        FILE *f = fopen(sim->stack_path, "wb");
+        if (f) {
+            fwrite(sim->sp_min_stack, 1, sim->sp_min_len, f);
+            fclose(f);
+        }
+    }
     uint64_t cycles = pd_cycles(sim);
     uint64_t sleep = sim->sleep_cycles < cycles ? sim->sleep_cycles : cycles;
     fprintf(sim->stats,
@@ -656,6 +668,14 @@ static void pd_track_sp(pd_sim_t *sim, avr_flashaddr_t pc)
     if (sp < sim->sp_min) {
         sim->sp_min = sp;
         sim->sp_min_pc = sim->avr->pc;
+        if (sim->stack_path && sp < sim->avr->ramend) {
+            /* New lows are rare after the first moments: the copy costs nothing then. */
+            size_t n = (size_t)(sim->avr->ramend - sp);
+            if (n <= sizeof sim->sp_min_stack) {
+                memcpy(sim->sp_min_stack, &sim->avr->data[sp + 1], n);
+                sim->sp_min_len = n;
+            }
+        }
     }
 }
 
@@ -1055,13 +1075,15 @@ static void pd_usage(FILE *f)
     fprintf(f,
             "usage: avrsim [--trace FILE] [--link PATH] [--control PATH] [--hex FILE]...\n"
             "              [--boot ADDR] [--auto-reset] [--glitch PIN] [--stats FILE]\n"
-            "              [--profile FILE] [--mcu NAME] [--freq HZ] [--owner-fd FD]\n"
+            "              [--profile FILE] [--stack FILE] [--mcu NAME] [--freq HZ]\n"
+            "              [--owner-fd FD]\n"
             "              [FIRMWARE.elf]\n"
             "Runs an emulated Arduino Uno with UART0 on a pseudo-terminal; prints the\n"
             "port as the first stdout line. SIGUSR1 resets the MCU, SIGINT/SIGTERM exit;\n"
             "--owner-fd FD: exit when FD (the owner's pipe) reads end-of-file;\n"
             "with --stats, SIGUSR2 and the exit append cycle and UART counters to FILE;\n"
             "with --profile, SIGUSR2 writes awake cycles per flash address to FILE;\n"
+            "with --stats and --stack, each stats line also writes the deepest stack's bytes to FILE;\n"
             "--control PATH: a Unix socket taking JSON input commands, one per line.\n");
 }
 
@@ -1229,6 +1251,7 @@ int main(int argc, char **argv)
         {"mcu", required_argument, NULL, 'm'},   {"freq", required_argument, NULL, 'f'},
         {"auto-reset", no_argument, NULL, 'r'},  {"glitch", required_argument, NULL, 'g'},
         {"stats", required_argument, NULL, 's'}, {"profile", required_argument, NULL, 'p'},
+        {"stack", required_argument, NULL, 'k'},
         {"control", required_argument, NULL, 'c'}, {"owner-fd", required_argument, NULL, 'o'},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
@@ -1274,6 +1297,9 @@ int main(int argc, char **argv)
             break;
         case 'p':
             sim->profile_path = optarg;
+            break;
+        case 'k':
+            sim->stack_path = optarg;
             break;
         case 'c':
             control_path = optarg;

@@ -58,6 +58,19 @@ class _StatusEnumTypeWrapper(_enum_type_wrapper._EnumTypeWrapper[_Status.ValueTy
     per the session's liveness source) came since: a Control now would leave
     an output commanded with no running timer. Send the liveness message first.
     """
+    STATUS_INTERLOCK_ACTIVE: _Status.ValueType  # 11
+    """An interlock input tripped (or is still at its trip level): outputs are
+    latched safe until the input is back at its normal level and the host
+    sends ClearInterlock.
+    """
+    STATUS_TIMER_IN_USE: _Status.ValueType  # 12
+    """The pin's hardware timer is taken by another mode (on the Uno Timer1
+    drives the servos, so pins 9 and 10 cannot do PWM while a servo runs).
+    """
+    STATUS_NOT_SUPPORTED: _Status.ValueType  # 13
+    """This pin cannot do this mode on this board (no PWM, ADC or interrupt
+    there), or the firmware was built without the mode's feature.
+    """
 
 class Status(_Status, metaclass=_StatusEnumTypeWrapper):
     """Why a command was or was not executed. Anything but STATUS_OK means the
@@ -88,7 +101,87 @@ STATUS_FAILSAFE_EXPIRED: Status.ValueType  # 10
 per the session's liveness source) came since: a Control now would leave
 an output commanded with no running timer. Send the liveness message first.
 """
+STATUS_INTERLOCK_ACTIVE: Status.ValueType  # 11
+"""An interlock input tripped (or is still at its trip level): outputs are
+latched safe until the input is back at its normal level and the host
+sends ClearInterlock.
+"""
+STATUS_TIMER_IN_USE: Status.ValueType  # 12
+"""The pin's hardware timer is taken by another mode (on the Uno Timer1
+drives the servos, so pins 9 and 10 cannot do PWM while a servo runs).
+"""
+STATUS_NOT_SUPPORTED: Status.ValueType  # 13
+"""This pin cannot do this mode on this board (no PWM, ADC or interrupt
+there), or the firmware was built without the mode's feature.
+"""
 Global___Status: _TypeAlias = Status  # noqa: Y015
+
+class _Feature:
+    ValueType = _typing.NewType("ValueType", _builtins.int)
+    V: _TypeAlias = ValueType  # noqa: Y015
+
+class _FeatureEnumTypeWrapper(_enum_type_wrapper._EnumTypeWrapper[_Feature.ValueType], _builtins.type):
+    DESCRIPTOR: _descriptor.EnumDescriptor
+    FEATURE_NONE: _Feature.ValueType  # 0
+    FEATURE_SERVO: _Feature.ValueType  # 1
+    FEATURE_DIGITAL_OUTPUT: _Feature.ValueType  # 2
+    FEATURE_DIGITAL_INPUT: _Feature.ValueType  # 3
+    FEATURE_ANALOG_INPUT: _Feature.ValueType  # 4
+    FEATURE_PWM: _Feature.ValueType  # 5
+    FEATURE_COUNTER: _Feature.ValueType  # 6
+
+class Feature(_Feature, metaclass=_FeatureEnumTypeWrapper):
+    """The build-time features a firmware may carry (DeviceInfo.features: bit N
+    set means Feature N is built in). One per pin mode.
+    """
+
+FEATURE_NONE: Feature.ValueType  # 0
+FEATURE_SERVO: Feature.ValueType  # 1
+FEATURE_DIGITAL_OUTPUT: Feature.ValueType  # 2
+FEATURE_DIGITAL_INPUT: Feature.ValueType  # 3
+FEATURE_ANALOG_INPUT: Feature.ValueType  # 4
+FEATURE_PWM: Feature.ValueType  # 5
+FEATURE_COUNTER: Feature.ValueType  # 6
+Global___Feature: _TypeAlias = Feature  # noqa: Y015
+
+class _Trip:
+    ValueType = _typing.NewType("ValueType", _builtins.int)
+    V: _TypeAlias = ValueType  # noqa: Y015
+
+class _TripEnumTypeWrapper(_enum_type_wrapper._EnumTypeWrapper[_Trip.ValueType], _builtins.type):
+    DESCRIPTOR: _descriptor.EnumDescriptor
+    TRIP_NONE: _Trip.ValueType  # 0
+    """not an interlock"""
+    TRIP_LOW: _Trip.ValueType  # 1
+    """trips when the debounced level is low (a switch to ground with pull-up)"""
+    TRIP_HIGH: _Trip.ValueType  # 2
+
+class Trip(_Trip, metaclass=_TripEnumTypeWrapper):
+    """When an interlock input trips (protocol.md section 7, Interlocks)."""
+
+TRIP_NONE: Trip.ValueType  # 0
+"""not an interlock"""
+TRIP_LOW: Trip.ValueType  # 1
+"""trips when the debounced level is low (a switch to ground with pull-up)"""
+TRIP_HIGH: Trip.ValueType  # 2
+Global___Trip: _TypeAlias = Trip  # noqa: Y015
+
+class _Edge:
+    ValueType = _typing.NewType("ValueType", _builtins.int)
+    V: _TypeAlias = ValueType  # noqa: Y015
+
+class _EdgeEnumTypeWrapper(_enum_type_wrapper._EnumTypeWrapper[_Edge.ValueType], _builtins.type):
+    DESCRIPTOR: _descriptor.EnumDescriptor
+    EDGE_RISING: _Edge.ValueType  # 0
+    EDGE_FALLING: _Edge.ValueType  # 1
+    EDGE_BOTH: _Edge.ValueType  # 2
+
+class Edge(_Edge, metaclass=_EdgeEnumTypeWrapper): ...
+
+EDGE_RISING: Edge.ValueType  # 0
+EDGE_FALLING: Edge.ValueType  # 1
+EDGE_BOTH: Edge.ValueType  # 2
+Global___Edge: _TypeAlias = Edge  # noqa: Y015
 
 class _Liveness:
     ValueType = _typing.NewType("ValueType", _builtins.int)
@@ -119,12 +212,14 @@ class _FailsafeCauseEnumTypeWrapper(_enum_type_wrapper._EnumTypeWrapper[_Failsaf
     FAILSAFE_CAUSE_NONE: _FailsafeCause.ValueType  # 0
     FAILSAFE_CAUSE_PING_TIMEOUT: _FailsafeCause.ValueType  # 1
     FAILSAFE_CAUSE_STOP: _FailsafeCause.ValueType  # 2
+    FAILSAFE_CAUSE_INTERLOCK: _FailsafeCause.ValueType  # 3
 
 class FailsafeCause(_FailsafeCause, metaclass=_FailsafeCauseEnumTypeWrapper): ...
 
 FAILSAFE_CAUSE_NONE: FailsafeCause.ValueType  # 0
 FAILSAFE_CAUSE_PING_TIMEOUT: FailsafeCause.ValueType  # 1
 FAILSAFE_CAUSE_STOP: FailsafeCause.ValueType  # 2
+FAILSAFE_CAUSE_INTERLOCK: FailsafeCause.ValueType  # 3
 Global___FailsafeCause: _TypeAlias = FailsafeCause  # noqa: Y015
 
 class _LogLevel:
@@ -327,6 +422,177 @@ class Stop(_message.Message):
 Global___Stop: _TypeAlias = Stop  # noqa: Y015
 
 @_typing.final
+class DigitalInputInit(_message.Message):
+    """Configure a digital input: reported on every debounced change (InputReport)."""
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    PIN_FIELD_NUMBER: _builtins.int
+    PULL_UP_FIELD_NUMBER: _builtins.int
+    DEBOUNCE_MS_FIELD_NUMBER: _builtins.int
+    INTERLOCK_FIELD_NUMBER: _builtins.int
+    pin: _builtins.int
+    pull_up: _builtins.bool
+    debounce_ms: _builtins.int
+    """0..255: a level must hold this long to count"""
+    interlock: Global___Trip.ValueType
+    """make it an interlock: a local reaction on the device"""
+    def __init__(
+        self,
+        *,
+        pin: _builtins.int = ...,
+        pull_up: _builtins.bool = ...,
+        debounce_ms: _builtins.int = ...,
+        interlock: Global___Trip.ValueType = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["debounce_ms", b"debounce_ms", "interlock", b"interlock", "pin", b"pin", "pull_up", b"pull_up"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___DigitalInputInit: _TypeAlias = DigitalInputInit  # noqa: Y015
+
+@_typing.final
+class AnalogInputInit(_message.Message):
+    """Configure an analog input (A0..A5 on the Uno: pins 14..19), 10-bit counts."""
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    PIN_FIELD_NUMBER: _builtins.int
+    INTERVAL_MS_FIELD_NUMBER: _builtins.int
+    THRESHOLD_FIELD_NUMBER: _builtins.int
+    HEARTBEAT_MS_FIELD_NUMBER: _builtins.int
+    pin: _builtins.int
+    interval_ms: _builtins.int
+    """sampling period, 1..60000; 0 means 10"""
+    threshold: _builtins.int
+    """report when the value moved by more than this many counts"""
+    heartbeat_ms: _builtins.int
+    """... or this long passed without a report (0: 1000)"""
+    def __init__(
+        self,
+        *,
+        pin: _builtins.int = ...,
+        interval_ms: _builtins.int = ...,
+        threshold: _builtins.int = ...,
+        heartbeat_ms: _builtins.int = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["heartbeat_ms", b"heartbeat_ms", "interval_ms", b"interval_ms", "pin", b"pin", "threshold", b"threshold"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___AnalogInputInit: _TypeAlias = AnalogInputInit  # noqa: Y015
+
+@_typing.final
+class CounterInit(_message.Message):
+    """Configure a pulse counter (wheel encoder): counts edges in an interrupt."""
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    PIN_FIELD_NUMBER: _builtins.int
+    EDGE_FIELD_NUMBER: _builtins.int
+    PULL_UP_FIELD_NUMBER: _builtins.int
+    INTERVAL_MS_FIELD_NUMBER: _builtins.int
+    pin: _builtins.int
+    edge: Global___Edge.ValueType
+    pull_up: _builtins.bool
+    interval_ms: _builtins.int
+    """report the count at most this often when it changed (0: 20)"""
+    def __init__(
+        self,
+        *,
+        pin: _builtins.int = ...,
+        edge: Global___Edge.ValueType = ...,
+        pull_up: _builtins.bool = ...,
+        interval_ms: _builtins.int = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["edge", b"edge", "interval_ms", b"interval_ms", "pin", b"pin", "pull_up", b"pull_up"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___CounterInit: _TypeAlias = CounterInit  # noqa: Y015
+
+@_typing.final
+class PwmInit(_message.Message):
+    """Configure a PWM output (duty 0..255, as Arduino's analogWrite). It takes its
+    safe duty at once, unless already a PWM output with this safe duty.
+    """
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    PIN_FIELD_NUMBER: _builtins.int
+    SAFE_DUTY_FIELD_NUMBER: _builtins.int
+    pin: _builtins.int
+    safe_duty: _builtins.int
+    """0..255; motors: 0"""
+    def __init__(
+        self,
+        *,
+        pin: _builtins.int = ...,
+        safe_duty: _builtins.int = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["pin", b"pin", "safe_duty", b"safe_duty"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___PwmInit: _TypeAlias = PwmInit  # noqa: Y015
+
+@_typing.final
+class PwmControl(_message.Message):
+    DESCRIPTOR: _descriptor.Descriptor
+
+    PIN_FIELD_NUMBER: _builtins.int
+    DUTY_FIELD_NUMBER: _builtins.int
+    pin: _builtins.int
+    duty: _builtins.int
+    """0..255"""
+    def __init__(
+        self,
+        *,
+        pin: _builtins.int = ...,
+        duty: _builtins.int = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["duty", b"duty", "pin", b"pin"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___PwmControl: _TypeAlias = PwmControl  # noqa: Y015
+
+@_typing.final
+class ClearInterlock(_message.Message):
+    """Clear a latched interlock once its input is back at its normal level."""
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    FAILSAFE_EPOCH_FIELD_NUMBER: _builtins.int
+    failsafe_epoch: _builtins.int
+    """As Ping.failsafe_epoch: only a host that has seen the latest safe state
+    (the interlock's trip, or anything after it) may clear the latch, so a
+    ClearInterlock held up on the way never clears a later trip.
+    """
+    def __init__(
+        self,
+        *,
+        failsafe_epoch: _builtins.int = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["failsafe_epoch", b"failsafe_epoch"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___ClearInterlock: _TypeAlias = ClearInterlock  # noqa: Y015
+
+@_typing.final
 class GetInfo(_message.Message):
     """Ask for DeviceInfo (returned in the Ack)."""
 
@@ -354,21 +620,25 @@ class PoseItem(_message.Message):
 
     SERVO_FIELD_NUMBER: _builtins.int
     DIGITAL_FIELD_NUMBER: _builtins.int
+    PWM_FIELD_NUMBER: _builtins.int
     @_builtins.property
     def servo(self) -> Global___ServoControl: ...
     @_builtins.property
     def digital(self) -> Global___DigitalControl: ...
+    @_builtins.property
+    def pwm(self) -> Global___PwmControl: ...
     def __init__(
         self,
         *,
         servo: Global___ServoControl | None = ...,
         digital: Global___DigitalControl | None = ...,
+        pwm: Global___PwmControl | None = ...,
     ) -> None: ...
-    _HasFieldArgType: _TypeAlias = _typing.Literal["digital", b"digital", "output", b"output", "servo", b"servo"]  # noqa: Y015
+    _HasFieldArgType: _TypeAlias = _typing.Literal["digital", b"digital", "output", b"output", "pwm", b"pwm", "servo", b"servo"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["digital", b"digital", "output", b"output", "servo", b"servo"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["digital", b"digital", "output", b"output", "pwm", b"pwm", "servo", b"servo"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
-    _WhichOneofReturnType_output: _TypeAlias = _typing.Literal["servo", "digital"]  # noqa: Y015
+    _WhichOneofReturnType_output: _TypeAlias = _typing.Literal["servo", "digital", "pwm"]  # noqa: Y015
     _WhichOneofArgType_output: _TypeAlias = _typing.Literal["output", b"output"]  # noqa: Y015
     def WhichOneof(self, oneof_group: _WhichOneofArgType_output) -> _WhichOneofReturnType_output | None: ...
 
@@ -520,6 +790,12 @@ class ArduinoIn(_message.Message):
     HEARTBEAT_FIELD_NUMBER: _builtins.int
     RELEASE_FIELD_NUMBER: _builtins.int
     RELEASE_ALL_FIELD_NUMBER: _builtins.int
+    PWM_CONTROL_FIELD_NUMBER: _builtins.int
+    PWM_INIT_FIELD_NUMBER: _builtins.int
+    DIGITAL_INPUT_INIT_FIELD_NUMBER: _builtins.int
+    ANALOG_INPUT_INIT_FIELD_NUMBER: _builtins.int
+    COUNTER_INIT_FIELD_NUMBER: _builtins.int
+    CLEAR_INTERLOCK_FIELD_NUMBER: _builtins.int
     POSE_FIELD_NUMBER: _builtins.int
     READ_OUTPUTS_FIELD_NUMBER: _builtins.int
     message_id: _builtins.int
@@ -547,6 +823,18 @@ class ArduinoIn(_message.Message):
     @_builtins.property
     def release_all(self) -> Global___ReleaseAll: ...
     @_builtins.property
+    def pwm_control(self) -> Global___PwmControl: ...
+    @_builtins.property
+    def pwm_init(self) -> Global___PwmInit: ...
+    @_builtins.property
+    def digital_input_init(self) -> Global___DigitalInputInit: ...
+    @_builtins.property
+    def analog_input_init(self) -> Global___AnalogInputInit: ...
+    @_builtins.property
+    def counter_init(self) -> Global___CounterInit: ...
+    @_builtins.property
+    def clear_interlock(self) -> Global___ClearInterlock: ...
+    @_builtins.property
     def pose(self) -> Global___Pose: ...
     @_builtins.property
     def read_outputs(self) -> Global___ReadOutputs: ...
@@ -565,14 +853,20 @@ class ArduinoIn(_message.Message):
         heartbeat: Global___Heartbeat | None = ...,
         release: Global___Release | None = ...,
         release_all: Global___ReleaseAll | None = ...,
+        pwm_control: Global___PwmControl | None = ...,
+        pwm_init: Global___PwmInit | None = ...,
+        digital_input_init: Global___DigitalInputInit | None = ...,
+        analog_input_init: Global___AnalogInputInit | None = ...,
+        counter_init: Global___CounterInit | None = ...,
+        clear_interlock: Global___ClearInterlock | None = ...,
         pose: Global___Pose | None = ...,
         read_outputs: Global___ReadOutputs | None = ...,
     ) -> None: ...
-    _HasFieldArgType: _TypeAlias = _typing.Literal["configure_failsafe", b"configure_failsafe", "data", b"data", "digital_control", b"digital_control", "digital_init", b"digital_init", "get_info", b"get_info", "heartbeat", b"heartbeat", "ping", b"ping", "pose", b"pose", "read_outputs", b"read_outputs", "release", b"release", "release_all", b"release_all", "servo_control", b"servo_control", "servo_init", b"servo_init", "stop", b"stop"]  # noqa: Y015
+    _HasFieldArgType: _TypeAlias = _typing.Literal["analog_input_init", b"analog_input_init", "clear_interlock", b"clear_interlock", "configure_failsafe", b"configure_failsafe", "counter_init", b"counter_init", "data", b"data", "digital_control", b"digital_control", "digital_init", b"digital_init", "digital_input_init", b"digital_input_init", "get_info", b"get_info", "heartbeat", b"heartbeat", "ping", b"ping", "pose", b"pose", "pwm_control", b"pwm_control", "pwm_init", b"pwm_init", "read_outputs", b"read_outputs", "release", b"release", "release_all", b"release_all", "servo_control", b"servo_control", "servo_init", b"servo_init", "stop", b"stop"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["configure_failsafe", b"configure_failsafe", "data", b"data", "digital_control", b"digital_control", "digital_init", b"digital_init", "get_info", b"get_info", "heartbeat", b"heartbeat", "message_id", b"message_id", "ping", b"ping", "pose", b"pose", "read_outputs", b"read_outputs", "release", b"release", "release_all", b"release_all", "servo_control", b"servo_control", "servo_init", b"servo_init", "stop", b"stop"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["analog_input_init", b"analog_input_init", "clear_interlock", b"clear_interlock", "configure_failsafe", b"configure_failsafe", "counter_init", b"counter_init", "data", b"data", "digital_control", b"digital_control", "digital_init", b"digital_init", "digital_input_init", b"digital_input_init", "get_info", b"get_info", "heartbeat", b"heartbeat", "message_id", b"message_id", "ping", b"ping", "pose", b"pose", "pwm_control", b"pwm_control", "pwm_init", b"pwm_init", "read_outputs", b"read_outputs", "release", b"release", "release_all", b"release_all", "servo_control", b"servo_control", "servo_init", b"servo_init", "stop", b"stop"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
-    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ping", "servo_init", "servo_control", "digital_init", "digital_control", "stop", "get_info", "configure_failsafe", "heartbeat", "release", "release_all", "pose", "read_outputs"]  # noqa: Y015
+    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ping", "servo_init", "servo_control", "digital_init", "digital_control", "stop", "get_info", "configure_failsafe", "heartbeat", "release", "release_all", "pwm_control", "pwm_init", "digital_input_init", "analog_input_init", "counter_init", "clear_interlock", "pose", "read_outputs"]  # noqa: Y015
     _WhichOneofArgType_data: _TypeAlias = _typing.Literal["data", b"data"]  # noqa: Y015
     def WhichOneof(self, oneof_group: _WhichOneofArgType_data) -> _WhichOneofReturnType_data | None: ...
 
@@ -590,6 +884,10 @@ class DeviceInfo(_message.Message):
     MAX_SERVOS_FIELD_NUMBER: _builtins.int
     RESERVED_PINS_FIELD_NUMBER: _builtins.int
     RX_BUFFER_FIELD_NUMBER: _builtins.int
+    FEATURES_FIELD_NUMBER: _builtins.int
+    PWM_PINS_FIELD_NUMBER: _builtins.int
+    ANALOG_PINS_FIELD_NUMBER: _builtins.int
+    COUNTER_PINS_FIELD_NUMBER: _builtins.int
     firmware_version: _builtins.str
     protocol_version: _builtins.int
     schema_id: _builtins.int
@@ -601,6 +899,14 @@ class DeviceInfo(_message.Message):
     """Bytes of received frames the device can hold while it works (the Uno's
     receive ring): the host keeps the command frames in flight within it.
     """
+    features: _builtins.int
+    """bit N: Feature N is built in"""
+    pwm_pins: _builtins.int
+    """bit N: pin N can do PWM"""
+    analog_pins: _builtins.int
+    """bit N: pin N is an analog input"""
+    counter_pins: _builtins.int
+    """bit N: pin N can count pulses"""
     @_builtins.property
     def reserved_pins(self) -> _containers.RepeatedScalarFieldContainer[_builtins.int]: ...
     def __init__(
@@ -614,10 +920,14 @@ class DeviceInfo(_message.Message):
         max_servos: _builtins.int = ...,
         reserved_pins: _abc.Iterable[_builtins.int] | None = ...,
         rx_buffer: _builtins.int = ...,
+        features: _builtins.int = ...,
+        pwm_pins: _builtins.int = ...,
+        analog_pins: _builtins.int = ...,
+        counter_pins: _builtins.int = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["board", b"board", "firmware_version", b"firmware_version", "max_servos", b"max_servos", "num_pins", b"num_pins", "protocol_version", b"protocol_version", "reserved_pins", b"reserved_pins", "rx_buffer", b"rx_buffer", "schema_id", b"schema_id"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["analog_pins", b"analog_pins", "board", b"board", "counter_pins", b"counter_pins", "features", b"features", "firmware_version", b"firmware_version", "max_servos", b"max_servos", "num_pins", b"num_pins", "protocol_version", b"protocol_version", "pwm_pins", b"pwm_pins", "reserved_pins", b"reserved_pins", "rx_buffer", b"rx_buffer", "schema_id", b"schema_id"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
@@ -632,6 +942,8 @@ class OutputStates(_message.Message):
     SERVOS_FIELD_NUMBER: _builtins.int
     DIGITAL_PINS_FIELD_NUMBER: _builtins.int
     DIGITAL_LEVELS_FIELD_NUMBER: _builtins.int
+    PWM_PINS_FIELD_NUMBER: _builtins.int
+    PWM_DUTIES_FIELD_NUMBER: _builtins.int
     servos: _builtins.bytes
     """5 bytes per servo, in pin order: its pin, then the width it drives now and
     the width it moves to (the same unless speed-limited), each in us as a
@@ -641,16 +953,24 @@ class OutputStates(_message.Message):
     """bit N: pin N is a digital output"""
     digital_levels: _builtins.int
     """bit N: the level pin N drives"""
+    pwm_pins: _builtins.int
+    """bit N: pin N is a PWM output"""
+    @_builtins.property
+    def pwm_duties(self) -> _containers.RepeatedScalarFieldContainer[_builtins.int]:
+        """their duties, in pin order"""
+
     def __init__(
         self,
         *,
         servos: _builtins.bytes = ...,
         digital_pins: _builtins.int = ...,
         digital_levels: _builtins.int = ...,
+        pwm_pins: _builtins.int = ...,
+        pwm_duties: _abc.Iterable[_builtins.int] | None = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["digital_levels", b"digital_levels", "digital_pins", b"digital_pins", "servos", b"servos"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["digital_levels", b"digital_levels", "digital_pins", b"digital_pins", "pwm_duties", b"pwm_duties", "pwm_pins", b"pwm_pins", "servos", b"servos"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
@@ -722,27 +1042,87 @@ class Failsafe(_message.Message):
     ACTIVE_FIELD_NUMBER: _builtins.int
     CAUSE_FIELD_NUMBER: _builtins.int
     EPOCH_FIELD_NUMBER: _builtins.int
+    PIN_FIELD_NUMBER: _builtins.int
     active: _builtins.bool
     cause: Global___FailsafeCause.ValueType
     epoch: _builtins.int
-    """Counts the safe states the device entered since boot (timeout or Stop),
-    1 for the first, modulo 256; the host sends the latest it saw back in its
-    liveness messages (Ping.failsafe_epoch).
+    """Counts the safe states the device entered since boot (timeout, Stop,
+    interlock), 1 for the first, modulo 256; the host sends the latest it
+    saw back in its liveness messages (Ping.failsafe_epoch).
     """
+    pin: _builtins.int
+    """the interlock's input pin (cause INTERLOCK)"""
     def __init__(
         self,
         *,
         active: _builtins.bool = ...,
         cause: Global___FailsafeCause.ValueType = ...,
         epoch: _builtins.int = ...,
+        pin: _builtins.int = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["active", b"active", "cause", b"cause", "epoch", b"epoch"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["active", b"active", "cause", b"cause", "epoch", b"epoch", "pin", b"pin"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
 Global___Failsafe: _TypeAlias = Failsafe  # noqa: Y015
+
+@_typing.final
+class InputReport(_message.Message):
+    """The inputs' state, sent when something changed ("newest wins": a report not
+    yet sent is replaced by a newer one, and `coalesced` counts the replaced).
+    """
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    TIME_MS_FIELD_NUMBER: _builtins.int
+    DIGITAL_PINS_FIELD_NUMBER: _builtins.int
+    DIGITAL_LEVELS_FIELD_NUMBER: _builtins.int
+    ANALOG_PINS_FIELD_NUMBER: _builtins.int
+    ANALOG_VALUES_FIELD_NUMBER: _builtins.int
+    COUNTER_PINS_FIELD_NUMBER: _builtins.int
+    COUNTER_COUNTS_FIELD_NUMBER: _builtins.int
+    COALESCED_FIELD_NUMBER: _builtins.int
+    time_ms: _builtins.int
+    """device time (ms, wraps) the values were taken"""
+    digital_pins: _builtins.int
+    """bit N: pin N is a digital input (every report)"""
+    digital_levels: _builtins.int
+    """bit N: its debounced level"""
+    analog_pins: _builtins.int
+    """bit N: pin N's value is in analog_values"""
+    counter_pins: _builtins.int
+    """bit N: pin N's count is in counter_counts"""
+    coalesced: _builtins.int
+    """reports replaced before they were sent, since the last"""
+    @_builtins.property
+    def analog_values(self) -> _containers.RepeatedScalarFieldContainer[_builtins.int]:
+        """10-bit counts, in pin order"""
+
+    @_builtins.property
+    def counter_counts(self) -> _containers.RepeatedScalarFieldContainer[_builtins.int]:
+        """edges since the CounterInit (wraps at 2^32), in pin order"""
+
+    def __init__(
+        self,
+        *,
+        time_ms: _builtins.int = ...,
+        digital_pins: _builtins.int = ...,
+        digital_levels: _builtins.int = ...,
+        analog_pins: _builtins.int = ...,
+        analog_values: _abc.Iterable[_builtins.int] | None = ...,
+        counter_pins: _builtins.int = ...,
+        counter_counts: _abc.Iterable[_builtins.int] | None = ...,
+        coalesced: _builtins.int = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["analog_pins", b"analog_pins", "analog_values", b"analog_values", "coalesced", b"coalesced", "counter_counts", b"counter_counts", "counter_pins", b"counter_pins", "digital_levels", b"digital_levels", "digital_pins", b"digital_pins", "time_ms", b"time_ms"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___InputReport: _TypeAlias = InputReport  # noqa: Y015
 
 @_typing.final
 class DecodeError(_message.Message):
@@ -798,6 +1178,7 @@ class ArduinoOut(_message.Message):
     FAILSAFE_FIELD_NUMBER: _builtins.int
     DECODE_ERROR_FIELD_NUMBER: _builtins.int
     LOG_FIELD_NUMBER: _builtins.int
+    INPUT_REPORT_FIELD_NUMBER: _builtins.int
     @_builtins.property
     def ack(self) -> Global___Ack: ...
     @_builtins.property
@@ -806,6 +1187,8 @@ class ArduinoOut(_message.Message):
     def decode_error(self) -> Global___DecodeError: ...
     @_builtins.property
     def log(self) -> Global___Log: ...
+    @_builtins.property
+    def input_report(self) -> Global___InputReport: ...
     def __init__(
         self,
         *,
@@ -813,12 +1196,13 @@ class ArduinoOut(_message.Message):
         failsafe: Global___Failsafe | None = ...,
         decode_error: Global___DecodeError | None = ...,
         log: Global___Log | None = ...,
+        input_report: Global___InputReport | None = ...,
     ) -> None: ...
-    _HasFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "log", b"log"]  # noqa: Y015
+    _HasFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "log", b"log"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "log", b"log"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "log", b"log"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
-    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ack", "failsafe", "decode_error", "log"]  # noqa: Y015
+    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ack", "failsafe", "decode_error", "log", "input_report"]  # noqa: Y015
     _WhichOneofArgType_data: _TypeAlias = _typing.Literal["data", b"data"]  # noqa: Y015
     def WhichOneof(self, oneof_group: _WhichOneofArgType_data) -> _WhichOneofReturnType_data | None: ...
 

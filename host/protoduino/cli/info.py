@@ -31,6 +31,9 @@ def run(args: argparse.Namespace) -> int:
         info = dataclasses.asdict(board.info)
         info["schema_id"] = f"0x{board.info.schema_id:08X}"
         info["reserved_pins"] = list(board.info.reserved_pins)
+        info["features"] = sorted(board.info.features)  # the pin modes built in
+        for mask in ("pwm_pins", "analog_pins", "counter_pins"):
+            info[mask] = list(getattr(board.info, mask))
         if args.json:
             print(
                 json.dumps(

@@ -1,0 +1,166 @@
+"""The Uno firmware's RAM budget, measured: static data + the deepest stack + 256 B free <= 2,048 B.
+
+The ATmega328P has 2 KB of RAM and no MMU: the stack grows down from RAMEND towards the
+static variables and, if it reaches them, corrupts them silently. The emulated Uno's runner
+(tools/avrsim, ``--stats``) records the lowest stack pointer after every instruction,
+interrupts included. :func:`exercise` drives the firmware the way that takes its stack
+deepest: every command at its largest, four in flight so that the UART interrupts land inside
+the deepest decode (a Pose, four nested messages in nanopb), with every kind of input
+configured and moving (counter, pin-change and ADC interrupts land anywhere, and reports
+compete with the Acks for the transmit ring). :class:`RamBudget` compares the low-water mark
+with the end of the static data (the linker's ``_end``; the firmware has no heap).
+
+One scenario for ``tests/e2e/test_stack_margin.py`` (which fails when the 256 B are not free)
+and for ``python -m bench`` part 5 (which reports it), so both judge the same thing.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from concurrent.futures import Future
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from protoduino import Board, CommandRejectedError, Servo
+from protoduino.messages import ArduinoIn, Status
+from protoduino.simcontrol import SimControl
+
+from . import stackwalk
+
+#: The ATmega328P's RAM (0x100 .. RAMEND = 0x8FF).
+RAM_BYTES = 2048
+RAM_START = 0x100
+#: Kept free for the users' own code (issue 21's budget). It also covers what a single run's
+#: low-water mark can miss: an interrupt landing at that point with a frame of its own.
+FREE_BYTES = 256
+
+#: The Uno firmware's pins in the scenario: counters on 2 and 3 (INT0, INT1), servos on 4..11
+#: (its eight channels), digital inputs on 12 and 13, analog inputs on 14..19 (A0..A5).
+COUNTER_PINS = (2, 3)
+SERVO_PINS = range(4, 12)
+DIGITAL_INPUT_PINS = (12, 13)
+ANALOG_PINS = range(14, 20)
+ROUNDS = 20
+#: Bounds a failing call only.
+CALL_TIMEOUT = 30.0
+
+
+def symbol(elf: Path, name: str) -> int:
+    """The data-space address of ``name`` in the ELF (avr-nm adds 0x800000 to RAM)."""
+    out = subprocess.run(
+        ["avr-nm", str(elf)], check=True, capture_output=True, text=True, timeout=60
+    ).stdout
+    for line in out.splitlines():
+        fields = line.split()
+        if len(fields) == 3 and fields[2] == name:
+            return int(fields[0], 16) & 0xFFFF
+    raise LookupError(f"{name} is not in {elf}")
+
+
+def _get_info() -> ArduinoIn:
+    msg = ArduinoIn()
+    msg.get_info.SetInParent()
+    return msg
+
+
+def _oversized_pose() -> ArduinoIn:
+    """A Pose with one item more than the firmware's bound (8): nanopb refuses it while it is
+    as deep in the decode as a Pose can take it."""
+    msg = ArduinoIn()
+    for pin in (*SERVO_PINS, DIGITAL_INPUT_PINS[0]):
+        msg.pose.items.add().servo.pin = pin
+    return msg
+
+
+def exercise(board: Board, control: SimControl, rounds: int = ROUNDS) -> int:
+    """Drive the deepest-stack scenario on an emulated Uno (``board`` opened with window 4,
+    ``control`` its input-control socket); returns the InputReports the host received.
+
+    Raises AssertionError if the device does not answer as it must (an oversized Pose that
+    decodes, inputs that never report).
+    """
+    servos: list[Servo] = [board.servo(pin, safe=90) for pin in SERVO_PINS]
+    for pin in COUNTER_PINS:
+        board.counter(pin, edge="both", rate_hz=1000)
+        control.pulses(pin, 100_000, 5_000)  # 10,000 edges a second each, the whole run
+    for pin in DIGITAL_INPUT_PINS:
+        board.digital_input(pin)
+    for pin in ANALOG_PINS:
+        board.analog_input(pin, rate_hz=1000, threshold=0)
+    for round_ in range(rounds):
+        for pin in ANALOG_PINS:
+            control.analog(pin, (round_ * 97 + pin * 31) % 1024)
+        for pin in DIGITAL_INPUT_PINS:
+            control.level(pin, (round_ + pin) & 1)
+        # Four of the largest at once: the next frame's bytes arrive (receive interrupt) and
+        # the last Ack leaves (transmit interrupt) during each decode.
+        calls: list[Future[Any]] = [
+            board.submit_pose({s: 30 + round_ for s in servos}),
+            board.submit_read_outputs(),
+            board.submit_ping(bytes(range(64))),
+            board.submit_pose({s: 150 - round_ for s in servos}),
+        ]
+        for call in calls:
+            call.result(timeout=CALL_TIMEOUT)
+        board.request(_get_info())
+        try:
+            board.request(_oversized_pose())
+        except CommandRejectedError as refused:
+            if refused.status != Status.STATUS_DECODE_ERROR:
+                raise AssertionError(f"an oversized Pose was refused with {refused}") from None
+        else:
+            raise AssertionError("a Pose of 9 items decoded")
+    reports = board.stats.input_reports
+    if reports <= rounds:
+        raise AssertionError(f"only {reports} InputReports in {rounds} rounds of moving inputs")
+    board.stop()
+    board.release_all()
+    return reports
+
+
+@dataclass(frozen=True, slots=True)
+class RamBudget:
+    """Static data and the deepest stack of one run, against the 2,048 B."""
+
+    static: int
+    stack: int
+    sp_min: int
+    sp_min_pc: int
+    #: The call chain at the deepest point (:mod:`protoduino_dev.stackwalk`), when the
+    #: runner kept the stack's bytes (``--stack FILE``); "" otherwise.
+    chain: str = ""
+
+    @classmethod
+    def of(cls, elf: Path, stats: dict[str, Any], stack: Path | None = None) -> RamBudget:
+        """From the ELF and the runner's --stats line (``sp_min``, ``sp_min_pc``, ``ramend``),
+        and its --stack file if given."""
+        if stats["sp_min"] > stats["ramend"]:
+            raise AssertionError(f"the stack was never used: {stats}")
+        chain = ""
+        if stack is not None and stack.exists():
+            chain = stackwalk.describe(stackwalk.walk(elf, stack.read_bytes()))
+        # SP points at the next free byte: the bytes above it, up to RAMEND, are in use.
+        return cls(
+            symbol(elf, "_end") - RAM_START,
+            int(stats["ramend"]) - int(stats["sp_min"]),
+            int(stats["sp_min"]),
+            int(stats["sp_min_pc"]),
+            chain,
+        )
+
+    @property
+    def free(self) -> int:
+        return RAM_BYTES - self.static - self.stack
+
+    @property
+    def holds(self) -> bool:
+        return self.free >= FREE_BYTES
+
+    def describe(self) -> str:
+        where = f"; its calls, bytes from RAMEND: {self.chain}" if self.chain else ""
+        return (
+            f"static {self.static} B + deepest stack {self.stack} B (lowest SP 0x{self.sp_min:x} "
+            f"at 0x{self.sp_min_pc:x}) = {self.static + self.stack} B; {self.free} B free "
+            f"(budget: {FREE_BYTES} B free of {RAM_BYTES} B){where}"
+        )

@@ -1,0 +1,18 @@
+/*
+ * The Arduino library's build-time features (firmware/core/pd_features.h).
+ * The IDE compiles a library's files without the sketch's #defines, so a
+ * feature is left out here, in the installed library's src/pd_config.h:
+ * set its line to 0 (it then costs no flash and no RAM, and the device
+ * answers its commands STATUS_NOT_SUPPORTED).
+ */
+#ifndef PD_CONFIG_H
+#define PD_CONFIG_H
+
+#define PD_FEATURE_SERVO 1
+#define PD_FEATURE_DIGITAL_OUTPUT 1
+#define PD_FEATURE_DIGITAL_INPUT 1
+#define PD_FEATURE_ANALOG_INPUT 1
+#define PD_FEATURE_PWM 1
+#define PD_FEATURE_COUNTER 1
+
+#endif /* PD_CONFIG_H */

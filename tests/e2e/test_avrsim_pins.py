@@ -1,0 +1,252 @@
+"""Issue 21 on the emulated Uno (the real firmware in simavr), judged at the pins and by the Acks.
+
+- A build without a feature (``make -C firmware avr FEATURES=...``) lists it nowhere in
+  DeviceInfo and answers its commands STATUS_NOT_SUPPORTED.
+- PWM outputs: the duty a PwmControl sets is the duty the trace measures at the pin (the
+  runner reads the timers' compare outputs), and Stop puts the safe duty there.
+
+Raw ArduinoIn requests go through ``Board.request``, so the device's own checks are what is
+tested (the host's Board API refuses a missing feature before sending; tests/unit test that).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+from boardprocess import BoardProcess, missing_tool
+from protoduino import Board, CommandRejectedError
+from protoduino.board import Edge
+from protoduino.messages import ArduinoIn, Status
+from protoduino.simboard import SimBoard, runner_command
+from protoduino.simcontrol import SimControl
+from protoduino_dev import build
+
+pytestmark = pytest.mark.avr
+
+STARTUP_TIMEOUT = 10.0
+#: Bounds a failing wait only: the trace line comes within a few emulated PWM periods.
+TRACE_TIMEOUT = 20.0
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _runner(elf: Path, trace: Path | None = None) -> BoardProcess:
+    return BoardProcess(runner_command(elf, trace=trace), startup=STARTUP_TIMEOUT)
+
+
+@pytest.fixture
+def tools() -> None:
+    missing = missing_tool("make", "cc", "avr-gcc", simavr=True)
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+    build.build_runner()
+
+
+def _info() -> ArduinoIn:
+    msg = ArduinoIn()
+    msg.get_info.SetInParent()
+    return msg
+
+
+def _servo_init(pin: int) -> ArduinoIn:
+    msg = ArduinoIn()
+    msg.servo_init.pin = pin
+    msg.servo_init.safe_degrees = 90
+    return msg
+
+
+def _pwm_init(pin: int, safe: int) -> ArduinoIn:
+    msg = ArduinoIn()
+    msg.pwm_init.pin = pin
+    msg.pwm_init.safe_duty = safe
+    return msg
+
+
+def _pwm(pin: int, duty: int) -> ArduinoIn:
+    msg = ArduinoIn()
+    msg.pwm_control.pin = pin
+    msg.pwm_control.duty = duty
+    return msg
+
+
+def test_a_build_without_servo_refuses_servos(tools: None) -> None:
+    elf = build.build_firmware_features(["digital_output", "pwm"])
+    runner = _runner(elf)
+    try:
+        with Board.open(runner.port) as board:
+            info = board.request(_info()).info
+            assert not (info.features >> 1) & 1  # FEATURE_SERVO
+            assert (info.features >> 5) & 1  # FEATURE_PWM
+            assert info.pwm_pins == (1 << 3) | (1 << 9) | (1 << 10) | (1 << 11)
+            with pytest.raises(CommandRejectedError) as refused:
+                board.request(_servo_init(9))
+            assert refused.value.status == Status.STATUS_NOT_SUPPORTED
+            # What it has still works.
+            board.request(_pwm_init(9, 0))
+    finally:
+        runner.stop(strict=False)
+
+
+def _wait_for(trace: Path, match: Callable[[dict[str, Any]], bool]) -> dict[str, Any]:
+    deadline = time.monotonic() + TRACE_TIMEOUT
+    while time.monotonic() < deadline:
+        if trace.exists():
+            for line in trace.read_text().splitlines():
+                row: dict[str, Any] = json.loads(line)
+                if match(row):
+                    return row
+        time.sleep(0.02)
+    raise AssertionError(f"no trace line matched in {TRACE_TIMEOUT} s:\n{trace.read_text()}")
+
+
+def _is_pwm(pin: int, duty: int) -> Callable[[dict[str, Any]], bool]:
+    def match(row: dict[str, Any]) -> bool:
+        return bool(row["pin"] == pin and row["mode"] == "pwm" and row["value"] == duty)
+
+    return match
+
+
+@pytest.mark.parametrize("pin", [3, 9, 10, 11])
+def test_pwm_duty_measured_at_the_pin(tools: None, tmp_path: Path, pin: int) -> None:
+    elf = build.build_firmware()
+    trace = tmp_path / "trace.jsonl"
+    runner = _runner(elf, trace)
+    try:
+        with Board.open(runner.port) as board:
+            board.request(_pwm_init(pin, 0))
+            for duty in (1, 128, 254):
+                board.request(_pwm(pin, duty))
+                _wait_for(trace, _is_pwm(pin, duty))
+            board.request(_pwm(pin, 200))
+            at_200 = _wait_for(trace, lambda r: r["pin"] == pin and r["value"] == 200)
+            stop = ArduinoIn()
+            stop.stop.SetInParent()
+            board.request(stop)
+            safe = _wait_for(
+                trace, lambda r: r["pin"] == pin and r["value"] == 0 and r["t"] > at_200["t"]
+            )
+            assert safe["mode"] == "pwm"
+    finally:
+        runner.stop(strict=False)
+
+
+def test_pwm_on_9_refused_while_a_servo_runs(tools: None) -> None:
+    runner = _runner(build.build_firmware())
+    try:
+        with Board.open(runner.port) as board:
+            board.request(_servo_init(2))
+            with pytest.raises(CommandRejectedError) as refused:
+                board.request(_pwm_init(9, 0))
+            assert refused.value.status == Status.STATUS_TIMER_IN_USE
+            with pytest.raises(CommandRejectedError) as refused:
+                board.request(_pwm_init(5, 0))
+            assert refused.value.status == Status.STATUS_TIMER_IN_USE
+    finally:
+        runner.stop(strict=False)
+
+
+#: The highest counted edge rate the firmware is documented to count without a loss, per
+#: counter, with both counters, eight servos and commands running (docs/protocol.md, Counters):
+#: counted edges at least 25 us apart.
+LOSSLESS_EDGES_PER_S = 40_000
+
+
+def test_counters_lose_no_edge_at_the_documented_rate(tools: None, tmp_path: Path) -> None:
+    """Both counters at the documented rate (pin 2 both edges of a 20 kHz square wave, pin 3
+    rising edges of a 40 kHz one) while eight servos pulse and poses keep coming: every edge
+    the control socket made is counted, to the edge."""
+    control = tmp_path / "control.sock"
+    runner = BoardProcess(
+        runner_command(build.build_firmware(), control=control), startup=STARTUP_TIMEOUT
+    )
+    try:
+        with Board.open(runner.port) as board, SimControl(control) as sim:
+            servos = [board.servo(pin, safe=90) for pin in range(4, 12)]
+            both = board.counter(2, edge="both", rate_hz=100)
+            rising = board.counter(3, edge="rising", rate_hz=100)
+            square_hz = LOSSLESS_EDGES_PER_S // 2
+            sim.pulses(2, square_hz // 2, square_hz)  # half a second: 20,000 edges
+            sim.pulses(3, LOSSLESS_EDGES_PER_S // 2, LOSSLESS_EDGES_PER_S)  # 20,000 rising
+            expected = (square_hz, LOSSLESS_EDGES_PER_S // 2)
+            step = 0
+            while (both.read(), rising.read()) != expected and step < 2000:
+                board.pose({s: (step * 7 + i) % 180 for i, s in enumerate(servos)})
+                step += 1
+            assert step >= 10  # commands flowed while the pulses came
+            # Every edge, and not one more (the counts settle at the trains' totals).
+            assert both.wait_for(lambda n: n >= expected[0], timeout=TRACE_TIMEOUT) == expected[0]
+            assert rising.wait_for(lambda n: n >= expected[1], timeout=TRACE_TIMEOUT) == expected[1]
+            board.ping()  # a round trip later (the report interval passed), still exact
+            assert (both.read(), rising.read()) == expected
+    finally:
+        runner.stop(strict=False)
+
+
+@pytest.mark.parametrize(
+    ("edge", "pull_up", "expected"),
+    [
+        ("rising", False, 300),
+        ("falling", False, 300),
+        ("both", False, 600),
+        ("rising", True, 300),
+        ("falling", True, 300),
+        ("both", True, 600),
+    ],
+)
+def test_counter_edges_on_both_boards(
+    sim_board: SimBoard, edge: Edge, pull_up: bool, expected: int
+) -> None:
+    """300 pulses from the pin's idle level (low, or high through the pull-up: then each pulse
+    goes low first), counted on the edges asked for, on each board's own input code (the
+    native board counts the control socket's train from its clock, the emulated Uno in its
+    INT1 interrupt); then two single level changes, counted as edges too."""
+    with Board.open(sim_board.port) as board:
+        counter = board.counter(3, edge=edge, pull_up=pull_up, rate_hz=50)
+        assert counter.wait_for(lambda n: n == 0, timeout=TRACE_TIMEOUT) == 0
+        idle = 1 if pull_up else 0
+        sim_board.control.level(3, idle)
+        sim_board.pulses(3, 300, 3_000)
+        assert counter.wait_for(lambda n: n >= expected, timeout=TRACE_TIMEOUT) == expected
+        sim_board.control.level(3, 1 - idle)  # one edge away from idle ...
+        sim_board.control.level(3, idle)  # ... and back
+        away = "rising" if idle == 0 else "falling"
+        more = 2 if edge == "both" else 1
+        total = expected + more
+        assert counter.wait_for(lambda n: n >= total, timeout=TRACE_TIMEOUT) == total
+        board.ping()
+        assert counter.read() == total, (away, edge)
+
+
+def test_a_released_analog_pin_reads_as_a_digital_input(sim_board: SimBoard) -> None:
+    """A0 as an analog input, released, then a digital input: it reads the levels driven at
+    the pin, on both boards. (On a real Uno an analog input also turns the pin's digital
+    input buffer off, DIDR0, and pd_avr_input_config turns it back on; simavr 1.6 does not
+    model DIDR0, so that part is not judged here.)"""
+    with Board.open(sim_board.port) as board:
+        pot = board.analog_input(14, rate_hz=100)
+        sim_board.control.analog(14, 700)
+        assert pot.wait_for(lambda v: v == 700, timeout=TRACE_TIMEOUT) == 700
+        pot.release()
+        button = board.digital_input(14)
+        for level in (True, False, True):
+            sim_board.control.level(14, level)
+            assert button.wait_for(level, timeout=TRACE_TIMEOUT) is level
+
+
+def test_pwm_on_timer1_in_a_build_without_servos(tools: None, tmp_path: Path) -> None:
+    """Without the servo driver Timer1 starts from its power-up state: PWM on 9 still comes
+    out at the duty asked (measured at the pin)."""
+    elf = build.build_firmware_features(["digital_output", "pwm"])
+    trace = tmp_path / "trace.jsonl"
+    runner = _runner(elf, trace)
+    try:
+        with Board.open(runner.port) as board:
+            board.request(_pwm_init(9, 0))
+            board.request(_pwm(9, 100))
+            _wait_for(trace, _is_pwm(9, 100))
+    finally:
+        runner.stop(strict=False)

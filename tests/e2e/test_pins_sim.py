@@ -1,0 +1,475 @@
+"""PWM, inputs, counters and interlocks through the Board API on both simulated boards.
+
+Outputs are judged at the pin (the trace): the native board traces the duty it is told;
+the emulated Uno (the real firmware in simavr) traces the duty it measures at the pin,
+from the timers' compare outputs. Both write ``{"pin": N, "mode": "pwm", "value": DUTY}``.
+Inputs are driven through the board's control socket (on the emulated Uno: the AVR's
+own pins, interrupts and ADC) and judged through the API: what the firmware's input code
+reported is what ``read()``, ``wait_for`` and ``on_change`` see.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import random
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from boardprocess import BoardProcess, missing_tool
+from protoduino import Board, Event, EventKind, aio
+from protoduino.constants import PacketType
+from protoduino.errors import (
+    FeatureMissingError,
+    InterlockActiveError,
+    NotSupportedError,
+    TimerInUseError,
+)
+from protoduino.inputs import Reading
+from protoduino.messages import ArduinoIn, Status, parse_out
+from protoduino.packets import Packet
+from protoduino.simboard import SimBoard, runner_command
+from protoduino_dev import build
+
+#: Bounds a failing test's wait only; the verdicts are the trace's.
+BOUND = 30.0
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def sim(sim_board: SimBoard) -> SimBoard:
+    return sim_board
+
+
+@pytest.fixture
+def board(sim: SimBoard) -> Iterator[Board]:
+    with Board.open(sim.port) as b:
+        yield b
+
+
+def pwm_values(trace: list[dict[str, Any]], pin: int) -> list[int]:
+    return [int(e["value"]) for e in trace if e["pin"] == pin and e.get("mode") == "pwm"]
+
+
+def wait_pwm(sim: SimBoard, pin: int, ok: Callable[[list[int]], bool], since: int = 0) -> None:
+    """Wait until the PWM duties ``pin`` took in the trace (from line ``since``) satisfy ``ok``."""
+    deadline = time.monotonic() + BOUND
+    while not ok(pwm_values(sim.trace()[since:], pin)):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"pin {pin}: PWM in the trace {pwm_values(sim.trace(), pin)}")
+        time.sleep(0.02)
+
+
+def events(board: Board) -> list[Event]:
+    seen: list[Event] = []
+    board.on_event(seen.append)
+    return seen
+
+
+def wait_event(seen: list[Event], kind: EventKind) -> Event:
+    deadline = time.monotonic() + BOUND
+    while True:
+        found = [e for e in list(seen) if e.kind is kind]
+        if found:
+            return found[-1]
+        assert time.monotonic() < deadline, f"no {kind} event; got {seen}"
+        time.sleep(0.02)
+
+
+def test_pwm_duty_at_the_pin_and_stop(board: Board, sim: SimBoard) -> None:
+    motor = board.pwm_output(3, safe=0)
+    motor.write(128.4)  # rounded to 128
+    wait_pwm(sim, 3, lambda v: v[-1:] == [128])
+    motor.write(254)
+    wait_pwm(sim, 3, lambda v: v[-1:] == [254])
+    states = board.read_outputs()
+    assert (states[3].mode, states[3].value) == ("pwm", 254)
+    mark = len(sim.trace())
+    board.stop()
+    wait_pwm(sim, 3, lambda v: v[-1:] == [0], since=mark)
+    assert motor.value == 0 and board.read_outputs()[3].value == 0
+
+
+def test_pose_sets_pwm_with_the_others_and_the_failsafe_makes_it_safe(sim: SimBoard) -> None:
+    with Board.open(sim.port, failsafe_timeout=0.3) as board:
+        seen = events(board)
+        motor = board.pwm_output(11, safe=7)
+        led = board.digital_output(13)
+        board.pose({motor: 200, led: True})
+        wait_pwm(sim, 11, lambda v: v[-1:] == [200])
+        mark = len(sim.trace())
+        board.pinging = False  # the device hears nothing more: its failsafe fires
+        event = wait_event(seen, EventKind.FAILSAFE)
+        assert event.details["active"] and event.details["cause"] == "ping_timeout"
+        wait_pwm(sim, 11, lambda v: v[-1:] == [7], since=mark)
+        assert motor.value == 7
+
+
+def _request(board: Board, msg: ArduinoIn) -> int:
+    """The device's own status for ``msg`` (no host check on the way)."""
+    try:
+        board.request(msg)
+    except protoduino.CommandRejectedError as error:
+        return error.status
+    return Status.STATUS_OK
+
+
+def test_host_refusals_are_the_devices(board: Board) -> None:
+    """Each PWM refusal the host makes before sending is the one the device makes."""
+    cases: list[tuple[int, type[protoduino.CommandRejectedError], int]] = [
+        (5, TimerInUseError, Status.STATUS_TIMER_IN_USE),  # Timer0: the clock
+        (6, TimerInUseError, Status.STATUS_TIMER_IN_USE),
+        (4, NotSupportedError, Status.STATUS_NOT_SUPPORTED),  # no PWM there
+    ]
+    board.servo(2)
+    cases.append((9, TimerInUseError, Status.STATUS_TIMER_IN_USE))  # Timer1 makes the pulses
+    for pin, error, status in cases:
+        with pytest.raises(error) as refused:
+            board.pwm_output(pin)
+        assert refused.value.status == status and not refused.value.sent
+        msg = ArduinoIn()
+        msg.pwm_init.pin = pin
+        assert _request(board, msg) == status, pin
+    with pytest.raises(protoduino.CommandRejectedError) as refused:
+        board.pwm_output(3).write(256)
+    msg = ArduinoIn()
+    msg.pwm_control.pin, msg.pwm_control.duty = 3, 256
+    assert _request(board, msg) == refused.value.status == Status.STATUS_OUT_OF_RANGE
+
+
+def test_restore_last_drives_the_last_duty_after_a_reboot(sim: SimBoard) -> None:
+    with Board.open(sim.port, restore="last") as board:
+        seen = events(board)
+        motor = board.pwm_output(10, safe=0)
+        motor.write(180)
+        wait_pwm(sim, 10, lambda v: v[-1:] == [180])
+        mark = len(sim.trace())
+        sim.reboot()
+        wait_event(seen, EventKind.RESTORED)
+        # Released by the reboot, up at its safe duty, then the last duty again.
+        wait_pwm(sim, 10, lambda v: v[-1:] == [180] and 0 in v, since=mark)
+
+
+def test_a_firmware_without_servos_is_refused_by_the_host(tmp_path: Path) -> None:
+    """Built with FEATURES="digital_output pwm": the host refuses a servo before sending,
+    naming the feature and how to build it in; what the build has still works."""
+    missing = missing_tool("make", "cc", "avr-gcc", simavr=True)
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+    build.build_runner()
+    build.make(ROOT / "firmware", "avr", "FEATURES=digital_output pwm")
+    elf = ROOT / "build" / "avr-digital_output-pwm" / "protoduino.elf"
+    trace = tmp_path / "trace.jsonl"
+    runner = BoardProcess(runner_command(elf, trace=trace), startup=10.0)
+    try:
+        with Board.open(runner.port) as board:
+            assert board.info.features == {"digital_output", "pwm"}
+            before = board.stats.commands
+            with pytest.raises(FeatureMissingError) as refused:
+                board.servo(9)
+            assert refused.value.feature == "servo" and not refused.value.sent
+            assert 'FEATURES="servo digital_output' in str(refused.value)
+            assert board.stats.commands == before  # nothing went to the device
+            for make in (lambda: board.digital_input(2), lambda: board.counter(2)):
+                with pytest.raises(FeatureMissingError):
+                    make()
+            board.pwm_output(9).write(77)
+    finally:
+        runner.stop(strict=False)
+
+
+# --- inputs ----------------------------------------------------------------------------
+
+
+def equals(wanted: int) -> Callable[[int], bool]:
+    return lambda value: value == wanted
+
+
+def test_digital_input_follows_the_pin(board: Board, sim: SimBoard) -> None:
+    sim.set_level(2, 1)
+    button = board.digital_input(2, pull_up=True, debounce_ms=5)
+    assert button.read() is True
+    changes: list[Reading] = []
+    button.on_change(changes.append)
+    for level in (0, 1, 0):
+        sim.set_level(2, level)
+        assert button.wait_for(bool(level), timeout=BOUND) is bool(level)
+    deadline = time.monotonic() + BOUND
+    while [r.value for r in changes] != [False, True, False]:
+        assert time.monotonic() < deadline, changes
+        time.sleep(0.01)
+    times = [r.time_ms for r in changes]
+    assert times == sorted(times)  # the device's clock, in the order the edges came
+    assert board.stats.input_reports >= 4
+
+
+def test_analog_input_reports_what_the_adc_reads(board: Board, sim: SimBoard) -> None:
+    sim.set_analog(14, 100)
+    pot = board.analog_input(14, rate_hz=200, threshold=2)
+    assert pot.read() == 100
+    for counts in (512, 1023, 0, 7):
+        sim.set_analog(14, counts)
+        assert pot.wait_for(equals(counts), timeout=BOUND) == counts
+    sim.set_analog(14, 8)  # within the threshold: no report for it
+    sim.set_analog(14, 300)
+    assert pot.wait_for(lambda v: v == 300, timeout=BOUND) == 300
+
+
+def test_six_analog_channels_at_once(board: Board, sim: SimBoard) -> None:
+    pots = {pin: board.analog_input(pin, rate_hz=200) for pin in board.info.analog_pins}
+    assert sorted(pots) == [14, 15, 16, 17, 18, 19]
+    for pin in pots:
+        sim.set_analog(pin, 10 * pin)
+    for pin, pot in pots.items():
+        assert pot.wait_for(equals(10 * pin), timeout=BOUND) == 10 * pin
+
+
+def test_counter_counts_every_pulse(board: Board, sim: SimBoard) -> None:
+    sim.set_level(3, 0)
+    wheel = board.counter(3, edge="rising", rate_hz=50)
+    assert wheel.read() == 0
+    sim.pulses(3, 500, 2000)  # 0.25 s of a 2 kHz encoder
+    assert wheel.wait_for(lambda n: n >= 500, timeout=BOUND) == 500
+    sim.pulses(3, 100, 1000)
+    assert wheel.wait_for(lambda n: n >= 600, timeout=BOUND) == 600
+
+
+# --- interlocks ------------------------------------------------------------------------
+
+
+def test_a_bumper_stops_the_motors_on_the_device(sim: SimBoard) -> None:
+    """The issue's new user: a bumper that must stop the drive motors whatever the host does.
+    Judged at the pin: on the emulated Uno the motor's PWM is at 0 within 1 ms of the edge
+    (board time, the trace's clock)."""
+    with Board.open(sim.port) as board:
+        seen = events(board)
+        left, right = board.pwm_output(3, safe=0), board.pwm_output(11, safe=0)
+        sim.set_level(2, 1)
+        bumper = board.digital_input(2, pull_up=True, interlock="low")
+        board.pose({left: 200, right: 150})
+        wait_pwm(sim, 3, lambda v: v[-1:] == [200])
+        wait_pwm(sim, 11, lambda v: v[-1:] == [150])
+        mark = len(sim.trace())
+        hit = sim.set_level(2, 0)  # the bumper closes (to ground)
+        wait_pwm(sim, 3, lambda v: v[-1:] == [0], since=mark)
+        wait_pwm(sim, 11, lambda v: v[-1:] == [0], since=mark)
+        # Each motor's first PWM 0 after it ran: the time its pin went low for good (the
+        # emulated Uno dates it at the end of the last pulse, which may come before the
+        # bumper's edge: then no pulse followed the edge).
+        stopped = [
+            next(e["t"] for e in sim.trace()[mark:] if e["pin"] == pin and e["value"] == 0)
+            for pin in (3, 11)
+        ]
+        reaction = max(0.0, max(stopped) - hit)
+        assert reaction <= 0.001, f"{reaction * 1000:.3f} ms from the bumper to the motors"
+        event = wait_event(seen, EventKind.FAILSAFE)
+        assert event.details["active"] and event.details["cause"] == "interlock"
+        assert event.details["pin"] == 2
+        assert left.value == 0 and right.value == 0
+        # The trip's device time: the bumper's own report of the edge.
+        assert bumper.wait_for(False, timeout=BOUND) is False
+        tripped = bumper.reading()
+        assert tripped is not None and tripped.value is False and tripped.time_ms > 0
+        with pytest.raises(InterlockActiveError) as refused:
+            left.write(100)
+        assert refused.value.sent  # the device refused it
+        with pytest.raises(InterlockActiveError):
+            board.pose({left: 100, right: 100})
+        with pytest.raises(InterlockActiveError):
+            board.clear_interlock()  # the bumper is still pressed
+        sim.set_level(2, 1)
+        assert bumper.wait_for(True, timeout=BOUND) is True
+        board.clear_interlock()
+        assert pwm_values(sim.trace()[mark:], 3)[-1] == 0  # safe until commanded
+        left.write(120)
+        wait_pwm(sim, 3, lambda v: v[-1:] == [120], since=mark)
+
+
+#: Bumper hits per board in the reaction test, each at another phase of the PWM period.
+BUMPER_TRIALS = 16
+
+
+def test_the_bumper_stops_the_motor_within_1_ms_at_any_phase(sim: SimBoard) -> None:
+    """The 1 ms bound at the pin holds wherever in the PWM period (1.024 ms on the Uno) the
+    edge falls: a duty change that waits for the period's end would miss it there."""
+    rng = random.Random(21)
+    reactions: list[float] = []
+    with Board.open(sim.port) as board:
+        motor = board.pwm_output(3, safe=0)
+        sim.set_level(2, 1)
+        bumper = board.digital_input(2, pull_up=True, interlock="low")
+        for trial in range(BUMPER_TRIALS):
+            if trial:
+                sim.set_level(2, 1)
+                bumper.wait_for(True, timeout=BOUND)
+                board.clear_interlock()
+            mark = len(sim.trace())
+            motor.write(200)
+            wait_pwm(sim, 3, lambda v: v[-1:] == [200], since=mark)
+            running = len(sim.trace())
+            time.sleep(rng.uniform(0.0, 0.005))  # only moves the phase; the verdict is the trace's
+            hit = sim.set_level(2, 0)
+            wait_pwm(sim, 3, lambda v: 0 in v, since=running)
+            low = next(e["t"] for e in sim.trace()[running:] if e["pin"] == 3 and e["value"] == 0)
+            reactions.append(max(0.0, low - hit))
+    slow = [f"{r * 1e6:.0f} us" for r in reactions if r > 0.001]
+    assert not slow, f"{len(slow)} of {BUMPER_TRIALS} hits took over 1 ms: {slow}"
+
+
+def test_aio_inputs_without_blocking_the_loop(sim: SimBoard) -> None:
+    async def main() -> None:
+        async with await aio.open(sim.port) as board:
+            await asyncio.to_thread(sim.set_level, 2, 1)
+            button = await board.digital_input(2, pull_up=True)
+            assert button.read() is True
+            motor = await board.pwm_output(3)
+            await motor.write(64)
+            async with button.changes() as changes:
+                await asyncio.to_thread(sim.set_level, 2, 0)
+                async with asyncio.timeout(BOUND):
+                    reading = await anext(changes)
+            assert reading.value is False and reading.pin == 2
+            await asyncio.to_thread(sim.set_level, 2, 1)
+            assert await button.wait_for(True, timeout=BOUND) is True
+        wait_pwm(sim, 3, lambda v: 64 in v)
+
+    asyncio.run(main())
+
+
+def test_host_input_refusals_are_the_devices(board: Board) -> None:
+    """Each input refusal the host makes before sending is the one the device makes, in the
+    device's order of checks (docs/protocol.md section 7, rules 13 and 14)."""
+    board.servo(9)
+
+    def analog(pin: int, threshold: int = 0, interval_ms: int = 10) -> ArduinoIn:
+        msg = ArduinoIn()
+        init = msg.analog_input_init
+        init.pin, init.threshold, init.interval_ms = pin, threshold, interval_ms
+        return msg
+
+    def digital(pin: int, debounce_ms: int = 0) -> ArduinoIn:
+        msg = ArduinoIn()
+        msg.digital_input_init.pin, msg.digital_input_init.debounce_ms = pin, debounce_ms
+        return msg
+
+    def counter(pin: int) -> ArduinoIn:
+        msg = ArduinoIn()
+        msg.counter_init.pin = pin
+        return msg
+
+    def pwm_init(pin: int, safe: int) -> ArduinoIn:
+        msg = ArduinoIn()
+        msg.pwm_init.pin, msg.pwm_init.safe_duty = pin, safe
+        return msg
+
+    cases: list[tuple[Callable[[], object], ArduinoIn]] = [
+        (lambda: board.analog_input(2), analog(2)),  # no ADC there
+        (lambda: board.analog_input(14, threshold=1024), analog(14, threshold=1024)),
+        (lambda: board.analog_input(14, rate_hz=1000 / 60001), analog(14, interval_ms=60001)),
+        (lambda: board.digital_input(2, debounce_ms=256), digital(2, debounce_ms=256)),
+        (lambda: board.digital_input(9), digital(9)),  # a servo holds it
+        (lambda: board.counter(14), counter(14)),  # no interrupt there
+        (lambda: board.counter(9), counter(9)),
+        # Two faults at once: the device's order decides which one is named.
+        (lambda: board.digital_input(1, debounce_ms=300), digital(1, debounce_ms=300)),
+        (lambda: board.digital_input(25), digital(25)),
+        (lambda: board.analog_input(25, threshold=2000), analog(25, threshold=2000)),
+        (lambda: board.analog_input(1, threshold=2000), analog(1, threshold=2000)),
+        (lambda: board.analog_input(1), analog(1)),
+        (lambda: board.pwm_output(5, safe=300), pwm_init(5, 300)),
+        (lambda: board.pwm_output(9, safe=300), pwm_init(9, 300)),  # a servo runs
+        (lambda: board.pwm_output(4, safe=300), pwm_init(4, 300)),
+    ]
+    for host, device in cases:
+        with pytest.raises(protoduino.CommandRejectedError) as refused:
+            host()
+        assert not refused.value.sent
+        assert _request(board, device) == refused.value.status, device
+
+
+def test_reports_keep_flowing_while_commands_flow_back_to_back(sim: SimBoard) -> None:
+    """Freshness under load: Acks go first, but a host sending commands back to back must
+    still hear its inputs. Judged on the device's clock (the reports' time_ms): every analog
+    channel is reported throughout, never more than GAP_MS apart."""
+    gap_ms = 50
+    with Board.open(sim.port) as board:
+        pots = [
+            board.analog_input(pin, rate_hz=200, heartbeat=0.005) for pin in board.info.analog_pins
+        ]
+        times: dict[int, list[int]] = {pot.pin: [] for pot in pots}
+
+        def record(rec: Any) -> None:  # the I/O thread: collect the reports' device times
+            item = rec.item
+            if rec.direction != "rx" or not isinstance(item, Packet):
+                return
+            if item.type is not PacketType.DATA:
+                return
+            msg = parse_out(item.payload)
+            if msg.WhichOneof("data") == "input_report":
+                for pin, seen in times.items():
+                    if msg.input_report.analog_pins >> pin & 1:
+                        seen.append(msg.input_report.time_ms)
+
+        board.add_frame_monitor(record)
+        pings = 0
+        deadline = time.monotonic() + BOUND
+        while time.monotonic() < deadline:
+            board.ping()
+            pings += 1
+            spans = [t[-1] - t[0] for t in times.values() if t]
+            if len(spans) == len(times) and min(spans) >= 500:  # half a second of device time
+                break
+        for pin, seen in times.items():
+            assert seen, f"pin {pin}: no report in {pings} back-to-back pings"
+            gaps = [b - a for a, b in itertools.pairwise(seen)]
+            assert max(gaps, default=0) <= gap_ms, f"pin {pin}: reports {gaps} ms apart"
+
+
+def test_restore_last_never_brings_back_a_duty_from_before_an_interlock(sim: SimBoard) -> None:
+    """restore="last" after a reboot sends the last values, but a value the interlock
+    overrode is gone: the motor comes back at its safe duty, judged at the pin."""
+    with Board.open(sim.port, restore="last") as board:
+        seen = events(board)
+        motor = board.pwm_output(10, safe=0)
+        motor.write(180)
+        wait_pwm(sim, 10, lambda v: v[-1:] == [180])
+        sim.set_level(2, 1)
+        bumper = board.digital_input(2, pull_up=True, interlock="low")
+        sim.set_level(2, 0)
+        wait_event(seen, EventKind.FAILSAFE)
+        sim.set_level(2, 1)
+        bumper.wait_for(True, timeout=BOUND)
+        board.clear_interlock()
+        mark = len(sim.trace())
+        sim.reboot()
+        wait_event(seen, EventKind.RESTORED)
+        assert board.read_outputs()[10].value == 0  # the device drives the safe duty
+        assert motor.value == 0
+        motor.write(50)  # a later change: every earlier one is in the trace before it
+        wait_pwm(sim, 10, lambda v: v[-1:] == [50], since=mark)
+        assert 180 not in pwm_values(sim.trace()[mark:], 10)
+
+
+def test_the_interlock_is_back_after_a_reboot(sim: SimBoard) -> None:
+    """A device that rebooted forgot its interlock; the restore gives it back before the
+    motor can run again, so the bumper still stops it (judged at the pin)."""
+    with Board.open(sim.port) as board:
+        seen = events(board)
+        motor = board.pwm_output(3, safe=0)
+        sim.set_level(2, 1)
+        board.digital_input(2, pull_up=True, interlock="low")
+        sim.reboot()
+        wait_event(seen, EventKind.RESTORED)
+        motor.write(220)
+        wait_pwm(sim, 3, lambda v: v[-1:] == [220])
+        mark = len(sim.trace())
+        sim.set_level(2, 0)
+        wait_pwm(sim, 3, lambda v: v[-1:] == [0], since=mark)
+        event = wait_event(seen, EventKind.FAILSAFE)
+        assert event.details["cause"] == "interlock" and event.details["pin"] == 2
+        with pytest.raises(InterlockActiveError):
+            motor.write(220)

@@ -1,0 +1,70 @@
+"""``protoduino pwm``, ``read`` and ``watch`` against the scripted fake device."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+from fakedevice import FakeDevice
+from protoduino.cli.main import main
+
+
+def test_pwm(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["pwm", fake.port, "3", "127.5", "--safe", "4"]) == 0
+    assert capsys.readouterr().out.strip() == "pwm 3: 128"
+    (init,) = fake.commands("pwm_init")
+    assert init.msg.pwm_init.safe_duty == 4 and fake.values[3] == 128
+    assert main(["pwm", fake.port, "4", "10"]) == 1
+    err = capsys.readouterr().err
+    assert "protoduino pwm:" in err and "STATUS_NOT_SUPPORTED" in err and "3, 9, 10, 11" in err
+
+
+def test_read_once(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+    fake.levels[2] = 0
+    assert main(["read", fake.port, "2", "--pull-up", "--debounce", "10"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("pin 2 digital: 0 (") and out.rstrip().endswith("ms old)")
+    init = fake.commands("digital_input_init")[0].msg.digital_input_init
+    assert (init.pull_up, init.debounce_ms) == (True, 10)
+    fake.analog[14] = 777
+    fake.time_ms = 5000
+    assert main(["read", fake.port, "14", "--analog", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["pin"] == 14 and got["kind"] == "analog" and got["value"] == 777
+    assert got["time_ms"] == 5000 and got["age"] >= 0
+    assert main(["read", fake.port, "3", "--counter", "--edge", "both", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["value"] == 0
+    assert fake.commands("counter_init")[0].msg.counter_init.edge == 2  # EDGE_BOTH
+
+
+def test_read_refuses_a_pin_that_cannot(
+    fake: FakeDevice, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["read", fake.port, "2", "--analog"]) == 1
+    assert "STATUS_NOT_SUPPORTED" in capsys.readouterr().err
+    assert fake.commands("analog_input_init") == []
+
+
+def test_watch_prints_the_values_then_each_change(
+    fake: FakeDevice, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def then_change_both(msg: Any) -> list[Any]:
+        replies = fake.default_reply(msg)  # the Ack and the first value
+        if msg.WhichOneof("data") == "analog_input_init":  # the second input's Init
+            fake.levels[2] = 0
+            replies.append(fake.report())
+            fake.analog[14] = 99
+            replies.append(fake.report(analog=[14]))
+        return replies
+
+    fake.analog[14] = 5
+    fake.handler = then_change_both
+    code = main(["watch", fake.port, "2", "14:analog", "--json", "--count", "2"])
+    assert code == 0
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    shown = [(x["pin"], x["kind"], x["value"]) for x in lines]
+    # Each input's first value, then the two changes, in the order they came.
+    assert shown == [
+        (2, "digital", True), (14, "analog", 5), (2, "digital", False), (14, "analog", 99)
+    ]  # fmt: skip

@@ -1,0 +1,464 @@
+"""PWM outputs, inputs and interlocks through the Board API, against the scripted fake device.
+
+The fake reports its inputs as the firmware does (the value right after an input's
+Init Ack, then on every change), so these tests judge the host alone: its checks
+before sending, what it sends, how it decodes reports, the newest-wins delivery and
+the restore rules. The same API against the real firmware is tests/e2e/test_pins_sim.py.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import protoduino
+import pytest
+from fakedevice import FakeDevice, ack, mask
+from protoduino import Board, EventKind
+from protoduino._generated import protoduino_pb2 as pb
+from protoduino.errors import (
+    FeatureMissingError,
+    InputTimeoutError,
+    InterlockActiveError,
+    NotSupportedError,
+    TimerInUseError,
+)
+from protoduino.inputs import Reading
+from protoduino.messages import ArduinoOut, Status
+from test_board_fake import Recorder
+
+
+def sent(fake: FakeDevice, kind: str) -> list[Any]:
+    return [r.msg for r in fake.commands(kind)]
+
+
+# --- PWM -------------------------------------------------------------------------------
+
+
+def test_pwm_output_init_write_and_rounding(board: Board, fake: FakeDevice) -> None:
+    motor = board.pwm_output(3, safe=10)
+    (init,) = sent(fake, "pwm_init")
+    assert (init.pwm_init.pin, init.pwm_init.safe_duty) == (3, 10)
+    assert fake.pins[3] == "pwm" and motor.value == 10
+    motor.write(200)
+    assert fake.values[3] == 200 and motor.value == 200
+    motor.write(127.5)  # halves go to the even neighbour, as Python's round()
+    assert fake.values[3] == 128
+    motor.write(128.5)
+    assert fake.values[3] == 128
+    motor.submit(0.4).result(5)
+    assert fake.values[3] == 0 and motor.value == 0
+
+
+@pytest.mark.parametrize("duty", [256, -1, float("nan"), float("inf"), 255.6])
+def test_pwm_duty_out_of_range_is_refused_before_sending(
+    board: Board, fake: FakeDevice, duty: float
+) -> None:
+    motor = board.pwm_output(11)
+    before = len(fake.commands())
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        motor.write(duty)
+    assert info.value.status == Status.STATUS_OUT_OF_RANGE and not info.value.sent
+    assert len(fake.commands()) == before
+
+
+def test_pwm_argument_types(board: Board) -> None:
+    motor = board.pwm_output(11)
+    for bad in ("100", True, None, b"\x01"):
+        with pytest.raises(TypeError):
+            motor.write(bad)  # type: ignore[arg-type]
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.pwm_output(10, safe=300)
+    assert info.value.status == Status.STATUS_OUT_OF_RANGE
+
+
+def test_pwm_on_a_pin_without_pwm_is_not_supported(board: Board, fake: FakeDevice) -> None:
+    with pytest.raises(NotSupportedError) as info:
+        board.pwm_output(4)
+    assert info.value.status == Status.STATUS_NOT_SUPPORTED and not info.value.sent
+    assert "3, 9, 10, 11" in str(info.value)
+    assert not isinstance(info.value, FeatureMissingError)
+    assert sent(fake, "pwm_init") == []
+
+
+@pytest.mark.parametrize(
+    ("feature", "configure"),
+    [
+        ("pwm", lambda b: b.pwm_output(3)),
+        ("servo", lambda b: b.servo(9)),
+        ("digital_output", lambda b: b.digital_output(13)),
+        ("digital_input", lambda b: b.digital_input(2)),
+        ("digital_input", lambda b: b.clear_interlock()),
+        ("analog_input", lambda b: b.analog_input(14)),
+        ("counter", lambda b: b.counter(2)),
+    ],
+)
+def test_a_mode_the_firmware_lacks_is_refused_naming_the_feature(
+    fake: FakeDevice, feature: str, configure: Any
+) -> None:
+    fake.features &= ~(1 << pb.Feature.Value(f"FEATURE_{feature.upper()}"))
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
+        assert feature not in board.info.features
+        before = len(fake.commands())
+        with pytest.raises(FeatureMissingError) as info:
+            configure(board)
+        assert info.value.feature == feature and not info.value.sent
+        assert info.value.status == Status.STATUS_NOT_SUPPORTED
+        text = str(info.value)
+        assert f"FEATURE_{feature.upper()}" in text and "FEATURES" in text
+        assert f"PD_FEATURE_{feature.upper()}" in text
+        assert len(fake.commands()) == before  # nothing sent
+
+
+def test_device_info_lists_features_and_pins(board: Board) -> None:
+    info = board.info
+    assert info.features == {
+        "servo", "digital_output", "digital_input", "analog_input", "pwm", "counter"
+    }  # fmt: skip
+    assert info.pwm_pins == (3, 9, 10, 11)
+    assert info.analog_pins == (14, 15, 16, 17, 18, 19)
+    assert 2 in info.counter_pins
+
+
+def test_timer1_is_shared_by_servos_and_pwm_on_9_and_10(fake: FakeDevice) -> None:
+    fake.board_name = "uno"
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
+        servo = board.servo(2)
+        for pin in (9, 10):
+            with pytest.raises(TimerInUseError) as info:
+                board.pwm_output(pin)
+            assert info.value.status == Status.STATUS_TIMER_IN_USE and not info.value.sent
+        board.pwm_output(3)  # Timer2: free
+        for pin in (5, 6):  # Timer0 runs the clock: never
+            with pytest.raises(TimerInUseError):
+                board.pwm_output(pin)
+        servo.release()
+        board.pwm_output(10)
+        with pytest.raises(TimerInUseError):
+            board.servo(4)
+        assert sorted(fake.pins) == [3, 10]
+
+
+def test_a_device_refusal_has_its_named_error(board: Board, fake: FakeDevice) -> None:
+    motor = board.pwm_output(3)
+
+    def refuse(msg: Any) -> list[Any]:
+        statuses = {
+            "pwm_control": Status.STATUS_INTERLOCK_ACTIVE,
+            "pwm_init": Status.STATUS_TIMER_IN_USE,
+            "counter_init": Status.STATUS_NOT_SUPPORTED,
+        }
+        status = statuses.get(msg.WhichOneof("data"))
+        return [ack(msg.message_id, status)] if status else fake.default_reply(msg)
+
+    fake.handler = refuse
+    with pytest.raises(InterlockActiveError) as interlock:
+        motor.write(100)
+    assert interlock.value.sent and interlock.value.status == Status.STATUS_INTERLOCK_ACTIVE
+    with pytest.raises(TimerInUseError):
+        board.pwm_output(9)
+    with pytest.raises(NotSupportedError):
+        board.counter(2)
+    assert motor.value == 0  # a refused value is not the output's
+
+
+def test_pose_with_pwm_items(board: Board, fake: FakeDevice) -> None:
+    servo = board.servo(9)
+    led = board.digital_output(13)
+    motor = board.pwm_output(3)
+    board.pose({servo: 30, led: True, motor: 99.6})
+    (pose,) = sent(fake, "pose")
+    assert [i.WhichOneof("output") for i in pose.pose.items] == ["servo", "digital", "pwm"]
+    assert pose.pose.items[2].pwm.duty == 100
+    assert fake.values == {9: 30, 13: 1, 3: 100}
+    assert motor.value == 100
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.pose({servo: 40, motor: 300})
+    assert info.value.output is motor and not info.value.sent
+
+
+def test_read_outputs_decodes_pwm(board: Board, fake: FakeDevice) -> None:
+    def outputs(msg: Any) -> list[Any]:
+        if msg.WhichOneof("data") != "read_outputs":
+            return fake.default_reply(msg)
+        out = ack(msg.message_id)
+        states = out.ack.outputs
+        states.pwm_pins = mask([3, 11])
+        states.pwm_duties.extend([17, 255])
+        states.digital_pins = mask([13])
+        states.digital_levels = mask([13])
+        return [out]
+
+    fake.handler = outputs
+    found = board.read_outputs()
+    assert [(s.pin, s.mode, s.value) for s in found.values()] == [
+        (3, "pwm", 17), (11, "pwm", 255), (13, "digital", 1)
+    ]  # fmt: skip
+
+
+def test_pwm_restore_last_replays_the_last_duty_but_never_one_before_a_failsafe(
+    fake: FakeDevice,
+) -> None:
+    with Board.open(fake.port, ack_timeout=0.1, ping=False, restore="last") as board:
+        rec = Recorder(board)
+        motor = board.pwm_output(3, safe=5)
+        motor.write(180)
+        fake.reboot()
+        rec.wait(EventKind.RESTORED)
+        assert fake.pins == {3: "pwm"} and fake.values == {3: 180}
+        assert sent(fake, "pwm_init")[-1].pwm_init.safe_duty == 5
+        fake.failsafe(pb.FAILSAFE_CAUSE_PING_TIMEOUT)
+        rec.wait(EventKind.FAILSAFE)
+        assert motor.value == 5
+        fake.reboot()
+        rec.wait(EventKind.RESTORED, count=2)
+        assert fake.values == {}  # only the Init: the motor stays at its safe duty
+
+
+# --- inputs ----------------------------------------------------------------------------
+
+
+def test_digital_input_knows_its_level_at_once_and_follows_changes(
+    board: Board, fake: FakeDevice
+) -> None:
+    fake.time_ms = 1234
+    button = board.digital_input(2, pull_up=True, debounce_ms=20)
+    (init,) = sent(fake, "digital_input_init")
+    assert (init.digital_input_init.pull_up, init.digital_input_init.debounce_ms) == (True, 20)
+    assert init.digital_input_init.interlock == pb.TRIP_NONE
+    assert button.read() is True  # the report that followed the Ack; no round trip now
+    reading = button.reading()
+    assert reading is not None and reading.time_ms == 1234
+    assert button.age is not None and 0 <= button.age < 30
+    changes: list[Reading] = []
+    got = threading.Event()
+
+    def changed(reading: Reading) -> None:
+        changes.append(reading)
+        got.set()
+
+    button.on_change(changed)
+    fake.time_ms = 1300
+    fake.set_level(2, 0)
+    assert button.wait_for(False, timeout=30) is False
+    assert got.wait(30)
+    assert changes[-1].value is False and changes[-1].time_ms == 1300
+    assert board.stats.input_reports == 2
+
+
+def test_wait_for_returns_at_once_sees_short_pulses_and_times_out(
+    board: Board, fake: FakeDevice
+) -> None:
+    button = board.digital_input(2)
+    assert button.wait_for(True, timeout=0) is True  # already so
+    with pytest.raises(InputTimeoutError):
+        button.wait_for(False, timeout=0.05)
+    result: list[bool] = []
+    waiter = threading.Thread(target=lambda: result.append(button.wait_for(False, timeout=30)))
+    waiter.start()
+    deadline = time.monotonic() + 30
+    while board.inputs.listeners("digital", 2) == 0:  # the waiter is listening
+        assert time.monotonic() < deadline
+        time.sleep(0.001)
+    fake.levels[2] = 0
+    fake.send_burst([fake.report(), fake.report()])
+    fake.levels[2] = 1
+    fake.send_burst([fake.report()])  # the low was short: a newer level replaced it
+    waiter.join(30)
+    assert result == [False]
+    with pytest.raises(TypeError):
+        button.wait_for(2)  # type: ignore[arg-type]
+    assert button.wait_for(lambda level: level, timeout=30) is True
+
+
+def test_analog_input_and_counter(board: Board, fake: FakeDevice) -> None:
+    fake.analog[14] = 300
+    pot = board.analog_input(14, rate_hz=250, threshold=4, heartbeat=2.0)
+    (init,) = sent(fake, "analog_input_init")
+    a = init.analog_input_init
+    assert (a.pin, a.interval_ms, a.threshold, a.heartbeat_ms) == (14, 4, 4, 2000)
+    assert pot.read() == 300
+    fake.set_analog(14, 1023)
+    assert pot.wait_for(lambda v: v > 1000, timeout=30) == 1023
+    wheel = board.counter(3, edge="both", pull_up=True, rate_hz=100)
+    (init,) = sent(fake, "counter_init")
+    c = init.counter_init
+    assert (c.pin, c.edge, c.pull_up, c.interval_ms) == (3, pb.EDGE_BOTH, True, 10)
+    assert wheel.read() == 0
+    fake.pulses(3, 100)
+    assert wheel.wait_for(lambda n: n >= 100, timeout=30) == 100
+    assert pot.read() == 1023  # a report without pin 14 leaves its value alone
+
+
+BAD = Status.STATUS_INVALID_ARGUMENT
+INPUT_REJECTIONS: list[tuple[str, Any, int]] = [
+    ("analog on a digital pin", lambda b: b.analog_input(2), Status.STATUS_NOT_SUPPORTED),
+    ("counter on an analog-only pin", lambda b: b.counter(14), Status.STATUS_NOT_SUPPORTED),
+    ("debounce too long", lambda b: b.digital_input(2, debounce_ms=256), BAD),
+    ("negative debounce", lambda b: b.digital_input(2, debounce_ms=-1), BAD),
+    ("bad interlock", lambda b: b.digital_input(2, interlock="up"), BAD),
+    ("threshold too big", lambda b: b.analog_input(14, threshold=1024), BAD),
+    ("rate too high", lambda b: b.analog_input(14, rate_hz=2000), BAD),
+    ("rate zero", lambda b: b.analog_input(14, rate_hz=0), BAD),
+    ("rate NaN", lambda b: b.analog_input(14, rate_hz=float("nan")), 7),
+    ("heartbeat too long", lambda b: b.analog_input(14, heartbeat=61), BAD),
+    ("bad edge", lambda b: b.counter(2, edge="up"), BAD),
+    ("reserved pin", lambda b: b.digital_input(1), Status.STATUS_RESERVED_PIN),
+    ("no such pin", lambda b: b.digital_input(20), Status.STATUS_INVALID_PIN),
+]
+
+
+@pytest.mark.parametrize(
+    ("what", "call", "status"), INPUT_REJECTIONS, ids=[r[0] for r in INPUT_REJECTIONS]
+)
+def test_input_arguments_are_checked_before_sending(
+    board: Board, fake: FakeDevice, what: str, call: Any, status: int
+) -> None:
+    before = len(fake.commands())
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        call(board)
+    assert info.value.status == status and not info.value.sent, what
+    assert len(fake.commands()) == before
+
+
+def test_input_pins_are_owned_like_outputs(board: Board, fake: FakeDevice) -> None:
+    board.servo(9)
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.digital_input(9)
+    assert info.value.status == Status.STATUS_PIN_IN_USE
+    button = board.digital_input(2)
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.counter(2)
+    assert info.value.status == Status.STATUS_PIN_IN_USE
+    board.digital_input(2, debounce_ms=5)  # the same mode again: a new configuration
+    button.release()
+    assert button.read() is None and 2 not in fake.pins
+    board.digital_output(2)  # free for any mode
+
+
+def test_inputs_are_restored_after_a_reboot(board: Board, fake: FakeDevice) -> None:
+    rec = Recorder(board)
+    button = board.digital_input(2, pull_up=True, interlock="low")
+    board.analog_input(15)
+    fake.reboot()
+    rec.wait(EventKind.RESTORED)
+    replay = [r.kind for r in fake.commands()][-3:]
+    assert replay == ["configure_failsafe", "digital_input_init", "analog_input_init"]
+    assert sent(fake, "digital_input_init")[-1].digital_input_init.interlock == pb.TRIP_LOW
+    assert fake.pins == {2: "digital_input", 15: "analog_input"}
+    fake.set_level(2, 0)
+    assert button.wait_for(False, timeout=30) is False
+
+
+def test_callbacks_are_newest_wins_and_stay_bounded(board: Board, fake: FakeDevice) -> None:
+    """A callback stuck while 500 changes arrive is then called with the latest value,
+    not 500 times: the event queue holds one job per input at most."""
+    pot = board.analog_input(14)
+    release = threading.Event()
+    entered = threading.Event()
+    seen: list[int] = []
+
+    def slow(reading: Reading) -> None:
+        seen.append(reading.value)
+        entered.set()
+        release.wait(30)
+
+    pot.on_change(slow)
+    fake.set_analog(14, 1)
+    assert entered.wait(30)  # the event thread is now stuck in the callback
+    burst = []
+    for value in range(2, 502):
+        fake.analog[14] = value
+        burst.append(fake.report(analog=[14]))
+    fake.send_burst(burst)
+    assert pot.wait_for(lambda v: v == 501, timeout=30) == 501
+    release.set()
+    deadline = time.monotonic() + 30
+    while seen[-1] != 501 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    # 2 queued the one job; 3..501 found it queued. It ran once, with the latest value.
+    assert seen == [1, 501]
+    assert board.stats.input_changes_skipped == 499
+
+
+def test_device_coalescing_is_counted_and_a_malformed_report_is_dropped(
+    board: Board, fake: FakeDevice
+) -> None:
+    pot = board.analog_input(14)
+    fake.coalesced = 7
+    fake.set_analog(14, 500)
+    assert pot.wait_for(lambda v: v == 500, timeout=30) == 500
+    assert board.stats.inputs_coalesced == 7
+    bad = ArduinoOut()
+    bad.input_report.analog_pins = mask([14, 15])
+    bad.input_report.analog_values.append(9)  # two pins, one value
+    fake.send_data(bad)
+    fake.set_analog(14, 501)
+    assert pot.wait_for(lambda v: v == 501, timeout=30) == 501
+    assert board.stats.input_reports == 3  # the bad one is not counted as a report
+
+
+def test_close_ends_a_wait(fake: FakeDevice) -> None:
+    board = Board.open(fake.port, ack_timeout=0.1, ping=False)
+    button = board.digital_input(2)
+    errors: list[BaseException] = []
+
+    def wait() -> None:
+        try:
+            button.wait_for(False, timeout=60)
+        except BaseException as error:
+            errors.append(error)
+
+    waiter = threading.Thread(target=wait)
+    waiter.start()
+    deadline = time.monotonic() + 30
+    while board.inputs.listeners("digital", 2) == 0:
+        assert time.monotonic() < deadline
+        time.sleep(0.001)
+    board.close()
+    waiter.join(30)
+    assert len(errors) == 1 and isinstance(errors[0], protoduino.BoardClosedError)
+
+
+# --- interlocks ------------------------------------------------------------------------
+
+
+def test_interlock_event_names_its_pin_and_forgets_values(board: Board, fake: FakeDevice) -> None:
+    rec = Recorder(board)
+    motor = board.pwm_output(3)
+    motor.write(200)
+    bumper = board.digital_input(2, pull_up=True, interlock="low")
+    assert bumper.interlock == "low"
+    assert sent(fake, "digital_input_init")[0].digital_input_init.interlock == pb.TRIP_LOW
+    fake.failsafe(pb.FAILSAFE_CAUSE_INTERLOCK, pin=2)
+    event = rec.wait(EventKind.FAILSAFE)
+    assert event.details == {"active": True, "cause": "interlock", "epoch": 1, "pin": 2}
+    assert "interlock on pin 2" in event.text
+    assert motor.value == 0  # the device drove it safe; the host knows
+    board.clear_interlock()
+    # It carries the epoch of the trip this host saw: a held-up one never clears a later trip.
+    assert [m.clear_interlock.failsafe_epoch for m in sent(fake, "clear_interlock")] == [1]
+    fake.failsafe(pb.FAILSAFE_CAUSE_INTERLOCK, active=False)  # as the device, after the Ack
+    cleared = rec.wait(EventKind.FAILSAFE, count=2)
+    assert cleared.details == {"active": False, "cause": "none", "epoch": 1}
+    board.submit_clear_interlock().result(30)
+    assert len(sent(fake, "clear_interlock")) == 2
+
+
+def test_a_wait_survives_a_release_and_a_new_configuration(board: Board, fake: FakeDevice) -> None:
+    """Releasing a pin drops its value, not who listens: a wait hears the pin configured anew."""
+    pot = board.analog_input(14)
+    result: list[int] = []
+    waiter = threading.Thread(target=lambda: result.append(pot.wait_for(lambda v: v == 900, 30)))
+    waiter.start()
+    deadline = time.monotonic() + 30
+    while board.inputs.listeners("analog", 14) == 0:
+        assert time.monotonic() < deadline
+        time.sleep(0.001)
+    board.release_all()
+    assert pot.read() is None
+    fake.analog[14] = 900
+    again = board.analog_input(14)  # its first report carries 900
+    waiter.join(30)
+    assert result == [900] and again.read() == 900
