@@ -125,7 +125,7 @@ class PwmOutput:
     def value(self) -> int | None:
         return self.sync.value
 
-    async def write(self, duty: float) -> None:
+    async def write(self, duty: _board.RealNumber) -> None:
         await _wait(self.sync.submit(duty))
 
     def __repr__(self) -> str:
@@ -420,7 +420,7 @@ class Board:
     async def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
         return DigitalOutput(await _wait(self.sync.submit_digital_output(pin, safe)))
 
-    async def pwm_output(self, pin: int, safe: float = 0) -> PwmOutput:
+    async def pwm_output(self, pin: int, safe: _board.RealNumber = 0) -> PwmOutput:
         return PwmOutput(await _wait(self.sync.submit_pwm_output(pin, safe)))
 
     async def digital_input(
@@ -470,7 +470,7 @@ class Board:
     async def stop(self) -> None:
         await _wait(self.sync.submit_stop())
 
-    async def pose(self, targets: Mapping[_Output, float]) -> None:
+    async def pose(self, targets: Mapping[_Output, _board.RealNumber]) -> None:
         """:meth:`protoduino.Board.pose`; the outputs may be these or the blocking ones."""
         await _wait(self.sync.submit_pose({_sync(o): v for o, v in targets.items()}))
 
