@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import statistics
 import threading
 import time
@@ -67,8 +68,20 @@ LINE_BYTES_PER_S = 1e6 / EMULATED_BYTE_US
 WARMUP = 8
 #: Longest one point may take before it is abandoned (every call is bounded by the Board).
 POINT_TIMEOUT = 120.0
-#: The Uno firmware's receive ring (PD_AVR_RX_SIZE, firmware/avr/pd_avr.h).
-UNO_RX_RING = 128
+
+
+def _uno_rx_ring() -> int:
+    """The Uno firmware's receive ring, PD_AVR_RX_SIZE, read from firmware/avr/pd_avr.h so
+    that the report's text cannot go stale when the ring is resized (128 -> 64 -> 48 B)."""
+    header = Path(__file__).resolve().parents[1] / "firmware" / "avr" / "pd_avr.h"
+    found = re.search(r"#define PD_AVR_RX_SIZE (\d+)", header.read_text())
+    if found is None:
+        raise RuntimeError(f"PD_AVR_RX_SIZE not found in {header}")
+    return int(found.group(1))
+
+
+#: The Uno firmware's receive ring (bytes).
+UNO_RX_RING = _uno_rx_ring()
 #: Each window is measured this many times, in turn with the others; the median round counts.
 ROUNDS = 3
 

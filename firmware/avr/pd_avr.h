@@ -15,8 +15,9 @@
  * its bytes as they come). 48 rather than 128: the 80 B went to the pin modes
  * within the RAM budget (firmware/README.md). */
 #define PD_AVR_RX_SIZE 48u
-/* UART transmit ring: the replies to one command (PD_TX_RESERVE) and a short report
- * (PD_TX_REPORT_ROOM); pd_avr_uart.c checks both fit at compile time. */
+/* UART transmit ring: the most one received frame can make the device send
+ * (PD_TX_RESERVE: pd_avr_uart.c checks it fits); a report goes only into an empty
+ * ring (pd_dispatch_send_spare), so it needs no room of its own. */
 #define PD_AVR_TX_SIZE 117u
 
 void pd_avr_uart_init(uint32_t baud);

@@ -86,8 +86,9 @@ static inline void pd_core_report(pd_core_t *core, uint8_t slot)
  * hear its inputs (freshness), and the command then waits for one report. About
  * a short command's time on the line: with 20 ms, six analog inputs at 200 Hz
  * lost a sample now and then (coalesced) to a host sending Pings back to back
- * (199.4 values/s per channel, bench part 7); with 2 ms, 200 (one or two samples
- * in 3,600 coalesced), and the Ping's round trip the same (1.17x its idle value).
+ * (199.4 values/s per channel, bench part 7); with 2 ms, 199.4 to 200 (2 to 5
+ * samples in 3,600 coalesced), and the Ping's round trip the same (1.17x its idle
+ * value). A complete frame held for transmit room is never passed (link.rx_held).
  */
 #define PD_REPORT_MAX_WAIT_MS 2u
 

@@ -76,11 +76,14 @@ bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg, b
                                 PD_MIN_PACKET + PD_TX_MAX_PAYLOAD + 3u) ? 1 : -1];
     (void)sizeof(no_cobs_block);
     size_t frame = PD_MIN_PACKET + len + 3u;
-    /* A command frame under way is answered first: its Ack must not queue behind this.
-     * And one report at a time, into a queue with room for a reply (on the Uno: an
-     * empty one): a reply never waits behind more than the report on the line. */
+    /* A command frame under way is answered first: its Ack must not queue behind this
+     * (`yield`: for a while), and a complete one held for room (rx_held) always goes
+     * first, or a stream of reports taking every emptied queue would starve it. And
+     * one report at a time, into a queue with room for a reply (on the Uno: an empty
+     * one): a reply never waits behind more than the report on the line. */
     uint16_t room = pd_hal_tx_room(core->hal);
-    if (len == 0 || (yield && core->link.rx_len > 0) || room < frame || room < PD_TX_RESERVE) {
+    if (len == 0 || core->link.rx_held || (yield && core->link.rx_len > 0) || room < frame ||
+        room < PD_TX_RESERVE) {
         return false;
     }
     return pd_link_send(core, PD_PACKET_DATA, raw, len);

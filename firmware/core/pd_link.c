@@ -24,6 +24,7 @@ static __attribute__((noinline)) void rx_restart(pd_link_t *link)
     link->rx_zero = false;
     link->rx_decoded = false;
     link->rx_in_used = false;
+    link->rx_held = false;
 }
 
 /* The end of a frame, handled or dropped: core->in back to zeros for the next
@@ -237,6 +238,7 @@ bool pd_link_rx_byte(pd_core_t *core, uint8_t byte)
             link->rx_skipping = false;
         } else if (link->rx_len > 0) {
             if (pd_hal_tx_room(core->hal) < PD_TX_RESERVE) {
+                link->rx_held = true; /* no report may take the room it waits for */
                 return false; /* its replies would not fit: later */
             }
             handle_frame(core);

@@ -124,6 +124,7 @@ typedef struct pd_link {
     bool rx_skipping; /* after an overflow, until the next 0x00 */
     bool rx_decoded;  /* the current frame's COMMAND payload decoded (pd_dispatch_decode) */
     bool rx_in_used;  /* core->in holds the current frame's decode: cleared as the frame ends */
+    bool rx_held;     /* the current frame is complete, held until its replies fit */
     bool active;      /* IDLE until the first RESET */
     bool tx_flush;    /* send a lone 0x00 before the next frame */
     uint8_t tx_seq;   /* SEQ of the next frame we send */

@@ -164,7 +164,7 @@ class PwmOutput:
     def value(self) -> int | None:
         return self.sync.value
 
-    async def write(self, duty: float) -> None:
+    async def write(self, duty: _board.RealNumber) -> None:
         await _wait(self.sync.submit(duty))
 
     def __repr__(self) -> str:
@@ -459,7 +459,7 @@ class Board:
     async def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
         return DigitalOutput(await _wait(self.sync.submit_digital_output(pin, safe)))
 
-    async def pwm_output(self, pin: int, safe: float = 0) -> PwmOutput:
+    async def pwm_output(self, pin: int, safe: _board.RealNumber = 0) -> PwmOutput:
         return PwmOutput(await _wait(self.sync.submit_pwm_output(pin, safe)))
 
     async def digital_input(

@@ -53,6 +53,7 @@ from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass
 from decimal import Decimal
+from fractions import Fraction
 from numbers import Integral, Real
 from types import TracebackType
 from typing import Any, Literal, SupportsFloat, TypeVar
@@ -325,24 +326,13 @@ def _reject(status: int, text: str) -> CommandRejectedError:
     return rejection(status, f"{text} ({status_name(status)})", sent=False)
 
 
-def _rounded(name: str, value: object) -> int:
-    """A real number (int, float, Fraction, Decimal, numpy's) to the nearest int.
-
-    Halves go to the even neighbour (Python's round(): 127.5 -> 128, 128.5 ->
-    128). NaN and infinities are refused; bools are not numbers here.
-    """
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise ArgumentTypeError(f"{name} must be a number, not {type(value).__name__}")
-    if isinstance(value, Integral):
-        return int(value)
-    if not math.isfinite(float(value)):
-        raise _reject(Status.STATUS_OUT_OF_RANGE, f"{name} {value} is not a finite number")
-    return int(round(value))  # noqa: RUF046  (round() of a Real is only Integral-like)
+#: The same for the type checker (an int is a float to it).
+RealNumber = float | Fraction | Decimal
 
 
 def _interval_ms(name: str, seconds: object) -> int:
     """An input's interval in seconds as whole ms, 1..INPUT_INTERVAL_MAX_MS."""
-    if isinstance(seconds, bool) or not isinstance(seconds, Real):
+    if isinstance(seconds, bool) or not isinstance(seconds, _REAL):
         raise ArgumentTypeError(f"{name} must be a number of seconds, not {type(seconds).__name__}")
     value = float(seconds)
     if not 0 < value <= INPUT_INTERVAL_MAX_MS / 1000:  # also NaN
@@ -355,7 +345,7 @@ def _interval_ms(name: str, seconds: object) -> int:
 
 def _period_ms(name: str, rate_hz: object) -> int:
     """A rate in Hz as the device's whole ms between samples (or reports), 1..60000."""
-    if isinstance(rate_hz, bool) or not isinstance(rate_hz, Real):
+    if isinstance(rate_hz, bool) or not isinstance(rate_hz, _REAL):
         raise ArgumentTypeError(f"{name} must be a number (Hz), not {type(rate_hz).__name__}")
     rate = float(rate_hz)
     slowest = 1000 / INPUT_INTERVAL_MAX_MS
@@ -582,17 +572,17 @@ class PwmOutput:
         item.pwm.CopyFrom(msg.pwm_control)
         return msg, duty
 
-    def write(self, duty: float) -> None:
+    def write(self, duty: RealNumber) -> None:
         """Set the duty, 0 (always low) .. 255 (always high); a real number is rounded
         to the nearest whole duty (halves to even)."""
         self.board._control(self.pin, *self._duty(duty))
 
-    def submit(self, duty: float) -> Future[None]:
+    def submit(self, duty: RealNumber) -> Future[None]:
         """:meth:`write` without waiting: a future resolved by the Ack."""
         return self.board._control_future(self.pin, *self._duty(duty))
 
     def _duty(self, duty: object) -> tuple[ArduinoIn, int]:
-        value = _rounded("duty", duty)
+        value = _whole("duty", duty)
         if not 0 <= value <= PWM_MAX_DUTY:
             shown = f"{duty} (rounded: {value})" if value != duty else str(value)
             raise _reject(Status.STATUS_OUT_OF_RANGE, f"duty {shown} is outside 0..{PWM_MAX_DUTY}")
@@ -1054,7 +1044,7 @@ class Board:
         state = _Output(DIGITAL, msg.SerializeToString(), int(safe))
         return msg, lambda: self._set_output(pin, state), DigitalOutput(self, pin)
 
-    def pwm_output(self, pin: int, safe: float = 0) -> PwmOutput:
+    def pwm_output(self, pin: int, safe: RealNumber = 0) -> PwmOutput:
         """Configure ``pin`` as a PWM output (duty 0..255); it takes its ``safe`` duty at once.
 
         The failsafe, :meth:`stop` and an interlock drive it back to ``safe`` (0,
@@ -1066,7 +1056,7 @@ class Board:
         self._send(msg, on_ok)
         return output
 
-    def submit_pwm_output(self, pin: int, safe: float = 0) -> Future[PwmOutput]:
+    def submit_pwm_output(self, pin: int, safe: RealNumber = 0) -> Future[PwmOutput]:
         """:meth:`pwm_output` without waiting: a future of the output, resolved by the Ack."""
         msg, on_ok, output = self._pwm_init(pin, safe)
         return self._future(msg, on_ok, _returning(output))
@@ -1081,7 +1071,7 @@ class Board:
                 f"(PWM pins: {', '.join(map(str, self.info.pwm_pins))})",
             )
         self._check_capable(pin, PWM)
-        duty = _rounded("safe", safe)
+        duty = _whole("safe", safe)
         with self._lock:
             self._check_free(pin, PWM)
             if pin in self._timer1_pins() and any(o.mode is SERVO for o in self._outputs.values()):

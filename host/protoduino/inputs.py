@@ -30,7 +30,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal, TypeVar
+from typing import Literal
 
 from ._generated import protoduino_pb2 as pb
 from .clock import Clock
@@ -45,8 +45,6 @@ from .messages import InputKind, input_values
 
 #: Values one waiter (``wait_for``, an asyncio iterator) keeps before the oldest is dropped.
 SINK_BUFFER = 64
-
-V = TypeVar("V")
 
 
 @dataclass(frozen=True, slots=True)

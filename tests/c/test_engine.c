@@ -196,6 +196,32 @@ static void test_report_gives_way_to_commands_for_a_while_only(void)
     CHECK(strcmp(last, "1:9") == 0);
 }
 
+static void test_a_held_command_goes_before_any_report(void)
+{
+    tdev_t d;
+    char last[64] = "";
+    t_active(&d);
+    d.core.report = test_report;
+    d.core.report_sent = NULL;
+    /* The queue cannot take a command's replies: its frame is held at the delimiter. */
+    d.hal.tx_room = PD_TX_RESERVE - 1u;
+    protoduino_ArduinoIn in = m_digital_init(9, 13, false);
+    t_send_in(&d, &in);
+    CHECK_EQ(t_acks(&d, 9, NULL), 0);
+    report_value[2] = 5;
+    pd_core_report(&d.core, 2);
+    /* The queue empties while the report has waited longer than it ever gives way. */
+    d.hal.tx_room = UINT16_MAX;
+    d.hal.now_ms += PD_REPORT_MAX_WAIT_MS + 10u;
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0); /* the held frame first */
+    const uint8_t delimiter = 0;
+    t_feed(&d, &delimiter, 1); /* the loop offers it again */
+    CHECK_EQ(t_acks(&d, 9, NULL), 1);
+    pd_core_poll(&d.core);
+    CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1);
+}
+
 static void test_one_report_per_pass_lowest_slot_first(void)
 {
     tdev_t d;
@@ -357,6 +383,7 @@ const pd_test_case_t pd_tests_engine[] = {
     TEST_CASE(test_reply_goes_before_pending_report),
     TEST_CASE(test_report_waits_for_a_command_under_way),
     TEST_CASE(test_report_gives_way_to_commands_for_a_while_only),
+    TEST_CASE(test_a_held_command_goes_before_any_report),
     TEST_CASE(test_one_report_per_pass_lowest_slot_first),
     TEST_CASE(test_no_report_while_idle),
     {NULL, NULL},

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import threading
 import time
+from decimal import Decimal
+from fractions import Fraction
 from typing import Any
 
 import protoduino
@@ -49,6 +51,9 @@ def test_pwm_output_init_write_and_rounding(board: Board, fake: FakeDevice) -> N
     assert fake.values[3] == 128
     motor.submit(0.4).result(5)
     assert fake.values[3] == 0 and motor.value == 0
+    motor.write(Decimal("99.5"))  # Decimal is no numbers.Real, but a real number all the same
+    motor.write(Fraction(401, 2))
+    assert [m.pwm_control.duty for m in sent(fake, "pwm_control")][-2:] == [100, 200]
 
 
 @pytest.mark.parametrize("duty", [256, -1, float("nan"), float("inf"), 255.6])
