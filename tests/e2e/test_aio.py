@@ -61,10 +61,15 @@ def test_the_loop_keeps_running_while_commands_wait(fake: FakeDevice) -> None:
             return []
         return replies
 
+    # One sender at a time: each takes its SEQ and writes its frame under this lock (two
+    # threads could otherwise write SEQ 6 before 5, which the host takes for a desync).
+    sending = threading.Lock()
+
     def send(replies: list[Any]) -> None:
         released.wait(BOUND)
-        for out in replies:
-            fake.send_data(out)
+        with sending:
+            for out in replies:
+                fake.send_data(out)
 
     async def main() -> None:
         async with await aio.open(fake.port, ack_timeout=BOUND, ping=False) as board:
@@ -189,10 +194,15 @@ def test_heartbeat_and_release_do_not_block_the_loop(fake: FakeDevice) -> None:
             return []
         return replies
 
+    # One sender at a time: each takes its SEQ and writes its frame under this lock (two
+    # threads could otherwise write SEQ 6 before 5, which the host takes for a desync).
+    sending = threading.Lock()
+
     def send(replies: list[Any]) -> None:
         released.wait(BOUND)
-        for out in replies:
-            fake.send_data(out)
+        with sending:
+            for out in replies:
+                fake.send_data(out)
 
     async def main() -> None:
         async with await aio.open(
@@ -217,7 +227,7 @@ def test_heartbeat_and_release_do_not_block_the_loop(fake: FakeDevice) -> None:
             await board.digital_output(13)
             await board.release_all()
             kinds = [r.kind for r in fake.commands()[before:]]
-            assert kinds.count("heartbeat") == 1 and kinds.count("release") == 3
+            assert kinds.count("heartbeat") == 1 and kinds.count("release") == 3, kinds
             assert kinds[-1] == "release_all"
 
     asyncio.run(asyncio.wait_for(main(), BOUND))
