@@ -19,7 +19,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import protoduino
@@ -134,6 +134,18 @@ def test_a_cancelled_aio_open_leaves_nothing_running(sim_board: SimBoard) -> Non
     _failsafe_fires(sim_board)
 
 
+@pytest.fixture
+def ctrl_c() -> Iterator[None]:
+    """SIGINT raises KeyboardInterrupt, as in a terminal, even where the suite runs with
+    SIGINT ignored (started in the background by a non-interactive shell, a CI runner)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.usefixtures("ctrl_c")
 def test_an_interrupted_open_leaves_nothing_running(sim_board: SimBoard) -> None:
     """Ctrl-C (a KeyboardInterrupt in the main thread) at any point of ``Board.open``."""
     session = _rig(sim_board)

@@ -30,11 +30,21 @@ def native(tmp_path: Path) -> Iterator[SimBoard]:
         yield sim
 
 
+#: A shell's foreground job has SIGINT at its default even where the suite itself runs
+#: with SIGINT ignored (started in the background by a non-interactive shell, or by a CI
+#: runner): the command is exec'd with it reset, as the terminal would have it, so
+#: Python installs its KeyboardInterrupt handler again.
+DEFAULT_SIGINT = (
+    "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+    "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])"
+)
+
+
 def _interrupt_after(argv: list[str], marker: str) -> tuple[int, str, str]:
     """Run the command in a process group of its own (as a shell's foreground job), and
     once a stdout line contains ``marker`` send SIGINT to the whole group, as Ctrl-C does."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "protoduino.cli.main", *argv],
+        [sys.executable, "-c", DEFAULT_SIGINT, "-m", "protoduino.cli.main", *argv],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         stdin=subprocess.DEVNULL,
