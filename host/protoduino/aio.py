@@ -41,7 +41,7 @@ import contextlib
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from types import TracebackType
-from typing import Any, SupportsFloat, TypeVar
+from typing import Any, Generic, Self, SupportsFloat, TypeVar
 
 from . import board as _board
 from . import inputs as _inputs
@@ -178,19 +178,67 @@ def _sync(output: _Output) -> _board.PoseOutput:
     return output.sync if isinstance(output, Servo | DigitalOutput | PwmOutput) else output
 
 
-class InputChanges:
-    """An async iterator of one input's changes (see the module docstring)."""
+ItemT = TypeVar("ItemT")
 
-    def __init__(self, board: Board, sync: _inputs.Input, maxsize: int) -> None:
+
+class _Stream(Generic[ItemT]):
+    """An async iterator fed from another thread: a bounded buffer on the loop (the
+    oldest item dropped and counted when the consumer falls behind), ended by
+    :meth:`close` after the items already buffered. Subclasses subscribe in their
+    ``__init__`` and say how to unsubscribe in :meth:`_detach`."""
+
+    def __init__(self, board: Board, maxsize: int) -> None:
         if maxsize < 1:
             raise ArgumentError("maxsize must be at least 1")
         self._loop = asyncio.get_running_loop()
-        self._buffer: collections.deque[Reading | None] = collections.deque()
+        self._buffer: collections.deque[ItemT | None] = collections.deque()
         self._maxsize = maxsize
         self._ready = asyncio.Event()
         self._board = board
-        #: Readings dropped because this iterator's consumer fell behind.
+        #: Items dropped because this iterator's consumer fell behind.
         self.dropped = 0
+
+    def _detach(self) -> None:
+        raise NotImplementedError
+
+    def _put(self, item: ItemT | None) -> None:  # the loop's thread
+        if item is not None and len(self._buffer) >= self._maxsize:
+            self._buffer.popleft()
+            self.dropped += 1
+        self._buffer.append(item)
+        self._ready.set()
+
+    def close(self) -> None:
+        """End the iteration (after the items already buffered)."""
+        self._detach()
+        self._board._streams.discard(self)
+        self._put(None)
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self.close()
+
+    def __aiter__(self) -> Self:
+        return self
+
+    async def __anext__(self) -> ItemT:
+        while not self._buffer:
+            self._ready.clear()
+            await self._ready.wait()
+        item = self._buffer.popleft()
+        if item is None:
+            self._buffer.append(None)  # stays ended
+            raise StopAsyncIteration
+        return item
+
+
+class InputChanges(_Stream[Reading]):
+    """An async iterator of one input's changes (see the module docstring)."""
+
+    def __init__(self, board: Board, sync: _inputs.Input, maxsize: int) -> None:
+        super().__init__(board, maxsize)
         table = board.sync.inputs
         #: The value known when the iterator started (None: none yet).
         self.current, self._remove = table.add_sink(sync.kind, sync.pin, self._from_thread)
@@ -202,37 +250,8 @@ class InputChanges:
         with contextlib.suppress(RuntimeError):  # the loop is closed: nobody listens any more
             self._loop.call_soon_threadsafe(self._put, reading)
 
-    def _put(self, reading: Reading | None) -> None:  # the loop's thread
-        if reading is not None and len(self._buffer) >= self._maxsize:
-            self._buffer.popleft()
-            self.dropped += 1
-        self._buffer.append(reading)
-        self._ready.set()
-
-    def close(self) -> None:
-        """End the iteration (after the readings already buffered)."""
+    def _detach(self) -> None:
         self._remove()
-        self._board._streams.discard(self)
-        self._put(None)
-
-    async def __aenter__(self) -> InputChanges:
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        self.close()
-
-    def __aiter__(self) -> InputChanges:
-        return self
-
-    async def __anext__(self) -> Reading:
-        while not self._buffer:
-            self._ready.clear()
-            await self._ready.wait()
-        reading = self._buffer.popleft()
-        if reading is None:
-            self._buffer.append(None)  # stays ended
-            raise StopAsyncIteration
-        return reading
 
 
 class _Input:
@@ -333,17 +352,11 @@ class Counter(_Input):
         return (await self._wait(lambda r: condition(r.value), timeout)).value
 
 
-class EventStream:
+class EventStream(_Stream[Event]):
     """An async iterator of a board's events (see the module docstring)."""
 
     def __init__(self, board: Board, maxsize: int) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._buffer: collections.deque[Event | None] = collections.deque()
-        self._maxsize = maxsize
-        self._ready = asyncio.Event()
-        self._board = board
-        #: Events dropped because this iterator's consumer fell behind.
-        self.dropped = 0
+        super().__init__(board, maxsize)
         self._unsubscribe = board.sync.on_event(self._from_thread)
         board._streams.add(self)
 
@@ -353,37 +366,8 @@ class EventStream:
         except RuntimeError:  # the loop is closed: nobody is listening any more
             self._unsubscribe()
 
-    def _put(self, event: Event | None) -> None:  # the loop's thread
-        if event is not None and len(self._buffer) >= self._maxsize:
-            self._buffer.popleft()
-            self.dropped += 1
-        self._buffer.append(event)
-        self._ready.set()
-
-    def close(self) -> None:
-        """End the iteration (after the events already buffered)."""
+    def _detach(self) -> None:
         self._unsubscribe()
-        self._board._streams.discard(self)
-        self._put(None)
-
-    async def __aenter__(self) -> EventStream:
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        self.close()
-
-    def __aiter__(self) -> EventStream:
-        return self
-
-    async def __anext__(self) -> Event:
-        while not self._buffer:
-            self._ready.clear()
-            await self._ready.wait()
-        event = self._buffer.popleft()
-        if event is None:
-            self._buffer.append(None)  # stays ended
-            raise StopAsyncIteration
-        return event
 
 
 class Board:
@@ -391,7 +375,7 @@ class Board:
 
     def __init__(self, sync: _board.Board) -> None:
         self.sync = sync
-        self._streams: set[EventStream | InputChanges] = set()
+        self._streams: set[_Stream[Any]] = set()
 
     @classmethod
     async def open(cls, url: str, **options: Any) -> Board:

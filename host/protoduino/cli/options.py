@@ -201,6 +201,19 @@ def with_board(
     return capture_verdict(command, board, rc)
 
 
+def add_hold(parser: argparse.ArgumentParser, safe: str) -> None:
+    """``--hold S``: the output commands' way to keep the link alive before the failsafe
+    (which then does ``safe``, e.g. "sets the safe level")."""
+    parser.add_argument(
+        "--hold",
+        type=argtypes.seconds,
+        default=0.0,
+        metavar="S",
+        help="keep the link alive S seconds; once the host stops pinging, the device's "
+        f"failsafe {safe} after 10 s",
+    )
+
+
 def hold(board: Board, seconds: float) -> None:
     """Keep the link (and its pings) alive for ``seconds``, so the failsafe stays away."""
     if seconds > 0:

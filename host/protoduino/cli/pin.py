@@ -6,7 +6,7 @@ import argparse
 
 from ..board import Board
 from . import argtypes
-from .options import add_port, hold, with_board
+from .options import add_hold, add_port, hold, with_board
 
 HELP = "set a digital output pin on or off"
 
@@ -20,14 +20,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--safe", choices=sorted(LEVELS), default="off", help="safe level (default: off)"
     )
-    parser.add_argument(
-        "--hold",
-        type=argtypes.seconds,
-        default=0.0,
-        metavar="S",
-        help="keep the link alive S seconds; once the host stops pinging, the device's "
-        "failsafe sets the safe level after 10 s",
-    )
+    add_hold(parser, "sets the safe level")
 
 
 def run(args: argparse.Namespace) -> int:

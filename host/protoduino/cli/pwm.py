@@ -7,7 +7,7 @@ import argparse
 from ..board import Board
 from ..constants import PWM_MAX_DUTY
 from . import argtypes
-from .options import add_port, hold, with_board
+from .options import add_hold, add_port, hold, with_board
 
 HELP = "set a PWM output's duty (0..255, as analogWrite)"
 
@@ -21,14 +21,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "duty", type=DUTY, metavar="DUTY", help="0 (off) .. 255 (always on); rounded to a whole"
     )
     parser.add_argument("--safe", type=DUTY, default=0, help="safe duty (default: 0, off)")
-    parser.add_argument(
-        "--hold",
-        type=argtypes.seconds,
-        default=0.0,
-        metavar="S",
-        help="keep the link alive S seconds; once the host stops pinging, the device's "
-        "failsafe sets the safe duty after 10 s",
-    )
+    add_hold(parser, "sets the safe duty")
 
 
 def run(args: argparse.Namespace) -> int:

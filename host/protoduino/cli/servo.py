@@ -7,7 +7,7 @@ import argparse
 from ..board import Board
 from ..constants import SERVO_LIMIT_MAX_US, SERVO_LIMIT_MIN_US, SERVO_MAX_DEGREES
 from . import argtypes
-from .options import add_port, hold, with_board
+from .options import add_hold, add_port, hold, with_board
 
 US = argtypes.integer(SERVO_LIMIT_MIN_US, SERVO_LIMIT_MAX_US, name="microseconds")
 
@@ -32,14 +32,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--min-us", type=US, default=544, help="pulse for 0 degrees (544)")
     parser.add_argument("--max-us", type=US, default=2400, help="pulse for 180 degrees (2400)")
-    parser.add_argument(
-        "--hold",
-        type=argtypes.seconds,
-        default=0.0,
-        metavar="S",
-        help="keep the link alive S seconds; once the host stops pinging, the device's "
-        "failsafe returns the servo to --safe after 10 s",
-    )
+    add_hold(parser, "returns the servo to --safe")
 
 
 def check(args: argparse.Namespace) -> str | None:
