@@ -320,36 +320,33 @@ class DigitalInput(_Input):
         return bool((await self._wait(lambda r: test(bool(r.value)), timeout)).value)
 
 
-class AnalogInput(_Input):
+class _ValueInput(_Input):
+    """An input whose value is a count (an analog input's, a counter's)."""
+
+    def read(self) -> int | None:
+        reading = self.reading()
+        return None if reading is None else reading.value
+
+    async def wait_for(
+        self, condition: _inputs.ValueCondition, timeout: float | None = None
+    ) -> int:
+        return (await self._wait(lambda r: condition(r.value), timeout)).value
+
+
+class AnalogInput(_ValueInput):
     """An awaitable analog input; get one from :meth:`Board.analog_input`."""
 
     def __init__(self, board: Board, sync: _inputs.AnalogInput) -> None:
         super().__init__(board, sync)
         self.sync = sync
 
-    def read(self) -> int | None:
-        return self.sync.read()
 
-    async def wait_for(
-        self, condition: _inputs.ValueCondition, timeout: float | None = None
-    ) -> int:
-        return (await self._wait(lambda r: condition(r.value), timeout)).value
-
-
-class Counter(_Input):
+class Counter(_ValueInput):
     """An awaitable pulse counter; get one from :meth:`Board.counter`."""
 
     def __init__(self, board: Board, sync: _inputs.Counter) -> None:
         super().__init__(board, sync)
         self.sync = sync
-
-    def read(self) -> int | None:
-        return self.sync.read()
-
-    async def wait_for(
-        self, condition: _inputs.ValueCondition, timeout: float | None = None
-    ) -> int:
-        return (await self._wait(lambda r: condition(r.value), timeout)).value
 
 
 class EventStream(_Stream[Event]):
