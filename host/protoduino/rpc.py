@@ -405,18 +405,17 @@ class Rpc:
     def _new_call(self, msg: ArduinoIn, on_done: Callable[[Call], None] | None) -> Call:
         mid = self._allocate_id()
         msg.message_id = mid
-        payload = msg.SerializeToString()
-        if len(payload) > MAX_PAYLOAD:
-            raise PayloadTooLargeError(
-                f"command of {len(payload)} bytes exceeds MAX_PAYLOAD ({MAX_PAYLOAD})"
-            )
         kind = msg.WhichOneof("data") or "empty"
         epoch: int | None = None
         if kind in EPOCH_KINDS:
             # The latest failsafe this host saw: only then may it re-arm the device.
             epoch = self.failsafe_epoch
             getattr(msg, kind).failsafe_epoch = epoch
-            payload = msg.SerializeToString()
+        payload = msg.SerializeToString()
+        if len(payload) > MAX_PAYLOAD:
+            raise PayloadTooLargeError(
+                f"command of {len(payload)} bytes exceeds MAX_PAYLOAD ({MAX_PAYLOAD})"
+            )
         now = self._clock()
         call = Call(
             mid, kind, payload, submitted=now, deadline=now + self.call_timeout, on_done=on_done
