@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from tempfile import TemporaryDirectory
 
-from protoduino import Board
+from protoduino import Board, Event, EventKind
 from protoduino.constants import PacketType
 from protoduino.errors import InterlockActiveError, ProtoduinoError
 from protoduino.framing import frame_packet
@@ -235,6 +235,20 @@ def measure_reaction(
     motor = board.pwm_output(MOTOR_PIN, safe=0)
     sim.set_level(BUMPER_PIN, 1)
     bumper = board.digital_input(BUMPER_PIN, pull_up=True, interlock="low")
+    # Only a host that has heard of a trip may clear it (ClearInterlock carries the trip's
+    # failsafe epoch): each trip's FAILSAFE event is waited for before the next clear.
+    trips = threading.Semaphore(0)
+
+    def on_trip(event: Event) -> None:
+        details = event.details
+        if (
+            event.kind is EventKind.FAILSAFE
+            and details["active"]
+            and details["cause"] == "interlock"
+        ):
+            trips.release()
+
+    board.on_event(on_trip)
     samples: list[float] = []
     lost = 0
     for _ in range(trials):
@@ -256,6 +270,7 @@ def measure_reaction(
             continue
         # Low for good from stopped[1]: at the edge already (0), or this long after it.
         samples.append(max(0.0, stopped[1] - hit))
+        trips.acquire(timeout=SETTLE)
     sim.set_level(BUMPER_PIN, 1)
     return samples, lost
 
