@@ -2,6 +2,12 @@
 
 #include <string.h>
 
+#include "pd_dedupe.h"
+#include "pd_dispatch.h"
+#include "pd_inputs.h"
+#include "pd_link.h"
+#include "pd_out.h"
+
 void pd_core_init(pd_core_t *core, void *hal)
 {
     core->hal = hal;
@@ -16,18 +22,52 @@ void pd_core_init(pd_core_t *core, void *hal)
     }
     pd_link_init(&core->link);
     pd_dispatch_clear(core);
+    core->in_state = PD_IN_EMPTY;
     pd_dedupe_init(&core->dedupe);
     pd_outputs_init(&core->outputs);
     core->failsafe.epoch = 0; /* counts since power-up; a new session keeps it */
     core->failsafe.cause = 0;
     pd_failsafe_init(&core->failsafe, pd_hal_millis(hal));
-    pd_link_send_event(core, PD_EVENT_BOOT);
+    pd_link_send_event(&core->link, hal, PD_EVENT_BOOT);
+}
+
+bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
+{
+    pd_link_event_t event = pd_link_rx_byte(&core->link, core->hal, byte);
+    if (event == PD_LINK_NONE) {
+        return true; /* most bytes: the frame goes on */
+    }
+    if (event == PD_LINK_HELD) {
+        return false;
+    }
+    if (event == PD_LINK_PAYLOAD) {
+        /* Decoded now, while the CRC and the delimiter are on the wire; run only on
+         * PD_LINK_COMMAND. */
+        core->in_state = pd_dispatch_decode(core, pd_link_payload(&core->link),
+                                            pd_link_payload_len(&core->link))
+                             ? PD_IN_DECODED
+                             : PD_IN_BAD;
+        return true;
+    }
+    if (event == PD_LINK_COMMAND) {
+        pd_dispatch_command(core, core->in_state == PD_IN_DECODED);
+    } else if (event == PD_LINK_RESET) {
+        bool resumed = pd_core_open_session(core, pd_link_session(&core->link));
+        pd_link_reset_ack(&core->link, core->hal, core->boot_id, resumed);
+    }
+    /* The frame ended, run or not: core->in back to zeros for the next decode
+     * (pd_dispatch_clear says why only now). */
+    if (core->in_state != PD_IN_EMPTY) {
+        pd_dispatch_clear(core);
+        core->in_state = PD_IN_EMPTY;
+    }
+    return true;
 }
 
 size_t pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len)
 {
     size_t i = 0;
-    while (i < len && pd_link_rx_byte(core, data[i])) {
+    while (i < len && pd_core_rx_byte(core, data[i])) {
         i++;
     }
     return i;
@@ -48,7 +88,7 @@ static __attribute__((noinline)) void send_report(pd_core_t *core)
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
     if (core->report(core, slot, &out)) {
         uint8_t waited = (uint8_t)((uint8_t)pd_hal_millis(core->hal) - core->report_since);
-        if (!pd_dispatch_send_spare(core, &out, waited < PD_REPORT_MAX_WAIT_MS)) {
+        if (!pd_out_send_spare(core, &out, waited < PD_REPORT_MAX_WAIT_MS)) {
             return; /* no room yet, or a command arriving: the newest value, later */
         }
         if (core->report_sent != NULL) {
@@ -66,7 +106,7 @@ void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause)
     } else {
         pd_failsafe_fire(&core->failsafe);
     }
-    pd_dispatch_send_failsafe(core); /* dropped while IDLE: no one to tell (a Ping's Ack will) */
+    pd_out_send_failsafe(core); /* dropped while IDLE: no one to tell (a Ping's Ack will) */
 }
 
 void pd_core_poll(pd_core_t *core)

@@ -4,112 +4,12 @@
 
 #include <pb_decode.h>
 
-#include "pd_core.h"
-#include "pd_encode.h"
-#include "pd_link.h"
+#include "pd_dedupe.h"
+#include "pd_inputs.h"
+#include "pd_out.h"
 #include "pd_rom.h"
 #include "pd_schema.h"
-
-void pd_dedupe_init(pd_dedupe_t *dd)
-{
-    memset(dd, 0, sizeof(*dd));
-}
-
-int pd_dedupe_find(const pd_dedupe_t *dd, uint32_t id)
-{
-    /* Every new command scans the whole window and finds nothing: one byte
-     * of each id first (ids count up, so their first bytes in memory, the low
-     * ones on the Uno, tell them apart; on any byte order it is only a filter,
-     * the whole compare decides), the rest only on a match. A 32-bit compare
-     * per entry was 380 of the Uno's cycles between a command's delimiter and
-     * its Ack. */
-    const uint8_t first = *(const uint8_t *)&id;
-    for (uint8_t i = 0; i < dd->count; i++) {
-        if (*(const uint8_t *)&dd->id[i] == first && dd->id[i] == id) {
-            uint8_t pair = dd->status[i >> 1];
-            return (i & 1u) ? pair >> 4 : pair & 0x0Fu;
-        }
-    }
-    return -1;
-}
-
-void pd_dedupe_add(pd_dedupe_t *dd, uint32_t id, uint8_t status)
-{
-    typedef char fits[(_protoduino_Status_MAX < 16) ? 1 : -1];
-    (void)sizeof(fits);
-    dd->id[dd->next] = id;
-    uint8_t *pair = &dd->status[dd->next >> 1];
-    *pair = (dd->next & 1u) ? (uint8_t)((*pair & 0x0Fu) | (status << 4))
-                            : (uint8_t)((*pair & 0xF0u) | (status & 0x0Fu));
-    dd->next = (uint8_t)((dd->next + 1u) % PD_DEDUPE_WINDOW);
-    if (dd->count < PD_DEDUPE_WINDOW) {
-        dd->count++;
-    }
-}
-
-bool pd_dispatch_send(pd_core_t *core, const protoduino_ArduinoOut *msg)
-{
-    uint8_t raw[PD_TX_BUF];
-
-    if (!core->link.active) {
-        return false; /* DATA only while ACTIVE; skip the encoding work */
-    }
-    size_t len = pd_encode_out(msg, raw + PD_TX_PAYLOAD_AT, PD_TX_MAX_PAYLOAD);
-    if (len == 0) {
-        return false; /* cannot happen: PD_TX_MAX_PAYLOAD is the message's max size */
-    }
-    return pd_link_send(core, PD_PACKET_DATA, raw, len);
-}
-
-bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg, bool yield)
-{
-    uint8_t raw[PD_TX_BUF];
-
-    if (!core->link.active) {
-        return false;
-    }
-    size_t len = pd_encode_out(msg, raw + PD_TX_PAYLOAD_AT, PD_TX_MAX_PAYLOAD);
-    /* PD_TX_FRAME_BYTES(len) without its division: at the largest payload its
-     * COBS term n / 254 is 0 (checked here), so it is 0 for every len <= that;
-     * the division would be a libgcc call on the AVR, in flash and per report. */
-    typedef char no_cobs_block[(PD_TX_FRAME_BYTES(PD_TX_MAX_PAYLOAD) ==
-                                PD_MIN_PACKET + PD_TX_MAX_PAYLOAD + 3u) ? 1 : -1];
-    (void)sizeof(no_cobs_block);
-    size_t frame = PD_MIN_PACKET + len + 3u;
-    /* A command frame under way is answered first: its Ack must not queue behind this
-     * (`yield`: for a while), and a complete one held for room (rx_held) always goes
-     * first, or a stream of reports taking every emptied queue would starve it. And
-     * one report at a time, into a queue with room for a reply (on the Uno: an empty
-     * one): a reply never waits behind more than the report on the line. */
-    uint16_t room = pd_hal_tx_room(core->hal);
-    if (len == 0 || core->link.rx_held || (yield && core->link.rx_len > 0) || room < frame ||
-        room < PD_TX_RESERVE) {
-        return false;
-    }
-    return pd_link_send(core, PD_PACKET_DATA, raw, len);
-}
-
-/* The device's failsafe state: the latest safe state entered (its cause and
- * epoch) and whether it still holds. */
-static void failsafe_state(const pd_core_t *core, protoduino_Failsafe *fs)
-{
-    /* An interlock's latch holds the safe state until ClearInterlock, whatever
-     * liveness messages came since. */
-    fs->active = core->failsafe.active || core->outputs.inputs.latched != 0;
-    fs->cause = (protoduino_FailsafeCause)core->failsafe.cause;
-    fs->epoch = core->failsafe.epoch;
-    if (fs->cause == protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK) {
-        fs->pin = core->failsafe.pin;
-    }
-}
-
-bool pd_dispatch_send_failsafe(pd_core_t *core)
-{
-    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
-    out.which_data = protoduino_ArduinoOut_failsafe_tag;
-    failsafe_state(core, &out.data.failsafe);
-    return pd_dispatch_send(core, &out);
-}
+#include "pd_state.h"
 
 static void copy_string(char *dst, size_t cap, const char *src)
 {
@@ -161,14 +61,14 @@ static __attribute__((noinline)) void send_ack(pd_core_t *core, protoduino_Ardui
     out->which_data = protoduino_ArduinoOut_ack_tag;
     out->data.ack.message_id = id;
     out->data.ack.status = (protoduino_Status)status;
-    pd_dispatch_send(core, out);
+    pd_out_send(core, out);
 }
 
 /* After a Stop's Ack, or a liveness message's that cleared the flag: the
  * state as it is now (active with the new epoch, or cleared). */
 static void notify_failsafe(pd_core_t *core)
 {
-    pd_dispatch_send_failsafe(core);
+    pd_out_send_failsafe(core);
 }
 
 /* --- command handlers: each returns the Ack status ------------------------ */
@@ -188,7 +88,7 @@ static void alive(pd_core_t *core, pd_cmd_t *cmd, uint8_t epoch, bool counts)
     }
     if (core->failsafe.epoch != 0) {
         cmd->ack->has_failsafe = true;
-        failsafe_state(core, &cmd->ack->failsafe);
+        pd_out_failsafe_state(core, &cmd->ack->failsafe);
     }
 }
 
@@ -470,7 +370,7 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
         memset(&out, 0, sizeof(out));
         out.which_data = protoduino_ArduinoOut_decode_error_tag;
         out.data.decode_error.count = core->decode_errors;
-        pd_dispatch_send(core, &out);
+        pd_out_send(core, &out);
         if (msg->message_id != 0) {
             memset(&out, 0, sizeof(out));
             send_ack(core, &out, msg->message_id, protoduino_Status_STATUS_DECODE_ERROR);

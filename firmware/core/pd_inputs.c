@@ -2,7 +2,8 @@
 
 #include <string.h>
 
-#include "pd_core.h"
+#include "pd_out.h"
+#include "pd_state.h"
 
 typedef char pd_assert_analog_dirty_fits[(PD_MAX_ANALOG_INPUTS <= 8u) ? 1 : -1];
 typedef char pd_assert_counter_dirty_fits[(PD_MAX_COUNTERS <= 8u) ? 1 : -1];
@@ -32,7 +33,7 @@ static void mark_dirty(pd_core_t *core)
             in->coalesced++;
         }
     }
-    pd_core_report(core, PD_INPUTS_SLOT);
+    pd_state_report(core, PD_INPUTS_SLOT);
 }
 
 #if PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER
@@ -122,7 +123,7 @@ static __attribute__((noinline)) void trip(pd_core_t *core, uint8_t pin)
     /* A safe state of its own (a new failsafe epoch); the timer runs on. */
     pd_failsafe_interlock(&core->failsafe, pin);
     in->latched = (uint8_t)(pin + 1u);
-    pd_dispatch_send_failsafe(core); /* dropped while IDLE: no one to tell (a Ping's Ack will) */
+    pd_out_send_failsafe(core); /* dropped while IDLE: no one to tell (a Ping's Ack will) */
 }
 
 /* Whether an interlock input is at its trip level now (debounced). */

@@ -26,7 +26,7 @@
 struct pd_core;
 struct pd_outputs;
 
-/* The core's report slot for InputReport (pd_core.h, PD_REPORT_SLOTS). */
+/* The core's report slot for InputReport (pd_state.h, PD_REPORT_SLOTS). */
 #define PD_INPUTS_SLOT 0u
 
 /* Slots per input mode (each slot a few bytes of the Uno's RAM). */

@@ -336,9 +336,9 @@ static void test_data_only_while_active(void)
     tdev_t d;
     t_boot(&d);
     fake_clear(&d.hal);
-    CHECK(!pd_dispatch_send_failsafe(&d.core));
+    CHECK(!pd_out_send_failsafe(&d.core));
     CHECK_EQ(fake_count(&d.hal), 0);
-    CHECK(pd_link_send_event(&d.core, PD_EVENT_DESYNC)); /* CONTROL goes in any state */
+    CHECK(pd_link_send_event(&d.core.link, &d.hal, PD_EVENT_DESYNC)); /* CONTROL goes in any state */
     CHECK_EQ(fake_count(&d.hal), 1);
 }
 
