@@ -33,12 +33,15 @@ void pd_core_init(pd_core_t *core, void *hal)
 
 bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
 {
-    pd_link_event_t event = pd_link_rx_byte(&core->link, core->hal, byte);
+    pd_link_event_t event = pd_link_rx_byte(&core->link, byte);
     if (event == PD_LINK_NONE) {
         return true; /* most bytes: the frame goes on */
     }
-    if (event == PD_LINK_HELD) {
-        return false;
+    if (event == PD_LINK_END) {
+        event = pd_link_rx_end(&core->link, core->hal, byte);
+        if (event == PD_LINK_HELD) {
+            return false;
+        }
     }
     if (event == PD_LINK_PAYLOAD) {
         /* Decoded now, while the CRC and the delimiter are on the wire; run only on

@@ -250,32 +250,13 @@ static void rx_put(pd_link_t *link, uint8_t byte)
     link->rx_out++; /* past the buffer: the length check drops the packet */
 }
 
-pd_link_event_t pd_link_rx_byte(pd_link_t *link, void *hal, uint8_t byte)
+pd_link_event_t pd_link_rx_byte(pd_link_t *link, uint8_t byte)
 {
-    if (byte == 0) {
-        pd_link_event_t event = PD_LINK_NONE;
-        if (link->rx_skipping) {
-            link->rx_skipping = false;
-        } else if (link->rx_len > 0) {
-            if (pd_hal_tx_room(hal) < PD_TX_RESERVE) {
-                link->rx_held = true; /* no report may take the room it waits for */
-                return PD_LINK_HELD; /* its replies would not fit: later */
-            }
-            event = handle_frame(link, hal);
-        }
-        /* rx_buf is kept: the command and the session in it are read after this returns. */
-        rx_restart(link);
-        return event;
+    if (byte == 0 || link->rx_len >= PD_MAX_ENCODED_FRAME) {
+        return PD_LINK_END; /* while skipping, rx_len stays 0 */
     }
     if (link->rx_skipping) {
         return PD_LINK_NONE;
-    }
-    if (link->rx_len >= PD_MAX_ENCODED_FRAME) {
-        rx_restart(link);
-        link->rx_skipping = true;
-        PD_STAT_INC(link, rx_overflow);
-        pd_link_send_event(link, hal, PD_EVENT_RX_OVERFLOW);
-        return PD_LINK_OVERFLOW;
     }
     link->rx_len++;
     /* Streaming COBS (PROTOCOL.md section 2), one call of rx_put (inlined: it
@@ -294,4 +275,29 @@ pd_link_event_t pd_link_rx_byte(pd_link_t *link, void *hal, uint8_t byte)
         return PD_LINK_PAYLOAD;
     }
     return PD_LINK_NONE;
+}
+
+pd_link_event_t pd_link_rx_end(pd_link_t *link, void *hal, uint8_t byte)
+{
+    if (byte != 0) {
+        /* One byte more than the longest frame. */
+        rx_restart(link);
+        link->rx_skipping = true;
+        PD_STAT_INC(link, rx_overflow);
+        pd_link_send_event(link, hal, PD_EVENT_RX_OVERFLOW);
+        return PD_LINK_OVERFLOW;
+    }
+    pd_link_event_t event = PD_LINK_NONE;
+    if (link->rx_skipping) {
+        link->rx_skipping = false;
+    } else if (link->rx_len > 0) {
+        if (pd_hal_tx_room(hal) < PD_TX_RESERVE) {
+            link->rx_held = true; /* no report may take the room it waits for */
+            return PD_LINK_HELD;  /* its replies would not fit: later */
+        }
+        event = handle_frame(link, hal);
+    }
+    /* rx_buf is kept: the command and the session in it are read after this returns. */
+    rx_restart(link);
+    return event;
 }

@@ -142,6 +142,8 @@ void pd_link_init(pd_link_t *link);
  */
 typedef enum pd_link_event {
     PD_LINK_NONE = 0, /* taken; the frame goes on (or there was none: noise, an empty frame) */
+    PD_LINK_END,      /* pd_link_rx_byte only, NOT taken: a delimiter or the byte past the
+                       * longest frame; hand it to pd_link_rx_end */
     PD_LINK_HELD,     /* NOT taken: a delimiter completing a frame while the transmit queue has
                        * less than PD_TX_RESERVE of room; offer it again later */
     PD_LINK_PAYLOAD,  /* taken; a COMMAND's payload is all in (pd_link_payload), unchecked:
@@ -159,8 +161,17 @@ typedef enum pd_link_event {
 /* Whether `event` ended the frame. */
 #define PD_LINK_ENDED(event) ((event) >= PD_LINK_COMMAND)
 
-/* Offer one received byte; `hal` is the platform's (pd_hal.h), for the replies. */
-pd_link_event_t pd_link_rx_byte(pd_link_t *link, void *hal, uint8_t byte);
+/*
+ * Offer one received byte. Most bytes are only decoded and stored; the one
+ * that ends a frame, a delimiter or one past the longest frame, may make the
+ * link answer, so it goes on to pd_link_rx_end with the platform's HAL
+ * (PD_LINK_END). Two calls rather than a HAL argument for every byte: on the
+ * Uno, loading it for each one was 9 of its cycles a byte.
+ */
+pd_link_event_t pd_link_rx_byte(pd_link_t *link, uint8_t byte);
+
+/* The byte pd_link_rx_byte returned PD_LINK_END for; `hal` is the platform's (pd_hal.h). */
+pd_link_event_t pd_link_rx_end(pd_link_t *link, void *hal, uint8_t byte);
 
 /* The COMMAND payload of PD_LINK_PAYLOAD and PD_LINK_COMMAND, valid until the next byte. */
 static inline const uint8_t *pd_link_payload(const pd_link_t *link)
