@@ -21,8 +21,7 @@ void pd_core_init(pd_core_t *core, void *hal)
         core->session[i] = 0;
     }
     pd_link_init(&core->link);
-    pd_dispatch_clear(core);
-    core->in_state = PD_IN_EMPTY;
+    core->in_decoded = false;
     pd_dedupe_init(&core->dedupe);
     pd_outputs_init(&core->outputs);
     core->failsafe.epoch = 0; /* counts since power-up; a new session keeps it */
@@ -46,24 +45,17 @@ bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
     if (event == PD_LINK_PAYLOAD) {
         /* Decoded now, while the CRC and the delimiter are on the wire; run only on
          * PD_LINK_COMMAND. */
-        core->in_state = pd_dispatch_decode(core, pd_link_payload(&core->link),
-                                            pd_link_payload_len(&core->link))
-                             ? PD_IN_DECODED
-                             : PD_IN_BAD;
+        core->in_decoded = pd_dispatch_decode(core, pd_link_payload(&core->link),
+                                              pd_link_payload_len(&core->link));
         return true;
     }
     if (event == PD_LINK_COMMAND) {
-        pd_dispatch_command(core, core->in_state == PD_IN_DECODED);
+        pd_dispatch_command(core, core->in_decoded);
     } else if (event == PD_LINK_RESET) {
         bool resumed = pd_core_open_session(core, pd_link_session(&core->link));
         pd_link_reset_ack(&core->link, core->hal, core->boot_id, resumed);
     }
-    /* The frame ended, run or not: core->in back to zeros for the next decode
-     * (pd_dispatch_clear says why only now). */
-    if (core->in_state != PD_IN_EMPTY) {
-        pd_dispatch_clear(core);
-        core->in_state = PD_IN_EMPTY;
-    }
+    core->in_decoded = false; /* the frame ended, run or not */
     return true;
 }
 

@@ -42,10 +42,6 @@ typedef struct pd_command {
  */
 bool pd_dispatch_decode(struct pd_core *core, const uint8_t *payload, size_t len);
 
-/* core->in back to all zeros, as pd_dispatch_decode requires (at start-up and
- * after every frame whose payload it decoded). */
-void pd_dispatch_clear(struct pd_core *core);
-
 /* Run and answer the checked COMMAND in core->in (`decoded`: what pd_dispatch_decode said). */
 void pd_dispatch_command(struct pd_core *core, bool decoded);
 

@@ -38,11 +38,6 @@ typedef void (*pd_report_sent_fn)(struct pd_core *core, const protoduino_Arduino
 /* Report slots: one bit each in pd_core_t.report_pending. */
 #define PD_REPORT_SLOTS 8u
 
-/* What core->in holds: all zeros (what the next decode needs), or the current frame's command. */
-#define PD_IN_EMPTY 0u
-#define PD_IN_BAD 1u     /* its payload did not decode */
-#define PD_IN_DECODED 2u /* decoded, waiting for the packet's check */
-
 typedef struct pd_core {
     void *hal; /* handed back to every pd_hal_* call */
     /* Both big-endian, as on the wire: RESET_ACK copies one, RESET compares the
@@ -51,7 +46,7 @@ typedef struct pd_core {
     uint8_t session[4]; /* the host session that owns the outputs; 0: none since power-up */
     pd_link_t link;
     protoduino_ArduinoIn in; /* the current frame's command, decoded as its payload completes */
-    uint8_t in_state;        /* PD_IN_*: cleared as the frame ends */
+    bool in_decoded;         /* `in` holds the current frame's command, decoded: until it ends */
     pd_dedupe_t dedupe;
     pd_outputs_t outputs;
     pd_failsafe_t failsafe;

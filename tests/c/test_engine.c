@@ -354,10 +354,10 @@ static void test_command_decoded_early_runs_only_after_the_check(void)
     }
     /* Up to its payload's last byte: decoded, not run. */
     size_t fed = 0;
-    while (fed < n - 1u && !(d.core.in_state == PD_IN_DECODED)) {
+    while (fed < n - 1u && !d.core.in_decoded) {
         CHECK(pd_core_rx_byte(&d.core, bad[fed++]));
     }
-    CHECK((d.core.in_state == PD_IN_DECODED));
+    CHECK(d.core.in_decoded);
     CHECK(fed < n - 2u); /* the CRC was still to come */
     CHECK_EQ(d.core.in.message_id, 9u);
     /* The rest and the delimiter: dropped, nothing run, nothing answered. */
