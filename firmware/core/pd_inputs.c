@@ -12,13 +12,7 @@ typedef char pd_assert_report_fits[(PD_MAX_ANALOG_INPUTS <= sizeof(((protoduino_
                                     PD_MAX_COUNTERS <= sizeof(((protoduino_InputReport *)0)->counter_counts) /
                                                            sizeof(uint32_t)) ? 1 : -1];
 
-#define NO_SLOT 0xFFu
-
-void pd_inputs_init(pd_inputs_t *in)
-{
-    memset(in, 0, sizeof(*in));
-    in->adc_slot = NO_SLOT;
-}
+#define NO_SLOT PD_INPUTS_NO_SLOT
 
 #define PD_ANY_INPUT (PD_FEATURE_DIGITAL_INPUT || PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER)
 
@@ -490,25 +484,4 @@ void pd_inputs_sent(pd_core_t *core, const protoduino_ArduinoOut *msg)
     in->analog_dirty = 0;
     in->counter_dirty = 0;
     in->coalesced = 0;
-}
-
-void pd_inputs_release(pd_outputs_t *outputs, void *hal, uint8_t pin, uint8_t mode, uint8_t slot)
-{
-    pd_inputs_t *in = &outputs->inputs;
-    uint32_t bit = 1UL << pin;
-    if (mode == PD_MODE_DIGITAL_INPUT) {
-        in->trip_mask &= ~bit;
-        in->dpins &= ~bit;
-    } else if (mode == PD_MODE_ANALOG_INPUT) {
-        in->analog_on = (uint8_t)(in->analog_on & ~(1u << slot));
-        /* Interval 0: not sampled; a conversion under way ends unused (poll_analog). */
-        memset(&in->analog[slot], 0, sizeof(in->analog[slot]));
-        in->analog_dirty = (uint8_t)(in->analog_dirty & ~(1u << slot));
-    } else if (mode == PD_MODE_COUNTER) {
-        in->counter_on = (uint8_t)(in->counter_on & ~(1u << slot));
-        pd_hal_counter_stop(hal, pin);
-        memset(&in->counter[slot], 0, sizeof(in->counter[slot]));
-        in->counter_dirty = (uint8_t)(in->counter_dirty & ~(1u << slot));
-    }
-    pd_hal_input_release(hal, pin);
 }
