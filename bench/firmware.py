@@ -115,7 +115,7 @@ GROUPS: tuple[tuple[str, Callable[[str], bool]], ...] = (
     ("CRC-16 (pd_crc16_*)", lambda n: n.startswith("pd_crc16")),
     (
         "Ack encoding (pd_encode.c)",
-        lambda n: n.startswith(("put", "open_msg", "close_msg", "pd_encode", "pd_dispatch_send")),
+        lambda n: n.startswith(("put", "open_msg", "close_msg", "pd_encode", "pd_out_send")),
     ),
     (
         "interrupt handlers",
