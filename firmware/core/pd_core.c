@@ -36,12 +36,6 @@ bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
     if (event == PD_LINK_NONE) {
         return true; /* most bytes: the frame goes on */
     }
-    if (event == PD_LINK_END) {
-        event = pd_link_rx_end(&core->link, core->hal, byte);
-        if (event == PD_LINK_HELD) {
-            return false;
-        }
-    }
     if (event == PD_LINK_PAYLOAD) {
         /* Decoded now, while the CRC and the delimiter are on the wire; run only on
          * PD_LINK_COMMAND. */
@@ -49,8 +43,12 @@ bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
                                               pd_link_payload_len(&core->link));
         return true;
     }
+    /* PD_LINK_END: the byte ends a frame. A command first: its Ack is what the host waits for. */
+    event = pd_link_rx_end(&core->link, core->hal, byte);
     if (event == PD_LINK_COMMAND) {
         pd_dispatch_command(core, core->in_decoded);
+    } else if (event == PD_LINK_HELD) {
+        return false;
     } else if (event == PD_LINK_RESET) {
         bool resumed = pd_core_open_session(core, pd_link_session(&core->link));
         pd_link_reset_ack(&core->link, core->hal, core->boot_id, resumed);

@@ -142,8 +142,9 @@ void pd_link_init(pd_link_t *link);
  */
 typedef enum pd_link_event {
     PD_LINK_NONE = 0, /* taken; the frame goes on (or there was none: noise, an empty frame) */
-    PD_LINK_END,      /* pd_link_rx_byte only, NOT taken: a delimiter or the byte past the
-                       * longest frame; hand it to pd_link_rx_end */
+    PD_LINK_END,      /* pd_link_rx_byte only (its others: NONE, PAYLOAD), NOT taken: a
+                       * delimiter or the byte past the longest frame; hand it to
+                       * pd_link_rx_end */
     PD_LINK_HELD,     /* NOT taken: a delimiter completing a frame while the transmit queue has
                        * less than PD_TX_RESERVE of room; offer it again later */
     PD_LINK_PAYLOAD,  /* taken; a COMMAND's payload is all in (pd_link_payload), unchecked:
