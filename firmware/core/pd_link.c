@@ -97,10 +97,10 @@ bool pd_link_send_spare(pd_link_t *link, void *hal, uint8_t *buf, size_t len, bo
 }
 
 /*
- * Out of line: its frame buffer (PD_TX_BUF) would otherwise join the frame
- * of pd_link_rx_byte, which is on the stack under every command's decode and
- * reply; on the Uno that was 115 of the stack's bytes at its deepest point (a
- * Pose's decode), which came within 34 B of the static data.
+ * Out of line: its frame buffer (PD_TX_BUF) would otherwise join the frame of
+ * the receive loop (pd_core_rx_byte), which is on the stack under every
+ * command's decode and reply; on the Uno that was 115 of the stack's bytes at
+ * its deepest point (a Pose's decode), which came within 34 B of the static data.
  */
 static __attribute__((noinline)) bool send_control(pd_link_t *link, void *hal,
                                                    const uint8_t *payload, size_t len)
