@@ -21,7 +21,6 @@ void pd_core_init(pd_core_t *core, void *hal)
         core->session[i] = 0;
     }
     pd_link_init(&core->link);
-    pd_dispatch_clear(core);
     core->in_decoded = false;
     pd_dedupe_init(&core->dedupe);
     pd_outputs_init(&core->outputs);
@@ -54,9 +53,7 @@ bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
         bool resumed = pd_core_open_session(core, pd_link_session(&core->link));
         pd_link_reset_ack(&core->link, core->hal, core->boot_id, resumed);
     }
-    /* The frame ended, run or not: its command is done with. */
-    pd_dispatch_clear(core);
-    core->in_decoded = false;
+    core->in_decoded = false; /* the frame ended, run or not */
     return true;
 }
 

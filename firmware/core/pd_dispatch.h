@@ -42,9 +42,6 @@ typedef struct pd_command {
  */
 bool pd_dispatch_decode(struct pd_core *core, const uint8_t *payload, size_t len);
 
-/* core->in back to what pd_dispatch_decode needs (at start-up, and as every frame ends). */
-void pd_dispatch_clear(struct pd_core *core);
-
 /* Run and answer the checked COMMAND in core->in (`decoded`: what pd_dispatch_decode said). */
 void pd_dispatch_command(struct pd_core *core, bool decoded);
 
