@@ -76,6 +76,8 @@ ANALOG_SECONDS = 2.0
 ANALOG_HZ = inputs.ANALOG_HZ
 #: Bounds a failing wait for the pins to show a flat-out run's last change (s).
 SETTLE = 10.0
+#: How far a trace time mapped to the host's clock may be off (the runner's pacing).
+MAPPING_ERROR = 0.001
 
 LABELS = ("protoduino", "StandardFirmata")
 
@@ -115,6 +117,7 @@ class Flat:
     behind: float = 0.0  # host's last write returned -> last change at the pins
     cpu: float = 0.0  # process CPU of the whole run
     calls: int = 0
+    acked: float | None = None  # the last Ack arrived -> last change (negative: before it)
     line_share: float | None = None  # host -> board bytes over the line's capacity
 
     @property
@@ -153,8 +156,9 @@ class RunnerClock:
         self.zero = int(self.row["start_ns"]) / 1e9
 
     def snapshot(self) -> dict[str, Any]:
-        self.row = runnerstats.snapshot(self.sim.pid, self.stats)
-        return self.row
+        row: dict[str, Any] = runnerstats.snapshot(self.sim.pid, self.stats)
+        self.row = row
+        return row
 
     def line(self) -> Line:
         cycles = int(self.snapshot()["uart_byte_cycles"])
@@ -233,6 +237,11 @@ def _time_servo(
         run.cpu.setdefault("servo write", []).append(got[1])
 
 
+def _poses(commands: int) -> int:
+    """Poses of the flat-out run: a third of the commands, even (see _flat_out)."""
+    return max(20, commands // 3) // 2 * 2
+
+
 def _servo_samples(samples: int) -> int:
     """Servo samples: a quarter of the digital ones (each waits for a 20 ms frame)."""
     return max(5, samples // 4)
@@ -247,9 +256,18 @@ def _flat_out(
     calls: int,
     issue: Callable[[int], object],
     finish: Callable[[], object],
+    acked: bool,
 ) -> Flat:
     """``calls`` calls as fast as the host makes them, call i setting every pin of ``pins`` to
-    level i % 2 == 0 (they start low); then until each pin showed all its changes."""
+    level i % 2 == 0 (they start low, ``calls`` is even: they end low).
+
+    The trace does not list every edge of a fast toggle (highs under 3 ms read as pulses, a
+    train of them as a servo: tools/avrsim/pd_pins.c), but it dates the last fall of each pin
+    exactly, as a digital 0 or as the end of a pulse train: the time the last call took
+    effect. Changes per second are those of all the calls over the time from the first call
+    to that moment. ``finish`` waits for the calls' Acks where there are any (``acked``)."""
+    if calls % 2:
+        raise ValueError("an even number of calls, so that the pins end low")
     mark = len(trace.update())
     rx0 = int(clock.snapshot()["uart_rx_bytes"])
     c0 = time.process_time()
@@ -258,26 +276,38 @@ def _flat_out(
         issue(i)
     t_last = time.monotonic()
     finish()
+    t_done = time.monotonic()
     cpu = time.process_time() - c0
     deadline = time.monotonic() + SETTLE + calls * 0.002
-    last: dict[int, float] = {}
     while True:
-        counts = dict.fromkeys(pins, 0)
-        for e in trace.update()[mark:]:
-            pin = int(e["pin"])
-            if pin in counts and e.get("mode") == "digital":
-                counts[pin] += 1
-                last[pin] = float(e["t"])
-        if all(n >= calls for n in counts.values()) or time.monotonic() > deadline:
+        ends = _last_falls(trace.update()[mark:], pins)
+        # A fall the last call made: after its write, and quiet since for longer than a
+        # pulse train's period (a later pulse would have been reported by then).
+        if (
+            len(ends) == len(pins)
+            and time.monotonic() > clock.zero + max(ends.values()) + 0.1
+            and clock.zero + min(ends.values()) >= t_last - MAPPING_ERROR
+        ):
             break
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"pins {list(pins)} did not show the last of {calls} calls")
         time.sleep(0.01)
     rx = int(clock.snapshot()["uart_rx_bytes"]) - rx0
-    if not last:
-        raise RuntimeError("no output change reached the pins")
-    end = clock.zero + max(last.values())
-    flat = Flat(sum(counts.values()), end - t0, end - t_last, cpu, calls)
+    end = clock.zero + max(ends.values())
+    flat = Flat(calls * len(pins), end - t0, end - t_last, cpu, calls)
+    if acked:
+        flat.acked = end - t_done
     flat.line_share = rx * line.host_byte_us / 1e6 / max(end - t0, 1e-9)
     return flat
+
+
+def _last_falls(events: Sequence[dict[str, Any]], pins: Sequence[int]) -> dict[int, float]:
+    """Each pin's last trace time, if its last line says 0 (the pin is low since then)."""
+    last: dict[int, dict[str, Any]] = {}
+    for e in events:
+        if int(e["pin"]) in pins:
+            last[int(e["pin"])] = e
+    return {pin: float(e["t"]) for pin, e in last.items() if int(e["value"]) == 0}
 
 
 class _WireSizes:
@@ -330,14 +360,15 @@ def run_protoduino(samples: int, commands: int, seed: int) -> BoardRun:
                 trace,
                 line,
                 pins=(DIGITAL_PIN,),
-                calls=commands,
+                calls=commands // 2 * 2,
                 issue=lambda i: futures.append(led.submit(i % 2 == 0)),
                 finish=lambda: [f.result() for f in wait(futures).done],
+                acked=True,
             )
             outs = [led, *(board.digital_output(p) for p in POSE_PINS if p != DIGITAL_PIN)]
             board.pose(dict.fromkeys(outs, False))
             pose_futures: list[Future[None]] = []
-            poses = max(20, commands // 3)
+            poses = _poses(commands)
             run.poses = _flat_out(
                 clock,
                 trace,
@@ -348,6 +379,7 @@ def run_protoduino(samples: int, commands: int, seed: int) -> BoardRun:
                     board.submit_pose(dict.fromkeys(outs, i % 2 == 0))
                 ),
                 finish=lambda: [f.result() for f in wait(pose_futures).done],
+                acked=True,
             )
             run.cpu["pose (6 outputs)"] = [run.poses.cpu / run.poses.calls]
             rates, _gaps, _coalesced, _idle, _busy = inputs.measure_streaming(
@@ -391,9 +423,10 @@ def run_firmata(samples: int, commands: int, seed: int) -> BoardRun:
                 trace,
                 line,
                 pins=(DIGITAL_PIN,),
-                calls=commands,
+                calls=commands // 2 * 2,
                 issue=lambda i: led.write(i % 2 == 0),
                 finish=list,  # nothing to wait for: Firmata answers nothing
+                acked=False,
             )
             run.analog = firmata.stream_analog(6, ANALOG_SECONDS)
             row = clock.snapshot()
@@ -446,6 +479,14 @@ def _range(values: list[int]) -> str:
     return f"{lo} B" if lo == hi else f"{lo}-{hi} B"
 
 
+def _behind(flat: Flat) -> str:
+    text = f"the last change {_ms(flat.behind)} ms after the host's last call returned"
+    if flat.acked is not None:
+        when = "before" if flat.acked < 0 else "after"
+        text += f", {_ms(abs(flat.acked))} ms {when} its Ack"
+    return text
+
+
 def _cells(run: BoardRun) -> dict[str, str]:
     """Each row's cell for one board."""
     if run.error is not None or run.line is None:
@@ -461,15 +502,11 @@ def _cells(run: BoardRun) -> dict[str, str]:
         else "-"
     )
     flat = run.flat
-    flat_cell = (
-        f"{flat.rate:,.0f}/s; the last change {_ms(flat.behind)} ms after the host's last write"
-        if flat
-        else "-"
-    )
+    flat_cell = f"{flat.rate:,.0f}/s; {_behind(flat)}" if flat else "-"
     poses = run.poses
     pose_cell = (
         f"{poses.rate:,.0f} changes/s, {(poses.line_share or 0) * 100:.0f} % of the line; "
-        f"{_ms(poses.behind)} ms behind at the end"
+        f"{_behind(poses)}"
         if poses
         else "- (no multi-output command)"
     )
@@ -585,7 +622,7 @@ def run(ctx: Context) -> SectionResult:
         f"{ctx.commands} digital writes as fast as the host issues them (protoduino: "
         f"`submit`, {WINDOW} in flight; Firmata has no acknowledgement and no flow control, so "
         f"the pty and the runner queue what the line cannot carry yet); poses: "
-        f"{max(20, ctx.commands // 3)} `submit_pose` of {len(POSE_PINS)} digital outputs, "
+        f"{_poses(ctx.commands)} `submit_pose` of {len(POSE_PINS)} digital outputs, "
         "their share of the line counting the bytes that entered the board's UART. Host "
         "CPU: `time.process_time` around each call (all of the host library's threads). "
         f"Analog: every analog input streamed for {ANALOG_SECONDS:.0f} s (protoduino at "
