@@ -329,7 +329,7 @@ class _WireSizes:
             self.answers.append(size)
 
 
-def run_protoduino(samples: int, commands: int, seed: int) -> BoardRun:
+def run_protoduino(samples: int, commands: int, seed: int, analog_seconds: float) -> BoardRun:
     run = BoardRun(LABELS[0], 115_200)
     rng = random.Random(seed)
     with TemporaryDirectory(prefix="bench-race-") as tmp:
@@ -383,7 +383,7 @@ def run_protoduino(samples: int, commands: int, seed: int) -> BoardRun:
             )
             run.cpu["pose (6 outputs)"] = [run.poses.cpu / run.poses.calls]
             rates, _gaps, _coalesced, _idle, _busy = inputs.measure_streaming(
-                board, ANALOG_SECONDS, 5
+                board, analog_seconds, 5
             )
             run.analog = rates
             row = clock.snapshot()
@@ -394,7 +394,7 @@ def run_protoduino(samples: int, commands: int, seed: int) -> BoardRun:
     return run
 
 
-def run_firmata(samples: int, commands: int, seed: int) -> BoardRun:
+def run_firmata(samples: int, commands: int, seed: int, analog_seconds: float) -> BoardRun:
     run = BoardRun(LABELS[1], firmata_board.BAUD)
     rng = random.Random(seed)
     with TemporaryDirectory(prefix="bench-race-") as tmp:
@@ -428,7 +428,7 @@ def run_firmata(samples: int, commands: int, seed: int) -> BoardRun:
                 finish=list,  # nothing to wait for: Firmata answers nothing
                 acked=False,
             )
-            run.analog = firmata.stream_analog(6, ANALOG_SECONDS)
+            run.analog = firmata.stream_analog(6, analog_seconds)
             row = clock.snapshot()
             run.stack = int(row["ramend"]) - int(row["sp_min"])
             run.lag = clock.lag()
@@ -444,14 +444,17 @@ def firmata_footprint() -> firmata_board.HexFootprint | None:
     return firmata_board.hex_footprint(FIRMATA_HEX)
 
 
-def collect(samples: int, commands: int, seed: int) -> list[BoardRun]:
+def collect(
+    samples: int, commands: int, seed: int, analog_seconds: float = ANALOG_SECONDS
+) -> list[BoardRun]:
+    """Both boards, protoduino first; one that cannot run carries its ``error``."""
     out: list[BoardRun] = []
     for label, measure, nominal in (
         (LABELS[0], run_protoduino, 115_200),
         (LABELS[1], run_firmata, firmata_board.BAUD),
     ):
         try:
-            out.append(measure(samples, commands, seed))
+            out.append(measure(samples, commands, seed, analog_seconds))
         except (ProtoduinoError, BoardUnavailableError, RuntimeError, OSError) as error:
             log.warning("race: %s not run: %s", label, error)
             out.append(BoardRun(label, nominal, error=str(error).splitlines()[0]))

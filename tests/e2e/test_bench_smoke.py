@@ -534,3 +534,75 @@ def test_report_quote_replaces_only_between_markers(tmp_path: Path) -> None:
     )
     assert other.read_text() == "no markers: old\n"
     assert report.quote([doc], {"footprint": "flash 1 B"}) == []  # nothing left to change
+
+
+def _firmata_hex() -> Path:
+    """The race's StandardFirmata hex: setup fetched it (tools/dev.sh setup, which CI runs)."""
+    from bench import race
+
+    assert race.FIRMATA_HEX.exists(), f"StandardFirmata's hex is missing: run {race.FETCH_STEP}"
+    return race.FIRMATA_HEX
+
+
+def test_firmata_footprint_from_its_hex() -> None:
+    """Flash is the hex's bytes; static RAM the end of .bss its start-up code clears (940 B,
+    as read from the same code by hand: ../shared/TOOLCHAIN.md, Peers and engines)."""
+    if shutil.which("avr-objcopy") is None:
+        pytest.skip("avr-objcopy is not installed (binutils-avr)")
+    from bench.peers import firmata_board
+
+    size = firmata_board.hex_footprint(_firmata_hex())
+    assert (size.flash, size.static_ram) == (12_194, 940)
+
+
+def test_race_finds_each_pins_last_fall() -> None:
+    from bench import race
+
+    events: list[dict[str, Any]] = [
+        {"t": 1.0, "pin": 13, "mode": "servo", "value": 1500},
+        {"t": 1.5, "pin": 2, "mode": "digital", "value": 0},
+        {"t": 2.0, "pin": 13, "mode": "servo", "value": 0},
+        {"t": 2.5, "pin": 4, "mode": "digital", "value": 1},
+    ]
+    # Pin 4 is high at the end: no last fall yet; pin 7 never moved.
+    assert race._last_falls(events, (2, 4, 7, 13)) == {2: 1.5, 13: 2.0}
+
+
+def test_race_line_times_from_simavrs_byte() -> None:
+    from bench import race
+
+    line = race.Line(11 * 8 * 17)  # U2X, UBRR 16: protoduino's 115200
+    assert line.baud == pytest.approx(16e6 / (8 * 17))
+    assert line.board_byte_us == pytest.approx(93.5)
+    assert line.host_byte_us == pytest.approx(85.0)
+
+
+@pytest.mark.avr
+def test_race_on_both_boards() -> None:
+    """Part 8: StandardFirmata (the unmodified hex) and protoduino on the same runner; every
+    row measured for both, nothing lost; byte counts and line rates exact."""
+    _need("avr")
+    _firmata_hex()
+    _or_skip(lambda: require("pyfirmata2.pyfirmata2", "pyFirmata2"))
+    from bench import race
+
+    ours, theirs = race.collect(samples=6, commands=10, seed=SEED, analog_seconds=0.3)
+    for run in (ours, theirs):
+        assert run.error is None, run.error
+        assert run.lost == 0 and len(run.digital) == 6 and len(run.servo) == 5
+        assert run.flat is not None and run.flat.changes == 10 and run.flat.seconds > 0
+        assert sorted(run.analog) == ([14, 15, 16, 17, 18, 19] if run is ours else list(range(6)))
+        assert all(rate > 0 for rate in run.analog.values())
+        assert 0 < run.stack < 2048 - run.static_ram
+    # The UART rates the firmwares set: protoduino U2X with UBRR 16, Firmata's 57600 without
+    # U2X (the Arduino core's exception for that rate) and UBRR 16; simavr's 11-bit bytes.
+    assert ours.line == race.Line(11 * 8 * 17)
+    assert theirs.line == race.Line(11 * 16 * 17)
+    assert theirs.command_bytes == [3]  # DIGITAL_MESSAGE: 0x90 | port, two 7-bit bytes
+    assert ours.command_bytes and min(ours.command_bytes) >= 12 and ours.answer_bytes
+    assert ours.poses is not None and ours.poses.changes == 20 * len(race.POSE_PINS)
+    assert ours.poses.acked is not None and ours.poses.acked <= 0.001  # the pins before the Ack
+    assert theirs.poses is None and theirs.flat is not None and theirs.flat.acked is None
+    assert (theirs.flash, theirs.static_ram) == (12_194, 940)
+    assert set(ours.cpu) == {"digital write", "servo write", "pose (6 outputs)"}
+    assert set(theirs.cpu) == {"digital write", "servo write"}
