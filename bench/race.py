@@ -56,10 +56,9 @@ from .peers import firmata_board
 
 log = logging.getLogger(__name__)
 
-ROOT = Path(__file__).resolve().parents[1]
-#: Where tools/fetch_firmata.sh puts StandardFirmata's Uno hex.
-FIRMATA_HEX = ROOT / ".deps" / "firmata" / "StandardFirmata.cpp.hex"
-FETCH_STEP = "tools/fetch_firmata.sh (run by tools/dev.sh setup and by tools/bench_setup.sh)"
+ROOT = firmata_board.ROOT
+FIRMATA_HEX = firmata_board.HEX
+FETCH_STEP = firmata_board.FETCH_STEP
 
 UNO_HZ = 16_000_000
 DIGITAL_PIN = 13
@@ -435,13 +434,6 @@ def run_firmata(samples: int, commands: int, seed: int, analog_seconds: float) -
     size = firmata_board.hex_footprint(FIRMATA_HEX)
     run.flash, run.static_ram = size.flash, size.static_ram
     return run
-
-
-def firmata_footprint() -> firmata_board.HexFootprint | None:
-    """StandardFirmata's flash and static RAM from the race's hex, or None without it."""
-    if not FIRMATA_HEX.exists():
-        return None
-    return firmata_board.hex_footprint(FIRMATA_HEX)
 
 
 def collect(

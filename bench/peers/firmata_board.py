@@ -23,6 +23,11 @@ from typing import Any
 
 from ..core import require
 
+ROOT = Path(__file__).resolve().parents[2]
+#: Where tools/fetch_firmata.sh puts StandardFirmata's Uno hex (from avrgirl-arduino 5.0.1).
+HEX = ROOT / ".deps" / "firmata" / "StandardFirmata.cpp.hex"
+FETCH_STEP = "tools/fetch_firmata.sh (run by tools/dev.sh setup and by tools/bench_setup.sh)"
+
 #: StandardFirmata's line (its sketch's Firmata.begin(57600)).
 BAUD = 57_600
 #: Its sampling interval's floor: it raises anything below to 10 ms.
@@ -98,6 +103,11 @@ def opened(port: str) -> Iterator[FirmataBoard]:
 class HexFootprint:
     flash: int
     static_ram: int
+
+
+def footprint() -> HexFootprint | None:
+    """StandardFirmata's flash and static RAM from the race's hex, or None without it."""
+    return hex_footprint(HEX) if HEX.exists() else None
 
 
 def _tool(name: str) -> str:
