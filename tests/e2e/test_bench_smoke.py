@@ -606,3 +606,30 @@ def test_race_on_both_boards() -> None:
     assert (theirs.flash, theirs.static_ram) == (12_194, 940)
     assert set(ours.cpu) == {"digital write", "servo write", "pose (6 outputs)"}
     assert set(theirs.cpu) == {"digital write", "servo write"}
+
+
+def test_report_merge_replaces_only_the_parts_run() -> None:
+    """``--merge``: the parts run replace theirs (sections and target rows), a new part goes in
+    its place by number, the others stay as the earlier run left them, and the header says so."""
+    from bench import report
+
+    table = "| part | target | goal | measured | verdict |\n|---|---|---|---|---|\n"
+    old = (
+        "# Performance\n\nheader\n\n## Targets\n\n" + table + "| 1. A | a | g | 1 | met |\n"
+        "| 5. F | f | g | old | met |\n| 7. I | i | g | 7 | met |\n\nMissed targets.\n\n"
+        "## Machine\n\nm\n\n## 1. A\n\nold one\n\n## 5. F\n\nold five\n\n## 7. I\n\nseven\n"
+    )
+    new = (
+        "# Performance\n\nnew header\n\n## Targets\n\n" + table + "| 5. F | f | g | new | met |\n"
+        "| 8. R | r | g | 8 | **missed** |\n\n## Machine\n\nm2\n\n## 5. F\n\nnew five\n\n"
+        "## 8. R\n\nrace\n"
+    )
+    merged = report.merge(old, new, "Parts 5, 8 come from a later run.")
+    assert merged.startswith("# Performance\n\nheader\n\n> Parts 5, 8 come from a later run.\n")
+    assert "new header" not in merged and "m2" not in merged and "\nm\n" in merged
+    rows = [line for line in merged.splitlines() if line.startswith("| ") and ". " in line[:6]]
+    assert [r.split(" | ")[0] for r in rows] == ["| 1. A", "| 5. F", "| 7. I", "| 8. R"]
+    assert "| 5. F | f | g | new | met |" in rows and "Missed targets." in merged
+    headings = [line for line in merged.splitlines() if line.startswith("## ")]
+    assert headings == ["## Targets", "## Machine", "## 1. A", "## 5. F", "## 7. I", "## 8. R"]
+    assert "new five" in merged and "old five" not in merged and "old one" in merged
