@@ -533,7 +533,8 @@ def _quotes(size: Footprint) -> dict[str, str]:
     return {
         "footprint": f"flash {size.flash:,} B of the {FLASH_BUDGET:,} B budget and static RAM "
         f"{size.ram:,} B (static RAM + the deepest stack + {RAM_FREE} B free <= {RAM_TOTAL:,} B; "
-        f"for comparison, StandardFirmata: {' and '.join(firmata_sizes())}, "
+        f"for comparison, StandardFirmata (the hex part 8 races): "
+        f"{' and '.join(firmata_sizes())}, "
         f"StandardFirmataPlus: {FIRMATA_PLUS[0]:,} B and {FIRMATA_PLUS[1]:,} B)"
     }
 

@@ -585,6 +585,26 @@ def _targets(ours: BoardRun, theirs: BoardRun) -> list[Target]:
     return out
 
 
+def _quote(ours: BoardRun, theirs: BoardRun) -> str:
+    """The race in one sentence, as README.md quotes it (bench.report.quote)."""
+    cpu_ours = statistics.median(ours.cpu["digital write"])
+    cpu_theirs = statistics.median(theirs.cpu["digital write"])
+    text = (
+        f"digital write -> pin p50 {_ms(statistics.median(ours.digital))} ms at 115200 "
+        f"({_range(ours.command_bytes)}: an acknowledged, CRC-checked frame) against "
+        f"StandardFirmata's {_ms(statistics.median(theirs.digital))} ms at 57600 "
+        f"({_range(theirs.command_bytes)}, no ack, no check); host CPU per digital write "
+        f"{cpu_ours * 1e6:,.0f} us against {cpu_theirs * 1e6:,.0f} us"
+    )
+    if ours.flat is not None and theirs.flat is not None:
+        text += (
+            f"; flat out {ours.flat.rate:,.0f} acknowledged changes/s against "
+            f"{theirs.flat.rate:,.0f}/s whose pins end {_ms(theirs.flat.behind)} ms behind the "
+            "host (no flow control)"
+        )
+    return text
+
+
 def run(ctx: Context) -> SectionResult:
     if not FIRMATA_HEX.exists():
         return SectionResult(
@@ -630,11 +650,8 @@ def run(ctx: Context) -> SectionResult:
     if lost:
         text += f"\nWrites whose change never showed at the pin: {', '.join(lost)}.\n"
     quotes: dict[str, str] = {}
-    if theirs.error is None:
-        quotes["race-firmata"] = (
-            f"StandardFirmata 2.4 (avrgirl-arduino 5.0.1's Uno hex): {theirs.flash:,} B flash, "
-            f"{theirs.static_ram:,} B static RAM"
-        )
+    if ours.error is None and theirs.error is None and ours.digital and theirs.digital:
+        quotes["race"] = _quote(ours, theirs)
     return SectionResult(text, _targets(ours, theirs), packages=["pyFirmata2"], quotes=quotes)
 
 
