@@ -113,7 +113,8 @@ class Flat:
 
     changes: int = 0
     seconds: float = 0.0  # first call -> last change at the pins (host clock)
-    behind: float = 0.0  # host's last write returned -> last change at the pins
+    behind: float = 0.0  # the host's last write to the line -> the last change at the pins
+    returned: float = 0.0  # the host's last call returned -> the last change at the pins
     cpu: float = 0.0  # process CPU of the whole run
     calls: int = 0
     acked: float | None = None  # the last Ack arrived -> last change (negative: before it)
@@ -256,6 +257,7 @@ def _flat_out(
     issue: Callable[[int], object],
     finish: Callable[[], object],
     acked: bool,
+    last_write: Callable[[], float] | None = None,
 ) -> Flat:
     """``calls`` calls as fast as the host makes them, call i setting every pin of ``pins`` to
     level i % 2 == 0 (they start low, ``calls`` is even: they end low).
@@ -264,7 +266,9 @@ def _flat_out(
     train of them as a servo: tools/avrsim/pd_pins.c), but it dates the last fall of each pin
     exactly, as a digital 0 or as the end of a pulse train: the time the last call took
     effect. Changes per second are those of all the calls over the time from the first call
-    to that moment. ``finish`` waits for the calls' Acks where there are any (``acked``)."""
+    to that moment. ``finish`` waits for the calls' Acks where there are any (``acked``);
+    ``last_write`` says when the host wrote its last frame to the line, where a library holds
+    calls back (protoduino's window); otherwise that is when the last call returned."""
     if calls % 2:
         raise ValueError("an even number of calls, so that the pins end low")
     mark = len(trace.update())
@@ -293,7 +297,8 @@ def _flat_out(
         time.sleep(0.01)
     rx = int(clock.snapshot()["uart_rx_bytes"]) - rx0
     end = clock.zero + max(ends.values())
-    flat = Flat(calls * len(pins), end - t0, end - t_last, cpu, calls)
+    wrote = last_write() if last_write is not None else t_last
+    flat = Flat(calls * len(pins), end - t0, end - wrote, end - t_last, cpu, calls)
     if acked:
         flat.acked = end - t_done
     flat.line_share = rx * line.host_byte_us / 1e6 / max(end - t0, 1e-9)
@@ -316,10 +321,15 @@ class _WireSizes:
         self.counting = False
         self.commands: list[int] = []
         self.answers: list[int] = []
+        self.last_command = 0.0  # time.monotonic() of the last COMMAND written
 
     def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
         item = record.item
-        if not self.counting or not isinstance(item, Packet):
+        if not isinstance(item, Packet):
+            return
+        if record.direction == "tx" and item.type is PacketType.COMMAND:
+            self.last_command = record.t
+        if not self.counting:
             return
         size = len(frame_packet(item.type, item.seq, item.payload))
         if record.direction == "tx" and item.type is PacketType.COMMAND:
@@ -363,6 +373,7 @@ def run_protoduino(samples: int, commands: int, seed: int, analog_seconds: float
                 issue=lambda i: futures.append(led.submit(i % 2 == 0)),
                 finish=lambda: [f.result() for f in wait(futures).done],
                 acked=True,
+                last_write=lambda: sizes.last_command,
             )
             outs = [led, *(board.digital_output(p) for p in POSE_PINS if p != DIGITAL_PIN)]
             board.pose(dict.fromkeys(outs, False))
@@ -379,6 +390,7 @@ def run_protoduino(samples: int, commands: int, seed: int, analog_seconds: float
                 ),
                 finish=lambda: [f.result() for f in wait(pose_futures).done],
                 acked=True,
+                last_write=lambda: sizes.last_command,
             )
             run.cpu["pose (6 outputs)"] = [run.poses.cpu / run.poses.calls]
             rates, _gaps, _coalesced, _idle, _busy = inputs.measure_streaming(
@@ -475,10 +487,13 @@ def _range(values: list[int]) -> str:
 
 
 def _behind(flat: Flat) -> str:
-    text = f"the last change {_ms(flat.behind)} ms after the host's last call returned"
+    text = f"the last change {_ms(flat.behind)} ms after the host's last write to the line"
     if flat.acked is not None:
         when = "before" if flat.acked < 0 else "after"
-        text += f", {_ms(abs(flat.acked))} ms {when} its Ack"
+        text += (
+            f" ({_ms(flat.returned)} ms after its last call returned, the rest queued in the "
+            f"host; {_ms(abs(flat.acked))} ms {when} the last Ack)"
+        )
     return text
 
 

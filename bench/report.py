@@ -130,7 +130,16 @@ def merge(old: str, new: str, note: str) -> str:
     out_blocks += list(pending.values())
     if not any(b.startswith("## Targets") for b in old_blocks) and fresh_rows:
         out_blocks.insert(0, new_targets)
-    head = old_head.rstrip() + f"\n\n> {note}\n\n"
+    # An earlier merge's note goes when this run replaces every part it named.
+    kept = [
+        line
+        for line in old_head.rstrip().split("\n\n")
+        if not (
+            (m := re.match(r"> Parts ([\d, ]+) come from a later run", line))
+            and {int(n) for n in m.group(1).split(",")} <= set(new_parts)
+        )
+    ]
+    head = "\n\n".join(kept) + f"\n\n> {note}\n\n"
     return (head + "".join(b.rstrip() + "\n\n" for b in out_blocks)).rstrip() + "\n"
 
 

@@ -633,3 +633,9 @@ def test_report_merge_replaces_only_the_parts_run() -> None:
     headings = [line for line in merged.splitlines() if line.startswith("## ")]
     assert headings == ["## Targets", "## Machine", "## 1. A", "## 5. F", "## 7. I", "## 8. R"]
     assert "new five" in merged and "old five" not in merged and "old one" in merged
+    # A later merge of the same parts replaces the note, one of fewer parts keeps it.
+    again = report.merge(merged, new, "Parts 5, 8 come from a later run, again.")
+    assert "later run.\n" not in again and again.count("> Parts") == 1
+    fewer = new.replace("| 5. F | f | g | new | met |\n", "").split("## 5. F")[0]
+    assert report.merge(merged, fewer + "## 8. R\n\nrace\n", "x").count("> Parts") == 1
+    assert "> x" in report.merge(merged, fewer + "## 8. R\n\nrace\n", "x")
