@@ -418,6 +418,10 @@ def run_firmata(samples: int, commands: int, seed: int, analog_seconds: float) -
             trace = Trace(trace_path)
             led = firmata.digital_output(DIGITAL_PIN)
             servo = firmata.servo(SERVO_PIN, 0)
+            # No Ack says the set-up arrived: the servo's first pulses at 0 degrees do, and
+            # that its bytes are not counted as the digital writes' below.
+            if wait_changes(trace, {SERVO_PIN: us(0)}, 0.0) is None:
+                raise RuntimeError("StandardFirmata's servo never started")
             run.line = line = clock.line()
             rx0 = int(clock.snapshot()["uart_rx_bytes"])
             _time_digital(run, clock, trace, samples=samples, rng=rng, write=led.write)
@@ -439,7 +443,9 @@ def run_firmata(samples: int, commands: int, seed: int, analog_seconds: float) -
                 finish=list,  # nothing to wait for: Firmata answers nothing
                 acked=False,
             )
-            run.analog = firmata.stream_analog(6, analog_seconds)
+            run.analog = firmata.stream_analog(
+                6, analog_seconds, lambda: float(clock.snapshot()["t"])
+            )
             row = clock.snapshot()
             run.stack = int(row["ramend"]) - int(row["sp_min"])
             run.lag = clock.lag()
@@ -656,7 +662,9 @@ def run(ctx: Context) -> SectionResult:
         "their share of the line counting the bytes that entered the board's UART. Host "
         "CPU: `time.process_time` around each call (all of the host library's threads). "
         f"Analog: every analog input streamed for {ANALOG_SECONDS:.0f} s (protoduino at "
-        f"{ANALOG_HZ} Hz with a heartbeat of one period, Firmata at its 10 ms floor). "
+        f"{ANALOG_HZ} Hz with a heartbeat of one period, Firmata at its 10 ms floor), counted "
+        "per second of the board's own clock (protoduino's reports carry it; Firmata's "
+        "between two readings of the runner's emulated time). "
         "Firmata's flash is the hex's bytes and its static RAM the end of .bss that its "
         "start-up code clears; the deepest stack is the runner's lowest stack pointer in this "
         "run for both.\n\n" + table

@@ -14,7 +14,7 @@ from __future__ import annotations
 import shutil
 import subprocess
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,14 +63,18 @@ class FirmataBoard:
         self.board.servo_config(pin, 544, 2400, degrees)
         return self.board.digital[pin]
 
-    def stream_analog(self, channels: int, seconds: float) -> dict[int, float]:
+    def stream_analog(
+        self, channels: int, seconds: float, board_time: Callable[[], float]
+    ) -> dict[int, float]:
         """Reports per second of each of the first ``channels`` analog inputs, sampled at the
-        firmware's fastest interval: (n - 1) over the span of their arrival on the host."""
-        arrivals: dict[int, list[float]] = {ch: [] for ch in range(channels)}
+        firmware's fastest interval, per second of ``board_time`` (the board's own clock,
+        as protoduino's rates are counted: a board that runs behind the wall clock is not
+        charged for it). Counted from a quarter of ``seconds`` in, when every channel runs."""
+        counts = dict.fromkeys(range(channels), 0)
 
-        def recorder(ch: int) -> Any:
+        def recorder(ch: int) -> Callable[[float], None]:
             def record(_value: float) -> None:  # pyFirmata2's reader thread
-                arrivals[ch].append(time.monotonic())
+                counts[ch] += 1
 
             return record
 
@@ -79,15 +83,14 @@ class FirmataBoard:
             pin.register_callback(recorder(ch))
             pin.enable_reporting()
         self.board.samplingOn(MIN_SAMPLING_MS)
+        time.sleep(seconds / 4)
+        before, t0 = dict(counts), board_time()
         time.sleep(seconds)
+        after, t1 = dict(counts), board_time()
         for pin in pins:
             pin.disable_reporting()
         self.board.samplingOff()
-        rates: dict[int, float] = {}
-        for ch, times in arrivals.items():
-            span = times[-1] - times[0] if len(times) > 1 else 0.0
-            rates[ch] = (len(times) - 1) / span if span > 0 else 0.0
-        return rates
+        return {ch: (after[ch] - before[ch]) / (t1 - t0) for ch in range(channels)}
 
 
 @contextmanager
