@@ -49,7 +49,7 @@ from protoduino.transport import FrameRecord
 from protoduino_dev import runnerstats
 
 from . import firmware, inputs
-from .boards import BoardUnavailableError, Percentiles, missing_tool, started, started_hex
+from .boards import UNO_HZ, BoardUnavailableError, Percentiles, missing_tool, started, started_hex
 from .core import Context, Section, SectionResult, Target, md_table, require
 from .motion import Trace, us, wait_changes
 from .peers import firmata_board
@@ -60,7 +60,6 @@ ROOT = firmata_board.ROOT
 FIRMATA_HEX = firmata_board.HEX
 FETCH_STEP = firmata_board.FETCH_STEP
 
-UNO_HZ = 16_000_000
 DIGITAL_PIN = 13
 SERVO_PIN = 9
 #: The pose's six digital outputs (13 is the digital write's pin).
