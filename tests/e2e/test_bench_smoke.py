@@ -606,6 +606,13 @@ def test_race_on_both_boards() -> None:
     assert (theirs.flash, theirs.static_ram) == (12_194, 940)
     assert set(ours.cpu) == {"digital write", "servo write", "pose (6 outputs)"}
     assert set(theirs.cpu) == {"digital write", "servo write"}
+    # The report's rows and the targets come out of these runs, every one filled in.
+    for run in (ours, theirs):
+        cells = race._cells(run)
+        assert set(cells) == set(race.ROWS)
+        assert not any(cell.startswith("not run") for cell in cells.values())
+    assert [t.met is not None for t in race._targets(ours, theirs)] == [True, True, True]
+    assert "StandardFirmata's" in race._quote(ours, theirs)
 
 
 def test_report_merge_replaces_only_the_parts_run() -> None:
