@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from protoduino import Board
 from protoduino.simboard import SimBoard
 from simfixtures import pin_values, wait_for_pin
 
@@ -477,7 +476,7 @@ def test_a_killed_bridge_trips_the_device_failsafe(
     wait_for_pin(sim, 13, lambda v: v[-1:] == [0])
 
 
-# --- what waits for issue 21's pins API (PWM outputs, inputs) ---------------------------
+# --- /cmd_vel and inputs (PWM outputs, inputs) -------------------------------------------
 
 DRIVE = """
 namespace: {ns}
@@ -491,12 +490,6 @@ drive:
 """
 
 
-def _needs(method: str) -> None:
-    # Checked when the test runs, so that it runs by itself once the Board has it.
-    if not hasattr(Board, method):
-        pytest.skip(f"Board.{method} is missing (issue 21's pins API has not landed)")
-
-
 def _twist(linear: float, angular: float) -> Any:
     def vector(x: float = 0.0, z: float = 0.0) -> Any:
         return ros("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)
@@ -507,7 +500,6 @@ def _twist(linear: float, angular: float) -> Any:
 def test_cmd_vel_drives_the_motors_and_a_stale_one_stops_them(
     sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
 ) -> None:
-    _needs("pwm_output")
     sim = sim_board
     ns = _namespace(sim, "drive")
     run_bridge(DRIVE.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
@@ -542,9 +534,6 @@ counters:
 def test_inputs_are_published(
     sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
 ) -> None:
-    _needs("digital_input")
-    _needs("analog_input")
-    _needs("counter")
     sim = sim_board
     ns = _namespace(sim, "inputs")
     run_bridge(INPUTS.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))

@@ -1,6 +1,6 @@
 """The ROS 2 bridge's pure parts: robot.yaml, the drive's kinematics and watchdog, the
 messages (checked byte for byte against rosbags' independent CDR codec), inputs to
-messages, /diagnostics, and the refusals of what the Board cannot do yet."""
+messages, /diagnostics."""
 
 from __future__ import annotations
 
@@ -18,7 +18,6 @@ pytest.importorskip("rosbags", reason="rosbags is not installed")
 import numpy as np
 from protoduino.events import Event, EventKind, Stats
 from protoduino.ros2 import msgs
-from protoduino.ros2.bridge import PWM_MISSING, check_board_type
 from protoduino.ros2.config import (
     BridgeConfig,
     ConfigError,
@@ -262,19 +261,6 @@ def test_after_a_device_stop_the_next_twist_sets_the_direction_again() -> None:
     assert log == [("ldir", True), ("lpwm", 128), ("rdir", True), ("rpwm", 128)]
 
 
-def test_a_drive_needs_pwm_outputs_on_the_board() -> None:
-    config = parse_config(FULL)
-    with pytest.raises(ConfigError, match=r"Board\.pwm_output .*issue 21"):
-        check_board_type(object(), dataclasses.replace(config, digital_inputs=()))
-    assert "pwm_output" in PWM_MISSING
-
-    class WithPwm:
-        def pwm_output(self) -> None: ...
-
-    with pytest.raises(ConfigError, match=r"digital_inputs, which needs Board\.digital_input"):
-        check_board_type(WithPwm(), config)
-
-
 # --- servos and joints ---------------------------------------------------------------
 
 
@@ -438,7 +424,7 @@ class FakeInput:
 
 
 class FakeBoard:
-    """The input half of issue 21's Board API, as far as the bridge uses it."""
+    """The input half of the Board API, as far as the bridge uses it."""
 
     def __init__(self) -> None:
         self.made: dict[int, FakeInput] = {}
@@ -466,7 +452,7 @@ def test_inputs_are_wired_to_their_topics() -> None:
     undo = wire(board, config, {k: v.append for k, v in sent.items()})
     assert board.calls == [
         ("digital", 2, {"pull_up": True, "debounce_ms": 5}),
-        ("analog", 14, {"rate_hz": 10.0, "threshold": 0}),
+        ("analog", 14, {"rate_hz": 10.0, "threshold": 0, "heartbeat": 1.0}),
         ("counter", 5, {}),
         ("counter", 6, {}),
     ]
@@ -481,12 +467,6 @@ def test_inputs_are_wired_to_their_topics() -> None:
         u()
     board.made[2].change(True)
     assert len(sent["bumper"]) == 2
-
-
-def test_inputs_need_the_board_api() -> None:
-    config = parse_config({"digital_inputs": [{"pin": 2, "topic": "b"}]})
-    with pytest.raises(ConfigError, match=r"Board\.digital_input .*issue 21"):
-        wire(object(), config, {})
 
 
 # --- /diagnostics ---------------------------------------------------------------------

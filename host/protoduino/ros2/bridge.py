@@ -62,20 +62,6 @@ BEATS_PER_TIMEOUT = 4
 #: Samples taken from one topic per pass, so that a flood on one cannot starve the others.
 TAKE_PER_PASS = 64
 
-PWM_METHOD = "pwm_output"
-PWM_MISSING = (
-    "the configuration has a drive, which needs Board.pwm_output (the PWM outputs of "
-    "issue 21, 'pins'); this protoduino's Board has no pwm_output yet"
-)
-
-
-def check_board_type(board: type[Any] | object, config: BridgeConfig) -> None:
-    """Refuse, before opening anything, a configuration the Board cannot carry out."""
-    if config.drive is not None and not hasattr(board, PWM_METHOD):
-        raise ConfigError(PWM_MISSING)
-    inputs.check_board(board, config)
-
-
 #: What a valid command does, once it is the newest of its topic.
 Action = Callable[[], None]
 #: Checks one sample (raising BadCommandError) and returns its action (None: nothing to do).
@@ -94,7 +80,7 @@ class _Route:
 class Bridge:
     """One board on ROS 2; see the module docstring.
 
-    ``Bridge(port, config)`` checks the configuration against the Board API;
+    ``Bridge(port, config)`` takes a checked configuration (:func:`.load_config`);
     :meth:`start` (or ``with``) opens the board and the DDS entities;
     :meth:`run` loops until :meth:`stop` (from another thread or a signal
     handler); :meth:`close` drives every output safe and releases everything.
@@ -110,7 +96,6 @@ class Bridge:
         board_options: Mapping[str, Any] | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        check_board_type(Board, config)
         self.port = port
         self.config = config
         self.clock = clock
@@ -250,9 +235,12 @@ class Bridge:
         self._subscribe(config.stop.topic, stop_type, self._on_stop)
         if config.drive is not None:
             drive = config.drive
-            make_pwm: Any = getattr(board, PWM_METHOD)  # issue 21's; no stub for it yet
             motors = [
-                Motor(m, make_pwm(m.pwm, safe=0), board.digital_output(m.direction, safe=False))
+                Motor(
+                    m,
+                    board.pwm_output(m.pwm, safe=0),
+                    board.digital_output(m.direction, safe=False),
+                )
                 for m in (drive.left, drive.right)
             ]
             self.drive = DiffDrive(drive, motors[0], motors[1], self.clock)

@@ -1,13 +1,10 @@
 """Board inputs to ROS 2 topics: digital -> Bool, analog -> Float32, counters -> Int32MultiArray.
 
 The values become messages here (pure functions, tested without a board).
-The wiring asks the board for its inputs by name (``digital_input``,
-``analog_input``, ``counter``: the pins API of issue 21) and refuses a
-configuration that needs one the installed protoduino's Board lacks, with an
-error that says so, rather than starting a bridge that silently publishes
-nothing. Each input's changes arrive on the board's event thread, newest
-value first (the board coalesces), and are published from there: a DDS
-writer may be used from any thread.
+The wiring configures each input on the board (``Board.digital_input``,
+``analog_input``, ``counter``). Each input's changes arrive on the board's
+event thread, newest value first (the board coalesces), and are published
+from there: a DDS writer may be used from any thread.
 """
 
 from __future__ import annotations
@@ -16,20 +13,8 @@ import threading
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-from .config import AnalogInputConfig, BridgeConfig, ConfigError, CounterConfig, DigitalInputConfig
+from .config import AnalogInputConfig, BridgeConfig, CounterConfig, DigitalInputConfig
 from .msgs import Bool, Float32, Int32MultiArray, MultiArrayDimension, MultiArrayLayout
-
-#: What the configuration names -> the Board method it needs.
-NEEDS = {
-    "digital_inputs": "digital_input",
-    "analog_inputs": "analog_input",
-    "counters": "counter",
-}
-
-MISSING = (
-    "the configuration has {section}, which needs Board.{method} (the input API of issue 21, "
-    "'pins'); this protoduino's Board has no {method} yet"
-)
 
 
 class Input(Protocol):
@@ -41,13 +26,6 @@ class Input(Protocol):
 
 
 Publish = Callable[[object], None]
-
-
-def check_board(board: object, config: BridgeConfig) -> None:
-    """Refuse a configuration with inputs the board object cannot provide (see MISSING)."""
-    for section, method in NEEDS.items():
-        if getattr(config, section) and not hasattr(board, method):
-            raise ConfigError(MISSING.format(section=section, method=method))
 
 
 def bool_message(level: object) -> Bool:
@@ -75,11 +53,6 @@ def counters_message(counts: Sequence[int], config: CounterConfig) -> Int32Multi
     return Int32MultiArray(layout=layout, data=[int32(c) for c in counts])
 
 
-def _value(reading: Any) -> Any:
-    """A change callback's argument: a reading with ``.value`` (issue 21), or the value itself."""
-    return getattr(reading, "value", reading)
-
-
 def wire(
     board: Any, config: BridgeConfig, publishers: dict[str, Publish]
 ) -> list[Callable[[], None]]:
@@ -87,7 +60,6 @@ def wire(
 
     ``publishers`` maps each input topic to the function that publishes a message on it.
     """
-    check_board(board, config)
     undo: list[Callable[[], None]] = []
     for d in config.digital_inputs:
         undo.append(_digital(board, d, publishers[d.topic]))
@@ -105,15 +77,17 @@ def _digital(board: Any, config: DigitalInputConfig, publish: Publish) -> Callab
     first = pin.read()
     if first is not None:
         publish(bool_message(first))
-    return pin.on_change(lambda r: publish(bool_message(_value(r))))
+    return pin.on_change(lambda r: publish(bool_message(r.value)))
 
 
 def _analog(board: Any, config: AnalogInputConfig, publish: Publish) -> Callable[[], None]:
-    pin: Input = board.analog_input(config.pin, rate_hz=config.rate_hz, threshold=config.threshold)
+    pin: Input = board.analog_input(
+        config.pin, rate_hz=config.rate_hz, threshold=config.threshold, heartbeat=config.heartbeat
+    )
     first = pin.read()
     if first is not None:
         publish(analog_message(int(first), config))
-    return pin.on_change(lambda r: publish(analog_message(int(_value(r)), config)))
+    return pin.on_change(lambda r: publish(analog_message(int(r.value), config)))
 
 
 def _counters(board: Any, config: CounterConfig, publish: Publish) -> list[Callable[[], None]]:
@@ -123,7 +97,7 @@ def _counters(board: Any, config: CounterConfig, publish: Publish) -> list[Calla
 
     def changed(index: int, reading: Any) -> None:
         with lock:
-            counts[index] = int(_value(reading))
+            counts[index] = int(reading.value)
             message = counters_message(counts, config)
         publish(message)
 
