@@ -452,7 +452,7 @@ def test_inputs_are_wired_to_their_topics() -> None:
     undo = wire(board, config, {k: v.append for k, v in sent.items()})
     assert board.calls == [
         ("digital", 2, {"pull_up": True, "debounce_ms": 5}),
-        ("analog", 14, {"rate_hz": 10.0, "threshold": 0, "heartbeat": 1.0}),
+        ("analog", 14, {"rate_hz": 10.0, "threshold": 0}),
         ("counter", 5, {}),
         ("counter", 6, {}),
     ]

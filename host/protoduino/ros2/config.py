@@ -117,8 +117,6 @@ class AnalogInputConfig:
     offset: float = 0.0
     rate_hz: float = 10.0
     threshold: int = 0
-    #: Published again after this long (s) without a change (Board.analog_input's heartbeat).
-    heartbeat: float = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -230,7 +228,6 @@ def _analog_input(s: _Section) -> AnalogInputConfig:
         s.number("offset", 0.0),
         s.number("rate_hz", 10.0, low=0.001, high=1000.0),
         s.integer("threshold", 0, 0, 1023),
-        s.number("heartbeat", 1.0, low=0.001, high=60.0),
     )
 
 

@@ -81,9 +81,7 @@ def _digital(board: Any, config: DigitalInputConfig, publish: Publish) -> Callab
 
 
 def _analog(board: Any, config: AnalogInputConfig, publish: Publish) -> Callable[[], None]:
-    pin: Input = board.analog_input(
-        config.pin, rate_hz=config.rate_hz, threshold=config.threshold, heartbeat=config.heartbeat
-    )
+    pin: Input = board.analog_input(config.pin, rate_hz=config.rate_hz, threshold=config.threshold)
     first = pin.read()
     if first is not None:
         publish(analog_message(int(first), config))
