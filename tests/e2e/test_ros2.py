@@ -536,7 +536,13 @@ def test_inputs_are_published(
 ) -> None:
     sim = sim_board
     ns = _namespace(sim, "inputs")
-    run_bridge(INPUTS.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    bridge = run_bridge(INPUTS.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    for topic, kind in (
+        ("bumper", "Bool"),
+        ("battery", "Float32"),
+        ("encoders", "Int32MultiArray"),
+    ):
+        assert f"/{ns}/{topic}  std_msgs/msg/{kind}" in bridge.output()  # listed at the start
     bumper = graph.subscriber(f"/{ns}/bumper", "std_msgs/msg/Bool", BEST_EFFORT)
     battery = graph.subscriber(f"/{ns}/battery", "std_msgs/msg/Float32", BEST_EFFORT)
     encoders = graph.subscriber(f"/{ns}/encoders", "std_msgs/msg/Int32MultiArray", BEST_EFFORT)

@@ -248,13 +248,14 @@ class Bridge:
 
     def _configure_inputs(self, board: Board) -> None:
         config = self.config
+        kinds: list[tuple[str, type[Any]]] = [(d.topic, Bool) for d in config.digital_inputs]
+        kinds += [(a.topic, Float32) for a in config.analog_inputs]
+        kinds += [(c.topic, Int32MultiArray) for c in config.counters]
         publishers: dict[str, inputs.Publish] = {}
-        for d in config.digital_inputs:
-            publishers[d.topic] = self._writer(d.topic, Bool, SENSOR_QOS).write
-        for a in config.analog_inputs:
-            publishers[a.topic] = self._writer(a.topic, Float32, SENSOR_QOS).write
-        for c in config.counters:
-            publishers[c.topic] = self._writer(c.topic, Int32MultiArray, SENSOR_QOS).write
+        for topic, kind in kinds:
+            # Kept in _writers too: topics() lists them, and they live as long as the bridge.
+            self._writers[topic] = self._writer(topic, kind, SENSOR_QOS)
+            publishers[topic] = self._writers[topic].write
         if publishers:
             self._undo += inputs.wire(board, config, publishers)
 
