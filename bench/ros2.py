@@ -442,6 +442,15 @@ def collect(trials: int, seconds: float, seed: int = 7) -> Result:
 # --- the report ------------------------------------------------------------------------
 
 
+def _version(package: str) -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(package)
+    except PackageNotFoundError:
+        return "(version unknown)"
+
+
 def _ms(seconds: float) -> str:
     return f"{seconds * 1000:.2f}"
 
@@ -500,7 +509,8 @@ def run(ctx: Context) -> SectionResult:
         "The bridge runs as `protoduino ros2 PORT --config robot.yaml --capture FILE` in a "
         "process of its own, on the emulated Uno (the real firmware on simavr); this process "
         "is the rest of the ROS 2 graph, a Cyclone DDS participant on loopback only (multicast "
-        "off, the peer 127.0.0.1). There is no ROS 2 installation here: the publisher and the "
+        f"off, the peer 127.0.0.1; Cyclone DDS {_version('cyclonedds')} from PyPI). There is "
+        "no ROS 2 installation here: the publisher and the "
         "subscribers use the bridge's own message types, whose CDR tests/e2e/test_ros2.py "
         "checks against rosbags' independent codec. The drive is on pins "
         f"{LEFT_PWM} and {RIGHT_PWM} (PWM, Timer2) with direction pins {LEFT_DIR} and "
@@ -585,6 +595,7 @@ def run(ctx: Context) -> SectionResult:
         else:
             parts.append(f"No edge arrived ({idle.inputs_lost} lost).\n")
     stream = result.streaming
+    quotes = _quotes(result)
     if stream is not None:
         parts.append("### Six analog channels streaming (emulated Uno)\n")
         stream_rows = [
@@ -603,7 +614,33 @@ def run(ctx: Context) -> SectionResult:
         parts.append(
             f"Values set per pin through the control socket: {stream.changes_per_pin:.0f}/s.\n"
         )
-    return SectionResult("\n".join(parts), packages=["cyclonedds"])
+    return SectionResult("\n".join(parts), packages=["cyclonedds"], quotes=quotes)
+
+
+def _quotes(result: Result) -> dict[str, str]:
+    """The figures docs/ros2.md quotes from this run (bench.report.quote)."""
+    quotes: dict[str, str] = {}
+    idle, stream = result.idle, result.streaming
+    if idle is not None and idle.drive and idle.command_bytes:
+        left = Percentiles.of([t.to_left for t in idle.drive])
+        right = Percentiles.of([t.to_right for t in idle.drive])
+        wire = statistics.median(idle.command_bytes) * EMULATED_BYTE_US / 1e6
+        quotes["ros2_cmd_vel"] = (
+            f"{_ms(left.p50)} ms at the median, {_ms(left.p99)} ms at the 99th percentile to "
+            f"the first motor's pin (its command's wire time: {_ms(wire)} ms), "
+            f"{_ms(right.p50)} and {_ms(right.p99)} ms to the second"
+        )
+    if idle is not None and idle.inputs:
+        lat = Percentiles.of(idle.inputs)
+        quotes["ros2_input"] = f"{_ms(lat.p50)} ms at the median, {_ms(lat.p99)} ms at the 99th"
+    if stream is not None and stream.topic_rates:
+        quotes["ros2_stream"] = (
+            f"{min(stream.topic_rates.values()):.1f} to {max(stream.topic_rates.values()):.1f} "
+            "samples/s per topic at the subscriber (the device sent "
+            f"{min(stream.device_rates.values(), default=0.0):.1f} to "
+            f"{max(stream.device_rates.values(), default=0.0):.1f} values/s per channel)"
+        )
+    return quotes
 
 
 SECTION = Section(8, "ros2", "ROS 2 bridge: /cmd_vel to the pins, inputs to DDS samples", run)

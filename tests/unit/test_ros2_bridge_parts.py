@@ -90,6 +90,18 @@ def test_a_full_configuration() -> None:
     assert config.counters[0].pins == (5, 6) and config.counters[0].topic == "sensors/encoders"
 
 
+def test_the_example_robot_is_the_one_docs_show() -> None:
+    """``protoduino ros2 --sim`` bridges docs/ros2.md's robot.yaml, and it is valid."""
+    from protoduino.ros2.example import ROBOT_YAML, example_config
+
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "ros2.md").read_text()
+    assert f"```yaml\n{ROBOT_YAML}```" in docs
+    config = example_config()
+    assert config.drive is not None and config.counters[0].pins == (2,)
+    assert {s.pin for s in config.servos} == {9, 10}  # Timer1: no PWM on 9 and 10, so
+    assert {config.drive.left.pwm, config.drive.right.pwm} == {3, 11}  # the drive is on Timer2
+
+
 def test_the_yaml_file(tmp_path: Path) -> None:
     path = tmp_path / "robot.yaml"
     path.write_text("namespace: /r2/\nservos:\n  - {pin: 9, topic: pan}\n")
