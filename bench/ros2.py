@@ -40,7 +40,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from tempfile import TemporaryDirectory
@@ -442,6 +442,13 @@ def collect(trials: int, seconds: float, seed: int = 7) -> Result:
 # --- the report ------------------------------------------------------------------------
 
 
+def _span(values: Iterable[float]) -> str:
+    """``lo to hi`` with one decimal, or one figure when they agree."""
+    ordered = sorted(values) or [0.0]
+    lo, hi = f"{ordered[0]:.1f}", f"{ordered[-1]:.1f}"
+    return lo if lo == hi else f"{lo} to {hi}"
+
+
 def _version(package: str) -> str:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -634,11 +641,11 @@ def _quotes(result: Result) -> dict[str, str]:
         lat = Percentiles.of(idle.inputs)
         quotes["ros2_input"] = f"{_ms(lat.p50)} ms at the median, {_ms(lat.p99)} ms at the 99th"
     if stream is not None and stream.topic_rates:
+        topics = _span(stream.topic_rates.values())
+        device = _span(stream.device_rates.values())
         quotes["ros2_stream"] = (
-            f"{min(stream.topic_rates.values()):.1f} to {max(stream.topic_rates.values()):.1f} "
-            "samples/s per topic at the subscriber (the device sent "
-            f"{min(stream.device_rates.values(), default=0.0):.1f} to "
-            f"{max(stream.device_rates.values(), default=0.0):.1f} values/s per channel)"
+            f"{topics} samples/s per topic at the subscriber (the device sent {device} values/s "
+            "per channel)"
         )
     return quotes
 
