@@ -538,7 +538,10 @@ def run(ctx: Context) -> SectionResult:
         "motor, two such frames. The last row is the DDS and bridge share: from the Twist "
         "written until the bridge wrote the left motor's command to the port (the capture's "
         "time of that frame). The same Twists again, fewer, while six analog channels stream "
-        "(below).\n",
+        "(below); the thread that changes their values runs in this process, next to the "
+        "publisher and the subscribers, and the machine's two cores are shared, so the tail of "
+        "those times is partly this bench's own load. With n below 100, p99 is the slowest "
+        "trial.\n",
         f"**Input to a DDS sample.** {trials} edges on the button, each after a random pause "
         "of 0-20 ms, made through the board's control socket: from the edge until the "
         "subscriber's listener has the Bool (the host time of the edge is the midpoint of the "
