@@ -568,6 +568,58 @@ def test_inputs_are_published(
     saw("encoders", encoders, lambda v: list(v) == [25])
 
 
+INTERLOCK = """
+namespace: {ns}
+failsafe_timeout: {failsafe}
+diagnostics_period: 0.5
+drive:
+  wheel_base: 0.2
+  max_speed: 0.5
+  timeout: 30.0
+  left: {{pwm: 3, direction: 4}}
+  right: {{pwm: 11, direction: 12}}
+digital_inputs:
+  - {{pin: 7, topic: bumper, pull_up: true, interlock: low}}
+"""
+
+
+def test_a_bumper_interlock_stops_the_motors_on_the_device_until_cleared(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+) -> None:
+    """The bumper trips both motors at the pins with no round trip through the bridge; Twists
+    and a clear are refused while it is pressed; a clear on its topic once it is released lets
+    the next Twist drive again."""
+    sim = sim_board
+    ns = _namespace(sim, "interlock")
+    sim.set_level(7, 1)  # released: the pull-up's level
+    run_bridge(INTERLOCK.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    diag = graph.subscriber("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+    clear = graph.publisher(f"/{ns}/clear_interlock", "std_msgs/msg/Empty")
+    empty = ros("std_msgs/msg/Empty", structure_needs_at_least_one_member=0)
+    cmd_vel(_twist(0.25, 0.0))
+    wait_for_pin(sim, 3, now_at(128))
+    wait_for_pin(sim, 11, now_at(128))
+
+    sim.set_level(7, 0)  # the bumper hits something
+    wait_for_pin(sim, 3, now_at(0))
+    wait_for_pin(sim, 11, now_at(0))
+    tripped = _wait_diag(diag, ns, "failsafe", lambda s: s["cause"] == "interlock")
+    assert tripped["active"] == "true", tripped
+    cmd_vel(_twist(0.4, 0.0))  # refused by the device: still pressed
+    _wait_diag(diag, ns, "bridge", lambda s: int(s["refused_by_device"]) >= 1)
+    clear(empty)  # refused too: the input is still at its trip level
+    _wait_diag(diag, ns, "bridge", lambda s: int(s["refused_by_device"]) >= 2)
+    assert pin_values(sim.trace(), 3)[-1] == 0 and pin_values(sim.trace(), 11)[-1] == 0
+
+    sim.set_level(7, 1)  # released
+    clear(empty)
+    _wait_diag(diag, ns, "bridge", lambda s: int(s["interlock_clears"]) == 1)
+    cmd_vel(_twist(0.4, 0.0))  # 0.4 / 0.5 * 255 = 204
+    wait_for_pin(sim, 3, now_at(204))
+    wait_for_pin(sim, 11, now_at(204))
+
+
 # --- a bridge that hangs --------------------------------------------------------------
 
 

@@ -21,6 +21,7 @@ from protoduino.ros2 import msgs
 from protoduino.ros2.config import (
     BridgeConfig,
     ConfigError,
+    DigitalInputConfig,
     DriveConfig,
     MotorConfig,
     ServoConfig,
@@ -158,12 +159,33 @@ def _with(**changes: Any) -> dict[str, Any]:
         (_with(domain_id=233), "0..232"),
         (_with(counters=[{"pins": []}]), "non-empty list"),
         (_with(analog_inputs=[{"pin": 14, "topic": "b", "threshold": 2000}]), "0..1023"),
+        (_with(digital_inputs=[{"pin": 2, "topic": "b", "interlock": "on"}]), "one of low, high"),
+        (
+            _with(digital_inputs=[{"pin": 2, "topic": "estop", "interlock": "low"}]),
+            "topic 'estop' is both",
+        ),
+        (
+            _with(
+                digital_inputs=[{"pin": 2, "topic": "b", "interlock": "low"}],
+                clear_interlock_topic="led",
+            ),
+            "topic 'led' is both",
+        ),
         ([1, 2], "must be a mapping"),
     ],
 )
 def test_bad_configurations_are_refused_naming_the_key(data: Any, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         parse_config(data)
+
+
+def test_an_interlock_input_and_its_clear_topic() -> None:
+    config = parse_config(_with(digital_inputs=[{"pin": 2, "topic": "bumper", "interlock": "low"}]))
+    assert config.interlocks == (DigitalInputConfig(2, "bumper", interlock="low"),)
+    assert config.clear_interlock_topic == "clear_interlock"
+    # Without an interlock, the clear topic is not the bridge's: another may use the name.
+    plain = parse_config(_with(digital_outputs=[{"pin": 13, "topic": "clear_interlock"}]))
+    assert plain.interlocks == ()
 
 
 def test_topic_names() -> None:
@@ -463,7 +485,7 @@ def test_inputs_are_wired_to_their_topics() -> None:
     sent: dict[str, list[Any]] = {"bumper": [], "battery": [], "sensors/encoders": []}
     undo = wire(board, config, {k: v.append for k, v in sent.items()})
     assert board.calls == [
-        ("digital", 2, {"pull_up": True, "debounce_ms": 5}),
+        ("digital", 2, {"pull_up": True, "debounce_ms": 5, "interlock": None}),
         ("analog", 14, {"rate_hz": 10.0, "threshold": 0}),
         ("counter", 5, {}),
         ("counter", 6, {}),
@@ -513,6 +535,7 @@ def test_diagnostics() -> None:
             "refused_by_device": "0",
             "stops": "0",
             "cmd_vel_stale_stops": "0",
+            "interlock_clears": "0",
         },
     )
 

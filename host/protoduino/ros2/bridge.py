@@ -233,6 +233,8 @@ class Bridge:
             self._subscribe(d.topic, Bool, self._digital_handler(out))
         stop_type = Empty if config.stop.type == "Empty" else Bool
         self._subscribe(config.stop.topic, stop_type, self._on_stop)
+        if config.interlocks:
+            self._subscribe(config.clear_interlock_topic, Empty, self._on_clear_interlock)
         if config.drive is not None:
             drive = config.drive
             motors = [
@@ -408,6 +410,17 @@ class Bridge:
         if self.drive is not None:
             self.drive.forget()
         log.warning("STOP: every output driven safe")
+
+    def _on_clear_interlock(self, _message: Empty) -> Action:
+        return self._clear_interlock
+
+    def _clear_interlock(self) -> None:
+        """Clear a tripped interlock (refused while its input is still at the trip level, which
+        :meth:`_carry_out` logs and counts). The outputs stay safe until commanded again."""
+        assert self.board is not None
+        self.board.clear_interlock()
+        self.health.count("interlock_clears")
+        log.warning("interlock cleared: the outputs stay safe until commanded again")
 
     def _on_twist(self, message: Twist) -> Action:
         assert self.drive is not None

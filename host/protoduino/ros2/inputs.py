@@ -72,7 +72,10 @@ def wire(
 
 def _digital(board: Any, config: DigitalInputConfig, publish: Publish) -> Callable[[], None]:
     pin: Input = board.digital_input(
-        config.pin, pull_up=config.pull_up, debounce_ms=config.debounce_ms
+        config.pin,
+        pull_up=config.pull_up,
+        debounce_ms=config.debounce_ms,
+        interlock=config.interlock,
     )
     first = pin.read()
     if first is not None:
