@@ -28,8 +28,8 @@ drive:                       # /cmd_vel (geometry_msgs/Twist) to a differential 
   timeout: 0.5               # s without a Twist: motors stopped
   left: {pwm: 3, direction: 4}
   right: {pwm: 11, direction: 12, invert: true}
-digital_inputs:              # std_msgs/Bool on each change
-  - {pin: 7, topic: bumper, pull_up: true, debounce_ms: 10}
+digital_inputs:              # std_msgs/Bool on each change; interlock: low (or high) trips
+  - {pin: 7, topic: bumper, pull_up: true, debounce_ms: 10}   # every output on the device
 analog_inputs:               # std_msgs/Float32: counts * scale + offset, on each change
   - {pin: A0, topic: battery, scale: 0.0147, offset: 0.0, rate_hz: 10, threshold: 2}
 counters:                    # std_msgs/Int32MultiArray, one value per pin in this order
