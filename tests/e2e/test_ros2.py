@@ -558,6 +558,11 @@ def test_inputs_are_published(
 
         _until(check, f"{name} sample")
 
+    # Subscribers that join after the bridge published the first values get them at once
+    # (volatile QoS keeps nothing for them: the bridge publishes the last value again).
+    saw("bumper", bumper, lambda v: True)
+    saw("battery", battery, lambda v: True)
+    saw("encoders", encoders, lambda v: list(v) == [0])
     sim.set_level(2, 0)  # the bumper pressed, to ground
     saw("bumper", bumper, lambda v: v is False or v == 0)
     sim.set_level(2, 1)

@@ -483,7 +483,7 @@ def test_inputs_are_wired_to_their_topics() -> None:
     config = parse_config(FULL)
     board = FakeBoard()
     sent: dict[str, list[Any]] = {"bumper": [], "battery": [], "sensors/encoders": []}
-    undo = wire(board, config, {k: v.append for k, v in sent.items()})
+    wiring = wire(board, config, {k: v.append for k, v in sent.items()})
     assert board.calls == [
         ("digital", 2, {"pull_up": True, "debounce_ms": 5, "interlock": None}),
         ("analog", 14, {"rate_hz": 10.0, "threshold": 0}),
@@ -497,10 +497,14 @@ def test_inputs_are_wired_to_their_topics() -> None:
     assert sent["bumper"] == [msgs.Bool(True), msgs.Bool(False)]  # the first level, then each
     assert [round(m.data, 3) for m in sent["battery"]] == [1.5, 3.5]
     assert [list(m.data) for m in sent["sensors/encoders"]] == [[0, 0], [0, 7], [-3, 7]]
-    for u in undo:
+    # A subscriber that joins now gets each topic's last message again.
+    assert all(wiring.topics[topic].again() for topic in sent)
+    assert sent["bumper"][-1] == msgs.Bool(False)
+    assert [list(m.data) for m in sent["sensors/encoders"]][-1] == [-3, 7]
+    for u in wiring.undo:
         u()
     board.made[2].change(True)
-    assert len(sent["bumper"]) == 2
+    assert len(sent["bumper"]) == 3
 
 
 # --- /diagnostics ---------------------------------------------------------------------

@@ -33,6 +33,7 @@ from typing import Any
 from cyclonedds.core import (
     GuardCondition,
     InstanceState,
+    Listener,
     ReadCondition,
     SampleState,
     ViewState,
@@ -117,6 +118,10 @@ class Bridge:
         #: Set from the event thread when the device drove its outputs safe on its own.
         self._device_safe = threading.Event()
         self._diag_lock = threading.Lock()
+        #: Input topics whose writer matched a new subscriber (Cyclone's thread adds them).
+        self._joined: set[str] = set()
+        self._joined_lock = threading.Lock()
+        self._inputs: inputs.Wiring | None = None
         self._next_beat = 0.0
         self._undo: list[Callable[[], None]] = []
 
@@ -205,10 +210,12 @@ class Bridge:
 
     # --- setup ---------------------------------------------------------------------
 
-    def _writer(self, name: str, kind: type[Any], qos: Any) -> DataWriter[Any]:
+    def _writer(
+        self, name: str, kind: type[Any], qos: Any, listener: Any = None
+    ) -> DataWriter[Any]:
         assert self._participant is not None
         topic = Topic(self._participant, dds_topic(self.config.namespace, name), kind, qos=qos)
-        return DataWriter(self._participant, topic, qos=qos)
+        return DataWriter(self._participant, topic, qos=qos, listener=listener)
 
     def _subscribe(self, name: str, kind: type[Any], prepare: Prepare) -> None:
         assert self._participant is not None and self._waitset is not None
@@ -256,10 +263,37 @@ class Bridge:
         publishers: dict[str, inputs.Publish] = {}
         for topic, kind in kinds:
             # Kept in _writers too: topics() lists them, and they live as long as the bridge.
-            self._writers[topic] = self._writer(topic, kind, SENSOR_QOS)
+            listener: Any = Listener  # untyped in cyclonedds
+            matched = listener(on_publication_matched=self._subscriber_joined(topic))
+            self._writers[topic] = self._writer(topic, kind, SENSOR_QOS, matched)
             publishers[topic] = self._writers[topic].write
         if publishers:
-            self._undo += inputs.wire(board, config, publishers)
+            self._inputs = inputs.wire(board, config, publishers)
+            self._undo += self._inputs.undo
+
+    def _subscriber_joined(self, topic: str) -> Callable[[Any, Any], None]:
+        """A writer's publication-matched listener (Cyclone's thread): a new subscriber gets
+        the topic's last value from the loop (volatile QoS kept none for it)."""
+
+        def matched(_writer: Any, status: Any) -> None:
+            if status.current_count_change > 0:
+                with self._joined_lock:
+                    self._joined.add(topic)
+                if self._wake is not None:
+                    self._wake.set(True)
+
+        return matched
+
+    def _publish_again_for_new_subscribers(self) -> None:
+        with self._joined_lock:
+            joined, self._joined = self._joined, set()
+        if self._inputs is None:
+            return
+        for topic in sorted(joined):
+            try:
+                self._inputs.topics[topic].again()
+            except Exception:  # DDS refused it; the next change publishes anyway
+                log.exception("%s: publishing the last value again failed", topic)
 
     # --- the loop ------------------------------------------------------------------
 
@@ -283,6 +317,7 @@ class Bridge:
             wait = max(0.0, due - self.clock())
             waitset.wait(duration(seconds=wait) if wait > 0 else 0)
             wake.set(False)
+            self._publish_again_for_new_subscribers()
             if self._device_safe.is_set():
                 self._device_safe.clear()
                 if self.drive is not None:

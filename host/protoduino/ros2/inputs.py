@@ -5,12 +5,18 @@ The wiring configures each input on the board (``Board.digital_input``,
 ``analog_input``, ``counter``). Each input's changes arrive on the board's
 event thread, newest value first (the board coalesces), and are published
 from there: a DDS writer may be used from any thread.
+
+A sensor topic is volatile (ROS 2's sensor-data QoS), so DDS keeps no value for a subscriber
+that joins later, and an input is published only when it changes: each topic keeps its last
+message (:class:`LastPublished`), which the bridge publishes again when a subscriber matches,
+so that ``ros2 topic echo`` shows a constant battery voltage at once.
 """
 
 from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 from .config import AnalogInputConfig, BridgeConfig, CounterConfig, DigitalInputConfig
@@ -53,21 +59,54 @@ def counters_message(counts: Sequence[int], config: CounterConfig) -> Int32Multi
     return Int32MultiArray(layout=layout, data=[int32(c) for c in counts])
 
 
-def wire(
-    board: Any, config: BridgeConfig, publishers: dict[str, Publish]
-) -> list[Callable[[], None]]:
-    """Subscribe to every configured input; returns the functions that unsubscribe.
+class LastPublished:
+    """Publishes on one topic and keeps the last message, to publish it :meth:`again`.
+
+    One lock around both, so that a message published again can never overtake a newer one
+    published from the board's event thread meanwhile (the newest stays the last one out).
+    """
+
+    def __init__(self, publish: Publish) -> None:
+        self._publish = publish
+        self._lock = threading.Lock()
+        self.message: object | None = None
+
+    def __call__(self, message: object) -> None:
+        with self._lock:
+            self.message = message
+            self._publish(message)
+
+    def again(self) -> bool:
+        """Publish the last message again (False: nothing was published yet)."""
+        with self._lock:
+            if self.message is None:
+                return False
+            self._publish(self.message)
+            return True
+
+
+@dataclass(frozen=True, slots=True)
+class Wiring:
+    """The inputs on their topics: what unsubscribes them, and each topic's last message."""
+
+    undo: list[Callable[[], None]]
+    topics: dict[str, LastPublished]
+
+
+def wire(board: Any, config: BridgeConfig, publishers: dict[str, Publish]) -> Wiring:
+    """Subscribe to every configured input and publish its first value.
 
     ``publishers`` maps each input topic to the function that publishes a message on it.
     """
+    last = {topic: LastPublished(publish) for topic, publish in publishers.items()}
     undo: list[Callable[[], None]] = []
     for d in config.digital_inputs:
-        undo.append(_digital(board, d, publishers[d.topic]))
+        undo.append(_digital(board, d, last[d.topic]))
     for a in config.analog_inputs:
-        undo.append(_analog(board, a, publishers[a.topic]))
+        undo.append(_analog(board, a, last[a.topic]))
     for c in config.counters:
-        undo += _counters(board, c, publishers[c.topic])
-    return undo
+        undo += _counters(board, c, last[c.topic])
+    return Wiring(undo, last)
 
 
 def _digital(board: Any, config: DigitalInputConfig, publish: Publish) -> Callable[[], None]:
