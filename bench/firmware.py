@@ -55,7 +55,7 @@ FLASH_BUDGET = 26_624
 #: RAM kept free beside the static data and the deepest stack (tests/e2e/test_stack_margin.py).
 RAM_FREE = FREE_BYTES
 #: For comparison, not a limit: StandardFirmata (digital and analog I/O, PWM, servos, I2C; no
-#: CRC, no acks, no failsafe), the hex that the race runs (part 8: bench/peers/firmata_board.py
+#: CRC, no acks, no failsafe), the hex that the race runs (part 9: bench/peers/firmata_board.py
 #: reads its size), and StandardFirmataPlus, built with the same avr-gcc 5.4 (the project's
 #: reference sizes).
 FIRMATA_PLUS = (15_202, 1_274)
@@ -476,7 +476,7 @@ def run(ctx: Context) -> SectionResult:
                 ],
             ],
         ),
-        "StandardFirmata is the 2.4 hex that part 8 races (avrgirl-arduino 5.0.1's, its "
+        "StandardFirmata is the 2.4 hex that part 9 races (avrgirl-arduino 5.0.1's, its "
         "static RAM read from its start-up code); StandardFirmataPlus was built here with the "
         "same avr-gcc 5.4 and the Arduino core's flags. StandardFirmata does digital and analog "
         "I/O, PWM, servos and I2C but has no CRC, no acks and no failsafe. README.md and "
@@ -533,7 +533,7 @@ def _quotes(size: Footprint) -> dict[str, str]:
     return {
         "footprint": f"flash {size.flash:,} B of the {FLASH_BUDGET:,} B budget and static RAM "
         f"{size.ram:,} B (static RAM + the deepest stack + {RAM_FREE} B free <= {RAM_TOTAL:,} B; "
-        f"for comparison, StandardFirmata (the hex part 8 races): "
+        f"for comparison, StandardFirmata (the hex part 9 races): "
         f"{' and '.join(firmata_sizes())}, "
         f"StandardFirmataPlus: {FIRMATA_PLUS[0]:,} B and {FIRMATA_PLUS[1]:,} B)"
     }

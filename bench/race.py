@@ -1,4 +1,4 @@
-"""Benchmark part 8 (docs/performance.md): the race against StandardFirmata (issue 23).
+"""Benchmark part 9 (docs/performance.md): the race against StandardFirmata (issue 23).
 
 StandardFirmata 2.4, the Uno hex that the npm package avrgirl-arduino 5.0.1 ships (fetched at
 setup by tools/fetch_firmata.sh, pinned by sha256; nothing is fetched here), runs unmodified on
@@ -685,4 +685,4 @@ def run(ctx: Context) -> SectionResult:
     return SectionResult(text, _targets(ours, theirs), packages=["pyFirmata2"], quotes=quotes)
 
 
-SECTION = Section(8, "race", "The race against StandardFirmata", run)
+SECTION = Section(9, "race", "The race against StandardFirmata", run)

@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 PARTIAL = ROOT / "build" / "bench"
 #: Documents that quote figures of the full run (bench.report.quote).
-QUOTING = (ROOT / "README.md", ROOT / "firmware" / "README.md")
+QUOTING = (ROOT / "README.md", ROOT / "firmware" / "README.md", DOCS / "ros2.md")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -520,6 +520,32 @@ def test_inputs_section_on_both_boards() -> None:
     assert out.SerializeToString()[:1] == inputs.REPORT_TAG
 
 
+@pytest.mark.avr
+def test_ros2_section_on_the_emulated_uno() -> None:
+    """Part 8: every Twist reached both motor pins, every edge its DDS sample, every analog
+    topic streamed, and the commands and reports were found in the bridge's capture."""
+    _need("avr")
+    pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing")
+    pytest.importorskip("yaml", reason="PyYAML (the ros2 extra) is missing")
+    from bench import ros2
+
+    result = ros2.collect(trials=4, seconds=0.5)
+    assert result.error is None, result.error
+    for phase, trials in ((result.idle, 4), (result.streaming, 3)):
+        assert phase is not None
+        assert phase.drive_lost == 0 and len(phase.drive) == trials
+        # The right motor is written after the left one's Ack: it comes later at the pins.
+        assert all(t.to_right > t.to_left for t in phase.drive)
+        assert all(t.to_sent is not None for t in phase.drive)
+        assert len(phase.command_bytes) == trials and min(phase.command_bytes) >= 12
+    assert result.idle is not None and result.streaming is not None
+    assert result.idle.inputs_lost == 0 and len(result.idle.inputs) == 4
+    assert len(result.idle.report_bytes) >= 4
+    assert sorted(result.streaming.device_rates) == list(ros2.ANALOG_PINS)
+    assert all(rate > 0 for rate in result.streaming.topic_rates.values())
+    assert len(result.streaming.topic_rates) == len(ros2.ANALOG_PINS)
+
+
 def test_report_quote_replaces_only_between_markers(tmp_path: Path) -> None:
     from bench import report
 
@@ -579,7 +605,7 @@ def test_race_line_times_from_simavrs_byte() -> None:
 
 @pytest.mark.avr
 def test_race_on_both_boards() -> None:
-    """Part 8: StandardFirmata (the unmodified hex) and protoduino on the same runner; every
+    """Part 9: StandardFirmata (the unmodified hex) and protoduino on the same runner; every
     row measured for both, nothing lost; byte counts and line rates exact."""
     _need("avr")
     _firmata_hex()
