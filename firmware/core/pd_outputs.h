@@ -31,6 +31,7 @@
 #include "pd_features.h"
 #include "pd_hal.h"
 #include "pd_inputs.h"
+#include "pd_tables.h"
 #include "protoduino.pb.h"
 
 /* Compile-time capacity; a board reports its real figures in pd_board_info_t. */
@@ -54,17 +55,10 @@
 #define PD_MAX_PWM 1
 #endif
 
-/* Pin modes (the PD_MODES table in pd_outputs.c). PD_MODE_FREE owns nothing. */
-enum {
-    PD_MODE_FREE = 0,
-    PD_MODE_DIGITAL, /* digital output; state by pin: digital_safe/digital_level */
-    PD_MODE_SERVO,   /* servo output; state by slot (= servo channel): servo[] */
-    PD_MODE_PWM,     /* PWM output; state by slot: pwm[] */
-    PD_MODE_DIGITAL_INPUT, /* inputs (pd_inputs.c); reserved here: an output never takes their pins */
-    PD_MODE_ANALOG_INPUT,
-    PD_MODE_COUNTER,
-    PD_MODE_COUNT
-};
+/* Pin modes: PD_MODE_<NAME>, numbered from 1 up to PD_MODE_COUNT - 1 (PD_MODE_FREE,
+ * 0, owns nothing), are generated into pd_tables.h from the (pin_mode) options
+ * on proto/protoduino.proto's enum Feature; PD_MODES in pd_outputs.c has one
+ * entry for each. */
 
 /* An owner byte: mode in the high nibble, slot in the low one (one byte per pin of RAM). */
 #define PD_OWNER(mode, slot) ((uint8_t)(((mode) << 4) | (slot)))
