@@ -64,7 +64,8 @@ class CommandDecl:
 class Tables:
     """Everything the options declare, checked."""
 
-    features: tuple[tuple[str, int], ...]  # (lower-case name, number) of every Feature but NONE
+    #: (lower-case name, number, on by default) of every Feature but NONE, in number order.
+    features: tuple[tuple[str, int, bool], ...]
     pin_modes: tuple[PinModeDecl, ...]
     commands: tuple[CommandDecl, ...]  # in the order of ArduinoIn.data
 
@@ -82,6 +83,7 @@ def read_tables(descriptor_set: bytes) -> Tables:
     classes = message_factory.GetMessageClassesForFiles([f.name for f in fds.file], pool)
     command_ext = pool.FindExtensionByName("protoduino.command")
     pin_mode_ext = pool.FindExtensionByName("protoduino.pin_mode")
+    switch_ext = pool.FindExtensionByName("protoduino.feature")
 
     def option(options: Any, holder: str, ext: Any) -> Any:
         # Re-read the options with the pool's own class, which knows the extensions.
@@ -169,12 +171,17 @@ def read_tables(descriptor_set: bytes) -> Tables:
                 pin_mode=owner.name if owner is not None else None,
             )
         )
-    features = tuple(
-        (v.name.removeprefix("FEATURE_").lower(), v.number)
-        for v in sorted(enum_proto.value, key=lambda v: v.number)
-        if v.number != 0
-    )
-    return Tables(features, tuple(modes), tuple(commands))
+    features = []
+    for value in sorted(enum_proto.value, key=lambda v: v.number):
+        if value.number == 0:
+            continue
+        switch = option(value.options, "google.protobuf.EnumValueOptions", switch_ext)
+        off = switch is not None and switch.off_by_default
+        features.append((value.name.removeprefix("FEATURE_").lower(), value.number, not off))
+    for mode in modes:
+        if not next(on for name, _n, on in features if name == mode.feature):
+            raise TableError(f"pin mode {mode.name}: its feature is off by default")
+    return Tables(tuple(features), tuple(modes), tuple(commands))
 
 
 def _macro_lines(lines: list[str]) -> list[str]:
@@ -205,16 +212,17 @@ def c_header(tables: Tables) -> str:
     out += [f"    PD_MODE_COUNT = {len(tables.pin_modes) + 1}", "};", ""]
     out += [
         "/* Build-time features (enum Feature): each is in the build unless it says",
-        " * otherwise (pd_features.h), and PD_FEATURES is DeviceInfo.features. The",
+        " * otherwise (pd_features.h) or is off by default (its (feature) option), and",
+        " * PD_FEATURES is DeviceInfo.features. The",
         " * Arduino library's switches come first, whichever header is included first. */",
         "#if defined(ARDUINO) || defined(PD_CONFIG_H_WANTED)",
         '#include "pd_config.h"',
         "#endif",
     ]
-    for name, _number in tables.features:
+    for name, _number, on in tables.features:
         macro = f"PD_FEATURE_{name.upper()}"
-        out += [f"#ifndef {macro}", f"#define {macro} 1", "#endif"]
-    bits = [f"({'PD_FEATURE_' + n.upper()} ? 1u << {num} : 0u)" for n, num in tables.features]
+        out += [f"#ifndef {macro}", f"#define {macro} {int(on)}", "#endif"]
+    bits = [f"(PD_FEATURE_{n.upper()} ? 1u << {num} : 0u)" for n, num, _on in tables.features]
     ors = [f"    | {bit}" for bit in bits]
     out += _macro_lines(["#define PD_FEATURES (0u", *ors[:-1], ors[-1] + ")"])
     out += [
@@ -248,8 +256,8 @@ def c_header(tables: Tables) -> str:
 
 
 def make_fragment(tables: Tables) -> str:
-    """firmware/generated/pd_features.mk: the Makefile's ALL_FEATURES."""
-    names = " ".join(name for name, _number in tables.features)
+    """firmware/generated/pd_features.mk: the Makefile's ALL_FEATURES (the default build's)."""
+    names = " ".join(name for name, _number, on in tables.features if on)
     return f"# {HEADER_NOTE}\nALL_FEATURES := {names}\n"
 
 
@@ -284,9 +292,10 @@ def python_module(tables: Tables) -> str:
         "    pin_mode: str | None",
         "",
         "",
-        "#: Every Feature but FEATURE_NONE, lower case without FEATURE_, in number order.",
+        "#: The features of the default build (make's FEATURES chooses among them), lower case",
+        "#: without FEATURE_, in number order.",
         "FEATURES: tuple[str, ...] = (",
-        *[f"    {name!r}," for name, _number in tables.features],
+        *[f"    {name!r}," for name, _number, on in tables.features if on],
         ")",
         "",
         "#: Every pin mode, in the device's PD_MODE_* order.",

@@ -13,8 +13,9 @@
 #define PD_FEATURES_H
 
 /* Each Feature of proto/protoduino.proto's enum is a PD_FEATURE_<NAME> switch,
- * 1 unless the build defined it (make's FEATURES, or the Arduino library's
- * pd_config.h, which pd_tables.h includes first), and PD_FEATURES is
+ * 1 (0 for one declared off by default) unless the build defined it (make's
+ * FEATURES, or the Arduino library's pd_config.h, which pd_tables.h includes
+ * first), and PD_FEATURES is
  * DeviceInfo.features: bit N set for each Feature N built in. Both are
  * generated from the schema by `protoduino gen`. */
 #include "pd_tables.h"

@@ -162,3 +162,19 @@ def test_the_generator_checks_the_declarations(
         return
     with pytest.raises(cmdtables.TableError, match=complaint):
         _tables_of(tmp_path, edit)
+
+
+def test_a_feature_off_by_default(tmp_path: Path) -> None:
+    """A Feature declared off by default is 0 unless the build defines it, still has its
+    DeviceInfo.features bit, and is not among make's FEATURES (nor the host's list of them)."""
+    counter = '[(pin_mode) = {name: "counter" init: "counter_init" pins: "counter_pins"}];\n'
+    extra = "  FEATURE_EXTRA = 7 [(feature).off_by_default = true];\n"
+    tables = _tables_of(tmp_path, (counter, counter + extra))
+    assert ("extra", 7, False) in tables.features
+    header = cmdtables.c_header(tables)
+    assert "#ifndef PD_FEATURE_EXTRA\n#define PD_FEATURE_EXTRA 0\n#endif" in header
+    assert "#define PD_FEATURE_COUNTER 1\n" in header
+    assert "(PD_FEATURE_EXTRA ? 1u << 7 : 0u))" in header
+    assert "extra" not in cmdtables.make_fragment(tables)
+    assert "'extra'" not in cmdtables.python_module(tables)
+    assert "'counter'," in cmdtables.python_module(tables)

@@ -25,7 +25,7 @@ _sym_db = _symbol_database.Default()
 from google.protobuf import descriptor_pb2 as google_dot_protobuf_dot_descriptor__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x18protoduino_options.proto\x12\nprotoduino\x1a google/protobuf/descriptor.proto\"S\n\x07\x43ommand\x12\x12\n\nidempotent\x18\x01 \x01(\x08\x12\x0e\n\x06result\x18\x02 \x01(\t\x12\x0f\n\x07\x66\x65\x61ture\x18\x03 \x01(\t\x12\x13\n\x0bsets_output\x18\x04 \x01(\x08\"D\n\x07PinMode\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x0c\n\x04init\x18\x02 \x01(\t\x12\x0f\n\x07\x63ontrol\x18\x03 \x01(\t\x12\x0c\n\x04pins\x18\x04 \x01(\t:E\n\x07\x63ommand\x12\x1d.google.protobuf.FieldOptions\x18\xb4\x87\x03 \x01(\x0b\x32\x13.protoduino.Command:J\n\x08pin_mode\x12!.google.protobuf.EnumValueOptions\x18\xb5\x87\x03 \x01(\x0b\x32\x13.protoduino.PinModeb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x18protoduino_options.proto\x12\nprotoduino\x1a google/protobuf/descriptor.proto\"S\n\x07\x43ommand\x12\x12\n\nidempotent\x18\x01 \x01(\x08\x12\x0e\n\x06result\x18\x02 \x01(\t\x12\x0f\n\x07\x66\x65\x61ture\x18\x03 \x01(\t\x12\x13\n\x0bsets_output\x18\x04 \x01(\x08\"D\n\x07PinMode\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x0c\n\x04init\x18\x02 \x01(\t\x12\x0f\n\x07\x63ontrol\x18\x03 \x01(\t\x12\x0c\n\x04pins\x18\x04 \x01(\t\"\'\n\rFeatureSwitch\x12\x16\n\x0eoff_by_default\x18\x01 \x01(\x08:E\n\x07\x63ommand\x12\x1d.google.protobuf.FieldOptions\x18\xb4\x87\x03 \x01(\x0b\x32\x13.protoduino.Command:J\n\x08pin_mode\x12!.google.protobuf.EnumValueOptions\x18\xb5\x87\x03 \x01(\x0b\x32\x13.protoduino.PinMode:O\n\x07\x66\x65\x61ture\x12!.google.protobuf.EnumValueOptions\x18\xb6\x87\x03 \x01(\x0b\x32\x19.protoduino.FeatureSwitchb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -36,4 +36,6 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_COMMAND']._serialized_end=157
   _globals['_PINMODE']._serialized_start=159
   _globals['_PINMODE']._serialized_end=227
+  _globals['_FEATURESWITCH']._serialized_start=229
+  _globals['_FEATURESWITCH']._serialized_end=268
 # @@protoc_insertion_point(module_scope)

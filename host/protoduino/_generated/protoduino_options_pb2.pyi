@@ -115,7 +115,37 @@ class PinMode(_message.Message):
 
 Global___PinMode: _TypeAlias = PinMode  # noqa: Y015
 
+@_typing.final
+class FeatureSwitch(_message.Message):
+    """A build-time feature's switch, on its Feature value (any: with or without a
+    pin mode). Without the option a feature is in the default build, and make's
+    FEATURES chooses among those.
+    """
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    OFF_BY_DEFAULT_FIELD_NUMBER: _builtins.int
+    off_by_default: _builtins.bool
+    """The default firmware leaves it out (PD_FEATURE_<NAME> is 0 unless the build
+    defines it 1): for a feature the default firmware must not pay for, built
+    in by its own build option rather than make's FEATURES.
+    """
+    def __init__(
+        self,
+        *,
+        off_by_default: _builtins.bool = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["off_by_default", b"off_by_default"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___FeatureSwitch: _TypeAlias = FeatureSwitch  # noqa: Y015
+
 COMMAND_FIELD_NUMBER: _builtins.int
 PIN_MODE_FIELD_NUMBER: _builtins.int
+FEATURE_FIELD_NUMBER: _builtins.int
 command: _extension_dict._ExtensionFieldDescriptor[_descriptor_pb2.FieldOptions, Global___Command]
 pin_mode: _extension_dict._ExtensionFieldDescriptor[_descriptor_pb2.EnumValueOptions, Global___PinMode]
+feature: _extension_dict._ExtensionFieldDescriptor[_descriptor_pb2.EnumValueOptions, Global___FeatureSwitch]

@@ -26,7 +26,8 @@ class CommandRow(NamedTuple):
     pin_mode: str | None
 
 
-#: Every Feature but FEATURE_NONE, lower case without FEATURE_, in number order.
+#: The features of the default build (make's FEATURES chooses among them), lower case
+#: without FEATURE_, in number order.
 FEATURES: tuple[str, ...] = (
     'servo',
     'digital_output',
