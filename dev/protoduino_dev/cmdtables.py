@@ -213,8 +213,8 @@ def c_header(tables: Tables) -> str:
     out += [
         "/* Build-time features (enum Feature): each is in the build unless it says",
         " * otherwise (pd_features.h) or is off by default (its (feature) option), and",
-        " * PD_FEATURES is DeviceInfo.features. The",
-        " * Arduino library's switches come first, whichever header is included first. */",
+        " * PD_FEATURES is DeviceInfo.features. The Arduino library's switches come",
+        " * first, whichever header is included first. */",
         "#if defined(ARDUINO) || defined(PD_CONFIG_H_WANTED)",
         '#include "pd_config.h"',
         "#endif",
