@@ -10,11 +10,20 @@ host's layers need to know about a command (the request layer: may its duplicate
 run twice? does a session restore have to send an Init before it?) is read from
 here instead of lists of names kept in step across modules.
 
-How to add a command: see the recipe in firmware/core/pd_dispatch.c (its
-declaration is its ArduinoIn member and options in the schema; nothing here), then
-its method on :class:`~protoduino.board.Board`. How to add a pin mode: the recipe in
-firmware/core/pd_outputs.h (declared by a ``(pin_mode)`` option on its Feature; here
-only a named constant, below, if the host's code refers to the mode).
+How to add a command (2 files by hand, counted with a throwaway one; before the tables
+were generated, 3): its message and ``ArduinoIn.data`` member in proto/protoduino.proto,
+with a ``(command)`` option if it is idempotent, carries an Ack result, needs a feature
+or sets outputs, then ``protoduino gen``; its handler ``cmd_<name>`` in
+firmware/core/pd_dispatch.c (the recipe there). Nothing here: its :class:`Command`
+comes from the table. Then its wire text in docs/protocol.md and its method on
+:class:`~protoduino.board.Board` (and ``protoduino.aio``).
+
+How to add a pin mode (4 files by hand, and the 2 tests that list the default
+firmware's features; before, 8 and the same 2): its Init and Control and a
+``Feature`` value with a ``(pin_mode)`` option in the schema, then the firmware's
+functions (firmware/core/pd_outputs.h has the exact recipe). Here, only a named
+constant (``SERVO`` and the others below) if the host's code refers to the mode.
+docs/architecture.md lists both counts, file by file.
 """
 
 from __future__ import annotations
