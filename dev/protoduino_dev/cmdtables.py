@@ -209,7 +209,11 @@ def c_header(tables: Tables) -> str:
     for mode in tables.pin_modes:
         uses = mode.init + (f", {mode.control}" if mode.control else "")
         out.append(f"    PD_MODE_{mode.name.upper()} = {mode.number}, /* {uses} */")
-    out += [f"    PD_MODE_COUNT = {len(tables.pin_modes) + 1}", "};", ""]
+    out += [
+        f"    PD_MODE_BUILTIN_END = {len(tables.pin_modes) + 1} /* a build's own modes follow */",
+        "};",
+        "",
+    ]
     out += [
         "/* Build-time features (enum Feature): each is in the build unless it says",
         " * otherwise (pd_features.h) or is off by default (its (feature) option), and",

@@ -71,10 +71,12 @@
 #define PD_MAX_PWM 1
 #endif
 
-/* Pin modes: PD_MODE_<NAME>, numbered from 1 up to PD_MODE_COUNT - 1 (PD_MODE_FREE,
- * 0, owns nothing), are generated into pd_tables.h from the (pin_mode) options
- * on proto/protoduino.proto's enum Feature; PD_MODES in pd_outputs.c has one
- * entry for each. */
+/* Pin modes: the built-in ones, PD_MODE_<NAME> numbered from 1 up to
+ * PD_MODE_BUILTIN_END - 1 (PD_MODE_FREE, 0, owns nothing), are generated into
+ * pd_tables.h from the (pin_mode) options on proto/protoduino.proto's enum
+ * Feature; a mode the firmware has of its own would follow them. PD_MODES in
+ * pd_outputs.c has one entry for each mode. */
+#define PD_MODE_COUNT PD_MODE_BUILTIN_END
 
 /* An owner byte: mode in the high nibble, slot in the low one (one byte per pin of RAM). */
 #define PD_OWNER(mode, slot) ((uint8_t)(((mode) << 4) | (slot)))

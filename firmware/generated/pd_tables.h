@@ -16,7 +16,7 @@ enum {
     PD_MODE_ANALOG_INPUT = 4, /* analog_input_init */
     PD_MODE_PWM = 5, /* pwm_init, pwm_control */
     PD_MODE_COUNTER = 6, /* counter_init */
-    PD_MODE_COUNT = 7
+    PD_MODE_BUILTIN_END = 7 /* a build's own modes follow */
 };
 
 /* Build-time features (enum Feature): each is in the build unless it says
