@@ -21,6 +21,8 @@
 #define PD_AVR_TX_SIZE 117u
 
 void pd_avr_uart_init(uint32_t baud);
+/* Switch to `baud` once every queued byte went out (waits for them). */
+void pd_avr_uart_set_baud(uint32_t baud);
 /* The oldest received byte, left in the ring, or -1 if none. */
 int16_t pd_avr_uart_peek(void);
 /* Remove the oldest received byte (after a successful peek). */

@@ -47,6 +47,23 @@ bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len)
     return pd_avr_uart_write(data, len);
 }
 
+/* 16 MHz divides every one of them exactly with U2X (UBRR 7, 3, 1). */
+uint8_t pd_hal_baud_rates(void *hal)
+{
+    (void)hal;
+#if F_CPU == 16000000UL
+    return PD_RESET_ACK_BAUD_250K | PD_RESET_ACK_BAUD_500K | PD_RESET_ACK_BAUD_1M;
+#else
+    return 0;
+#endif
+}
+
+void pd_hal_set_baud(void *hal, uint32_t baud)
+{
+    (void)hal;
+    pd_avr_uart_set_baud(baud);
+}
+
 uint32_t pd_hal_millis(void *hal)
 {
     (void)hal;
@@ -227,7 +244,7 @@ void pd_avr_setup(void)
 #ifndef ARDUINO
     pd_avr_clock_init();
 #endif
-    pd_avr_uart_init(115200UL);
+    pd_avr_uart_init(PD_BAUD);
     if (PD_FEATURE_SERVO) {
         pd_avr_servo_init();
     }

@@ -1,6 +1,8 @@
 /*
- * USART0 at 115200 baud with U2X (UBRR 16: 2.1 % fast, the Arduino setting,
- * well within what the Uno's USB bridge accepts). Our own driver rather than
+ * USART0 with U2X, opening at PD_BAUD (a build option; 115200 by default: UBRR
+ * 16, 2.1 % fast, the Arduino setting, well within what the Uno's USB bridge
+ * accepts), and at 250,000, 500,000 or 1,000,000 baud once the host agreed on
+ * one (UBRR 7, 3, 1: exact at 16 MHz; docs/protocol.md 5, *Line rate*). Our own driver rather than
  * the Arduino core's HardwareSerial: the same job in far less flash and RAM.
  *
  * Receive: an interrupt fills a ring buffer, so no byte is lost while the
@@ -15,6 +17,7 @@
 #include <avr/io.h>
 #include <string.h>
 #include <util/atomic.h>
+#include <util/delay_basic.h>
 
 #include "pd_avr.h"
 #include "pd_link.h"
@@ -34,9 +37,34 @@ static volatile uint8_t tx_buf[PD_AVR_TX_SIZE];
 static volatile uint8_t tx_head; /* written by the main loop */
 static volatile uint8_t tx_tail; /* written by the ISR */
 
+static uint16_t ubrr_for(uint32_t baud)
+{
+    return (uint16_t)((F_CPU / 8u + baud / 2u) / baud - 1u);
+}
+
+/*
+ * A new rate once every queued byte is out: the ring drains in the interrupt,
+ * then the last byte leaves the shift register within one byte time at the old
+ * rate (waited for in full: 11 bits, as simavr counts them, at 8 cycles a bit
+ * with U2X, 4 cycles per _delay_loop_2 turn). The main loop waits here a few
+ * ms at most, once or twice a session; bytes received meanwhile wait in the ring.
+ */
+void pd_avr_uart_set_baud(uint32_t baud)
+{
+    while (tx_head != tx_tail) {
+    }
+    while (!(UCSR0A & _BV(UDRE0))) {
+    }
+    uint16_t old = (uint16_t)(((uint16_t)UBRR0H << 8) | UBRR0L);
+    _delay_loop_2((uint16_t)((old + 1u) * 24u));
+    uint16_t ubrr = ubrr_for(baud);
+    UBRR0H = (uint8_t)(ubrr >> 8);
+    UBRR0L = (uint8_t)ubrr; /* simavr takes the new byte time from this write */
+}
+
 void pd_avr_uart_init(uint32_t baud)
 {
-    uint16_t ubrr = (uint16_t)((F_CPU / 8u + baud / 2u) / baud - 1u);
+    uint16_t ubrr = ubrr_for(baud);
     /* U2X before the rate, as the Arduino core does: simavr derives the byte
      * time from UBRR when UBRR0L is written and reads U2X only then, so the
      * other order emulates 57600 baud timing (the hardware does not care). */

@@ -15,6 +15,8 @@ void pd_core_init(pd_core_t *core, void *hal)
     core->report = pd_inputs_report;
     core->report_sent = pd_inputs_sent;
     core->report_pending = 0;
+    core->baud = 0; /* the platform opened the line at PD_BAUD */
+    core->baud_unconfirmed = false;
     uint32_t boot = pd_hal_boot_id(hal);
     for (uint8_t i = 0; i < 4; i++) {
         core->boot_id[i] = (uint8_t)(boot >> (24 - 8 * i));
@@ -28,6 +30,47 @@ void pd_core_init(pd_core_t *core, void *hal)
     core->failsafe.cause = 0;
     pd_failsafe_init(&core->failsafe, pd_hal_millis(hal));
     pd_link_send_event(&core->link, hal, PD_EVENT_BOOT);
+}
+
+/* The RESET_ACK flag bit of a line rate above the opening one (0: none of them). */
+static uint8_t baud_flag(uint32_t rate)
+{
+    if (rate == 250000UL) {
+        return PD_RESET_ACK_BAUD_250K;
+    }
+    if (rate == 500000UL) {
+        return PD_RESET_ACK_BAUD_500K;
+    }
+    return rate == 1000000UL ? PD_RESET_ACK_BAUD_1M : 0u;
+}
+
+/*
+ * BAUD_SET (docs/protocol.md 5, *Line rate*): a rate this board offers is acked
+ * at the rate the line runs at, and then the line switches (after the BAUD_ACK
+ * went out: pd_hal_set_baud), unconfirmed until a frame other than a BAUD_SET
+ * arrives at the new rate (pd_core_poll goes back otherwise). A BAUD_SET of the
+ * rate the line already runs at is the host's probe: acked, nothing changes.
+ * Another rate is refused with a BAUD_ACK of 0. Out of line: it runs once or
+ * twice a session, and not under the receive loop's stack.
+ */
+static __attribute__((noinline)) void baud_set(pd_core_t *core, const uint8_t *rate_be)
+{
+    uint32_t rate = ((uint32_t)rate_be[0] << 24) | ((uint32_t)rate_be[1] << 16) |
+                    ((uint32_t)rate_be[2] << 8) | rate_be[3];
+    uint8_t flag = (uint8_t)(baud_flag(rate) & pd_hal_baud_rates(core->hal));
+    if (flag == 0) {
+        const uint8_t refused[4] = {0, 0, 0, 0};
+        pd_link_baud_ack(&core->link, core->hal, refused);
+        return;
+    }
+    pd_link_baud_ack(&core->link, core->hal, rate_be);
+    if (flag != core->baud) {
+        pd_hal_set_baud(core->hal, rate);
+        core->baud = flag;
+        core->baud_unconfirmed = true;
+        core->baud_at = (uint16_t)pd_hal_millis(core->hal);
+        core->link.tx_flush = true; /* the host's receiver meets the new rate clean */
+    }
 }
 
 bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
@@ -52,6 +95,13 @@ bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
     } else if (event == PD_LINK_RESET) {
         bool resumed = pd_core_open_session(core, pd_link_session(&core->link));
         pd_link_reset_ack(&core->link, core->hal, core->boot_id, resumed);
+    } else if (event == PD_LINK_BAUD) {
+        baud_set(core, pd_link_baud(&core->link));
+    }
+    if (event >= PD_LINK_COMMAND && event <= PD_LINK_HANDLED) {
+        /* A valid frame, other than a BAUD_SET, heard at the rate the line runs at:
+         * the host follows the switch, which is confirmed. */
+        core->baud_unconfirmed = false;
     }
     core->in_decoded = false; /* the frame ended, run or not */
     return true;
@@ -107,6 +157,14 @@ void pd_core_poll(pd_core_t *core)
     /* Checked in every state: a RESET of another protocol version makes the
      * link IDLE with outputs still configured. */
     uint32_t now = pd_hal_millis(core->hal);
+    if (core->baud_unconfirmed &&
+        (uint16_t)((uint16_t)now - core->baud_at) >= (uint16_t)PD_BAUD_CONFIRM_MS) {
+        /* The host did not follow the switch: both go back to the opening rate. */
+        pd_hal_set_baud(core->hal, PD_BAUD);
+        core->baud = 0;
+        core->baud_unconfirmed = false;
+        core->link.tx_flush = true;
+    }
     if (pd_failsafe_due(&core->failsafe, now)) {
         pd_core_enter_safe(core, protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT);
     }

@@ -20,6 +20,18 @@
 
 #include "pd_state.h"
 
+/*
+ * The opening line rate, a build option (make -C firmware avr BAUD=..., or the
+ * Arduino library's pd_config.h): the rate after power-up and the one the line
+ * returns to when a switch is not confirmed (docs/protocol.md 5, *Line rate*).
+ */
+#if defined(ARDUINO) || defined(PD_CONFIG_H_WANTED)
+#include "pd_config.h"
+#endif
+#ifndef PD_BAUD
+#define PD_BAUD ((uint32_t)PD_OPENING_BAUDRATE)
+#endif
+
 /* Power-up state: nothing configured, link IDLE; sends EVENT BOOT. */
 void pd_core_init(pd_core_t *core, void *hal);
 

@@ -51,6 +51,18 @@ typedef struct pd_board_info {
 uint16_t pd_hal_tx_room(void *hal);
 bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len);
 
+/*
+ * The line rate (docs/protocol.md section 5, *Line rate*). pd_hal_baud_rates:
+ * the RESET_ACK FLAGS bits (PD_RESET_ACK_BAUD_*) of the rates above the opening
+ * one that this board can switch to (0: none). pd_hal_set_baud: switch the line
+ * to `baud` (the opening rate or one of those), once every byte queued before
+ * the call has gone out at the old rate: the BAUD_ACK that announces a switch
+ * is the last of them. It may wait for them (on the Uno at most the transmit
+ * ring's drain, a few ms, as the switch is rare).
+ */
+uint8_t pd_hal_baud_rates(void *hal);
+void pd_hal_set_baud(void *hal, uint32_t baud);
+
 /* Milliseconds since an arbitrary origin; wraps modulo 2^32. */
 uint32_t pd_hal_millis(void *hal);
 

@@ -148,7 +148,14 @@ static void send_reset_ack(pd_link_t *link, void *hal, const uint8_t *boot_id, u
 
 void pd_link_reset_ack(pd_link_t *link, void *hal, const uint8_t boot_id[4], bool resumed)
 {
-    send_reset_ack(link, hal, boot_id, resumed ? PD_RESET_ACK_RESUMED : 0u);
+    uint8_t flags = pd_hal_baud_rates(hal);
+    send_reset_ack(link, hal, boot_id, resumed ? (uint8_t)(flags | PD_RESET_ACK_RESUMED) : flags);
+}
+
+bool pd_link_baud_ack(pd_link_t *link, void *hal, const uint8_t rate[4])
+{
+    const uint8_t ack[PD_BAUD_SIZE] = {PD_CONTROL_BAUD_ACK, rate[0], rate[1], rate[2], rate[3]};
+    return send_control(link, hal, ack, sizeof(ack));
 }
 
 /*
@@ -232,6 +239,10 @@ static pd_link_event_t handle_frame(pd_link_t *link, void *hal)
          * check had rx_out pass through PD_HEADER_SIZE + LEN, one byte at a
          * time, with its TYPE and LEN stored. */
         return PD_LINK_COMMAND;
+    }
+    if (pkt.type == PD_PACKET_CONTROL && link->active && pkt.len == PD_BAUD_SIZE &&
+        pkt.payload[0] == PD_CONTROL_BAUD_SET) {
+        return PD_LINK_BAUD; /* the rate is the core's to decide */
     }
     if (pkt.type == PD_PACKET_CONTROL && pkt.len == 1 && pkt.payload[0] == PD_CONTROL_HEARTBEAT) {
         return PD_LINK_HANDLED; /* liveness of the link only; never of the application */

@@ -154,6 +154,8 @@ typedef enum pd_link_event {
                        * the session it carries (pd_link_session), then pd_link_reset_ack */
     PD_LINK_HANDLED,  /* a valid packet the link dealt with itself: CONTROL, DATA (ignored), a
                        * RESET of another version or a COMMAND while IDLE (both answered) */
+    PD_LINK_BAUD,     /* a BAUD_SET while ACTIVE (docs/protocol.md 5, *Line rate*): the core
+                       * answers it (pd_link_baud_ack) and may switch the rate */
     PD_LINK_DROPPED,  /* an error: not valid COBS, a length, CRC or TYPE error (counted) */
     PD_LINK_OVERFLOW  /* an error: no 0x00 in PD_MAX_ENCODED_FRAME bytes; EVENT RX_OVERFLOW
                        * sent, the rest skipped up to the next 0x00 */
@@ -191,8 +193,18 @@ static inline const uint8_t *pd_link_session(const pd_link_t *link)
     return link->rx_buf + PD_HEADER_SIZE + 2u;
 }
 
-/* Answer PD_LINK_RESET: RESET_ACK with this power-up's id and whether the session resumed. */
+/* Answer PD_LINK_RESET: RESET_ACK with this power-up's id, whether the session resumed
+ * and the line rates the board can switch to (pd_hal_baud_rates). */
 void pd_link_reset_ack(pd_link_t *link, void *hal, const uint8_t boot_id[4], bool resumed);
+
+/* The rate a PD_LINK_BAUD asks for (4 bytes, big-endian), valid until the next byte. */
+static inline const uint8_t *pd_link_baud(const pd_link_t *link)
+{
+    return link->rx_buf + PD_HEADER_SIZE + 1u;
+}
+
+/* Answer PD_LINK_BAUD: BAUD_ACK with `rate` (4 bytes, big-endian; all 0: refused). */
+bool pd_link_baud_ack(pd_link_t *link, void *hal, const uint8_t rate[4]);
 
 /*
  * The buffer a frame is built in, in place: the lone 0x00 that may go first,

@@ -55,6 +55,13 @@ typedef struct pd_core {
     pd_report_sent_fn report_sent;
     uint8_t report_pending;  /* bit N: slot N has a value to send */
     uint8_t report_since;    /* low byte of the ms report_pending stopped being 0 */
+    /* The line rate (docs/protocol.md 5, *Line rate*): the RESET_ACK flag bit of the
+     * rate the line runs at (0: the opening rate), and while a switch is not yet
+     * confirmed by a frame at the new rate, the low 16 bits of the ms it was made
+     * at in baud_at (baud_unconfirmed set). 4 B of the Uno's RAM. */
+    uint8_t baud;
+    bool baud_unconfirmed;
+    uint16_t baud_at;
 } pd_core_t;
 
 /* Report slot `slot` has a new value: sent (pd_core_t.report builds it) when the line allows. */

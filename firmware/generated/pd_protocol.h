@@ -6,7 +6,7 @@
 #ifndef PD_PROTOCOL_H
 #define PD_PROTOCOL_H
 
-#define PD_PROTOCOL_VERSION 3
+#define PD_PROTOCOL_VERSION 4
 #define PD_MAX_PAYLOAD 255
 /* COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter. */
 #define PD_MAX_ENCODED_FRAME 262
@@ -23,6 +23,16 @@
 #define PD_RESET_ACK_SIZE 11
 /* RESET_ACK FLAGS: the session was resumed (the device kept its outputs). */
 #define PD_RESET_ACK_RESUMED 1
+/* RESET_ACK FLAGS: the line rates above the opening one the device can switch to (docs/protocol.md section 5, *Line rate*): the Uno's clock divides them exactly. */
+#define PD_RESET_ACK_BAUD_250K 2
+#define PD_RESET_ACK_BAUD_500K 4
+#define PD_RESET_ACK_BAUD_1M 8
+/* The firmware's default opening rate (a build option: ``make -C firmware avr BAUD=...``). */
+#define PD_OPENING_BAUDRATE 115200
+/* BAUD_SET / BAUD_ACK: CODE RATE (4 B big-endian). */
+#define PD_BAUD_SIZE 5
+/* After it switched, the device goes back to the opening rate unless a frame other than a BAUD_SET arrives at the new rate within this (seconds). */
+#define PD_BAUD_CONFIRM_MS 250UL
 #define PD_SEQ_DESYNC_THRESHOLD 50
 #define PD_DEDUPE_WINDOW 16
 /* Servo pulse defaults when a ServoInit leaves min_us/max_us at 0. */
@@ -47,6 +57,8 @@
 #define PD_CONTROL_RESET_ACK 0x01
 #define PD_CONTROL_HEARTBEAT 0x02
 #define PD_CONTROL_EVENT 0x03
+#define PD_CONTROL_BAUD_SET 0x04
+#define PD_CONTROL_BAUD_ACK 0x05
 
 /* EventCode: EVENT codes (docs/protocol.md section 5). */
 #define PD_EVENT_BOOT 0x01

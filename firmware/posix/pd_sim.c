@@ -39,6 +39,7 @@
 
 #include "pd_control.h"
 #include "pd_core.h"
+#include "pd_linerate.h"
 #include "pd_owner.h"
 
 /*
@@ -77,6 +78,8 @@ typedef struct sim_hal {
     uint32_t last_boot_id;
     uint16_t adc_value;             /* the conversion under way */
     bool driven[PD_MAX_PINS];       /* the control socket set the pin's level */
+    uint32_t baud;                  /* the device's line rate (pd_hal_set_baud) */
+    pd_line_t line;                 /* --line-*: what the line carries (pd_linerate.h) */
 } sim_hal_t;
 
 static const pd_board_info_t sim_board = {
@@ -268,6 +271,10 @@ bool pd_hal_write(void *ctx, const uint8_t *data, uint16_t len)
 /* Move what the pty takes now from the queue to it. */
 static void sim_tx_flush(sim_hal_t *hal)
 {
+    if (hal->tx_len > 0 && !pd_line_carries(&hal->line, hal->master, hal->baud, true)) {
+        hal->line.lost_out += hal->tx_len; /* sent at a rate the host or the line does not take */
+        hal->tx_len = 0;
+    }
     while (hal->tx_len > 0) {
         ssize_t n = write(hal->master, hal->tx, hal->tx_len);
         if (n < 0 && errno == EINTR) {
@@ -282,6 +289,28 @@ static void sim_tx_flush(sim_hal_t *hal)
         memmove(hal->tx, hal->tx + n, hal->tx_len - (size_t)n);
         hal->tx_len -= (size_t)n;
     }
+}
+
+/* Any rate: a pty has none of its own (pd_linerate.h judges the bytes when asked to). */
+uint8_t pd_hal_baud_rates(void *ctx)
+{
+    (void)ctx;
+    return PD_RESET_ACK_BAUD_250K | PD_RESET_ACK_BAUD_500K | PD_RESET_ACK_BAUD_1M;
+}
+
+/* The bytes queued before go out at the old rate first, as pd_hal.h asks (the
+ * pty's reader is the host: waited for 100 ms at most). */
+void pd_hal_set_baud(void *ctx, uint32_t baud)
+{
+    sim_hal_t *hal = ctx;
+    for (int i = 0; i < 100 && hal->tx_len > 0; i++) {
+        sim_tx_flush(hal);
+        if (hal->tx_len > 0) {
+            struct pollfd p = {.fd = hal->master, .events = POLLOUT};
+            poll(&p, 1, 1);
+        }
+    }
+    hal->baud = baud;
 }
 
 uint32_t pd_hal_millis(void *ctx)
@@ -442,7 +471,8 @@ static void on_signal(int sig)
 static int usage(void)
 {
     fprintf(stderr,
-            "usage: pd_sim [--trace FILE] [--link PATH] [--control PATH] [--owner-fd FD]\n");
+            "usage: pd_sim [--trace FILE] [--link PATH] [--control PATH] [--owner-fd FD]\n"
+            "              [--line-check] [--line-max BAUD] [--line-max-out BAUD]\n");
     return 2;
 }
 
@@ -504,7 +534,15 @@ int main(int argc, char **argv)
     for (int pin = 0; pin < PD_MAX_PINS; pin++) {
         hal.input[pin].edge = -1; /* no counter */
     }
+    hal.baud = PD_BAUD;
     for (int i = 1; i < argc; i++) {
+        int line = pd_line_option(&hal.line, argc, argv, &i);
+        if (line < 0) {
+            return usage();
+        }
+        if (line > 0) {
+            continue;
+        }
         if (strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
             trace_path = argv[++i];
         } else if (strcmp(argv[i], "--link") == 0 && i + 1 < argc) {
@@ -576,6 +614,7 @@ int main(int argc, char **argv)
                 hal.input[pin].edge = -1; /* its counters stop; the outside world's levels stay */
             }
             rx_len = rx_off = 0;
+            hal.baud = PD_BAUD; /* a reset UART is at the opening rate */
             pd_core_init(&core, &hal);
         }
         /* Bytes the core left last time (their replies need transmit room) go first. */
@@ -596,7 +635,9 @@ int main(int argc, char **argv)
         }
         if (ready > 0 && (p.revents & POLLIN)) {
             ssize_t n = read(hal.master, rx, sizeof(rx));
-            if (n > 0) {
+            if (n > 0 && !pd_line_carries(&hal.line, hal.master, hal.baud, false)) {
+                hal.line.lost_in += (uint64_t)n; /* sent at a rate we are not at */
+            } else if (n > 0) {
                 rx_len = (size_t)n;
                 rx_off = pd_core_rx(&core, rx, rx_len);
             }

@@ -81,6 +81,7 @@ from .constants import (
     HANDSHAKE_TIMEOUT,
     INPUT_INTERVAL_MAX_MS,
     MAX_RETRIES,
+    OPENING_BAUDRATE,
     PING_INTERVAL,
     PWM_MAX_DUTY,
     SERVO_DEFAULT_MAX_US,
@@ -624,7 +625,7 @@ class Board:
         self,
         url: str,
         *,
-        baudrate: int = 115200,
+        baudrate: int | None = None,
         ack_timeout: float = ACK_TIMEOUT,
         handshake_timeout: float = HANDSHAKE_TIMEOUT,
         max_retries: int = MAX_RETRIES,
@@ -689,7 +690,8 @@ class Board:
             if capture is not None
             else None
         )
-        self._transport = Transport(url, baudrate=baudrate)
+        # None: open at the firmware's default opening rate and agree on a faster one.
+        self._transport = Transport(url, baudrate=baudrate or OPENING_BAUDRATE)
         if monitor is not None:
             self._transport.add_monitor(monitor)
         if self._capture is not None:
@@ -701,6 +703,7 @@ class Board:
             watchdog_timeout=watchdog_timeout,
             notify=self._notify,
             session=session,
+            baudrate=baudrate,
         )
         self._rpc.attach(self._link)
         if self._capture is not None:
@@ -730,7 +733,7 @@ class Board:
         cls,
         url: str,
         *,
-        baudrate: int = 115200,
+        baudrate: int | None = None,
         ack_timeout: float = ACK_TIMEOUT,
         handshake_timeout: float = HANDSHAKE_TIMEOUT,
         max_retries: int = MAX_RETRIES,
@@ -784,6 +787,13 @@ class Board:
         moment fail with :class:`DeviceRebootedError`; ``reboot_limit``
         losses within ``reboot_window`` seconds stop restoring
         (:class:`RebootLoopError`).
+
+        ``baudrate`` pins the line rate: the port opens at it and stays there (a
+        firmware built with another opening rate, or a line known to carry no more).
+        By default (None) the port opens at 115200 baud and the host and the device
+        agree on the fastest rate both offer (docs/protocol.md 5, *Line rate*): on an
+        Uno 1,000,000 baud; a rate the line fails to carry falls back to a slower one.
+        :attr:`baudrate` is the rate the line runs at.
 
         ``session`` resumes a host session (1..2**32-1) that may still own
         the device's outputs, as the command line does; by default every
@@ -1575,6 +1585,11 @@ class Board:
         if self._closed:
             raise BoardClosedError("the board is closed")
         return self._future(msg, None, lambda call: call.result())
+
+    @property
+    def baudrate(self) -> int:
+        """The rate the line runs at: pinned, agreed (docs/protocol.md 5, *Line rate*) or opening."""
+        return self._transport.baudrate
 
     @property
     def stats(self) -> Stats:

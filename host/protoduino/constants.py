@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-PROTOCOL_VERSION = 3
+PROTOCOL_VERSION = 4
 MAX_PAYLOAD = 255
 #: COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter.
 MAX_ENCODED_FRAME = 262
@@ -69,6 +69,10 @@ class ControlCode(IntEnum):
     RESET_ACK = 0x01
     HEARTBEAT = 0x02
     EVENT = 0x03
+    #: Line rate agreement (docs/protocol.md section 5, *Line rate*). 0x02 stays
+    #: HEARTBEAT's, or free once it is gone: these take new codes.
+    BAUD_SET = 0x04
+    BAUD_ACK = 0x05
 
 
 #: CONTROL payload sizes (section 5). RESET: CODE VERSION SESSION(4).
@@ -79,6 +83,23 @@ RESET_ACK_V1_SIZE = 6
 RESET_ACK_SIZE = 11
 #: RESET_ACK FLAGS: the session was resumed (the device kept its outputs).
 RESET_ACK_RESUMED = 0x01
+#: RESET_ACK FLAGS: the line rates above the opening one the device can switch to
+#: (docs/protocol.md section 5, *Line rate*): the Uno's clock divides them exactly.
+RESET_ACK_BAUD_250K = 0x02
+RESET_ACK_BAUD_500K = 0x04
+RESET_ACK_BAUD_1M = 0x08
+#: The rates those flags name, slowest first (bit 1, 2, 3).
+FAST_BAUDRATES = (250_000, 500_000, 1_000_000)
+#: The firmware's default opening rate (a build option: ``make -C firmware avr BAUD=...``).
+OPENING_BAUDRATE = 115_200
+#: BAUD_SET / BAUD_ACK: CODE RATE (4 B big-endian).
+BAUD_SIZE = 5
+#: After it switched, the device goes back to the opening rate unless a frame other
+#: than a BAUD_SET arrives at the new rate within this (seconds).
+BAUD_CONFIRM = 0.25
+#: The host's probe at the new rate: this many tries, each waiting this long.
+BAUD_PROBE_TRIES = 3
+BAUD_PROBE_WAIT = 0.05
 
 
 class EventCode(IntEnum):
@@ -107,6 +128,12 @@ FIRMWARE_CONSTANTS = (
     "RESET_ACK_V1_SIZE",
     "RESET_ACK_SIZE",
     "RESET_ACK_RESUMED",
+    "RESET_ACK_BAUD_250K",
+    "RESET_ACK_BAUD_500K",
+    "RESET_ACK_BAUD_1M",
+    "OPENING_BAUDRATE",
+    "BAUD_SIZE",
+    "BAUD_CONFIRM",
     "SEQ_DESYNC_THRESHOLD",
     "DEDUPE_WINDOW",
     "SERVO_DEFAULT_MIN_US",

@@ -20,6 +20,17 @@ but new firmware); CLOSED.
 * EVENT BOOT or NOT_ACTIVE while ACTIVE, a reopened port, a SEQ jump of more
   than SEQ_DESYNC_THRESHOLD, or nothing valid received for WATCHDOG_TIMEOUT
   while traffic is expected: handshake again (the RESET_ACK then tells).
+* The line rate (docs/protocol.md 5, *Line rate*), unless the board pinned one:
+  after a RESET_ACK at the opening rate that offers faster rates, BAUD_SET of the
+  fastest not yet failed, at the opening rate; on its BAUD_ACK the port switches
+  and the same BAUD_SET probes the new rate; on that answer the handshake goes on
+  with a RESET at the new rate, which confirms the switch to the device. A probe
+  unanswered after BAUD_PROBE_TRIES x BAUD_PROBE_WAIT puts the port back at the
+  opening rate, marks the rate failed (never sent at again) and handshakes there
+  (the device, unconfirmed, is back within BAUD_CONFIRM). Every other RESET retry
+  goes at the rate the link last ran at, the ones between cycle through the
+  opening rate and the other rates not failed: a device that rebooted (at the
+  opening rate) or that a previous host left at a fast one is found either way.
 
 Everything here runs on the transport's I/O thread, except :meth:`open` and
 :meth:`close`. The state is a handful of fields written only by that thread,
@@ -28,6 +39,7 @@ so readers from other threads see a consistent-enough snapshot without locks.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import secrets
 import threading
@@ -40,6 +52,10 @@ from typing import Protocol
 from ._generated.schema_id import SCHEMA_ID
 from .clock import Clock
 from .constants import (
+    BAUD_PROBE_TRIES,
+    BAUD_PROBE_WAIT,
+    FAST_BAUDRATES,
+    OPENING_BAUDRATE,
     PROTOCOL_VERSION,
     SEQ_DESYNC_THRESHOLD,
     SEQ_TOLERANCE,
@@ -62,7 +78,7 @@ from .errors import (
 )
 from .events import Event, EventKind
 from .messages import ArduinoOut, parse_out
-from .packets import BadFrame, Control, Packet, parse_control, reset_payload
+from .packets import BadFrame, Control, Packet, baud_payload, parse_control, reset_payload
 from .transport import TransportListener
 
 log = logging.getLogger(__name__)
@@ -81,6 +97,8 @@ class PacketPort(Protocol):
 
     url: str
     name: str
+    #: The rate the port runs at (set_baudrate changes it).
+    baudrate: int
     #: True while the port is open.
     connected: bool
     #: Bytes received since the last open, and the first of them (to say what a wrong
@@ -95,6 +113,8 @@ class PacketPort(Protocol):
     def send(self, ptype: PacketType, payload: bytes, *, reset_seq: bool = False) -> None: ...
 
     def clear_queue(self) -> None: ...
+
+    def set_baudrate(self, rate: int) -> None: ...
 
     def recent_frames(self) -> tuple[str, ...]: ...
 
@@ -162,6 +182,7 @@ class Link:
         version: int = PROTOCOL_VERSION,
         clock: Clock = time.monotonic,
         session: int | None = None,
+        baudrate: int | None = None,
     ) -> None:
         self.transport = transport
         #: Every timestamp of the link's own comes from this clock (the I/O thread's ticks
@@ -180,6 +201,26 @@ class Link:
         self.session = session if session is not None else secrets.randbelow(0xFFFFFFFF) + 1
         if not 0 < self.session <= 0xFFFFFFFF:
             raise ArgumentError(f"session must be 1..2**32-1, not {self.session}")
+        #: ``baudrate`` pins the line rate (no agreement); None: open at
+        #: OPENING_BAUDRATE and agree on the fastest rate both sides offer.
+        if baudrate is not None and (isinstance(baudrate, bool) or not isinstance(baudrate, int)):
+            raise ArgumentTypeError(f"baudrate must be an int, not {type(baudrate).__name__}")
+        if baudrate is not None and baudrate <= 0:
+            raise ArgumentError(f"baudrate must be positive, not {baudrate}")
+        self.pinned_baudrate = baudrate
+        self.opening_baudrate = baudrate if baudrate is not None else OPENING_BAUDRATE
+        #: The rate the link last ran at: where a re-handshake looks first.
+        self.line_baudrate = self.opening_baudrate
+        #: Rates whose switch failed: never proposed, nor sent at, again by this link.
+        self.failed_baudrates: set[int] = set()
+        self.baud_switches = 0
+        self.baud_fallbacks = 0
+        self._hs_attempt = 0  # RESETs sent in this handshake (which rate the next goes at)
+        self._baud_phase: str | None = None  # "propose" (at the opening rate), "probe" (new)
+        self._baud_rate = 0
+        self._baud_tries = 0
+        self._baud_due = 0.0
+        self._baud_from: Control | None = None  # the RESET_ACK the agreement started from
         #: The device's boot id at the last handshake (None before the first).
         self.boot_id: int | None = None
         #: Whether the first handshake found the session still on the device.
@@ -307,7 +348,13 @@ class Link:
             # was reported up to a retry interval late (5.5 s for 5 s).
             if not self._hs_reported and now >= self._hs_started + self.handshake_timeout:
                 self._handshake_failed()
-            if self.state is LinkState.WAIT_ACK and now >= self._hs_next:
+            if self._baud_phase is not None:
+                if self.state is LinkState.WAIT_ACK and now >= self._baud_due:
+                    if self._baud_tries < BAUD_PROBE_TRIES:
+                        self._send_baud(now)
+                    else:
+                        self._baud_failed(now, "no answer")
+            elif self.state is LinkState.WAIT_ACK and now >= self._hs_next:
                 self._send_reset(now)
         elif (
             self.state is LinkState.ACTIVE
@@ -325,7 +372,7 @@ class Link:
             self._restart("watchdog", now)
         due = self._listener.link_tick(now)
         if self.state is LinkState.WAIT_ACK and self.transport.connected:
-            due = min(due, self._hs_next)
+            due = min(due, self._baud_due if self._baud_phase is not None else self._hs_next)
             if not self._hs_reported:
                 due = min(due, self._hs_started + self.handshake_timeout)
         elif self.state is LinkState.ACTIVE and self.expect_traffic():
@@ -361,13 +408,33 @@ class Link:
         self._hs_delay = RESET_FIRST_RETRY
         self._hs_reported = False
         self._hs_packets = 0
+        self._hs_attempt = 0
+        self._baud_phase = None
         self._hs_rx = self.transport.rx_since_open
         if not self._opened.is_set():
             self.down_error = HandshakeError(self._no_answer_text())
         self._send_reset(now)
 
+    def _attempt_rate(self) -> int:
+        """The rate the next RESET goes at (module docstring: every other one at the last)."""
+        if self.pinned_baudrate is not None:
+            return self.pinned_baudrate
+        k = self._hs_attempt
+        if k % 2 == 0:
+            return self.line_baudrate
+        others = [
+            rate
+            for rate in (self.opening_baudrate, *reversed(FAST_BAUDRATES))
+            if rate != self.line_baudrate and rate not in self.failed_baudrates
+        ]
+        return others[(k // 2) % len(others)] if others else self.line_baudrate
+
     def _send_reset(self, now: float) -> None:
+        rate = self._attempt_rate()
+        self._hs_attempt += 1
         self.transport.clear_queue()
+        if self.transport.baudrate != rate:
+            self.transport.set_baudrate(rate)
         self.transport.send(
             PacketType.CONTROL, reset_payload(self.version, self.session), reset_seq=True
         )
@@ -423,6 +490,9 @@ class Link:
                 return
             if ctl.code is ControlCode.RESET_ACK:
                 self._reset_ack(ctl, now)
+                return
+            if ctl.code is ControlCode.BAUD_ACK:
+                self._baud_ack(ctl, now)
                 return
             if ctl.code is ControlCode.EVENT and ctl.event in (
                 EventCode.BOOT,
@@ -496,7 +566,7 @@ class Link:
         self.device_version, self.device_schema_id = version, schema_id
         self._rx_expected = 1
         self._last_rx = now
-        if self.state is not LinkState.WAIT_ACK:
+        if self.state is not LinkState.WAIT_ACK or self._baud_phase is not None:
             return  # the twin of a resent RESET: SEQ re-synchronised, nothing else
         if version != self.version:
             self._fail(VersionMismatchError(self.version, version))
@@ -506,6 +576,16 @@ class Link:
             return
         if ctl.boot_id is None:
             log.warning("%s: RESET_ACK without a boot id ignored", self.transport.name)
+            return
+        if self._baud_from is not None:
+            # The RESET that confirmed a new rate: the session was opened or resumed by
+            # the handshake before the switch, whose answer says which (unless the
+            # device rebooted in between).
+            if self._baud_from.boot_id == ctl.boot_id:
+                ctl = dataclasses.replace(ctl, resumed=self._baud_from.resumed)
+            self._baud_from = None
+        self.line_baudrate = self.transport.baudrate
+        if self._start_agreement(ctl, now):
             return
         self.handshakes += 1
         self.state = LinkState.ACTIVE
@@ -556,3 +636,65 @@ class Link:
             )
         self._listener.link_up(lost, rebooted)
         self._opened.set()
+
+    # --- the line rate (docs/protocol.md 5, *Line rate*) ------------------------
+
+    def _start_agreement(self, ctl: Control, now: float) -> bool:
+        """After a RESET_ACK at the opening rate: propose the fastest rate offered, if any."""
+        if self.pinned_baudrate is not None or self.transport.baudrate != self.opening_baudrate:
+            return False
+        offered = [rate for rate in ctl.baudrates if rate not in self.failed_baudrates]
+        if not offered:
+            return False
+        self._baud_from = ctl
+        self._baud_rate = offered[0]  # fastest first
+        self._baud_phase = "propose"
+        self._baud_tries = 0
+        self._send_baud(now)
+        return True
+
+    def _send_baud(self, now: float) -> None:
+        self.transport.send(PacketType.CONTROL, baud_payload(ControlCode.BAUD_SET, self._baud_rate))
+        self._baud_tries += 1
+        self._baud_due = now + BAUD_PROBE_WAIT
+
+    def _baud_ack(self, ctl: Control, now: float) -> None:
+        self._last_rx = now
+        if self.state is not LinkState.WAIT_ACK or self._baud_phase is None:
+            return  # late: an answer to a BAUD_SET of an agreement that is over
+        if ctl.baudrate == 0:
+            self._baud_failed(now, "refused")
+            return
+        if ctl.baudrate != self._baud_rate:
+            return
+        if self._baud_phase == "propose":
+            # Acked at the opening rate; the device switches once the ack is out.
+            self.transport.set_baudrate(self._baud_rate)
+            self._baud_phase = "probe"
+            self._baud_tries = 0
+            self._send_baud(now)
+            return
+        # The probe was answered at the new rate: the RESET that goes on with the
+        # handshake there confirms the switch to the device.
+        log.info("%s: line rate %d baud agreed", self.transport.name, self._baud_rate)
+        self._baud_phase = None
+        self.baud_switches += 1
+        self.line_baudrate = self._baud_rate
+        self._hs_attempt = 0
+        self._send_reset(now)
+
+    def _baud_failed(self, now: float, why: str) -> None:
+        log.warning(
+            "%s: line rate %d baud failed (%s); back to %d baud",
+            self.transport.name,
+            self._baud_rate,
+            why,
+            self.opening_baudrate,
+        )
+        self.failed_baudrates.add(self._baud_rate)
+        self.baud_fallbacks += 1
+        self._baud_phase = None
+        self.line_baudrate = self.opening_baudrate
+        self.transport.set_baudrate(self.opening_baudrate)
+        self._hs_attempt = 0
+        self._send_reset(now)

@@ -12,7 +12,9 @@ from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
 from .constants import (
+    BAUD_SIZE,
     CRC_SIZE,
+    FAST_BAUDRATES,
     HEADER_SIZE,
     MAX_PAYLOAD,
     MIN_PACKET,
@@ -103,6 +105,11 @@ class Control:
     #: resumed; None in the short shape a device gives a RESET of another version.
     boot_id: int | None = None
     resumed: bool | None = None
+    #: RESET_ACK (version 4): the line rates above the opening one the device can
+    #: switch to (section 5, *Line rate*), fastest first; empty in older shapes.
+    baudrates: tuple[int, ...] = ()
+    #: BAUD_SET / BAUD_ACK (version 4): the rate (0 in a BAUD_ACK: refused).
+    baudrate: int | None = None
 
     def to_json(self) -> dict[str, object]:
         out: dict[str, object] = {"code": self.code.name}
@@ -115,6 +122,10 @@ class Control:
         if self.boot_id is not None:
             out["boot_id"] = f"0x{self.boot_id:08X}"
             out["resumed"] = self.resumed
+        if self.baudrates:
+            out["baudrates"] = list(self.baudrates)
+        if self.baudrate is not None:
+            out["baudrate"] = self.baudrate
         if self.event is not None:
             try:
                 out["event"] = EventCode(self.event).name
@@ -132,13 +143,29 @@ def reset_payload(version: int, session: int = 1) -> bytes:
 
 
 def reset_ack_payload(
-    version: int, schema_id: int, boot_id: int | None = None, resumed: bool = False
+    version: int,
+    schema_id: int,
+    boot_id: int | None = None,
+    resumed: bool = False,
+    baudrates: tuple[int, ...] = (),
 ) -> bytes:
-    """RESET_ACK; without ``boot_id``, the short shape every version parses."""
+    """RESET_ACK; without ``boot_id``, the short shape every version parses.
+
+    ``baudrates``: the rates of FAST_BAUDRATES the device offers (FLAGS bits 1..3).
+    """
     head = bytes((ControlCode.RESET_ACK, version)) + struct.pack(">I", schema_id)
     if boot_id is None:
         return head
-    return head + struct.pack(">IB", boot_id, RESET_ACK_RESUMED if resumed else 0)
+    flags = RESET_ACK_RESUMED if resumed else 0
+    for bit, rate in enumerate(FAST_BAUDRATES, start=1):
+        if rate in baudrates:
+            flags |= 1 << bit
+    return head + struct.pack(">IB", boot_id, flags)
+
+
+def baud_payload(code: ControlCode, rate: int) -> bytes:
+    """BAUD_SET or BAUD_ACK of ``rate`` (section 5, *Line rate*)."""
+    return bytes((code,)) + struct.pack(">I", rate)
 
 
 def heartbeat_payload() -> bytes:
@@ -188,7 +215,16 @@ def parse_control(payload: bytes) -> Control:
             schema_id=int.from_bytes(args[1:5], "big"),
             boot_id=int.from_bytes(args[5:9], "big"),
             resumed=bool(args[9] & RESET_ACK_RESUMED),
+            baudrates=tuple(
+                rate
+                for bit, rate in reversed(list(enumerate(FAST_BAUDRATES, start=1)))
+                if args[9] & (1 << bit)
+            ),
         )
+    if code in (ControlCode.BAUD_SET, ControlCode.BAUD_ACK):
+        if len(args) != BAUD_SIZE - 1:
+            raise ProtocolError(f"{code.name} takes 4 argument bytes, got {len(args)}")
+        return Control(code, baudrate=int.from_bytes(args, "big"))
     if code is ControlCode.HEARTBEAT:
         raise ProtocolError("HEARTBEAT takes no arguments")
     if not args:

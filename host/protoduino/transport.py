@@ -254,6 +254,16 @@ class Transport:
         """The last frames in both directions, oldest first, as readable lines."""
         return tuple(r.describe() for r in list(self._recent))
 
+    def set_baudrate(self, rate: int) -> None:
+        """The line's rate from now on (docs/protocol.md 5, *Line rate*); on the I/O thread.
+
+        It applies to the bytes written after it: the link changes it only between
+        frames, once what it waited for has arrived. A port reopened later opens at it.
+        """
+        self.baudrate = rate
+        if self._port is not None:
+            self._port.baudrate = rate
+
     @property
     def tx_seq(self) -> int:
         return self._tx_seq

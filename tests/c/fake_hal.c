@@ -322,6 +322,18 @@ uint32_t pd_hal_boot_id(void *ctx)
     return ++hal->boots;
 }
 
+uint8_t pd_hal_baud_rates(void *ctx)
+{
+    return ((fake_hal_t *)ctx)->baud_rates;
+}
+
+void pd_hal_set_baud(void *ctx, uint32_t baud)
+{
+    fake_hal_t *hal = ctx;
+    hal->baud = baud;
+    hal->baud_sets++;
+}
+
 void pd_hal_outputs_safe(void *ctx)
 {
     fake_hal_t *hal = ctx;

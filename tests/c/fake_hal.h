@@ -48,6 +48,9 @@ typedef struct fake_hal {
     unsigned servo_writes[PD_MAX_PINS];
     unsigned digital_writes[PD_MAX_PINS];
     unsigned outputs_safe_calls; /* pd_hal_outputs_safe() since fake_init */
+    uint8_t baud_rates;          /* what pd_hal_baud_rates() answers (0 after fake_init: none) */
+    uint32_t baud;               /* the last pd_hal_set_baud() rate (0: none since fake_init) */
+    unsigned baud_sets;          /* pd_hal_set_baud() calls since fake_init */
     bool servo_held;             /* inside pd_hal_servo_hold(true) .. (false) */
     unsigned servo_holds;        /* pd_hal_servo_hold(true) calls since fake_init */
     uint32_t boots;              /* pd_hal_boot_id() calls: the boot id */

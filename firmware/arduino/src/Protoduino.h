@@ -20,7 +20,8 @@ void pd_avr_loop(void);
 }
 #endif
 
-/* Call once from setup(): starts the UART at 115200 baud and the servo timer. */
+/* Call once from setup(): starts the UART at PD_BAUD (pd_config.h: 115200 unless changed there;
+ * the host may agree on a faster rate) and the servo timer. */
 static inline void protoduino_begin(void)
 {
     pd_avr_setup();

@@ -32,7 +32,11 @@ def add_port(parser: argparse.ArgumentParser, *, required: bool = True) -> None:
         help="serial port or pyserial URL (/dev/ttyACM0, rfc2217://pi:7000, socket://...)",
     )
     parser.add_argument(
-        "--baud", type=argtypes.baud, default=115200, help="baud rate (default: %(default)s)"
+        "--baud",
+        type=argtypes.baud,
+        default=None,
+        help="pin the line rate (default: open at 115200 and agree on the fastest the "
+        "device offers)",
     )
     parser.add_argument(
         "--ack-timeout",
