@@ -44,6 +44,16 @@
  * passes counts the main loop's passes (a batch of emulation and a wait each):
  * the pacing bounds them per emulated second, so many more mean a loop that
  * does not wait (as when a full input buffer left the pty readable forever).
+ * The stats line also states UART0's byte time and rate as the firmware set
+ * them last (uart_byte_cycles, uart_baud: they follow a mid-run UBRR0 write,
+ * the line rate's agreement), and the bytes --line-* options lost each way.
+ *
+ * --line-check, --line-max BAUD, --line-max-out BAUD (tools/simcontrol/pd_linerate.h,
+ * as the native board): a byte crosses the pty only if the host's termios rate is
+ * UART0's (within 3 %) and, with --line-max, UART0's is at most BAUD (both ways;
+ * --line-max-out: from the MCU to the host only). Host bytes are judged as they
+ * are read, MCU bytes as UART0 starts to send them.
+ *
  * --profile FILE: each SIGUSR2 also replaces FILE with the awake cycles spent
  * at each flash address since the previous SIGUSR2 (a flat profile the
  * benchmarks map to the ELF's symbols), written before the --stats line.
@@ -81,6 +91,7 @@
 #include <sim_regbit.h>
 
 #include "pd_control.h"
+#include "pd_linerate.h"
 #include "pd_owner.h"
 #include "pd_pins.h"
 
@@ -213,6 +224,7 @@ typedef struct {
     uint8_t ext_mask[3]; /* per port: pins held by the control socket */
     uint8_t ext_value[3];
     int owner_fd; /* --owner-fd: the owner's pipe, or -1 */
+    pd_line_t line; /* --line-check, --line-max, --line-max-out (pd_linerate.h) */
 } pd_sim_t;
 
 static pd_sim_t g_sim;
@@ -514,10 +526,25 @@ static void pd_rxc_hook(struct avr_irq_t *irq, uint32_t value, void *param)
     }
 }
 
+/* UART0's rate now, from the registers the firmware set (UBRR0, U2X0): the rate a
+ * byte it sends or receives is at, which it may change mid-run (the line rate's
+ * agreement); simavr's byte time follows the same UBRR0L write. */
+static uint32_t pd_uart_baud(const pd_sim_t *sim)
+{
+    const uint8_t *data = sim->avr->data;
+    uint32_t ubrr = ((uint32_t)(data[0xC5] & 0x0FU) << 8) | data[0xC4]; /* UBRR0H, UBRR0L */
+    uint32_t per_bit = (data[0xC0] & 0x02U) ? 8U : 16U;                 /* UCSR0A U2X0 */
+    return (uint32_t)(sim->avr->frequency / (per_bit * (ubrr + 1U)));
+}
+
 static void pd_uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
     pd_sim_t *sim = param;
+    if (!pd_line_carries(&sim->line, sim->master, pd_uart_baud(sim), true)) {
+        sim->line.lost_out++; /* sent at a rate the host or the line does not take */
+        return;
+    }
     sim->uart_tx++;
     sim->tx_last = pd_cycles(sim);
     if (sim->rx_last_at) {
@@ -575,7 +602,8 @@ static void pd_write_stats(pd_sim_t *sim)
             "\"awake_cycles\": %llu, \"uart_rx_bytes\": %llu, \"uart_tx_bytes\": %llu, "
             "\"sp_min\": %u, \"sp_min_pc\": %lu, \"ramend\": %u, \"passes\": %llu, "
             "\"rx_lag_max\": %llu, \"answers\": %llu, \"answer_cycles\": %llu, "
-            "\"start_ns\": %llu, \"uart_byte_cycles\": %llu}\n",
+            "\"start_ns\": %llu, \"uart_byte_cycles\": %llu, \"uart_baud\": %u, "
+            "\"line_lost_in\": %llu, \"line_lost_out\": %llu}\n",
             (double)cycles / (double)sim->avr->frequency, (unsigned)sim->avr->frequency,
             (unsigned long long)cycles, (unsigned long long)sleep,
             (unsigned long long)(cycles - sleep), (unsigned long long)sim->uart_rx,
@@ -583,7 +611,9 @@ static void pd_write_stats(pd_sim_t *sim)
             (unsigned)sim->avr->ramend, (unsigned long long)sim->passes,
             (unsigned long long)sim->rx_lag_max, (unsigned long long)sim->answers,
             (unsigned long long)sim->answer_cycles, (unsigned long long)g_start_ns,
-            (unsigned long long)(sim->uart ? sim->uart->cycles_per_byte : 0U));
+            (unsigned long long)(sim->uart ? sim->uart->cycles_per_byte : 0U),
+            (unsigned)pd_uart_baud(sim), (unsigned long long)sim->line.lost_in,
+            (unsigned long long)sim->line.lost_out);
     fflush(sim->stats);
 }
 
@@ -1002,6 +1032,10 @@ static void pd_pump_pty(pd_sim_t *sim)
         if (sim->crashed) {
             continue; /* a stopped MCU drops what arrives, as a real one would */
         }
+        if (!pd_line_carries(&sim->line, sim->master, pd_uart_baud(sim), false)) {
+            sim->line.lost_in += (uint64_t)n; /* sent at a rate UART0 is not at */
+            continue;
+        }
         for (ssize_t i = 0; i < n; i++) {
             pd_fifo_push(&sim->rx, buf[i]);
         }
@@ -1084,7 +1118,7 @@ static void pd_usage(FILE *f)
             "usage: avrsim [--trace FILE] [--link PATH] [--control PATH] [--hex FILE]...\n"
             "              [--boot ADDR] [--auto-reset] [--glitch PIN] [--stats FILE]\n"
             "              [--profile FILE] [--stack FILE] [--mcu NAME] [--freq HZ]\n"
-            "              [--owner-fd FD]\n"
+            "              [--owner-fd FD] [--line-check] [--line-max BAUD] [--line-max-out BAUD]\n"
             "              [FIRMWARE.elf]\n"
             "Runs an emulated Arduino Uno with UART0 on a pseudo-terminal; prints the\n"
             "port as the first stdout line. SIGUSR1 resets the MCU, SIGINT/SIGTERM exit;\n"
@@ -1092,7 +1126,8 @@ static void pd_usage(FILE *f)
             "with --stats, SIGUSR2 and the exit append cycle and UART counters to FILE;\n"
             "with --profile, SIGUSR2 writes awake cycles per flash address to FILE;\n"
             "with --stats and --stack, each stats line also writes the deepest stack's bytes to FILE;\n"
-            "--control PATH: a Unix socket taking JSON input commands, one per line.\n");
+            "--control PATH: a Unix socket taking JSON input commands, one per line;\n"
+            "--line-*: bytes cross only at the rate both ends set (and at most BAUD).\n");
 }
 
 static void pd_cleanup(pd_sim_t *sim)
@@ -1262,6 +1297,8 @@ int main(int argc, char **argv)
         {"stack", required_argument, NULL, 'k'},
         {"control", required_argument, NULL, 'c'}, {"owner-fd", required_argument, NULL, 'o'},
         {"help", no_argument, NULL, 'h'},
+        {"line-check", no_argument, NULL, 'L'}, {"line-max", required_argument, NULL, 'M'},
+        {"line-max-out", required_argument, NULL, 'O'},
         {NULL, 0, NULL, 0},
     };
     int opt;
@@ -1318,6 +1355,21 @@ int main(int argc, char **argv)
                 return 2;
             }
             break;
+        case 'L':
+        case 'M':
+        case 'O': {
+            /* pd_linerate.h parses them as the native board does. */
+            char *args[3] = {(char *)(opt == 'L' ? "--line-check"
+                                      : opt == 'M' ? "--line-max"
+                                                   : "--line-max-out"),
+                             optarg, NULL};
+            int at = 0;
+            if (pd_line_option(&sim->line, opt == 'L' ? 1 : 2, args, &at) <= 0) {
+                fprintf(stderr, "avrsim: --line-max and --line-max-out take a baud rate\n");
+                return 2;
+            }
+            break;
+        }
         case 'h':
             pd_usage(stdout);
             return 0;
