@@ -119,6 +119,12 @@ class VirtualDevice:
     def clear_queue(self) -> None:
         pass  # nothing waits: every send reached the device at once
 
+    #: The line rate the link set (Link's RESET retries may change it; no rate is emulated).
+    baudrate = 115200
+
+    def set_baudrate(self, rate: int) -> None:
+        self.baudrate = rate
+
     def recent_frames(self) -> tuple[str, ...]:
         return ()
 

@@ -97,6 +97,12 @@ class FakeTransport:
     def clear_queue(self) -> None:
         pass
 
+    #: The line rate the link set (Link's RESET retries may change it; no rate is emulated).
+    baudrate = 115200
+
+    def set_baudrate(self, rate: int) -> None:
+        self.baudrate = rate
+
     def recent_frames(self) -> tuple[str, ...]:
         return ()
 
