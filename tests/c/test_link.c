@@ -564,7 +564,121 @@ static void test_link_alone_holds_a_frame_until_its_replies_fit(void)
     CHECK_EQ(fake_count(&hal), 1);
 }
 
+/* --- The line rate (docs/protocol.md 5, *Line rate*) -------------------------- */
+
+static void send_baud_set(tdev_t *d, uint32_t rate)
+{
+    const uint8_t payload[PD_BAUD_SIZE] = {PD_CONTROL_BAUD_SET, (uint8_t)(rate >> 24),
+                                           (uint8_t)(rate >> 16), (uint8_t)(rate >> 8),
+                                           (uint8_t)rate};
+    t_send_packet(d, PD_PACKET_CONTROL, d->host_seq++, payload, sizeof(payload));
+}
+
+/* The rate of the last BAUD_ACK sent since the last clear, or -1 if none. */
+static long long last_baud_ack(const tdev_t *d)
+{
+    long long rate = -1;
+    for (size_t i = 0; i < d->hal.n_frames; i++) {
+        const fake_frame_t *f = fake_frame(&d->hal, i);
+        if (f->type == PD_PACKET_CONTROL && f->len == PD_BAUD_SIZE &&
+            f->payload[0] == PD_CONTROL_BAUD_ACK) {
+            rate = ((long long)f->payload[1] << 24) | ((long long)f->payload[2] << 16) |
+                   ((long long)f->payload[3] << 8) | f->payload[4];
+        }
+    }
+    return rate;
+}
+
+static void test_reset_ack_offers_the_hal_rates(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    d.hal.baud_rates = PD_RESET_ACK_BAUD_500K | PD_RESET_ACK_BAUD_1M;
+    fake_clear(&d.hal);
+    t_send_reset(&d, PD_PROTOCOL_VERSION);
+    const fake_frame_t *f = fake_frame(&d.hal, 0);
+    CHECK_EQ(f->payload[0], PD_CONTROL_RESET_ACK);
+    CHECK_EQ(f->len, PD_RESET_ACK_SIZE);
+    CHECK_EQ(f->payload[10], PD_RESET_ACK_BAUD_500K | PD_RESET_ACK_BAUD_1M);
+}
+
+static void test_baud_set_acks_then_switches(void)
+{
+    tdev_t d;
+    t_active(&d);
+    d.hal.baud_rates = PD_RESET_ACK_BAUD_250K | PD_RESET_ACK_BAUD_500K | PD_RESET_ACK_BAUD_1M;
+    send_baud_set(&d, 1000000UL);
+    CHECK_EQ(last_baud_ack(&d), 1000000LL);
+    CHECK_EQ(d.hal.baud_sets, 1u);
+    CHECK_EQ(d.hal.baud, 1000000UL);
+    /* The probe at the new rate: acked, no second switch, not yet confirmed. */
+    fake_clear(&d.hal);
+    send_baud_set(&d, 1000000UL);
+    CHECK_EQ(last_baud_ack(&d), 1000000LL);
+    CHECK_EQ(d.hal.baud_sets, 1u);
+    CHECK(d.core.baud_unconfirmed);
+}
+
+static void test_baud_unconfirmed_falls_back(void)
+{
+    tdev_t d;
+    t_active(&d);
+    d.hal.baud_rates = PD_RESET_ACK_BAUD_1M;
+    send_baud_set(&d, 1000000UL);
+    d.hal.now_ms += PD_BAUD_CONFIRM_MS - 1u;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.baud, 1000000UL); /* still inside the bound */
+    d.hal.now_ms += 1u;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.baud, (uint32_t)PD_BAUD); /* back at the opening rate */
+    CHECK_EQ(d.hal.baud_sets, 2u);
+    CHECK(!d.core.baud_unconfirmed);
+}
+
+static void test_baud_confirmed_by_a_reset_stays(void)
+{
+    tdev_t d;
+    t_active(&d);
+    d.hal.baud_rates = PD_RESET_ACK_BAUD_1M;
+    send_baud_set(&d, 1000000UL);
+    t_send_reset(&d, PD_PROTOCOL_VERSION); /* the host's RESET at the new rate */
+    d.hal.now_ms += 10u * PD_BAUD_CONFIRM_MS;
+    pd_core_poll(&d.core);
+    CHECK_EQ(d.hal.baud, 1000000UL);
+    CHECK_EQ(d.hal.baud_sets, 1u);
+}
+
+static void test_baud_set_of_a_rate_not_offered_is_refused(void)
+{
+    tdev_t d;
+    t_active(&d);
+    d.hal.baud_rates = PD_RESET_ACK_BAUD_250K;
+    send_baud_set(&d, 1000000UL); /* not offered by this board */
+    CHECK_EQ(last_baud_ack(&d), 0LL);
+    fake_clear(&d.hal);
+    send_baud_set(&d, 57600UL); /* not a rate of the protocol's */
+    CHECK_EQ(last_baud_ack(&d), 0LL);
+    CHECK_EQ(d.hal.baud_sets, 0u);
+}
+
+static void test_baud_set_while_idle_is_ignored(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    d.hal.baud_rates = PD_RESET_ACK_BAUD_1M;
+    fake_clear(&d.hal);
+    send_baud_set(&d, 1000000UL);
+    CHECK_EQ(last_baud_ack(&d), -1LL);
+    CHECK_EQ(d.hal.baud_sets, 0u);
+}
+
 const pd_test_case_t pd_tests_link[] = {
+    TEST_CASE(test_reset_ack_offers_the_hal_rates),
+    TEST_CASE(test_baud_set_acks_then_switches),
+    TEST_CASE(test_baud_unconfirmed_falls_back),
+    TEST_CASE(test_baud_confirmed_by_a_reset_stays),
+    TEST_CASE(test_baud_set_of_a_rate_not_offered_is_refused),
+    TEST_CASE(test_baud_set_while_idle_is_ignored),
     TEST_CASE(test_boot_event),
     TEST_CASE(test_reset_ack),
     TEST_CASE(test_reset_other_version_still_answered),
