@@ -1588,7 +1588,7 @@ class Board:
 
     @property
     def baudrate(self) -> int:
-        """The rate the line runs at: pinned, agreed (docs/protocol.md 5, *Line rate*) or opening."""
+        """The rate the line runs at: pinned, agreed (docs/protocol.md 5) or opening."""
         return self._transport.baudrate
 
     @property

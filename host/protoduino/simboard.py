@@ -236,12 +236,13 @@ class SimBoard:
         trace: str | os.PathLike[str] | None = None,
         link: str | os.PathLike[str] | None = None,
         control: str | os.PathLike[str] | None = None,
-        line: Sequence[str] = (),
+        options: Sequence[str] = (),
     ) -> None:
         self._backend = _backend(backend)
-        #: Options of the board's line (both backends: --line-check, --line-max BAUD,
-        #: --line-max-out BAUD; tools/simcontrol/pd_linerate.h), for testing the line rate.
-        self.line_options = tuple(line)
+        #: More options of the board program, for tests: both backends take the line's
+        #: (--line-check, --line-max BAUD, --line-max-out BAUD: tools/simcontrol/pd_linerate.h),
+        #: the emulated Uno its runner's too (--stats FILE ...: tools/avrsim/avrsim.c).
+        self.options = tuple(options)
         self.backend = backend
         # A str names a file as well as a Path does (trace() reads it as a Path).
         self.trace_path = None if trace is None else Path(trace)
@@ -265,7 +266,7 @@ class SimBoard:
             self._control_path = self._control_dir / "control"
         self._control = SimControl(self._control_path)
         cmd = owned(self._backend.command(self.trace_path, self.link, self._control_path))
-        cmd += self.line_options
+        cmd += self.options
         logger.debug("starting %s", " ".join(cmd))
         # stderr is inherited: the board writes there only when something is wrong.
         # stdin is the owner's pipe (module docstring); its own process group keeps a

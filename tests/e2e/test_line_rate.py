@@ -1,0 +1,130 @@
+"""The line rate (docs/protocol.md 5, *Line rate*; issue 23) on both boards.
+
+A pseudo-terminal carries bytes whatever rate either end set, so each board is
+started with ``--line-check`` (tools/simcontrol/pd_linerate.h): a byte crosses
+only when the host's termios rate is the device's (the native board's
+``pd_hal_set_baud``, the emulated Uno's UBRR0 as its firmware writes it), and
+``--line-max`` / ``--line-max-out`` make a line that cannot carry the faster
+rates (both ways, or from the device only: a device whose answers are lost after
+the switch). So a test passes only if both ends really run at the rate the host
+reports. Verdicts come from the link's own record (rates agreed, failed, fallbacks),
+what the device answers, and the emulated Uno's --stats (its UART's rate and byte
+time after the switch), never from wall-clock time.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import protoduino
+import pytest
+from protoduino.simboard import SimBoard
+from protoduino_dev.runnerstats import snapshot
+from simfixtures import SIM_BACKENDS
+
+_NEEDS = {"native": ("make", "gcc"), "avr": ("make", "gcc", "avr-gcc")}
+
+StartBoard = Callable[..., SimBoard]
+
+
+@pytest.fixture(params=SIM_BACKENDS)
+def start_board(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[StartBoard]:
+    """Starts a board of the backend with the given extra options (stopped at the end)."""
+    backend: str = request.param
+    for tool in _NEEDS[backend]:
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} is not installed (needed to build the {backend} board)")
+    boards: list[SimBoard] = []
+
+    def start(*options: str) -> SimBoard:
+        board = SimBoard(backend, trace=tmp_path / f"trace-{backend}.jsonl", options=options)
+        boards.append(board)
+        board.start()
+        return board
+
+    yield start
+    for board in boards:
+        board.stop()
+
+
+def _works(board: protoduino.Board) -> None:
+    """A command round trip at the rate the line runs at."""
+    board.ping(b"\x00\x55\xaa\xff" * 8)
+    led = board.digital_output(13, safe=False)
+    led.write(True)
+
+
+def test_agreement_reaches_the_fastest_common_rate(start_board: StartBoard) -> None:
+    sim = start_board("--line-check")
+    with protoduino.Board.open(sim.port) as board:
+        assert board.baudrate == 1_000_000
+        assert board._link.baud_switches == 1
+        assert board._link.baud_fallbacks == 0
+        _works(board)
+
+
+def test_a_rate_the_line_cannot_carry_falls_back(start_board: StartBoard) -> None:
+    sim = start_board("--line-max", "250000")
+    with protoduino.Board.open(sim.port) as board:
+        # 1,000,000 and 500,000 fail their probe; each time both ends return to the
+        # opening rate, and the next rate down is tried.
+        assert board._link.failed_baudrates == {1_000_000, 500_000}
+        assert board._link.baud_fallbacks == 2
+        assert board.baudrate == 250_000
+        _works(board)
+
+
+def test_a_device_that_does_not_answer_after_the_switch_falls_back(
+    start_board: StartBoard,
+) -> None:
+    # The device hears the host at 1,000,000 baud, but its answers are lost: it
+    # must not stay there (a probe does not confirm the switch), or the host,
+    # back at the opening rate, could never reach it again.
+    sim = start_board("--line-max-out", "500000")
+    with protoduino.Board.open(sim.port) as board:
+        assert board._link.failed_baudrates == {1_000_000}
+        assert board.baudrate == 500_000
+        _works(board)
+
+
+def test_a_pinned_rate_runs_no_agreement(start_board: StartBoard) -> None:
+    sim = start_board("--line-check")
+    with protoduino.Board.open(sim.port, baudrate=115_200) as board:
+        assert board.baudrate == 115_200
+        assert board._link.baud_switches == 0
+        _works(board)  # with --line-check: the device is at 115,200 too
+
+
+def test_a_new_host_finds_a_device_left_at_the_fast_rate(start_board: StartBoard) -> None:
+    # A pty does not reset the device on open (a real Uno's DTR does): the second
+    # host opens at 115,200 while the device still runs at 1,000,000. Its RESET
+    # retries alternate rates and find it there.
+    sim = start_board("--line-check")
+    with protoduino.Board.open(sim.port) as first:
+        assert first.baudrate == 1_000_000
+    with protoduino.Board.open(sim.port) as second:
+        assert second.baudrate == 1_000_000
+        assert second._link.baud_switches == 0  # found there, nothing to agree
+        _works(second)
+
+
+def test_the_emulated_uart_follows_the_switch(tmp_path: Path) -> None:
+    """The emulated Uno only: its runner's --stats state UART0's rate and byte time."""
+    for tool in _NEEDS["avr"]:
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} is not installed (needed to build the avr board)")
+    stats = tmp_path / "stats.jsonl"
+    with SimBoard("avr", options=("--line-check", "--stats", str(stats))) as sim:
+        sim.start()
+        with protoduino.Board.open(sim.port) as board:
+            _works(board)
+            line = snapshot(sim.pid, stats)
+    # UBRR0 1 with U2X: 1,000,000 baud, and simavr's byte time (11 bits of 16 cycles).
+    assert line["uart_baud"] == 1_000_000
+    assert line["uart_byte_cycles"] == 11 * 16
+    # Nothing the device sent was lost to a rate mismatch. (A host may lose its first
+    # probe: it can follow the BAUD_ACK before the device, which waits for the ack's
+    # last bit to leave, has switched; that is what the probe's retries are for.)
+    assert line["line_lost_out"] == 0
