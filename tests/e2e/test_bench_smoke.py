@@ -612,17 +612,19 @@ def test_race_on_both_boards() -> None:
     _or_skip(lambda: require("pyfirmata2.pyfirmata2", "pyFirmata2"))
     from bench import race
 
-    ours, theirs = race.collect(samples=6, commands=10, seed=SEED, analog_seconds=0.3)
-    for run in (ours, theirs):
+    ours, fast, theirs = race.collect(samples=6, commands=10, seed=SEED, analog_seconds=0.3)
+    for run in (ours, fast, theirs):
         assert run.error is None, run.error
         assert run.lost == 0 and len(run.digital) == 6 and len(run.servo) == 5
         assert run.flat is not None and run.flat.changes == 10 and run.flat.seconds > 0
-        assert sorted(run.analog) == ([14, 15, 16, 17, 18, 19] if run is ours else list(range(6)))
+        assert sorted(run.analog) == (list(range(6)) if run is theirs else [14, 15, 16, 17, 18, 19])
         assert all(rate > 0 for rate in run.analog.values())
         assert 0 < run.stack < 2048 - run.static_ram
     # The UART rates the firmwares set: protoduino U2X with UBRR 16, Firmata's 57600 without
     # U2X (the Arduino core's exception for that rate) and UBRR 16; simavr's 11-bit bytes.
     assert ours.line == race.Line(11 * 8 * 17)
+    # The agreed rate: UBRR 1 with U2X, 1,000,000 baud (docs/protocol.md 5, *Line rate*).
+    assert fast.nominal_baud == race.FAST_BAUD and fast.line == race.Line(11 * 8 * 2)
     assert theirs.line == race.Line(11 * 16 * 17)
     assert theirs.command_bytes == [3]  # DIGITAL_MESSAGE: 0x90 | port, two 7-bit bytes
     assert ours.command_bytes and min(ours.command_bytes) >= 12 and ours.answer_bytes
@@ -633,11 +635,11 @@ def test_race_on_both_boards() -> None:
     assert set(ours.cpu) == {"digital write", "servo write", "pose (6 outputs)"}
     assert set(theirs.cpu) == {"digital write", "servo write"}
     # The report's rows and the targets come out of these runs, every one filled in.
-    for run in (ours, theirs):
+    for run in (ours, fast, theirs):
         cells = race._cells(run)
         assert set(cells) == set(race.ROWS)
         assert not any(cell.startswith("not run") for cell in cells.values())
-    assert [t.met is not None for t in race._targets(ours, theirs)] == [True, True, True]
+    assert [t.met is not None for t in race._targets(ours, theirs, fast)] == [True] * 4
     assert "StandardFirmata's" in race._quote(ours, theirs)
 
 
