@@ -296,7 +296,7 @@ def measure_cycles(samples: int, commands: int) -> CycleRun:
         profile_path = Path(tmp) / "profile.txt"
         with started("avr", stats=stats, profile=profile_path) as sim:
             counter = CycleCounter(sim, stats)
-            with Board.open(sim.port, ping=False) as board:
+            with Board.open(sim.port, ping=False, baudrate=115_200) as board:
                 servo = board.servo(9)
                 led = board.digital_output(13)
                 payload = bytes(range(64))
@@ -322,7 +322,9 @@ def measure_cycles(samples: int, commands: int) -> CycleRun:
                     io[kind] = (delta.uart_rx / samples, delta.uart_tx / samples)
                     if kind == "servo":
                         profile = read_profile(profile_path, symbols)
-            with Board.open(sim.port, window=MAX_RATE_WINDOW, ping=False) as board:
+            with Board.open(
+                sim.port, window=MAX_RATE_WINDOW, ping=False, baudrate=115_200
+            ) as board:
                 servo = board.servo(9)
                 before = counter.snapshot()
                 seconds, ok, _failed = drive(
@@ -390,7 +392,10 @@ def measure_ram(elf: Path) -> RamBudget:
     scenario (protoduino_dev.rambudget) beside the static data."""
     with TemporaryDirectory() as tmp:
         stats = Path(tmp) / "stats.jsonl"
-        with started("avr", stats=stats) as sim, Board.open(sim.port, window=4) as board:
+        with (
+            started("avr", stats=stats) as sim,
+            Board.open(sim.port, window=4, baudrate=115_200) as board,
+        ):
             exercise(board, sim.control)
             row = runnerstats.snapshot(sim.pid, stats)
     return RamBudget.of(elf, row)

@@ -290,7 +290,7 @@ def collect(trials: int, seconds: float, pings: int, seed: int = 7) -> list[Boar
             try:
                 sim.start()
                 trace = Trace(Path(tmp) / "trace.jsonl")
-                with Board.open(sim.port) as board:
+                with Board.open(sim.port, baudrate=115_200) as board:
                     (
                         result.latency,
                         result.latency_lost,

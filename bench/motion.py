@@ -266,7 +266,7 @@ def collect(trials: int, commands: int, seed: int = 7) -> list[BoardResult]:
             try:
                 sim.start()
                 trace = Trace(Path(tmp) / "trace.jsonl")
-                with Board.open(sim.port) as board:
+                with Board.open(sim.port, baudrate=115_200) as board:
                     led = board.digital_output(CLOCK_PIN)
                     result.clock = calibrate(led, trace)
                     result.poses = measure_poses(board, trace, result.clock, trials, seed)

@@ -180,6 +180,7 @@ def bridge_process(port: str, domain: int, tmp: Path, name: str, streaming: bool
     command = [
         *(sys.executable, "-m", "protoduino.cli.main", "ros2", port, "--config", str(config)),
         *("--domain-id", str(domain), "--new-session", "--capture", str(capture)),
+        *("--baud", "115200"),  # this part's figures are at 115200, as its text says
     ]
     with out.open("w") as log_file:
         proc = subprocess.Popen(command, stdout=log_file, stderr=subprocess.STDOUT)

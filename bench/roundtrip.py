@@ -36,6 +36,7 @@ from protoduino.board import Servo
 from protoduino.constants import PacketType
 from protoduino.framing import frame_packet
 from protoduino.simboard import SimBoard
+from protoduino_dev import runnerstats
 
 from . import charts
 from .boards import (
@@ -185,7 +186,8 @@ def measure_board(
     awake: dict[str, list[tuple[CycleStats, int]]] = {kind: [] for kind, _ in KINDS}
     io: dict[str, list[int]] = {kind: [0, 0, 0] for kind, _ in KINDS}  # tx, rx, calls
     for _round in range(ROUNDS):
-        with Board.open(sim.port, ping=False) as board:
+        # Pinned: this part's figures are at 115200 (the agreed rate's: measure_agreed).
+        with Board.open(sim.port, ping=False, baudrate=BAUD) as board:
             servo = board.servo(9)
             if counter is not None and run.idle_share is None:
                 a = counter.snapshot()
@@ -222,6 +224,90 @@ def measure_board(
             if answers:
                 run.answer[kind] = sum(d.answer_cycles for d, _n in blocks) / answers
     return run
+
+
+@dataclass(slots=True)
+class AgreedRun:
+    """The emulated Uno at the rate its Board agrees on (docs/protocol.md 5, *Line rate*)."""
+
+    baudrate: int = 0
+    byte_us: float = 0.0  # the runner's byte time from the board at that rate (11 bits)
+    library: dict[str, list[float]] = field(default_factory=dict)
+    wire_bytes: dict[str, tuple[float, float]] = field(default_factory=dict)
+    error: str | None = None
+
+
+def measure_agreed(samples: int, seed: int) -> AgreedRun:
+    """The library's round trips on the emulated Uno at the agreed rate (no raw client)."""
+    run = AgreedRun()
+    rng = random.Random(seed)
+    try:
+        with TemporaryDirectory(prefix="bench-rt-") as tmp:
+            stats = Path(tmp) / "stats.jsonl"
+            with started("avr", stats=stats) as sim, Board.open(sim.port, ping=False) as board:
+                run.baudrate = board.baudrate
+                servo = board.servo(9)
+                for kind, op in _library_ops(board, servo).items():
+                    link = board.stats
+                    run.library[kind] = _timed(op, samples, rng)
+                    after, calls = board.stats, samples + WARMUP
+                    run.wire_bytes[kind] = (
+                        (after.tx_bytes - link.tx_bytes) / calls,
+                        (after.rx_bytes - link.rx_bytes) / calls,
+                    )
+                cycles = int(runnerstats.snapshot(sim.pid, stats)["uart_byte_cycles"])
+                run.byte_us = cycles / UNO_HZ * 1e6
+    except BoardUnavailableError as error:
+        run.error = str(error)
+    return run
+
+
+def _agreed_table(agreed: AgreedRun, avr: BoardRun | None) -> str:
+    """The agreed rate's round trips beside 115200's (the emulated Uno's)."""
+    if agreed.error is not None or not agreed.library:
+        return f"At the agreed rate: not run ({agreed.error or 'no samples'}).\n"
+    rows = []
+    for kind, kind_label in KINDS:
+        command_b, ack_b = agreed.wire_bytes[kind]
+        wire_s = agreed.byte_us * (command_b + ack_b) / 1e6
+        lib = Percentiles.of(agreed.library[kind])
+        base = (
+            _us(Percentiles.of(avr.library[kind]).p50)
+            if avr is not None and avr.library.get(kind)
+            else "-"
+        )
+        rows.append(
+            [
+                kind_label,
+                base,
+                _us(lib.p50),
+                _us(lib.p99),
+                f"{_bytes(command_b)} + {_bytes(ack_b)}",
+                _us(wire_s),
+                _us(lib.p50 - wire_s),
+                str(lib.n),
+            ]
+        )
+    return (
+        f"\n### At the agreed rate\n\nThe same calls on a fresh emulated Uno whose Board "
+        f"agreed on {agreed.baudrate:,} baud after the handshake (docs/protocol.md 5, *Line "
+        f"rate*; its runner times a byte at {agreed.byte_us:.1f} us), library only, beside "
+        "the 115200 p50 of the table above.\n\n"
+        + md_table(
+            [
+                "command",
+                "p50 us at 115200",
+                f"p50 us at {agreed.baudrate:,}",
+                "p99 us",
+                "bytes (cmd + Ack)",
+                "wire time us",
+                "p50 minus wire us",
+                "samples",
+            ],
+            rows,
+            "lrrrrrrr",
+        )
+    )
 
 
 def collect(samples: int, seed: int = 7) -> list[BoardRun]:
@@ -439,6 +525,8 @@ def run(ctx: Context) -> SectionResult:
     native = next((r for r in runs if r.backend == "native" and r.error is None), None)
     if avr is not None:
         parts.append(_explain(avr, native or avr, targets[0]))
+    if any(r.backend == "avr" for r in runs):
+        parts.append(_agreed_table(measure_agreed(ctx.samples, ctx.seed), avr))
 
     chart_list: list[Chart] = []
     if ctx.chart_dir is not None:

@@ -238,7 +238,7 @@ def measure_round(
     counter: CycleCounter | None,
 ) -> Round:
     """A fresh Board with ``window``, warmed up, then ``total`` calls."""
-    with Board.open(sim.port, window=window, ping=False) as board:
+    with Board.open(sim.port, window=window, ping=False, baudrate=115_200) as board:
         op = make_op(board)
         for i in range(WARMUP):
             op(i)
