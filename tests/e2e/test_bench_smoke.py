@@ -462,6 +462,9 @@ def test_runner_writes_the_board_sections(tmp_path: Path) -> None:
     for label, _ in boards.BACKENDS:
         assert f"| {boards.LABELS[label]} | servo write |" in text
     assert "### Where the emulated Uno's round trip goes" in text
+    # The round trip at the rate the Board agrees on, beside 115200's: measured, not skipped.
+    assert "### At the agreed rate" in text and "agreed on 1,000,000 baud" in text
+    assert "| servo write |" in text.split("### At the agreed rate")[1]
     assert "echoes one byte in" in text  # the emulator's own share, measured
     assert "### Profile of a servo write on the Uno" in text
     assert "`pd_link_send`" in text
