@@ -213,6 +213,8 @@ class Link:
         self.line_baudrate = self.opening_baudrate
         #: Rates whose switch failed: never proposed, nor sent at, again by this link.
         self.failed_baudrates: set[int] = set()
+        #: The rates the device offered at the last handshake, fastest first.
+        self.device_baudrates: tuple[int, ...] = ()
         self.baud_switches = 0
         self.baud_fallbacks = 0
         self._hs_attempt = 0  # RESETs sent in this handshake (which rate the next goes at)
@@ -641,6 +643,8 @@ class Link:
 
     def _start_agreement(self, ctl: Control, now: float) -> bool:
         """After a RESET_ACK at the opening rate: propose the fastest rate offered, if any."""
+        if ctl.baudrates:
+            self.device_baudrates = ctl.baudrates
         if self.pinned_baudrate is not None or self.transport.baudrate != self.opening_baudrate:
             return False
         offered = [rate for rate in ctl.baudrates if rate not in self.failed_baudrates]
