@@ -625,12 +625,17 @@ def _targets(ours: BoardRun, theirs: BoardRun, fast: BoardRun | None = None) -> 
     return out
 
 
-def _quote(ours: BoardRun, theirs: BoardRun) -> str:
+def _quote(ours: BoardRun, theirs: BoardRun, fast: BoardRun | None = None) -> str:
     """The race in one sentence, as README.md quotes it (bench.report.quote)."""
     cpu_ours = statistics.median(ours.cpu["digital write"])
     cpu_theirs = statistics.median(theirs.cpu["digital write"])
+    at_fast = (
+        f" and {_ms(statistics.median(fast.digital))} ms at the agreed {fast.nominal_baud:,}"
+        if fast is not None and fast.error is None and fast.digital
+        else ""
+    )
     text = (
-        f"digital write -> pin p50 {_ms(statistics.median(ours.digital))} ms at 115200 "
+        f"digital write -> pin p50 {_ms(statistics.median(ours.digital))} ms at 115200{at_fast} "
         f"({_range(ours.command_bytes)}: an acknowledged, CRC-checked frame) against "
         f"StandardFirmata's {_ms(statistics.median(theirs.digital))} ms at 57600 "
         f"({_range(theirs.command_bytes)}, no ack, no check); host CPU per digital write "
@@ -708,7 +713,7 @@ def run(ctx: Context) -> SectionResult:
         text += f"\nWrites whose change never showed at the pin: {', '.join(lost)}.\n"
     quotes: dict[str, str] = {}
     if ours.error is None and theirs.error is None and ours.digital and theirs.digital:
-        quotes["race"] = _quote(ours, theirs)
+        quotes["race"] = _quote(ours, theirs, fast)
     return SectionResult(text, _targets(ours, theirs, fast), packages=["pyFirmata2"], quotes=quotes)
 
 

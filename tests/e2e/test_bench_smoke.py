@@ -643,7 +643,8 @@ def test_race_on_both_boards() -> None:
         assert set(cells) == set(race.ROWS)
         assert not any(cell.startswith("not run") for cell in cells.values())
     assert [t.met is not None for t in race._targets(ours, theirs, fast)] == [True] * 4
-    assert "StandardFirmata's" in race._quote(ours, theirs)
+    assert "StandardFirmata's" in race._quote(ours, theirs, fast)
+    assert f"at the agreed {race.FAST_BAUD:,}" in race._quote(ours, theirs, fast)
 
 
 def test_report_merge_replaces_only_the_parts_run() -> None:
