@@ -49,18 +49,21 @@ bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len)
 
 /*
  * 16 MHz divides 250,000, 500,000 and 1,000,000 baud exactly with U2X (UBRR 7,
- * 3, 1), but 1,000,000 is not offered: a byte every 160 cycles both ways keeps
- * the two UART interrupts busy for about half of them, and the main loop, which
- * also builds input reports, then falls behind a frame longer than the 48-byte
- * receive ring (a 58-byte Pose during input reports lost its bytes on the
- * emulated Uno, every retransmission; tests/e2e/test_stack_margin.py's exercise).
- * At 500,000 (320 cycles a byte) it keeps up.
+ * 3, 1), but only 250,000 is offered: the host lets one frame longer than the
+ * 48-byte receive ring go at a time (docs/protocol.md 7, *Flow control*), which
+ * holds only while the main loop takes the bytes faster than the line brings
+ * them. At 1,000,000 (160 cycles a byte, the two UART interrupts busy for about
+ * half of them) a 58-byte Pose arriving while an input report was built lost
+ * its bytes at every retransmission; at 500,000 a 64-byte Ping arriving while
+ * GetInfo's 100-byte Ack was built now and then did (one retransmission in a
+ * few hundred calls at window 4 and 16, tests/e2e/test_board_sim.py's burst);
+ * at 250,000 none, on the emulated Uno.
  */
 uint8_t pd_hal_baud_rates(void *hal)
 {
     (void)hal;
 #if F_CPU == 16000000UL
-    return PD_RESET_ACK_BAUD_250K | PD_RESET_ACK_BAUD_500K;
+    return PD_RESET_ACK_BAUD_250K;
 #else
     return 0;
 #endif
