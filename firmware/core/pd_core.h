@@ -18,6 +18,7 @@
 #include "pd_link.h"
 #include "pd_outputs.h"
 #include "pd_protocol.h"
+#include "pd_user.h"
 
 /* Reported in DeviceInfo.firmware_version; follows the Python package's version. */
 #define PD_FIRMWARE_VERSION "0.1.0"
@@ -54,6 +55,9 @@ typedef struct pd_core {
     pd_report_sent_fn report_sent;
     uint8_t report_pending;  /* bit N: slot N has a value to send */
     uint8_t report_since;    /* low byte of the ms report_pending stopped being 0 */
+#if PD_FEATURE_USER
+    pd_user_state_t user;    /* the user service's reports (pd_user.h) */
+#endif
 } pd_core_t;
 
 /* Power-up state: nothing configured, link IDLE; sends EVENT BOOT. */

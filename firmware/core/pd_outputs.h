@@ -63,8 +63,11 @@ enum {
     PD_MODE_DIGITAL_INPUT, /* inputs (pd_inputs.c); reserved here: an output never takes their pins */
     PD_MODE_ANALOG_INPUT,
     PD_MODE_COUNTER,
-    PD_MODE_COUNT
+    PD_MODE_BUILTIN_END
 };
+/* A user service's pins (pd_user.h), in a build with one: its hooks drive them safe and release them. */
+#define PD_MODE_USER PD_MODE_BUILTIN_END
+#define PD_MODE_COUNT (PD_MODE_BUILTIN_END + (PD_FEATURE_USER ? 1 : 0))
 
 /* An owner byte: mode in the high nibble, slot in the low one (one byte per pin of RAM). */
 #define PD_OWNER(mode, slot) ((uint8_t)(((mode) << 4) | (slot)))

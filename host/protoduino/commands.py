@@ -109,6 +109,10 @@ _BOARD_COMMANDS: tuple[Command, ...] = (
     # Not idempotent: a late duplicate must never clear an interlock that tripped
     # again after the first one ran; the dedupe window answers it instead.
     Command("clear_interlock"),
+    # A user service's method (docs/services.md). The device takes each method's
+    # flags from the user's service table; the host guards every one as a
+    # command that changes outputs (the safe side for a retransmission).
+    Command("user_call", result="user_reply"),
 )
 
 

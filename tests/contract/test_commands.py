@@ -105,5 +105,7 @@ def test_every_command_needs_the_feature_the_host_checks() -> None:
             assert feature == f"PD_FEATURE_{mode.feature.upper()}", name
         elif name == "clear_interlock":
             assert feature == "PD_FEATURE_DIGITAL_INPUT"
+        elif name == "user_call":  # a firmware built with a user service (docs/services.md)
+            assert feature == "PD_FEATURE_USER"
         else:
             assert feature == "1", name
