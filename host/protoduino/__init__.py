@@ -46,6 +46,9 @@ from .errors import (
     SimControlError,
     TimerInUseError,
     TransportError,
+    UserError,
+    UserReplyLostError,
+    UserSchemaError,
     VersionMismatchError,
 )
 from .events import Event, EventKind, Stats
@@ -94,6 +97,9 @@ __all__ = [
     "Stats",
     "TimerInUseError",
     "TransportError",
+    "UserError",
+    "UserReplyLostError",
+    "UserSchemaError",
     "VersionMismatchError",
     "__version__",
     "effective_speed",

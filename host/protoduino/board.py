@@ -101,6 +101,8 @@ from .errors import (
     ProtocolError,
     ProtoduinoError,
     ReentrantCallError,
+    UserError,
+    UserReplyLostError,
     rejection,
 )
 from .events import Event, EventCallback, EventDispatcher, EventKind, Stats
@@ -109,6 +111,7 @@ from .link import Link
 from .messages import ArduinoIn, ArduinoOut, InputKind, Status, status_name
 from .rpc import REBOOT_LIMIT, REBOOT_WINDOW, Ack, Call, Rpc, RpcState
 from .transport import FrameMonitor, Transport
+from .userreports import UserReportTable
 
 log = logging.getLogger(__name__)
 
@@ -160,6 +163,25 @@ def _returning(obj: T) -> Callable[[Call], T]:
         return obj
 
     return value
+
+
+def _user_reply(call: Call) -> bytes:
+    """A UserCall's reply; its handler's own refusal as :class:`UserError`."""
+    if call.error is not None:
+        refusal = call.refusal
+        if refusal is not None and refusal.status == Status.STATUS_USER_ERROR:
+            raise UserError(
+                refusal.user_code,
+                f"user method refused by its handler with code {refusal.user_code}",
+            ) from call.error
+        raise call.error
+    ack = call.result()
+    if ack.WhichOneof("result") != "user_reply":
+        raise UserReplyLostError(
+            "the user call ran once, but its reply was lost (its retransmission was "
+            "answered from the device's dedupe window, which keeps no replies)"
+        )
+    return bytes(ack.user_reply)
 
 
 def _output_states(call: Call) -> dict[int, OutputState]:
@@ -228,6 +250,8 @@ class DeviceInfo:
     pwm_pins: tuple[int, ...] = ()
     analog_pins: tuple[int, ...] = ()
     counter_pins: tuple[int, ...] = ()
+    #: The user service built in: its schema's fingerprint (docs/services.md); 0: none.
+    user_fingerprint: int = 0
 
 
 @dataclass(slots=True)
@@ -709,6 +733,8 @@ class Board:
         self._events = EventDispatcher(url)
         # Callbacks of inputs run on the event thread, in order with the events.
         self._inputs = InputTable(self._events.put_job)
+        # The user service's reports (docs/services.md), newest wins as the inputs'.
+        self.user_reports = UserReportTable(self._events.put_job)
         if self._capture is not None:
             self._capture.on_lost = self._capture_lost
         # From here on anything that ends the open early (an error, a KeyboardInterrupt
@@ -1576,6 +1602,29 @@ class Board:
             raise BoardClosedError("the board is closed")
         return self._future(msg, None, lambda call: call.result())
 
+    def call_user(self, method: int, request: bytes) -> bytes:
+        """Call method ``method`` of the firmware's user service; returns its reply bytes.
+
+        ``request`` and the reply are messages of the user's schema, serialised: a
+        generated client (``protoduino gen robot.proto``, docs/services.md) does both
+        and checks the service's fingerprint first. Acknowledged and executed exactly
+        once like every command. Raises :class:`UserError` (its ``code``) when the
+        handler refuses, :class:`UserReplyLostError` when the call ran but its reply
+        was lost, and the errors of any command.
+        """
+        return self.submit_call_user(method, request).result()
+
+    def submit_call_user(self, method: int, request: bytes) -> Future[bytes]:
+        """:meth:`call_user` without waiting: a future of the reply bytes (or of its error)."""
+        if self._closed:
+            raise BoardClosedError("the board is closed")
+        if isinstance(method, bool) or not isinstance(method, int) or not 1 <= method <= 255:
+            raise ArgumentError(f"user method must be 1..255, not {method!r}")
+        msg = ArduinoIn()
+        msg.user_call.method = method
+        msg.user_call.request = bytes(request)
+        return self._future(msg, None, _user_reply)
+
     @property
     def stats(self) -> Stats:
         """A snapshot of the link counters."""
@@ -1826,6 +1875,7 @@ class Board:
             pwm_pins=_mask_pins(info.pwm_pins),
             analog_pins=_mask_pins(info.analog_pins),
             counter_pins=_mask_pins(info.counter_pins),
+            user_fingerprint=info.user_fingerprint,
         )
 
     def _message(self, msg: ArduinoOut) -> None:
@@ -1836,6 +1886,9 @@ class Board:
                 self._inputs.update(msg.input_report)
             except ProtocolError as error:
                 log.warning("%s: input report dropped: %s", self.url, error)
+        elif kind == "user_report":
+            report = msg.user_report
+            self.user_reports.update(report.report, bytes(report.body), report.coalesced)
         elif kind == "failsafe":
             self._failsafe_state(msg.failsafe)
         elif kind == "log":

@@ -10,7 +10,7 @@ Bad values are usage errors: exit status 2 and one line on stderr, from the
 argparse types in :mod:`.argtypes`, before any port is opened. Nothing the
 command line does ends in a traceback (``-vv`` logs one for a bug).
 
-The development commands (``gen``, ``soak``) live in the separate package
+The development commands (``soak``, and ``gen`` without a .proto) live in the separate package
 ``protoduino_dev`` (``dev/`` in the source checkout), which a user's
 ``pip install protoduino`` does not carry: without it they are still listed,
 and say how to get them instead of failing with an import error.
@@ -57,7 +57,7 @@ COMMANDS: dict[str, str] = {
     "sim": f"{__package__}.sim",
     "demo": f"{__package__}.demo",
     "ros2": f"{__package__}.ros2",
-    "gen": f"{DEV_PACKAGE}.cli.gen",
+    "gen": f"{__package__}.gen",  # a user service; protoduino's own schema via protoduino_dev
     "soak": f"{DEV_PACKAGE}.cli.soak",
 }
 
