@@ -44,7 +44,18 @@ def test_importing_the_dev_tools_registers_faulty_urls() -> None:
 def test_dev_commands_without_the_dev_tools_say_how_to_get_them() -> None:
     # None in sys.modules makes every import of protoduino_dev fail as if not installed.
     dev_commands = [name for name, mod in COMMANDS.items() if mod.startswith("protoduino_dev")]
-    assert sorted(dev_commands) == ["gen", "soak"]
+    # `gen` is the user's command (a service's code, docs/services.md); without a .proto it is
+    # the development generator of protoduino's own schema, and says so the same way.
+    assert sorted(dev_commands) == ["soak"]
+    result = _python(
+        "import sys\n"
+        "sys.modules['protoduino_dev'] = None\n"
+        "from protoduino.cli.main import main\n"
+        "sys.exit(main(['gen']))\n"
+    )
+    assert result.returncode == 2, (result.stdout, result.stderr)
+    assert "`protoduino gen` is a development command" in result.stderr
+    assert "./tools/dev.sh setup" in result.stderr and "protoduino gen robot.proto" in result.stderr
     for name in dev_commands:
         result = _python(
             "import sys\n"
