@@ -90,10 +90,16 @@ def test_the_client_is_typed_for_mypy_strict(tmp_path: Path) -> None:
     )
     cmd = [sys.executable, "-m", "mypy", "--strict", "--no-incremental"]
     ok = subprocess.run(
-        [*cmd, "blinker_client.py", "use_it.py"], cwd=tmp_path, capture_output=True, text=True
+        [*cmd, "blinker_client.py", "use_it.py"],
+        check=False,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
     )
     assert ok.returncode == 0, ok.stdout + ok.stderr
-    bad = subprocess.run([*cmd, "wrong.py"], cwd=tmp_path, capture_output=True, text=True)
+    bad = subprocess.run(
+        [*cmd, "wrong.py"], check=False, cwd=tmp_path, capture_output=True, text=True
+    )
     assert bad.returncode == 1
     assert 'incompatible type "Blink"; expected "Empty"' in bad.stdout
     assert 'Incompatible return value type (got "int", expected "str")' in bad.stdout
@@ -122,6 +128,7 @@ def test_the_c_compiles_with_the_core_warnings(tmp_path: Path) -> None:
             str(tmp_path / "blinker_service.c"),
             str(tmp_path / "blinker.pb.c"),
         ],
+        check=False,
         cwd=tmp_path,
         capture_output=True,
         text=True,
@@ -154,7 +161,8 @@ def test_the_c_compiles_with_the_core_warnings(tmp_path: Path) -> None:
             "message A takes up to 102 bytes on the wire, more than 64",
         ),
         (
-            'syntax = "proto3"; message A { uint32 x = 1; } service S { rpc F(stream A) returns (A); }',
+            'syntax = "proto3"; message A { uint32 x = 1; }'
+            " service S { rpc F(stream A) returns (A); }",
             "",
             "rpc F: a client stream is not supported",
         ),
@@ -168,7 +176,7 @@ def test_what_it_cannot_carry_is_refused_by_name(
     proto.write_text(text)
     if options:
         (tmp_path / "mine.options").write_text(options)
-    with pytest.raises(servicegen.ServiceGenError, match="^mine.proto: ") as error:
+    with pytest.raises(servicegen.ServiceGenError, match=r"^mine\.proto: ") as error:
         gen(proto, tmp_path / "out")
     assert message in str(error.value)
 
