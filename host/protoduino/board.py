@@ -165,6 +165,15 @@ def _returning(obj: T) -> Callable[[Call], T]:
     return value
 
 
+def _user_call(method: int, request: bytes) -> ArduinoIn:
+    if isinstance(method, bool) or not isinstance(method, int) or not 1 <= method <= 255:
+        raise ArgumentError(f"user method must be 1..255, not {method!r}")
+    msg = ArduinoIn()
+    msg.user_call.method = method
+    msg.user_call.request = bytes(request)
+    return msg
+
+
 def _user_reply(call: Call) -> bytes:
     """A UserCall's reply; its handler's own refusal as :class:`UserError`."""
     if call.error is not None:
@@ -1612,18 +1621,13 @@ class Board:
         handler refuses, :class:`UserReplyLostError` when the call ran but its reply
         was lost, and the errors of any command.
         """
-        return self.submit_call_user(method, request).result()
+        return _user_reply(self._send(_user_call(method, request)))  # no thread hop, as ping()
 
     def submit_call_user(self, method: int, request: bytes) -> Future[bytes]:
         """:meth:`call_user` without waiting: a future of the reply bytes (or of its error)."""
         if self._closed:
             raise BoardClosedError("the board is closed")
-        if isinstance(method, bool) or not isinstance(method, int) or not 1 <= method <= 255:
-            raise ArgumentError(f"user method must be 1..255, not {method!r}")
-        msg = ArduinoIn()
-        msg.user_call.method = method
-        msg.user_call.request = bytes(request)
-        return self._future(msg, None, _user_reply)
+        return self._future(_user_call(method, request), None, _user_reply)
 
     @property
     def stats(self) -> Stats:

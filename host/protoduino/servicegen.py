@@ -495,7 +495,9 @@ def python_client(s: Service) -> str:
                 "",
                 f"    def {m.snake}(self, request: pb.{m.request}) -> pb.{m.reply}:",
                 f'        """rpc {m.name}: returns once the device answered; raises its errors."""',
-                f"        return self.submit_{m.snake}(request).result()",
+                "        return self._call(",
+                f'            {m.number}, "{m.name}", request, pb.{m.request}, pb.{m.reply}',
+                "        )",
                 "",
                 f"    def submit_{m.snake}(self, request: pb.{m.request}) -> Future[pb.{m.reply}]:",
                 f'        """rpc {m.name} without waiting: a future of the reply (or of its '

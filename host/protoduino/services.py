@@ -84,9 +84,7 @@ class ServiceClient:
             raise UserSchemaError(self.PROTO, self.FINGERPRINT, device)
         self.board = board
 
-    def _submit(
-        self, method: int, name: str, request: Message, expected: type[Message], reply: type[M]
-    ) -> Future[M]:
+    def _request(self, name: str, request: Message, expected: type[Message]) -> bytes:
         if not isinstance(request, expected):
             raise ArgumentTypeError(
                 f"{name} takes a {expected.DESCRIPTOR.full_name}, not {type(request).__name__}"
@@ -97,24 +95,47 @@ class ServiceClient:
                 f"{name}: the request takes {len(body)} bytes on the wire, more than "
                 f"{MAX_USER_BYTES} (UserCall.request)"
             )
+        return body
+
+    def _named(self, error: UserError, name: str) -> UserError:
+        """The client's own error for the handler's code (UserError for an unknown one)."""
+        named = self.ERRORS.get(error.code, UserError)
+        label = getattr(named, "NAME", "") or str(error.code)
+        return named(error.code, f"{name} refused by its handler: {label}")
+
+    @staticmethod
+    def _decode(name: str, raw: bytes, reply: type[M]) -> M:
+        try:
+            return reply.FromString(raw)
+        except DecodeError as error:
+            raise ProtocolError(
+                f"{name}: the reply does not decode as {reply.DESCRIPTOR.full_name}: {error}"
+            ) from error
+
+    def _call(
+        self, method: int, name: str, request: Message, expected: type[Message], reply: type[M]
+    ) -> M:
+        """The blocking call: the board's own (no thread hop between the Ack and the caller)."""
+        body = self._request(name, request, expected)
+        try:
+            raw = self.board.call_user(method, body)
+        except UserError as error:
+            raise self._named(error, name) from error
+        return self._decode(name, raw, reply)
+
+    def _submit(
+        self, method: int, name: str, request: Message, expected: type[Message], reply: type[M]
+    ) -> Future[M]:
+        body = self._request(name, request, expected)
         raw = self.board.submit_call_user(method, body)
         out: Future[M] = Future()
         out.set_running_or_notify_cancel()
 
         def done(f: Future[bytes]) -> None:
             try:
-                value = reply.FromString(f.result())
+                value = self._decode(name, f.result(), reply)
             except UserError as error:
-                named = self.ERRORS.get(error.code, UserError)
-                label = getattr(named, "NAME", str(error.code))
-                out.set_exception(named(error.code, f"{name} refused by its handler: {label}"))
-            except DecodeError as error:
-                out.set_exception(
-                    ProtocolError(
-                        f"{name}: the reply does not decode as "
-                        f"{reply.DESCRIPTOR.full_name}: {error}"
-                    )
-                )
+                out.set_exception(self._named(error, name))
             except BaseException as error:  # the caller sees what the board raised
                 out.set_exception(error)
             else:
