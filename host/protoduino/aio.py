@@ -508,6 +508,10 @@ class Board:
         """:meth:`protoduino.Board.request`, awaited."""
         return await _wait(self.sync.submit_request(msg))
 
+    async def call_user(self, method: int, request: bytes) -> bytes:
+        """:meth:`protoduino.Board.call_user` (a user service's method), awaited."""
+        return await _wait(self.sync.submit_call_user(method, request))
+
     async def pose(self, targets: Mapping[_Output, _board.PoseValue]) -> None:
         """:meth:`protoduino.Board.pose`; the outputs may be these or the blocking ones."""
         await _wait(self.sync.submit_pose({_sync(o): v for o, v in targets.items()}))
