@@ -9,16 +9,11 @@ control socket and streams reports. Each is called through its generated client.
 from __future__ import annotations
 
 import asyncio
-import importlib
 import itertools
-import shutil
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import protoduino
@@ -28,63 +23,20 @@ from protoduino._generated import protoduino_pb2 as pb
 from protoduino.events import Event, EventKind
 from protoduino.simboard import SimBoard
 from simfixtures import pin_values, wait_for_pin
+from userbuilds import client, need, program
 
-ROOT = Path(__file__).resolve().parents[2]
-EXAMPLES = ROOT / "examples"
 BACKENDS = ["native", "avr"]
-_NEEDS = {"native": ("make", "gcc"), "avr": ("make", "gcc", "avr-gcc")}
-#: Where `make ... USER_PROTO=examples/NAME/NAME.proto` puts a user build.
-PROGRAMS = {"native": "sim/pd_sim", "avr": "avr/protoduino.elf"}
-_built: set[str] = set()
-_lock = threading.Lock()
-
-
-def build_example(name: str) -> Path:
-    """Build examples/NAME for both boards (make caches it); its build folder."""
-    for tool in _NEEDS["avr"]:
-        if shutil.which(tool) is None:
-            pytest.skip(f"{tool} is not installed (needed to build the user firmware)")
-    with _lock:
-        if name not in _built:
-            subprocess.run(
-                [
-                    "make",
-                    "-s",
-                    "-C",
-                    str(ROOT / "firmware"),
-                    "sim",
-                    "avr",
-                    f"USER_PROTO={EXAMPLES / name / (name + '.proto')}",
-                    f"USER_SRC={EXAMPLES / name / (name + '.c')}",
-                ],
-                check=True,
-                capture_output=True,
-            )
-            _built.add(name)
-    return ROOT / "build" / "user" / name
-
-
-def client(name: str, monkeypatch: pytest.MonkeyPatch) -> ModuleType:
-    """The generated client module of examples/NAME (and its messages, ``.pb``)."""
-    gen = build_example(name) / "gen"
-    monkeypatch.syspath_prepend(str(gen))
-    for module in (f"{name}_client", f"{name}_pb2"):
-        sys.modules.pop(module, None)
-    return importlib.import_module(f"{name}_client")
 
 
 @pytest.fixture(params=BACKENDS)
 def backend(request: pytest.FixtureRequest) -> str:
     name: str = request.param
-    for tool in _NEEDS[name]:
-        if shutil.which(tool) is None:
-            pytest.skip(f"{tool} is not installed (needed to build the {name} board)")
+    need(name)
     return name
 
 
 def start(name: str, backend: str, tmp_path: Path) -> SimBoard:
-    program = build_example(name) / PROGRAMS[backend]
-    sim = SimBoard(backend, trace=tmp_path / "trace.jsonl", firmware=program)
+    sim = SimBoard(backend, trace=tmp_path / "trace.jsonl", firmware=program(name, backend))
     sim.start()
     return sim
 
