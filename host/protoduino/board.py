@@ -1621,7 +1621,10 @@ class Board:
         handler refuses, :class:`UserReplyLostError` when the call ran but its reply
         was lost, and the errors of any command.
         """
-        return _user_reply(self._send(_user_call(method, request)))  # no thread hop, as ping()
+        call = self._start(_user_call(method, request))  # waited for here, as ping(): no hop
+        with contextlib.suppress(ProtoduinoError):
+            self._rpc.wait(call)  # its error stays the call's: _user_reply raises it, named
+        return _user_reply(call)
 
     def submit_call_user(self, method: int, request: bytes) -> Future[bytes]:
         """:meth:`call_user` without waiting: a future of the reply bytes (or of its error)."""
@@ -1759,15 +1762,19 @@ class Board:
         thread may be busy in a callback (or be the caller), and the bound
         stays :meth:`Rpc.wait`'s.
         """
+        call = self._start(msg, on_ok)
+        self._rpc.wait(call)
+        return call
+
+    def _start(self, msg: ArduinoIn, on_ok: Callable[[], None] | None = None) -> Call:
+        """Submit for a blocking call: never from the I/O thread, which alone reads Acks."""
         if self._transport.on_io_thread():
             raise ReentrantCallError(
                 f"{msg.WhichOneof('data')} called on the board's I/O thread (from a frame "
                 "monitor?): it would wait for an Ack that only this thread can read. Call it "
                 "from another thread, or use its submit form (never wait on the future there)"
             )
-        call = self._submit(msg, on_ok)
-        self._rpc.wait(call)
-        return call
+        return self._submit(msg, on_ok)
 
     def _future(
         self, msg: ArduinoIn, on_ok: Callable[[], None] | None, value: Callable[[Call], T]
