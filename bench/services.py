@@ -26,9 +26,16 @@ from tempfile import TemporaryDirectory
 
 from protoduino import Board
 from protoduino._generated import protoduino_pb2 as pb
-from protoduino.simboard import SimBoard
+from protoduino.simboard import Backend, SimBoard, runner_command
 
-from .boards import BoardUnavailableError, Percentiles, missing_tool
+from .boards import (
+    UNO_HZ,
+    BoardUnavailableError,
+    CycleCounter,
+    Percentiles,
+    _RunnerBoard,
+    missing_tool,
+)
 from .core import Context, Section, SectionResult, Target, md_table
 from .firmware import Footprint, footprint
 
@@ -80,7 +87,19 @@ def matched_ping_payload(user_in: bytes) -> bytes:
     raise ValueError("no Ping of that size")
 
 
-def round_trips(elf: Path, gen: Path, samples: int) -> tuple[Percentiles, Percentiles, str]:
+def _stats_board(elf: Path, stats: Path) -> SimBoard:
+    """The emulated Uno running ``elf`` with the runner's --stats counters."""
+
+    def command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
+        cmd = runner_command(elf, trace=trace, link=link, control=control)
+        return [*cmd[:-1], "--stats", str(stats), cmd[-1]]
+
+    return _RunnerBoard(Backend(build=lambda: elf, command=command))
+
+
+def round_trips(
+    elf: Path, gen: Path, samples: int, stats: Path
+) -> tuple[Percentiles, Percentiles, str, tuple[float, float]]:
     sys.path.insert(0, str(gen))
     try:
         for module in ("blinker_client", "blinker_pb2"):
@@ -95,8 +114,9 @@ def round_trips(elf: Path, gen: Path, samples: int) -> tuple[Percentiles, Percen
     user: list[float] = []
     builtin: list[float] = []
     rng = random.Random(8)
-    with SimBoard("avr", firmware=elf) as sim:
+    with _stats_board(elf, stats) as sim:
         sim.start()
+        counter = CycleCounter(sim, stats)
         with Board.open(sim.port, window=4) as board:
             blinker = client.Blinker(board)
             empty = client.pb.Empty()
@@ -114,6 +134,15 @@ def round_trips(elf: Path, gen: Path, samples: int) -> tuple[Percentiles, Percen
                     (user if kind == 0 else builtin).append(time.perf_counter() - t0)
             reply = client.pb.Toggles()
             reply.CopyFrom(blinker.count(empty))
+            # The firmware's answer time: the command's last byte to the Ack's first, in the
+            # Uno's cycles (the runner's counters), each kind in a block of its own.
+            answer: list[float] = []
+            for call in (lambda: blinker.count(empty), lambda: board.ping(payload)):
+                before = counter.snapshot()
+                for _ in range(samples):
+                    call()
+                delta = counter.snapshot() - before
+                answer.append(delta.answer_cycles / max(1, delta.answers))
     ack_user = pb.Ack(message_id=0x7FFFFFFF, user_reply=reply.SerializeToString())
     ack_ping = pb.Ack(message_id=0x7FFFFFFF, ping_echo=payload)
     sizes = (
@@ -121,7 +150,7 @@ def round_trips(elf: Path, gen: Path, samples: int) -> tuple[Percentiles, Percen
         f"{len(payload)} B); Ack {len(ack_user.SerializeToString())} B (user) and "
         f"{len(ack_ping.SerializeToString())} B (Ping)"
     )
-    return Percentiles.of(user), Percentiles.of(builtin), sizes
+    return Percentiles.of(user), Percentiles.of(builtin), sizes, (answer[0], answer[1])
 
 
 def _ms(s: float) -> str:
@@ -144,8 +173,8 @@ def run(ctx: Context) -> SectionResult:
         blinker = footprint(blinker_elf)
         presses = footprint(build_example("presses", build))
         lean = footprint(build_example("blinker", build / "lean", features="digital_output"))
-        user, builtin, sizes = round_trips(
-            blinker_elf, build / "user" / "blinker" / "gen", ctx.samples
+        user, builtin, sizes, answer = round_trips(
+            blinker_elf, build / "user" / "blinker" / "gen", ctx.samples, build / "stats.jsonl"
         )
     ratio = user.p50 / builtin.p50
     rows = [
@@ -163,12 +192,16 @@ def run(ctx: Context) -> SectionResult:
         f"blinker example's firmware), {user.n} of each, alternating; {sizes}. Milliseconds, "
         "call to return with the Ack:\n\n"
         + md_table(["call", "p50", "p90", "p99"], rows)
-        + f"\nMedian ratio user / built-in: **{ratio:.3f}**. Where the difference goes "
+        + f"\nMedian ratio user / built-in: **{ratio:.3f}**. The firmware's answer time (the "
+        "command's last byte to the Ack's first, the emulator's cycle counters, mean of "
+        f"{user.n}): user call {answer[0]:,.0f} cycles ({answer[0] / UNO_HZ * 1e6:,.0f} us, "
+        "the blinker's handler included), Ping "
+        f"{answer[1]:,.0f} cycles ({answer[1] / UNO_HZ * 1e6:,.0f} us). Where the difference goes "
         "(the runner's --profile of 300 calls of each, measured once by hand): nanopb's search for "
         "ArduinoIn field 19 (`user_call`) walks the descriptor past fields 2..18, where the "
         "Ping is field 2 (about 2,500 cycles), then the UserCall and the user's messages are "
         "decoded and the reply encoded with nanopb's generic code (the built-in Ack is "
-        "written by the hand-made encoder): about 0.3 ms of the Uno's time per call. A Pose "
+        "written by the hand-made encoder): the difference of the two answer times. A Pose "
         "(field 30) pays the same search.\n\n"
         "Flash and static RAM (`avr-size -A`; the budget of the default firmware is "
         "26,624 B of flash and static RAM + deepest stack + 256 B free <= 2,048 B). The "
