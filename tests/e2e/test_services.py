@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import json
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -226,3 +229,41 @@ def test_the_default_firmware_has_no_service(
             blinker.Blinker(board)
         with pytest.raises(protoduino.NotSupportedError):
             board.call_user(1, b"")
+
+
+def test_the_command_line_runs_a_user_build(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`protoduino sim --firmware` runs the user's board; `protoduino info` shows its service."""
+    need("native")
+    mod = client("blinker", monkeypatch)
+    cli = [sys.executable, "-m", "protoduino.cli.main"]
+    pid_file = tmp_path / "sim.pid"
+    started = subprocess.run(
+        [
+            *cli,
+            "sim",
+            "--firmware",
+            str(program("blinker", "native")),
+            "--detach",
+            "--pid-file",
+            str(pid_file),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=60,
+    )
+    assert started.returncode == 0, started.stderr
+    try:
+        info = subprocess.run(
+            [*cli, "info", started.stdout.strip(), "--json", "--new-session"],
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=60,
+        )
+        assert info.returncode == 0, info.stderr
+        assert json.loads(info.stdout)["info"]["user_fingerprint"] == f"0x{mod.FINGERPRINT:08X}"
+    finally:
+        subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
