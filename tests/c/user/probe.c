@@ -7,10 +7,13 @@ probe_record_t probe_record;
 
 uint8_t probe_echo(pd_user_ctx_t *ctx, const probe_Req *request, probe_Rep *reply)
 {
-    (void)ctx;
     probe_record.echoes++;
     if (request->value == 0) {
         return probe_ProbeError_PROBE_ERROR_REFUSED;
+    }
+    if (request->value % 2u == 0) {
+        probe_record.level = request->value; /* an even value is a new Level report */
+        pd_user_publish(ctx, 4u);
     }
     reply->value = request->value + 1u;
     reply->blob.size = request->blob.size;
