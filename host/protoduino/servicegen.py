@@ -31,6 +31,7 @@ The tools (grpcio-tools' protoc, mypy-protobuf, nanopb's generator) are the
 
 from __future__ import annotations
 
+import builtins
 import importlib.util
 import re
 import subprocess
@@ -412,7 +413,9 @@ def c_source(s: Service) -> str:
 def _error_class(s: Service, value: str) -> str:
     prefix = snake(s.error_enum).upper() + "_"
     short = value[len(prefix) :] if value.startswith(prefix) else value
-    return f"{camel(short)}Error"
+    name = f"{camel(short)}Error"
+    # Never a builtin's name (VALUE -> ValueError): the service's own then.
+    return f"{s.name}{name}" if hasattr(builtins, name) else name
 
 
 def python_client(s: Service) -> str:

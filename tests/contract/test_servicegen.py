@@ -185,3 +185,15 @@ def test_error_names_and_method_names() -> None:
     assert servicegen.snake("StartBlink") == "start_blink"
     assert servicegen.snake("GetHTTPStatus") == "get_http_status"
     assert servicegen.camel("PIN_UNAVAILABLE") == "PinUnavailable"
+
+
+def test_an_error_named_like_a_builtin_gets_the_services_name(tmp_path: Path) -> None:
+    proto = tmp_path / "meter.proto"
+    proto.write_text(
+        'syntax = "proto3"; enum MeterError { METER_ERROR_NONE = 0; METER_ERROR_VALUE = 1;'
+        " METER_ERROR_STUCK = 2; } message A { uint32 x = 1; } service Meter {"
+        " rpc Read(A) returns (A); }"
+    )
+    client = (gen(proto, tmp_path / "out").files[-1]).read_text()
+    assert "class MeterValueError(MeterError)" in client
+    assert "class StuckError(MeterError)" in client
