@@ -7,8 +7,9 @@
 #include <pb_decode.h>
 #include <pb_encode.h>
 
-#include "pd_core.h"
+#include "pd_inputs.h"
 #include "pd_outputs.h"
+#include "pd_state.h"
 
 /* The method `method` (1..), or NULL. */
 static const pd_user_method_t *method_of(uint8_t method)
@@ -110,7 +111,7 @@ void pd_user_publish(pd_user_ctx_t *ctx, uint8_t method)
         }
     }
     st->pending = (uint8_t)(st->pending | (1u << bit));
-    pd_core_report(ctx->core, PD_USER_SLOT);
+    pd_state_report(ctx->core, PD_USER_SLOT);
 }
 
 void pd_user_init(pd_core_t *core)
@@ -121,27 +122,11 @@ void pd_user_init(pd_core_t *core)
 void pd_user_poll(pd_core_t *core, uint32_t now)
 {
     if (core->user.pending != 0 && !((core->report_pending >> PD_USER_SLOT) & 1u)) {
-        pd_core_report(core, PD_USER_SLOT); /* more than one report was pending */
+        pd_state_report(core, PD_USER_SLOT); /* more than one report was pending */
     }
     if (pd_user_service.poll != NULL) {
         pd_user_ctx_t ctx = {core, core->hal};
         pd_user_service.poll(&ctx, now);
-    }
-}
-
-void pd_user_pin_safe(void *hal, uint8_t pin)
-{
-    if (pd_user_service.safe != NULL) {
-        pd_user_service.safe(hal, pin);
-    }
-}
-
-void pd_user_pin_release(void *hal, uint8_t pin)
-{
-    if (pd_user_service.release != NULL) {
-        pd_user_service.release(hal, pin);
-    } else {
-        pd_hal_digital_release(hal, pin);
     }
 }
 

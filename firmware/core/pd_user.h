@@ -32,6 +32,7 @@
 #include <pb.h>
 
 #include "pd_features.h"
+#include "pd_hal.h"
 #include "protoduino.pb.h"
 
 struct pd_core;
@@ -128,8 +129,27 @@ protoduino_Status pd_user_call(struct pd_core *core, const protoduino_UserCall *
 
 void pd_user_init(struct pd_core *core);
 void pd_user_poll(struct pd_core *core, uint32_t now);
-void pd_user_pin_safe(void *hal, uint8_t pin);
-void pd_user_pin_release(void *hal, uint8_t pin);
+
+#if PD_FEATURE_USER
+/* The pin table's user mode (pd_outputs.c): a claimed pin to the service's safe state, or
+ * released (by default: an input without pull-up, as at power-up). Inline here, with the
+ * table's types: the pin table sits below the modules that act on the whole device. */
+static inline void pd_user_pin_safe(void *hal, uint8_t pin)
+{
+    if (pd_user_service.safe != NULL) {
+        pd_user_service.safe(hal, pin);
+    }
+}
+
+static inline void pd_user_pin_release(void *hal, uint8_t pin)
+{
+    if (pd_user_service.release != NULL) {
+        pd_user_service.release(hal, pin);
+    } else {
+        pd_hal_digital_release(hal, pin);
+    }
+}
+#endif
 
 /* The core's report callback with a user service: the user's slot, else the inputs'. */
 bool pd_user_report(struct pd_core *core, uint8_t slot, protoduino_ArduinoOut *out);

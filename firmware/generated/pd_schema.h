@@ -3,6 +3,6 @@
 #define PD_SCHEMA_H
 
 /* CRC-32 of the schema's deterministic FileDescriptorSet (docs/protocol.md 5). */
-#define PD_SCHEMA_ID 0x79E74B19UL
+#define PD_SCHEMA_ID 0xBE4A5E51UL
 
 #endif /* PD_SCHEMA_H */

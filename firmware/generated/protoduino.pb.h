@@ -43,7 +43,7 @@ typedef enum _protoduino_Status {
 } protoduino_Status;
 
 /* The build-time features a firmware may carry (DeviceInfo.features: bit N
- set means Feature N is built in). One per pin mode. */
+ set means Feature N is built in). One per pin mode, declared on it. */
 typedef enum _protoduino_Feature {
     protoduino_Feature_FEATURE_NONE = 0,
     protoduino_Feature_FEATURE_SERVO = 1,
@@ -277,7 +277,11 @@ typedef struct _protoduino_ArduinoIn {
         protoduino_DigitalInputInit digital_input_init;
         protoduino_AnalogInputInit analog_input_init;
         protoduino_CounterInit counter_init;
+        /* Not idempotent: a late duplicate must never clear an interlock that
+     tripped again after the first one ran; the dedupe window answers it. */
         protoduino_ClearInterlock clear_interlock;
+        /* A user service's method (docs/services.md): the device takes its flags from the
+     service's table (the rpc's idempotency_level), the host guards it as not idempotent. */
         protoduino_UserCall user_call;
         protoduino_Pose pose;
         protoduino_ReadOutputs read_outputs;
