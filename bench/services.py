@@ -207,7 +207,8 @@ def run(ctx: Context) -> SectionResult:
         "26,624 B of flash and static RAM + deepest stack + 256 B free <= 2,048 B). The "
         "mechanism with no user service: the default firmware, against 21,372 B and 1,093 B "
         "without the mechanism (main at 55d3879, built the same way). A service adds "
-        "nanopb's encoder, its descriptors and scratch buffers and its handlers; a firmware composes it with the pin modes it needs:\n\n"
+        "nanopb's encoder, its descriptors and scratch buffers and its handlers; a "
+        "firmware composes it with the pin modes it needs:\n\n"
         + md_table(["build", "flash B", "static RAM B"], sizes_rows)
     )
     target = Target(
