@@ -2,7 +2,7 @@
 
 Both simulated boards (the native one and the emulated Uno) take one JSON
 object per line on a Unix stream socket and apply it to their inputs at once
-(``tools/simcontrol/pd_control.h`` is the protocol)::
+(``firmware/simcontrol/pd_control.h`` is the protocol)::
 
     {"pin": 2, "level": 0}                  drive a digital input
     {"pin": 14, "analog": 512}              an analog input, in counts 0..1023 (A0 = 14)
