@@ -41,17 +41,21 @@ import contextlib
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from types import TracebackType
-from typing import Any, Generic, Self, SupportsFloat, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, Self, SupportsFloat, TypeVar
 
 from . import board as _board
 from . import inputs as _inputs
 from .board import Edge, Interlock, OutputState
+from .boardoptions import BoardOptions
 from .constants import SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
 from .errors import ArgumentError, BoardClosedError, InputTimeoutError
 from .events import Event, Stats
 from .inputs import SINK_BUFFER, Reading
 from .messages import ArduinoIn
 from .rpc import Ack
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 T = TypeVar("T")
 InputT = TypeVar("InputT", bound="_Input")
@@ -64,7 +68,7 @@ async def _wait(future: Future[T]) -> T:
     return await asyncio.wrap_future(future)
 
 
-async def open(url: str, **options: Any) -> Board:
+async def open(url: str, **options: Unpack[BoardOptions]) -> Board:
     """Open ``url`` like :meth:`protoduino.Board.open` (same keywords); the loop runs on.
 
     Cancelling it (``asyncio.wait_for(aio.open(url), 0.5)`` timing out, ``task.cancel()``)
@@ -74,9 +78,8 @@ async def open(url: str, **options: Any) -> Board:
     A board the open had just returned is closed likewise.
     """
     cancel = _board.OpenCancel()
-    opening = asyncio.ensure_future(
-        asyncio.to_thread(_board.Board.open, url, cancel=cancel, **options)
-    )
+    options = {**options, "cancel": cancel}
+    opening = asyncio.ensure_future(asyncio.to_thread(_board.Board.open, url, **options))
     try:
         sync = await asyncio.shield(opening)
     except asyncio.CancelledError:
@@ -375,7 +378,7 @@ class Board:
         self._streams: set[_Stream[Any]] = set()
 
     @classmethod
-    async def open(cls, url: str, **options: Any) -> Board:
+    async def open(cls, url: str, **options: Unpack[BoardOptions]) -> Board:
         return await open(url, **options)
 
     async def __aenter__(self) -> Board:

@@ -46,7 +46,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import os
 import struct
 import threading
 from collections.abc import Callable, Mapping
@@ -56,9 +55,13 @@ from decimal import Decimal
 from fractions import Fraction
 from numbers import Integral, Real
 from types import TracebackType
-from typing import Any, Literal, SupportsFloat, TypeVar
+from typing import TYPE_CHECKING, Any, Literal, SupportsFloat, TypeVar
 
 from ._generated import protoduino_pb2 as pb
+from .boardoptions import BoardOptions, Liveness, RestorePolicy, resolved
+
+# Public here too, where it began (an explicit re-export).
+from .boardoptions import OpenCancel as OpenCancel  # noqa: PLC0414
 from .capture import CaptureWriter
 from .commands import (
     ANALOG_INPUT,
@@ -72,15 +75,11 @@ from .commands import (
     feature_hint,
 )
 from .constants import (
-    ACK_TIMEOUT,
     ANALOG_MAX,
     DEBOUNCE_MAX_MS,
     FAILSAFE_MAX,
     FAILSAFE_MIN,
-    FAILSAFE_TIMEOUT,
-    HANDSHAKE_TIMEOUT,
     INPUT_INTERVAL_MAX_MS,
-    MAX_RETRIES,
     PING_INTERVAL,
     PWM_MAX_DUTY,
     SERVO_DEFAULT_MAX_US,
@@ -90,7 +89,6 @@ from .constants import (
     SERVO_LIMIT_MIN_US,
     SERVO_MAX_DEGREES,
     SERVO_MAX_SPEED,
-    WATCHDOG_TIMEOUT,
 )
 from .errors import (
     ArgumentError,
@@ -107,8 +105,11 @@ from .events import Event, EventCallback, EventDispatcher, EventKind, Stats
 from .inputs import AnalogInput, Counter, DigitalInput, InputTable
 from .link import Link
 from .messages import ArduinoIn, ArduinoOut, InputKind, Status, status_name
-from .rpc import REBOOT_LIMIT, REBOOT_WINDOW, Ack, Call, Rpc, RpcState
+from .rpc import Ack, Call, Rpc, RpcState
 from .transport import FrameMonitor, Transport
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 log = logging.getLogger(__name__)
 
@@ -200,10 +201,6 @@ def _resolve(future: Future[T], call: Call, value: Callable[[Call], T]) -> None:
         future.set_result(result)
 
 
-#: Where the device's failsafe timer gets its liveness from (protocol.md section 7).
-Liveness = Literal["ping", "heartbeat"]
-#: What the board sends when the device lost its outputs.
-RestorePolicy = Literal["safe", "last"]
 #: The automatic Ping comes at least this many times per failsafe timeout.
 PINGS_PER_TIMEOUT = 4
 
@@ -516,43 +513,6 @@ class DigitalOutput:
         return f"DigitalOutput(pin={self.pin})"
 
 
-class OpenCancel:
-    """Abandons a :meth:`Board.open` in progress from another thread.
-
-    Pass one as ``Board.open(..., cancel=c)``; ``c.cancel()`` then closes the board
-    being opened: the open raises :class:`BoardClosedError` (from wherever it was:
-    opening the port, the handshake, reading the device's info) and, once
-    ``cancel()`` returned, nothing of it runs: no I/O or event thread, no Ping, the
-    port's lock released. A cancel that comes after the open returned closes the
-    board it returned, so the race between the two ends the same way.
-    :func:`protoduino.aio.open` uses one when its task is cancelled. ``cancel()``
-    blocks while the board closes (its threads are joined: see :meth:`Board.close`).
-    """
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._board: Board | None = None
-        self._cancelled = False
-
-    @property
-    def cancelled(self) -> bool:
-        return self._cancelled
-
-    def cancel(self) -> None:
-        with self._lock:
-            self._cancelled = True
-            board = self._board
-        if board is not None:
-            board.close()
-
-    def _attach(self, board: Board) -> None:
-        """Called by the board being opened, before it starts anything cancel() must stop."""
-        with self._lock:
-            if self._cancelled:
-                raise BoardClosedError("the open was cancelled")
-            self._board = board
-
-
 class PwmOutput:
     """A PWM output, duty 0..255 as Arduino's analogWrite; get one from :meth:`Board.pwm_output`."""
 
@@ -620,28 +580,16 @@ _INPUT_KINDS: dict[str, InputKind] = {
 class Board:
     """A connected device. Use :meth:`open`; close it (or use ``with``) when done."""
 
-    def __init__(
-        self,
-        url: str,
-        *,
-        baudrate: int = 115200,
-        ack_timeout: float = ACK_TIMEOUT,
-        handshake_timeout: float = HANDSHAKE_TIMEOUT,
-        max_retries: int = MAX_RETRIES,
-        window: int = 4,
-        ping: bool = True,
-        monitor: FrameMonitor | None = None,
-        capture: str | os.PathLike[str] | None = None,
-        capture_max_bytes: int | None = None,
-        watchdog_timeout: float = WATCHDOG_TIMEOUT,
-        failsafe_timeout: float = FAILSAFE_TIMEOUT,
-        liveness: Liveness = "ping",
-        restore: RestorePolicy = "safe",
-        session: int | None = None,
-        reboot_limit: int = REBOOT_LIMIT,
-        reboot_window: float = REBOOT_WINDOW,
-        cancel: OpenCancel | None = None,
-    ) -> None:
+    def __init__(self, url: str, **options: Unpack[BoardOptions]) -> None:
+        # One declaration of the options (boardoptions.py); an unknown one raises here.
+        opts = resolved(options)
+        ack_timeout, max_retries, window = opts["ack_timeout"], opts["max_retries"], opts["window"]
+        handshake_timeout, watchdog_timeout = opts["handshake_timeout"], opts["watchdog_timeout"]
+        failsafe_timeout, session = opts["failsafe_timeout"], opts["session"]
+        liveness, restore, cancel = opts["liveness"], opts["restore"], opts["cancel"]
+        capture, capture_max_bytes = opts["capture"], opts["capture_max_bytes"]
+        reboot_limit, reboot_window = opts["reboot_limit"], opts["reboot_window"]
+        baudrate, ping, monitor = opts["baudrate"], opts["ping"], opts["monitor"]
         # Every option is checked before anything is opened or started: a wrong one
         # raises here, with no thread to stop (a float session once crashed the I/O thread).
         failsafe_ms = _failsafe_ms(failsafe_timeout)
@@ -726,28 +674,7 @@ class Board:
             raise
 
     @classmethod
-    def open(
-        cls,
-        url: str,
-        *,
-        baudrate: int = 115200,
-        ack_timeout: float = ACK_TIMEOUT,
-        handshake_timeout: float = HANDSHAKE_TIMEOUT,
-        max_retries: int = MAX_RETRIES,
-        window: int = 4,
-        ping: bool = True,
-        monitor: FrameMonitor | None = None,
-        capture: str | os.PathLike[str] | None = None,
-        capture_max_bytes: int | None = None,
-        watchdog_timeout: float = WATCHDOG_TIMEOUT,
-        failsafe_timeout: float = FAILSAFE_TIMEOUT,
-        liveness: Liveness = "ping",
-        restore: RestorePolicy = "safe",
-        session: int | None = None,
-        reboot_limit: int = REBOOT_LIMIT,
-        reboot_window: float = REBOOT_WINDOW,
-        cancel: OpenCancel | None = None,
-    ) -> Board:
+    def open(cls, url: str, **options: Unpack[BoardOptions]) -> Board:
         """Open ``url`` (any pyserial URL), handshake and read the device's info.
 
         Raises :class:`TransportError` if the port cannot be opened,
@@ -797,26 +724,7 @@ class Board:
         wrong type raises :class:`ArgumentTypeError`, a wrong value
         :class:`ArgumentError`.
         """
-        return cls(
-            url,
-            baudrate=baudrate,
-            ack_timeout=ack_timeout,
-            handshake_timeout=handshake_timeout,
-            max_retries=max_retries,
-            window=window,
-            ping=ping,
-            monitor=monitor,
-            capture=capture,
-            capture_max_bytes=capture_max_bytes,
-            watchdog_timeout=watchdog_timeout,
-            failsafe_timeout=failsafe_timeout,
-            liveness=liveness,
-            restore=restore,
-            session=session,
-            reboot_limit=reboot_limit,
-            reboot_window=reboot_window,
-            cancel=cancel,
-        )
+        return cls(url, **options)
 
     # --- context and life cycle -------------------------------------------------------
 

@@ -61,6 +61,7 @@ PYTHON_LAYERS: Sequence[tuple[str, Sequence[str]]] = (
     (
         "api",
         (
+            "protoduino.boardoptions",
             "protoduino.board",
             "protoduino.aio",
             "protoduino.mcapexport",

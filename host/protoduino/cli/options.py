@@ -11,6 +11,7 @@ from pathlib import Path
 
 from .. import plugins
 from ..board import Board
+from ..boardoptions import BoardOptions
 from ..capture import MIN_PART
 from ..constants import ACK_TIMEOUT, HANDSHAKE_TIMEOUT
 from ..errors import CommandRejectedError, ProtoduinoError, TransportError
@@ -156,22 +157,28 @@ def load_url_handlers(port: str) -> None:
         )
 
 
+def board_options(
+    args: argparse.Namespace, *, ping: bool = True, monitor: FrameMonitor | None = None
+) -> BoardOptions:
+    """The board options a command's arguments give (the one place the CLI spells them)."""
+    return {
+        "baudrate": args.baud,
+        "ack_timeout": args.ack_timeout,
+        "handshake_timeout": args.handshake_timeout,
+        "ping": ping,
+        "monitor": monitor,
+        "capture": args.capture,
+        "capture_max_bytes": capture_max_bytes(args),
+        "session": session_of(args),
+    }
+
+
 def open_board(
     args: argparse.Namespace, *, ping: bool = True, monitor: FrameMonitor | None = None
 ) -> Board:
     """The board of a command: the port's session, the link options, ``--new-session``."""
     load_url_handlers(args.port)
-    board = Board.open(
-        args.port,
-        baudrate=args.baud,
-        ack_timeout=args.ack_timeout,
-        handshake_timeout=args.handshake_timeout,
-        ping=ping,
-        monitor=monitor,
-        capture=args.capture,
-        capture_max_bytes=capture_max_bytes(args),
-        session=session_of(args),
-    )
+    board = Board.open(args.port, **board_options(args, ping=ping, monitor=monitor))
     start_afresh(board, args)
     return board
 
