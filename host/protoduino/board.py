@@ -106,7 +106,8 @@ from .inputs import AnalogInput, Counter, DigitalInput, InputTable
 from .link import Link
 from .messages import ArduinoIn, ArduinoOut, InputKind, Status, status_name
 from .rpc import Ack, Call, Rpc, RpcState
-from .transport import FrameMonitor, Transport
+from .transport import FrameMonitor
+from .wiring import Wiring, serial_wiring
 
 if TYPE_CHECKING:
     from typing_extensions import Unpack
@@ -580,7 +581,12 @@ _INPUT_KINDS: dict[str, InputKind] = {
 class Board:
     """A connected device. Use :meth:`open`; close it (or use ``with``) when done."""
 
-    def __init__(self, url: str, **options: Unpack[BoardOptions]) -> None:
+    def __init__(
+        self, url: str, *, wiring: Wiring | None = None, **options: Unpack[BoardOptions]
+    ) -> None:
+        """See :meth:`open`. ``wiring`` is what the board runs on (:mod:`protoduino.wiring`):
+        by default the pyserial port ``url`` and the board's threads; :mod:`protoduino.testing`
+        passes an in-process device's."""
         # One declaration of the options (boardoptions.py); an unknown one raises here.
         opts = resolved(options)
         ack_timeout, max_retries, window = opts["ack_timeout"], opts["max_retries"], opts["window"]
@@ -601,6 +607,8 @@ class Board:
             raise ArgumentError(f"restore must be 'safe' or 'last', not {restore!r}")
         if capture_max_bytes is not None and capture is None:
             raise ArgumentError("capture_max_bytes bounds a capture: give capture= too")
+        if wiring is None:
+            wiring = serial_wiring(url, baudrate)
         self.failsafe_timeout = failsafe_ms / 1000
         self.liveness: Liveness = liveness
         self.restore: RestorePolicy = restore
@@ -626,6 +634,8 @@ class Board:
             reboot_window=reboot_window,
             failsafe_timeout=self.failsafe_timeout,
             heartbeat_liveness=liveness == "heartbeat",
+            clock=wiring.clock,
+            waiter=wiring.wait,
         )
         self._rpc.restore_values = restore == "last"
         self._rpc.message_hook = self._message
@@ -637,7 +647,7 @@ class Board:
             if capture is not None
             else None
         )
-        self._transport = Transport(url, baudrate=baudrate)
+        self._transport = wiring.port
         if monitor is not None:
             self._transport.add_monitor(monitor)
         if self._capture is not None:
@@ -649,14 +659,15 @@ class Board:
             watchdog_timeout=watchdog_timeout,
             notify=self._notify,
             session=session,
+            clock=wiring.clock,
         )
         self._rpc.attach(self._link)
         if self._capture is not None:
             self._capture.set_stats(lambda: self.stats)
         # Started only now: a constructor above that refuses its options leaves no thread.
-        self._events = EventDispatcher(url)
+        self._events = wiring.events()
         # Callbacks of inputs run on the event thread, in order with the events.
-        self._inputs = InputTable(self._events.put_job)
+        self._inputs = InputTable(self._events.put_job, wiring.clock)
         if self._capture is not None:
             self._capture.on_lost = self._capture_lost
         # From here on anything that ends the open early (an error, a KeyboardInterrupt

@@ -181,6 +181,14 @@ class Call:
 
 MessageHook = Callable[[ArduinoOut], None]
 RestoreProvider = Callable[[], list[ArduinoIn]]
+#: How a caller waits for a call: (its done event, the bound in seconds) -> whether it was set.
+#: ``threading.Event.wait`` while an I/O thread runs the link; an in-process device runs the
+#: link itself on its own clock instead (:mod:`protoduino.testing`).
+Waiter = Callable[[threading.Event, float], bool]
+
+
+def event_wait(event: threading.Event, timeout: float) -> bool:
+    return event.wait(timeout)
 
 
 class LinkPort(Protocol):
@@ -236,6 +244,7 @@ class Rpc:
         reboot_window: float = REBOOT_WINDOW,
         failsafe_timeout: float = FAILSAFE_TIMEOUT,
         heartbeat_liveness: bool = False,
+        waiter: Waiter = event_wait,
     ) -> None:
         if ack_timeout <= 0 or max_retries < 0 or window < 1 or reboot_limit < 1:
             raise ArgumentError(
@@ -246,6 +255,7 @@ class Rpc:
         #: time.monotonic() unless a test injects its own; the I/O thread passes its
         #: ``now`` to link_tick, every other timestamp here comes from this clock.
         self._clock = clock
+        self._waiter = waiter
         #: Set once the link failed for good: every call fails at once with it.
         self._failed: ProtoduinoError | None = None
         self.ack_timeout = ack_timeout
@@ -390,7 +400,7 @@ class Rpc:
         # The I/O thread fails every call by its deadline; the margin only
         # guards against that thread having died.
         bound = call.deadline - self._clock() + self.ack_timeout * (self.max_retries + 2) + 1.0
-        if not call.done.wait(max(0.0, bound)):
+        if not self._waiter(call.done, max(0.0, bound)):
             with self._lock:
                 self._finish(
                     call, error=AckTimeoutError(f"{call.kind} never completed (I/O thread stuck?)")

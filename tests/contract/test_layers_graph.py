@@ -61,8 +61,10 @@ PYTHON_LAYERS: Sequence[tuple[str, Sequence[str]]] = (
     (
         "api",
         (
+            "protoduino.wiring",
             "protoduino.boardoptions",
             "protoduino.board",
+            "protoduino.testing",
             "protoduino.aio",
             "protoduino.mcapexport",
             "protoduino.simboard",

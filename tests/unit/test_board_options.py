@@ -18,12 +18,14 @@ def test_every_declared_option_has_its_one_default() -> None:
 
 
 def test_the_openers_take_the_declaration_itself() -> None:
-    # Each is (url, **options): no opener re-spells the keywords.
+    # Each is (url, **options): no opener re-spells the keywords. (The constructor also
+    # takes what the board runs on, which is no option: protoduino.wiring.)
     for opener in (Board.__init__, Board.open, aio.open, aio.Board.open):
         params = list(inspect.signature(opener).parameters.values())
         assert params[-1].kind is inspect.Parameter.VAR_KEYWORD, opener
         assert "BoardOptions" in str(params[-1].annotation), opener
-        assert [p.name for p in params[:-1]][-1] == "url", opener
+        named = [p.name for p in params[:-1] if p.name not in ("self", "cls")]
+        assert named == (["url", "wiring"] if opener is Board.__init__ else ["url"]), opener
 
 
 def test_given_options_override_the_defaults_and_unknown_ones_are_refused() -> None:

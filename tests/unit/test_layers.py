@@ -1,9 +1,9 @@
 """The link and request layers on an in-process device: no port, no thread, no wall clock.
 
 Each test builds the two layers exactly as ``Board`` does (``Rpc`` attached to a ``Link``),
-hands the link a :class:`~virtualdevice.VirtualDevice` as its port and a
-:class:`~virtualdevice.ManualClock` as its clock, and plays the I/O thread itself. Every verdict
-is a count or an exact time on that clock.
+hands the link a :class:`~protoduino.testing.VirtualDevice` as its port and the device's
+:class:`~protoduino.testing.ManualClock` as its clock, and plays the I/O thread itself.
+Every verdict is a count or an exact time on that clock.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from protoduino.events import Event, EventKind
 from protoduino.link import Link, LinkState
 from protoduino.messages import ArduinoIn, ArduinoOut
 from protoduino.rpc import Rpc
-from virtualdevice import ManualClock, VirtualDevice
+from protoduino.testing import VirtualDevice
 
 HANDSHAKE_TIMEOUT = 5.0
 WATCHDOG_TIMEOUT = 2.0
@@ -36,7 +36,7 @@ class Stack:
     """A Link and its Rpc over a virtual device, as Board wires them."""
 
     def __init__(self, device: VirtualDevice, *, ping: bool = False, first_id: int = 1) -> None:
-        self.clock = ManualClock()
+        self.clock = device.clock
         self.device = device
         self.events: list[Event] = []
         self.restore: list[ArduinoIn] = []
@@ -61,7 +61,7 @@ class Stack:
         self.rpc.attach(self.link)
 
     def run(self, seconds: float) -> None:
-        self.device.run_until(self.link, self.clock, seconds)
+        self.device.run(seconds)
 
     def state(self) -> LinkState:
         # A call, not the attribute: each read is fresh to the type checker as well.
