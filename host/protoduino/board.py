@@ -636,10 +636,10 @@ class Board:
             heartbeat_liveness=liveness == "heartbeat",
             clock=wiring.clock,
             waiter=wiring.wait,
+            message_hook=self._message,
+            restore_provider=self._restore_messages,
+            restore_values=restore == "last",
         )
-        self._rpc.restore_values = restore == "last"
-        self._rpc.message_hook = self._message
-        self._rpc.restore_provider = self._restore_messages
         # Before the port: a capture that cannot be written fails with nothing opened,
         # and the handshake is in it.
         self._capture = (
@@ -1698,7 +1698,11 @@ class Board:
 
     def _restore_messages(self) -> list[ArduinoIn]:
         """The failsafe configuration, every Init, then with ``restore="last"`` every
-        last value (called on the I/O thread when the device lost the outputs)."""
+        last value (called on the I/O thread when the device lost the outputs).
+
+        Called with the request layer's lock held, and takes this board's: the one lock
+        order (rpc.py, "Lock order"), so nothing here may call into the request layer
+        while holding ``self._lock``."""
         lapsed = self._rpc.liveness_lapsed()
         with self._lock:
             outputs = list(self._outputs.values())

@@ -56,6 +56,12 @@ I/O thread.
   re-handshake found it again): the restore runs, and that call is sent again
   after it, once, under a new id (the device keeps the refusal under the old
   one). It had not run, so this cannot run it twice.
+
+Lock order: this layer's lock, then the board's. :meth:`Rpc` calls its hooks
+(``restore_provider``, which takes the board's lock; ``on_done``) with its own
+lock held, so the board never calls into this layer while it holds its own
+lock: it takes what it needs under its lock, releases it, then submits.
+tests/unit/test_lock_order.py checks that order on every path it drives.
 """
 
 from __future__ import annotations
@@ -195,15 +201,14 @@ class LinkPort(Protocol):
     """What the request layer needs of the link below it (:class:`~protoduino.link.Link`)."""
 
     down_error: ProtoduinoError | None
-    #: Set by :meth:`Rpc.attach`: whether the link's watchdog should expect answers.
-    expect_traffic: Callable[[], bool]
-    #: Device reboots seen (the request layer counts the ones only it can see).
-    reboots: int
 
     @property
     def active(self) -> bool: ...
 
     def send_command(self, payload: bytes) -> bool: ...
+
+    def reboot_inferred(self) -> None:
+        """Count a reboot only the request layer could see (the link owns the counter)."""
 
     def recent_frames(self) -> tuple[str, ...]:
         """The last frames on the line, to show in an error."""
@@ -245,6 +250,9 @@ class Rpc:
         failsafe_timeout: float = FAILSAFE_TIMEOUT,
         heartbeat_liveness: bool = False,
         waiter: Waiter = event_wait,
+        message_hook: MessageHook | None = None,
+        restore_provider: RestoreProvider | None = None,
+        restore_values: bool = False,
     ) -> None:
         if ack_timeout <= 0 or max_retries < 0 or window < 1 or reboot_limit < 1:
             raise ArgumentError(
@@ -268,10 +276,13 @@ class Rpc:
         self.ping_interval = ping_interval
         #: Longest a call waits for the link to come back before it fails.
         self.link_wait = link_wait
-        self.message_hook: MessageHook | None = None
-        self.restore_provider: RestoreProvider | None = None
+        #: Where every message that is no Ack goes (the board's events and inputs).
+        self.message_hook = message_hook
+        #: The messages that rebuild the board's outputs after the device lost them; called
+        #: with this layer's lock held (see "Lock order" in the module docstring).
+        self.restore_provider = restore_provider
         #: Whether the restore sends last values too (for the RESTORED event only).
-        self.restore_values = False
+        self.restore_values = restore_values
         self._lock = threading.Lock()
         # Random by default, so that ids from before a host restart do not look like
         # retransmissions to the device's dedupe window; ``first_id`` fixes it (tests).
@@ -341,8 +352,9 @@ class Rpc:
             )
 
     def attach(self, link: LinkPort) -> None:
+        """The link below, which is built on this layer as its listener: the one step that
+        ties the two together, once, before the link opens."""
         self.link = link
-        link.expect_traffic = self._expect_traffic
 
     @property
     def round_time(self) -> float:
@@ -366,7 +378,7 @@ class Rpc:
             self._pinging = bool(on)
             self._next_ping = 0.0  # resuming: ping at once, the failsafe may be close
 
-    def _expect_traffic(self) -> bool:
+    def expect_traffic(self) -> bool:
         return self._pinging or bool(self._calls)
 
     # --- submitting (any thread) ------------------------------------------------------
@@ -744,7 +756,7 @@ class Rpc:
             status_name(Status.STATUS_NOT_INITIALISED),
         )
         if self.link is not None:
-            self.link.reboots += 1
+            self.link.reboot_inferred()
         self._notify(
             Event(
                 EventKind.REBOOTED,

@@ -25,7 +25,7 @@ from protoduino.errors import (
 from protoduino.events import Event, EventKind
 from protoduino.link import Link, LinkState
 from protoduino.messages import ArduinoIn, ArduinoOut
-from protoduino.rpc import Rpc
+from protoduino.rpc import MessageHook, Rpc
 from protoduino.testing import VirtualDevice
 
 HANDSHAKE_TIMEOUT = 5.0
@@ -35,7 +35,14 @@ WATCHDOG_TIMEOUT = 2.0
 class Stack:
     """A Link and its Rpc over a virtual device, as Board wires them."""
 
-    def __init__(self, device: VirtualDevice, *, ping: bool = False, first_id: int = 1) -> None:
+    def __init__(
+        self,
+        device: VirtualDevice,
+        *,
+        ping: bool = False,
+        first_id: int = 1,
+        message_hook: MessageHook | None = None,
+    ) -> None:
         self.clock = device.clock
         self.device = device
         self.events: list[Event] = []
@@ -48,8 +55,9 @@ class Stack:
             link_wait=HANDSHAKE_TIMEOUT,
             clock=self.clock,
             first_id=first_id,
+            message_hook=message_hook,
+            restore_provider=lambda: list(self.restore),
         )
-        self.rpc.restore_provider = lambda: list(self.restore)
         self.link = Link(
             device,
             self.rpc,
@@ -230,9 +238,8 @@ def test_a_call_fails_with_the_port_error_while_the_port_is_gone() -> None:
 def test_input_reports_reach_the_message_hook_and_are_no_acks() -> None:
     """An InputReport after an Init's Ack, and one between a command and its Ack, go to
     the board's hook; the request layer matches Acks as before and counts no stray one."""
-    stack = Stack(VirtualDevice())
     reports: list[ArduinoOut] = []
-    stack.rpc.message_hook = reports.append
+    stack = Stack(VirtualDevice(), message_hook=reports.append)
     stack.link.open()
     msg = ArduinoIn()
     msg.digital_input_init.pin = 2
