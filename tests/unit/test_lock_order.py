@@ -13,25 +13,31 @@ from types import TracebackType
 from protoduino.testing import VirtualDevice
 
 
+class Journal:
+    """The tracked locks this (one) thread holds, and every acquisition with what was held."""
+
+    def __init__(self) -> None:
+        self.held: list[str] = []
+        self.order: list[tuple[tuple[str, ...], str]] = []
+
+
 class TrackedLock:
-    """A lock that records, at each acquisition, which tracked locks this thread holds."""
+    """A lock that records each acquisition in a journal."""
 
-    held: list[str] = []
-    order: list[tuple[tuple[str, ...], str]] = []
-
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, journal: Journal) -> None:
         self.name = name
+        self.journal = journal
         self._lock = threading.Lock()
 
     def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
-        TrackedLock.order.append((tuple(TrackedLock.held), self.name))
+        self.journal.order.append((tuple(self.journal.held), self.name))
         got = self._lock.acquire(blocking, timeout)
         if got:
-            TrackedLock.held.append(self.name)
+            self.journal.held.append(self.name)
         return got
 
     def release(self) -> None:
-        TrackedLock.held.remove(self.name)
+        self.journal.held.remove(self.name)
         self._lock.release()
 
     def __enter__(self) -> bool:
@@ -48,11 +54,10 @@ class TrackedLock:
 
 def test_the_board_lock_is_never_held_while_the_request_lock_is_taken() -> None:
     device = VirtualDevice()
-    TrackedLock.held.clear()
-    TrackedLock.order.clear()
+    journal = Journal()
     with device.open_board(ping=False, restore="last") as board:
-        board._lock = TrackedLock("board")  # type: ignore[assignment]
-        board._rpc._lock = TrackedLock("rpc")  # type: ignore[assignment]
+        board._lock = TrackedLock("board", journal)  # type: ignore[assignment]
+        board._rpc._lock = TrackedLock("rpc", journal)  # type: ignore[assignment]
         servo = board.servo(9, safe=90)
         led = board.digital_output(13)
         board.pose({servo: 30, led: True})
@@ -65,7 +70,7 @@ def test_the_board_lock_is_never_held_while_the_request_lock_is_taken() -> None:
         led.release()
         _ = board.stats
         board.release_all()
-    order = TrackedLock.order
-    assert ((("rpc",), "board")) in order, "the restore path was not driven"
+    order = journal.order
+    assert (("rpc",), "board") in order, "the restore path was not driven"
     inverted = [(held, name) for held, name in order if name == "rpc" and "board" in held]
     assert inverted == []
