@@ -21,7 +21,7 @@ from .constants import (
     WATCHDOG_TIMEOUT,
 )
 from .errors import ArgumentTypeError, BoardClosedError
-from .rpc import REBOOT_LIMIT, REBOOT_WINDOW
+from .session import REBOOT_LIMIT, REBOOT_WINDOW
 from .transport import FrameMonitor
 
 #: What keeps the device's failsafe from firing: any Ping, or only the control loop's Heartbeat.

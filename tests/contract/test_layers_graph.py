@@ -57,6 +57,7 @@ PYTHON_LAYERS: Sequence[tuple[str, Sequence[str]]] = (
             "protoduino.capturefollow",
         ),
     ),
+    ("session", ("protoduino.session",)),
     ("requests", ("protoduino.rpc", "protoduino.inputs")),
     (
         "api",
