@@ -42,7 +42,7 @@ def test_a_restore_message_that_times_out_goes_again_a_bounded_number_of_times()
     assert event.details["replayed"] == 2 and len(event.details["failed"]) == 2
 
 
-def refusal(status: int, item: int = 0) -> ArduinoOut:
+def refusal(status: Status.ValueType, item: int = 0) -> ArduinoOut:
     out = ArduinoOut()
     out.ack.status = status
     out.ack.refused_item = item
@@ -82,7 +82,11 @@ def test_only_the_sessions_liveness_source_with_the_devices_epoch_feeds_the_time
     fs.active, fs.epoch = True, 2
     assert liveness.seen(fs) and liveness.epoch == 2
     assert not liveness.seen(fs)  # reported once per epoch
-    liveness.acked("heartbeat", 0, 2.0, ok)  # carried an older epoch: fed nothing
+    tripped = ArduinoOut().ack
+    tripped.failsafe.CopyFrom(fs)
+    liveness.acked("heartbeat", 0, 2.0, tripped)  # carried an older epoch: fed nothing
     assert liveness.lapsed(2.1)
+    liveness.acked("heartbeat", 2, 2.0, tripped)  # carried it back: the device re-armed
+    assert not liveness.lapsed(2.1)
     liveness.rebooted()
     assert liveness.epoch == 0
