@@ -45,6 +45,7 @@ from typing import TYPE_CHECKING, Any, Generic, Self, SupportsFloat, TypeVar
 
 from . import board as _board
 from . import inputs as _inputs
+from .arguments import RealNumber
 from .board import Edge, Interlock, OutputState
 from .boardoptions import BoardOptions
 from .constants import SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
@@ -167,7 +168,7 @@ class PwmOutput:
     def value(self) -> int | None:
         return self.sync.value
 
-    async def write(self, duty: _board.RealNumber) -> None:
+    async def write(self, duty: RealNumber) -> None:
         await _wait(self.sync.submit(duty))
 
     def __repr__(self) -> str:
@@ -443,7 +444,7 @@ class Board:
     async def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
         return DigitalOutput(await _wait(self.sync.submit_digital_output(pin, safe)))
 
-    async def pwm_output(self, pin: int, safe: _board.RealNumber = 0) -> PwmOutput:
+    async def pwm_output(self, pin: int, safe: RealNumber = 0) -> PwmOutput:
         return PwmOutput(await _wait(self.sync.submit_pwm_output(pin, safe)))
 
     async def digital_input(

@@ -58,12 +58,14 @@ PYTHON_LAYERS: Sequence[tuple[str, Sequence[str]]] = (
         ),
     ),
     ("session", ("protoduino.session",)),
+    ("values", ("protoduino.arguments", "protoduino.readback")),
     ("requests", ("protoduino.rpc", "protoduino.inputs")),
     (
         "api",
         (
             "protoduino.wiring",
             "protoduino.boardoptions",
+            "protoduino.outputs",
             "protoduino.board",
             "protoduino.testing",
             "protoduino.aio",
