@@ -213,9 +213,6 @@ static void handle_frame(pd_core_t *core)
         pd_dispatch_command(core, link->rx_decoded);
         return;
     }
-    if (pkt.type == PD_PACKET_CONTROL && pkt.len == 1 && pkt.payload[0] == PD_CONTROL_HEARTBEAT) {
-        return; /* liveness of the link only; never of the application */
-    }
     PD_STAT_INC(link, ignored);
 }
 

@@ -6,7 +6,7 @@
 #ifndef PD_PROTOCOL_H
 #define PD_PROTOCOL_H
 
-#define PD_PROTOCOL_VERSION 3
+#define PD_PROTOCOL_VERSION 4
 #define PD_MAX_PAYLOAD 255
 /* COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter. */
 #define PD_MAX_ENCODED_FRAME 262
@@ -45,7 +45,6 @@
 /* ControlCode: CONTROL payload CODE (docs/protocol.md section 5). */
 #define PD_CONTROL_RESET 0x00
 #define PD_CONTROL_RESET_ACK 0x01
-#define PD_CONTROL_HEARTBEAT 0x02
 #define PD_CONTROL_EVENT 0x03
 
 /* EventCode: EVENT codes (docs/protocol.md section 5). */

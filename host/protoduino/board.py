@@ -113,7 +113,7 @@ from .outputs import PwmOutput as PwmOutput  # noqa: PLC0414
 from .outputs import Servo as Servo  # noqa: PLC0414
 from .readback import DeviceInfo as DeviceInfo  # noqa: PLC0414
 from .readback import OutputState as OutputState  # noqa: PLC0414
-from .readback import decode_device_info
+from .readback import decode_device_info, failsafe_cause
 from .readback import decode_output_states as decode_output_states  # noqa: PLC0414
 from .rpc import Ack, Call, Rpc, RpcState
 from .transport import FrameMonitor
@@ -1398,15 +1398,6 @@ class Board:
                 log.warning("%s: input report dropped: %s", self.url, error)
         elif kind == "failsafe":
             self._failsafe_state(msg.failsafe)
-        elif kind == "log":
-            level = ("debug", "info", "warning", "error")[min(msg.log.level, 3)]
-            self._notify(
-                Event(
-                    EventKind.LOG,
-                    f"device {level}: {msg.log.text}",
-                    {"level": level, "text": msg.log.text},
-                )
-            )
         elif kind == "decode_error":
             count = msg.decode_error.count
             self._notify(
@@ -1428,12 +1419,9 @@ class Board:
         """
         # The wire names one timeout cause, whatever the liveness source: the host
         # names it for what expired (with liveness="heartbeat" no Ping could stop it).
-        timeout = "heartbeat_timeout" if self.liveness == "heartbeat" else "ping_timeout"
-        cause = {
-            pb.FAILSAFE_CAUSE_PING_TIMEOUT: timeout,
-            pb.FAILSAFE_CAUSE_STOP: "stop",
-            pb.FAILSAFE_CAUSE_INTERLOCK: "interlock",
-        }.get(fs.cause, "none")
+        cause = failsafe_cause(fs.cause)
+        if cause == "ping_timeout" and self.liveness == "heartbeat":
+            cause = "heartbeat_timeout"
         with self._lock:
             if fs.active:
                 if self._failsafe_active and self._failsafe_epoch == fs.epoch:

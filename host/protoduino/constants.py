@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-PROTOCOL_VERSION = 3
+PROTOCOL_VERSION = 4
 MAX_PAYLOAD = 255
 #: COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter.
 MAX_ENCODED_FRAME = 262
@@ -67,7 +67,7 @@ class ControlCode(IntEnum):
 
     RESET = 0x00
     RESET_ACK = 0x01
-    HEARTBEAT = 0x02
+    # 0x02 was HEARTBEAT until version 3 (sent by nobody, ignored by the firmware): unassigned.
     EVENT = 0x03
 
 

@@ -47,8 +47,6 @@ class EventKind(StrEnum):
     #: "interlock", "none"), epoch (int: the device's count of its safe states since
     #: power-up), and for an interlock pin (int: the input that tripped)
     FAILSAFE = "failsafe"
-    #: A text from the firmware. details: level ("debug".."error"), text (str)
-    LOG = "log"
     #: The device could not decode a command. details: count (int, since boot)
     DECODE_ERROR = "decode_error"
     #: The device saw our SEQ jump (details: none) or dropped an over-long frame.
@@ -131,9 +129,7 @@ class Stats:
 #: Kinds that inform without changing what the host knows of the device: when the
 #: queue is full the oldest of them is dropped first (a flood of Log lines must not
 #: push out a failsafe or a reboot).
-INFORMATIONAL = frozenset(
-    {EventKind.LOG, EventKind.DECODE_ERROR, EventKind.DEVICE_DESYNC, EventKind.RX_OVERFLOW}
-)
+INFORMATIONAL = frozenset({EventKind.DECODE_ERROR, EventKind.DEVICE_DESYNC, EventKind.RX_OVERFLOW})
 
 #: Events waiting for the callbacks, at most (a few hundred kilobytes).
 EVENT_QUEUE_LIMIT = 1024

@@ -1,7 +1,8 @@
 """What the device reports about itself and its outputs, decoded: :class:`DeviceInfo` (GetInfo,
 read once at open) and :class:`OutputState` (``Board.read_outputs``, ReadOutputs).
 
-Pure decoding, no I/O: the board, the asyncio board and the MCAP export (each readback as
+:func:`failsafe_cause` names a Failsafe's cause from the schema's own enum. Pure decoding,
+no I/O: the board, the asyncio board and the MCAP export (each readback as
 plottable numbers) share it.
 """
 
@@ -11,6 +12,7 @@ import struct
 from dataclasses import dataclass
 from typing import Any
 
+from ._generated import protoduino_pb2 as pb
 from .commands import PIN_MODES
 from .errors import ProtocolError
 
@@ -93,3 +95,17 @@ def decode_device_info(info: Any) -> DeviceInfo:
         analog_pins=_mask_pins(info.analog_pins),
         counter_pins=_mask_pins(info.counter_pins),
     )
+
+
+#: The schema's enum prefix of every failsafe cause (FAILSAFE_CAUSE_PING_TIMEOUT, ...).
+_CAUSE_PREFIX = "FAILSAFE_CAUSE_"
+
+
+def failsafe_cause(value: int) -> str:
+    """A Failsafe's cause by its name in the schema (``FailsafeCause``), in lower case:
+    "ping_timeout", "stop", "interlock", "none"; a cause this host does not know is "none"."""
+    try:
+        name = pb.FailsafeCause.Name(value)  # type: ignore[arg-type]
+    except ValueError:
+        return "none"
+    return name.removeprefix(_CAUSE_PREFIX).lower()

@@ -222,25 +222,6 @@ FAILSAFE_CAUSE_STOP: FailsafeCause.ValueType  # 2
 FAILSAFE_CAUSE_INTERLOCK: FailsafeCause.ValueType  # 3
 Global___FailsafeCause: _TypeAlias = FailsafeCause  # noqa: Y015
 
-class _LogLevel:
-    ValueType = _typing.NewType("ValueType", _builtins.int)
-    V: _TypeAlias = ValueType  # noqa: Y015
-
-class _LogLevelEnumTypeWrapper(_enum_type_wrapper._EnumTypeWrapper[_LogLevel.ValueType], _builtins.type):
-    DESCRIPTOR: _descriptor.EnumDescriptor
-    LOG_LEVEL_DEBUG: _LogLevel.ValueType  # 0
-    LOG_LEVEL_INFO: _LogLevel.ValueType  # 1
-    LOG_LEVEL_WARNING: _LogLevel.ValueType  # 2
-    LOG_LEVEL_ERROR: _LogLevel.ValueType  # 3
-
-class LogLevel(_LogLevel, metaclass=_LogLevelEnumTypeWrapper): ...
-
-LOG_LEVEL_DEBUG: LogLevel.ValueType  # 0
-LOG_LEVEL_INFO: LogLevel.ValueType  # 1
-LOG_LEVEL_WARNING: LogLevel.ValueType  # 2
-LOG_LEVEL_ERROR: LogLevel.ValueType  # 3
-Global___LogLevel: _TypeAlias = LogLevel  # noqa: Y015
-
 @_typing.final
 class Ping(_message.Message):
     """Link test and liveness: one per second keeps the failsafe away. The
@@ -1147,37 +1128,12 @@ class DecodeError(_message.Message):
 Global___DecodeError: _TypeAlias = DecodeError  # noqa: Y015
 
 @_typing.final
-class Log(_message.Message):
-    """A short text from the firmware, for humans."""
-
-    DESCRIPTOR: _descriptor.Descriptor
-
-    LEVEL_FIELD_NUMBER: _builtins.int
-    TEXT_FIELD_NUMBER: _builtins.int
-    level: Global___LogLevel.ValueType
-    text: _builtins.str
-    def __init__(
-        self,
-        *,
-        level: Global___LogLevel.ValueType = ...,
-        text: _builtins.str = ...,
-    ) -> None: ...
-    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
-    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["level", b"level", "text", b"text"]  # noqa: Y015
-    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
-    def WhichOneof(self, oneof_group: _Never) -> None: ...
-
-Global___Log: _TypeAlias = Log  # noqa: Y015
-
-@_typing.final
 class ArduinoOut(_message.Message):
     DESCRIPTOR: _descriptor.Descriptor
 
     ACK_FIELD_NUMBER: _builtins.int
     FAILSAFE_FIELD_NUMBER: _builtins.int
     DECODE_ERROR_FIELD_NUMBER: _builtins.int
-    LOG_FIELD_NUMBER: _builtins.int
     INPUT_REPORT_FIELD_NUMBER: _builtins.int
     @_builtins.property
     def ack(self) -> Global___Ack: ...
@@ -1186,8 +1142,6 @@ class ArduinoOut(_message.Message):
     @_builtins.property
     def decode_error(self) -> Global___DecodeError: ...
     @_builtins.property
-    def log(self) -> Global___Log: ...
-    @_builtins.property
     def input_report(self) -> Global___InputReport: ...
     def __init__(
         self,
@@ -1195,14 +1149,13 @@ class ArduinoOut(_message.Message):
         ack: Global___Ack | None = ...,
         failsafe: Global___Failsafe | None = ...,
         decode_error: Global___DecodeError | None = ...,
-        log: Global___Log | None = ...,
         input_report: Global___InputReport | None = ...,
     ) -> None: ...
-    _HasFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "log", b"log"]  # noqa: Y015
+    _HasFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "log", b"log"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
-    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ack", "failsafe", "decode_error", "log", "input_report"]  # noqa: Y015
+    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ack", "failsafe", "decode_error", "input_report"]  # noqa: Y015
     _WhichOneofArgType_data: _TypeAlias = _typing.Literal["data", b"data"]  # noqa: Y015
     def WhichOneof(self, oneof_group: _WhichOneofArgType_data) -> _WhichOneofReturnType_data | None: ...
 
