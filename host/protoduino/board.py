@@ -49,7 +49,6 @@ import threading
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass
-from types import TracebackType
 from typing import TYPE_CHECKING, Any, Literal, SupportsFloat, TypeVar
 
 from ._generated import protoduino_pb2 as pb
@@ -69,6 +68,7 @@ from .boardoptions import BoardOptions, Liveness, RestorePolicy, resolved
 # Public here too, where it began (an explicit re-export).
 from .boardoptions import OpenCancel as OpenCancel  # noqa: PLC0414
 from .capture import CaptureWriter
+from .closing import ClosedOnExit
 from .commands import (
     ANALOG_INPUT,
     COUNTER,
@@ -231,7 +231,7 @@ _INPUT_KINDS: dict[str, InputKind] = {
 }
 
 
-class Board:
+class Board(ClosedOnExit):
     """A connected device. Use :meth:`open`; close it (or use ``with``) when done."""
 
     def __init__(
@@ -391,17 +391,6 @@ class Board:
         return cls(url, **options)
 
     # --- context and life cycle -------------------------------------------------------
-
-    def __enter__(self) -> Board:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def close(self) -> None:
         """Stop pinging, fail outstanding calls, stop every thread, close the port.
