@@ -294,9 +294,16 @@ class Board(ClosedOnExit):
             restore_values=restore == "last",
         )
         # Before the port: a capture that cannot be written fails with nothing opened,
-        # and the handshake is in it.
+        # and the handshake is in it. Its hooks are called only once frames flow (from the
+        # link's open on), when the link, the inputs and the event thread all exist.
         self._capture = (
-            CaptureWriter(capture, url, max_bytes=capture_max_bytes)
+            CaptureWriter(
+                capture,
+                url,
+                max_bytes=capture_max_bytes,
+                stats=lambda: self.stats,
+                on_lost=self._capture_lost,
+            )
             if capture is not None
             else None
         )
@@ -315,14 +322,10 @@ class Board(ClosedOnExit):
             clock=wiring.clock,
         )
         self._rpc.attach(self._link)
-        if self._capture is not None:
-            self._capture.set_stats(lambda: self.stats)
         # Started only now: a constructor above that refuses its options leaves no thread.
         self._events = wiring.events()
         # Callbacks of inputs run on the event thread, in order with the events.
         self._inputs = InputTable(self._events.put_job, wiring.clock)
-        if self._capture is not None:
-            self._capture.on_lost = self._capture_lost
         # From here on anything that ends the open early (an error, a KeyboardInterrupt
         # at any point, a cancel from another thread) closes what was started: a
         # half-open board that pinged on would keep the device's outputs driven.
