@@ -35,9 +35,15 @@ command; it checks no pin), the dedupe window (a retransmitted id is acknowledge
 not executed again), Ping echo, a DeviceInfo with an Uno's pins, EVENT BOOT on
 :meth:`~VirtualDevice.reboot` (which forgets the dedupe window and the session), and a digital
 input's level in an InputReport right after its Init's Ack and after each
-:meth:`~VirtualDevice.set_level`. It models no failsafe, no output state and no readback:
-what it executed is in :attr:`~VirtualDevice.executed`. For the firmware itself, use
-:class:`protoduino.simboard.SimBoard` (the firmware compiled for this machine, on a pty).
+:meth:`~VirtualDevice.set_level`, and the failsafe with its epochs (docs/protocol.md section
+7): a timer restarted only by a liveness message that carries the device's current epoch
+(a Heartbeat, or a Ping unless the session's liveness is the Heartbeat), which fires after
+the session's ConfigureFailsafe timeout on the device's clock and so does a Stop: the epoch
+advances, a Failsafe event goes out, Controls and Poses are refused with
+STATUS_FAILSAFE_EXPIRED until the next liveness message clears it, and each liveness Ack
+carries the failsafe state once one was entered. It models no output values and no
+readback: what it executed is in :attr:`~VirtualDevice.executed`. For the firmware itself,
+use :class:`protoduino.simboard.SimBoard` (the firmware compiled for this machine, on a pty).
 
 Faults: ``lose`` drops the device's next packets on the way to the host, ``silent`` all of
 them. protoduino's own tests drive the link and request layers alone with it too
@@ -51,11 +57,19 @@ import collections
 import threading
 from typing import TYPE_CHECKING, Any
 
+from ._generated import protoduino_pb2 as pb
 from ._generated.schema_id import SCHEMA_ID
 from .board import Board
 from .boardoptions import BoardOptions
 from .commands import DIGITAL_INPUT, PIN_MODES, command
-from .constants import DEDUPE_WINDOW, PROTOCOL_VERSION, ControlCode, EventCode, PacketType
+from .constants import (
+    DEDUPE_WINDOW,
+    FAILSAFE_TIMEOUT,
+    PROTOCOL_VERSION,
+    ControlCode,
+    EventCode,
+    PacketType,
+)
 from .errors import ArgumentError
 from .events import EventDispatcher
 from .messages import ArduinoIn, ArduinoOut, Status
@@ -74,6 +88,10 @@ RESERVED_PINS = (0, 1)
 PWM_PINS = (3, 5, 6, 9, 10, 11)
 ANALOG_PINS = tuple(range(14, 20))
 COUNTER_PINS = (2, 3)
+#: What a failsafe refuses: every command that sets a commanded value.
+CONTROLS = frozenset({mode.control for mode in PIN_MODES if mode.control} | {"pose"})
+#: The schema's FailsafeCause values (pb: protoduino_pb2).
+PING_TIMEOUT, STOP = pb.FAILSAFE_CAUSE_PING_TIMEOUT, pb.FAILSAFE_CAUSE_STOP
 
 
 class ManualClock:
@@ -134,6 +152,17 @@ class VirtualDevice:
         #: Digital inputs configured, and their levels (1 until set).
         self.inputs: set[int] = set()
         self.levels: dict[int, int] = {}
+        #: The failsafe: its epoch (kept across sessions, 0 at power-up), whether a safe state
+        #: holds and why (FailsafeCause), whether any was entered since power-up.
+        self.failsafe_epoch = 0
+        self.failsafe_active = False
+        self.failsafe_cause = 0
+        self._failsafe_entered = False
+        self._failsafe_timeout = FAILSAFE_TIMEOUT
+        self._heartbeat_only = False
+        #: When the timer runs out (device clock); None once it fired, until a liveness message.
+        self._failsafe_due: float | None = None
+        self._pending_clear = False
 
     # --- a board on it ----------------------------------------------------------------------
 
@@ -192,6 +221,9 @@ class VirtualDevice:
             msg.ParseFromString(payload)
             executed = len(self.executed)
             self._reply(PacketType.DATA, self._answer(msg).SerializeToString())
+            if self._pending_clear:  # a liveness message cleared the flag: said after its Ack
+                self._pending_clear = False
+                self._send_failsafe()
             if len(self.executed) > executed and command(str(msg.WhichOneof("data"))).is_init:
                 self._after_init(msg)
 
@@ -231,11 +263,14 @@ class VirtualDevice:
         when the timers next need to run."""
         if self._listener is None:
             return float("inf")
+        self._check_failsafe()
         self.deliver()
         due = self._listener.transport_tick(self.clock())
         self.deliver()
         if self._events is not None:
             self._events.run_pending()
+        if self._failsafe_due is not None:
+            due = min(due, self._failsafe_due)
         return due
 
     def run(self, seconds: float) -> None:
@@ -262,12 +297,16 @@ class VirtualDevice:
         return until is not None and until.is_set()
 
     def reboot(self) -> None:
-        """A power cycle: state and dedupe window forgotten, EVENT BOOT sent."""
+        """A power cycle: state, dedupe window and failsafe epoch forgotten, EVENT BOOT sent."""
         self._active = False
         self._tx_seq = 0
         self._dedupe.clear()
         self.session = 0
         self.boot_id += 1
+        self.failsafe_epoch, self.failsafe_active, self.failsafe_cause = 0, False, 0
+        self._failsafe_entered = False
+        self._failsafe_timeout, self._heartbeat_only = FAILSAFE_TIMEOUT, False
+        self._failsafe_due = None
         self._reply(PacketType.CONTROL, event_payload(EventCode.BOOT))
 
     # --- the device ----------------------------------------------------------------------------
@@ -285,6 +324,8 @@ class VirtualDevice:
             return
         self._active = True
         resumed = ctl.session != 0 and ctl.session == self.session
+        if not resumed:  # a session opens: its timer runs from the handshake
+            self._failsafe_due = self.clock() + self._failsafe_timeout
         self.session = ctl.session
         self._reply(
             PacketType.CONTROL,
@@ -318,8 +359,14 @@ class VirtualDevice:
         mid = msg.message_id
         out.ack.message_id = mid
         kind = msg.WhichOneof("data")
-        if kind == "ping":
-            out.ack.ping_echo = msg.ping.payload
+        if kind in ("ping", "heartbeat"):
+            self._liveness(kind, getattr(msg, kind).failsafe_epoch)
+            if kind == "ping":
+                out.ack.ping_echo = msg.ping.payload
+            if self._failsafe_entered:
+                self._failsafe_state(out.ack.failsafe)
+            if mid not in self._dedupe:
+                self._remember(mid, Status.STATUS_OK, msg if kind == "heartbeat" else None)
             return out
         if kind == "get_info":
             info = out.ack.info
@@ -338,9 +385,62 @@ class VirtualDevice:
         if mid in self._dedupe:  # a retransmission: acknowledged again, not executed again
             out.ack.status = self._dedupe[mid]
             return out
-        self.executed.append(msg)
+        if kind in CONTROLS and self.failsafe_active:
+            out.ack.status = Status.STATUS_FAILSAFE_EXPIRED  # no timer behind a value now
+            self._remember(mid, out.ack.status, None)
+            return out
         out.ack.status = Status.STATUS_OK
-        self._dedupe[mid] = out.ack.status
+        self._remember(mid, out.ack.status, msg)
+        if kind == "configure_failsafe":
+            cfg = msg.configure_failsafe
+            self._failsafe_timeout = cfg.timeout_ms / 1000 or FAILSAFE_TIMEOUT
+            self._heartbeat_only = cfg.liveness == pb.LIVENESS_HEARTBEAT
+            if self._failsafe_due is not None:  # restarts a timer that has not run out
+                self._failsafe_due = self.clock() + self._failsafe_timeout
+        elif kind == "stop":
+            self._enter_failsafe(STOP)
+        return out
+
+    def _remember(self, mid: int, status: Status.ValueType, executed: ArduinoIn | None) -> None:
+        if executed is not None:
+            self.executed.append(executed)
+        self._dedupe[mid] = status
         while len(self._dedupe) > DEDUPE_WINDOW:
             self._dedupe.popitem(last=False)
-        return out
+
+    # --- the failsafe (docs/protocol.md section 7) ---------------------------------------------
+
+    def _liveness(self, kind: str, epoch: int) -> None:
+        """A Ping or Heartbeat: it counts only from the session's source, with the epoch."""
+        if kind == "ping" and self._heartbeat_only:
+            return
+        if epoch != self.failsafe_epoch:
+            return  # written before a failsafe this host had not heard of: re-arms nothing
+        self._failsafe_due = self.clock() + self._failsafe_timeout
+        if self.failsafe_active:
+            self.failsafe_active = False
+            self._pending_clear = True
+
+    def _check_failsafe(self) -> None:
+        if self._failsafe_due is not None and self.clock() >= self._failsafe_due:
+            self._failsafe_due = None  # once per silence
+            self._enter_failsafe(PING_TIMEOUT)
+
+    def _enter_failsafe(self, cause: int) -> None:
+        self.failsafe_epoch = (self.failsafe_epoch + 1) % 256
+        self.failsafe_active, self.failsafe_cause = True, cause
+        self._failsafe_entered = True
+        if self._active:
+            self._send_failsafe()
+
+    def _failsafe_state(self, fs: Any) -> None:
+        fs.active, fs.cause, fs.epoch = (
+            self.failsafe_active,
+            self.failsafe_cause,
+            self.failsafe_epoch,
+        )
+
+    def _send_failsafe(self) -> None:
+        out = ArduinoOut()
+        self._failsafe_state(out.failsafe)
+        self._reply(PacketType.DATA, out.SerializeToString())

@@ -13,8 +13,8 @@ from concurrent.futures import Future
 import pytest
 from protoduino import Board, Event, EventKind
 from protoduino.constants import ACK_TIMEOUT, MAX_RETRIES, PING_INTERVAL, PacketType
-from protoduino.errors import AckTimeoutError
-from protoduino.messages import ArduinoIn
+from protoduino.errors import AckTimeoutError, CommandRejectedError
+from protoduino.messages import ArduinoIn, Status
 from protoduino.testing import VirtualDevice
 
 
@@ -95,3 +95,63 @@ def test_the_automatic_ping_keeps_its_interval(device: VirtualDevice) -> None:
         first = sent(device, "ping")
         device.run(PING_INTERVAL * 3)
         assert sent(device, "ping") == first + 3
+
+
+def failsafes(events: list[Event]) -> list[tuple[bool, str, int]]:
+    return [
+        (e.details["active"], e.details["cause"], e.details["epoch"])
+        for e in events
+        if e.kind is EventKind.FAILSAFE
+    ]
+
+
+def test_the_failsafe_fires_at_its_timeout_and_a_liveness_message_clears_it(
+    device: VirtualDevice,
+) -> None:
+    with device.open_board(ping=False, failsafe_timeout=0.5) as board:
+        events: list[Event] = []
+        board.on_event(events.append)
+        servo = board.servo(9, safe=90)
+        servo.write(30)
+        start = device.clock()
+        device.run(0.5)  # silence: the timer restarted by ConfigureFailsafe runs out
+        assert device.failsafe_active and device.failsafe_epoch == 1
+        assert failsafes(events) == [(True, "ping_timeout", 1)]
+        assert device.clock() - start == pytest.approx(0.5)
+        with pytest.raises(CommandRejectedError) as refused:
+            servo.write(40)  # no timer behind a value
+        assert refused.value.status == Status.STATUS_FAILSAFE_EXPIRED
+        board.ping()  # carries epoch 1, which the host heard: re-armed
+        device.run(0)
+        assert not device.failsafe_active
+        assert failsafes(events)[-1] == (False, "none", 1)  # the board names no cause on clear
+        servo.write(40)
+        assert device.last("servo_control").servo_control.degrees == 40
+
+
+def test_a_liveness_message_of_an_older_epoch_re_arms_nothing(device: VirtualDevice) -> None:
+    with device.open_board(ping=False, failsafe_timeout=0.5, liveness="heartbeat") as board:
+        events: list[Event] = []
+        board.on_event(events.append)
+        device.run(0.4)
+        device.lose = 1  # the failsafe's event is lost on the way
+        device.run(0.2)
+        assert device.failsafe_active and failsafes(events) == []
+        board.heartbeat()  # written with epoch 0: it counts for nothing ...
+        device.run(0)
+        assert device.failsafe_active
+        # ... but its Ack told the host of the failsafe, once, and its epoch
+        assert failsafes(events) == [(True, "heartbeat_timeout", 1)]
+        board.heartbeat()  # now with epoch 1
+        device.run(0)
+        assert not device.failsafe_active
+        assert failsafes(events)[-1] == (False, "none", 1)
+
+
+def test_a_stop_is_a_failsafe_of_its_own_epoch(device: VirtualDevice) -> None:
+    with device.open_board(ping=False) as board:
+        events: list[Event] = []
+        board.on_event(events.append)
+        board.stop()
+        device.run(0)
+        assert failsafes(events) == [(True, "stop", 1)]
