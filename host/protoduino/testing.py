@@ -38,10 +38,11 @@ input's level in an InputReport right after its Init's Ack and after each
 :meth:`~VirtualDevice.set_level`, and the failsafe with its epochs (docs/protocol.md section
 7): a timer restarted only by a liveness message that carries the device's current epoch
 (a Heartbeat, or a Ping unless the session's liveness is the Heartbeat), which fires after
-the session's ConfigureFailsafe timeout on the device's clock and so does a Stop: the epoch
-advances, a Failsafe event goes out, Controls and Poses are refused with
-STATUS_FAILSAFE_EXPIRED until the next liveness message clears it, and each liveness Ack
-carries the failsafe state once one was entered. It models no output values and no
+the session's ConfigureFailsafe timeout on the device's clock: the epoch advances, a
+Failsafe event goes out, and Controls and Poses are refused with STATUS_FAILSAFE_EXPIRED
+until the next such liveness message clears it (a Stop advances the epoch and sends its
+event too, but refuses nothing: the timer still runs); each liveness Ack carries the
+failsafe state once one was entered. It models no output values and no
 readback: what it executed is in :attr:`~VirtualDevice.executed`. For the firmware itself,
 use :class:`protoduino.simboard.SimBoard` (the firmware compiled for this machine, on a pty).
 
@@ -160,8 +161,10 @@ class VirtualDevice:
         self._failsafe_entered = False
         self._failsafe_timeout = FAILSAFE_TIMEOUT
         self._heartbeat_only = False
-        #: When the timer runs out (device clock); None once it fired, until a liveness message.
+        #: When the timer runs out (device clock; None before a session), and whether it ran
+        #: out since the last liveness message (then, and only then, Controls are refused).
         self._failsafe_due: float | None = None
+        self._fired = False
         self._pending_clear = False
 
     # --- a board on it ----------------------------------------------------------------------
@@ -269,7 +272,7 @@ class VirtualDevice:
         self.deliver()
         if self._events is not None:
             self._events.run_pending()
-        if self._failsafe_due is not None:
+        if self._failsafe_due is not None and not self._fired:
             due = min(due, self._failsafe_due)
         return due
 
@@ -306,7 +309,7 @@ class VirtualDevice:
         self.failsafe_epoch, self.failsafe_active, self.failsafe_cause = 0, False, 0
         self._failsafe_entered = False
         self._failsafe_timeout, self._heartbeat_only = FAILSAFE_TIMEOUT, False
-        self._failsafe_due = None
+        self._failsafe_due, self._fired = None, False
         self._reply(PacketType.CONTROL, event_payload(EventCode.BOOT))
 
     # --- the device ----------------------------------------------------------------------------
@@ -385,7 +388,7 @@ class VirtualDevice:
         if mid in self._dedupe:  # a retransmission: acknowledged again, not executed again
             out.ack.status = self._dedupe[mid]
             return out
-        if kind in CONTROLS and self.failsafe_active:
+        if kind in CONTROLS and self._fired:
             out.ack.status = Status.STATUS_FAILSAFE_EXPIRED  # no timer behind a value now
             self._remember(mid, out.ack.status, None)
             return out
@@ -395,7 +398,7 @@ class VirtualDevice:
             cfg = msg.configure_failsafe
             self._failsafe_timeout = cfg.timeout_ms / 1000 or FAILSAFE_TIMEOUT
             self._heartbeat_only = cfg.liveness == pb.LIVENESS_HEARTBEAT
-            if self._failsafe_due is not None:  # restarts a timer that has not run out
+            if not self._fired:  # restarts a timer that has not run out
                 self._failsafe_due = self.clock() + self._failsafe_timeout
         elif kind == "stop":
             self._enter_failsafe(STOP)
@@ -417,13 +420,15 @@ class VirtualDevice:
         if epoch != self.failsafe_epoch:
             return  # written before a failsafe this host had not heard of: re-arms nothing
         self._failsafe_due = self.clock() + self._failsafe_timeout
+        self._fired = False
         if self.failsafe_active:
             self.failsafe_active = False
             self._pending_clear = True
 
     def _check_failsafe(self) -> None:
-        if self._failsafe_due is not None and self.clock() >= self._failsafe_due:
-            self._failsafe_due = None  # once per silence
+        due = self._failsafe_due
+        if due is not None and not self._fired and self.clock() >= due:
+            self._fired = True  # once per silence
             self._enter_failsafe(PING_TIMEOUT)
 
     def _enter_failsafe(self, cause: int) -> None:

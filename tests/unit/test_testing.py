@@ -152,6 +152,9 @@ def test_a_stop_is_a_failsafe_of_its_own_epoch(device: VirtualDevice) -> None:
     with device.open_board(ping=False) as board:
         events: list[Event] = []
         board.on_event(events.append)
+        servo = board.servo(9)
         board.stop()
         device.run(0)
         assert failsafes(events) == [(True, "stop", 1)]
+        servo.write(20)  # the timer still runs: a Control after a Stop is protected, not refused
+        assert device.last("servo_control").servo_control.degrees == 20
