@@ -135,7 +135,8 @@ class VirtualDevice:
         self.schema_id = schema_id
         #: Every packet the host sent, in order: (type, payload).
         self.received: list[tuple[PacketType, bytes]] = []
-        #: The commands the device executed, each once (retransmissions are not executed).
+        #: The commands the device executed, each once (retransmissions are not executed;
+        #: Pings and Heartbeats, answered each time, are only in ``received``).
         self.executed: list[ArduinoIn] = []
         self.resets = 0
         #: Device packets still to be lost on the way to the host; ``silent`` loses them all.
@@ -368,8 +369,8 @@ class VirtualDevice:
                 out.ack.ping_echo = msg.ping.payload
             if self._failsafe_entered:
                 self._failsafe_state(out.ack.failsafe)
-            if mid not in self._dedupe:
-                self._remember(mid, Status.STATUS_OK, msg if kind == "heartbeat" else None)
+            # Answered in full each time, never in the dedupe window nor in `executed` (a
+            # repeat counts as the original would): `received` has every one.
             return out
         if kind == "get_info":
             info = out.ack.info
