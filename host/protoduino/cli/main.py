@@ -85,7 +85,11 @@ def _load(name: str, module: str) -> ModuleType | _Missing:
         entry = plugins.find(plugins.COMMANDS, name)
         if entry is None:
             return _Missing(name)
-        loaded: ModuleType = entry.load()
+        try:
+            loaded: ModuleType = entry.load()
+        except ImportError:  # declared by metadata left behind, its package gone
+            log.debug("development command %s does not import", name, exc_info=True)
+            return _Missing(name)
         return loaded
     return importlib.import_module(module)
 
