@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
 from protoduino import plugins
 from protoduino.cli.main import COMMANDS, DEV_COMMANDS
 
@@ -67,11 +68,14 @@ def test_without_a_declared_program_source_the_bundled_copy_is_asked_for() -> No
     assert result.stdout.startswith("BuildError this protoduino installation carries no pd_sim")
 
 
-def test_dev_commands_without_the_dev_tools_say_how_to_get_them() -> None:
-    # No entry points, and None in sys.modules makes every import of protoduino_dev fail.
+@pytest.mark.parametrize("declared", [False, True], ids=["not-declared", "declared-but-gone"])
+def test_dev_commands_without_the_dev_tools_say_how_to_get_them(declared: bool) -> None:
+    # None in sys.modules makes every import of protoduino_dev fail; without NO_PLUGINS the
+    # entry points are still declared (metadata left behind by a removed package).
+    prelude = "" if declared else NO_PLUGINS
     for name in DEV_COMMANDS:
         result = _python(
-            NO_PLUGINS + "import sys\n"
+            prelude + "import sys\n"
             "sys.modules['protoduino_dev'] = None\n"
             "from protoduino.cli.main import main\n"
             f"sys.exit(main([{name!r}, '--some-option', 'x']))\n"
