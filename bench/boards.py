@@ -144,9 +144,21 @@ class _RunnerBoard(SimBoard):
     """The simavr runner with a command line of the bench's own (SimBoard has no option for
     --stats, --profile or another program); everything else is SimBoard's."""
 
-    def __init__(self, backend: Backend) -> None:
-        super().__init__("avr")
+    def __init__(self, backend: Backend, trace: Path | None = None) -> None:
+        super().__init__("avr", trace=trace)
         self._backend = backend
+
+
+def _hex_backend(hex_file: Path, stats: Path) -> Backend:
+    """The runner with a program of another project, loaded from Intel hex, and --stats."""
+    from protoduino.simboard import runner_command
+    from protoduino_dev import build as builds
+
+    def command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
+        cmd = runner_command(trace=trace, link=link, control=control, hex_files=[hex_file])
+        return [*cmd, "--stats", str(stats)]
+
+    return Backend(build=builds.build_runner, command=command)
 
 
 def _stats_backend(stats: Path, profile: Path | None) -> Backend:
@@ -180,10 +192,14 @@ def _echo_backend() -> Backend:
 
 @contextlib.contextmanager
 def started(
-    backend: str, *, stats: Path | None = None, profile: Path | None = None
+    backend: str,
+    *,
+    stats: Path | None = None,
+    profile: Path | None = None,
+    trace: Path | None = None,
 ) -> Iterator[SimBoard]:
     """A started board of ``backend``, stopped on exit. ``stats`` and ``profile`` (avr only)
-    are the runner's --stats and --profile files.
+    are the runner's --stats and --profile files, ``trace`` its trace file.
 
     Raises :class:`BoardUnavailableError` when a tool is missing or the build fails.
     """
@@ -194,8 +210,22 @@ def started(
         raise ValueError("cycle statistics exist only on the emulated Uno (avr)")
     if profile is not None and stats is None:
         raise ValueError("a profile is written with the statistics: give stats= too")
-    sim = _RunnerBoard(_stats_backend(stats, profile)) if stats is not None else SimBoard(backend)
+    sim = (
+        _RunnerBoard(_stats_backend(stats, profile), trace)
+        if stats is not None
+        else SimBoard(backend, trace=trace)
+    )
     yield from _run(sim)
+
+
+@contextlib.contextmanager
+def started_hex(hex_file: Path, *, stats: Path, trace: Path | None = None) -> Iterator[SimBoard]:
+    """The emulated Uno running another project's firmware from ``hex_file``, unmodified
+    (the bench's race runs StandardFirmata so), with the runner's --stats file."""
+    tool = missing_tool("avr")
+    if tool is not None:
+        raise BoardUnavailableError(f"`{tool}` is not installed")
+    yield from _run(_RunnerBoard(_hex_backend(hex_file, stats), trace))
 
 
 @contextlib.contextmanager

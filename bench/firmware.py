@@ -44,6 +44,7 @@ from protoduino_dev.rambudget import FREE_BYTES, RamBudget, exercise
 from . import charts
 from .boards import UNO_HZ, BoardUnavailableError, CycleCounter, CycleStats, started
 from .core import Chart, Context, Section, SectionResult, Target, fmt_rate, md_table
+from .peers import firmata_board
 from .peers import protoduino as protoduino_peer
 from .throughput import drive, servo_line
 
@@ -54,10 +55,20 @@ FLASH_BUDGET = 26_624
 #: RAM kept free beside the static data and the deepest stack (tests/e2e/test_stack_margin.py).
 RAM_FREE = FREE_BYTES
 #: For comparison, not a limit: StandardFirmata (digital and analog I/O, PWM, servos, I2C; no
-#: CRC, no acks, no failsafe) and StandardFirmataPlus, built with the same avr-gcc 5.4 (the
-#: project's reference sizes).
-FIRMATA = (13_212, 1_069)
+#: CRC, no acks, no failsafe), the hex that the race runs (part 9: bench/peers/firmata_board.py
+#: reads its size), and StandardFirmataPlus, built with the same avr-gcc 5.4 (the project's
+#: reference sizes).
 FIRMATA_PLUS = (15_202, 1_274)
+
+
+def firmata_sizes() -> tuple[str, str]:
+    """StandardFirmata's flash and static RAM as the report shows them, from the race's hex."""
+    size = firmata_board.footprint()
+    if size is None:
+        return ("-", "-")  # not fetched: firmata_board.FETCH_STEP fetches it
+    return (f"{size.flash:,} B", f"{size.static_ram:,} B")
+
+
 #: What each carries, per protoduino feature (their sketches' own feature lists).
 FEATURE_ROWS = (
     ("servo", "Servo", "yes", "yes"),
@@ -115,7 +126,7 @@ GROUPS: tuple[tuple[str, Callable[[str], bool]], ...] = (
     ("CRC-16 (pd_crc16_*)", lambda n: n.startswith("pd_crc16")),
     (
         "Ack encoding (pd_encode.c)",
-        lambda n: n.startswith(("put", "open_msg", "close_msg", "pd_encode", "pd_dispatch_send")),
+        lambda n: n.startswith(("put", "open_msg", "close_msg", "pd_encode", "pd_out_send")),
     ),
     (
         "interrupt handlers",
@@ -358,7 +369,7 @@ def _features_markdown(size: Footprint, costs: dict[str, Footprint]) -> str:
             "**the whole firmware**",
             f"**{size.flash:,} B**",
             f"**{size.ram:,} B**",
-            f"{FIRMATA[0]:,} B / {FIRMATA[1]:,} B",
+            " / ".join(firmata_sizes()),
             f"{FIRMATA_PLUS[0]:,} B / {FIRMATA_PLUS[1]:,} B",
         ]
     )
@@ -448,7 +459,7 @@ def run(ctx: Context) -> SectionResult:
                     "",
                     f"{size.flash:,} B",
                     f"{FLASH_BUDGET:,} B",
-                    f"{FIRMATA[0]:,} B",
+                    firmata_sizes()[0],
                     f"{FIRMATA_PLUS[0]:,} B",
                     f"{size.flash / FLASH_TOTAL * 100:.0f} % of 32 KB",
                 ],
@@ -459,14 +470,15 @@ def run(ctx: Context) -> SectionResult:
                     f"{size.bss:,}",
                     f"{size.ram:,} B",
                     f"+ stack + {RAM_FREE} B free <= {RAM_TOTAL:,} B",
-                    f"{FIRMATA[1]:,} B",
+                    firmata_sizes()[1],
                     f"{FIRMATA_PLUS[1]:,} B",
                     f"{size.ram / RAM_TOTAL * 100:.0f} % of 2 KB (the stack takes the rest)",
                 ],
             ],
         ),
-        "StandardFirmata and StandardFirmataPlus were built here with the same avr-gcc 5.4 "
-        "and the Arduino core's flags; StandardFirmata does digital and analog "
+        "StandardFirmata is the 2.4 hex that part 9 races (avrgirl-arduino 5.0.1's, its "
+        "static RAM read from its start-up code); StandardFirmataPlus was built here with the "
+        "same avr-gcc 5.4 and the Arduino core's flags. StandardFirmata does digital and analog "
         "I/O, PWM, servos and I2C but has no CRC, no acks and no failsafe. README.md and "
         "firmware/README.md quote the flash and RAM figures of this run.\n",
         _footprint_verdict(size, ram),
@@ -521,7 +533,8 @@ def _quotes(size: Footprint) -> dict[str, str]:
     return {
         "footprint": f"flash {size.flash:,} B of the {FLASH_BUDGET:,} B budget and static RAM "
         f"{size.ram:,} B (static RAM + the deepest stack + {RAM_FREE} B free <= {RAM_TOTAL:,} B; "
-        f"for comparison, StandardFirmata: {FIRMATA[0]:,} B and {FIRMATA[1]:,} B, "
+        f"for comparison, StandardFirmata (the hex part 9 races): "
+        f"{' and '.join(firmata_sizes())}, "
         f"StandardFirmataPlus: {FIRMATA_PLUS[0]:,} B and {FIRMATA_PLUS[1]:,} B)"
     }
 

@@ -14,7 +14,7 @@ while part 1 measures CPU time (``bench.core.measure``).
 
 from __future__ import annotations
 
-from . import firmware, inputs, motion, receive, roundtrip, throughput, wire
+from . import firmware, inputs, motion, race, receive, ros2, roundtrip, throughput, wire
 from .core import Section
 
 SECTIONS: tuple[Section, ...] = (
@@ -25,4 +25,6 @@ SECTIONS: tuple[Section, ...] = (
     firmware.SECTION,
     motion.SECTION,
     inputs.SECTION,
+    ros2.SECTION,
+    race.SECTION,
 )

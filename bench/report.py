@@ -89,3 +89,66 @@ def quote(paths: Sequence[Path], quotes: dict[str, str]) -> list[Path]:
             path.write_text(new, encoding="utf-8")
             changed.append(path)
     return changed
+
+
+def _blocks(text: str) -> tuple[str, list[str]]:
+    """``text`` as its preamble and its ``## `` blocks (each from its heading to the next)."""
+    parts = re.split(r"(?m)^(?=## )", text)
+    return parts[0], parts[1:]
+
+
+def _part(block: str) -> int | None:
+    """The part number of a ``## N. title`` block, or None (Targets, Machine)."""
+    match = re.match(r"## (\d+)\. ", block)
+    return int(match.group(1)) if match else None
+
+
+def merge(old: str, new: str, note: str) -> str:
+    """``old`` (a whole report) with the parts that ``new`` (a report of some parts, from
+    :func:`render`) measured put in: their sections and their rows of the targets table
+    replaced, every other part kept as the earlier run left it, and ``note`` (which run the
+    merged parts come from) added under the header's notes."""
+    old_head, old_blocks = _blocks(old)
+    _new_head, new_blocks = _blocks(new)
+    new_parts = {_part(b): b for b in new_blocks if _part(b) is not None}
+    new_targets = next((b for b in new_blocks if b.startswith("## Targets")), "")
+    fresh_rows = [line for line in new_targets.splitlines() if re.match(r"\| \d+\. ", line)]
+    out_blocks: list[str] = []
+    pending = dict(sorted(new_parts.items(), key=lambda kv: kv[0] or 0))
+    for old_block in old_blocks:
+        number = _part(old_block)
+        block = old_block
+        if block.startswith("## Targets"):
+            block = _merge_targets(block, set(new_parts), fresh_rows)
+        if number is not None:
+            for n in [n for n in pending if n is not None and n < number]:
+                out_blocks.append(pending.pop(n))
+            if number in pending:
+                out_blocks.append(pending.pop(number))
+                continue
+        out_blocks.append(block)
+    out_blocks += list(pending.values())
+    if not any(b.startswith("## Targets") for b in old_blocks) and fresh_rows:
+        out_blocks.insert(0, new_targets)
+    # An earlier merge's note goes when this run replaces every part it named.
+    kept = [
+        line
+        for line in old_head.rstrip().split("\n\n")
+        if not (
+            (m := re.match(r"> Parts ([\d, ]+) come from a later run", line))
+            and {int(n) for n in m.group(1).split(",")} <= set(new_parts)
+        )
+    ]
+    head = "\n\n".join(kept) + f"\n\n> {note}\n\n"
+    return (head + "".join(b.rstrip() + "\n\n" for b in out_blocks)).rstrip() + "\n"
+
+
+def _merge_targets(block: str, parts: set[int | None], fresh: list[str]) -> str:
+    """The targets block with the rows of ``parts`` replaced by ``fresh``, in part order."""
+    lines = block.rstrip().splitlines()
+    rows = [line for line in lines if re.match(r"\| \d+\. ", line)]
+    kept = [r for r in rows if int(r[2 : r.index(".")]) not in parts]
+    merged = sorted([*kept, *fresh], key=lambda r: int(r[2 : r.index(".")]))
+    first = lines.index(rows[0]) if rows else len(lines)
+    rest = [line for line in lines[first:] if line not in rows]
+    return "\n".join([*lines[:first], *merged, *rest]) + "\n"

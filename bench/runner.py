@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 PARTIAL = ROOT / "build" / "bench"
 #: Documents that quote figures of the full run (bench.report.quote).
-QUOTING = (ROOT / "README.md", ROOT / "firmware" / "README.md")
+QUOTING = (ROOT / "README.md", ROOT / "firmware" / "README.md", DOCS / "ros2.md")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -49,6 +49,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--only", action="append", choices=keys, metavar="SECTION", help=f"one of {keys}"
     )
     parser.add_argument("--out", type=Path, help="report path (default docs/performance.md)")
+    parser.add_argument(
+        "--merge",
+        action="store_true",
+        help="with --only: put those parts into the existing report (docs/performance.md "
+        "unless --out), keeping the other parts of its earlier run, and say so in its header",
+    )
     parser.add_argument("--no-charts", action="store_true", help="skip the PNG charts")
     parser.add_argument("--no-profile", action="store_true", help="skip the cProfile dumps")
     return parser
@@ -95,7 +101,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
     args = build_parser().parse_args(argv)
     sections = [s for s in registry.SECTIONS if not args.only or s.key in args.only]
-    out: Path = args.out or (PARTIAL if args.only else DOCS) / "performance.md"
+    if args.merge and not args.only:
+        build_parser().error("--merge needs --only")
+    out: Path = args.out or (PARTIAL if args.only and not args.merge else DOCS) / "performance.md"
     ctx = make_context(args, out)
     notes: list[str] = []
     if ctx.chart_dir is not None:
@@ -112,7 +120,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     packages += ["matplotlib"] if ctx.chart_dir is not None else []
     argv_text = " ".join(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))
     command = f"python -m bench {argv_text}".strip()
-    text = report.render(results, machine.describe(ROOT, packages), ctx, command, notes)
+    described = machine.describe(ROOT, packages)
+    text = report.render(results, described, ctx, command, notes)
+    if args.merge and out.exists():
+        facts = dict(described)
+        parts = ", ".join(str(section.number) for section, _result in results)
+        note = (
+            f"Parts {parts} come from a later run, `{command}` "
+            f"({facts.get('date (UTC)', '?')}, commit {facts.get('commit', '?')}, load average "
+            f"{facts.get('load average at start', '?')}); the machine table is the earlier run's."
+        )
+        text = report.merge(out.read_text(encoding="utf-8"), text, note)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text, encoding="utf-8")
     log.info("wrote %s", out)

@@ -7,7 +7,9 @@
 #   2. pigweed WITHOUT its dependencies: it declares about 55 (Sphinx, pylint, cloud storage,
 #      protobuf~=5.28, ...) that pw_hdlc and pw_rpc's packet code never import, and pulling
 #      them in would downgrade the project's protobuf. What the benchmarks use from it needs
-#      only protobuf, which the project already has.
+#      only protobuf, which the project already has;
+#   3. StandardFirmata's Uno hex, which the race (bench/race.py) runs on the emulated Uno:
+#      tools/fetch_firmata.sh, from the npm registry, pinned by version and sha256.
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -26,4 +28,5 @@ for module in ("pymavlink", "pySerialTransfer", "pyfirmata2", "telemetrix", "mat
                "pw_hdlc.decode", "pw_rpc.packets"):
     importlib.import_module(module)
 PY
+"$root/tools/fetch_firmata.sh"
 echo "bench extras installed; run: $python -m bench"

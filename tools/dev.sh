@@ -8,7 +8,8 @@
 # Setup is idempotent: Debian packages (installed only when missing), a
 # virtual environment in .venv with the package, its pinned dev extras and the
 # development tools (dev/, the protoduino_dev package),
-# and the nanopb C runtime from Debian's source package (.deps/nanopb).
+# the nanopb C runtime from Debian's source package (.deps/nanopb), and StandardFirmata's
+# Uno hex from the npm registry for the bench's race (.deps/firmata).
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -71,6 +72,7 @@ setup() {
     setup_apt
     setup_venv
     "$root/tools/fetch_nanopb.sh"
+    "$root/tools/fetch_firmata.sh"  # the bench race's peer (bench/race.py), from npm, pinned
 }
 
 cmd=${1:-}

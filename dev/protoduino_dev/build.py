@@ -24,6 +24,7 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 from protoduino import programs
+from protoduino._generated import tables
 from protoduino.errors import BuildError
 
 logger = logging.getLogger(__name__)
@@ -110,8 +111,9 @@ def build_firmware() -> Path:
     return FIRMWARE_ELF
 
 
-#: The Uno firmware's build-time features (firmware/Makefile ALL_FEATURES, core/pd_features.h).
-FEATURES = ("servo", "digital_output", "digital_input", "analog_input", "pwm", "counter")
+#: The Uno firmware's build-time features: every Feature of the schema (`protoduino gen` writes
+#: them for the Makefile's ALL_FEATURES and core/pd_features.h too).
+FEATURES = tables.FEATURES
 
 
 def build_firmware_features(features: Iterable[str]) -> Path:

@@ -2,19 +2,25 @@
 
 One function, :func:`generate`, writes:
 
-* ``host/protoduino/_generated/protoduino_pb2.py`` and ``.pyi`` (protoc from
-  ``grpcio-tools``, typed stubs from ``mypy-protobuf``);
+* ``host/protoduino/_generated/protoduino_pb2.py`` and ``.pyi``, and the same for
+  ``protoduino_options.proto`` (protoc from ``grpcio-tools``, typed stubs from
+  ``mypy-protobuf``);
 * ``host/protoduino/_generated/schema_id.py`` with ``SCHEMA_ID``;
 * ``firmware/generated/protoduino.pb.[ch]`` (nanopb 0.4.7, the version of the C
   runtime the firmware is built against) and ``firmware/generated/pd_schema.h``
   with ``PD_SCHEMA_ID``;
 * ``firmware/generated/pd_protocol.h``: the protocol constants and enumerations the
-  firmware uses, from ``host/protoduino/constants.py`` (the one place they are written).
+  firmware uses, from ``host/protoduino/constants.py`` (the one place they are written);
+* the built-in command and pin-mode tables from the schema's options
+  (:mod:`protoduino_dev.cmdtables`): ``firmware/generated/pd_tables.h``,
+  ``firmware/generated/pd_features.mk`` and ``host/protoduino/_generated/tables.py``.
 
 SCHEMA_ID (docs/protocol.md section 5) is the CRC-32 of the deterministic
-serialisation of the schema's ``FileDescriptorSet`` without source info: it
-changes when any message, field, enum or option in the schema changes, but not
-with comments or formatting. Both sides take it from this one computation.
+serialisation of the schema's ``FileDescriptorSet`` (protoduino.proto and
+protoduino_options.proto, not the protobuf files they import) without source info:
+it changes when any message, field, enum or option in the schema changes (a
+command's or pin mode's declaration too), but not with comments or formatting.
+Both sides take it from this one computation.
 
 Everything written is deterministic, so the committed files can be compared
 against a fresh run (``tests/contract/test_codegen.py``). The generator tools are dev
@@ -34,18 +40,27 @@ from enum import IntEnum
 from pathlib import Path
 from types import ModuleType
 
+from . import cmdtables
+
 PROTO_NAME = "protoduino.proto"
+#: The custom options' declarations, imported by PROTO_NAME (no wire messages).
+OPTIONS_PROTO = cmdtables.OPTIONS_PROTO
 OPTIONS_NAME = "protoduino.options"
 
 #: Paths (relative to the repository root) of every generated file.
 GENERATED_FILES = (
     "host/protoduino/_generated/protoduino_pb2.py",
     "host/protoduino/_generated/protoduino_pb2.pyi",
+    "host/protoduino/_generated/protoduino_options_pb2.py",
+    "host/protoduino/_generated/protoduino_options_pb2.pyi",
     "host/protoduino/_generated/schema_id.py",
+    "host/protoduino/_generated/tables.py",
     "firmware/generated/protoduino.pb.c",
     "firmware/generated/protoduino.pb.h",
     "firmware/generated/pd_schema.h",
     "firmware/generated/pd_protocol.h",
+    "firmware/generated/pd_tables.h",
+    "firmware/generated/pd_features.mk",
 )
 #: The constants' one source, relative to the repository root.
 CONSTANTS_SOURCE = "host/protoduino/constants.py"
@@ -79,11 +94,18 @@ def _protoc(args: list[str], cwd: Path) -> None:
 
 
 def schema_id_of(descriptor_set: bytes) -> int:
-    """CRC-32 of a FileDescriptorSet re-serialised deterministically."""
+    """CRC-32 of a FileDescriptorSet re-serialised deterministically.
+
+    protobuf's own files (``google/protobuf/descriptor.proto``, which the options
+    import) are left out: they come with the protoc version, not from the schema.
+    """
     from google.protobuf import descriptor_pb2
 
     fds = descriptor_pb2.FileDescriptorSet()
     fds.ParseFromString(descriptor_set)
+    own = [f for f in fds.file if not f.name.startswith("google/protobuf/")]
+    del fds.file[:]
+    fds.file.extend(own)
     for f in fds.file:
         f.ClearField("source_code_info")
     return zlib.crc32(fds.SerializeToString(deterministic=True)) & 0xFFFFFFFF
@@ -105,8 +127,12 @@ def generate(out_root: Path | None = None, proto_dir: Path | None = None) -> Res
 
     with tempfile.TemporaryDirectory() as tmp:
         desc_path = Path(tmp) / "protoduino.desc"
-        _protoc(["-I.", f"--descriptor_set_out={desc_path}", PROTO_NAME], proto_dir)
+        _protoc(
+            ["-I.", "--include_imports", f"--descriptor_set_out={desc_path}", PROTO_NAME],
+            proto_dir,
+        )
         schema_id = schema_id_of(desc_path.read_bytes())
+        tables = cmdtables.read_tables(desc_path.read_bytes())
 
         _protoc(
             [
@@ -115,6 +141,7 @@ def generate(out_root: Path | None = None, proto_dir: Path | None = None) -> Res
                 f"--mypy_out={py_out}",
                 f"--plugin=protoc-gen-mypy={_mypy_plugin()}",
                 PROTO_NAME,
+                OPTIONS_PROTO,
             ],
             proto_dir,
         )
@@ -133,11 +160,16 @@ def generate(out_root: Path | None = None, proto_dir: Path | None = None) -> Res
                 str(c_out),
                 "--error-on-unmatched",
                 "-q",
+                # The options are for the generators: nothing on the device reads them.
+                "-x",
+                OPTIONS_PROTO,
                 str(proto_dir / PROTO_NAME),
             ],
             proto_dir,
         )
 
+    pb2 = py_out / "protoduino_pb2.py"
+    pb2.write_text(package_imports(pb2.read_text()))
     header = c_out / "protoduino.pb.h"
     header.write_text(share_descriptors(header.read_text()))
     (py_out / "schema_id.py").write_text(
@@ -152,7 +184,20 @@ def generate(out_root: Path | None = None, proto_dir: Path | None = None) -> Res
         "#endif /* PD_SCHEMA_H */\n"
     )
     (c_out / "pd_protocol.h").write_text(protocol_header(root / CONSTANTS_SOURCE))
+    (c_out / "pd_tables.h").write_text(cmdtables.c_header(tables))
+    (c_out / "pd_features.mk").write_text(cmdtables.make_fragment(tables))
+    (py_out / "tables.py").write_text(cmdtables.python_module(tables))
     return Result(schema_id, tuple(out_root / p for p in GENERATED_FILES))
+
+
+def package_imports(source: str) -> str:
+    """protoc's ``import protoduino_options_pb2`` as an import from the same package.
+
+    protoc writes imports relative to its include path, as if ``_generated`` were on
+    sys.path; the package imports it as ``protoduino._generated``.
+    """
+    stem = OPTIONS_PROTO.removesuffix(".proto")
+    return re.sub(rf"^import {stem}_pb2 as ", f"from . import {stem}_pb2 as ", source, flags=re.M)
 
 
 def _load_constants(path: Path) -> ModuleType:

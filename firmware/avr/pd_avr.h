@@ -17,7 +17,7 @@
 #define PD_AVR_RX_SIZE 48u
 /* UART transmit ring: the most one received frame can make the device send
  * (PD_TX_RESERVE: pd_avr_uart.c checks it fits); a report goes only into an empty
- * ring (pd_dispatch_send_spare), so it needs no room of its own. */
+ * ring (pd_link_send_spare), so it needs no room of its own. */
 #define PD_AVR_TX_SIZE 117u
 
 void pd_avr_uart_init(uint32_t baud);

@@ -2,6 +2,12 @@
 
 #include <string.h>
 
+#include "pd_dedupe.h"
+#include "pd_dispatch.h"
+#include "pd_inputs.h"
+#include "pd_link.h"
+#include "pd_out.h"
+
 void pd_core_init(pd_core_t *core, void *hal)
 {
     core->hal = hal;
@@ -15,19 +21,46 @@ void pd_core_init(pd_core_t *core, void *hal)
         core->session[i] = 0;
     }
     pd_link_init(&core->link);
-    pd_dispatch_clear(core);
+    core->in_decoded = false;
     pd_dedupe_init(&core->dedupe);
     pd_outputs_init(&core->outputs);
     core->failsafe.epoch = 0; /* counts since power-up; a new session keeps it */
     core->failsafe.cause = 0;
     pd_failsafe_init(&core->failsafe, pd_hal_millis(hal));
-    pd_link_send_event(core, PD_EVENT_BOOT);
+    pd_link_send_event(&core->link, hal, PD_EVENT_BOOT);
+}
+
+bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
+{
+    pd_link_event_t event = pd_link_rx_byte(&core->link, byte);
+    if (event == PD_LINK_NONE) {
+        return true; /* most bytes: the frame goes on */
+    }
+    if (event == PD_LINK_PAYLOAD) {
+        /* Decoded now, while the CRC and the delimiter are on the wire; run only on
+         * PD_LINK_COMMAND. */
+        core->in_decoded = pd_dispatch_decode(core, pd_link_payload(&core->link),
+                                              pd_link_payload_len(&core->link));
+        return true;
+    }
+    /* PD_LINK_END: the byte ends a frame. A command first: its Ack is what the host waits for. */
+    event = pd_link_rx_end(&core->link, core->hal, byte);
+    if (event == PD_LINK_COMMAND) {
+        pd_dispatch_command(core, core->in_decoded);
+    } else if (event == PD_LINK_HELD) {
+        return false;
+    } else if (event == PD_LINK_RESET) {
+        bool resumed = pd_core_open_session(core, pd_link_session(&core->link));
+        pd_link_reset_ack(&core->link, core->hal, core->boot_id, resumed);
+    }
+    core->in_decoded = false; /* the frame ended, run or not */
+    return true;
 }
 
 size_t pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len)
 {
     size_t i = 0;
-    while (i < len && pd_link_rx_byte(core, data[i])) {
+    while (i < len && pd_core_rx_byte(core, data[i])) {
         i++;
     }
     return i;
@@ -48,7 +81,7 @@ static __attribute__((noinline)) void send_report(pd_core_t *core)
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
     if (core->report(core, slot, &out)) {
         uint8_t waited = (uint8_t)((uint8_t)pd_hal_millis(core->hal) - core->report_since);
-        if (!pd_dispatch_send_spare(core, &out, waited < PD_REPORT_MAX_WAIT_MS)) {
+        if (!pd_out_send_spare(core, &out, waited < PD_REPORT_MAX_WAIT_MS)) {
             return; /* no room yet, or a command arriving: the newest value, later */
         }
         if (core->report_sent != NULL) {
@@ -66,7 +99,7 @@ void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause)
     } else {
         pd_failsafe_fire(&core->failsafe);
     }
-    pd_dispatch_send_failsafe(core); /* dropped while IDLE: no one to tell (a Ping's Ack will) */
+    pd_out_send_failsafe(core); /* dropped while IDLE: no one to tell (a Ping's Ack will) */
 }
 
 void pd_core_poll(pd_core_t *core)

@@ -1,115 +1,17 @@
 #include "pd_dispatch.h"
 
+#include <stddef.h>
 #include <string.h>
 
 #include <pb_decode.h>
 
-#include "pd_core.h"
-#include "pd_encode.h"
-#include "pd_link.h"
+#include "pd_dedupe.h"
+#include "pd_inputs.h"
+#include "pd_out.h"
 #include "pd_rom.h"
 #include "pd_schema.h"
-
-void pd_dedupe_init(pd_dedupe_t *dd)
-{
-    memset(dd, 0, sizeof(*dd));
-}
-
-int pd_dedupe_find(const pd_dedupe_t *dd, uint32_t id)
-{
-    /* Every new command scans the whole window and finds nothing: one byte
-     * of each id first (ids count up, so their first bytes in memory, the low
-     * ones on the Uno, tell them apart; on any byte order it is only a filter,
-     * the whole compare decides), the rest only on a match. A 32-bit compare
-     * per entry was 380 of the Uno's cycles between a command's delimiter and
-     * its Ack. */
-    const uint8_t first = *(const uint8_t *)&id;
-    for (uint8_t i = 0; i < dd->count; i++) {
-        if (*(const uint8_t *)&dd->id[i] == first && dd->id[i] == id) {
-            uint8_t pair = dd->status[i >> 1];
-            return (i & 1u) ? pair >> 4 : pair & 0x0Fu;
-        }
-    }
-    return -1;
-}
-
-void pd_dedupe_add(pd_dedupe_t *dd, uint32_t id, uint8_t status)
-{
-    typedef char fits[(_protoduino_Status_MAX < 16) ? 1 : -1];
-    (void)sizeof(fits);
-    dd->id[dd->next] = id;
-    uint8_t *pair = &dd->status[dd->next >> 1];
-    *pair = (dd->next & 1u) ? (uint8_t)((*pair & 0x0Fu) | (status << 4))
-                            : (uint8_t)((*pair & 0xF0u) | (status & 0x0Fu));
-    dd->next = (uint8_t)((dd->next + 1u) % PD_DEDUPE_WINDOW);
-    if (dd->count < PD_DEDUPE_WINDOW) {
-        dd->count++;
-    }
-}
-
-bool pd_dispatch_send(pd_core_t *core, const protoduino_ArduinoOut *msg)
-{
-    uint8_t raw[PD_TX_BUF];
-
-    if (!core->link.active) {
-        return false; /* DATA only while ACTIVE; skip the encoding work */
-    }
-    size_t len = pd_encode_out(msg, raw + PD_TX_PAYLOAD_AT, PD_TX_MAX_PAYLOAD);
-    if (len == 0) {
-        return false; /* cannot happen: PD_TX_MAX_PAYLOAD is the message's max size */
-    }
-    return pd_link_send(core, PD_PACKET_DATA, raw, len);
-}
-
-bool pd_dispatch_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg, bool yield)
-{
-    uint8_t raw[PD_TX_BUF];
-
-    if (!core->link.active) {
-        return false;
-    }
-    size_t len = pd_encode_out(msg, raw + PD_TX_PAYLOAD_AT, PD_TX_MAX_PAYLOAD);
-    /* PD_TX_FRAME_BYTES(len) without its division: at the largest payload its
-     * COBS term n / 254 is 0 (checked here), so it is 0 for every len <= that;
-     * the division would be a libgcc call on the AVR, in flash and per report. */
-    typedef char no_cobs_block[(PD_TX_FRAME_BYTES(PD_TX_MAX_PAYLOAD) ==
-                                PD_MIN_PACKET + PD_TX_MAX_PAYLOAD + 3u) ? 1 : -1];
-    (void)sizeof(no_cobs_block);
-    size_t frame = PD_MIN_PACKET + len + 3u;
-    /* A command frame under way is answered first: its Ack must not queue behind this
-     * (`yield`: for a while), and a complete one held for room (rx_held) always goes
-     * first, or a stream of reports taking every emptied queue would starve it. And
-     * one report at a time, into a queue with room for a reply (on the Uno: an empty
-     * one): a reply never waits behind more than the report on the line. */
-    uint16_t room = pd_hal_tx_room(core->hal);
-    if (len == 0 || core->link.rx_held || (yield && core->link.rx_len > 0) || room < frame ||
-        room < PD_TX_RESERVE) {
-        return false;
-    }
-    return pd_link_send(core, PD_PACKET_DATA, raw, len);
-}
-
-/* The device's failsafe state: the latest safe state entered (its cause and
- * epoch) and whether it still holds. */
-static void failsafe_state(const pd_core_t *core, protoduino_Failsafe *fs)
-{
-    /* An interlock's latch holds the safe state until ClearInterlock, whatever
-     * liveness messages came since. */
-    fs->active = core->failsafe.active || core->outputs.inputs.latched != 0;
-    fs->cause = (protoduino_FailsafeCause)core->failsafe.cause;
-    fs->epoch = core->failsafe.epoch;
-    if (fs->cause == protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK) {
-        fs->pin = core->failsafe.pin;
-    }
-}
-
-bool pd_dispatch_send_failsafe(pd_core_t *core)
-{
-    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
-    out.which_data = protoduino_ArduinoOut_failsafe_tag;
-    failsafe_state(core, &out.data.failsafe);
-    return pd_dispatch_send(core, &out);
-}
+#include "pd_state.h"
+#include "pd_tables.h"
 
 static void copy_string(char *dst, size_t cap, const char *src)
 {
@@ -161,14 +63,14 @@ static __attribute__((noinline)) void send_ack(pd_core_t *core, protoduino_Ardui
     out->which_data = protoduino_ArduinoOut_ack_tag;
     out->data.ack.message_id = id;
     out->data.ack.status = (protoduino_Status)status;
-    pd_dispatch_send(core, out);
+    pd_out_send(core, out);
 }
 
 /* After a Stop's Ack, or a liveness message's that cleared the flag: the
  * state as it is now (active with the new epoch, or cleared). */
 static void notify_failsafe(pd_core_t *core)
 {
-    pd_dispatch_send_failsafe(core);
+    pd_out_send_failsafe(core);
 }
 
 /* --- command handlers: each returns the Ack status ------------------------ */
@@ -188,7 +90,7 @@ static void alive(pd_core_t *core, pd_cmd_t *cmd, uint8_t epoch, bool counts)
     }
     if (core->failsafe.epoch != 0) {
         cmd->ack->has_failsafe = true;
-        failsafe_state(core, &cmd->ack->failsafe);
+        pd_out_failsafe_state(core, &cmd->ack->failsafe);
     }
 }
 
@@ -327,23 +229,27 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
 }
 
 /*
- * The command table: one entry per ArduinoIn.data member,
- *   X(name, feature, flags, result)
+ * The command table, PD_COMMANDS in pd_tables.h: generated by `protoduino gen`
+ * from the (command) options on ArduinoIn.data's members and the (pin_mode)
+ * options on enum Feature (proto/protoduino.proto; protoduino_options.proto
+ * says what each means), the declarations host/protoduino/commands.py is
+ * built from too. One X(name, feature, flags, result) per member:
  *   name    the member: its tag is protoduino_ArduinoIn_<name>_tag, its
- *           handler cmd_<name>(core, cmd), which returns the Ack status
+ *           handler cmd_<name>(core, cmd) above, which returns the Ack status
  *           (anything but OK: nothing changed) and may set cmd->then to send
  *           something after the Ack;
- *   feature 1, or the PD_FEATURE_x switch (pd_features.h) of the pin mode it
- *           belongs to: built without it, the command is answered
- *           STATUS_NOT_SUPPORTED and its handler is left out of the build;
+ *   feature 1, or the PD_FEATURE_x switch (pd_features.h) it needs: built
+ *           without it, the command is answered STATUS_NOT_SUPPORTED and its
+ *           handler is left out of the build;
  *   flags   PD_CMD_IDEMPOTENT: running it twice changes nothing, so it is
  *           neither looked up in nor recorded in the dedupe window (a repeat
  *           is answered in full; the window is left to commands that move
- *           outputs). Must agree with `idempotent` in host/protoduino/commands.py;
- *           PD_CMD_COMMANDS: it sets an output to a commanded (not safe)
+ *           outputs);
+ *           PD_CMD_SETS_OUTPUT: it sets an output to a commanded (not safe)
  *           value, so it is refused with STATUS_FAILSAFE_EXPIRED once the
- *           failsafe timer has run out, until the next liveness message:
- *           there is never a commanded output without a running timer;
+ *           failsafe timer has run out, until the next liveness message
+ *           (there is never a commanded output without a running timer), and
+ *           with STATUS_INTERLOCK_ACTIVE while an interlock is latched;
  *   result  the Ack.result member its Ack carries (0: none); the handler fills it.
  *
  * Why an X-macro and not an array of structs with function pointers: the
@@ -352,39 +258,19 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
  * board's constant figures into them. Expanded into switches, the table costs
  * what the hand-written switch it replaced cost.
  *
- * How to add a command:
- *   1. its message in proto/protoduino.proto, a member of ArduinoIn.data with
- *      a field number from your range (and its bounds in protoduino.options),
- *      then `protoduino gen`, and the wire text in docs/protocol.md;
- *   2. a handler above, cmd_<name>(core, cmd);
- *   3. one X(...) line below;
- *   4. one Command declaration in host/protoduino/commands.py (the suite checks
- *      that every ArduinoIn member has one and that both sides agree on the flags).
+ * How to add a command (the files touched by hand; docs/architecture.md):
+ *   1. proto/protoduino.proto: its message and a member of ArduinoIn.data with
+ *      a field number from your range, with a (command) option if it is
+ *      idempotent, carries an Ack result, needs a feature or sets outputs
+ *      (its bounds, if any, in proto/protoduino.options); then `protoduino gen`;
+ *   2. here: its handler, cmd_<name>(core, cmd);
+ *   3. docs/protocol.md: its wire text;
+ *   4. its method on the host (host/protoduino/board.py and aio.py) and its
+ *      tests; the fake devices (tests/fakedevice.py, host/protoduino/testing.py) if
+ *      the tests that use them send it.
+ * A result also needs its encoding in pd_encode.c (the device's encoder writes
+ * only the Ack results it knows).
  */
-#define PD_CMD_IDEMPOTENT 0x01u
-#define PD_CMD_COMMANDS 0x02u
-
-#define PD_COMMANDS(X)                                                       \
-    X(ping, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_ping_echo_tag)              \
-    X(get_info, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_info_tag)               \
-    X(servo_init, PD_FEATURE_SERVO, 0, 0)                                    \
-    X(servo_control, PD_FEATURE_SERVO, PD_CMD_COMMANDS, 0)                   \
-    X(digital_init, PD_FEATURE_DIGITAL_OUTPUT, 0, 0)                         \
-    X(digital_control, PD_FEATURE_DIGITAL_OUTPUT, PD_CMD_COMMANDS, 0)        \
-    X(pwm_init, PD_FEATURE_PWM, 0, 0)                                        \
-    X(pwm_control, PD_FEATURE_PWM, PD_CMD_COMMANDS, 0)                       \
-    X(digital_input_init, PD_FEATURE_DIGITAL_INPUT, 0, 0)                    \
-    X(analog_input_init, PD_FEATURE_ANALOG_INPUT, 0, 0)                      \
-    X(counter_init, PD_FEATURE_COUNTER, 0, 0)                                \
-    X(clear_interlock, PD_FEATURE_DIGITAL_INPUT, 0, 0)                       \
-    X(stop, 1, 0, 0)                                                         \
-    X(pose, 1, PD_CMD_COMMANDS, 0)                                           \
-    X(read_outputs, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)        \
-    X(configure_failsafe, 1, 0, 0)                                           \
-    X(heartbeat, 1, PD_CMD_IDEMPOTENT, 0)                                    \
-    X(release, 1, 0, 0)                                                      \
-    X(release_all, 1, 0, 0)
-
 /* The table entry for `tag` (flags and result; the handler is run by run_command). */
 static bool find_command(pb_size_t tag, pd_command_t *entry)
 {
@@ -416,24 +302,28 @@ static protoduino_Status run_command(pd_core_t *core, pd_cmd_t *cmd)
 
 static void respond(pd_core_t *core, const protoduino_ArduinoIn *msg, bool decoded);
 
+/* What pd_dispatch_decode clears: ArduinoIn is its message id and the oneof. */
+typedef char pd_assert_in_is_id_and_oneof[
+    (offsetof(protoduino_ArduinoIn, message_id) == 0 &&
+     offsetof(protoduino_ArduinoIn, which_data) == sizeof(uint32_t) &&
+     offsetof(protoduino_ArduinoIn, data) < offsetof(protoduino_ArduinoIn, which_data) + 2u * sizeof(uint32_t) &&
+     offsetof(protoduino_ArduinoIn, data) + sizeof(((protoduino_ArduinoIn *)0)->data) ==
+         sizeof(protoduino_ArduinoIn)) ? 1 : -1];
+
 bool pd_dispatch_decode(pd_core_t *core, const uint8_t *payload, size_t len)
 {
     pb_istream_t stream = pb_istream_from_buffer(payload, len);
-    /* NOINIT: core->in is all zeros already (pd_dispatch_clear), which are
-     * proto3's defaults; nanopb would walk every field descriptor of ArduinoIn
-     * to set them. */
+    /*
+     * NOINIT: nanopb would walk every field descriptor of ArduinoIn to set
+     * proto3's defaults. Zeros are those defaults, and nanopb zeroes (and sets
+     * to defaults) the oneof member it decodes whenever which_data did not name
+     * it yet, so only the fields outside the oneof are zeroed here. Zeroing the
+     * whole 104 B after every frame instead was 350 of the Uno's cycles per
+     * command (and 320 on the Ack's path when it ran before the decode).
+     */
+    core->in.message_id = 0;
+    core->in.which_data = 0;
     return pb_decode_ex(&stream, protoduino_ArduinoIn_fields, &core->in, PB_DECODE_NOINIT);
-}
-
-/*
- * Zeroed when the frame that used it ends, not before the next decode: the
- * decode starts as the payload's last byte arrives and has to finish before
- * the Ack can go, and zeroing 104 B there was 320 of the Uno's cycles on that
- * path; after the frame, the Ack is already leaving.
- */
-void pd_dispatch_clear(pd_core_t *core)
-{
-    memset(&core->in, 0, sizeof(core->in));
 }
 
 /*
@@ -470,7 +360,7 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
         memset(&out, 0, sizeof(out));
         out.which_data = protoduino_ArduinoOut_decode_error_tag;
         out.data.decode_error.count = core->decode_errors;
-        pd_dispatch_send(core, &out);
+        pd_out_send(core, &out);
         if (msg->message_id != 0) {
             memset(&out, 0, sizeof(out));
             send_ack(core, &out, msg->message_id, protoduino_Status_STATUS_DECODE_ERROR);
@@ -495,11 +385,11 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
     }
     pd_cmd_t cmd = {msg, &out.data.ack, NULL};
     protoduino_Status status = protoduino_Status_STATUS_UNKNOWN_COMMAND;
-    if (known && (entry.flags & PD_CMD_COMMANDS) && core->failsafe.fired) {
+    if (known && (entry.flags & PD_CMD_SETS_OUTPUT) && core->failsafe.fired) {
         /* The timer ran out (pd_core_poll acts on it within the millisecond) and no
          * liveness message came since. */
         status = protoduino_Status_STATUS_FAILSAFE_EXPIRED;
-    } else if (known && (entry.flags & PD_CMD_COMMANDS) && core->outputs.inputs.latched) {
+    } else if (known && (entry.flags & PD_CMD_SETS_OUTPUT) && core->outputs.inputs.latched) {
         /* An interlock tripped: outputs stay safe until ClearInterlock. */
         status = protoduino_Status_STATUS_INTERLOCK_ACTIVE;
     } else if (known) {

@@ -12,33 +12,12 @@
 #ifndef PD_FEATURES_H
 #define PD_FEATURES_H
 
-#if defined(ARDUINO) || defined(PD_CONFIG_H_WANTED)
-#include "pd_config.h"
-#endif
-
-#ifndef PD_FEATURE_SERVO
-#define PD_FEATURE_SERVO 1
-#endif
-#ifndef PD_FEATURE_DIGITAL_OUTPUT
-#define PD_FEATURE_DIGITAL_OUTPUT 1
-#endif
-#ifndef PD_FEATURE_DIGITAL_INPUT
-#define PD_FEATURE_DIGITAL_INPUT 1
-#endif
-#ifndef PD_FEATURE_ANALOG_INPUT
-#define PD_FEATURE_ANALOG_INPUT 1
-#endif
-#ifndef PD_FEATURE_PWM
-#define PD_FEATURE_PWM 1
-#endif
-#ifndef PD_FEATURE_COUNTER
-#define PD_FEATURE_COUNTER 1
-#endif
-
-/* DeviceInfo.features: bit N set for each Feature N built in (protoduino.proto, enum Feature). */
-#define PD_FEATURES                                                          \
-    ((PD_FEATURE_SERVO ? 1u << 1 : 0u) | (PD_FEATURE_DIGITAL_OUTPUT ? 1u << 2 : 0u) |   \
-     (PD_FEATURE_DIGITAL_INPUT ? 1u << 3 : 0u) | (PD_FEATURE_ANALOG_INPUT ? 1u << 4 : 0u) | \
-     (PD_FEATURE_PWM ? 1u << 5 : 0u) | (PD_FEATURE_COUNTER ? 1u << 6 : 0u))
+/* Each Feature of proto/protoduino.proto's enum is a PD_FEATURE_<NAME> switch,
+ * 1 (0 for one declared off by default) unless the build defined it (make's
+ * FEATURES, or the Arduino library's pd_config.h, which pd_tables.h includes
+ * first), and PD_FEATURES is
+ * DeviceInfo.features: bit N set for each Feature N built in. Both are
+ * generated from the schema by `protoduino gen`. */
+#include "pd_tables.h"
 
 #endif /* PD_FEATURES_H */

@@ -2,7 +2,8 @@
 
 #include <string.h>
 
-#include "pd_core.h"
+#include "pd_out.h"
+#include "pd_state.h"
 
 typedef char pd_assert_analog_dirty_fits[(PD_MAX_ANALOG_INPUTS <= 8u) ? 1 : -1];
 typedef char pd_assert_counter_dirty_fits[(PD_MAX_COUNTERS <= 8u) ? 1 : -1];
@@ -11,13 +12,7 @@ typedef char pd_assert_report_fits[(PD_MAX_ANALOG_INPUTS <= sizeof(((protoduino_
                                     PD_MAX_COUNTERS <= sizeof(((protoduino_InputReport *)0)->counter_counts) /
                                                            sizeof(uint32_t)) ? 1 : -1];
 
-#define NO_SLOT 0xFFu
-
-void pd_inputs_init(pd_inputs_t *in)
-{
-    memset(in, 0, sizeof(*in));
-    in->adc_slot = NO_SLOT;
-}
+#define NO_SLOT PD_INPUTS_NO_SLOT
 
 #define PD_ANY_INPUT (PD_FEATURE_DIGITAL_INPUT || PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER)
 
@@ -32,7 +27,7 @@ static void mark_dirty(pd_core_t *core)
             in->coalesced++;
         }
     }
-    pd_core_report(core, PD_INPUTS_SLOT);
+    pd_state_report(core, PD_INPUTS_SLOT);
 }
 
 #if PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER
@@ -122,7 +117,7 @@ static __attribute__((noinline)) void trip(pd_core_t *core, uint8_t pin)
     /* A safe state of its own (a new failsafe epoch); the timer runs on. */
     pd_failsafe_interlock(&core->failsafe, pin);
     in->latched = (uint8_t)(pin + 1u);
-    pd_dispatch_send_failsafe(core); /* dropped while IDLE: no one to tell (a Ping's Ack will) */
+    pd_out_send_failsafe(core); /* dropped while IDLE: no one to tell (a Ping's Ack will) */
 }
 
 /* Whether an interlock input is at its trip level now (debounced). */
@@ -489,25 +484,4 @@ void pd_inputs_sent(pd_core_t *core, const protoduino_ArduinoOut *msg)
     in->analog_dirty = 0;
     in->counter_dirty = 0;
     in->coalesced = 0;
-}
-
-void pd_inputs_release(pd_outputs_t *outputs, void *hal, uint8_t pin, uint8_t mode, uint8_t slot)
-{
-    pd_inputs_t *in = &outputs->inputs;
-    uint32_t bit = 1UL << pin;
-    if (mode == PD_MODE_DIGITAL_INPUT) {
-        in->trip_mask &= ~bit;
-        in->dpins &= ~bit;
-    } else if (mode == PD_MODE_ANALOG_INPUT) {
-        in->analog_on = (uint8_t)(in->analog_on & ~(1u << slot));
-        /* Interval 0: not sampled; a conversion under way ends unused (poll_analog). */
-        memset(&in->analog[slot], 0, sizeof(in->analog[slot]));
-        in->analog_dirty = (uint8_t)(in->analog_dirty & ~(1u << slot));
-    } else if (mode == PD_MODE_COUNTER) {
-        in->counter_on = (uint8_t)(in->counter_on & ~(1u << slot));
-        pd_hal_counter_stop(hal, pin);
-        memset(&in->counter[slot], 0, sizeof(in->counter[slot]));
-        in->counter_dirty = (uint8_t)(in->counter_dirty & ~(1u << slot));
-    }
-    pd_hal_input_release(hal, pin);
 }

@@ -26,7 +26,7 @@
 struct pd_core;
 struct pd_outputs;
 
-/* The core's report slot for InputReport (pd_core.h, PD_REPORT_SLOTS). */
+/* The core's report slot for InputReport (pd_state.h, PD_REPORT_SLOTS). */
 #define PD_INPUTS_SLOT 0u
 
 /* Slots per input mode (each slot a few bytes of the Uno's RAM). */
@@ -67,6 +67,9 @@ typedef struct pd_counter {
     uint16_t reported_at; /* low 16 bits of the ms of the last report */
 } pd_counter_t;
 
+/* No slot: pd_inputs_t.adc_slot when no conversion is under way. */
+#define PD_INPUTS_NO_SLOT 0xFFu
+
 typedef struct pd_inputs {
     pd_dinput_t digital[PD_MAX_DIGITAL_INPUTS];
     pd_ainput_t analog[PD_MAX_ANALOG_INPUTS];
@@ -78,7 +81,7 @@ typedef struct pd_inputs {
     uint32_t trip_level; /* bit N: it trips at a high level (else low) */
     uint8_t analog_dirty;  /* bit slot: a value to report */
     uint8_t counter_dirty; /* bit slot: a count to report */
-    uint8_t adc_slot;      /* the analog slot being converted; 0xFF: none */
+    uint8_t adc_slot;      /* the analog slot being converted; PD_INPUTS_NO_SLOT: none */
     uint8_t adc_last;      /* the analog slot converted last (round-robin) */
     uint8_t analog_fresh;  /* samples due for a report since the last round's end */
     uint8_t analog_round;  /* bit slot: sampled in this round */

@@ -1,20 +1,24 @@
 /*
- * The link layer (docs/protocol.md sections 2, 5 and 6): the streaming COBS
+ * The link layer (docs/protocol.md sections 2, 5 and 6): the streaming
  * receiver, packet checks, the IDLE/ACTIVE state machine with RESET/RESET_ACK,
- * SEQ accounting, link events, and the transmit path.
+ * SEQ accounting, link events, and the transmit path. It knows nothing above
+ * it: it is given bytes and a HAL, and returns what happened (pd_link_event_t);
+ * the core decides what runs.
  *
  * Receive recovery policy, the same as the host's framing.py: bytes are
  * collected until a 0x00; an empty frame is ignored; anything else is checked
  * (COBS, length, CRC, type), and dropped and counted by reason if it fails.
  * The work is done as the bytes arrive: each one is COBS-decoded into rx_buf
- * and advances the CRC, and a COMMAND's payload is handed to nanopb as soon as
- * its last byte is in (pd_dispatch_decode), while the CRC and the delimiter are
- * still on the wire; so at the delimiter only the checks and the command
- * remain (the round trip's share of the device). Nothing runs unchecked: the
- * decoded command is used only once the whole packet passed. More than PD_MAX_ENCODED_FRAME bytes without a 0x00 is
- * an overflow: the buffer is discarded, EVENT RX_OVERFLOW is sent and
- * everything up to the next 0x00 is skipped. So a corrupted frame never
- * damages the next one, and no timer is needed.
+ * (pd_cobs_rx_byte) and advances the CRC, and as soon as a COMMAND's payload
+ * is all in the link says so (PD_LINK_PAYLOAD), while the CRC and the
+ * delimiter are still on the wire, so that the core has it decoded by then;
+ * at the delimiter only the checks and the command remain (the round trip's
+ * share of the device). Nothing runs unchecked: the command is run only on
+ * PD_LINK_COMMAND, once the whole packet passed. More than
+ * PD_MAX_ENCODED_FRAME bytes without a 0x00 is an overflow: the buffer is
+ * discarded, EVENT RX_OVERFLOW is sent and everything up to the next 0x00 is
+ * skipped. So a corrupted frame never damages the next one, and no timer is
+ * needed.
  *
  * Transmit: a frame is built on the stack, encoded into a bounded buffer and
  * handed to the HAL's transmit queue whole, in the order the core produces
@@ -22,11 +26,11 @@
  * (Acks, CONTROL, the notices that follow an Ack) go in at once. A received
  * frame is only acted upon while the queue has room for everything it can
  * make the device send (PD_TX_RESERVE): otherwise its delimiter is left
- * unconsumed, the bytes wait in the platform's receive buffer (which the host's
- * flow control keeps from overflowing) and the loop goes on. Unsolicited
- * reports go in only when room beyond that reserve remains, so they never
- * hold up a reply by more than one short frame. DATA is sent only while
- * ACTIVE; CONTROL always.
+ * unconsumed (PD_LINK_HELD), the bytes wait in the platform's receive buffer
+ * (which the host's flow control keeps from overflowing) and the loop goes
+ * on. Unsolicited reports go in only when room beyond that reserve remains
+ * (pd_link_send_spare), so they never hold up a reply by more than one short
+ * frame. DATA is sent only while ACTIVE; CONTROL always.
  */
 #ifndef PD_LINK_H
 #define PD_LINK_H
@@ -39,8 +43,6 @@
 #include "pd_encode.h"
 #include "pd_protocol.h"
 #include "protoduino.pb.h"
-
-struct pd_core;
 
 /* Largest payload the device sends: one ArduinoOut (CONTROL payloads are <= 11 B). */
 #define PD_TX_MAX_PAYLOAD PD_ENCODE_MAX
@@ -74,7 +76,7 @@ struct pd_core;
 /*
  * A platform's transmit queue holds at least the reserve (checked at compile
  * time by each platform). A report goes in only when the queue has room for it
- * and for a reply, and no command frame is arriving (pd_dispatch_send_spare):
+ * and for a reply, and no command frame is arriving (pd_link_send_spare):
  * on the Uno, whose queue is the reserve, into an empty queue. So a reply
  * waits behind one report at most, the one on the line, and the queue keeps
  * no room beside the reserve for reports (every byte of it is the Uno's RAM).
@@ -119,11 +121,8 @@ typedef struct pd_link {
     uint16_t rx_len;  /* encoded bytes of the current frame so far */
     uint16_t rx_out;  /* decoded bytes so far (may pass rx_buf's size: then too long) */
     uint16_t rx_crc;  /* CRC-16 over the decoded bytes so far */
-    uint8_t rx_left;  /* bytes left in the current COBS block; 0: the next one is a code */
-    bool rx_zero;     /* the current block implies a 0x00 after it, if another follows */
+    pd_cobs_rx_t rx_cobs; /* the current frame's COBS decoder */
     bool rx_skipping; /* after an overflow, until the next 0x00 */
-    bool rx_decoded;  /* the current frame's COMMAND payload decoded (pd_dispatch_decode) */
-    bool rx_in_used;  /* core->in holds the current frame's decode: cleared as the frame ends */
     bool rx_held;     /* the current frame is complete, held until its replies fit */
     bool active;      /* IDLE until the first RESET */
     bool tx_flush;    /* send a lone 0x00 before the next frame */
@@ -137,11 +136,63 @@ typedef struct pd_link {
 void pd_link_init(pd_link_t *link);
 
 /*
- * Offer one received byte; a complete packet is acted upon at once. Returns
- * false, without consuming it, for a delimiter that completes a frame while
- * the transmit queue has less than PD_TX_RESERVE of room: offer it again later.
+ * What one received byte did. The values from PD_LINK_COMMAND on end a frame
+ * (the receiver has restarted): whatever the core kept of it (a decoded
+ * command) is done with.
  */
-bool pd_link_rx_byte(struct pd_core *core, uint8_t byte);
+typedef enum pd_link_event {
+    PD_LINK_NONE = 0, /* taken; the frame goes on (or there was none: noise, an empty frame) */
+    PD_LINK_END,      /* pd_link_rx_byte only (its others: NONE, PAYLOAD), NOT taken: a
+                       * delimiter or the byte past the longest frame; hand it to
+                       * pd_link_rx_end */
+    PD_LINK_HELD,     /* NOT taken: a delimiter completing a frame while the transmit queue has
+                       * less than PD_TX_RESERVE of room; offer it again later */
+    PD_LINK_PAYLOAD,  /* taken; a COMMAND's payload is all in (pd_link_payload), unchecked:
+                       * decode it now, run it only on PD_LINK_COMMAND */
+    PD_LINK_COMMAND,  /* a checked COMMAND while ACTIVE: run and answer it */
+    PD_LINK_RESET,    /* a RESET of this version: the link is ACTIVE with SEQ restarted; open
+                       * the session it carries (pd_link_session), then pd_link_reset_ack */
+    PD_LINK_HANDLED,  /* a valid packet the link dealt with itself: CONTROL, DATA (ignored), a
+                       * RESET of another version or a COMMAND while IDLE (both answered) */
+    PD_LINK_DROPPED,  /* an error: not valid COBS, a length, CRC or TYPE error (counted) */
+    PD_LINK_OVERFLOW  /* an error: no 0x00 in PD_MAX_ENCODED_FRAME bytes; EVENT RX_OVERFLOW
+                       * sent, the rest skipped up to the next 0x00 */
+} pd_link_event_t;
+
+/* Whether `event` ended the frame. */
+#define PD_LINK_ENDED(event) ((event) >= PD_LINK_COMMAND)
+
+/*
+ * Offer one received byte. Most bytes are only decoded and stored; the one
+ * that ends a frame, a delimiter or one past the longest frame, may make the
+ * link answer, so it goes on to pd_link_rx_end with the platform's HAL
+ * (PD_LINK_END). Two calls rather than a HAL argument for every byte: on the
+ * Uno, loading it for each one was 9 of its cycles a byte.
+ */
+pd_link_event_t pd_link_rx_byte(pd_link_t *link, uint8_t byte);
+
+/* The byte pd_link_rx_byte returned PD_LINK_END for; `hal` is the platform's (pd_hal.h). */
+pd_link_event_t pd_link_rx_end(pd_link_t *link, void *hal, uint8_t byte);
+
+/* The COMMAND payload of PD_LINK_PAYLOAD and PD_LINK_COMMAND, valid until the next byte. */
+static inline const uint8_t *pd_link_payload(const pd_link_t *link)
+{
+    return link->rx_buf + PD_HEADER_SIZE;
+}
+
+static inline uint8_t pd_link_payload_len(const pd_link_t *link)
+{
+    return link->rx_buf[1];
+}
+
+/* The session a PD_LINK_RESET carries (4 bytes, big-endian), valid until the next byte. */
+static inline const uint8_t *pd_link_session(const pd_link_t *link)
+{
+    return link->rx_buf + PD_HEADER_SIZE + 2u;
+}
+
+/* Answer PD_LINK_RESET: RESET_ACK with this power-up's id and whether the session resumed. */
+void pd_link_reset_ack(pd_link_t *link, void *hal, const uint8_t boot_id[4], bool resumed);
 
 /*
  * The buffer a frame is built in, in place: the lone 0x00 that may go first,
@@ -160,9 +211,17 @@ bool pd_link_rx_byte(struct pd_core *core, uint8_t byte);
  * buf + PD_TX_PAYLOAD_AT, in a buffer of PD_TX_BUF bytes (which it overwrites).
  * Returns whether the HAL took the whole frame. DATA is refused while IDLE.
  */
-bool pd_link_send(struct pd_core *core, uint8_t type, uint8_t *buf, size_t len);
+bool pd_link_send(pd_link_t *link, void *hal, uint8_t type, uint8_t *buf, size_t len);
+
+/*
+ * The same for an unsolicited DATA packet (a report): sent only if the
+ * transmit queue has room for it and for a reply (PD_TX_RESERVE: on the Uno,
+ * if it is empty), no complete frame is held for room and, if `yield`, no
+ * frame is being received. Returns whether it was queued.
+ */
+bool pd_link_send_spare(pd_link_t *link, void *hal, uint8_t *buf, size_t len, bool yield);
 
 /* CONTROL EVENT with the given code (allowed in any state). */
-bool pd_link_send_event(struct pd_core *core, uint8_t event);
+bool pd_link_send_event(pd_link_t *link, void *hal, uint8_t event);
 
 #endif /* PD_LINK_H */

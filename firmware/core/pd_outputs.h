@@ -14,13 +14,29 @@
  * - the pin-mode table, PD_MODES in pd_outputs.c: per mode, how many slots it
  *   has, how to drive a pin of it to its safe value and how to release it.
  *
- * How to add a pin mode (e.g. PWM):
- *   1. a PD_MODE_x value below (before PD_MODE_COUNT; at most 16 modes);
- *   2. its state, if any, in pd_outputs_t (an array indexed by slot, or a mask by pin);
- *   3. one X(...) entry in PD_MODES (pd_outputs.c): slots, safe and release;
- *   4. its Init/Control functions here, which call pd_pins_claim()/pd_pins_owned(),
- *      and their commands: one entry each in the command table (pd_dispatch.c);
- *   5. on the host, one PinMode declaration in host/protoduino/commands.py.
+ * How to add a pin mode (the files touched by hand, counted by adding a
+ * throwaway output mode; docs/architecture.md):
+ *   1. proto/protoduino.proto: its Init and Control messages (each with a `pin`
+ *      field; an input has no Control) and their ArduinoIn.data members, and one
+ *      Feature value with a (pin_mode) option naming them (and the DeviceInfo
+ *      mask of the pins that can do it, if not every pin can); then
+ *      `protoduino gen`, which writes PD_MODE_<NAME>, PD_FEATURE_<NAME> and
+ *      PD_FEATURES (pd_tables.h), the Makefile's feature list, the command table
+ *      and the host's declarations (host/protoduino/commands.py reads them);
+ *   2. here: its state, if any, in pd_outputs_t (an array indexed by slot, or a
+ *      mask by pin), and its Init/Control functions' prototypes;
+ *   3. pd_outputs.c: one X(...) entry in PD_MODES (slots, safe and release; the
+ *      compiler checks that every mode has one), and the Init/Control functions,
+ *      which call pd_pins_claim()/pd_pins_owned(), under #if PD_FEATURE_<NAME>;
+ *   4. pd_dispatch.c: their handlers cmd_<init>() and cmd_<control>();
+ *   5. the tests that list the default firmware's features
+ *      (tests/unit/test_pins_fake.py, tests/e2e/test_cli.py), and the switch in
+ *      firmware/arduino/src/pd_config.h (a feature not listed there is on).
+ * Then, for a mode the host offers: docs/protocol.md, its Board method
+ * (host/protoduino/board.py, aio.py; a named PinMode in commands.py if the
+ * host's code refers to it) and its tests; the HAL (pd_hal.h, avr/, posix/) if
+ * it drives a pin in a new way; ReadOutputs (pd_outputs_read, pd_encode.c) if
+ * the host reads it back; the fake devices (tests/) when their tests use it.
  */
 #ifndef PD_OUTPUTS_H
 #define PD_OUTPUTS_H
@@ -31,6 +47,7 @@
 #include "pd_features.h"
 #include "pd_hal.h"
 #include "pd_inputs.h"
+#include "pd_tables.h"
 #include "protoduino.pb.h"
 
 /* Compile-time capacity; a board reports its real figures in pd_board_info_t. */
@@ -54,17 +71,12 @@
 #define PD_MAX_PWM 1
 #endif
 
-/* Pin modes (the PD_MODES table in pd_outputs.c). PD_MODE_FREE owns nothing. */
-enum {
-    PD_MODE_FREE = 0,
-    PD_MODE_DIGITAL, /* digital output; state by pin: digital_safe/digital_level */
-    PD_MODE_SERVO,   /* servo output; state by slot (= servo channel): servo[] */
-    PD_MODE_PWM,     /* PWM output; state by slot: pwm[] */
-    PD_MODE_DIGITAL_INPUT, /* inputs (pd_inputs.c); reserved here: an output never takes their pins */
-    PD_MODE_ANALOG_INPUT,
-    PD_MODE_COUNTER,
-    PD_MODE_COUNT
-};
+/* Pin modes: the built-in ones, PD_MODE_<NAME> numbered from 1 up to
+ * PD_MODE_BUILTIN_END - 1 (PD_MODE_FREE, 0, owns nothing), are generated into
+ * pd_tables.h from the (pin_mode) options on proto/protoduino.proto's enum
+ * Feature; a mode the firmware has of its own would follow them. PD_MODES in
+ * pd_outputs.c has one entry for each mode. */
+#define PD_MODE_COUNT PD_MODE_BUILTIN_END
 
 /* An owner byte: mode in the high nibble, slot in the low one (one byte per pin of RAM). */
 #define PD_OWNER(mode, slot) ((uint8_t)(((mode) << 4) | (slot)))

@@ -40,7 +40,7 @@ typedef enum _protoduino_Status {
 } protoduino_Status;
 
 /* The build-time features a firmware may carry (DeviceInfo.features: bit N
- set means Feature N is built in). One per pin mode. */
+ set means Feature N is built in). One per pin mode, declared on it. */
 typedef enum _protoduino_Feature {
     protoduino_Feature_FEATURE_NONE = 0,
     protoduino_Feature_FEATURE_SERVO = 1,
@@ -252,6 +252,8 @@ typedef struct _protoduino_ArduinoIn {
         protoduino_DigitalInputInit digital_input_init;
         protoduino_AnalogInputInit analog_input_init;
         protoduino_CounterInit counter_init;
+        /* Not idempotent: a late duplicate must never clear an interlock that
+     tripped again after the first one ran; the dedupe window answers it. */
         protoduino_ClearInterlock clear_interlock;
         protoduino_Pose pose;
         protoduino_ReadOutputs read_outputs;

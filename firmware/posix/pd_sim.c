@@ -607,7 +607,7 @@ int main(int argc, char **argv)
         }
         /* The replies this pass queued go out before the core's poll, as the Uno's
          * ring drains while its loop runs: a report waits for an empty queue
-         * (pd_dispatch_send_spare), and with a command every pass it would wait for good. */
+         * (pd_link_send_spare), and with a command every pass it would wait for good. */
         sim_tx_flush(&hal);
         pd_core_poll(&core);
         sim_tx_flush(&hal); /* what this pass queued goes out now, not after the next poll() */

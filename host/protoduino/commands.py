@@ -1,16 +1,29 @@
-"""One declaration per command and per pin mode: the host's side of the firmware's tables.
+"""The built-in commands and pin modes as the host handles them, from their one declaration.
 
-The firmware has a command table (``PD_COMMANDS`` in firmware/core/pd_dispatch.c:
-handler, idempotent or not, what its Ack returns) and a pin-mode table
-(``PD_MODES`` in firmware/core/pd_outputs.c). Everything the host's layers need
-to know about a command (the request layer: may its duplicate run twice? does
-a session restore have to send an Init before it?) is read from here instead of
-lists of names kept in step across modules. tests/contract/test_commands.py checks that
-every ArduinoIn member is declared and that the firmware's table agrees.
+Each command's handling (idempotent, the Ack result, the feature it needs, whether
+it sets an output) and each pin mode (its Init and Control, its feature, the pins
+that can do it) are declared once, as options in proto/protoduino.proto
+(proto/protoduino_options.proto says what each means). ``protoduino gen`` writes
+from them the firmware's tables (firmware/generated/pd_tables.h) and the rows this
+module builds its typed declarations from (``_generated/tables.py``). Everything the
+host's layers need to know about a command (the request layer: may its duplicate
+run twice? does a session restore have to send an Init before it?) is read from
+here instead of lists of names kept in step across modules.
 
-How to add a command: one :class:`Command` in ``_BOARD_COMMANDS`` (or, for the
-Init and Control of a pin mode, one :class:`PinMode` in ``PIN_MODES``, which
-declares both), then its method on :class:`~protoduino.board.Board`.
+How to add a command (2 files by hand, counted with a throwaway one; before the tables
+were generated, 3): its message and ``ArduinoIn.data`` member in proto/protoduino.proto,
+with a ``(command)`` option if it is idempotent, carries an Ack result, needs a feature
+or sets outputs, then ``protoduino gen``; its handler ``cmd_<name>`` in
+firmware/core/pd_dispatch.c (the recipe there). Nothing here: its :class:`Command`
+comes from the table. Then its wire text in docs/protocol.md and its method on
+:class:`~protoduino.board.Board` (and ``protoduino.aio``).
+
+How to add a pin mode (4 files by hand, and the 2 tests that list the default
+firmware's features; before, 8 and the same 2): its Init and Control and a
+``Feature`` value with a ``(pin_mode)`` option in the schema, then the firmware's
+functions (firmware/core/pd_outputs.h has the exact recipe). Here, only a named
+constant (``SERVO`` and the others below) if the host's code refers to the mode.
+docs/architecture.md lists both counts, file by file.
 """
 
 from __future__ import annotations
@@ -18,6 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ._generated import protoduino_pb2 as pb
+from ._generated import tables
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +76,11 @@ class Command:
     result: str | None = None
     #: The pin mode whose Init or Control it is, if any.
     pin_mode: PinMode | None = None
+    #: The build-time feature it needs (a pin mode's, or its own), if any.
+    feature: str | None = None
+    #: It sets outputs to commanded values (the firmware's PD_CMD_SETS_OUTPUT): the
+    #: device refuses it once the failsafe has run out or an interlock is latched.
+    sets_output: bool = False
 
     @property
     def is_init(self) -> bool:
@@ -82,47 +101,32 @@ class Command:
         return self.pin_mode.init
 
 
-DIGITAL = PinMode(
-    "digital", init="digital_init", control="digital_control", feature="digital_output"
+#: Every pin mode, in the firmware's PD_MODE_* order (their Features' order).
+PIN_MODES: tuple[PinMode, ...] = tuple(
+    PinMode(row.name, row.init, row.control, row.feature, row.pins) for row in tables.PIN_MODES
 )
-SERVO = PinMode("servo", init="servo_init", control="servo_control", feature="servo")
-PWM = PinMode("pwm", init="pwm_init", control="pwm_control", feature="pwm", pins="pwm_pins")
-DIGITAL_INPUT = PinMode("digital_input", init="digital_input_init", feature="digital_input")
-ANALOG_INPUT = PinMode(
-    "analog_input", init="analog_input_init", feature="analog_input", pins="analog_pins"
-)
-COUNTER = PinMode("counter", init="counter_init", feature="counter", pins="counter_pins")
+_MODES = {mode.name: mode for mode in PIN_MODES}
 
-#: Every pin mode, in the firmware's PD_MODE_* order.
-PIN_MODES: tuple[PinMode, ...] = (DIGITAL, SERVO, PWM, DIGITAL_INPUT, ANALOG_INPUT, COUNTER)
+#: The pin modes the host's code names.
+DIGITAL = _MODES["digital"]
+SERVO = _MODES["servo"]
+PWM = _MODES["pwm"]
+DIGITAL_INPUT = _MODES["digital_input"]
+ANALOG_INPUT = _MODES["analog_input"]
+COUNTER = _MODES["counter"]
 
-_BOARD_COMMANDS: tuple[Command, ...] = (
-    Command("ping", idempotent=True, result="ping_echo"),
-    Command("get_info", idempotent=True, result="info"),
-    Command("stop"),
-    Command("pose"),  # several pin-mode Controls at once (PoseItem: servo, digital, pwm)
-    Command("read_outputs", idempotent=True, result="outputs"),
-    Command("configure_failsafe"),
-    Command("heartbeat", idempotent=True),
-    Command("release"),
-    Command("release_all"),
-    # Not idempotent: a late duplicate must never clear an interlock that tripped
-    # again after the first one ran; the dedupe window answers it instead.
-    Command("clear_interlock"),
-)
-
-
-def _pin_mode_commands(modes: tuple[PinMode, ...]) -> tuple[Command, ...]:
-    commands = []
-    for mode in modes:
-        commands.append(Command(mode.init, pin_mode=mode))
-        if mode.control is not None:
-            commands.append(Command(mode.control, pin_mode=mode))
-    return tuple(commands)
-
-
-#: ArduinoIn member -> its declaration.
-COMMANDS: dict[str, Command] = {c.kind: c for c in _BOARD_COMMANDS + _pin_mode_commands(PIN_MODES)}
+#: ArduinoIn member -> its declaration, for every member of the schema.
+COMMANDS: dict[str, Command] = {
+    row.kind: Command(
+        row.kind,
+        idempotent=row.idempotent,
+        result=row.result,
+        pin_mode=_MODES[row.pin_mode] if row.pin_mode is not None else None,
+        feature=row.feature,
+        sets_output=row.sets_output,
+    )
+    for row in tables.COMMANDS
+}
 
 
 def feature_hint(feature: str) -> str:
@@ -144,6 +148,6 @@ def command(kind: str) -> Command:
 
 
 def arduino_in_kinds() -> tuple[str, ...]:
-    """Every member of ArduinoIn.data in the schema (what must be declared here)."""
+    """Every member of ArduinoIn.data in the schema (each has a declaration here)."""
     oneof = pb.ArduinoIn.DESCRIPTOR.oneofs_by_name["data"]
     return tuple(field.name for field in oneof.fields)

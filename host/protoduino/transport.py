@@ -368,10 +368,15 @@ class Transport:
     def _lost(self, error: Exception) -> None:
         log.warning("%s: port lost: %s", self.name, error)
         self.last_error = TransportError(f"port {self.url} lost ({error}); reopening")
-        self._close_port()
-        self.clear_queue()
+        # The link goes down first, then the port reads as closed: a caller who sees
+        # `connected` False and submits a command must find the link down too (its call
+        # then waits for the next session). In the other order a command submitted in
+        # between was handed to a closed port's queue, counted as sent, and failed as
+        # possibly run once the next handshake found the outputs lost.
         assert self._listener is not None
         self._listener.transport_lost(self.last_error)
+        self._close_port()
+        self.clear_queue()
 
     def _sleep_limit(self) -> float:
         """How long a read may wait: TICK at most, and not past the next timer."""

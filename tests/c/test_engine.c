@@ -113,11 +113,11 @@ static void test_report_newest_value_replaces_unsent(void)
     /* No room for it: the report waits, the bit stays. */
     d.hal.tx_room = 8u;
     report_value[3] = 1;
-    pd_core_report(&d.core, 3);
+    pd_state_report(&d.core, 3);
     pd_core_poll(&d.core);
     CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
     report_value[3] = 2;
-    pd_core_report(&d.core, 3);
+    pd_state_report(&d.core, 3);
     report_value[3] = 3;
     pd_core_poll(&d.core);
     CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
@@ -139,7 +139,7 @@ static void test_reply_goes_before_pending_report(void)
     d.core.report = test_report;
     d.core.report_sent = NULL;
     report_value[0] = 42;
-    pd_core_report(&d.core, 0);
+    pd_state_report(&d.core, 0);
     /* A command arriving in the same pass is answered first; the report follows. */
     protoduino_ArduinoIn in = m_digital_init(9, 13, false);
     t_send_in(&d, &in);
@@ -160,7 +160,7 @@ static void test_report_waits_for_a_command_under_way(void)
     d.core.report = test_report;
     d.core.report_sent = NULL;
     report_value[2] = 7;
-    pd_core_report(&d.core, 2);
+    pd_state_report(&d.core, 2);
     /* Half a command frame is in: the report waits for its Ack. */
     const uint8_t half[3] = {0x05, 0x01, 0x02};
     t_feed(&d, half, sizeof(half));
@@ -181,7 +181,7 @@ static void test_report_gives_way_to_commands_for_a_while_only(void)
     d.core.report = test_report;
     d.core.report_sent = NULL;
     report_value[1] = 9;
-    pd_core_report(&d.core, 1);
+    pd_state_report(&d.core, 1);
     const uint8_t partial[2] = {0x05, 0x01}; /* a command frame, forever arriving */
     t_feed(&d, partial, sizeof(partial));
     uint32_t t0 = d.hal.now_ms;
@@ -209,7 +209,7 @@ static void test_a_held_command_goes_before_any_report(void)
     t_send_in(&d, &in);
     CHECK_EQ(t_acks(&d, 9, NULL), 0);
     report_value[2] = 5;
-    pd_core_report(&d.core, 2);
+    pd_state_report(&d.core, 2);
     /* The queue empties while the report has waited longer than it ever gives way. */
     d.hal.tx_room = UINT16_MAX;
     d.hal.now_ms += PD_REPORT_MAX_WAIT_MS + 10u;
@@ -231,8 +231,8 @@ static void test_one_report_per_pass_lowest_slot_first(void)
     d.core.report_sent = NULL;
     report_value[1] = 10;
     report_value[5] = 50;
-    pd_core_report(&d.core, 5);
-    pd_core_report(&d.core, 1);
+    pd_state_report(&d.core, 5);
+    pd_state_report(&d.core, 1);
     pd_core_poll(&d.core);
     CHECK_EQ(reports_sent(&d, last, sizeof(last)), 1);
     CHECK(strcmp(last, "1:10") == 0);
@@ -249,7 +249,7 @@ static void test_no_report_while_idle(void)
     fake_clear(&d.hal);
     d.core.report = test_report;
     d.core.report_sent = NULL;
-    pd_core_report(&d.core, 0);
+    pd_state_report(&d.core, 0);
     pd_core_poll(&d.core);
     CHECK_EQ(reports_sent(&d, last, sizeof(last)), 0);
     CHECK_EQ(fake_count(&d.hal), 0);
@@ -354,10 +354,10 @@ static void test_command_decoded_early_runs_only_after_the_check(void)
     }
     /* Up to its payload's last byte: decoded, not run. */
     size_t fed = 0;
-    while (fed < n - 1u && !d.core.link.rx_decoded) {
+    while (fed < n - 1u && !d.core.in_decoded) {
         CHECK(pd_core_rx_byte(&d.core, bad[fed++]));
     }
-    CHECK(d.core.link.rx_decoded);
+    CHECK(d.core.in_decoded);
     CHECK(fed < n - 2u); /* the CRC was still to come */
     CHECK_EQ(d.core.in.message_id, 9u);
     /* The rest and the delimiter: dropped, nothing run, nothing answered. */

@@ -3,8 +3,8 @@
 26 KB of the 32,256 B that Optiboot leaves, so that users' own code has room
 beside it. RAM has its own budget (static data + the deepest stack + 256 B free
 <= 2,048 B), which needs the stack's measurement: tests/e2e/test_stack_margin.py.
-StandardFirmata (13,212 B / 1,069 B) and StandardFirmataPlus (15,202 B /
-1,274 B) stay in the bench as a comparison, not a limit. The build itself
+StandardFirmata (the hex the bench races, part 9) and StandardFirmataPlus
+(15,202 B / 1,274 B) stay in the bench as a comparison, not a limit. The build itself
 prints the figures (``make -C firmware avr``); this test checks that it does,
 measures them again with ``avr-size`` and enforces the budget.
 """

@@ -1,4 +1,5 @@
-/* The link state machine: BOOT, RESET/RESET_ACK, NOT_ACTIVE, SEQ, overflow, TX rules. */
+/* The link state machine: BOOT, RESET/RESET_ACK, NOT_ACTIVE, SEQ, overflow, TX rules; and the
+ * link alone, without a core: what each received byte did (pd_link_event_t). */
 #include <string.h>
 
 #include <pb_encode.h>
@@ -336,9 +337,9 @@ static void test_data_only_while_active(void)
     tdev_t d;
     t_boot(&d);
     fake_clear(&d.hal);
-    CHECK(!pd_dispatch_send_failsafe(&d.core));
+    CHECK(!pd_out_send_failsafe(&d.core));
     CHECK_EQ(fake_count(&d.hal), 0);
-    CHECK(pd_link_send_event(&d.core, PD_EVENT_DESYNC)); /* CONTROL goes in any state */
+    CHECK(pd_link_send_event(&d.core.link, &d.hal, PD_EVENT_DESYNC)); /* CONTROL goes in any state */
     CHECK_EQ(fake_count(&d.hal), 1);
 }
 
@@ -409,6 +410,160 @@ static void test_fed_in_any_chunking(void)
     CHECK_EQ(b.core.link.stats.packets, a.core.link.stats.packets);
 }
 
+
+/* --- the link alone: a pd_link_t, the fake HAL, and no core ---------------- */
+
+/* A whole wire frame (delimiter included) of one packet; returns its length. */
+static size_t wire_of(uint8_t type, uint8_t seq, const uint8_t *payload, size_t len, uint8_t *wire,
+                      size_t cap)
+{
+    uint8_t raw[PD_MIN_PACKET + PD_MAX_PAYLOAD];
+    size_t raw_len = 0;
+    if (pd_packet_build(type, seq, payload, len, raw, sizeof(raw), &raw_len) != PD_PACKET_OK) {
+        return 0;
+    }
+    size_t n = pd_cobs_encode(raw, raw_len, wire, cap - 1u);
+    wire[n++] = 0;
+    return n;
+}
+
+/* CONTROL EVENTs with `code` among the frames the link sent. */
+static int hal_events(const fake_hal_t *hal, uint8_t code)
+{
+    int n = 0;
+    for (size_t i = 0; i < fake_count(hal); i++) {
+        const fake_frame_t *f = fake_frame(hal, i);
+        n += f->type == PD_PACKET_CONTROL && f->len == 2 && f->payload[0] == PD_CONTROL_EVENT &&
+             f->payload[1] == code;
+    }
+    return n;
+}
+
+/* Feed `wire` to the link as the core does; counts each event, returns the last one. */
+static pd_link_event_t feed_link(pd_link_t *link, fake_hal_t *hal, const uint8_t *wire, size_t n,
+                                 unsigned counts[PD_LINK_OVERFLOW + 1])
+{
+    pd_link_event_t event = PD_LINK_NONE;
+    for (size_t i = 0; i < n; i++) {
+        event = pd_link_rx_byte(link, wire[i]);
+        if (event == PD_LINK_END) {
+            event = pd_link_rx_end(link, hal, wire[i]);
+        }
+        counts[event]++;
+    }
+    return event;
+}
+
+static void link_active(pd_link_t *link, fake_hal_t *hal)
+{
+    const uint8_t reset[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION, 0xDE, 0xAD, 0xBE, 0xEF};
+    uint8_t wire[32];
+    unsigned counts[PD_LINK_OVERFLOW + 1] = {0};
+    fake_init(hal);
+    pd_link_init(link);
+    size_t n = wire_of(PD_PACKET_CONTROL, 0, reset, sizeof(reset), wire, sizeof(wire));
+    CHECK_EQ(feed_link(link, hal, wire, n, counts), PD_LINK_RESET);
+    CHECK_EQ(counts[PD_LINK_RESET], 1);
+    CHECK_EQ(counts[PD_LINK_NONE], n - 1u);
+    CHECK(link->active);
+    /* The session is the core's to judge: the link hands it over and answers nothing yet. */
+    CHECK(memcmp(pd_link_session(link), reset + 2, 4) == 0);
+    CHECK_EQ(fake_count(hal), 0);
+    const uint8_t boot[4] = {1, 2, 3, 4};
+    pd_link_reset_ack(link, hal, boot, true);
+    CHECK_EQ(fake_count(hal), 1);
+    CHECK_EQ(fake_frame(hal, 0)->len, PD_RESET_ACK_SIZE);
+    CHECK(memcmp(fake_frame(hal, 0)->payload + 6, boot, 4) == 0);
+    CHECK_EQ(fake_frame(hal, 0)->payload[10], PD_RESET_ACK_RESUMED);
+    fake_clear(hal);
+}
+
+static void test_link_alone_reports_a_command_payload_then_the_checked_command(void)
+{
+    pd_link_t link;
+    fake_hal_t hal;
+    link_active(&link, &hal);
+    const uint8_t payload[] = {0x08, 0x07, 0x00, 0x12}; /* bytes, a zero among them */
+    uint8_t wire[32];
+    size_t n = wire_of(PD_PACKET_COMMAND, 1, payload, sizeof(payload), wire, sizeof(wire));
+    unsigned counts[PD_LINK_OVERFLOW + 1] = {0};
+    /* Up to the payload's last byte: nothing; at it, PD_LINK_PAYLOAD, with the CRC (2 bytes and
+     * the COBS code they may need) and the delimiter still to come. */
+    size_t i = 0;
+    pd_link_event_t event = PD_LINK_NONE;
+    while (i < n && event == PD_LINK_NONE) {
+        event = feed_link(&link, &hal, wire + i, 1, counts);
+        i++;
+    }
+    CHECK_EQ(event, PD_LINK_PAYLOAD);
+    CHECK(n - i >= 3u);
+    CHECK_EQ(pd_link_payload_len(&link), sizeof(payload));
+    CHECK(memcmp(pd_link_payload(&link), payload, sizeof(payload)) == 0);
+    CHECK_EQ(feed_link(&link, &hal, wire + i, n - i, counts), PD_LINK_COMMAND);
+    CHECK_EQ(counts[PD_LINK_PAYLOAD], 1);
+    CHECK_EQ(counts[PD_LINK_COMMAND], 1);
+    CHECK(memcmp(pd_link_payload(&link), payload, sizeof(payload)) == 0); /* still there */
+    CHECK_EQ(fake_count(&hal), 0); /* the link answers a command with nothing of its own */
+}
+
+static void test_link_alone_drops_and_overflows_with_events(void)
+{
+    pd_link_t link;
+    fake_hal_t hal;
+    link_active(&link, &hal);
+    const uint8_t payload[] = {0x08, 0x07};
+    uint8_t wire[32];
+    unsigned counts[PD_LINK_OVERFLOW + 1] = {0};
+    size_t n = wire_of(PD_PACKET_COMMAND, 1, payload, sizeof(payload), wire, sizeof(wire));
+    wire[n - 2] ^= 0x01; /* the CRC's last byte */
+    CHECK_EQ(feed_link(&link, &hal, wire, n, counts), PD_LINK_DROPPED);
+    CHECK_EQ(counts[PD_LINK_PAYLOAD], 1); /* decoded early, and never run: no COMMAND */
+    CHECK_EQ(counts[PD_LINK_COMMAND], 0);
+    CHECK_EQ(link.stats.drop_crc, 1);
+
+    /* DATA from the host: valid, nothing to run. */
+    n = wire_of(PD_PACKET_DATA, 2, payload, sizeof(payload), wire, sizeof(wire));
+    CHECK_EQ(feed_link(&link, &hal, wire, n, counts), PD_LINK_HANDLED);
+
+    /* No delimiter in PD_MAX_ENCODED_FRAME bytes: one OVERFLOW, its event sent, the rest skipped. */
+    memset(counts, 0, sizeof(counts));
+    const uint8_t one = 0x01;
+    for (unsigned k = 0; k < PD_MAX_ENCODED_FRAME + 10u; k++) {
+        feed_link(&link, &hal, &one, 1, counts);
+    }
+    CHECK_EQ(counts[PD_LINK_OVERFLOW], 1);
+    CHECK_EQ(counts[PD_LINK_NONE], PD_MAX_ENCODED_FRAME + 9u);
+    CHECK_EQ(hal_events(&hal, PD_EVENT_RX_OVERFLOW), 1);
+    const uint8_t zero = 0x00;
+    CHECK_EQ(feed_link(&link, &hal, &zero, 1, counts), PD_LINK_NONE); /* the skip's end */
+}
+
+static void test_link_alone_holds_a_frame_until_its_replies_fit(void)
+{
+    pd_link_t link;
+    fake_hal_t hal;
+    link_active(&link, &hal);
+    const uint8_t payload[] = {0x08, 0x07};
+    uint8_t wire[32];
+    unsigned counts[PD_LINK_OVERFLOW + 1] = {0};
+    size_t n = wire_of(PD_PACKET_COMMAND, 1, payload, sizeof(payload), wire, sizeof(wire));
+    hal.tx_room = PD_TX_RESERVE - 1u;
+    CHECK_EQ(feed_link(&link, &hal, wire, n, counts), PD_LINK_HELD);
+    CHECK(link.rx_held);
+    /* A report may not take the room the held frame waits for. */
+    uint8_t buf[PD_TX_BUF];
+    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
+    out.which_data = protoduino_ArduinoOut_failsafe_tag;
+    out.data.failsafe.epoch = 1;
+    size_t len = pd_encode_out(&out, buf + PD_TX_PAYLOAD_AT, PD_TX_MAX_PAYLOAD);
+    CHECK(len > 0);
+    hal.tx_room = 1000u;
+    CHECK(!pd_link_send_spare(&link, &hal, buf, len, false));
+    CHECK_EQ(feed_link(&link, &hal, wire + n - 1u, 1, counts), PD_LINK_COMMAND);
+    CHECK(pd_link_send_spare(&link, &hal, buf, len, false));
+    CHECK_EQ(fake_count(&hal), 1);
+}
+
 const pd_test_case_t pd_tests_link[] = {
     TEST_CASE(test_boot_event),
     TEST_CASE(test_reset_ack),
@@ -430,5 +585,8 @@ const pd_test_case_t pd_tests_link[] = {
     TEST_CASE(test_failed_write_keeps_seq_and_flushes),
     TEST_CASE(test_reboot_returns_to_idle),
     TEST_CASE(test_fed_in_any_chunking),
+    TEST_CASE(test_link_alone_reports_a_command_payload_then_the_checked_command),
+    TEST_CASE(test_link_alone_drops_and_overflows_with_events),
+    TEST_CASE(test_link_alone_holds_a_frame_until_its_replies_fit),
     {NULL, NULL},
 };

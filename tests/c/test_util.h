@@ -8,6 +8,7 @@
 
 #include "fake_hal.h"
 #include "pd_core.h"
+#include "pd_out.h"
 #include "protoduino.pb.h"
 
 typedef struct tdev {

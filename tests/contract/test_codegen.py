@@ -37,22 +37,44 @@ def test_schema_id_is_the_same_on_both_sides(regenerated: tuple[Path, codegen.Re
     assert f"#define PD_SCHEMA_ID 0x{result.schema_id:08X}UL" in header
 
 
+def _generate_from(tmp_path: Path, text: str) -> tuple[Path, codegen.Result]:
+    """Everything generated from ``text`` as protoduino.proto (the rest of proto/ as is)."""
+    d = tmp_path / str(abs(hash(text)))
+    (d / "proto").mkdir(parents=True)
+    (d / "proto" / codegen.PROTO_NAME).write_text(text)
+    for name in (codegen.OPTIONS_NAME, codegen.OPTIONS_PROTO):
+        (d / "proto" / name).write_text((ROOT / "proto" / name).read_text())
+    return d / "out", codegen.generate(d / "out", proto_dir=d / "proto")
+
+
 def test_schema_id_ignores_comments_but_not_fields(tmp_path: Path) -> None:
     source = (ROOT / "proto" / codegen.PROTO_NAME).read_text()
-    options = (ROOT / "proto" / codegen.OPTIONS_NAME).read_text()
-
-    def schema_id_of(text: str) -> int:
-        d = tmp_path / str(abs(hash(text)))
-        (d / "proto").mkdir(parents=True)
-        (d / "proto" / codegen.PROTO_NAME).write_text(text)
-        (d / "proto" / codegen.OPTIONS_NAME).write_text(options)
-        return codegen.generate(d / "out", proto_dir=d / "proto").schema_id
-
     commented = "// an extra comment\n" + source.replace("\n\n", "\n\n// more\n", 3)
-    assert schema_id_of(commented) == protoduino.SCHEMA_ID
+    assert _generate_from(tmp_path, commented)[1].schema_id == protoduino.SCHEMA_ID
     changed = source.replace("bool safe_level = 2;", "bool safe_level = 3;")
     assert changed != source
-    assert schema_id_of(changed) != protoduino.SCHEMA_ID
+    assert _generate_from(tmp_path, changed)[1].schema_id != protoduino.SCHEMA_ID
+
+
+def test_a_declaration_changes_both_tables_and_the_schema_id(tmp_path: Path) -> None:
+    """Options are not on the wire, but a command's declaration is part of the schema both
+    sides must share: Heartbeat made not idempotent changes SCHEMA_ID and both tables."""
+    source = (ROOT / "proto" / codegen.PROTO_NAME).read_text()
+    old = "Heartbeat heartbeat = 10 [(command).idempotent = true];"
+    assert source.count(old) == 1
+    out, result = _generate_from(tmp_path, source.replace(old, "Heartbeat heartbeat = 10;"))
+    assert result.schema_id != protoduino.SCHEMA_ID
+    header = (out / "firmware/generated/pd_tables.h").read_text()
+    assert "X(heartbeat, 1, 0, 0)" in header
+    assert (
+        "X(heartbeat, 1, PD_CMD_IDEMPOTENT, 0)"
+        in (ROOT / "firmware/generated/pd_tables.h").read_text()
+    )
+    table = (out / "host/protoduino/_generated/tables.py").read_text()
+    assert "CommandRow('heartbeat', False," in table
+    # The wire is the same: the nanopb code and the Python messages do not change.
+    for rel in ("firmware/generated/protoduino.pb.c",):
+        assert (out / rel).read_bytes() == (ROOT / rel).read_bytes()
 
 
 def test_nanopb_bounds_every_variable_field() -> None:

@@ -1,10 +1,11 @@
-"""The import graph of host/ and dev/ and the #include graph of firmware/ flow one way.
+"""The import graph of host/ and dev/ flows one way; no firmware target reaches into tools/.
 
-Each side's layer order is declared once, below, bottom first. A module may use its own layer
-and the layers beneath it, never one above; and no group of modules may use each other in a
-circle, even within one layer. Every module must be in a layer, so a new one is placed on
-purpose. The graphs are read from the sources (``ast`` for Python, ``#include "..."`` for C),
-so they stay true as the code changes; docs/architecture.md draws the same order.
+The Python layer order is declared once, below, bottom first (the firmware's is declared once
+too, in tests/c/test_include_graph.py, which checks its include and call graphs). A module may
+use its own layer and the layers beneath it, never one above; and no group of modules may use
+each other in a circle, even within one layer. Every module must be in a layer, so a new one is
+placed on purpose. The graph is read from the sources (``ast``), so it stays true as the code
+changes; docs/architecture.md draws the same order.
 """
 
 from __future__ import annotations
@@ -15,8 +16,6 @@ import graphlib
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-
-import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -80,19 +79,6 @@ PYTHON_LAYERS: Sequence[tuple[str, Sequence[str]]] = (
         ("protoduino.cli", "protoduino.cli.*", "protoduino.ros2", "protoduino.ros2.*"),
     ),
     ("development", ("protoduino_dev", "protoduino_dev.*")),
-)
-
-#: Firmware, bottom first: (layer, file stems; a .c and its .h are one module).
-FIRMWARE_LAYERS: Sequence[tuple[str, Sequence[str]]] = (
-    ("generated", ("pd_protocol", "pd_schema", "protoduino.pb", "pd_config")),
-    ("hal", ("pd_hal", "pd_features", "pd_rom")),
-    ("codecs", ("pd_crc", "pd_cobs", "pd_encode")),
-    ("packets", ("pd_packet",)),
-    ("link", ("pd_link",)),
-    ("pins", ("pd_inputs", "pd_outputs", "pd_failsafe")),
-    ("dispatch", ("pd_dispatch",)),
-    ("core", ("pd_core",)),
-    ("targets", ("pd_sim", "pd_control", "pd_owner", "pd_avr*", "Protoduino")),
 )
 
 
@@ -162,17 +148,6 @@ def firmware_modules() -> dict[str, list[Path]]:
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 
 
-def firmware_includes(paths: Sequence[Path], known: Iterable[str], name: str) -> set[str]:
-    known = set(known)
-    out: set[str] = set()
-    for path in paths:
-        for header in INCLUDE.findall(path.read_text(errors="replace")):
-            stem = Path(header).name.rsplit(".", 1)[0]
-            if stem in known and stem != name:
-                out.add(stem)
-    return out
-
-
 def violations(
     graph: Mapping[str, set[str]], layers: Sequence[tuple[str, Sequence[str]]]
 ) -> list[str]:
@@ -201,11 +176,6 @@ def python_graph() -> dict[str, set[str]]:
     return {name: python_imports(name, path, modules) for name, path in modules.items()}
 
 
-def firmware_graph() -> dict[str, set[str]]:
-    modules = firmware_modules()
-    return {name: firmware_includes(paths, modules, name) for name, paths in modules.items()}
-
-
 def test_the_python_layers_flow_one_way() -> None:
     graph = python_graph()
     assert "protoduino.board" in graph and "protoduino_dev.build" in graph
@@ -219,17 +189,6 @@ def test_the_runtime_imports_no_development_tooling() -> None:
     assert runtime and all(
         not used.startswith("protoduino_dev") for uses in runtime.values() for used in uses
     )
-
-
-@pytest.mark.xfail(
-    strict=True,
-    reason="the firmware calls back up (pd_link -> pd_core/pd_dispatch, pd_dispatch and pd_inputs "
-    "-> pd_core) until the fwflow branch (issue 24) merges: remove this mark then",
-)
-def test_the_firmware_includes_flow_one_way() -> None:
-    graph = firmware_graph()
-    assert "pd_link" in graph and "pd_sim" in graph
-    assert violations(graph, FIRMWARE_LAYERS) == []
 
 
 def test_firmware_targets_reach_nowhere_outside_firmware() -> None:

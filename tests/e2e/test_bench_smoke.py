@@ -520,6 +520,32 @@ def test_inputs_section_on_both_boards() -> None:
     assert out.SerializeToString()[:1] == inputs.REPORT_TAG
 
 
+@pytest.mark.avr
+def test_ros2_section_on_the_emulated_uno() -> None:
+    """Part 8: every Twist reached both motor pins, every edge its DDS sample, every analog
+    topic streamed, and the commands and reports were found in the bridge's capture."""
+    _need("avr")
+    pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing")
+    pytest.importorskip("yaml", reason="PyYAML (the ros2 extra) is missing")
+    from bench import ros2
+
+    result = ros2.collect(trials=4, seconds=0.5)
+    assert result.error is None, result.error
+    for phase, trials in ((result.idle, 4), (result.streaming, 3)):
+        assert phase is not None
+        assert phase.drive_lost == 0 and len(phase.drive) == trials
+        # The right motor is written after the left one's Ack: it comes later at the pins.
+        assert all(t.to_right > t.to_left for t in phase.drive)
+        assert all(t.to_sent is not None for t in phase.drive)
+        assert len(phase.command_bytes) == trials and min(phase.command_bytes) >= 12
+    assert result.idle is not None and result.streaming is not None
+    assert result.idle.inputs_lost == 0 and len(result.idle.inputs) == 4
+    assert len(result.idle.report_bytes) >= 4
+    assert sorted(result.streaming.device_rates) == list(ros2.ANALOG_PINS)
+    assert all(rate > 0 for rate in result.streaming.topic_rates.values())
+    assert len(result.streaming.topic_rates) == len(ros2.ANALOG_PINS)
+
+
 def test_report_quote_replaces_only_between_markers(tmp_path: Path) -> None:
     from bench import report
 
@@ -534,3 +560,115 @@ def test_report_quote_replaces_only_between_markers(tmp_path: Path) -> None:
     )
     assert other.read_text() == "no markers: old\n"
     assert report.quote([doc], {"footprint": "flash 1 B"}) == []  # nothing left to change
+
+
+def _firmata_hex() -> Path:
+    """The race's StandardFirmata hex: setup fetched it (tools/dev.sh setup, which CI runs)."""
+    from bench import race
+
+    assert race.FIRMATA_HEX.exists(), f"StandardFirmata's hex is missing: run {race.FETCH_STEP}"
+    return race.FIRMATA_HEX
+
+
+def test_firmata_footprint_from_its_hex() -> None:
+    """Flash is the hex's bytes; static RAM the end of .bss its start-up code clears (940 B,
+    as read from the same code by hand: ../shared/TOOLCHAIN.md, Peers and engines)."""
+    if shutil.which("avr-objcopy") is None:
+        pytest.skip("avr-objcopy is not installed (binutils-avr)")
+    from bench.peers import firmata_board
+
+    size = firmata_board.hex_footprint(_firmata_hex())
+    assert (size.flash, size.static_ram) == (12_194, 940)
+
+
+def test_race_finds_each_pins_last_fall() -> None:
+    from bench import race
+
+    events: list[dict[str, Any]] = [
+        {"t": 1.0, "pin": 13, "mode": "servo", "value": 1500},
+        {"t": 1.5, "pin": 2, "mode": "digital", "value": 0},
+        {"t": 2.0, "pin": 13, "mode": "servo", "value": 0},
+        {"t": 2.5, "pin": 4, "mode": "digital", "value": 1},
+    ]
+    # Pin 4 is high at the end: no last fall yet; pin 7 never moved.
+    assert race._last_falls(events, (2, 4, 7, 13)) == {2: 1.5, 13: 2.0}
+
+
+def test_race_line_times_from_simavrs_byte() -> None:
+    from bench import race
+
+    line = race.Line(11 * 8 * 17)  # U2X, UBRR 16: protoduino's 115200
+    assert line.baud == pytest.approx(16e6 / (8 * 17))
+    assert line.board_byte_us == pytest.approx(93.5)
+    assert line.host_byte_us == pytest.approx(85.0)
+
+
+@pytest.mark.avr
+def test_race_on_both_boards() -> None:
+    """Part 9: StandardFirmata (the unmodified hex) and protoduino on the same runner; every
+    row measured for both, nothing lost; byte counts and line rates exact."""
+    _need("avr")
+    _firmata_hex()
+    _or_skip(lambda: require("pyfirmata2.pyfirmata2", "pyFirmata2"))
+    from bench import race
+
+    ours, theirs = race.collect(samples=6, commands=10, seed=SEED, analog_seconds=0.3)
+    for run in (ours, theirs):
+        assert run.error is None, run.error
+        assert run.lost == 0 and len(run.digital) == 6 and len(run.servo) == 5
+        assert run.flat is not None and run.flat.changes == 10 and run.flat.seconds > 0
+        assert sorted(run.analog) == ([14, 15, 16, 17, 18, 19] if run is ours else list(range(6)))
+        assert all(rate > 0 for rate in run.analog.values())
+        assert 0 < run.stack < 2048 - run.static_ram
+    # The UART rates the firmwares set: protoduino U2X with UBRR 16, Firmata's 57600 without
+    # U2X (the Arduino core's exception for that rate) and UBRR 16; simavr's 11-bit bytes.
+    assert ours.line == race.Line(11 * 8 * 17)
+    assert theirs.line == race.Line(11 * 16 * 17)
+    assert theirs.command_bytes == [3]  # DIGITAL_MESSAGE: 0x90 | port, two 7-bit bytes
+    assert ours.command_bytes and min(ours.command_bytes) >= 12 and ours.answer_bytes
+    assert ours.poses is not None and ours.poses.changes == 20 * len(race.POSE_PINS)
+    assert ours.poses.acked is not None and ours.poses.acked <= 0.001  # the pins before the Ack
+    assert theirs.poses is None and theirs.flat is not None and theirs.flat.acked is None
+    assert (theirs.flash, theirs.static_ram) == (12_194, 940)
+    assert set(ours.cpu) == {"digital write", "servo write", "pose (6 outputs)"}
+    assert set(theirs.cpu) == {"digital write", "servo write"}
+    # The report's rows and the issue's targets come out of these runs, every one filled in.
+    for run in (ours, theirs):
+        cells = race._cells(run)
+        assert set(cells) == set(race.ROWS)
+        assert not any(cell.startswith("not run") for cell in cells.values())
+    assert [t.met is not None for t in race._targets(ours, theirs)] == [True, True, True]
+    assert "StandardFirmata's" in race._quote(ours, theirs)
+
+
+def test_report_merge_replaces_only_the_parts_run() -> None:
+    """``--merge``: the parts run replace theirs (sections and target rows), a new part goes in
+    its place by number, the others stay as the earlier run left them, and the header says so."""
+    from bench import report
+
+    table = "| part | target | goal | measured | verdict |\n|---|---|---|---|---|\n"
+    old = (
+        "# Performance\n\nheader\n\n## Targets\n\n" + table + "| 1. A | a | g | 1 | met |\n"
+        "| 5. F | f | g | old | met |\n| 7. I | i | g | 7 | met |\n\nMissed targets.\n\n"
+        "## Machine\n\nm\n\n## 1. A\n\nold one\n\n## 5. F\n\nold five\n\n## 7. I\n\nseven\n"
+    )
+    new = (
+        "# Performance\n\nnew header\n\n## Targets\n\n" + table + "| 5. F | f | g | new | met |\n"
+        "| 8. R | r | g | 8 | **missed** |\n\n## Machine\n\nm2\n\n## 5. F\n\nnew five\n\n"
+        "## 8. R\n\nrace\n"
+    )
+    merged = report.merge(old, new, "Parts 5, 8 come from a later run.")
+    assert merged.startswith("# Performance\n\nheader\n\n> Parts 5, 8 come from a later run.\n")
+    assert "new header" not in merged and "m2" not in merged and "\nm\n" in merged
+    rows = [line for line in merged.splitlines() if line.startswith("| ") and ". " in line[:6]]
+    assert [r.split(" | ")[0] for r in rows] == ["| 1. A", "| 5. F", "| 7. I", "| 8. R"]
+    assert "| 5. F | f | g | new | met |" in rows and "Missed targets." in merged
+    headings = [line for line in merged.splitlines() if line.startswith("## ")]
+    assert headings == ["## Targets", "## Machine", "## 1. A", "## 5. F", "## 7. I", "## 8. R"]
+    assert "new five" in merged and "old five" not in merged and "old one" in merged
+    # A later merge of the same parts replaces the note, one of fewer parts keeps it.
+    again = report.merge(merged, new, "Parts 5, 8 come from a later run, again.")
+    assert "later run.\n" not in again and again.count("> Parts") == 1
+    fewer = new.replace("| 5. F | f | g | new | met |\n", "").split("## 5. F")[0]
+    assert report.merge(merged, fewer + "## 8. R\n\nrace\n", "x").count("> Parts") == 1
+    assert "> x" in report.merge(merged, fewer + "## 8. R\n\nrace\n", "x")

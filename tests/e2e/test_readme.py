@@ -43,6 +43,7 @@ BLOCKS = {
     "uno": "protoduino ports",
     "capture": "--capture robot.jsonl",
     "remote": "rfc2217://raspberrypi.local:7000",
+    "ros2": "protoduino ros2 --sim",
 }
 
 
@@ -216,6 +217,56 @@ def test_the_remote_example(sim_board: SimBoard, tmp_path: Path) -> None:
             assert run(line, {"rfc2217://raspberrypi.local:7000": local}) == 0, line
     finally:
         server.stop()
+
+
+def test_the_ros2_example(workdir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The bridge in one command on the simulated board it starts, as written, on a loopback
+    DDS domain of its own: a Twist and a servo angle from an independent ROS 2 peer (rosbags'
+    codec, tests/e2e/test_ros2.py) reach the pins, and Ctrl-C stops it with the outputs safe."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed (needed to build the native board)")
+    pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing")
+    pytest.importorskip("rosbags.typesys", reason="rosbags is not installed")
+    import signal
+
+    import test_ros2 as ros
+    from cyclonedds.domain import DomainParticipant
+
+    (line,) = block("ros2")
+    monkeypatch.setenv("CYCLONEDDS_URI", ros.LOOPBACK)
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros.DOMAIN))
+    out = workdir / "bridge.log"
+    argv = [sys.executable, "-m", "protoduino.cli.main", *shlex.split(line)[1:]]
+    with out.open("w") as log:
+        proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
+    try:
+        ros._until(lambda: "topics:" in out.read_text() or proc.poll() is not None, "the bridge")
+        assert proc.poll() is None, out.read_text()
+        text = out.read_text()
+        assert "simulated board (native) on /dev/" in text
+        for topic in ("cmd_vel", "servo/pan", "battery", "bumper", "sensors/encoders"):
+            assert f"/robot1/{topic}  " in text, text
+        trace = workdir / "trace.jsonl"
+
+        def pin(number: int) -> list[int]:
+            return pin_values([json.loads(x) for x in trace.read_text().splitlines()], number)
+
+        graph = ros.Graph(DomainParticipant(ros.DOMAIN))
+        cmd_vel = graph.publisher("/robot1/cmd_vel", "geometry_msgs/msg/Twist")
+        pan = graph.publisher("/robot1/servo/pan", "std_msgs/msg/Float64")
+        pan(ros.ros("std_msgs/msg/Float64", data=45.0))
+        ros._until(lambda: pin(9)[-1:] == [1008], "the servo at 45 degrees")
+        cmd_vel(ros._twist(0.25, 0.0))  # both wheels ahead at half their top speed
+        ros._until(lambda: pin(3)[-1:] == [128] and pin(11)[-1:] == [128], "the motors")
+        proc.send_signal(signal.SIGINT)  # Ctrl-C
+        assert proc.wait(30) == 0, out.read_text()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert "protoduino ros2: stopped" in out.read_text()
+    assert pin(3)[-1] == 0 and pin(11)[-1] == 0  # the device's Stop: the motors safe
+    assert 1472 in pin(9)[pin(9).index(1008) :]  # the servo back at its safe 90 degrees
 
 
 def python_example() -> str:

@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from protoduino import Board
 from protoduino.simboard import SimBoard
 from simfixtures import pin_values, wait_for_pin
 
@@ -477,7 +476,7 @@ def test_a_killed_bridge_trips_the_device_failsafe(
     wait_for_pin(sim, 13, lambda v: v[-1:] == [0])
 
 
-# --- what waits for issue 21's pins API (PWM outputs, inputs) ---------------------------
+# --- /cmd_vel and inputs (PWM outputs, inputs) -------------------------------------------
 
 DRIVE = """
 namespace: {ns}
@@ -491,12 +490,6 @@ drive:
 """
 
 
-def _needs(method: str) -> None:
-    # Checked when the test runs, so that it runs by itself once the Board has it.
-    if not hasattr(Board, method):
-        pytest.skip(f"Board.{method} is missing (issue 21's pins API has not landed)")
-
-
 def _twist(linear: float, angular: float) -> Any:
     def vector(x: float = 0.0, z: float = 0.0) -> Any:
         return ros("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)
@@ -507,7 +500,6 @@ def _twist(linear: float, angular: float) -> Any:
 def test_cmd_vel_drives_the_motors_and_a_stale_one_stops_them(
     sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
 ) -> None:
-    _needs("pwm_output")
     sim = sim_board
     ns = _namespace(sim, "drive")
     run_bridge(DRIVE.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
@@ -542,12 +534,15 @@ counters:
 def test_inputs_are_published(
     sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
 ) -> None:
-    _needs("digital_input")
-    _needs("analog_input")
-    _needs("counter")
     sim = sim_board
     ns = _namespace(sim, "inputs")
-    run_bridge(INPUTS.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    bridge = run_bridge(INPUTS.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    for topic, kind in (
+        ("bumper", "Bool"),
+        ("battery", "Float32"),
+        ("encoders", "Int32MultiArray"),
+    ):
+        assert f"/{ns}/{topic}  std_msgs/msg/{kind}" in bridge.output()  # listed at the start
     bumper = graph.subscriber(f"/{ns}/bumper", "std_msgs/msg/Bool", BEST_EFFORT)
     battery = graph.subscriber(f"/{ns}/battery", "std_msgs/msg/Float32", BEST_EFFORT)
     encoders = graph.subscriber(f"/{ns}/encoders", "std_msgs/msg/Int32MultiArray", BEST_EFFORT)
@@ -563,6 +558,11 @@ def test_inputs_are_published(
 
         _until(check, f"{name} sample")
 
+    # Subscribers that join after the bridge published the first values get them at once
+    # (volatile QoS keeps nothing for them: the bridge publishes the last value again).
+    saw("bumper", bumper, lambda v: True)
+    saw("battery", battery, lambda v: True)
+    saw("encoders", encoders, lambda v: list(v) == [0])
     sim.set_level(2, 0)  # the bumper pressed, to ground
     saw("bumper", bumper, lambda v: v is False or v == 0)
     sim.set_level(2, 1)
@@ -571,6 +571,58 @@ def test_inputs_are_published(
     saw("battery", battery, lambda v: abs(v - 7.0) < 1e-4)
     sim.pulses(3, 25, 1000)  # 25 rising edges on the encoder's pin
     saw("encoders", encoders, lambda v: list(v) == [25])
+
+
+INTERLOCK = """
+namespace: {ns}
+failsafe_timeout: {failsafe}
+diagnostics_period: 0.5
+drive:
+  wheel_base: 0.2
+  max_speed: 0.5
+  timeout: 30.0
+  left: {{pwm: 3, direction: 4}}
+  right: {{pwm: 11, direction: 12}}
+digital_inputs:
+  - {{pin: 7, topic: bumper, pull_up: true, interlock: low}}
+"""
+
+
+def test_a_bumper_interlock_stops_the_motors_on_the_device_until_cleared(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+) -> None:
+    """The bumper trips both motors at the pins with no round trip through the bridge; Twists
+    and a clear are refused while it is pressed; a clear on its topic once it is released lets
+    the next Twist drive again."""
+    sim = sim_board
+    ns = _namespace(sim, "interlock")
+    sim.set_level(7, 1)  # released: the pull-up's level
+    run_bridge(INTERLOCK.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    diag = graph.subscriber("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+    clear = graph.publisher(f"/{ns}/clear_interlock", "std_msgs/msg/Empty")
+    empty = ros("std_msgs/msg/Empty", structure_needs_at_least_one_member=0)
+    cmd_vel(_twist(0.25, 0.0))
+    wait_for_pin(sim, 3, now_at(128))
+    wait_for_pin(sim, 11, now_at(128))
+
+    sim.set_level(7, 0)  # the bumper hits something
+    wait_for_pin(sim, 3, now_at(0))
+    wait_for_pin(sim, 11, now_at(0))
+    tripped = _wait_diag(diag, ns, "failsafe", lambda s: s["cause"] == "interlock")
+    assert tripped["active"] == "true", tripped
+    cmd_vel(_twist(0.4, 0.0))  # refused by the device: still pressed
+    _wait_diag(diag, ns, "bridge", lambda s: int(s["refused_by_device"]) >= 1)
+    clear(empty)  # refused too: the input is still at its trip level
+    _wait_diag(diag, ns, "bridge", lambda s: int(s["refused_by_device"]) >= 2)
+    assert pin_values(sim.trace(), 3)[-1] == 0 and pin_values(sim.trace(), 11)[-1] == 0
+
+    sim.set_level(7, 1)  # released
+    clear(empty)
+    _wait_diag(diag, ns, "bridge", lambda s: int(s["interlock_clears"]) == 1)
+    cmd_vel(_twist(0.4, 0.0))  # 0.4 / 0.5 * 255 = 204
+    wait_for_pin(sim, 3, now_at(204))
+    wait_for_pin(sim, 11, now_at(204))
 
 
 # --- a bridge that hangs --------------------------------------------------------------

@@ -1,6 +1,6 @@
 """The ROS 2 bridge's pure parts: robot.yaml, the drive's kinematics and watchdog, the
 messages (checked byte for byte against rosbags' independent CDR codec), inputs to
-messages, /diagnostics, and the refusals of what the Board cannot do yet."""
+messages, /diagnostics."""
 
 from __future__ import annotations
 
@@ -18,10 +18,10 @@ pytest.importorskip("rosbags", reason="rosbags is not installed")
 import numpy as np
 from protoduino.events import Event, EventKind, Stats
 from protoduino.ros2 import msgs
-from protoduino.ros2.bridge import PWM_MISSING, check_board_type
 from protoduino.ros2.config import (
     BridgeConfig,
     ConfigError,
+    DigitalInputConfig,
     DriveConfig,
     MotorConfig,
     ServoConfig,
@@ -91,6 +91,18 @@ def test_a_full_configuration() -> None:
     assert config.counters[0].pins == (5, 6) and config.counters[0].topic == "sensors/encoders"
 
 
+def test_the_example_robot_is_the_one_docs_show() -> None:
+    """``protoduino ros2 --sim`` bridges docs/ros2.md's robot.yaml, and it is valid."""
+    from protoduino.ros2.example import ROBOT_YAML, example_config
+
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "ros2.md").read_text()
+    assert f"```yaml\n{ROBOT_YAML}```" in docs
+    config = example_config()
+    assert config.drive is not None and config.counters[0].pins == (2,)
+    assert {s.pin for s in config.servos} == {9, 10}  # Timer1: no PWM on 9 and 10, so
+    assert {config.drive.left.pwm, config.drive.right.pwm} == {3, 11}  # the drive is on Timer2
+
+
 def test_the_yaml_file(tmp_path: Path) -> None:
     path = tmp_path / "robot.yaml"
     path.write_text("namespace: /r2/\nservos:\n  - {pin: 9, topic: pan}\n")
@@ -147,12 +159,33 @@ def _with(**changes: Any) -> dict[str, Any]:
         (_with(domain_id=233), "0..232"),
         (_with(counters=[{"pins": []}]), "non-empty list"),
         (_with(analog_inputs=[{"pin": 14, "topic": "b", "threshold": 2000}]), "0..1023"),
+        (_with(digital_inputs=[{"pin": 2, "topic": "b", "interlock": "on"}]), "one of low, high"),
+        (
+            _with(digital_inputs=[{"pin": 2, "topic": "estop", "interlock": "low"}]),
+            "topic 'estop' is both",
+        ),
+        (
+            _with(
+                digital_inputs=[{"pin": 2, "topic": "b", "interlock": "low"}],
+                clear_interlock_topic="led",
+            ),
+            "topic 'led' is both",
+        ),
         ([1, 2], "must be a mapping"),
     ],
 )
 def test_bad_configurations_are_refused_naming_the_key(data: Any, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         parse_config(data)
+
+
+def test_an_interlock_input_and_its_clear_topic() -> None:
+    config = parse_config(_with(digital_inputs=[{"pin": 2, "topic": "bumper", "interlock": "low"}]))
+    assert config.interlocks == (DigitalInputConfig(2, "bumper", interlock="low"),)
+    assert config.clear_interlock_topic == "clear_interlock"
+    # Without an interlock, the clear topic is not the bridge's: another may use the name.
+    plain = parse_config(_with(digital_outputs=[{"pin": 13, "topic": "clear_interlock"}]))
+    assert plain.interlocks == ()
 
 
 def test_topic_names() -> None:
@@ -260,19 +293,6 @@ def test_after_a_device_stop_the_next_twist_sets_the_direction_again() -> None:
     log.clear()
     drive.command(0.25, 0.0)
     assert log == [("ldir", True), ("lpwm", 128), ("rdir", True), ("rpwm", 128)]
-
-
-def test_a_drive_needs_pwm_outputs_on_the_board() -> None:
-    config = parse_config(FULL)
-    with pytest.raises(ConfigError, match=r"Board\.pwm_output .*issue 21"):
-        check_board_type(object(), dataclasses.replace(config, digital_inputs=()))
-    assert "pwm_output" in PWM_MISSING
-
-    class WithPwm:
-        def pwm_output(self) -> None: ...
-
-    with pytest.raises(ConfigError, match=r"digital_inputs, which needs Board\.digital_input"):
-        check_board_type(WithPwm(), config)
 
 
 # --- servos and joints ---------------------------------------------------------------
@@ -438,7 +458,7 @@ class FakeInput:
 
 
 class FakeBoard:
-    """The input half of issue 21's Board API, as far as the bridge uses it."""
+    """The input half of the Board API, as far as the bridge uses it."""
 
     def __init__(self) -> None:
         self.made: dict[int, FakeInput] = {}
@@ -463,9 +483,9 @@ def test_inputs_are_wired_to_their_topics() -> None:
     config = parse_config(FULL)
     board = FakeBoard()
     sent: dict[str, list[Any]] = {"bumper": [], "battery": [], "sensors/encoders": []}
-    undo = wire(board, config, {k: v.append for k, v in sent.items()})
+    wiring = wire(board, config, {k: v.append for k, v in sent.items()})
     assert board.calls == [
-        ("digital", 2, {"pull_up": True, "debounce_ms": 5}),
+        ("digital", 2, {"pull_up": True, "debounce_ms": 5, "interlock": None}),
         ("analog", 14, {"rate_hz": 10.0, "threshold": 0}),
         ("counter", 5, {}),
         ("counter", 6, {}),
@@ -477,16 +497,14 @@ def test_inputs_are_wired_to_their_topics() -> None:
     assert sent["bumper"] == [msgs.Bool(True), msgs.Bool(False)]  # the first level, then each
     assert [round(m.data, 3) for m in sent["battery"]] == [1.5, 3.5]
     assert [list(m.data) for m in sent["sensors/encoders"]] == [[0, 0], [0, 7], [-3, 7]]
-    for u in undo:
+    # A subscriber that joins now gets each topic's last message again.
+    assert all(wiring.topics[topic].again() for topic in sent)
+    assert sent["bumper"][-1] == msgs.Bool(False)
+    assert [list(m.data) for m in sent["sensors/encoders"]][-1] == [-3, 7]
+    for u in wiring.undo:
         u()
     board.made[2].change(True)
-    assert len(sent["bumper"]) == 2
-
-
-def test_inputs_need_the_board_api() -> None:
-    config = parse_config({"digital_inputs": [{"pin": 2, "topic": "b"}]})
-    with pytest.raises(ConfigError, match=r"Board\.digital_input .*issue 21"):
-        wire(object(), config, {})
+    assert len(sent["bumper"]) == 3
 
 
 # --- /diagnostics ---------------------------------------------------------------------
@@ -521,6 +539,7 @@ def test_diagnostics() -> None:
             "refused_by_device": "0",
             "stops": "0",
             "cmd_vel_stale_stops": "0",
+            "interlock_clears": "0",
         },
     )
 

@@ -9,13 +9,13 @@
  * protoduino.simboard runs both):
  * the first stdout line is the port to open (the pty's slave, or --link),
  * SIGINT/SIGTERM (and SIGHUP unless ignored) exit cleanly, so does the end of
- * the owner with --owner-fd (tools/simcontrol/pd_owner.h), SIGUSR1 resets the
+ * the owner with --owner-fd (firmware/simcontrol/pd_owner.h), SIGUSR1 resets the
  * MCU while keeping the pty,
  * and --trace writes one JSON line per output change, measured at the pins
  * (servo pulse widths, digital levels, and the duty of the timers' PWM, read
  * from their compare-output IRQs: PWM never goes through the PORT register).
  *
- * --control PATH (tools/simcontrol) drives the MCU's inputs the way the
+ * --control PATH (firmware/simcontrol) drives the MCU's inputs the way the
  * outside world would, so the firmware's own input code is what runs: a level
  * is raised on the port pin's IRQ (PIN register, pin-change and external
  * interrupts) and held there as the port's "external" level, so that simavr
@@ -188,7 +188,7 @@ typedef struct {
     uint64_t uart_rx;      /* bytes fed into UART0 */
     uint64_t uart_tx;      /* bytes UART0 sent */
     uint64_t tx_last;      /* cycle of the last byte UART0 sent */
-    uint64_t byte_cycles;  /* one byte on the line (10 bits at 115200 baud) */
+    uint64_t byte_cycles;  /* one byte on the line before the firmware sets a baud (10 bits at 115200) */
     uint64_t pace_at;      /* pd_pace_timer's cycle, in pd_cycles terms; 0 when not set */
     uint64_t rx_read_at;   /* wall clock (in cycles) when the burst now entering was read */
     int rx_first;          /* the next byte pd_rx_timer feeds starts a burst */
@@ -574,14 +574,16 @@ static void pd_write_stats(pd_sim_t *sim)
             "{\"t\": %.6f, \"freq\": %u, \"cycles\": %llu, \"sleep_cycles\": %llu, "
             "\"awake_cycles\": %llu, \"uart_rx_bytes\": %llu, \"uart_tx_bytes\": %llu, "
             "\"sp_min\": %u, \"sp_min_pc\": %lu, \"ramend\": %u, \"passes\": %llu, "
-            "\"rx_lag_max\": %llu, \"answers\": %llu, \"answer_cycles\": %llu}\n",
+            "\"rx_lag_max\": %llu, \"answers\": %llu, \"answer_cycles\": %llu, "
+            "\"start_ns\": %llu, \"uart_byte_cycles\": %llu}\n",
             (double)cycles / (double)sim->avr->frequency, (unsigned)sim->avr->frequency,
             (unsigned long long)cycles, (unsigned long long)sleep,
             (unsigned long long)(cycles - sleep), (unsigned long long)sim->uart_rx,
             (unsigned long long)sim->uart_tx, (unsigned)sim->sp_min, (unsigned long)sim->sp_min_pc,
             (unsigned)sim->avr->ramend, (unsigned long long)sim->passes,
             (unsigned long long)sim->rx_lag_max, (unsigned long long)sim->answers,
-            (unsigned long long)sim->answer_cycles);
+            (unsigned long long)sim->answer_cycles, (unsigned long long)g_start_ns,
+            (unsigned long long)(sim->uart ? sim->uart->cycles_per_byte : 0U));
     fflush(sim->stats);
 }
 
@@ -854,7 +856,13 @@ static uint64_t pd_wall_cycles(const pd_sim_t *sim)
 static avr_cycle_count_t pd_rx_timer(struct avr_t *avr, avr_cycle_count_t when, void *param)
 {
     pd_sim_t *sim = param;
-    const avr_cycle_count_t per_byte = sim->byte_cycles;
+    /* At the rate the firmware set (UBRR, U2X), as a wire at that rate would
+     * carry host bytes: a firmware at 57600 baud must not be fed at 115200.
+     * simavr's byte time counts 11 bits for 8N1; a host's byte is 10. Before the
+     * firmware sets a rate, the default baud's. */
+    const avr_cycle_count_t per_byte = sim->uart && sim->uart->cycles_per_byte
+                                           ? sim->uart->cycles_per_byte * 10U / 11U
+                                           : sim->byte_cycles;
     if (!sim->rx.len) {
         sim->rx_timer = 0;
         return 0;

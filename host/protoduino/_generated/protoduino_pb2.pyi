@@ -132,7 +132,7 @@ class _FeatureEnumTypeWrapper(_enum_type_wrapper._EnumTypeWrapper[_Feature.Value
 
 class Feature(_Feature, metaclass=_FeatureEnumTypeWrapper):
     """The build-time features a firmware may carry (DeviceInfo.features: bit N
-    set means Feature N is built in). One per pin mode.
+    set means Feature N is built in). One per pin mode, declared on it.
     """
 
 FEATURE_NONE: Feature.ValueType  # 0
@@ -814,7 +814,11 @@ class ArduinoIn(_message.Message):
     @_builtins.property
     def counter_init(self) -> Global___CounterInit: ...
     @_builtins.property
-    def clear_interlock(self) -> Global___ClearInterlock: ...
+    def clear_interlock(self) -> Global___ClearInterlock:
+        """Not idempotent: a late duplicate must never clear an interlock that
+        tripped again after the first one ran; the dedupe window answers it.
+        """
+
     @_builtins.property
     def pose(self) -> Global___Pose: ...
     @_builtins.property

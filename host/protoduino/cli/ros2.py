@@ -3,7 +3,9 @@
 The configuration is read and checked before the port is opened (a bad one is
 a usage error, exit status 2). The bridge runs in the foreground; SIGINT and
 SIGTERM end it cleanly (every output driven safe by the device's Stop, then the
-board closed). docs/ros2.md has the details.
+board closed). ``--sim`` instead of PORT starts a simulated board owned by this
+process (stopped after the bridge) and, without ``--config``, bridges the
+example robot of docs/ros2.md: the README's one command. docs/ros2.md has the details.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from pathlib import Path
 from types import FrameType
 
 from ..errors import ProtoduinoError
+from ..simboard import BACKENDS
 from . import argtypes
 from .options import add_port, error, load_url_handlers, session_of
 
@@ -22,13 +25,24 @@ HELP = "run the ROS 2 bridge: the board's pins as ROS 2 topics on DDS (see docs/
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    add_port(parser)
+    add_port(parser, required=False)
     parser.add_argument(
         "--config",
         type=Path,
-        required=True,
         metavar="FILE",
-        help="robot.yaml: the namespace and which pins are which topics",
+        help="robot.yaml: the namespace and which pins are which topics (required with a "
+        "PORT; with --sim the default is the example robot of docs/ros2.md)",
+    )
+    parser.add_argument(
+        "--sim",
+        nargs="?",
+        const="native",
+        choices=sorted(BACKENDS),
+        help="instead of PORT: start a simulated board, native (the default) or avr (the "
+        "emulated Uno), and bridge it; it stops with the bridge",
+    )
+    parser.add_argument(
+        "--trace", type=Path, metavar="FILE", help="with --sim: the board's pin trace"
     )
     parser.add_argument(
         "--domain-id",
@@ -41,9 +55,16 @@ def register(parser: argparse.ArgumentParser) -> None:
 def check(args: argparse.Namespace) -> str | None:
     """The configuration is read here: a bad one is refused before any port opens."""
     from ..ros2.config import load_config
+    from ..ros2.example import example_config
 
+    if (args.port is None) == (args.sim is None):
+        return "give a PORT or --sim (a simulated board), one of them"
+    if args.trace is not None and args.sim is None:
+        return "--trace is the simulated board's: it needs --sim"
+    if args.config is None and args.sim is None:
+        return "--config FILE is required with a PORT (docs/ros2.md shows one)"
     try:
-        config = load_config(args.config)
+        config = example_config() if args.config is None else load_config(args.config)
     except ProtoduinoError as exc:
         return str(exc)
     if args.domain_id is not None:
@@ -55,6 +76,20 @@ def check(args: argparse.Namespace) -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.sim is None:
+        return _bridge(args)
+    from ..simboard import SimBoard
+
+    try:
+        with SimBoard(args.sim, trace=args.trace) as sim:
+            args.port = sim.start()
+            print(f"protoduino ros2: simulated board ({args.sim}) on {args.port}", flush=True)
+            return _bridge(args)
+    except ProtoduinoError as exc:
+        return error("ros2", exc)
+
+
+def _bridge(args: argparse.Namespace) -> int:
     from .. import ros2
 
     try:

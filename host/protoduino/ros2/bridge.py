@@ -33,6 +33,7 @@ from typing import Any
 from cyclonedds.core import (
     GuardCondition,
     InstanceState,
+    Listener,
     ReadCondition,
     SampleState,
     ViewState,
@@ -62,20 +63,6 @@ BEATS_PER_TIMEOUT = 4
 #: Samples taken from one topic per pass, so that a flood on one cannot starve the others.
 TAKE_PER_PASS = 64
 
-PWM_METHOD = "pwm_output"
-PWM_MISSING = (
-    "the configuration has a drive, which needs Board.pwm_output (the PWM outputs of "
-    "issue 21, 'pins'); this protoduino's Board has no pwm_output yet"
-)
-
-
-def check_board_type(board: type[Any] | object, config: BridgeConfig) -> None:
-    """Refuse, before opening anything, a configuration the Board cannot carry out."""
-    if config.drive is not None and not hasattr(board, PWM_METHOD):
-        raise ConfigError(PWM_MISSING)
-    inputs.check_board(board, config)
-
-
 #: What a valid command does, once it is the newest of its topic.
 Action = Callable[[], None]
 #: Checks one sample (raising BadCommandError) and returns its action (None: nothing to do).
@@ -94,7 +81,7 @@ class _Route:
 class Bridge:
     """One board on ROS 2; see the module docstring.
 
-    ``Bridge(port, config)`` checks the configuration against the Board API;
+    ``Bridge(port, config)`` takes a checked configuration (:func:`.load_config`);
     :meth:`start` (or ``with``) opens the board and the DDS entities;
     :meth:`run` loops until :meth:`stop` (from another thread or a signal
     handler); :meth:`close` drives every output safe and releases everything.
@@ -110,7 +97,6 @@ class Bridge:
         board_options: Mapping[str, Any] | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        check_board_type(Board, config)
         self.port = port
         self.config = config
         self.clock = clock
@@ -132,6 +118,10 @@ class Bridge:
         #: Set from the event thread when the device drove its outputs safe on its own.
         self._device_safe = threading.Event()
         self._diag_lock = threading.Lock()
+        #: Input topics whose writer matched a new subscriber (Cyclone's thread adds them).
+        self._joined: set[str] = set()
+        self._joined_lock = threading.Lock()
+        self._inputs: inputs.Wiring | None = None
         self._next_beat = 0.0
         self._undo: list[Callable[[], None]] = []
 
@@ -220,10 +210,12 @@ class Bridge:
 
     # --- setup ---------------------------------------------------------------------
 
-    def _writer(self, name: str, kind: type[Any], qos: Any) -> DataWriter[Any]:
+    def _writer(
+        self, name: str, kind: type[Any], qos: Any, listener: Any = None
+    ) -> DataWriter[Any]:
         assert self._participant is not None
         topic = Topic(self._participant, dds_topic(self.config.namespace, name), kind, qos=qos)
-        return DataWriter(self._participant, topic, qos=qos)
+        return DataWriter(self._participant, topic, qos=qos, listener=listener)
 
     def _subscribe(self, name: str, kind: type[Any], prepare: Prepare) -> None:
         assert self._participant is not None and self._waitset is not None
@@ -248,11 +240,16 @@ class Bridge:
             self._subscribe(d.topic, Bool, self._digital_handler(out))
         stop_type = Empty if config.stop.type == "Empty" else Bool
         self._subscribe(config.stop.topic, stop_type, self._on_stop)
+        if config.interlocks:
+            self._subscribe(config.clear_interlock_topic, Empty, self._on_clear_interlock)
         if config.drive is not None:
             drive = config.drive
-            make_pwm: Any = getattr(board, PWM_METHOD)  # issue 21's; no stub for it yet
             motors = [
-                Motor(m, make_pwm(m.pwm, safe=0), board.digital_output(m.direction, safe=False))
+                Motor(
+                    m,
+                    board.pwm_output(m.pwm, safe=0),
+                    board.digital_output(m.direction, safe=False),
+                )
                 for m in (drive.left, drive.right)
             ]
             self.drive = DiffDrive(drive, motors[0], motors[1], self.clock)
@@ -260,15 +257,43 @@ class Bridge:
 
     def _configure_inputs(self, board: Board) -> None:
         config = self.config
+        kinds: list[tuple[str, type[Any]]] = [(d.topic, Bool) for d in config.digital_inputs]
+        kinds += [(a.topic, Float32) for a in config.analog_inputs]
+        kinds += [(c.topic, Int32MultiArray) for c in config.counters]
         publishers: dict[str, inputs.Publish] = {}
-        for d in config.digital_inputs:
-            publishers[d.topic] = self._writer(d.topic, Bool, SENSOR_QOS).write
-        for a in config.analog_inputs:
-            publishers[a.topic] = self._writer(a.topic, Float32, SENSOR_QOS).write
-        for c in config.counters:
-            publishers[c.topic] = self._writer(c.topic, Int32MultiArray, SENSOR_QOS).write
+        for topic, kind in kinds:
+            # Kept in _writers too: topics() lists them, and they live as long as the bridge.
+            listener: Any = Listener  # untyped in cyclonedds
+            matched = listener(on_publication_matched=self._subscriber_joined(topic))
+            self._writers[topic] = self._writer(topic, kind, SENSOR_QOS, matched)
+            publishers[topic] = self._writers[topic].write
         if publishers:
-            self._undo += inputs.wire(board, config, publishers)
+            self._inputs = inputs.wire(board, config, publishers)
+            self._undo += self._inputs.undo
+
+    def _subscriber_joined(self, topic: str) -> Callable[[Any, Any], None]:
+        """A writer's publication-matched listener (Cyclone's thread): a new subscriber gets
+        the topic's last value from the loop (volatile QoS kept none for it)."""
+
+        def matched(_writer: Any, status: Any) -> None:
+            if status.current_count_change > 0:
+                with self._joined_lock:
+                    self._joined.add(topic)
+                if self._wake is not None:
+                    self._wake.set(True)
+
+        return matched
+
+    def _publish_again_for_new_subscribers(self) -> None:
+        with self._joined_lock:
+            joined, self._joined = self._joined, set()
+        if self._inputs is None:
+            return
+        for topic in sorted(joined):
+            try:
+                self._inputs.topics[topic].again()
+            except Exception:  # DDS refused it; the next change publishes anyway
+                log.exception("%s: publishing the last value again failed", topic)
 
     # --- the loop ------------------------------------------------------------------
 
@@ -292,6 +317,7 @@ class Bridge:
             wait = max(0.0, due - self.clock())
             waitset.wait(duration(seconds=wait) if wait > 0 else 0)
             wake.set(False)
+            self._publish_again_for_new_subscribers()
             if self._device_safe.is_set():
                 self._device_safe.clear()
                 if self.drive is not None:
@@ -419,6 +445,17 @@ class Bridge:
         if self.drive is not None:
             self.drive.forget()
         log.warning("STOP: every output driven safe")
+
+    def _on_clear_interlock(self, _message: Empty) -> Action:
+        return self._clear_interlock
+
+    def _clear_interlock(self) -> None:
+        """Clear a tripped interlock (refused while its input is still at the trip level, which
+        :meth:`_carry_out` logs and counts). The outputs stay safe until commanded again."""
+        assert self.board is not None
+        self.board.clear_interlock()
+        self.health.count("interlock_clears")
+        log.warning("interlock cleared: the outputs stay safe until commanded again")
 
     def _on_twist(self, message: Twist) -> Action:
         assert self.drive is not None

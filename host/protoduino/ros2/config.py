@@ -33,6 +33,7 @@ MAX_JOINTS = 8
 ANALOG_NAMES = {f"A{i}": 14 + i for i in range(8)}
 
 StopType = Literal["Empty", "Bool"]
+InterlockLevel = Literal["low", "high"]
 T = TypeVar("T")
 
 # A ROS 2 name token: letters, digits and underscores, not starting with a digit.
@@ -106,6 +107,8 @@ class DigitalInputConfig:
     topic: str
     pull_up: bool = False
     debounce_ms: int = 0
+    #: Trip every output safe on the device itself at this level (Board.digital_input's).
+    interlock: InterlockLevel | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,6 +140,8 @@ class BridgeConfig:
     diagnostics_period: float = DIAGNOSTICS_PERIOD
     diagnostics_topic: str = "/diagnostics"
     joint_topic: str = "joint_commands"
+    #: std_msgs/Empty that clears a tripped interlock (only with an interlock input).
+    clear_interlock_topic: str = "clear_interlock"
     servos: tuple[ServoConfig, ...] = ()
     digital_outputs: tuple[DigitalOutputConfig, ...] = ()
     stop: StopConfig = field(default_factory=StopConfig)
@@ -144,6 +149,11 @@ class BridgeConfig:
     digital_inputs: tuple[DigitalInputConfig, ...] = ()
     analog_inputs: tuple[AnalogInputConfig, ...] = ()
     counters: tuple[CounterConfig, ...] = ()
+
+    @property
+    def interlocks(self) -> tuple[DigitalInputConfig, ...]:
+        """The digital inputs that are interlocks."""
+        return tuple(d for d in self.digital_inputs if d.interlock is not None)
 
     @property
     def joints(self) -> dict[str, ServoConfig]:
@@ -194,6 +204,7 @@ def parse_config(data: object) -> BridgeConfig:
         diagnostics_period=top.number("diagnostics_period", DIAGNOSTICS_PERIOD, low=0.05),
         diagnostics_topic=top.topic("diagnostics_topic", "/diagnostics"),
         joint_topic=top.topic("joint_topic", "joint_commands"),
+        clear_interlock_topic=top.topic("clear_interlock_topic", "clear_interlock"),
         servos=top.each("servos", _servo),
         digital_outputs=top.each("digital_outputs", _digital_output),
         stop=top.optional("stop", _stop) or StopConfig(),
@@ -217,6 +228,7 @@ def _digital_input(s: _Section) -> DigitalInputConfig:
         s.topic("topic"),
         s.flag("pull_up", False),
         s.integer("debounce_ms", 0, 0, 255),
+        s.optional_choice("interlock", ("low", "high")),  # type: ignore[arg-type]
     )
 
 
@@ -319,6 +331,8 @@ def _topics(config: BridgeConfig) -> list[tuple[str, str]]:
     if config.drive is not None:
         found.append((config.drive.topic, "the drive"))
     found += [(i.topic, f"digital input {i.pin}") for i in config.digital_inputs]
+    if config.interlocks:
+        found.append((config.clear_interlock_topic, "the interlock's clear"))
     found += [(i.topic, f"analog input {i.pin}") for i in config.analog_inputs]
     found += [(c.topic, f"counters {list(c.pins)}") for c in config.counters]
     return found
@@ -418,6 +432,14 @@ class _Section:
         if not isinstance(value, bool):
             raise ConfigError(f"{self._at(key)} must be true or false, not {value!r}")
         return value
+
+    def optional_choice(self, key: str, options: Sequence[str]) -> str | None:
+        value = self._get(key)
+        if value is None:
+            return None
+        if value not in options:
+            raise ConfigError(f"{self._at(key)} must be one of {', '.join(options)}")
+        return str(value)
 
     def choice(self, key: str, options: Sequence[str], default: str) -> str:
         value = self._get(key)

@@ -91,6 +91,7 @@ class Health:
         self.superseded = 0  # valid commands a newer one of the same topic replaced unsent
         self.stale_stops = 0
         self.stops = 0
+        self.interlock_clears = 0
         self.failsafe_active = False
         self.failsafe_cause = "none"
         self.failsafes = 0
@@ -104,7 +105,8 @@ class Health:
             self.bad_total += 1
 
     def count(self, what: str, n: int = 1) -> None:
-        """Add to one of the plain counters (forwarded, refused, stale_stops, stops)."""
+        """Add to one of the plain counters (forwarded, refused, stale_stops, stops,
+        interlock_clears)."""
         with self._lock:
             setattr(self, what, getattr(self, what) + n)
 
@@ -174,6 +176,7 @@ class Health:
             "refused_by_device": self.refused,
             "stops": self.stops,
             "cmd_vel_stale_stops": self.stale_stops,
+            "interlock_clears": self.interlock_clears,
         }
         values.update({f"bad.{k}": v for k, v in sorted(self.bad.items())})
         return self._status("bridge", level, message, values)

@@ -1,35 +1,26 @@
 """Board inputs to ROS 2 topics: digital -> Bool, analog -> Float32, counters -> Int32MultiArray.
 
 The values become messages here (pure functions, tested without a board).
-The wiring asks the board for its inputs by name (``digital_input``,
-``analog_input``, ``counter``: the pins API of issue 21) and refuses a
-configuration that needs one the installed protoduino's Board lacks, with an
-error that says so, rather than starting a bridge that silently publishes
-nothing. Each input's changes arrive on the board's event thread, newest
-value first (the board coalesces), and are published from there: a DDS
-writer may be used from any thread.
+The wiring configures each input on the board (``Board.digital_input``,
+``analog_input``, ``counter``). Each input's changes arrive on the board's
+event thread, newest value first (the board coalesces), and are published
+from there: a DDS writer may be used from any thread.
+
+A sensor topic is volatile (ROS 2's sensor-data QoS), so DDS keeps no value for a subscriber
+that joins later, and an input is published only when it changes: each topic keeps its last
+message (:class:`LastPublished`), which the bridge publishes again when a subscriber matches,
+so that ``ros2 topic echo`` shows a constant battery voltage at once.
 """
 
 from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any, Protocol
 
-from .config import AnalogInputConfig, BridgeConfig, ConfigError, CounterConfig, DigitalInputConfig
+from .config import AnalogInputConfig, BridgeConfig, CounterConfig, DigitalInputConfig
 from .msgs import Bool, Float32, Int32MultiArray, MultiArrayDimension, MultiArrayLayout
-
-#: What the configuration names -> the Board method it needs.
-NEEDS = {
-    "digital_inputs": "digital_input",
-    "analog_inputs": "analog_input",
-    "counters": "counter",
-}
-
-MISSING = (
-    "the configuration has {section}, which needs Board.{method} (the input API of issue 21, "
-    "'pins'); this protoduino's Board has no {method} yet"
-)
 
 
 class Input(Protocol):
@@ -41,13 +32,6 @@ class Input(Protocol):
 
 
 Publish = Callable[[object], None]
-
-
-def check_board(board: object, config: BridgeConfig) -> None:
-    """Refuse a configuration with inputs the board object cannot provide (see MISSING)."""
-    for section, method in NEEDS.items():
-        if getattr(config, section) and not hasattr(board, method):
-            raise ConfigError(MISSING.format(section=section, method=method))
 
 
 def bool_message(level: object) -> Bool:
@@ -75,37 +59,67 @@ def counters_message(counts: Sequence[int], config: CounterConfig) -> Int32Multi
     return Int32MultiArray(layout=layout, data=[int32(c) for c in counts])
 
 
-def _value(reading: Any) -> Any:
-    """A change callback's argument: a reading with ``.value`` (issue 21), or the value itself."""
-    return getattr(reading, "value", reading)
+class LastPublished:
+    """Publishes on one topic and keeps the last message, to publish it :meth:`again`.
+
+    One lock around both, so that a message published again can never overtake a newer one
+    published from the board's event thread meanwhile (the newest stays the last one out).
+    """
+
+    def __init__(self, publish: Publish) -> None:
+        self._publish = publish
+        self._lock = threading.Lock()
+        self.message: object | None = None
+
+    def __call__(self, message: object) -> None:
+        with self._lock:
+            self.message = message
+            self._publish(message)
+
+    def again(self) -> bool:
+        """Publish the last message again (False: nothing was published yet)."""
+        with self._lock:
+            if self.message is None:
+                return False
+            self._publish(self.message)
+            return True
 
 
-def wire(
-    board: Any, config: BridgeConfig, publishers: dict[str, Publish]
-) -> list[Callable[[], None]]:
-    """Subscribe to every configured input; returns the functions that unsubscribe.
+@dataclass(frozen=True, slots=True)
+class Wiring:
+    """The inputs on their topics: what unsubscribes them, and each topic's last message."""
+
+    undo: list[Callable[[], None]]
+    topics: dict[str, LastPublished]
+
+
+def wire(board: Any, config: BridgeConfig, publishers: dict[str, Publish]) -> Wiring:
+    """Subscribe to every configured input and publish its first value.
 
     ``publishers`` maps each input topic to the function that publishes a message on it.
     """
-    check_board(board, config)
+    last = {topic: LastPublished(publish) for topic, publish in publishers.items()}
     undo: list[Callable[[], None]] = []
     for d in config.digital_inputs:
-        undo.append(_digital(board, d, publishers[d.topic]))
+        undo.append(_digital(board, d, last[d.topic]))
     for a in config.analog_inputs:
-        undo.append(_analog(board, a, publishers[a.topic]))
+        undo.append(_analog(board, a, last[a.topic]))
     for c in config.counters:
-        undo += _counters(board, c, publishers[c.topic])
-    return undo
+        undo += _counters(board, c, last[c.topic])
+    return Wiring(undo, last)
 
 
 def _digital(board: Any, config: DigitalInputConfig, publish: Publish) -> Callable[[], None]:
     pin: Input = board.digital_input(
-        config.pin, pull_up=config.pull_up, debounce_ms=config.debounce_ms
+        config.pin,
+        pull_up=config.pull_up,
+        debounce_ms=config.debounce_ms,
+        interlock=config.interlock,
     )
     first = pin.read()
     if first is not None:
         publish(bool_message(first))
-    return pin.on_change(lambda r: publish(bool_message(_value(r))))
+    return pin.on_change(lambda r: publish(bool_message(r.value)))
 
 
 def _analog(board: Any, config: AnalogInputConfig, publish: Publish) -> Callable[[], None]:
@@ -113,7 +127,7 @@ def _analog(board: Any, config: AnalogInputConfig, publish: Publish) -> Callable
     first = pin.read()
     if first is not None:
         publish(analog_message(int(first), config))
-    return pin.on_change(lambda r: publish(analog_message(int(_value(r)), config)))
+    return pin.on_change(lambda r: publish(analog_message(int(r.value), config)))
 
 
 def _counters(board: Any, config: CounterConfig, publish: Publish) -> list[Callable[[], None]]:
@@ -123,7 +137,7 @@ def _counters(board: Any, config: CounterConfig, publish: Publish) -> list[Calla
 
     def changed(index: int, reading: Any) -> None:
         with lock:
-            counts[index] = int(_value(reading))
+            counts[index] = int(reading.value)
             message = counters_message(counts, config)
         publish(message)
 

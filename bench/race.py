@@ -1,0 +1,696 @@
+"""Benchmark part 9 (docs/performance.md): the race against StandardFirmata (issue 23).
+
+StandardFirmata 2.4, the Uno hex that the npm package avrgirl-arduino 5.0.1 ships (fetched at
+setup by tools/fetch_firmata.sh, pinned by sha256; nothing is fetched here), runs unmodified on
+the same emulated Uno runner (tools/avrsim ``--hex``) as protoduino's firmware, one after the
+other in one run, and the same questions are asked of both:
+
+* the bytes of a digital write on the wire, and of its answer;
+* digital write -> pin, and servo write -> new pulse width at the pin (p50 / p99), the digital
+  one also less the command's own line time;
+* output changes per second delivered at the pin flat out, and how far behind the host's last
+  write the pin's last change comes; poses of six digital outputs at window 4 (protoduino);
+* host CPU per command, per call kind: ``time.process_time`` around each call, so the host
+  library's own threads count (protoduino's I/O thread; pyFirmata2 runs none while writing);
+* analog samples per second per channel, every channel at its fastest;
+* flash, static RAM and the deepest stack (the runner's lowest stack pointer in this run).
+
+Pin times are the trace's (emulated seconds since the runner started, measured at the pins)
+plus the runner's time zero on CLOCK_MONOTONIC, which its --stats line gives: the host's
+``time.monotonic()`` of the change, within the pacing's 50 us while the runner keeps up (its
+lag at the end of each board's run is reported). Each line's byte time is the runner's: simavr
+sends a byte in 11 bit times at the rate the firmware set, and the runner feeds host bytes in
+10 bit times at that rate.
+
+Firmata is driven by pyFirmata2, the bench's Firmata library already (bench/peers/firmata.py).
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import random
+import statistics
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+from tempfile import TemporaryDirectory
+from typing import Any
+
+from protoduino import Board, programs
+from protoduino.constants import PacketType
+from protoduino.errors import ProtoduinoError
+from protoduino.framing import frame_packet
+from protoduino.packets import Packet
+from protoduino.simboard import SimBoard
+from protoduino.transport import FrameRecord
+from protoduino_dev import runnerstats
+
+from . import firmware, inputs
+from .boards import (
+    UNO_HZ,
+    BoardUnavailableError,
+    Percentiles,
+    Trace,
+    missing_tool,
+    started,
+    started_hex,
+)
+from .core import Context, Section, SectionResult, Target, md_table, require
+from .motion import us, wait_changes
+from .peers import firmata_board
+
+log = logging.getLogger(__name__)
+
+ROOT = firmata_board.ROOT
+FIRMATA_HEX = firmata_board.HEX
+FETCH_STEP = firmata_board.FETCH_STEP
+
+DIGITAL_PIN = 13
+SERVO_PIN = 9
+#: The pose's six digital outputs (13 is the digital write's pin).
+POSE_PINS: tuple[int, ...] = (2, 4, 7, 8, 12, 13)
+WINDOW = 4
+#: Random pause before a timed digital call (s): samples every phase of the boards' 1 ms tick.
+DIGITAL_GAP = 0.002
+#: ... and before a servo write: every phase of the 20 ms servo frame.
+SERVO_GAP = 0.020
+#: Analog streaming per board (s), and protoduino's sampling rate per channel (its inputs part).
+ANALOG_SECONDS = 2.0
+ANALOG_HZ = inputs.ANALOG_HZ
+#: Bounds a failing wait for the pins to show a flat-out run's last change (s).
+SETTLE = 10.0
+#: How far a trace time mapped to the host's clock may be off (the runner's pacing).
+MAPPING_ERROR = 0.001
+
+LABELS = ("protoduino", "StandardFirmata")
+
+
+@dataclass(frozen=True, slots=True)
+class Line:
+    """A board's serial line as the runner times it (from simavr's byte time, in cycles)."""
+
+    byte_cycles: int  # a byte the UART sends: 11 bit times in simavr 1.6
+
+    @property
+    def baud(self) -> float:
+        return UNO_HZ * 11 / self.byte_cycles
+
+    @property
+    def board_byte_us(self) -> float:
+        return self.byte_cycles / UNO_HZ * 1e6
+
+    @property
+    def host_byte_us(self) -> float:
+        """A host byte into the UART: 10 bit times at the same rate (tools/avrsim)."""
+        return self.byte_cycles * 10 / 11 / UNO_HZ * 1e6
+
+    def describe(self, nominal: int) -> str:
+        return (
+            f"{nominal} ({self.baud:,.0f} from UBRR): {self.host_byte_us:.1f} us a byte "
+            f"to the board (10 bits), {self.board_byte_us:.1f} us from it (simavr's 11 bits)"
+        )
+
+
+@dataclass(slots=True)
+class Flat:
+    """A flat-out run: ``changes`` output changes, from the first call to the last change."""
+
+    changes: int = 0
+    seconds: float = 0.0  # first call -> last change at the pins (host clock)
+    behind: float = 0.0  # the host's last write to the line -> the last change at the pins
+    returned: float = 0.0  # the host's last call returned -> the last change at the pins
+    cpu: float = 0.0  # process CPU of the whole run
+    calls: int = 0
+    acked: float | None = None  # the last Ack arrived -> last change (negative: before it)
+    line_share: float | None = None  # host -> board bytes over the line's capacity
+
+    @property
+    def rate(self) -> float:
+        return self.changes / self.seconds if self.seconds > 0 else 0.0
+
+
+@dataclass(slots=True)
+class BoardRun:
+    label: str
+    nominal_baud: int
+    line: Line | None = None
+    command_bytes: list[int] = field(default_factory=list)
+    answer_bytes: list[int] = field(default_factory=list)
+    digital: list[float] = field(default_factory=list)  # call -> pin (s)
+    servo: list[float] = field(default_factory=list)
+    cpu: dict[str, list[float]] = field(default_factory=dict)  # per call kind (s)
+    lost: int = 0
+    flat: Flat | None = None
+    poses: Flat | None = None
+    analog: dict[int, float] = field(default_factory=dict)
+    flash: int = 0
+    static_ram: int = 0
+    stack: int = 0
+    lag: float = 0.0  # wall clock minus the runner's emulated clock at the end (s)
+    error: str | None = None
+
+
+class RunnerClock:
+    """The runner's --stats counters, and its time zero: trace time + ``zero`` is host time."""
+
+    def __init__(self, sim: SimBoard, stats: Path) -> None:
+        self.sim = sim
+        self.stats = stats
+        self.row = runnerstats.snapshot(sim.pid, stats)
+        self.zero = int(self.row["start_ns"]) / 1e9
+
+    def snapshot(self) -> dict[str, Any]:
+        row: dict[str, Any] = runnerstats.snapshot(self.sim.pid, self.stats)
+        self.row = row
+        return row
+
+    def line(self) -> Line:
+        cycles = int(self.snapshot()["uart_byte_cycles"])
+        if cycles <= 0:
+            raise RuntimeError("the firmware never set up its UART")
+        return Line(cycles)
+
+    def lag(self) -> float:
+        """How far the emulated clock is behind the host's now (s); ~0 when it keeps up."""
+        seen = time.monotonic()
+        row = self.snapshot()
+        return seen - (self.zero + float(row["t"]))
+
+
+def _to_pin(
+    clock: RunnerClock,
+    trace: Trace,
+    pin: int,
+    want: int,
+    call: Callable[[], object],
+) -> tuple[float, float] | None:
+    """(call -> the pin shows ``want``, process CPU of the call) in seconds; None if lost."""
+    events = trace.update()
+    after = float(events[-1]["t"]) if events else 0.0
+    c0 = time.process_time()
+    t0 = time.monotonic()
+    call()
+    cpu = time.process_time() - c0
+    changed = wait_changes(trace, {pin: want}, after)
+    if changed is None:
+        return None
+    return clock.zero + changed[pin] - t0, cpu
+
+
+def _time_digital(
+    run: BoardRun,
+    clock: RunnerClock,
+    trace: Trace,
+    *,
+    samples: int,
+    rng: random.Random,
+    write: Callable[[bool], object],
+) -> None:
+    """Digital writes toggling DIGITAL_PIN, one at a time."""
+    level = False
+    for _ in range(samples):
+        level = not level
+        time.sleep(rng.uniform(0.0, DIGITAL_GAP))
+        got = _to_pin(clock, trace, DIGITAL_PIN, int(level), functools.partial(write, level))
+        if got is None:
+            run.lost += 1
+            continue
+        run.digital.append(got[0])
+        run.cpu.setdefault("digital write", []).append(got[1])
+
+
+def _time_servo(
+    run: BoardRun,
+    clock: RunnerClock,
+    trace: Trace,
+    *,
+    samples: int,
+    rng: random.Random,
+    write: Callable[[int], object],
+) -> None:
+    """Servo writes on SERVO_PIN, one at a time, each to a new angle."""
+    degrees = 0
+    for i in range(samples):
+        degrees = (degrees + 37 + i % 7) % 171 + 5
+        time.sleep(rng.uniform(0.0, SERVO_GAP))
+        got = _to_pin(clock, trace, SERVO_PIN, us(degrees), functools.partial(write, degrees))
+        if got is None:
+            run.lost += 1
+            continue
+        run.servo.append(got[0])
+        run.cpu.setdefault("servo write", []).append(got[1])
+
+
+def _poses(commands: int) -> int:
+    """Poses of the flat-out run: a third of the commands, even (see _flat_out)."""
+    return max(20, commands // 3) // 2 * 2
+
+
+def _servo_samples(samples: int) -> int:
+    """Servo samples: a quarter of the digital ones (each waits for a 20 ms frame)."""
+    return max(5, samples // 4)
+
+
+def _flat_out(
+    clock: RunnerClock,
+    trace: Trace,
+    line: Line,
+    *,
+    pins: Sequence[int],
+    calls: int,
+    issue: Callable[[int], object],
+    finish: Callable[[], object],
+    acked: bool,
+    last_write: Callable[[], float] | None = None,
+) -> Flat:
+    """``calls`` calls as fast as the host makes them, call i setting every pin of ``pins`` to
+    level i % 2 == 0 (they start low, ``calls`` is even: they end low).
+
+    The trace does not list every edge of a fast toggle (highs under 3 ms read as pulses, a
+    train of them as a servo: tools/avrsim/pd_pins.c), but it dates the last fall of each pin
+    exactly, as a digital 0 or as the end of a pulse train: the time the last call took
+    effect. Changes per second are those of all the calls over the time from the first call
+    to that moment. ``finish`` waits for the calls' Acks where there are any (``acked``);
+    ``last_write`` says when the host wrote its last frame to the line, where a library holds
+    calls back (protoduino's window); otherwise that is when the last call returned."""
+    if calls % 2:
+        raise ValueError("an even number of calls, so that the pins end low")
+    mark = len(trace.update())
+    rx0 = int(clock.snapshot()["uart_rx_bytes"])
+    c0 = time.process_time()
+    t0 = time.monotonic()
+    for i in range(calls):
+        issue(i)
+    t_last = time.monotonic()
+    finish()
+    t_done = time.monotonic()
+    cpu = time.process_time() - c0
+    deadline = time.monotonic() + SETTLE + calls * 0.002
+    while True:
+        ends = _last_falls(trace.update()[mark:], pins)
+        # A fall the last call made: after its write, and quiet since for longer than a
+        # pulse train's period (a later pulse would have been reported by then).
+        if (
+            len(ends) == len(pins)
+            and time.monotonic() > clock.zero + max(ends.values()) + 0.1
+            and clock.zero + min(ends.values()) >= t_last - MAPPING_ERROR
+        ):
+            break
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"pins {list(pins)} did not show the last of {calls} calls")
+        time.sleep(0.01)
+    rx = int(clock.snapshot()["uart_rx_bytes"]) - rx0
+    end = clock.zero + max(ends.values())
+    wrote = last_write() if last_write is not None else t_last
+    flat = Flat(calls * len(pins), end - t0, end - wrote, end - t_last, cpu, calls)
+    if acked:
+        flat.acked = end - t_done
+    flat.line_share = rx * line.host_byte_us / 1e6 / max(end - t0, 1e-9)
+    return flat
+
+
+def _last_falls(events: Sequence[dict[str, Any]], pins: Sequence[int]) -> dict[int, float]:
+    """Each pin's last trace time, if its last line says 0 (the pin is low since then)."""
+    last: dict[int, dict[str, Any]] = {}
+    for e in events:
+        if int(e["pin"]) in pins:
+            last[int(e["pin"])] = e
+    return {pin: float(e["t"]) for pin, e in last.items() if int(e["value"]) == 0}
+
+
+class _WireSizes:
+    """Frame monitor: the wire size of every COMMAND the host sends and every DATA it gets."""
+
+    def __init__(self) -> None:
+        self.counting = False
+        self.commands: list[int] = []
+        self.answers: list[int] = []
+        self.last_command = 0.0  # time.monotonic() of the last COMMAND written
+
+    def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
+        item = record.item
+        if not isinstance(item, Packet):
+            return
+        if record.direction == "tx" and item.type is PacketType.COMMAND:
+            self.last_command = record.t
+        if not self.counting:
+            return
+        size = len(frame_packet(item.type, item.seq, item.payload))
+        if record.direction == "tx" and item.type is PacketType.COMMAND:
+            self.commands.append(size)
+        elif record.direction == "rx" and item.type is PacketType.DATA:
+            self.answers.append(size)
+
+
+def run_protoduino(samples: int, commands: int, seed: int, analog_seconds: float) -> BoardRun:
+    run = BoardRun(LABELS[0], 115_200)
+    rng = random.Random(seed)
+    with TemporaryDirectory(prefix="bench-race-") as tmp:
+        stats, trace_path = Path(tmp) / "stats.jsonl", Path(tmp) / "trace.jsonl"
+        with (
+            started("avr", stats=stats, trace=trace_path) as sim,
+            Board.open(sim.port, window=WINDOW) as board,
+        ):
+            clock = RunnerClock(sim, stats)
+            trace = Trace(trace_path)
+            led = board.digital_output(DIGITAL_PIN)
+            servo = board.servo(SERVO_PIN)
+            run.line = line = clock.line()
+            sizes = _WireSizes()
+            board.add_frame_monitor(sizes)
+            sizes.counting = True
+            _time_digital(run, clock, trace, samples=samples, rng=rng, write=led.write)
+            sizes.counting = False
+            run.command_bytes, run.answer_bytes = sizes.commands, sizes.answers
+            _time_servo(
+                run, clock, trace, samples=_servo_samples(samples), rng=rng, write=servo.write
+            )
+
+            futures: list[Future[None]] = []
+            led.write(False)
+            run.flat = _flat_out(
+                clock,
+                trace,
+                line,
+                pins=(DIGITAL_PIN,),
+                calls=commands // 2 * 2,
+                issue=lambda i: futures.append(led.submit(i % 2 == 0)),
+                finish=lambda: [f.result() for f in wait(futures).done],
+                acked=True,
+                last_write=lambda: sizes.last_command,
+            )
+            outs = [led, *(board.digital_output(p) for p in POSE_PINS if p != DIGITAL_PIN)]
+            board.pose(dict.fromkeys(outs, False))
+            pose_futures: list[Future[None]] = []
+            poses = _poses(commands)
+            run.poses = _flat_out(
+                clock,
+                trace,
+                line,
+                pins=POSE_PINS,
+                calls=poses,
+                issue=lambda i: pose_futures.append(
+                    board.submit_pose(dict.fromkeys(outs, i % 2 == 0))
+                ),
+                finish=lambda: [f.result() for f in wait(pose_futures).done],
+                acked=True,
+                last_write=lambda: sizes.last_command,
+            )
+            run.cpu["pose (6 outputs)"] = [run.poses.cpu / run.poses.calls]
+            rates, _gaps, _coalesced, _idle, _busy = inputs.measure_streaming(
+                board, analog_seconds, 5
+            )
+            run.analog = rates
+            row = clock.snapshot()
+            run.stack = int(row["ramend"]) - int(row["sp_min"])
+            run.lag = clock.lag()
+    size = firmware.footprint(programs.locate(programs.FIRMWARE_ELF))
+    run.flash, run.static_ram = size.flash, size.ram
+    return run
+
+
+def run_firmata(samples: int, commands: int, seed: int, analog_seconds: float) -> BoardRun:
+    run = BoardRun(LABELS[1], firmata_board.BAUD)
+    rng = random.Random(seed)
+    with TemporaryDirectory(prefix="bench-race-") as tmp:
+        stats, trace_path = Path(tmp) / "stats.jsonl", Path(tmp) / "trace.jsonl"
+        with (
+            started_hex(FIRMATA_HEX, stats=stats, trace=trace_path) as sim,
+            firmata_board.opened(sim.port) as firmata,
+        ):
+            clock = RunnerClock(sim, stats)
+            trace = Trace(trace_path)
+            led = firmata.digital_output(DIGITAL_PIN)
+            servo = firmata.servo(SERVO_PIN, 0)
+            # No Ack says the set-up arrived: the servo's first pulses at 0 degrees do, and
+            # that its bytes are not counted as the digital writes' below.
+            if wait_changes(trace, {SERVO_PIN: us(0)}, 0.0) is None:
+                raise RuntimeError("StandardFirmata's servo never started")
+            run.line = line = clock.line()
+            rx0 = int(clock.snapshot()["uart_rx_bytes"])
+            _time_digital(run, clock, trace, samples=samples, rng=rng, write=led.write)
+            rx = int(clock.snapshot()["uart_rx_bytes"]) - rx0
+            # No answer to tell one command's bytes from another's: the mean, all alike here.
+            run.command_bytes = [round(rx / samples)]
+            _time_servo(
+                run, clock, trace, samples=_servo_samples(samples), rng=rng, write=servo.write
+            )
+
+            led.write(False)
+            run.flat = _flat_out(
+                clock,
+                trace,
+                line,
+                pins=(DIGITAL_PIN,),
+                calls=commands // 2 * 2,
+                issue=lambda i: led.write(i % 2 == 0),
+                finish=list,  # nothing to wait for: Firmata answers nothing
+                acked=False,
+            )
+            run.analog = firmata.stream_analog(
+                6, analog_seconds, lambda: float(clock.snapshot()["t"])
+            )
+            row = clock.snapshot()
+            run.stack = int(row["ramend"]) - int(row["sp_min"])
+            run.lag = clock.lag()
+    size = firmata_board.hex_footprint(FIRMATA_HEX)
+    run.flash, run.static_ram = size.flash, size.static_ram
+    return run
+
+
+def collect(
+    samples: int, commands: int, seed: int, analog_seconds: float = ANALOG_SECONDS
+) -> list[BoardRun]:
+    """Both boards, protoduino first; one that cannot run carries its ``error``."""
+    out: list[BoardRun] = []
+    for label, measure, nominal in (
+        (LABELS[0], run_protoduino, 115_200),
+        (LABELS[1], run_firmata, firmata_board.BAUD),
+    ):
+        try:
+            out.append(measure(samples, commands, seed, analog_seconds))
+        except (ProtoduinoError, BoardUnavailableError, RuntimeError, OSError) as error:
+            log.warning("race: %s not run: %s", label, error)
+            out.append(BoardRun(label, nominal, error=str(error).splitlines()[0]))
+    return out
+
+
+# -- the report ------------------------------------------------------------------------------
+
+
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1000:.2f}"
+
+
+def _pcts(values: list[float]) -> str:
+    if not values:
+        return "-"
+    p = Percentiles.of(values)
+    return f"{_ms(p.p50)} / {_ms(p.p99)} ms"
+
+
+def _range(values: list[int]) -> str:
+    if not values:
+        return "-"
+    lo, hi = min(values), max(values)
+    return f"{lo} B" if lo == hi else f"{lo}-{hi} B"
+
+
+def _behind(flat: Flat) -> str:
+    text = f"the last change {_ms(flat.behind)} ms after the host's last write to the line"
+    if flat.acked is not None:
+        when = "before" if flat.acked < 0 else "after"
+        text += (
+            f" ({_ms(flat.returned)} ms after its last call returned, the rest queued in the "
+            f"host; {_ms(abs(flat.acked))} ms {when} the last Ack)"
+        )
+    return text
+
+
+def _cells(run: BoardRun) -> dict[str, str]:
+    """Each row's cell for one board."""
+    if run.error is not None or run.line is None:
+        why = run.error or "no line"
+        return dict.fromkeys(ROWS, f"not run: {why}")
+    line = run.line
+    cmd = statistics.median(run.command_bytes) if run.command_bytes else 0.0
+    answer = f"; its Ack {_range(run.answer_bytes)}" if run.answer_bytes else "; no answer (no ack)"
+    own = cmd * line.host_byte_us / 1e6
+    less = (
+        f"{(statistics.median(run.digital) - own) * 1e6:,.0f} us (line {own * 1e6:,.0f} us)"
+        if run.digital
+        else "-"
+    )
+    flat = run.flat
+    flat_cell = f"{flat.rate:,.0f}/s; {_behind(flat)}" if flat else "-"
+    poses = run.poses
+    pose_cell = (
+        f"{poses.rate:,.0f} changes/s, {(poses.line_share or 0) * 100:.0f} % of the line; "
+        f"{_behind(poses)}"
+        if poses
+        else "- (no multi-output command)"
+    )
+    cpu = [f"{kind} {statistics.median(v) * 1e6:,.0f} us" for kind, v in run.cpu.items() if v]
+    if flat is not None and flat.calls:
+        cpu.append(f"digital flat out {flat.cpu / flat.calls * 1e6:,.0f} us")
+    analog = (
+        f"{statistics.median(run.analog.values()):,.1f} (min {min(run.analog.values()):,.1f}, "
+        f"{len(run.analog)} channels)"
+        if run.analog
+        else "-"
+    )
+    return {
+        "line": line.describe(run.nominal_baud),
+        "digital write on the wire": f"{_range(run.command_bytes)}{answer}",
+        "digital write -> pin p50 / p99": _pcts(run.digital),
+        "the same minus the command's own line time, p50": less,
+        "servo write -> new width at the pin p50 / p99": _pcts(run.servo),
+        "output changes/s delivered, flat out (digital writes)": flat_cell,
+        "six outputs per command (pose) at window 4": pose_cell,
+        "host CPU per command (median)": "; ".join(cpu) or "-",
+        "analog samples/s per channel (median)": analog,
+        "flash / static RAM / deepest stack in this run": (
+            f"{run.flash:,} / {run.static_ram:,} / {run.stack:,} B"
+        ),
+        "runner behind the wall clock at the end": f"{run.lag * 1e6:,.0f} us",
+    }
+
+
+ROWS: tuple[str, ...] = (
+    "line",
+    "digital write on the wire",
+    "digital write -> pin p50 / p99",
+    "the same minus the command's own line time, p50",
+    "servo write -> new width at the pin p50 / p99",
+    "output changes/s delivered, flat out (digital writes)",
+    "six outputs per command (pose) at window 4",
+    "host CPU per command (median)",
+    "analog samples/s per channel (median)",
+    "flash / static RAM / deepest stack in this run",
+    "runner behind the wall clock at the end",
+)
+
+
+def _targets(ours: BoardRun, theirs: BoardRun) -> list[Target]:
+    """Issue 23's goals that this run can judge."""
+    out: list[Target] = []
+    if ours.digital and ours.line is not None and ours.command_bytes:
+        own = statistics.median(ours.command_bytes) * ours.line.host_byte_us / 1e6
+        p50 = statistics.median(ours.digital)
+        out.append(
+            Target(
+                "digital write -> pin at 115200, p50",
+                "<= its own line time + 0.15 ms",
+                f"{_ms(p50)} ms (line {_ms(own)} ms)",
+                p50 <= own + 0.15e-3,
+            )
+        )
+    if ours.poses is not None and theirs.flat is not None:
+        met = ours.poses.rate > theirs.flat.rate and ours.poses.behind <= 0.010
+        out.append(
+            Target(
+                "pose changes/s at window 4",
+                "> Firmata's flat-out rate, last change <= 10 ms behind",
+                f"{ours.poses.rate:,.0f}/s ({_ms(ours.poses.behind)} ms behind) against "
+                f"{theirs.flat.rate:,.0f}/s",
+                met,
+                "Firmata's rate is at its own 57600 baud, not at the same baud",
+            )
+        )
+    cpu = [statistics.median(v) for v in ours.cpu.values() if v]
+    if cpu:
+        out.append(
+            Target(
+                "host CPU per acked command",
+                "<= 100 us, every call kind",
+                f"{min(cpu) * 1e6:,.0f}-{max(cpu) * 1e6:,.0f} us",
+                max(cpu) <= 100e-6,
+            )
+        )
+    return out
+
+
+def _quote(ours: BoardRun, theirs: BoardRun) -> str:
+    """The race in one sentence, as README.md quotes it (bench.report.quote)."""
+    cpu_ours = statistics.median(ours.cpu["digital write"])
+    cpu_theirs = statistics.median(theirs.cpu["digital write"])
+    text = (
+        f"digital write -> pin p50 {_ms(statistics.median(ours.digital))} ms at 115200 "
+        f"({_range(ours.command_bytes)}: an acknowledged, CRC-checked frame) against "
+        f"StandardFirmata's {_ms(statistics.median(theirs.digital))} ms at 57600 "
+        f"({_range(theirs.command_bytes)}, no ack, no check); host CPU per digital write "
+        f"{cpu_ours * 1e6:,.0f} us against {cpu_theirs * 1e6:,.0f} us"
+    )
+    if ours.flat is not None and theirs.flat is not None:
+        text += (
+            f"; flat out {ours.flat.rate:,.0f} acknowledged changes/s against "
+            f"{theirs.flat.rate:,.0f}/s whose pins end {_ms(theirs.flat.behind)} ms behind the "
+            "host (no flow control)"
+        )
+    return text
+
+
+def run(ctx: Context) -> SectionResult:
+    if not FIRMATA_HEX.exists():
+        return SectionResult(
+            f"Not run: StandardFirmata's hex is missing ({FIRMATA_HEX.relative_to(ROOT)}); "
+            f"{FETCH_STEP} fetches it.\n"
+        )
+    tool = missing_tool("avr")
+    if tool is not None:
+        return SectionResult(f"Not run: `{tool}` is not installed.\n")
+    require("pyfirmata2.pyfirmata2", "pyFirmata2")  # MissingDependencyError: "not run"
+    samples = max(10, ctx.samples)
+    runs = collect(samples, ctx.commands, ctx.seed)
+    ours, theirs = runs
+    cells = [_cells(r) for r in runs]
+    table = md_table(
+        ["", f"{ours.label} (115200)", f"{theirs.label} 2.4 (57600)"],
+        [[row, cells[0][row], cells[1][row]] for row in ROWS],
+        "lll",
+    )
+    text = (
+        "StandardFirmata 2.4 (the Uno hex of the npm package avrgirl-arduino 5.0.1, fetched "
+        f"at setup by {FETCH_STEP}, pinned by sha256) and protoduino's firmware, one after the "
+        "other on the same emulated Uno runner (tools/avrsim), each at its own baud; "
+        "StandardFirmata through pyFirmata2, protoduino through its Board at window "
+        f"{WINDOW}. {samples} digital writes (pin {DIGITAL_PIN} toggled) and "
+        f"{_servo_samples(samples)} servo writes (pin {SERVO_PIN}) one at a time, each after a "
+        "random pause; pin times from the emulated trace, mapped to host time through the "
+        "runner's own time zero (within 50 us while the runner keeps up; its lag at the end is "
+        "the last row). A servo shows a new width at its next 20 ms frame. Flat out: "
+        f"{ctx.commands} digital writes as fast as the host issues them (protoduino: "
+        f"`submit`, {WINDOW} in flight; Firmata has no acknowledgement and no flow control, so "
+        f"the pty and the runner queue what the line cannot carry yet); poses: "
+        f"{_poses(ctx.commands)} `submit_pose` of {len(POSE_PINS)} digital outputs, "
+        "their share of the line counting the bytes that entered the board's UART. Host "
+        "CPU: `time.process_time` around each call (all of the host library's threads). "
+        f"Analog: every analog input streamed for {ANALOG_SECONDS:.0f} s (protoduino at "
+        f"{ANALOG_HZ} Hz with a heartbeat of one period, Firmata at its 10 ms floor), counted "
+        "per second of the board's own clock (protoduino's reports carry it; Firmata's "
+        "between two readings of the runner's emulated time). "
+        "Firmata's flash is the hex's bytes and its static RAM the end of .bss that its "
+        "start-up code clears; the deepest stack is the runner's lowest stack pointer in this "
+        "run for both.\n\n" + table
+    )
+    text += (
+        "\nThe targets are issue 23's for protoduino; this part only measures. What the issue "
+        "plans to meet them with is elsewhere: shorter frames (sequential message ids, small "
+        "field numbers), a faster line agreed after the handshake, and less host work per "
+        "call. Firmata's figures are bought with no acknowledgement, no check and no flow "
+        "control: flat out, its pins fall as far behind the host as the operating system "
+        "will buffer.\n"
+    )
+    lost = [f"{r.label}: {r.lost}" for r in runs if r.lost]
+    if lost:
+        text += f"\nWrites whose change never showed at the pin: {', '.join(lost)}.\n"
+    quotes: dict[str, str] = {}
+    if ours.error is None and theirs.error is None and ours.digital and theirs.digital:
+        quotes["race"] = _quote(ours, theirs)
+    return SectionResult(text, _targets(ours, theirs), packages=["pyFirmata2"], quotes=quotes)
+
+
+SECTION = Section(9, "race", "The race against StandardFirmata", run)
