@@ -49,9 +49,17 @@ from protoduino.transport import FrameRecord
 from protoduino_dev import runnerstats
 
 from . import firmware, inputs
-from .boards import UNO_HZ, BoardUnavailableError, Percentiles, missing_tool, started, started_hex
+from .boards import (
+    UNO_HZ,
+    BoardUnavailableError,
+    Percentiles,
+    Trace,
+    missing_tool,
+    started,
+    started_hex,
+)
 from .core import Context, Section, SectionResult, Target, md_table, require
-from .motion import Trace, us, wait_changes
+from .motion import us, wait_changes
 from .peers import firmata_board
 
 log = logging.getLogger(__name__)

@@ -284,7 +284,7 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
  *   2. here: its handler, cmd_<name>(core, cmd);
  *   3. docs/protocol.md: its wire text;
  *   4. its method on the host (host/protoduino/board.py and aio.py) and its
- *      tests; the fake devices (tests/fakedevice.py, tests/virtualdevice.py) if
+ *      tests; the fake devices (tests/fakedevice.py, host/protoduino/testing.py) if
  *      the tests that use them send it.
  * A result also needs its encoding in pd_encode.c (the device's encoder writes
  * only the Ack results it knows).

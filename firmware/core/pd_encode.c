@@ -296,12 +296,6 @@ size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap)
         put_uint(&w, protoduino_DecodeError_count_tag, msg->data.decode_error.count);
         close_msg(&w, at);
         break;
-    case protoduino_ArduinoOut_log_tag:
-        at = open_msg(&w, protoduino_ArduinoOut_log_tag);
-        put_uint(&w, protoduino_Log_level_tag, (uint32_t)msg->data.log.level);
-        put_string(&w, protoduino_Log_text_tag, msg->data.log.text, sizeof(msg->data.log.text));
-        close_msg(&w, at);
-        break;
 #if PD_FEATURE_USER
     case protoduino_ArduinoOut_user_report_tag:
         at = open_msg(&w, protoduino_ArduinoOut_user_report_tag);

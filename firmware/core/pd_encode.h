@@ -45,8 +45,7 @@
                          66u + 2u + protoduino_Failsafe_size))
 #define PD_ENCODE_MAX                                                        \
     (2u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(PD_ENCODE_ACK_MAX, protoduino_InputReport_size), \
-                         PD_ENCODE_MAX2(PD_ENCODE_MAX2(protoduino_Log_size, protoduino_Failsafe_size), \
-                                        protoduino_UserReport_size)))
+                         PD_ENCODE_MAX2(protoduino_Failsafe_size, protoduino_UserReport_size)))
 
 /* Encode `msg` into buf (capacity cap). Returns the length, or 0 if cap is
  * below PD_ENCODE_MAX (the largest message: any message fits a buffer that

@@ -233,9 +233,6 @@ static pd_link_event_t handle_frame(pd_link_t *link, void *hal)
          * time, with its TYPE and LEN stored. */
         return PD_LINK_COMMAND;
     }
-    if (pkt.type == PD_PACKET_CONTROL && pkt.len == 1 && pkt.payload[0] == PD_CONTROL_HEARTBEAT) {
-        return PD_LINK_HANDLED; /* liveness of the link only; never of the application */
-    }
     PD_STAT_INC(link, ignored);
     return PD_LINK_HANDLED;
 }

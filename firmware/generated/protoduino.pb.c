@@ -90,14 +90,10 @@ PB_BIND(protoduino_InputReport, protoduino_InputReport, AUTO)
 PB_BIND(protoduino_DecodeError, protoduino_DecodeError, AUTO)
 
 
-PB_BIND(protoduino_Log, protoduino_Log, AUTO)
-
-
 PB_BIND(protoduino_UserReport, protoduino_UserReport, AUTO)
 
 
 PB_BIND(protoduino_ArduinoOut, protoduino_ArduinoOut, AUTO)
-
 
 
 

@@ -83,13 +83,6 @@ typedef enum _protoduino_FailsafeCause {
     protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK = 3
 } protoduino_FailsafeCause;
 
-typedef enum _protoduino_LogLevel {
-    protoduino_LogLevel_LOG_LEVEL_DEBUG = 0,
-    protoduino_LogLevel_LOG_LEVEL_INFO = 1,
-    protoduino_LogLevel_LOG_LEVEL_WARNING = 2,
-    protoduino_LogLevel_LOG_LEVEL_ERROR = 3
-} protoduino_LogLevel;
-
 /* Struct definitions */
 typedef PB_BYTES_ARRAY_T(64) protoduino_Ping_payload_t;
 /* Link test and liveness: one per second keeps the failsafe away. The
@@ -379,12 +372,6 @@ typedef struct _protoduino_DecodeError {
     uint32_t count; /* decode errors since boot */
 } protoduino_DecodeError;
 
-/* A short text from the firmware, for humans. */
-typedef struct _protoduino_Log {
-    protoduino_LogLevel level;
-    char text[48];
-} protoduino_Log;
-
 typedef PB_BYTES_ARRAY_T(64) protoduino_UserReport_body_t;
 /* A report of a user service (docs/services.md): the newest value of report
  `report`, "newest wins" as InputReport. */
@@ -400,7 +387,6 @@ typedef struct _protoduino_ArduinoOut {
         protoduino_Ack ack;
         protoduino_Failsafe failsafe;
         protoduino_DecodeError decode_error;
-        protoduino_Log log;
         protoduino_InputReport input_report;
         protoduino_UserReport user_report;
     } data;
@@ -436,10 +422,6 @@ extern "C" {
 #define _protoduino_FailsafeCause_MAX protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK
 #define _protoduino_FailsafeCause_ARRAYSIZE ((protoduino_FailsafeCause)(protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK+1))
 
-#define _protoduino_LogLevel_MIN protoduino_LogLevel_LOG_LEVEL_DEBUG
-#define _protoduino_LogLevel_MAX protoduino_LogLevel_LOG_LEVEL_ERROR
-#define _protoduino_LogLevel_ARRAYSIZE ((protoduino_LogLevel)(protoduino_LogLevel_LOG_LEVEL_ERROR+1))
-
 
 
 
@@ -473,8 +455,6 @@ extern "C" {
 
 
 
-#define protoduino_Log_level_ENUMTYPE protoduino_LogLevel
-
 
 
 
@@ -507,7 +487,6 @@ extern "C" {
 #define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN, 0, 0}
 #define protoduino_InputReport_init_default      {0, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_DecodeError_init_default      {0}
-#define protoduino_Log_init_default              {_protoduino_LogLevel_MIN, ""}
 #define protoduino_UserReport_init_default       {0, {0, {0}}, 0}
 #define protoduino_ArduinoOut_init_default       {0, {protoduino_Ack_init_default}}
 #define protoduino_Ping_init_zero                {{0, {0}}, 0}
@@ -538,7 +517,6 @@ extern "C" {
 #define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN, 0, 0}
 #define protoduino_InputReport_init_zero         {0, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_DecodeError_init_zero         {0}
-#define protoduino_Log_init_zero                 {_protoduino_LogLevel_MIN, ""}
 #define protoduino_UserReport_init_zero          {0, {0, {0}}, 0}
 #define protoduino_ArduinoOut_init_zero          {0, {protoduino_Ack_init_zero}}
 
@@ -647,15 +625,12 @@ extern "C" {
 #define protoduino_InputReport_counter_counts_tag 7
 #define protoduino_InputReport_coalesced_tag     8
 #define protoduino_DecodeError_count_tag         1
-#define protoduino_Log_level_tag                 1
-#define protoduino_Log_text_tag                  2
 #define protoduino_UserReport_report_tag         1
 #define protoduino_UserReport_body_tag           2
 #define protoduino_UserReport_coalesced_tag      3
 #define protoduino_ArduinoOut_ack_tag            1
 #define protoduino_ArduinoOut_failsafe_tag       2
 #define protoduino_ArduinoOut_decode_error_tag   3
-#define protoduino_ArduinoOut_log_tag            4
 #define protoduino_ArduinoOut_input_report_tag   5
 #define protoduino_ArduinoOut_user_report_tag    6
 
@@ -915,12 +890,6 @@ X(a, STATIC,   SINGULAR, UINT32,   count,             1)
 #define protoduino_DecodeError_CALLBACK NULL
 #define protoduino_DecodeError_DEFAULT NULL
 
-#define protoduino_Log_FIELDLIST(X, a) \
-X(a, STATIC,   SINGULAR, UENUM,    level,             1) \
-X(a, STATIC,   SINGULAR, STRING,   text,              2)
-#define protoduino_Log_CALLBACK NULL
-#define protoduino_Log_DEFAULT NULL
-
 #define protoduino_UserReport_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, UINT32,   report,            1) \
 X(a, STATIC,   SINGULAR, BYTES,    body,              2) \
@@ -932,7 +901,6 @@ X(a, STATIC,   SINGULAR, UINT32,   coalesced,         3)
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,ack,data.ack),   1) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,failsafe,data.failsafe),   2) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,decode_error,data.decode_error),   3) \
-X(a, STATIC,   ONEOF,    MESSAGE,  (data,log,data.log),   4) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,input_report,data.input_report),   5) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,user_report,data.user_report),   6)
 #define protoduino_ArduinoOut_CALLBACK NULL
@@ -940,7 +908,6 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,user_report,data.user_report),   6)
 #define protoduino_ArduinoOut_data_ack_MSGTYPE protoduino_Ack
 #define protoduino_ArduinoOut_data_failsafe_MSGTYPE protoduino_Failsafe
 #define protoduino_ArduinoOut_data_decode_error_MSGTYPE protoduino_DecodeError
-#define protoduino_ArduinoOut_data_log_MSGTYPE protoduino_Log
 #define protoduino_ArduinoOut_data_input_report_MSGTYPE protoduino_InputReport
 #define protoduino_ArduinoOut_data_user_report_MSGTYPE protoduino_UserReport
 
@@ -972,7 +939,6 @@ extern const pb_msgdesc_t protoduino_Ack_msg;
 extern const pb_msgdesc_t protoduino_Failsafe_msg;
 extern const pb_msgdesc_t protoduino_InputReport_msg;
 extern const pb_msgdesc_t protoduino_DecodeError_msg;
-extern const pb_msgdesc_t protoduino_Log_msg;
 extern const pb_msgdesc_t protoduino_UserReport_msg;
 extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 
@@ -1005,7 +971,6 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_Failsafe_fields &protoduino_Failsafe_msg
 #define protoduino_InputReport_fields &protoduino_InputReport_msg
 #define protoduino_DecodeError_fields &protoduino_DecodeError_msg
-#define protoduino_Log_fields &protoduino_Log_msg
 #define protoduino_UserReport_fields &protoduino_UserReport_msg
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
@@ -1026,7 +991,6 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_GetInfo_size                  0
 #define protoduino_Heartbeat_size                3
 #define protoduino_InputReport_size              78
-#define protoduino_Log_size                      51
 #define protoduino_OutputStates_size             75
 #define protoduino_Ping_size                     69
 #define protoduino_PoseItem_size                 9

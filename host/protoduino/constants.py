@@ -67,7 +67,7 @@ class ControlCode(IntEnum):
 
     RESET = 0x00
     RESET_ACK = 0x01
-    HEARTBEAT = 0x02
+    # 0x02 was HEARTBEAT until version 3 (sent by nobody, ignored by the firmware): unassigned.
     EVENT = 0x03
 
 

@@ -141,24 +141,15 @@ def reset_ack_payload(
     return head + struct.pack(">IB", boot_id, RESET_ACK_RESUMED if resumed else 0)
 
 
-def heartbeat_payload() -> bytes:
-    return bytes((ControlCode.HEARTBEAT,))
-
-
 def event_payload(event: int, detail: bytes = b"") -> bytes:
     return bytes((ControlCode.EVENT, event)) + detail
 
 
-_HEARTBEAT = b"\x02"
-#: HEARTBEATs are a large share of idle traffic; one shared, immutable answer.
-_HEARTBEAT_CONTROL = Control(ControlCode.HEARTBEAT)
 _CONTROL_CODES: dict[int, ControlCode] = {int(c): c for c in ControlCode}
 
 
 def parse_control(payload: bytes) -> Control:
     """Decode a CONTROL payload; raises :class:`ProtocolError` if malformed."""
-    if payload == _HEARTBEAT:
-        return _HEARTBEAT_CONTROL
     if not payload:
         raise ProtocolError("empty CONTROL payload")
     code = _CONTROL_CODES.get(payload[0])
@@ -189,8 +180,6 @@ def parse_control(payload: bytes) -> Control:
             boot_id=int.from_bytes(args[5:9], "big"),
             resumed=bool(args[9] & RESET_ACK_RESUMED),
         )
-    if code is ControlCode.HEARTBEAT:
-        raise ProtocolError("HEARTBEAT takes no arguments")
     if not args:
         raise ProtocolError("EVENT without an event code")
     return Control(code, event=args[0], detail=bytes(args[1:]))

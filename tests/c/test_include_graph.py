@@ -51,7 +51,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("outgoing messages", ("pd_out",)),
     ("commands and inputs", ("pd_dispatch", "pd_inputs.c", "pd_user.c")),
     ("core", ("pd_core",)),
-    ("platforms", ("posix/", "avr/", "arduino/")),
+    ("platforms", ("posix/", "simcontrol/", "avr/", "arduino/")),
 )
 
 SOURCE_SUFFIXES = (".c", ".h", ".ino")

@@ -9,13 +9,13 @@
  * protoduino.simboard runs both):
  * the first stdout line is the port to open (the pty's slave, or --link),
  * SIGINT/SIGTERM (and SIGHUP unless ignored) exit cleanly, so does the end of
- * the owner with --owner-fd (tools/simcontrol/pd_owner.h), SIGUSR1 resets the
+ * the owner with --owner-fd (firmware/simcontrol/pd_owner.h), SIGUSR1 resets the
  * MCU while keeping the pty,
  * and --trace writes one JSON line per output change, measured at the pins
  * (servo pulse widths, digital levels, and the duty of the timers' PWM, read
  * from their compare-output IRQs: PWM never goes through the PORT register).
  *
- * --control PATH (tools/simcontrol) drives the MCU's inputs the way the
+ * --control PATH (firmware/simcontrol) drives the MCU's inputs the way the
  * outside world would, so the firmware's own input code is what runs: a level
  * is raised on the port pin's IRQ (PIN register, pin-change and external
  * interrupts) and held there as the port's "external" level, so that simavr

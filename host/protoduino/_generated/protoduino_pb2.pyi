@@ -238,25 +238,6 @@ FAILSAFE_CAUSE_STOP: FailsafeCause.ValueType  # 2
 FAILSAFE_CAUSE_INTERLOCK: FailsafeCause.ValueType  # 3
 Global___FailsafeCause: _TypeAlias = FailsafeCause  # noqa: Y015
 
-class _LogLevel:
-    ValueType = _typing.NewType("ValueType", _builtins.int)
-    V: _TypeAlias = ValueType  # noqa: Y015
-
-class _LogLevelEnumTypeWrapper(_enum_type_wrapper._EnumTypeWrapper[_LogLevel.ValueType], _builtins.type):
-    DESCRIPTOR: _descriptor.EnumDescriptor
-    LOG_LEVEL_DEBUG: _LogLevel.ValueType  # 0
-    LOG_LEVEL_INFO: _LogLevel.ValueType  # 1
-    LOG_LEVEL_WARNING: _LogLevel.ValueType  # 2
-    LOG_LEVEL_ERROR: _LogLevel.ValueType  # 3
-
-class LogLevel(_LogLevel, metaclass=_LogLevelEnumTypeWrapper): ...
-
-LOG_LEVEL_DEBUG: LogLevel.ValueType  # 0
-LOG_LEVEL_INFO: LogLevel.ValueType  # 1
-LOG_LEVEL_WARNING: LogLevel.ValueType  # 2
-LOG_LEVEL_ERROR: LogLevel.ValueType  # 3
-Global___LogLevel: _TypeAlias = LogLevel  # noqa: Y015
-
 @_typing.final
 class Ping(_message.Message):
     """Link test and liveness: one per second keeps the failsafe away. The
@@ -1221,30 +1202,6 @@ class DecodeError(_message.Message):
 Global___DecodeError: _TypeAlias = DecodeError  # noqa: Y015
 
 @_typing.final
-class Log(_message.Message):
-    """A short text from the firmware, for humans."""
-
-    DESCRIPTOR: _descriptor.Descriptor
-
-    LEVEL_FIELD_NUMBER: _builtins.int
-    TEXT_FIELD_NUMBER: _builtins.int
-    level: Global___LogLevel.ValueType
-    text: _builtins.str
-    def __init__(
-        self,
-        *,
-        level: Global___LogLevel.ValueType = ...,
-        text: _builtins.str = ...,
-    ) -> None: ...
-    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
-    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["level", b"level", "text", b"text"]  # noqa: Y015
-    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
-    def WhichOneof(self, oneof_group: _Never) -> None: ...
-
-Global___Log: _TypeAlias = Log  # noqa: Y015
-
-@_typing.final
 class UserReport(_message.Message):
     """A report of a user service (docs/services.md): the newest value of report
     `report`, "newest wins" as InputReport.
@@ -1283,7 +1240,6 @@ class ArduinoOut(_message.Message):
     ACK_FIELD_NUMBER: _builtins.int
     FAILSAFE_FIELD_NUMBER: _builtins.int
     DECODE_ERROR_FIELD_NUMBER: _builtins.int
-    LOG_FIELD_NUMBER: _builtins.int
     INPUT_REPORT_FIELD_NUMBER: _builtins.int
     USER_REPORT_FIELD_NUMBER: _builtins.int
     @_builtins.property
@@ -1292,8 +1248,6 @@ class ArduinoOut(_message.Message):
     def failsafe(self) -> Global___Failsafe: ...
     @_builtins.property
     def decode_error(self) -> Global___DecodeError: ...
-    @_builtins.property
-    def log(self) -> Global___Log: ...
     @_builtins.property
     def input_report(self) -> Global___InputReport: ...
     @_builtins.property
@@ -1304,15 +1258,14 @@ class ArduinoOut(_message.Message):
         ack: Global___Ack | None = ...,
         failsafe: Global___Failsafe | None = ...,
         decode_error: Global___DecodeError | None = ...,
-        log: Global___Log | None = ...,
         input_report: Global___InputReport | None = ...,
         user_report: Global___UserReport | None = ...,
     ) -> None: ...
-    _HasFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "log", b"log", "user_report", b"user_report"]  # noqa: Y015
+    _HasFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "user_report", b"user_report"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "log", b"log", "user_report", b"user_report"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "user_report", b"user_report"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
-    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ack", "failsafe", "decode_error", "log", "input_report", "user_report"]  # noqa: Y015
+    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ack", "failsafe", "decode_error", "input_report", "user_report"]  # noqa: Y015
     _WhichOneofArgType_data: _TypeAlias = _typing.Literal["data", b"data"]  # noqa: Y015
     def WhichOneof(self, oneof_group: _WhichOneofArgType_data) -> _WhichOneofReturnType_data | None: ...
 

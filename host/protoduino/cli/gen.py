@@ -3,22 +3,22 @@
 With a .proto it runs :mod:`protoduino.servicegen` (the ``gen`` extra's tools:
 ``pip install 'protoduino[gen]'``; docs/services.md). Without one it is the
 development command that regenerates protoduino's own schema code in a source
-checkout (``protoduino_dev``), as before user services existed.
+checkout: the development tools declare that generator as an entry point
+(:data:`protoduino.plugins.GENERATORS`); the runtime never imports them by name.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
 import sys
 from pathlib import Path
+
+from .. import plugins
 
 HELP = (
     "generate a user service's C and typed Python code from your .proto (docs/services.md); "
     "without one, protoduino's own (development)"
 )
-DEV_PACKAGE = "protoduino_dev"
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -57,7 +57,14 @@ def run(args: argparse.Namespace) -> int:
 
 def _builtin(args: argparse.Namespace) -> int:
     """protoduino's own schema: the development tools' generator."""
-    if importlib.util.find_spec(DEV_PACKAGE) is None:
+    entry = plugins.find(plugins.GENERATORS, "schema")
+    dev_gen = None
+    if entry is not None:
+        try:
+            dev_gen = entry.load()
+        except ImportError:  # declared by metadata left behind, its package gone
+            dev_gen = None
+    if dev_gen is None:
         print(
             "protoduino gen: without a .proto, `protoduino gen` is a development command: it "
             "works in a source checkout with the development tools installed (git clone, then "
@@ -66,6 +73,5 @@ def _builtin(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
-    dev_gen = importlib.import_module(f"{DEV_PACKAGE}.cli.gen")
     status: int = dev_gen.run(args)
     return status
