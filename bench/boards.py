@@ -5,6 +5,8 @@
   time, its UART timed at 115200 baud), optionally with the runner's ``--stats`` file.
 * :class:`CycleCounter` reads the emulated Uno's cycle counters (``tools/avrsim --stats``:
   SIGUSR2 appends one JSON line): total, asleep and awake cycles, UART bytes.
+* :func:`on_each_board` runs one measurement on each board in turn (a Board open on it, its
+  trace read by :class:`Trace`), a board that cannot run noted, not fatal.
 * :class:`RawClient` talks to a board with pyserial and the project's framing only, no I/O
   thread and no request layer: the same round trip without the host library, so that the
   library's own share of a round trip can be told apart from the board's.
@@ -15,6 +17,8 @@ Every wait here is bounded; every process and port is closed by a context manage
 from __future__ import annotations
 
 import contextlib
+import json
+import logging
 import os
 import random
 import select
@@ -24,9 +28,12 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
+from tempfile import TemporaryDirectory
+from typing import Any, Protocol, TypeVar
 
 import serial
+from protoduino import Board
+from protoduino.closing import ClosedOnExit
 from protoduino.constants import PROTOCOL_VERSION, ControlCode, PacketType
 from protoduino.errors import ProtoduinoError
 from protoduino.framing import DELIMITER, StreamDecoder, frame_packet
@@ -35,6 +42,8 @@ from protoduino.packets import Packet, parse_control, reset_payload
 from protoduino.simboard import BACKENDS as BACKEND_TABLE
 from protoduino.simboard import Backend, SimBoard
 from protoduino_dev import runnerstats
+
+log = logging.getLogger(__name__)
 
 #: The boards, in report order: (backend, label).
 BACKENDS: tuple[tuple[str, str], ...] = (
@@ -70,6 +79,65 @@ def missing_tool(backend: str) -> str | None:
     if backend == "avr" and not SIMAVR_HEADER.exists():
         return "libsimavr-dev"
     return None
+
+
+class Trace:
+    """The board's trace file, read incrementally (it only grows)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.events: list[dict[str, Any]] = []
+        self._offset = 0
+
+    def update(self) -> list[dict[str, Any]]:
+        with self.path.open("rb") as f:
+            f.seek(self._offset)
+            data = f.read()
+        end = data.rfind(b"\n") + 1
+        self._offset += end
+        self.events += [json.loads(line) for line in data[:end].splitlines() if line.strip()]
+        return self.events
+
+
+class Measured(Protocol):
+    """A board's result: what went wrong, if it did not run."""
+
+    error: str | None
+
+
+R = TypeVar("R", bound=Measured)
+
+
+def on_each_board(
+    name: str,
+    result_of: Callable[[str], R],
+    measure: Callable[[R, SimBoard, Trace, Board], None],
+) -> list[R]:
+    """``measure`` on each board of :data:`BACKENDS`, a Board open on it and its trace read.
+
+    A board whose tools are missing, or that fails to build, start or answer, keeps its
+    result with ``error`` set (the first line of what went wrong) and the others still run.
+    """
+    out: list[R] = []
+    for backend, _label in BACKENDS:
+        result = result_of(backend)
+        out.append(result)
+        tool = missing_tool(backend)
+        if tool is not None:
+            result.error = f"`{tool}` is not installed"
+            continue
+        with TemporaryDirectory(prefix=f"bench-{name}-") as tmp:
+            sim = SimBoard(backend, trace=Path(tmp) / "trace.jsonl")
+            try:
+                sim.start()
+                with Board.open(sim.port, baudrate=115_200) as board:  # figures at 115200
+                    measure(result, sim, Trace(Path(tmp) / "trace.jsonl"), board)
+            except (ProtoduinoError, BoardUnavailableError, RuntimeError) as error:
+                log.warning("%s: %s board not run: %s", name, backend, error)
+                result.error = str(error).splitlines()[0]
+            finally:
+                sim.stop()
+    return out
 
 
 class _RunnerBoard(SimBoard):
@@ -264,7 +332,7 @@ class Percentiles:
         return cls(len(s), statistics.median(s), pct(0.90), pct(0.99), s[0], s[-1])
 
 
-class RawClient:
+class RawClient(ClosedOnExit):
     """A board driven directly: pyserial, ``framing`` and hand-kept SEQ and message ids.
 
     No thread: :meth:`call` writes one COMMAND and reads until its Ack arrives, in the caller's
@@ -286,17 +354,6 @@ class RawClient:
 
     def close(self) -> None:
         self._serial.close()
-
-    def __enter__(self) -> RawClient:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def _read_until(self, want: Callable[[Packet], bool]) -> Packet:
         deadline = time.perf_counter() + RAW_TIMEOUT

@@ -27,8 +27,6 @@ import statistics
 import threading
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
-from tempfile import TemporaryDirectory
 
 from protoduino import Board, Event, EventKind
 from protoduino.constants import PacketType
@@ -40,9 +38,8 @@ from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
 from protoduino.transport import FrameRecord
 
-from .boards import BACKENDS, LABELS, BoardUnavailableError, Percentiles, missing_tool
+from .boards import LABELS, Percentiles, Trace, on_each_board
 from .core import Context, Section, SectionResult, Target, md_table
-from .motion import Trace
 from .wire import board_byte_us
 
 log = logging.getLogger(__name__)
@@ -277,42 +274,24 @@ def measure_reaction(
 
 def collect(trials: int, seconds: float, pings: int, seed: int = 7) -> list[BoardResult]:
     rng = random.Random(seed)
-    out: list[BoardResult] = []
-    for backend, _label in BACKENDS:
-        result = BoardResult(backend)
-        out.append(result)
-        tool = missing_tool(backend)
-        if tool is not None:
-            result.error = f"`{tool}` is not installed"
-            continue
-        with TemporaryDirectory(prefix="bench-inputs-") as tmp:
-            sim = SimBoard(backend, trace=Path(tmp) / "trace.jsonl")
-            try:
-                sim.start()
-                trace = Trace(Path(tmp) / "trace.jsonl")
-                with Board.open(sim.port, baudrate=115_200) as board:
-                    (
-                        result.latency,
-                        result.latency_lost,
-                        result.edge_uncertainty,
-                        result.report_bytes,
-                    ) = measure_latency(board, sim, trials, rng)
-                    (
-                        result.per_channel,
-                        result.max_gap_ms,
-                        result.coalesced,
-                        result.idle_rtt,
-                        result.stream_rtt,
-                    ) = measure_streaming(board, seconds, pings)
-                    result.reaction, result.reaction_lost = measure_reaction(
-                        board, sim, trace, trials, rng
-                    )
-            except (ProtoduinoError, BoardUnavailableError, RuntimeError) as error:
-                log.warning("inputs: %s board not run: %s", backend, error)
-                result.error = str(error).splitlines()[0]
-            finally:
-                sim.stop()
-    return out
+
+    def measure(result: BoardResult, sim: SimBoard, trace: Trace, board: Board) -> None:
+        (
+            result.latency,
+            result.latency_lost,
+            result.edge_uncertainty,
+            result.report_bytes,
+        ) = measure_latency(board, sim, trials, rng)
+        (
+            result.per_channel,
+            result.max_gap_ms,
+            result.coalesced,
+            result.idle_rtt,
+            result.stream_rtt,
+        ) = measure_streaming(board, seconds, pings)
+        result.reaction, result.reaction_lost = measure_reaction(board, sim, trace, trials, rng)
+
+    return on_each_board("inputs", BoardResult, measure)
 
 
 def _ms(seconds: float) -> str:

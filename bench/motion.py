@@ -20,7 +20,6 @@ half-width is reported as the uncertainty of every call-to-pin time.
 
 from __future__ import annotations
 
-import json
 import logging
 import random
 import statistics
@@ -29,15 +28,11 @@ import time
 from collections.abc import Sequence
 from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
-from pathlib import Path
-from tempfile import TemporaryDirectory
-from typing import Any
 
 from protoduino import Board, DigitalOutput, Servo
-from protoduino.errors import ProtoduinoError
 from protoduino.simboard import SimBoard
 
-from .boards import BACKENDS, LABELS, BoardUnavailableError, missing_tool
+from .boards import LABELS, Trace, on_each_board
 from .core import Context, Section, SectionResult, fmt_rate, md_table
 
 log = logging.getLogger(__name__)
@@ -58,24 +53,6 @@ THREADS = 4
 
 def us(degrees: int) -> int:
     return 544 + degrees * (2400 - 544) // 180
-
-
-class Trace:
-    """The board's trace file, read incrementally (it only grows)."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.events: list[dict[str, Any]] = []
-        self._offset = 0
-
-    def update(self) -> list[dict[str, Any]]:
-        with self.path.open("rb") as f:
-            f.seek(self._offset)
-            data = f.read()
-        end = data.rfind(b"\n") + 1
-        self._offset += end
-        self.events += [json.loads(line) for line in data[:end].splitlines() if line.strip()]
-        return self.events
 
 
 def wait_changes(
@@ -253,30 +230,13 @@ class BoardResult:
 
 
 def collect(trials: int, commands: int, seed: int = 7) -> list[BoardResult]:
-    out: list[BoardResult] = []
-    for backend, _label in BACKENDS:
-        result = BoardResult(backend)
-        out.append(result)
-        tool = missing_tool(backend)
-        if tool is not None:
-            result.error = f"`{tool}` is not installed"
-            continue
-        with TemporaryDirectory(prefix="bench-motion-") as tmp:
-            sim = SimBoard(backend, trace=Path(tmp) / "trace.jsonl")
-            try:
-                sim.start()
-                trace = Trace(Path(tmp) / "trace.jsonl")
-                with Board.open(sim.port, baudrate=115_200) as board:
-                    led = board.digital_output(CLOCK_PIN)
-                    result.clock = calibrate(led, trace)
-                    result.poses = measure_poses(board, trace, result.clock, trials, seed)
-                    result.rates = measure_rates(board, commands)
-            except (ProtoduinoError, BoardUnavailableError, RuntimeError) as error:
-                log.warning("motion: %s board not run: %s", backend, error)
-                result.error = str(error).splitlines()[0]
-            finally:
-                sim.stop()
-    return out
+    def measure(result: BoardResult, sim: SimBoard, trace: Trace, board: Board) -> None:
+        led = board.digital_output(CLOCK_PIN)
+        result.clock = calibrate(led, trace)
+        result.poses = measure_poses(board, trace, result.clock, trials, seed)
+        result.rates = measure_rates(board, commands)
+
+    return on_each_board("motion", BoardResult, measure)
 
 
 def _ms(values: list[float], q: float = 0.5) -> str:

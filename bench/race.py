@@ -49,9 +49,17 @@ from protoduino.transport import FrameRecord
 from protoduino_dev import runnerstats
 
 from . import firmware, inputs
-from .boards import UNO_HZ, BoardUnavailableError, Percentiles, missing_tool, started, started_hex
+from .boards import (
+    UNO_HZ,
+    BoardUnavailableError,
+    Percentiles,
+    Trace,
+    missing_tool,
+    started,
+    started_hex,
+)
 from .core import Context, Section, SectionResult, Target, md_table, require
-from .motion import Trace, us, wait_changes
+from .motion import us, wait_changes
 from .peers import firmata_board
 
 log = logging.getLogger(__name__)
@@ -468,7 +476,11 @@ def collect(
     out: list[BoardRun] = []
     runs: tuple[tuple[str, Callable[[int, int, int, float], BoardRun], int], ...] = (
         (LABELS[0], run_protoduino, 115_200),
-        (LABELS[0], lambda *a: run_protoduino(*a, baudrate=None), FAST_BAUD),
+        (
+            LABELS[0],
+            lambda n, c, seed, secs: run_protoduino(n, c, seed, secs, baudrate=None),
+            FAST_BAUD,
+        ),
         (LABELS[1], run_firmata, firmata_board.BAUD),
     )
     for label, measure, nominal in runs:

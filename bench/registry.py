@@ -14,7 +14,7 @@ while part 1 measures CPU time (``bench.core.measure``).
 
 from __future__ import annotations
 
-from . import firmware, inputs, motion, race, receive, ros2, roundtrip, throughput, wire
+from . import firmware, inputs, motion, race, receive, ros2, roundtrip, services, throughput, wire
 from .core import Section
 
 SECTIONS: tuple[Section, ...] = (
@@ -27,4 +27,5 @@ SECTIONS: tuple[Section, ...] = (
     inputs.SECTION,
     ros2.SECTION,
     race.SECTION,
+    services.SECTION,
 )

@@ -51,9 +51,8 @@ from protoduino.messages import parse_in, parse_out
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
 
-from .boards import BoardUnavailableError, Percentiles, missing_tool
+from .boards import BoardUnavailableError, Percentiles, Trace, missing_tool
 from .core import Context, Section, SectionResult, md_table, require
-from .motion import Trace
 from .wire import EMULATED_BYTE_US
 
 if TYPE_CHECKING:

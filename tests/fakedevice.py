@@ -102,6 +102,8 @@ class FakeDevice:
         self.pwm_pins = [3, 9, 10, 11]
         self.analog_pins = list(range(14, 20))
         self.counter_pins = [2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]
+        #: DeviceInfo.user_fingerprint: the user service it claims to carry (0: none).
+        self.user_fingerprint = 0
         #: The inputs' state as the device sees it: levels by pin (1 until set:
         #: a pulled-up open switch), analog counts, edges counted.
         self.levels: dict[int, int] = {}
@@ -297,6 +299,7 @@ class FakeDevice:
             info.pwm_pins = mask(self.pwm_pins)
             info.analog_pins = mask(self.analog_pins)
             info.counter_pins = mask(self.counter_pins)
+            info.user_fingerprint = self.user_fingerprint
         elif declared.is_init:
             assert declared.pin_mode is not None
             pin = getattr(msg, kind).pin

@@ -21,6 +21,7 @@ APT_PACKAGES=(
     python3-dev                            # headers for the C accelerator protoduino._speedups
     gcc-avr binutils-avr avr-libc          # the Uno firmware
     arduino-core-avr                       # Optiboot sources for the flashing test
+    arduino-builder                        # the Arduino IDE 1.8's builder: the user-service sketch's test
     simavr libsimavr-dev                   # the emulated Uno
     libjansson-dev                         # JSON of the simulated boards' control socket
     avrdude                                # flashing

@@ -12,11 +12,11 @@ from typing import Protocol
 
 from protoduino import framing
 from protoduino._generated import protoduino_pb2 as pb
-from protoduino.constants import ControlCode, PacketType
+from protoduino.constants import ControlCode, EventCode, PacketType
 from protoduino.errors import ProtocolError
 from protoduino.framing import COBS_NATIVE, PyStreamDecoder, frame_packet
 from protoduino.messages import parse_out
-from protoduino.packets import BadFrame, Packet, heartbeat_payload, parse_control
+from protoduino.packets import BadFrame, Packet, event_payload, parse_control
 
 from . import RxCase, Slot, WireSample, chunked
 
@@ -25,18 +25,17 @@ from . import RxCase, Slot, WireSample, chunked
 FIRST_MESSAGE_ID = 0x9E3779B9
 
 #: What a busy link's device-to-host traffic is made of, by weight: one Ack per command or Ping
-#: (some with a non-OK status, Pings echoing 8 bytes), the device's HEARTBEATs, and the occasional
-#: Failsafe or Log event.
+#: (some with a non-OK status, Pings echoing 8 bytes), the inputs' reports, the occasional
+#: CONTROL EVENT and Failsafe event. (Until protocol version 3 the mix had a CONTROL HEARTBEAT
+#: and a Log event in the places of the last two, although no device sent either.)
 MIX: tuple[tuple[str, int], ...] = (
     ("Ack OK (command)", 60),
     ("Ack with a non-OK status", 5),
     ("Ack echoing an 8-byte Ping", 10),
-    ("CONTROL HEARTBEAT", 15),
+    ("CONTROL EVENT", 15),
     ("Failsafe event", 4),
-    ("Log event", 6),
+    ("InputReport", 6),
 )
-
-_LOG_TEXTS = ("servo 9 -> 90 deg", "ping late 312 ms", "boot", "pin 13 high")
 
 
 class Decoder(Protocol):
@@ -159,8 +158,8 @@ def mixed_stream(frames: int, seed: int) -> tuple[bytes, list[int]]:
     for seq_count in range(frames):
         seq = seq_count & 0xFF
         kind = rng.choices(kinds, weights)[0]
-        if kind == "CONTROL HEARTBEAT":
-            out.append(frame_packet(PacketType.CONTROL, seq, heartbeat_payload()))
+        if kind == "CONTROL EVENT":
+            out.append(frame_packet(PacketType.CONTROL, seq, event_payload(EventCode.DESYNC)))
             continue
         msg = pb.ArduinoOut()
         if kind.startswith("Ack"):
@@ -175,8 +174,8 @@ def mixed_stream(frames: int, seed: int) -> tuple[bytes, list[int]]:
             msg.failsafe.active = rng.random() < 0.5
             msg.failsafe.cause = pb.FAILSAFE_CAUSE_PING_TIMEOUT
         else:
-            msg.log.level = pb.LOG_LEVEL_INFO
-            msg.log.text = rng.choice(_LOG_TEXTS)
+            msg.input_report.digital_pins = 1 << 7
+            msg.input_report.digital_levels = rng.getrandbits(1) << 7
         out.append(frame_packet(PacketType.DATA, seq, msg.SerializeToString()))
     return b"".join(out), ids
 

@@ -4,8 +4,8 @@ Installed from the source checkout (``./tools/dev.sh setup`` runs ``pip install 
 a user's ``pip install protoduino`` does not carry it. Modules:
 
 * :mod:`~protoduino_dev.build`: builds the firmware, the simulated board and the emulated
-  Uno's runner from the checkout with make (the runtime uses it when present, see
-  :mod:`protoduino.programs`);
+  Uno's runner from the checkout with make (declared to the runtime as its program source by
+  entry point, see :mod:`protoduino.plugins`);
 * :mod:`~protoduino_dev.codegen`: ``protoduino gen``;
 * :mod:`~protoduino_dev.faults` and ``urlhandler``: the ``faulty://`` pyserial URL (seeded,
   repeatable line faults), registered by importing this package;

@@ -8,9 +8,10 @@ Everything goes through ``make`` (so repeated calls cost a few milliseconds) int
 - Optiboot in a 1 KB boot section at 0x7C00 (``build/optiboot/optiboot.hex``), for the
   flashing test.
 
-:func:`build_program` is what the runtime's :func:`protoduino.programs.locate` calls when this
-package is installed: in a checkout every run uses programs built from the current sources,
-never a copy bundled into some earlier wheel.
+:func:`build_program` is the program source this distribution declares (entry point group
+``protoduino.programs``, dev/pyproject.toml), which the runtime's
+:func:`protoduino.programs.locate` calls when this package is installed: in a checkout every
+run uses programs built from the current sources, never a copy bundled into some earlier wheel.
 """
 
 from __future__ import annotations

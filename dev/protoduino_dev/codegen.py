@@ -261,13 +261,15 @@ def protocol_header(constants_path: Path) -> str:
 
 _STRUCT = re.compile(r"typedef struct _(\w+) \{\n(.*?)\n\} \1;", re.S)
 _FIELDLIST = re.compile(r"#define (\w+)_FIELDLIST\(X, a\) \\\n((?:.*\\\n)*.*)")
+_BYTES_TYPEDEF = re.compile(r"^typedef (PB_BYTES_ARRAY_T\(\d+\)) (\w+);$", re.M)
 _MSGTYPE = re.compile(r"^#define (\w+_MSGTYPE) (\w+)$", re.M)
 
 
 def _layout(body: str) -> str:
     """A struct body without its member names (and comments): equal for equal layouts."""
     body = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
-    return re.sub(r"\w+(\s*(?:\[[^\]]*\])?\s*;)", r"_\1", body).strip()
+    body = re.sub(r"\w+(\s*(?:\[[^\]]*\])?\s*;)", r"_\1", body)
+    return " ".join(body.split())  # a comment's lines leave blank ones behind
 
 
 def _fields(fieldlist: str) -> str:
@@ -287,12 +289,17 @@ def share_descriptors(header: str) -> str:
     submessage table) in the Uno's RAM. Messages with the same fields (tags,
     types, widths) and the same C layout decode and encode alike whatever their
     names: the empty ones (Stop, GetInfo, ...), Heartbeat and Release, DigitalInit
-    and DigitalControl. Their fields' MSGTYPE (what a parent's submessage table
+    and DigitalControl, Ping and UserCall. Their fields' MSGTYPE (what a parent's submessage table
     points at) is rewritten to the first of the shape, so the others' descriptors
     are unreferenced and the linker drops them: about 100 B of RAM. Python and
     the wire are untouched; the C structs keep their own names and types.
     """
-    layouts = {name: _layout(body) for name, body in _STRUCT.findall(header)}
+    # A bytes field's type is a typedef of its own per field: compare its definition.
+    arrays = dict((n, d) for d, n in _BYTES_TYPEDEF.findall(header))
+    layouts = {
+        name: re.sub(r"\b\w+_t\b", lambda m: arrays.get(m.group(0), m.group(0)), _layout(body))
+        for name, body in _STRUCT.findall(header)
+    }
     shapes: dict[str, str] = {}
     for name, fieldlist in _FIELDLIST.findall(header):
         if (

@@ -17,6 +17,11 @@ void pd_core_init(pd_core_t *core, void *hal)
     core->report_pending = 0;
     core->baud = 0; /* the platform opened the line at PD_BAUD */
     core->baud_unconfirmed = false;
+#if PD_FEATURE_USER
+    core->report = pd_user_report; /* the user's reports, and the inputs' */
+    core->report_sent = pd_user_sent;
+    pd_user_init(core);
+#endif
     uint32_t boot = pd_hal_boot_id(hal);
     for (uint8_t i = 0; i < 4; i++) {
         core->boot_id[i] = (uint8_t)(boot >> (24 - 8 * i));
@@ -173,6 +178,9 @@ void pd_core_poll(pd_core_t *core)
     if (pd_inputs_active(&core->outputs.inputs)) {
         pd_inputs_poll(core, now);
     }
+#if PD_FEATURE_USER
+    pd_user_poll(core, now);
+#endif
     if (core->report_pending != 0 && core->report != NULL && core->link.active) {
         send_report(core);
     }

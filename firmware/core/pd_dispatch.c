@@ -12,6 +12,7 @@
 #include "pd_schema.h"
 #include "pd_state.h"
 #include "pd_tables.h"
+#include "pd_user.h"
 
 static void copy_string(char *dst, size_t cap, const char *src)
 {
@@ -42,6 +43,9 @@ static void fill_info(pd_core_t *core, protoduino_DeviceInfo *info)
     info->pwm_pins = PD_FEATURE_PWM ? board->pwm_pins : 0u;
     info->analog_pins = PD_FEATURE_ANALOG_INPUT ? board->analog_pins : 0u;
     info->counter_pins = PD_FEATURE_COUNTER ? board->counter_pins : 0u;
+#if PD_FEATURE_USER
+    info->user_fingerprint = pd_user_service.fingerprint;
+#endif
     info->reserved_pins_count = 0;
     /* The mask shifts one place per pin: a 32-bit shift by a variable count is
      * a loop on the AVR. */
@@ -220,6 +224,20 @@ static protoduino_Status cmd_read_outputs(pd_core_t *core, pd_cmd_t *cmd)
     return protoduino_Status_STATUS_OK;
 }
 
+/* A user service's method (pd_user.c): its request decoded with the user's
+ * schema, its handler run, its reply (or its own code) in the Ack. Without
+ * the feature the table answers STATUS_NOT_SUPPORTED and never calls it. */
+static protoduino_Status cmd_user_call(pd_core_t *core, pd_cmd_t *cmd)
+{
+#if PD_FEATURE_USER
+    return pd_user_call(core, &cmd->in->data.user_call, cmd->ack);
+#else
+    (void)core;
+    (void)cmd;
+    return protoduino_Status_STATUS_NOT_SUPPORTED;
+#endif
+}
+
 static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
 {
     pd_outputs_all_safe(&core->outputs, core->hal);
@@ -266,7 +284,7 @@ static protoduino_Status cmd_stop(pd_core_t *core, pd_cmd_t *cmd)
  *   2. here: its handler, cmd_<name>(core, cmd);
  *   3. docs/protocol.md: its wire text;
  *   4. its method on the host (host/protoduino/board.py and aio.py) and its
- *      tests; the fake devices (tests/fakedevice.py, tests/virtualdevice.py) if
+ *      tests; the fake devices (tests/fakedevice.py, host/protoduino/testing.py) if
  *      the tests that use them send it.
  * A result also needs its encoding in pd_encode.c (the device's encoder writes
  * only the Ack results it knows).
@@ -348,6 +366,7 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
     out.data.ack.which_result = 0;
     out.data.ack.refused_item = 0;
     out.data.ack.has_failsafe = false;
+    out.data.ack.user_code = 0;
     /* msg is core->in, a constant address once LTO sees the whole program: the
      * AVR would then reach every field with 4-byte lds/sts instead of 2-byte
      * loads relative to a pointer register (108 B of flash). The empty asm
@@ -374,6 +393,14 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
 
     pd_command_t entry;
     bool known = find_command(msg->which_data, &entry);
+#if PD_FEATURE_USER
+    if (msg->which_data == protoduino_ArduinoIn_user_call_tag) {
+        /* Each method's own flags (its rpc's idempotency_level, docs/services.md). */
+        uint8_t flags = pd_user_flags(msg->data.user_call.method);
+        entry.flags = (uint8_t)(((flags & PD_USER_IDEMPOTENT) ? PD_CMD_IDEMPOTENT : 0u) |
+                                ((flags & PD_USER_COMMANDS) ? PD_CMD_SETS_OUTPUT : 0u));
+    }
+#endif
     bool idempotent = known && (entry.flags & PD_CMD_IDEMPOTENT);
     if (!idempotent) {
         int seen = pd_dedupe_find(&core->dedupe, msg->message_id);

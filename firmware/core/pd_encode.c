@@ -13,6 +13,11 @@ typedef char pd_assert_out_small[(PD_ENCODE_MAX < 128) ? 1 : -1];
 /* The bound covers every member of ArduinoOut that is not an Ack, and is no larger than nanopb's. */
 typedef char pd_assert_bound[(PD_ENCODE_MAX <= protoduino_ArduinoOut_size &&
                               2u + protoduino_DecodeError_size <= PD_ENCODE_MAX) ? 1 : -1];
+/* The user reply's bound above is the schema's (protoduino.options), and a
+ * UserCall's Ack fits beside the shapes that make the bound. */
+typedef char pd_assert_user_bounds[(sizeof(((protoduino_Ack *)0)->result.user_reply.bytes) == 64u &&
+                                    sizeof(((protoduino_UserReport *)0)->body.bytes) <= 64u &&
+                                    8u + PD_ENCODE_USER_ACK_MAX <= PD_ENCODE_ACK_MAX) ? 1 : -1];
 
 /*
  * No bounds check per byte: pd_encode_out takes only a buffer that holds the
@@ -134,6 +139,9 @@ static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
     put_fixed32(w, protoduino_DeviceInfo_pwm_pins_tag, info->pwm_pins);
     put_fixed32(w, protoduino_DeviceInfo_analog_pins_tag, info->analog_pins);
     put_fixed32(w, protoduino_DeviceInfo_counter_pins_tag, info->counter_pins);
+#if PD_FEATURE_USER
+    put_fixed32(w, protoduino_DeviceInfo_user_fingerprint_tag, info->user_fingerprint);
+#endif
 }
 
 /* A packed repeated varint field; omitted when empty, as pb_encode does. */
@@ -190,7 +198,10 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
 {
     /* The most this Ack's shape can take, checked before anything is written
      * (PD_ENCODE_ACK_MAX: the shapes the device sends fit). */
-    uint8_t need = ack->which_result == protoduino_Ack_info_tag ? 2u + protoduino_DeviceInfo_size
+    uint8_t need = ack->which_result == protoduino_Ack_info_tag ? 2u + PD_ENCODE_INFO_MAX
+#if PD_FEATURE_USER
+                   : ack->which_result == protoduino_Ack_user_reply_tag ? PD_ENCODE_USER_ACK_MAX
+#endif
                    : ack->which_result == protoduino_Ack_outputs_tag
                        ? 2u + protoduino_OutputStates_size
                    : ack->which_result == protoduino_Ack_ping_echo_tag ? 66u
@@ -220,6 +231,19 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
     if (ack->has_failsafe) {
         put_failsafe(w, protoduino_Ack_failsafe_tag, &ack->failsafe);
     }
+#if PD_FEATURE_USER
+    /* Fields 6 and 7, before 30: a UserCall's reply (always written when set,
+     * even empty: the set member of a oneof) and its handler's code. */
+    if (ack->which_result == protoduino_Ack_user_reply_tag) {
+        if (ack->result.user_reply.size > sizeof(ack->result.user_reply.bytes)) {
+            w->ok = false;
+            return;
+        }
+        put_bytes(w, protoduino_Ack_user_reply_tag, ack->result.user_reply.bytes,
+                  ack->result.user_reply.size);
+    }
+    put_uint(w, protoduino_Ack_user_code_tag, ack->user_code);
+#endif
     if (ack->which_result == protoduino_Ack_outputs_tag) {
         const protoduino_OutputStates *st = &ack->result.outputs;
         uint8_t *at = open_msg(w, protoduino_Ack_outputs_tag);
@@ -272,12 +296,20 @@ size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap)
         put_uint(&w, protoduino_DecodeError_count_tag, msg->data.decode_error.count);
         close_msg(&w, at);
         break;
-    case protoduino_ArduinoOut_log_tag:
-        at = open_msg(&w, protoduino_ArduinoOut_log_tag);
-        put_uint(&w, protoduino_Log_level_tag, (uint32_t)msg->data.log.level);
-        put_string(&w, protoduino_Log_text_tag, msg->data.log.text, sizeof(msg->data.log.text));
+#if PD_FEATURE_USER
+    case protoduino_ArduinoOut_user_report_tag:
+        at = open_msg(&w, protoduino_ArduinoOut_user_report_tag);
+        put_uint(&w, protoduino_UserReport_report_tag, msg->data.user_report.report);
+        if (msg->data.user_report.body.size > sizeof(msg->data.user_report.body.bytes)) {
+            w.ok = false;
+        } else if (msg->data.user_report.body.size > 0) {
+            put_bytes(&w, protoduino_UserReport_body_tag, msg->data.user_report.body.bytes,
+                      msg->data.user_report.body.size);
+        }
+        put_uint(&w, protoduino_UserReport_coalesced_tag, msg->data.user_report.coalesced);
         close_msg(&w, at);
         break;
+#endif
     default:
         break; /* no member set: the empty message */
     }

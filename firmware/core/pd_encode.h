@@ -20,6 +20,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "pd_features.h"
 #include "protoduino.pb.h"
 
 /*
@@ -32,13 +33,19 @@
  * encoder before it writes (put_ack), never written past this bound.
  */
 #define PD_ENCODE_MAX2(a, b) ((a) > (b) ? (a) : (b))
+/* DeviceInfo as the device sends it: user_fingerprint (a fixed32, 5 B) only
+ * from a firmware with a user service (PD_FEATURE_USER), so that the field
+ * costs the default build no transmit buffer. */
+#define PD_ENCODE_INFO_MAX (protoduino_DeviceInfo_size - (PD_FEATURE_USER ? 0u : 5u))
+/* A UserCall's Ack: its reply (or none) and its handler's code. */
+#define PD_ENCODE_USER_ACK_MAX (2u + 64u + 2u)
 #define PD_ENCODE_ACK_MAX                                                    \
-    (8u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(2u + protoduino_DeviceInfo_size,     \
+    (8u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(2u + PD_ENCODE_INFO_MAX,             \
                                         2u + protoduino_OutputStates_size),  \
                          66u + 2u + protoduino_Failsafe_size))
 #define PD_ENCODE_MAX                                                        \
     (2u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(PD_ENCODE_ACK_MAX, protoduino_InputReport_size), \
-                         PD_ENCODE_MAX2(protoduino_Log_size, protoduino_Failsafe_size)))
+                         PD_ENCODE_MAX2(protoduino_Failsafe_size, protoduino_UserReport_size)))
 
 /* Encode `msg` into buf (capacity cap). Returns the length, or 0 if cap is
  * below PD_ENCODE_MAX (the largest message: any message fits a buffer that

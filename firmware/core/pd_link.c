@@ -244,9 +244,6 @@ static pd_link_event_t handle_frame(pd_link_t *link, void *hal)
         pkt.payload[0] == PD_CONTROL_BAUD_SET) {
         return PD_LINK_BAUD; /* the rate is the core's to decide */
     }
-    if (pkt.type == PD_PACKET_CONTROL && pkt.len == 1 && pkt.payload[0] == PD_CONTROL_HEARTBEAT) {
-        return PD_LINK_HANDLED; /* liveness of the link only; never of the application */
-    }
     PD_STAT_INC(link, ignored);
     return PD_LINK_HANDLED;
 }

@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "pd_protocol.h"
+#include "pd_user.h"
 
 /* The digital masks hold one bit per pin; a slot fits the owner byte's low nibble. */
 typedef char pd_assert_pins_fit_mask[(PD_MAX_PINS <= 32) ? 1 : -1];
@@ -178,7 +179,28 @@ static void digital_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t s
     X(PD_MODE_PWM, pwm_slots, pwm_safe, pwm_release)                         \
     X(PD_MODE_DIGITAL_INPUT, dinput_slots, input_safe, dinput_release)       \
     X(PD_MODE_ANALOG_INPUT, ainput_slots, input_safe, ainput_release)        \
-    X(PD_MODE_COUNTER, counter_slots, input_safe, counter_release)
+    X(PD_MODE_COUNTER, counter_slots, input_safe, counter_release)           \
+    PD_MODES_USER(X)
+
+/* A user service's pins (pd_user.h), by pin, like digital outputs. */
+#if PD_FEATURE_USER
+static void user_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    (void)out;
+    (void)slot;
+    pd_user_pin_safe(hal, pin);
+}
+
+static void user_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
+{
+    (void)out;
+    (void)slot;
+    pd_user_pin_release(hal, pin);
+}
+#define PD_MODES_USER(X) X(PD_MODE_USER, by_pin, user_safe, user_release)
+#else
+#define PD_MODES_USER(X)
+#endif
 
 #define PD_MODE_ONE(mode, slots_, safe_, release_) +1
 typedef char pd_assert_every_mode_listed[(0 PD_MODES(PD_MODE_ONE)) == PD_MODE_COUNT - 1 ? 1 : -1];

@@ -76,7 +76,10 @@
  * pd_tables.h from the (pin_mode) options on proto/protoduino.proto's enum
  * Feature; a mode the firmware has of its own would follow them. PD_MODES in
  * pd_outputs.c has one entry for each mode. */
-#define PD_MODE_COUNT PD_MODE_BUILTIN_END
+/* A user service's pins (pd_user.h), in a build with one: its hooks drive them safe and
+ * release them. */
+#define PD_MODE_USER PD_MODE_BUILTIN_END
+#define PD_MODE_COUNT (PD_MODE_BUILTIN_END + (PD_FEATURE_USER ? 1 : 0))
 
 /* An owner byte: mode in the high nibble, slot in the low one (one byte per pin of RAM). */
 #define PD_OWNER(mode, slot) ((uint8_t)(((mode) << 4) | (slot)))

@@ -17,6 +17,7 @@
 #include "pd_hal.h"
 #include "pd_link.h"
 #include "pd_outputs.h"
+#include "pd_user.h"
 #include "protoduino.pb.h"
 
 /* Reported in DeviceInfo.firmware_version; follows the Python package's version. */
@@ -62,6 +63,9 @@ typedef struct pd_core {
     uint8_t baud;
     bool baud_unconfirmed;
     uint16_t baud_at;
+#if PD_FEATURE_USER
+    pd_user_state_t user;    /* the user service's reports (pd_user.h) */
+#endif
 } pd_core_t;
 
 /* Report slot `slot` has a new value: sent (pd_core_t.report builds it) when the line allows. */

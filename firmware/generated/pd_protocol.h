@@ -55,7 +55,6 @@
 /* ControlCode: CONTROL payload CODE (docs/protocol.md section 5). */
 #define PD_CONTROL_RESET 0x00
 #define PD_CONTROL_RESET_ACK 0x01
-#define PD_CONTROL_HEARTBEAT 0x02
 #define PD_CONTROL_EVENT 0x03
 #define PD_CONTROL_BAUD_SET 0x04
 #define PD_CONTROL_BAUD_ACK 0x05

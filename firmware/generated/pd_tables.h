@@ -44,13 +44,17 @@ enum {
 #ifndef PD_FEATURE_COUNTER
 #define PD_FEATURE_COUNTER 1
 #endif
+#ifndef PD_FEATURE_USER
+#define PD_FEATURE_USER 0
+#endif
 #define PD_FEATURES (0u                          \
     | (PD_FEATURE_SERVO ? 1u << 1 : 0u)          \
     | (PD_FEATURE_DIGITAL_OUTPUT ? 1u << 2 : 0u) \
     | (PD_FEATURE_DIGITAL_INPUT ? 1u << 3 : 0u)  \
     | (PD_FEATURE_ANALOG_INPUT ? 1u << 4 : 0u)   \
     | (PD_FEATURE_PWM ? 1u << 5 : 0u)            \
-    | (PD_FEATURE_COUNTER ? 1u << 6 : 0u))
+    | (PD_FEATURE_COUNTER ? 1u << 6 : 0u)        \
+    | (PD_FEATURE_USER ? 1u << 7 : 0u))
 
 /* A command's flags (proto/protoduino_options.proto, message Command). */
 #define PD_CMD_IDEMPOTENT 0x01u  /* idempotent */
@@ -80,6 +84,7 @@ enum {
     X(counter_init, PD_FEATURE_COUNTER, 0, 0)                            \
     X(clear_interlock, PD_FEATURE_DIGITAL_INPUT, 0, 0)                   \
     X(pose, 1, PD_CMD_SETS_OUTPUT, 0)                                    \
-    X(read_outputs, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)
+    X(read_outputs, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)    \
+    X(user_call, PD_FEATURE_USER, 0, protoduino_Ack_user_reply_tag)
 
 #endif /* PD_TABLES_H */

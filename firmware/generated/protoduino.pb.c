@@ -66,6 +66,9 @@ PB_BIND(protoduino_Release, protoduino_Release, AUTO)
 PB_BIND(protoduino_ReleaseAll, protoduino_ReleaseAll, AUTO)
 
 
+PB_BIND(protoduino_UserCall, protoduino_UserCall, AUTO)
+
+
 PB_BIND(protoduino_ArduinoIn, protoduino_ArduinoIn, AUTO)
 
 
@@ -87,11 +90,10 @@ PB_BIND(protoduino_InputReport, protoduino_InputReport, AUTO)
 PB_BIND(protoduino_DecodeError, protoduino_DecodeError, AUTO)
 
 
-PB_BIND(protoduino_Log, protoduino_Log, AUTO)
+PB_BIND(protoduino_UserReport, protoduino_UserReport, AUTO)
 
 
 PB_BIND(protoduino_ArduinoOut, protoduino_ArduinoOut, AUTO)
-
 
 
 

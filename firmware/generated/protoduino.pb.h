@@ -36,7 +36,10 @@ typedef enum _protoduino_Status {
     protoduino_Status_STATUS_TIMER_IN_USE = 12,
     /* This pin cannot do this mode on this board (no PWM, ADC or interrupt
  there), or the firmware was built without the mode's feature. */
-    protoduino_Status_STATUS_NOT_SUPPORTED = 13
+    protoduino_Status_STATUS_NOT_SUPPORTED = 13,
+    /* A user service's handler refused the call with its own code (Ack.user_code,
+ from the user's .proto; docs/services.md). Its handler changed nothing. */
+    protoduino_Status_STATUS_USER_ERROR = 14
 } protoduino_Status;
 
 /* The build-time features a firmware may carry (DeviceInfo.features: bit N
@@ -48,7 +51,10 @@ typedef enum _protoduino_Feature {
     protoduino_Feature_FEATURE_DIGITAL_INPUT = 3,
     protoduino_Feature_FEATURE_ANALOG_INPUT = 4,
     protoduino_Feature_FEATURE_PWM = 5,
-    protoduino_Feature_FEATURE_COUNTER = 6
+    protoduino_Feature_FEATURE_COUNTER = 6,
+    /* User services (UserCall, UserReport): a firmware built with the user's
+ generated service table (docs/services.md). Off in the default firmware. */
+    protoduino_Feature_FEATURE_USER = 7
 } protoduino_Feature;
 
 /* When an interlock input trips (protocol.md section 7, Interlocks). */
@@ -76,13 +82,6 @@ typedef enum _protoduino_FailsafeCause {
     protoduino_FailsafeCause_FAILSAFE_CAUSE_STOP = 2,
     protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK = 3
 } protoduino_FailsafeCause;
-
-typedef enum _protoduino_LogLevel {
-    protoduino_LogLevel_LOG_LEVEL_DEBUG = 0,
-    protoduino_LogLevel_LOG_LEVEL_INFO = 1,
-    protoduino_LogLevel_LOG_LEVEL_WARNING = 2,
-    protoduino_LogLevel_LOG_LEVEL_ERROR = 3
-} protoduino_LogLevel;
 
 /* Struct definitions */
 typedef PB_BYTES_ARRAY_T(64) protoduino_Ping_payload_t;
@@ -239,6 +238,18 @@ typedef struct _protoduino_ReleaseAll {
     char dummy_field;
 } protoduino_ReleaseAll;
 
+typedef PB_BYTES_ARRAY_T(64) protoduino_UserCall_request_t;
+/* A call of a user service's method (docs/services.md). The request is the
+ method's own message, encoded with the user's schema: protoduino carries it
+ unread, and the device decodes it with the user's generated descriptors.
+ Acknowledged and deduplicated like any command (section 7, User services).
+ Its fields have the shape of Ping's (bytes 1, a byte-wide 2), so that the
+ device decodes both with one nanopb descriptor (14 B of the Uno's RAM). */
+typedef struct _protoduino_UserCall {
+    protoduino_UserCall_request_t request; /* the request message, in the user's schema */
+    uint8_t method; /* 1..: the method's position in the user's service */
+} protoduino_UserCall;
+
 typedef struct _protoduino_ArduinoIn {
     uint32_t message_id; /* non-zero; reused by retransmissions */
     pb_size_t which_data;
@@ -262,6 +273,9 @@ typedef struct _protoduino_ArduinoIn {
         /* Not idempotent: a late duplicate must never clear an interlock that
      tripped again after the first one ran; the dedupe window answers it. */
         protoduino_ClearInterlock clear_interlock;
+        /* A user service's method (docs/services.md): the device takes its flags from the
+     service's table (the rpc's idempotency_level), the host guards it as not idempotent. */
+        protoduino_UserCall user_call;
         protoduino_Pose pose;
         protoduino_ReadOutputs read_outputs;
     } data;
@@ -283,6 +297,9 @@ typedef struct _protoduino_DeviceInfo {
     uint32_t pwm_pins; /* bit N: pin N can do PWM */
     uint32_t analog_pins; /* bit N: pin N is an analog input */
     uint32_t counter_pins; /* bit N: pin N can count pulses */
+    /* The user service built in (FEATURE_USER): the CRC-32 of its schema's
+ FileDescriptorSet (as SCHEMA_ID is of this one); 0: none. */
+    uint32_t user_fingerprint;
 } protoduino_DeviceInfo;
 
 typedef PB_BYTES_ARRAY_T(40) protoduino_OutputStates_servos_t;
@@ -313,6 +330,7 @@ typedef struct _protoduino_Failsafe {
 } protoduino_Failsafe;
 
 typedef PB_BYTES_ARRAY_T(64) protoduino_Ack_ping_echo_t;
+typedef PB_BYTES_ARRAY_T(64) protoduino_Ack_user_reply_t;
 typedef struct _protoduino_Ack {
     uint32_t message_id;
     protoduino_Status status;
@@ -320,6 +338,7 @@ typedef struct _protoduino_Ack {
     union {
         protoduino_Ack_ping_echo_t ping_echo; /* the Ping's payload, unchanged */
         protoduino_DeviceInfo info; /* answer to GetInfo */
+        protoduino_Ack_user_reply_t user_reply; /* a UserCall's reply message, in the user's schema */
         protoduino_OutputStates outputs; /* answer to ReadOutputs */
     } result;
     /* On the Ack of a Ping or Heartbeat: the device's failsafe state after that
@@ -328,6 +347,8 @@ typedef struct _protoduino_Ack {
  failsafe whose event it missed. */
     bool has_failsafe;
     protoduino_Failsafe failsafe;
+    /* STATUS_USER_ERROR: the handler's own code (the user's error enum, not 0). */
+    uint8_t user_code;
     uint8_t refused_item; /* a refused Pose: its offending item, counted from 1 */
 } protoduino_Ack;
 
@@ -351,11 +372,14 @@ typedef struct _protoduino_DecodeError {
     uint32_t count; /* decode errors since boot */
 } protoduino_DecodeError;
 
-/* A short text from the firmware, for humans. */
-typedef struct _protoduino_Log {
-    protoduino_LogLevel level;
-    char text[48];
-} protoduino_Log;
+typedef PB_BYTES_ARRAY_T(64) protoduino_UserReport_body_t;
+/* A report of a user service (docs/services.md): the newest value of report
+ `report`, "newest wins" as InputReport. */
+typedef struct _protoduino_UserReport {
+    uint8_t report; /* 1..: the report method's position in the user's service */
+    protoduino_UserReport_body_t body; /* the report message, in the user's schema */
+    uint16_t coalesced; /* values of this report replaced before they were sent, since the last */
+} protoduino_UserReport;
 
 typedef struct _protoduino_ArduinoOut {
     pb_size_t which_data;
@@ -363,8 +387,8 @@ typedef struct _protoduino_ArduinoOut {
         protoduino_Ack ack;
         protoduino_Failsafe failsafe;
         protoduino_DecodeError decode_error;
-        protoduino_Log log;
         protoduino_InputReport input_report;
+        protoduino_UserReport user_report;
     } data;
 } protoduino_ArduinoOut;
 
@@ -375,12 +399,12 @@ extern "C" {
 
 /* Helper constants for enums */
 #define _protoduino_Status_MIN protoduino_Status_STATUS_OK
-#define _protoduino_Status_MAX protoduino_Status_STATUS_NOT_SUPPORTED
-#define _protoduino_Status_ARRAYSIZE ((protoduino_Status)(protoduino_Status_STATUS_NOT_SUPPORTED+1))
+#define _protoduino_Status_MAX protoduino_Status_STATUS_USER_ERROR
+#define _protoduino_Status_ARRAYSIZE ((protoduino_Status)(protoduino_Status_STATUS_USER_ERROR+1))
 
 #define _protoduino_Feature_MIN protoduino_Feature_FEATURE_NONE
-#define _protoduino_Feature_MAX protoduino_Feature_FEATURE_COUNTER
-#define _protoduino_Feature_ARRAYSIZE ((protoduino_Feature)(protoduino_Feature_FEATURE_COUNTER+1))
+#define _protoduino_Feature_MAX protoduino_Feature_FEATURE_USER
+#define _protoduino_Feature_ARRAYSIZE ((protoduino_Feature)(protoduino_Feature_FEATURE_USER+1))
 
 #define _protoduino_Trip_MIN protoduino_Trip_TRIP_NONE
 #define _protoduino_Trip_MAX protoduino_Trip_TRIP_HIGH
@@ -397,10 +421,6 @@ extern "C" {
 #define _protoduino_FailsafeCause_MIN protoduino_FailsafeCause_FAILSAFE_CAUSE_NONE
 #define _protoduino_FailsafeCause_MAX protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK
 #define _protoduino_FailsafeCause_ARRAYSIZE ((protoduino_FailsafeCause)(protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK+1))
-
-#define _protoduino_LogLevel_MIN protoduino_LogLevel_LOG_LEVEL_DEBUG
-#define _protoduino_LogLevel_MAX protoduino_LogLevel_LOG_LEVEL_ERROR
-#define _protoduino_LogLevel_ARRAYSIZE ((protoduino_LogLevel)(protoduino_LogLevel_LOG_LEVEL_ERROR+1))
 
 
 
@@ -428,13 +448,13 @@ extern "C" {
 
 
 
+
 #define protoduino_Ack_status_ENUMTYPE protoduino_Status
 
 #define protoduino_Failsafe_cause_ENUMTYPE protoduino_FailsafeCause
 
 
 
-#define protoduino_Log_level_ENUMTYPE protoduino_LogLevel
 
 
 
@@ -459,14 +479,15 @@ extern "C" {
 #define protoduino_Heartbeat_init_default        {0}
 #define protoduino_Release_init_default          {0}
 #define protoduino_ReleaseAll_init_default       {0}
+#define protoduino_UserCall_init_default         {{0, {0}}, 0}
 #define protoduino_ArduinoIn_init_default        {0, 0, {protoduino_Ping_init_default}}
-#define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, 0, 0}
+#define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, 0, 0, 0}
 #define protoduino_OutputStates_init_default     {{0, {0}}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
-#define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_default, 0}
+#define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_default, 0, 0}
 #define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN, 0, 0}
 #define protoduino_InputReport_init_default      {0, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_DecodeError_init_default      {0}
-#define protoduino_Log_init_default              {_protoduino_LogLevel_MIN, ""}
+#define protoduino_UserReport_init_default       {0, {0, {0}}, 0}
 #define protoduino_ArduinoOut_init_default       {0, {protoduino_Ack_init_default}}
 #define protoduino_Ping_init_zero                {{0, {0}}, 0}
 #define protoduino_ServoInit_init_zero           {0, 0, 0, 0, {0}, 0}
@@ -488,14 +509,15 @@ extern "C" {
 #define protoduino_Heartbeat_init_zero           {0}
 #define protoduino_Release_init_zero             {0}
 #define protoduino_ReleaseAll_init_zero          {0}
+#define protoduino_UserCall_init_zero            {{0, {0}}, 0}
 #define protoduino_ArduinoIn_init_zero           {0, 0, {protoduino_Ping_init_zero}}
-#define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, 0, 0}
+#define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, 0, 0, 0}
 #define protoduino_OutputStates_init_zero        {{0, {0}}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
-#define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_zero, 0}
+#define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_zero, 0, 0}
 #define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN, 0, 0}
 #define protoduino_InputReport_init_zero         {0, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}, 0, 0, {0, 0, 0, 0}, 0}
 #define protoduino_DecodeError_init_zero         {0}
-#define protoduino_Log_init_zero                 {_protoduino_LogLevel_MIN, ""}
+#define protoduino_UserReport_init_zero          {0, {0, {0}}, 0}
 #define protoduino_ArduinoOut_init_zero          {0, {protoduino_Ack_init_zero}}
 
 /* Field tags (for use in manual encoding/decoding) */
@@ -540,6 +562,8 @@ extern "C" {
 #define protoduino_ConfigureFailsafe_liveness_tag 2
 #define protoduino_Heartbeat_failsafe_epoch_tag  1
 #define protoduino_Release_pin_tag               1
+#define protoduino_UserCall_request_tag          1
+#define protoduino_UserCall_method_tag           2
 #define protoduino_ArduinoIn_message_id_tag      1
 #define protoduino_ArduinoIn_ping_tag            2
 #define protoduino_ArduinoIn_servo_init_tag      3
@@ -558,6 +582,7 @@ extern "C" {
 #define protoduino_ArduinoIn_analog_input_init_tag 16
 #define protoduino_ArduinoIn_counter_init_tag    17
 #define protoduino_ArduinoIn_clear_interlock_tag 18
+#define protoduino_ArduinoIn_user_call_tag       19
 #define protoduino_ArduinoIn_pose_tag            30
 #define protoduino_ArduinoIn_read_outputs_tag    31
 #define protoduino_DeviceInfo_firmware_version_tag 1
@@ -572,6 +597,7 @@ extern "C" {
 #define protoduino_DeviceInfo_pwm_pins_tag       10
 #define protoduino_DeviceInfo_analog_pins_tag    11
 #define protoduino_DeviceInfo_counter_pins_tag   12
+#define protoduino_DeviceInfo_user_fingerprint_tag 13
 #define protoduino_OutputStates_servos_tag       1
 #define protoduino_OutputStates_digital_pins_tag 2
 #define protoduino_OutputStates_digital_levels_tag 3
@@ -585,8 +611,10 @@ extern "C" {
 #define protoduino_Ack_status_tag                2
 #define protoduino_Ack_ping_echo_tag             3
 #define protoduino_Ack_info_tag                  4
+#define protoduino_Ack_user_reply_tag            6
 #define protoduino_Ack_outputs_tag               30
 #define protoduino_Ack_failsafe_tag              5
+#define protoduino_Ack_user_code_tag             7
 #define protoduino_Ack_refused_item_tag          31
 #define protoduino_InputReport_time_ms_tag       1
 #define protoduino_InputReport_digital_pins_tag  2
@@ -597,13 +625,14 @@ extern "C" {
 #define protoduino_InputReport_counter_counts_tag 7
 #define protoduino_InputReport_coalesced_tag     8
 #define protoduino_DecodeError_count_tag         1
-#define protoduino_Log_level_tag                 1
-#define protoduino_Log_text_tag                  2
+#define protoduino_UserReport_report_tag         1
+#define protoduino_UserReport_body_tag           2
+#define protoduino_UserReport_coalesced_tag      3
 #define protoduino_ArduinoOut_ack_tag            1
 #define protoduino_ArduinoOut_failsafe_tag       2
 #define protoduino_ArduinoOut_decode_error_tag   3
-#define protoduino_ArduinoOut_log_tag            4
 #define protoduino_ArduinoOut_input_report_tag   5
+#define protoduino_ArduinoOut_user_report_tag    6
 
 /* Struct field encoding specification for nanopb */
 #define protoduino_Ping_FIELDLIST(X, a) \
@@ -735,6 +764,12 @@ X(a, STATIC,   SINGULAR, UINT32,   pin,               1)
 #define protoduino_ReleaseAll_CALLBACK NULL
 #define protoduino_ReleaseAll_DEFAULT NULL
 
+#define protoduino_UserCall_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, BYTES,    request,           1) \
+X(a, STATIC,   SINGULAR, UINT32,   method,            2)
+#define protoduino_UserCall_CALLBACK NULL
+#define protoduino_UserCall_DEFAULT NULL
+
 #define protoduino_ArduinoIn_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, UINT32,   message_id,        1) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,ping,data.ping),   2) \
@@ -754,6 +789,7 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,digital_input_init,data.digital_input_i
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,analog_input_init,data.analog_input_init),  16) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,counter_init,data.counter_init),  17) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,clear_interlock,data.clear_interlock),  18) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,user_call,data.user_call),  19) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,pose,data.pose),  30) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,read_outputs,data.read_outputs),  31)
 #define protoduino_ArduinoIn_CALLBACK NULL
@@ -781,6 +817,8 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,read_outputs,data.read_outputs),  31)
 #define protoduino_ArduinoIn_data_analog_input_init_MSGTYPE protoduino_AnalogInputInit
 #define protoduino_ArduinoIn_data_counter_init_MSGTYPE protoduino_CounterInit
 #define protoduino_ArduinoIn_data_clear_interlock_MSGTYPE protoduino_ClearInterlock
+/* protoduino gen: protoduino_UserCall has the shape of protoduino_Ping: one descriptor (codegen.share_descriptors) */
+#define protoduino_ArduinoIn_data_user_call_MSGTYPE protoduino_Ping
 #define protoduino_ArduinoIn_data_pose_MSGTYPE protoduino_Pose
 /* protoduino gen: protoduino_ReadOutputs has the shape of protoduino_GetInfo: one descriptor (codegen.share_descriptors) */
 #define protoduino_ArduinoIn_data_read_outputs_MSGTYPE protoduino_GetInfo
@@ -797,7 +835,8 @@ X(a, STATIC,   SINGULAR, UINT32,   rx_buffer,         8) \
 X(a, STATIC,   SINGULAR, UINT32,   features,          9) \
 X(a, STATIC,   SINGULAR, FIXED32,  pwm_pins,         10) \
 X(a, STATIC,   SINGULAR, FIXED32,  analog_pins,      11) \
-X(a, STATIC,   SINGULAR, FIXED32,  counter_pins,     12)
+X(a, STATIC,   SINGULAR, FIXED32,  counter_pins,     12) \
+X(a, STATIC,   SINGULAR, FIXED32,  user_fingerprint,  13)
 #define protoduino_DeviceInfo_CALLBACK NULL
 #define protoduino_DeviceInfo_DEFAULT NULL
 
@@ -816,6 +855,8 @@ X(a, STATIC,   SINGULAR, UENUM,    status,            2) \
 X(a, STATIC,   ONEOF,    BYTES,    (result,ping_echo,result.ping_echo),   3) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (result,info,result.info),   4) \
 X(a, STATIC,   OPTIONAL, MESSAGE,  failsafe,          5) \
+X(a, STATIC,   ONEOF,    BYTES,    (result,user_reply,result.user_reply),   6) \
+X(a, STATIC,   SINGULAR, UINT32,   user_code,         7) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (result,outputs,result.outputs),  30) \
 X(a, STATIC,   SINGULAR, UINT32,   refused_item,     31)
 #define protoduino_Ack_CALLBACK NULL
@@ -849,25 +890,26 @@ X(a, STATIC,   SINGULAR, UINT32,   count,             1)
 #define protoduino_DecodeError_CALLBACK NULL
 #define protoduino_DecodeError_DEFAULT NULL
 
-#define protoduino_Log_FIELDLIST(X, a) \
-X(a, STATIC,   SINGULAR, UENUM,    level,             1) \
-X(a, STATIC,   SINGULAR, STRING,   text,              2)
-#define protoduino_Log_CALLBACK NULL
-#define protoduino_Log_DEFAULT NULL
+#define protoduino_UserReport_FIELDLIST(X, a) \
+X(a, STATIC,   SINGULAR, UINT32,   report,            1) \
+X(a, STATIC,   SINGULAR, BYTES,    body,              2) \
+X(a, STATIC,   SINGULAR, UINT32,   coalesced,         3)
+#define protoduino_UserReport_CALLBACK NULL
+#define protoduino_UserReport_DEFAULT NULL
 
 #define protoduino_ArduinoOut_FIELDLIST(X, a) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,ack,data.ack),   1) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,failsafe,data.failsafe),   2) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,decode_error,data.decode_error),   3) \
-X(a, STATIC,   ONEOF,    MESSAGE,  (data,log,data.log),   4) \
-X(a, STATIC,   ONEOF,    MESSAGE,  (data,input_report,data.input_report),   5)
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,input_report,data.input_report),   5) \
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,user_report,data.user_report),   6)
 #define protoduino_ArduinoOut_CALLBACK NULL
 #define protoduino_ArduinoOut_DEFAULT NULL
 #define protoduino_ArduinoOut_data_ack_MSGTYPE protoduino_Ack
 #define protoduino_ArduinoOut_data_failsafe_MSGTYPE protoduino_Failsafe
 #define protoduino_ArduinoOut_data_decode_error_MSGTYPE protoduino_DecodeError
-#define protoduino_ArduinoOut_data_log_MSGTYPE protoduino_Log
 #define protoduino_ArduinoOut_data_input_report_MSGTYPE protoduino_InputReport
+#define protoduino_ArduinoOut_data_user_report_MSGTYPE protoduino_UserReport
 
 extern const pb_msgdesc_t protoduino_Ping_msg;
 extern const pb_msgdesc_t protoduino_ServoInit_msg;
@@ -889,6 +931,7 @@ extern const pb_msgdesc_t protoduino_ConfigureFailsafe_msg;
 extern const pb_msgdesc_t protoduino_Heartbeat_msg;
 extern const pb_msgdesc_t protoduino_Release_msg;
 extern const pb_msgdesc_t protoduino_ReleaseAll_msg;
+extern const pb_msgdesc_t protoduino_UserCall_msg;
 extern const pb_msgdesc_t protoduino_ArduinoIn_msg;
 extern const pb_msgdesc_t protoduino_DeviceInfo_msg;
 extern const pb_msgdesc_t protoduino_OutputStates_msg;
@@ -896,7 +939,7 @@ extern const pb_msgdesc_t protoduino_Ack_msg;
 extern const pb_msgdesc_t protoduino_Failsafe_msg;
 extern const pb_msgdesc_t protoduino_InputReport_msg;
 extern const pb_msgdesc_t protoduino_DecodeError_msg;
-extern const pb_msgdesc_t protoduino_Log_msg;
+extern const pb_msgdesc_t protoduino_UserReport_msg;
 extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 
 /* Defines for backwards compatibility with code written before nanopb-0.4.0 */
@@ -920,6 +963,7 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_Heartbeat_fields &protoduino_Heartbeat_msg
 #define protoduino_Release_fields &protoduino_Release_msg
 #define protoduino_ReleaseAll_fields &protoduino_ReleaseAll_msg
+#define protoduino_UserCall_fields &protoduino_UserCall_msg
 #define protoduino_ArduinoIn_fields &protoduino_ArduinoIn_msg
 #define protoduino_DeviceInfo_fields &protoduino_DeviceInfo_msg
 #define protoduino_OutputStates_fields &protoduino_OutputStates_msg
@@ -927,19 +971,19 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_Failsafe_fields &protoduino_Failsafe_msg
 #define protoduino_InputReport_fields &protoduino_InputReport_msg
 #define protoduino_DecodeError_fields &protoduino_DecodeError_msg
-#define protoduino_Log_fields &protoduino_Log_msg
+#define protoduino_UserReport_fields &protoduino_UserReport_msg
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_Ack_size                      109
+#define protoduino_Ack_size                      117
 #define protoduino_AnalogInputInit_size          19
 #define protoduino_ArduinoIn_size                97
-#define protoduino_ArduinoOut_size               111
+#define protoduino_ArduinoOut_size               119
 #define protoduino_ClearInterlock_size           3
 #define protoduino_ConfigureFailsafe_size        8
 #define protoduino_CounterInit_size              13
 #define protoduino_DecodeError_size              6
-#define protoduino_DeviceInfo_size               83
+#define protoduino_DeviceInfo_size               88
 #define protoduino_DigitalControl_size           5
 #define protoduino_DigitalInit_size              5
 #define protoduino_DigitalInputInit_size         11
@@ -947,7 +991,6 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_GetInfo_size                  0
 #define protoduino_Heartbeat_size                3
 #define protoduino_InputReport_size              78
-#define protoduino_Log_size                      51
 #define protoduino_OutputStates_size             75
 #define protoduino_Ping_size                     69
 #define protoduino_PoseItem_size                 9
@@ -960,6 +1003,8 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_ServoControl_size             7
 #define protoduino_ServoInit_size                28
 #define protoduino_Stop_size                     0
+#define protoduino_UserCall_size                 69
+#define protoduino_UserReport_size               73
 
 #ifdef __cplusplus
 } /* extern "C" */

@@ -10,7 +10,7 @@
  * SIGUSR1 is a simulated reboot. The pins are
  * virtual: every change is written to the trace as one JSON object per line,
  * flushed per line, with t = seconds since the process started (monotonic).
- * --control PATH opens the input-control socket (tools/simcontrol): levels,
+ * --control PATH opens the input-control socket (firmware/simcontrol): levels,
  * analog values and pulse trains on the virtual input pins, which the HAL's
  * input functions read back on the same clock. A pulse train is computed
  * from the clock when it is read, not stepped, so no edge depends on how

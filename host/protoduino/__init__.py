@@ -2,7 +2,9 @@
 
 The layers, each a module, data flowing one way::
 
-    bytes -> framing (COBS) -> packets (TYPE/LEN/SEQ/CRC) -> link -> rpc -> board
+    bytes -> framing (COBS) -> packets (TYPE/LEN/SEQ/CRC) -> link -> rpc (+ session) -> board
+
+``protoduino.testing`` is a Board on an in-process device, for testing code without hardware.
 
 See README.md for the API and docs/protocol.md for the wire protocol.
 """
@@ -10,15 +12,8 @@ See README.md for the API and docs/protocol.md for the wire protocol.
 from __future__ import annotations
 
 from ._generated.schema_id import SCHEMA_ID
-from .board import (
-    Board,
-    DeviceInfo,
-    DigitalOutput,
-    OutputState,
-    PwmOutput,
-    Servo,
-    effective_speed,
-)
+from .board import Board, effective_speed
+from .boardoptions import BoardOptions
 from .constants import PROTOCOL_VERSION
 from .errors import (
     AckTimeoutError,
@@ -46,10 +41,15 @@ from .errors import (
     SimControlError,
     TimerInUseError,
     TransportError,
+    UserError,
+    UserReplyLostError,
+    UserSchemaError,
     VersionMismatchError,
 )
 from .events import Event, EventKind, Stats
 from .inputs import AnalogInput, Counter, DigitalInput, Reading
+from .outputs import DigitalOutput, PwmOutput, Servo
+from .readback import DeviceInfo, OutputState
 
 __version__ = "0.1.0"
 
@@ -62,6 +62,7 @@ __all__ = [
     "ArgumentTypeError",
     "Board",
     "BoardClosedError",
+    "BoardOptions",
     "BuildError",
     "CaptureError",
     "CommandRejectedError",
@@ -94,6 +95,9 @@ __all__ = [
     "Stats",
     "TimerInUseError",
     "TransportError",
+    "UserError",
+    "UserReplyLostError",
+    "UserSchemaError",
     "VersionMismatchError",
     "__version__",
     "effective_speed",

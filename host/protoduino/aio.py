@@ -41,17 +41,22 @@ import contextlib
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from types import TracebackType
-from typing import Any, Generic, Self, SupportsFloat, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, Self, SupportsFloat, TypeVar
 
 from . import board as _board
 from . import inputs as _inputs
+from .arguments import RealNumber
 from .board import Edge, Interlock, OutputState
+from .boardoptions import BoardOptions
 from .constants import SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
 from .errors import ArgumentError, BoardClosedError, InputTimeoutError
 from .events import Event, Stats
 from .inputs import SINK_BUFFER, Reading
 from .messages import ArduinoIn
 from .rpc import Ack
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 T = TypeVar("T")
 InputT = TypeVar("InputT", bound="_Input")
@@ -64,7 +69,7 @@ async def _wait(future: Future[T]) -> T:
     return await asyncio.wrap_future(future)
 
 
-async def open(url: str, **options: Any) -> Board:
+async def open(url: str, **options: Unpack[BoardOptions]) -> Board:
     """Open ``url`` like :meth:`protoduino.Board.open` (same keywords); the loop runs on.
 
     Cancelling it (``asyncio.wait_for(aio.open(url), 0.5)`` timing out, ``task.cancel()``)
@@ -74,9 +79,8 @@ async def open(url: str, **options: Any) -> Board:
     A board the open had just returned is closed likewise.
     """
     cancel = _board.OpenCancel()
-    opening = asyncio.ensure_future(
-        asyncio.to_thread(_board.Board.open, url, cancel=cancel, **options)
-    )
+    options = {**options, "cancel": cancel}
+    opening = asyncio.ensure_future(asyncio.to_thread(_board.Board.open, url, **options))
     try:
         sync = await asyncio.shield(opening)
     except asyncio.CancelledError:
@@ -164,7 +168,7 @@ class PwmOutput:
     def value(self) -> int | None:
         return self.sync.value
 
-    async def write(self, duty: _board.RealNumber) -> None:
+    async def write(self, duty: RealNumber) -> None:
         await _wait(self.sync.submit(duty))
 
     def __repr__(self) -> str:
@@ -375,7 +379,7 @@ class Board:
         self._streams: set[_Stream[Any]] = set()
 
     @classmethod
-    async def open(cls, url: str, **options: Any) -> Board:
+    async def open(cls, url: str, **options: Unpack[BoardOptions]) -> Board:
         return await open(url, **options)
 
     async def __aenter__(self) -> Board:
@@ -440,7 +444,7 @@ class Board:
     async def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
         return DigitalOutput(await _wait(self.sync.submit_digital_output(pin, safe)))
 
-    async def pwm_output(self, pin: int, safe: _board.RealNumber = 0) -> PwmOutput:
+    async def pwm_output(self, pin: int, safe: RealNumber = 0) -> PwmOutput:
         return PwmOutput(await _wait(self.sync.submit_pwm_output(pin, safe)))
 
     async def digital_input(
@@ -507,6 +511,10 @@ class Board:
     async def request(self, msg: ArduinoIn) -> Ack:
         """:meth:`protoduino.Board.request`, awaited."""
         return await _wait(self.sync.submit_request(msg))
+
+    async def call_user(self, method: int, request: bytes) -> bytes:
+        """:meth:`protoduino.Board.call_user` (a user service's method), awaited."""
+        return await _wait(self.sync.submit_call_user(method, request))
 
     async def pose(self, targets: Mapping[_Output, _board.PoseValue]) -> None:
         """:meth:`protoduino.Board.pose`; the outputs may be these or the blocking ones."""

@@ -45,43 +45,43 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import math
-import os
-import struct
 import threading
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass
-from decimal import Decimal
-from fractions import Fraction
-from numbers import Integral, Real
-from types import TracebackType
-from typing import Any, Literal, SupportsFloat, TypeVar
+from typing import TYPE_CHECKING, Any, Literal, SupportsFloat, TypeVar
 
 from ._generated import protoduino_pb2 as pb
+from .arguments import (
+    RealNumber,
+    check_failsafe_ms,
+    check_int,
+    check_level,
+    check_session,
+    interval_ms,
+    period_ms,
+    refused,
+    whole_number,
+)
+from .boardoptions import BoardOptions, Liveness, RestorePolicy, resolved
+
+# Public here too, where it began (an explicit re-export).
+from .boardoptions import OpenCancel as OpenCancel  # noqa: PLC0414
 from .capture import CaptureWriter
+from .closing import ClosedOnExit
 from .commands import (
     ANALOG_INPUT,
     COUNTER,
     DIGITAL,
     DIGITAL_INPUT,
-    PIN_MODES,
     PWM,
     SERVO,
     PinMode,
     feature_hint,
 )
 from .constants import (
-    ACK_TIMEOUT,
     ANALOG_MAX,
     DEBOUNCE_MAX_MS,
-    FAILSAFE_MAX,
-    FAILSAFE_MIN,
-    FAILSAFE_TIMEOUT,
-    HANDSHAKE_TIMEOUT,
-    INPUT_INTERVAL_MAX_MS,
-    MAX_RETRIES,
-    OPENING_BAUDRATE,
     PING_INTERVAL,
     PWM_MAX_DUTY,
     SERVO_DEFAULT_MAX_US,
@@ -91,7 +91,6 @@ from .constants import (
     SERVO_LIMIT_MIN_US,
     SERVO_MAX_DEGREES,
     SERVO_MAX_SPEED,
-    WATCHDOG_TIMEOUT,
 )
 from .errors import (
     ArgumentError,
@@ -102,14 +101,29 @@ from .errors import (
     ProtocolError,
     ProtoduinoError,
     ReentrantCallError,
-    rejection,
+    UserError,
+    UserReplyLostError,
 )
 from .events import Event, EventCallback, EventDispatcher, EventKind, Stats
 from .inputs import AnalogInput, Counter, DigitalInput, InputTable
 from .link import Link
 from .messages import ArduinoIn, ArduinoOut, InputKind, Status, status_name
-from .rpc import REBOOT_LIMIT, REBOOT_WINDOW, Ack, Call, Rpc, RpcState
-from .transport import FrameMonitor, Transport
+
+# The outputs and the readback live in modules of their own; public here too, as before.
+from .outputs import DigitalOutput as DigitalOutput  # noqa: PLC0414
+from .outputs import PwmOutput as PwmOutput  # noqa: PLC0414
+from .outputs import Servo as Servo  # noqa: PLC0414
+from .readback import DeviceInfo as DeviceInfo  # noqa: PLC0414
+from .readback import OutputState as OutputState  # noqa: PLC0414
+from .readback import decode_device_info, failsafe_cause
+from .readback import decode_output_states as decode_output_states  # noqa: PLC0414
+from .rpc import Ack, Call, Rpc, RpcState
+from .transport import FrameMonitor
+from .userreports import UserReportTable
+from .wiring import Wiring, serial_wiring
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 log = logging.getLogger(__name__)
 
@@ -133,18 +147,6 @@ def effective_speed(us_per_second: int) -> int:
     return step * FRAMES_PER_SECOND
 
 
-@dataclass(frozen=True, slots=True)
-class OutputState:
-    """One configured output as the device drives it now (:meth:`Board.read_outputs`)."""
-
-    pin: int
-    mode: str  # "servo", "digital" or "pwm"
-    #: A servo's pulse width now (us), a digital level (0, 1) or a PWM duty (0..255).
-    value: int
-    #: Where a servo is going (differs from ``value`` while a speed limit moves it).
-    target: int
-
-
 T = TypeVar("T")
 
 #: A pose's value for one output: degrees (any real number) or a digital level.
@@ -163,32 +165,36 @@ def _returning(obj: T) -> Callable[[Call], T]:
     return value
 
 
+def _user_call(method: int, request: bytes) -> ArduinoIn:
+    if isinstance(method, bool) or not isinstance(method, int) or not 1 <= method <= 255:
+        raise ArgumentError(f"user method must be 1..255, not {method!r}")
+    msg = ArduinoIn()
+    msg.user_call.method = method
+    msg.user_call.request = bytes(request)
+    return msg
+
+
+def _user_reply(call: Call) -> bytes:
+    """A UserCall's reply; its handler's own refusal as :class:`UserError`."""
+    if call.error is not None:
+        refusal = call.refusal
+        if refusal is not None and refusal.status == Status.STATUS_USER_ERROR:
+            raise UserError(
+                refusal.user_code,
+                f"user method refused by its handler with code {refusal.user_code}",
+            ) from call.error
+        raise call.error
+    ack = call.result()
+    if ack.WhichOneof("result") != "user_reply":
+        raise UserReplyLostError(
+            "the user call ran once, but its reply was lost (its retransmission was "
+            "answered from the device's dedupe window, which keeps no replies)"
+        )
+    return bytes(ack.user_reply)
+
+
 def _output_states(call: Call) -> dict[int, OutputState]:
     return decode_output_states(call.result().outputs)
-
-
-def decode_output_states(states: Any) -> dict[int, OutputState]:
-    """Decode an ``OutputStates`` readback by pin (docs/protocol.md: 5 bytes per servo,
-    the digital masks, then the PWM pins' mask and their duties in pin order);
-    :class:`ProtocolError` for fields that do not agree."""
-    blob = bytes(states.servos)
-    if len(blob) % 5:
-        raise ProtocolError(f"OutputStates.servos of {len(blob)} bytes is not 5 per servo")
-    found: dict[int, OutputState] = {}
-    for pin, us, target in struct.iter_unpack("<BHH", blob):
-        found[pin] = OutputState(pin, "servo", us, target)
-    for pin in range(32):
-        if states.digital_pins >> pin & 1:
-            level = states.digital_levels >> pin & 1
-            found[pin] = OutputState(pin, "digital", level, level)
-    pwm_pins = [pin for pin in range(32) if states.pwm_pins >> pin & 1]
-    if len(pwm_pins) != len(states.pwm_duties):
-        raise ProtocolError(
-            f"OutputStates: {len(pwm_pins)} PWM pins but {len(states.pwm_duties)} duties"
-        )
-    for pin, duty in zip(pwm_pins, states.pwm_duties, strict=True):
-        found[pin] = OutputState(pin, "pwm", duty, duty)
-    return dict(sorted(found.items()))
 
 
 def _resolve(future: Future[T], call: Call, value: Callable[[Call], T]) -> None:
@@ -201,34 +207,8 @@ def _resolve(future: Future[T], call: Call, value: Callable[[Call], T]) -> None:
         future.set_result(result)
 
 
-#: Where the device's failsafe timer gets its liveness from (protocol.md section 7).
-Liveness = Literal["ping", "heartbeat"]
-#: What the board sends when the device lost its outputs.
-RestorePolicy = Literal["safe", "last"]
 #: The automatic Ping comes at least this many times per failsafe timeout.
 PINGS_PER_TIMEOUT = 4
-
-
-@dataclass(frozen=True, slots=True)
-class DeviceInfo:
-    """What the device says about itself (GetInfo), read once at open."""
-
-    firmware_version: str
-    protocol_version: int
-    schema_id: int
-    board: str
-    num_pins: int
-    max_servos: int
-    reserved_pins: tuple[int, ...]
-    #: Bytes of received frames the device buffers while it works (0: not stated); the
-    #: board keeps the command bytes in flight within it.
-    rx_buffer: int = 0
-    #: The pin modes built into the firmware, by feature name ("servo", "pwm", ...).
-    features: frozenset[str] = frozenset()
-    #: The pins that can do PWM, that are analog inputs, that can count pulses.
-    pwm_pins: tuple[int, ...] = ()
-    analog_pins: tuple[int, ...] = ()
-    counter_pins: tuple[int, ...] = ()
 
 
 @dataclass(slots=True)
@@ -248,119 +228,6 @@ class _Output:
         self.value = self.safe
 
 
-def _int(name: str, value: object) -> int:
-    if isinstance(value, bool) or not isinstance(value, Integral):
-        raise ArgumentTypeError(f"{name} must be an int, not {type(value).__name__}")
-    return int(value)
-
-
-#: Real numbers: numbers.Real (int, float, Fraction, numpy's) and Decimal, which the
-#: numbers tower leaves out although its values are real.
-_REAL = (Real, Decimal)
-
-
-def _whole(name: str, value: object) -> int:
-    """A real number (int, float, Fraction, Decimal, a numpy float) rounded to a whole one.
-
-    Inverse kinematics and filters produce floats; the wire carries whole degrees
-    and microseconds. The rounding is ``round()``'s: to the nearest whole number, a
-    half to the even one (44.5 -> 44, 45.5 -> 46), exact for a Fraction or a
-    Decimal. NaN and infinities are refused (there is no nearest whole number), and
-    so is a bool: ``True`` is no angle.
-    """
-    if isinstance(value, bool) or not isinstance(value, _REAL):
-        raise ArgumentTypeError(f"{name} must be a real number, not {type(value).__name__}")
-    if isinstance(value, Integral):
-        return int(value)
-    if not math.isfinite(value):
-        raise _reject(Status.STATUS_OUT_OF_RANGE, f"{name} {value!r} is not a finite number")
-    return int(round(value))  # noqa: RUF046  (numpy < 2 rounds a float32 to a float32)
-
-
-def _session(value: object) -> int:
-    """A host session id: an int 1..2**32-1 (a bool or a float is refused, not truncated)."""
-    session = _int("session", value)
-    if not 0 < session <= 0xFFFFFFFF:
-        raise ArgumentError(f"session must be 1..2**32-1, not {session}")
-    return session
-
-
-def _failsafe_ms(value: object) -> int:
-    """A failsafe timeout (seconds, any real number) as the whole milliseconds the device keeps.
-
-    ``Decimal("0.1")`` is 100 ms like ``0.1``: the check is on the value rounded to the
-    millisecond, which is what ConfigureFailsafe carries, so no binary float edge
-    decides it. A bool is refused (``True`` is no duration), and so are NaN and infinities.
-    """
-    if isinstance(value, bool) or not isinstance(value, _REAL):
-        raise ArgumentTypeError(
-            f"failsafe_timeout must be a number of seconds, not {type(value).__name__}"
-        )
-    low, high = round(FAILSAFE_MIN * 1000), round(FAILSAFE_MAX * 1000)
-    try:
-        ms = round(float(value) * 1000)
-    except (OverflowError, ValueError):  # an infinity, NaN
-        ms = -1
-    if not low <= ms <= high:
-        raise ArgumentError(
-            f"failsafe_timeout must be {FAILSAFE_MIN:g}..{FAILSAFE_MAX:g} s, not {value!r}"
-        )
-    return ms
-
-
-def _level(name: str, value: object) -> bool:
-    """A digital level: True/False, or the ints 1/0; anything else is refused, never clamped.
-
-    ``bool(2)`` is True, so accepting any int would turn a wrong value (a PWM
-    duty, a pin number passed by mistake) into "on".
-    """
-    if isinstance(value, bool):
-        return value
-    if isinstance(value, Integral):
-        if int(value) in (0, 1):
-            return bool(value)
-        raise _reject(Status.STATUS_OUT_OF_RANGE, f"{name} {int(value)} is not a level (0 or 1)")
-    raise ArgumentTypeError(f"{name} must be a bool, not {type(value).__name__}")
-
-
-def _reject(status: int, text: str) -> CommandRejectedError:
-    return rejection(status, f"{text} ({status_name(status)})", sent=False)
-
-
-#: The same for the type checker (an int is a float to it).
-RealNumber = float | Fraction | Decimal
-
-
-def _interval_ms(name: str, seconds: object) -> int:
-    """An input's interval in seconds as whole ms, 1..INPUT_INTERVAL_MAX_MS."""
-    if isinstance(seconds, bool) or not isinstance(seconds, _REAL):
-        raise ArgumentTypeError(f"{name} must be a number of seconds, not {type(seconds).__name__}")
-    value = float(seconds)
-    if not 0 < value <= INPUT_INTERVAL_MAX_MS / 1000:  # also NaN
-        raise _reject(
-            Status.STATUS_INVALID_ARGUMENT,
-            f"{name} {seconds} s is outside 0.001..{INPUT_INTERVAL_MAX_MS // 1000} s",
-        )
-    return max(1, round(value * 1000))
-
-
-def _period_ms(name: str, rate_hz: object) -> int:
-    """A rate in Hz as the device's whole ms between samples (or reports), 1..60000."""
-    if isinstance(rate_hz, bool) or not isinstance(rate_hz, _REAL):
-        raise ArgumentTypeError(f"{name} must be a number (Hz), not {type(rate_hz).__name__}")
-    rate = float(rate_hz)
-    slowest = 1000 / INPUT_INTERVAL_MAX_MS
-    if not slowest <= rate <= 1000:  # also NaN
-        raise _reject(
-            Status.STATUS_INVALID_ARGUMENT, f"{name} {rate_hz} is outside {slowest:g}..1000 Hz"
-        )
-    return min(INPUT_INTERVAL_MAX_MS, max(1, round(1000 / rate)))
-
-
-def _mask_pins(mask: int) -> tuple[int, ...]:
-    return tuple(pin for pin in range(32) if mask >> pin & 1)
-
-
 #: Timers shared with PWM pins, by DeviceInfo.board (the simulated board keeps the
 #: Uno's rules). The device refuses the same with STATUS_TIMER_IN_USE:
 #: Timer1 makes the servo pulses (as Arduino's Servo library does), so pins 9 and 10
@@ -375,229 +242,6 @@ TIMER0_PWM_PINS: dict[str, frozenset[int]] = {
     "uno": frozenset({5, 6}),
     "sim": frozenset({5, 6}),
 }
-
-
-class Servo:
-    """A servo output; get one from :meth:`Board.servo`."""
-
-    def __init__(
-        self, board: Board, pin: int, min_us: int, max_us: int, max_speed_us: int = 0
-    ) -> None:
-        self.board = board
-        self.pin = pin
-        self.min_us = min_us
-        self.max_us = max_us
-        #: The speed limit the device keeps (us per second; 0: none, values jump).
-        self.max_speed_us = max_speed_us
-
-    @property
-    def value(self) -> int | None:
-        """The pulse width (us) the device last acknowledged for this servo.
-
-        Its safe width after the Init, a Stop or a failsafe (0 for ``safe="detach"``:
-        no pulses); None once the pin was released or configured anew as
-        something else (or for a servo object that stands for a configuration
-        since replaced).
-        """
-        return self.board._value(self.pin, SERVO)
-
-    def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
-        msg, us = self._degrees(value)
-        item.servo.CopyFrom(msg.servo_control)
-        return msg, us
-
-    def to_us(self, degrees: int) -> int:
-        """The pulse width the device makes for ``degrees`` (its own integer formula)."""
-        return self.min_us + degrees * (self.max_us - self.min_us) // SERVO_MAX_DEGREES
-
-    def write(self, degrees: SupportsFloat) -> None:
-        """Move to ``degrees`` (0..180, mapped linearly onto [min_us, max_us]).
-
-        Any real number: it is rounded to the nearest whole degree first, a half to
-        the even one (``round()``), which must then be within 0..180.
-        """
-        self.board._control(self.pin, *self._degrees(degrees))
-
-    def write_us(self, us: SupportsFloat) -> None:
-        """Set the pulse width in microseconds (within [min_us, max_us]).
-
-        Any real number, rounded to the nearest whole microsecond as :meth:`write` rounds.
-        """
-        self.board._control(self.pin, *self._us(us))
-
-    def submit(self, degrees: SupportsFloat) -> Future[None]:
-        """:meth:`write` without waiting: a future resolved by the Ack."""
-        return self.board._control_future(self.pin, *self._degrees(degrees))
-
-    def submit_us(self, us: SupportsFloat) -> Future[None]:
-        """:meth:`write_us` without waiting: a future resolved by the Ack."""
-        return self.board._control_future(self.pin, *self._us(us))
-
-    def _degrees(self, value: object) -> tuple[ArduinoIn, int]:
-        degrees = _whole("degrees", value)
-        if not 0 <= degrees <= SERVO_MAX_DEGREES:
-            raise _reject(Status.STATUS_OUT_OF_RANGE, f"{degrees} degrees is outside 0..180")
-        msg = ArduinoIn()
-        msg.servo_control.pin = self.pin
-        msg.servo_control.degrees = degrees
-        return msg, self.to_us(degrees)
-
-    def _us(self, value: object) -> tuple[ArduinoIn, int]:
-        us = _whole("us", value)
-        if not self.min_us <= us <= self.max_us:
-            raise _reject(
-                Status.STATUS_OUT_OF_RANGE,
-                f"{us} us is outside this servo's [{self.min_us}, {self.max_us}]",
-            )
-        msg = ArduinoIn()
-        msg.servo_control.pin = self.pin
-        msg.servo_control.us = us
-        return msg, us
-
-    def release(self) -> None:
-        """Release the servo: its pulses stop (limp) and the pin is free for any mode."""
-        self.board.release(self.pin)
-
-    def submit_release(self) -> Future[None]:
-        """:meth:`release` without waiting: a future resolved by the Ack."""
-        return self.board.submit_release(self.pin)
-
-    def __repr__(self) -> str:
-        return f"Servo(pin={self.pin}, min_us={self.min_us}, max_us={self.max_us})"
-
-
-class DigitalOutput:
-    """A digital output pin; get one from :meth:`Board.digital_output`."""
-
-    def __init__(self, board: Board, pin: int) -> None:
-        self.board = board
-        self.pin = pin
-
-    @property
-    def value(self) -> bool | None:
-        """The level the device last acknowledged (the safe level after Init, Stop, failsafe)."""
-        value = self.board._value(self.pin, DIGITAL)
-        return None if value is None else bool(value)
-
-    def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
-        msg, level = self._level(value)  # type: ignore[arg-type]
-        item.digital.CopyFrom(msg.digital_control)
-        return msg, level
-
-    def write(self, level: bool) -> None:
-        """Drive the pin high (True or 1) or low (False or 0); any other value is refused."""
-        self.board._control(self.pin, *self._level(level))
-
-    def on(self) -> None:
-        self.write(True)
-
-    def off(self) -> None:
-        self.write(False)
-
-    def submit(self, level: bool) -> Future[None]:
-        """:meth:`write` without waiting: a future resolved by the Ack."""
-        return self.board._control_future(self.pin, *self._level(level))
-
-    def _level(self, level: bool) -> tuple[ArduinoIn, int]:
-        value = _level("level", level)
-        msg = ArduinoIn()
-        msg.digital_control.pin = self.pin
-        msg.digital_control.level = value
-        return msg, int(value)
-
-    def release(self) -> None:
-        """Release the pin: it becomes an input, as at power-up, free for any mode."""
-        self.board.release(self.pin)
-
-    def submit_release(self) -> Future[None]:
-        """:meth:`release` without waiting: a future resolved by the Ack."""
-        return self.board.submit_release(self.pin)
-
-    def __repr__(self) -> str:
-        return f"DigitalOutput(pin={self.pin})"
-
-
-class OpenCancel:
-    """Abandons a :meth:`Board.open` in progress from another thread.
-
-    Pass one as ``Board.open(..., cancel=c)``; ``c.cancel()`` then closes the board
-    being opened: the open raises :class:`BoardClosedError` (from wherever it was:
-    opening the port, the handshake, reading the device's info) and, once
-    ``cancel()`` returned, nothing of it runs: no I/O or event thread, no Ping, the
-    port's lock released. A cancel that comes after the open returned closes the
-    board it returned, so the race between the two ends the same way.
-    :func:`protoduino.aio.open` uses one when its task is cancelled. ``cancel()``
-    blocks while the board closes (its threads are joined: see :meth:`Board.close`).
-    """
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._board: Board | None = None
-        self._cancelled = False
-
-    @property
-    def cancelled(self) -> bool:
-        return self._cancelled
-
-    def cancel(self) -> None:
-        with self._lock:
-            self._cancelled = True
-            board = self._board
-        if board is not None:
-            board.close()
-
-    def _attach(self, board: Board) -> None:
-        """Called by the board being opened, before it starts anything cancel() must stop."""
-        with self._lock:
-            if self._cancelled:
-                raise BoardClosedError("the open was cancelled")
-            self._board = board
-
-
-class PwmOutput:
-    """A PWM output, duty 0..255 as Arduino's analogWrite; get one from :meth:`Board.pwm_output`."""
-
-    def __init__(self, board: Board, pin: int, safe: int) -> None:
-        self.board = board
-        self.pin = pin
-        #: The duty the failsafe, a Stop and an interlock drive (0: off).
-        self.safe = safe
-
-    @property
-    def value(self) -> int | None:
-        """The duty the device last acknowledged (the safe duty after Init, Stop, failsafe)."""
-        return self.board._value(self.pin, PWM)
-
-    def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
-        msg, duty = self._duty(value)
-        item.pwm.CopyFrom(msg.pwm_control)
-        return msg, duty
-
-    def write(self, duty: RealNumber) -> None:
-        """Set the duty, 0 (always low) .. 255 (always high); a real number is rounded
-        to the nearest whole duty (halves to even)."""
-        self.board._control(self.pin, *self._duty(duty))
-
-    def submit(self, duty: RealNumber) -> Future[None]:
-        """:meth:`write` without waiting: a future resolved by the Ack."""
-        return self.board._control_future(self.pin, *self._duty(duty))
-
-    def _duty(self, duty: object) -> tuple[ArduinoIn, int]:
-        value = _whole("duty", duty)
-        if not 0 <= value <= PWM_MAX_DUTY:
-            shown = f"{duty} (rounded: {value})" if value != duty else str(value)
-            raise _reject(Status.STATUS_OUT_OF_RANGE, f"duty {shown} is outside 0..{PWM_MAX_DUTY}")
-        msg = ArduinoIn()
-        msg.pwm_control.pin = self.pin
-        msg.pwm_control.duty = value
-        return msg, value
-
-    def release(self) -> None:
-        """Release the pin: its PWM stops, it becomes an input, free for any mode."""
-        self.board.release(self.pin)
-
-    def __repr__(self) -> str:
-        return f"PwmOutput(pin={self.pin}, safe={self.safe})"
 
 
 #: What a pose sets.
@@ -618,42 +262,37 @@ _INPUT_KINDS: dict[str, InputKind] = {
 }
 
 
-class Board:
+class Board(ClosedOnExit):
     """A connected device. Use :meth:`open`; close it (or use ``with``) when done."""
 
     def __init__(
-        self,
-        url: str,
-        *,
-        baudrate: int | None = None,
-        ack_timeout: float = ACK_TIMEOUT,
-        handshake_timeout: float = HANDSHAKE_TIMEOUT,
-        max_retries: int = MAX_RETRIES,
-        window: int = 4,
-        ping: bool = True,
-        monitor: FrameMonitor | None = None,
-        capture: str | os.PathLike[str] | None = None,
-        capture_max_bytes: int | None = None,
-        watchdog_timeout: float = WATCHDOG_TIMEOUT,
-        failsafe_timeout: float = FAILSAFE_TIMEOUT,
-        liveness: Liveness = "ping",
-        restore: RestorePolicy = "safe",
-        session: int | None = None,
-        reboot_limit: int = REBOOT_LIMIT,
-        reboot_window: float = REBOOT_WINDOW,
-        cancel: OpenCancel | None = None,
+        self, url: str, *, wiring: Wiring | None = None, **options: Unpack[BoardOptions]
     ) -> None:
+        """See :meth:`open`. ``wiring`` is what the board runs on (:mod:`protoduino.wiring`):
+        by default the pyserial port ``url`` and the board's threads; :mod:`protoduino.testing`
+        passes an in-process device's."""
+        # One declaration of the options (boardoptions.py); an unknown one raises here.
+        opts = resolved(options)
+        ack_timeout, max_retries, window = opts["ack_timeout"], opts["max_retries"], opts["window"]
+        handshake_timeout, watchdog_timeout = opts["handshake_timeout"], opts["watchdog_timeout"]
+        failsafe_timeout, session = opts["failsafe_timeout"], opts["session"]
+        liveness, restore, cancel = opts["liveness"], opts["restore"], opts["cancel"]
+        capture, capture_max_bytes = opts["capture"], opts["capture_max_bytes"]
+        reboot_limit, reboot_window = opts["reboot_limit"], opts["reboot_window"]
+        baudrate, ping, monitor = opts["baudrate"], opts["ping"], opts["monitor"]
         # Every option is checked before anything is opened or started: a wrong one
         # raises here, with no thread to stop (a float session once crashed the I/O thread).
-        failsafe_ms = _failsafe_ms(failsafe_timeout)
+        failsafe_ms = check_failsafe_ms(failsafe_timeout)
         if session is not None:
-            session = _session(session)
+            session = check_session(session)
         if liveness not in ("ping", "heartbeat"):
             raise ArgumentError(f"liveness must be 'ping' or 'heartbeat', not {liveness!r}")
         if restore not in ("safe", "last"):
             raise ArgumentError(f"restore must be 'safe' or 'last', not {restore!r}")
         if capture_max_bytes is not None and capture is None:
             raise ArgumentError("capture_max_bytes bounds a capture: give capture= too")
+        if wiring is None:
+            wiring = serial_wiring(url, baudrate)
         self.failsafe_timeout = failsafe_ms / 1000
         self.liveness: Liveness = liveness
         self.restore: RestorePolicy = restore
@@ -679,19 +318,27 @@ class Board:
             reboot_window=reboot_window,
             failsafe_timeout=self.failsafe_timeout,
             heartbeat_liveness=liveness == "heartbeat",
+            clock=wiring.clock,
+            waiter=wiring.wait,
+            message_hook=self._message,
+            restore_provider=self._restore_messages,
+            restore_values=restore == "last",
         )
-        self._rpc.restore_values = restore == "last"
-        self._rpc.message_hook = self._message
-        self._rpc.restore_provider = self._restore_messages
         # Before the port: a capture that cannot be written fails with nothing opened,
-        # and the handshake is in it.
+        # and the handshake is in it. Its hooks are called only once frames flow (from the
+        # link's open on), when the link, the inputs and the event thread all exist.
         self._capture = (
-            CaptureWriter(capture, url, max_bytes=capture_max_bytes)
+            CaptureWriter(
+                capture,
+                url,
+                max_bytes=capture_max_bytes,
+                stats=lambda: self.stats,
+                on_lost=self._capture_lost,
+            )
             if capture is not None
             else None
         )
-        # None: open at the firmware's default opening rate and agree on a faster one.
-        self._transport = Transport(url, baudrate=baudrate or OPENING_BAUDRATE)
+        self._transport = wiring.port
         if monitor is not None:
             self._transport.add_monitor(monitor)
         if self._capture is not None:
@@ -704,16 +351,15 @@ class Board:
             notify=self._notify,
             session=session,
             baudrate=baudrate,
+            clock=wiring.clock,
         )
         self._rpc.attach(self._link)
-        if self._capture is not None:
-            self._capture.set_stats(lambda: self.stats)
         # Started only now: a constructor above that refuses its options leaves no thread.
-        self._events = EventDispatcher(url)
+        self._events = wiring.events()
         # Callbacks of inputs run on the event thread, in order with the events.
-        self._inputs = InputTable(self._events.put_job)
-        if self._capture is not None:
-            self._capture.on_lost = self._capture_lost
+        self._inputs = InputTable(self._events.put_job, wiring.clock)
+        # The user service's reports (docs/services.md), newest wins as the inputs'.
+        self.user_reports = UserReportTable(self._events.put_job)
         # From here on anything that ends the open early (an error, a KeyboardInterrupt
         # at any point, a cancel from another thread) closes what was started: a
         # half-open board that pinged on would keep the device's outputs driven.
@@ -729,28 +375,7 @@ class Board:
             raise
 
     @classmethod
-    def open(
-        cls,
-        url: str,
-        *,
-        baudrate: int | None = None,
-        ack_timeout: float = ACK_TIMEOUT,
-        handshake_timeout: float = HANDSHAKE_TIMEOUT,
-        max_retries: int = MAX_RETRIES,
-        window: int = 4,
-        ping: bool = True,
-        monitor: FrameMonitor | None = None,
-        capture: str | os.PathLike[str] | None = None,
-        capture_max_bytes: int | None = None,
-        watchdog_timeout: float = WATCHDOG_TIMEOUT,
-        failsafe_timeout: float = FAILSAFE_TIMEOUT,
-        liveness: Liveness = "ping",
-        restore: RestorePolicy = "safe",
-        session: int | None = None,
-        reboot_limit: int = REBOOT_LIMIT,
-        reboot_window: float = REBOOT_WINDOW,
-        cancel: OpenCancel | None = None,
-    ) -> Board:
+    def open(cls, url: str, **options: Unpack[BoardOptions]) -> Board:
         """Open ``url`` (any pyserial URL), handshake and read the device's info.
 
         Raises :class:`TransportError` if the port cannot be opened,
@@ -807,39 +432,9 @@ class Board:
         wrong type raises :class:`ArgumentTypeError`, a wrong value
         :class:`ArgumentError`.
         """
-        return cls(
-            url,
-            baudrate=baudrate,
-            ack_timeout=ack_timeout,
-            handshake_timeout=handshake_timeout,
-            max_retries=max_retries,
-            window=window,
-            ping=ping,
-            monitor=monitor,
-            capture=capture,
-            capture_max_bytes=capture_max_bytes,
-            watchdog_timeout=watchdog_timeout,
-            failsafe_timeout=failsafe_timeout,
-            liveness=liveness,
-            restore=restore,
-            session=session,
-            reboot_limit=reboot_limit,
-            reboot_window=reboot_window,
-            cancel=cancel,
-        )
+        return cls(url, **options)
 
     # --- context and life cycle -------------------------------------------------------
-
-    def __enter__(self) -> Board:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def close(self) -> None:
         """Stop pinging, fail outstanding calls, stop every thread, close the port.
@@ -946,12 +541,12 @@ class Board:
     ) -> tuple[ArduinoIn, Callable[[], None], Servo]:
         """Check a servo's configuration; its ServoInit, what to record at the Ack, its object."""
         pin = self._check_pin(pin, SERVO)
-        min_us = _int("min_us", min_us) or SERVO_DEFAULT_MIN_US
-        max_us = _int("max_us", max_us) or SERVO_DEFAULT_MAX_US
+        min_us = check_int("min_us", min_us) or SERVO_DEFAULT_MIN_US
+        max_us = check_int("max_us", max_us) or SERVO_DEFAULT_MAX_US
         if safe is not None and safe_us is not None:
             raise ArgumentTypeError("give safe (degrees) or safe_us, not both")
         if min_us < SERVO_LIMIT_MIN_US or max_us > SERVO_LIMIT_MAX_US or min_us >= max_us:
-            raise _reject(
+            raise refused(
                 Status.STATUS_INVALID_ARGUMENT,
                 f"servo limits [{min_us}, {max_us}] us must satisfy "
                 f"{SERVO_LIMIT_MIN_US} <= min_us < max_us <= {SERVO_LIMIT_MAX_US}",
@@ -961,32 +556,32 @@ class Board:
         init = msg.servo_init
         init.pin, init.min_us, init.max_us, init.max_speed = pin, min_us, max_us, speed
         if safe_us is not None:
-            safe_us = _int("safe_us", safe_us)
+            safe_us = check_int("safe_us", safe_us)
             if not min_us <= safe_us <= max_us:
-                raise _reject(
+                raise refused(
                     Status.STATUS_OUT_OF_RANGE, f"safe_us {safe_us} is outside [{min_us}, {max_us}]"
                 )
             init.safe_us = safe_us
         elif safe == "detach":
             init.safe_detach = True
         else:
-            safe = 90 if safe is None else _int("safe", safe)
+            safe = 90 if safe is None else check_int("safe", safe)
             if not 0 <= safe <= SERVO_MAX_DEGREES:
-                raise _reject(Status.STATUS_OUT_OF_RANGE, f"safe {safe} degrees is outside 0..180")
+                raise refused(Status.STATUS_OUT_OF_RANGE, f"safe {safe} degrees is outside 0..180")
             init.safe_degrees = safe
         with self._lock:
             pwm = sorted(self._timer1_pins() & self._pins_of(PWM))
             if pwm:  # checked before the pin itself, as the device does (rule 13)
-                raise _reject(
+                raise refused(
                     Status.STATUS_TIMER_IN_USE,
                     f"pin {pwm[0]} does PWM on the timer the servos need (release it first)",
                 )
             current = self._outputs.get(pin)
             if current is not None and current.mode is not SERVO:
-                raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
+                raise refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
             servos = sum(1 for o in self._outputs.values() if o.mode is SERVO)
             if current is None and servos >= self.info.max_servos:
-                raise _reject(
+                raise refused(
                     Status.STATUS_NO_FREE_RESOURCE,
                     f"all {self.info.max_servos} servo slots are in use",
                 )
@@ -1010,16 +605,16 @@ class Board:
                     f"max_speed must be a number, not {type(degrees_per_s).__name__}"
                 )
             if not degrees_per_s > 0:  # also NaN
-                raise _reject(Status.STATUS_INVALID_ARGUMENT, "max_speed must be above 0")
+                raise refused(Status.STATUS_INVALID_ARGUMENT, "max_speed must be above 0")
             us_per_s = max(1, round(degrees_per_s * span_us / SERVO_MAX_DEGREES))
         elif us_per_s is None:
             return 0
         else:
-            us_per_s = _int("max_speed_us", us_per_s)
+            us_per_s = check_int("max_speed_us", us_per_s)
             if us_per_s <= 0:
-                raise _reject(Status.STATUS_INVALID_ARGUMENT, "max_speed_us must be above 0")
+                raise refused(Status.STATUS_INVALID_ARGUMENT, "max_speed_us must be above 0")
         if us_per_s > MAX_SPEED_US:
-            raise _reject(
+            raise refused(
                 Status.STATUS_INVALID_ARGUMENT,
                 f"a speed limit of {us_per_s} us/s is above the device's {MAX_SPEED_US}",
             )
@@ -1043,11 +638,11 @@ class Board:
         self, pin: int, safe: bool
     ) -> tuple[ArduinoIn, Callable[[], None], DigitalOutput]:
         pin = self._check_pin(pin, DIGITAL)
-        safe = _level("safe", safe)  # bool("no") and bool(2) are True: no guessing
+        safe = check_level("safe", safe)  # bool("no") and bool(2) are True: no guessing
         with self._lock:
             current = self._outputs.get(pin)
             if current is not None and current.mode is not DIGITAL:
-                raise _reject(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
+                raise refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
         msg = ArduinoIn()
         msg.digital_init.pin = pin
         msg.digital_init.safe_level = safe
@@ -1075,23 +670,23 @@ class Board:
         # The device's order (docs/protocol.md section 7, rule 13).
         pin = self._check_pin(pin, PWM)
         if pin in TIMER0_PWM_PINS.get(self.info.board, ()):
-            raise _reject(
+            raise refused(
                 Status.STATUS_TIMER_IN_USE,
                 f"pin {pin}'s PWM timer (Timer0) runs the device's millisecond clock "
                 f"(PWM pins: {', '.join(map(str, self.info.pwm_pins))})",
             )
         self._check_capable(pin, PWM)
-        duty = _whole("safe", safe)
+        duty = whole_number("safe", safe)
         with self._lock:
             self._check_free(pin, PWM)
             if pin in self._timer1_pins() and any(o.mode is SERVO for o in self._outputs.values()):
-                raise _reject(
+                raise refused(
                     Status.STATUS_TIMER_IN_USE,
                     f"pin {pin}'s PWM timer makes the servo pulses while a servo runs "
                     "(release the servos first, or use another PWM pin)",
                 )
         if not 0 <= duty <= PWM_MAX_DUTY:
-            raise _reject(
+            raise refused(
                 Status.STATUS_OUT_OF_RANGE, f"safe duty {duty} is outside 0..{PWM_MAX_DUTY}"
             )
         msg = ArduinoIn()
@@ -1144,16 +739,16 @@ class Board:
         # the arguments, the pin, then whether it is free.
         if not isinstance(pull_up, bool):
             raise ArgumentTypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
-        pin = _int("pin", pin)
+        pin = check_int("pin", pin)
         self._check_feature(DIGITAL_INPUT)
-        debounce = _int("debounce_ms", debounce_ms)
+        debounce = check_int("debounce_ms", debounce_ms)
         if not 0 <= debounce <= DEBOUNCE_MAX_MS:
-            raise _reject(
+            raise refused(
                 Status.STATUS_INVALID_ARGUMENT,
                 f"debounce_ms {debounce} is outside 0..{DEBOUNCE_MAX_MS}",
             )
         if interlock not in _TRIPS:
-            raise _reject(
+            raise refused(
                 Status.STATUS_INVALID_ARGUMENT,
                 f"interlock must be None, 'low' or 'high', not {interlock!r}",
             )
@@ -1196,11 +791,11 @@ class Board:
         # The device's order (rules 11 and 14): the feature, the pin's number, the
         # arguments, a reserved pin, the pin's ADC, then whether it is free.
         pin = self._check_pin(pin, ANALOG_INPUT, reserved=False)
-        interval = _period_ms("rate_hz", rate_hz)
-        beat = _interval_ms("heartbeat", heartbeat)
-        counts = _int("threshold", threshold)
+        interval = period_ms("rate_hz", rate_hz)
+        beat = interval_ms("heartbeat", heartbeat)
+        counts = check_int("threshold", threshold)
         if not 0 <= counts <= ANALOG_MAX:
-            raise _reject(
+            raise refused(
                 Status.STATUS_INVALID_ARGUMENT, f"threshold {counts} is outside 0..{ANALOG_MAX}"
             )
         self._check_reserved(pin)
@@ -1241,11 +836,11 @@ class Board:
             raise ArgumentTypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
         pin = self._check_pin(pin, COUNTER, reserved=False)
         if edge not in _EDGES:
-            raise _reject(
+            raise refused(
                 Status.STATUS_INVALID_ARGUMENT,
                 f"edge must be 'rising', 'falling' or 'both', not {edge!r}",
             )
-        interval = _period_ms("rate_hz", rate_hz)
+        interval = period_ms("rate_hz", rate_hz)
         self._check_reserved(pin)
         self._check_capable(pin, COUNTER)
         msg = ArduinoIn()
@@ -1322,7 +917,7 @@ class Board:
             raise ArgumentTypeError(f"payload must be bytes, not {type(payload).__name__}")
         sent = bytes(payload)
         if len(sent) > MAX_PING_PAYLOAD:
-            raise _reject(
+            raise refused(
                 Status.STATUS_DECODE_ERROR,
                 f"ping payload of {len(sent)} bytes exceeds {MAX_PING_PAYLOAD}",
             )
@@ -1377,7 +972,7 @@ class Board:
         pin = self._check_pin(pin)
         with self._lock:
             if pin not in self._outputs:
-                raise _reject(Status.STATUS_NOT_INITIALISED, f"pin {pin} is not configured")
+                raise refused(Status.STATUS_NOT_INITIALISED, f"pin {pin} is not configured")
         msg = ArduinoIn()
         msg.release.pin = pin
 
@@ -1453,7 +1048,7 @@ class Board:
                 f"a pose is a mapping of outputs to values, not {type(targets).__name__}"
             )
         if not 1 <= len(targets) <= MAX_POSE_ITEMS:
-            raise _reject(
+            raise refused(
                 Status.STATUS_INVALID_ARGUMENT,
                 f"a pose sets 1 to {MAX_POSE_ITEMS} outputs, not {len(targets)}",
             )
@@ -1470,7 +1065,7 @@ class Board:
             item = msg.pose.items.add()
             try:
                 if output.pin in (o.pin for o in outputs):
-                    raise _reject(Status.STATUS_INVALID_ARGUMENT, f"pin {output.pin} twice")
+                    raise refused(Status.STATUS_INVALID_ARGUMENT, f"pin {output.pin} twice")
                 control, width = output._pose_item(item, target)
             except CommandRejectedError as error:
                 raise CommandRejectedError(
@@ -1586,6 +1181,27 @@ class Board:
             raise BoardClosedError("the board is closed")
         return self._future(msg, None, lambda call: call.result())
 
+    def call_user(self, method: int, request: bytes) -> bytes:
+        """Call method ``method`` of the firmware's user service; returns its reply bytes.
+
+        ``request`` and the reply are messages of the user's schema, serialised: a
+        generated client (``protoduino gen robot.proto``, docs/services.md) does both
+        and checks the service's fingerprint first. Acknowledged and executed exactly
+        once like every command. Raises :class:`UserError` (its ``code``) when the
+        handler refuses, :class:`UserReplyLostError` when the call ran but its reply
+        was lost, and the errors of any command.
+        """
+        call = self._start(_user_call(method, request))  # waited for here, as ping(): no hop
+        with contextlib.suppress(ProtoduinoError):
+            self._rpc.wait(call)  # its error stays the call's: _user_reply raises it, named
+        return _user_reply(call)
+
+    def submit_call_user(self, method: int, request: bytes) -> Future[bytes]:
+        """:meth:`call_user` without waiting: a future of the reply bytes (or of its error)."""
+        if self._closed:
+            raise BoardClosedError("the board is closed")
+        return self._future(_user_call(method, request), None, _user_reply)
+
     @property
     def baudrate(self) -> int:
         """The rate the line runs at: pinned, agreed (docs/protocol.md 5) or opening."""
@@ -1649,13 +1265,13 @@ class Board:
     def _check_pin(self, pin: object, mode: PinMode | None = None, *, reserved: bool = True) -> int:
         """The pin as an int, checked as the device does first: ``mode``'s feature built in
         (rule 11), the pin's number, and (unless ``reserved=False``) not reserved."""
-        pin = _int("pin", pin)
+        pin = check_int("pin", pin)
         if self._closed:
             raise BoardClosedError("the board is closed")
         if mode is not None:
             self._check_feature(mode)
         if not 0 <= pin < self.info.num_pins:
-            raise _reject(
+            raise refused(
                 Status.STATUS_INVALID_PIN,
                 f"pin {pin} does not exist ({self.info.board}: 0..{self.info.num_pins - 1})",
             )
@@ -1665,7 +1281,7 @@ class Board:
 
     def _check_reserved(self, pin: int) -> None:
         if pin in self.info.reserved_pins:
-            raise _reject(Status.STATUS_RESERVED_PIN, f"pin {pin} is reserved")
+            raise refused(Status.STATUS_RESERVED_PIN, f"pin {pin} is reserved")
 
     def _check_feature(self, mode: PinMode) -> None:
         if mode.feature not in self.info.features:
@@ -1680,7 +1296,7 @@ class Board:
         if mode.pins:
             capable: tuple[int, ...] = getattr(self.info, mode.pins)
             if pin not in capable:
-                raise _reject(
+                raise refused(
                     Status.STATUS_NOT_SUPPORTED,
                     f"pin {pin} cannot be a {mode.name.replace('_', ' ')} pin on this "
                     f"{self.info.board} (those are {', '.join(map(str, capable)) or 'none'})",
@@ -1690,7 +1306,7 @@ class Board:
         """Refuse a pin another mode holds (lock held); the same mode is a new configuration."""
         current = self._outputs.get(pin)
         if current is not None and current.mode is not mode:
-            raise _reject(
+            raise refused(
                 Status.STATUS_PIN_IN_USE,
                 f"pin {pin} is a {current.mode.name.replace('_', ' ')} pin",
             )
@@ -1721,15 +1337,19 @@ class Board:
         thread may be busy in a callback (or be the caller), and the bound
         stays :meth:`Rpc.wait`'s.
         """
+        call = self._start(msg, on_ok)
+        self._rpc.wait(call)
+        return call
+
+    def _start(self, msg: ArduinoIn, on_ok: Callable[[], None] | None = None) -> Call:
+        """Submit for a blocking call: never from the I/O thread, which alone reads Acks."""
         if self._transport.on_io_thread():
             raise ReentrantCallError(
                 f"{msg.WhichOneof('data')} called on the board's I/O thread (from a frame "
                 "monitor?): it would wait for an Ack that only this thread can read. Call it "
                 "from another thread, or use its submit form (never wait on the future there)"
             )
-        call = self._submit(msg, on_ok)
-        self._rpc.wait(call)
-        return call
+        return self._submit(msg, on_ok)
 
     def _future(
         self, msg: ArduinoIn, on_ok: Callable[[], None] | None, value: Callable[[Call], T]
@@ -1794,7 +1414,11 @@ class Board:
 
     def _restore_messages(self) -> list[ArduinoIn]:
         """The failsafe configuration, every Init, then with ``restore="last"`` every
-        last value (called on the I/O thread when the device lost the outputs)."""
+        last value (called on the I/O thread when the device lost the outputs).
+
+        Called with the request layer's lock held, and takes this board's: the one lock
+        order (rpc.py, "Lock order"), so nothing here may call into the request layer
+        while holding ``self._lock``."""
         lapsed = self._rpc.liveness_lapsed()
         with self._lock:
             outputs = list(self._outputs.values())
@@ -1825,23 +1449,7 @@ class Board:
     def _get_info(self) -> DeviceInfo:
         msg = ArduinoIn()
         msg.get_info.SetInParent()
-        info = self._send(msg).result().info
-        return DeviceInfo(
-            firmware_version=info.firmware_version,
-            protocol_version=info.protocol_version,
-            schema_id=info.schema_id,
-            board=info.board,
-            num_pins=info.num_pins,
-            max_servos=info.max_servos,
-            reserved_pins=tuple(info.reserved_pins),
-            rx_buffer=info.rx_buffer,
-            features=frozenset(
-                mode.feature for mode in PIN_MODES if info.features & mode.feature_bit
-            ),
-            pwm_pins=_mask_pins(info.pwm_pins),
-            analog_pins=_mask_pins(info.analog_pins),
-            counter_pins=_mask_pins(info.counter_pins),
-        )
+        return decode_device_info(self._send(msg).result().info)
 
     def _message(self, msg: ArduinoOut) -> None:
         """A DATA message other than an Ack (I/O thread)."""
@@ -1851,17 +1459,11 @@ class Board:
                 self._inputs.update(msg.input_report)
             except ProtocolError as error:
                 log.warning("%s: input report dropped: %s", self.url, error)
+        elif kind == "user_report":
+            report = msg.user_report
+            self.user_reports.update(report.report, bytes(report.body), report.coalesced)
         elif kind == "failsafe":
             self._failsafe_state(msg.failsafe)
-        elif kind == "log":
-            level = ("debug", "info", "warning", "error")[min(msg.log.level, 3)]
-            self._notify(
-                Event(
-                    EventKind.LOG,
-                    f"device {level}: {msg.log.text}",
-                    {"level": level, "text": msg.log.text},
-                )
-            )
         elif kind == "decode_error":
             count = msg.decode_error.count
             self._notify(
@@ -1883,12 +1485,9 @@ class Board:
         """
         # The wire names one timeout cause, whatever the liveness source: the host
         # names it for what expired (with liveness="heartbeat" no Ping could stop it).
-        timeout = "heartbeat_timeout" if self.liveness == "heartbeat" else "ping_timeout"
-        cause = {
-            pb.FAILSAFE_CAUSE_PING_TIMEOUT: timeout,
-            pb.FAILSAFE_CAUSE_STOP: "stop",
-            pb.FAILSAFE_CAUSE_INTERLOCK: "interlock",
-        }.get(fs.cause, "none")
+        cause = failsafe_cause(fs.cause)
+        if cause == "ping_timeout" and self.liveness == "heartbeat":
+            cause = "heartbeat_timeout"
         with self._lock:
             if fs.active:
                 if self._failsafe_active and self._failsafe_epoch == fs.epoch:

@@ -176,9 +176,6 @@ class CaptureWriter:
                 f"cannot write the capture {self.path}: {reason_of(error)}"
             ) from error
 
-    def set_stats(self, stats: Callable[[], Stats]) -> None:
-        self._stats = stats
-
     def frame(self, rec: FrameRecord) -> None:
         obj: dict[str, Any] = {
             "t": round(rec.t + self._offset, 6),

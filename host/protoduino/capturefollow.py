@@ -18,6 +18,7 @@ from collections.abc import Callable, Iterator
 
 from .capture import MAX_LINE, CaptureEnd, CaptureHeader, Record, reason_of
 from .capturereader import Damage, LineSplitter, RawLine, read_record, report
+from .closing import ClosedOnExit
 from .errors import CaptureError
 
 
@@ -109,7 +110,7 @@ def _ignore(damage: Damage) -> None:
     """Damage in a line looked at only to decide where to read: not reported twice."""
 
 
-class _Tail:
+class _Tail(ClosedOnExit):
     """The file ``follow`` reads: opened non-blocking, polled, reopened as ``tail -F`` does."""
 
     def __init__(
@@ -206,12 +207,6 @@ class _Tail:
         fd, self.fd = self.fd, None
         if fd is not None:
             os.close(fd)
-
-    def __enter__(self) -> _Tail:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def skip_to_end(self) -> CaptureEnd | None:
         """Go to the end of a regular file (live traffic only); its end mark if it had ended."""

@@ -67,10 +67,10 @@ class ControlCode(IntEnum):
 
     RESET = 0x00
     RESET_ACK = 0x01
-    HEARTBEAT = 0x02
+    # 0x02 was HEARTBEAT until version 3 (sent by nobody, ignored by the firmware): unassigned.
     EVENT = 0x03
-    #: Line rate agreement (docs/protocol.md section 5, *Line rate*). 0x02 stays
-    #: HEARTBEAT's, or free once it is gone: these take new codes.
+    #: Line rate agreement (docs/protocol.md section 5, *Line rate*): new codes, not
+    #: HEARTBEAT's old 0x02 (a version 3 device may still see one).
     BAUD_SET = 0x04
     BAUD_ACK = 0x05
 

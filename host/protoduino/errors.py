@@ -9,11 +9,14 @@
      |    +-- HandshakeError        the device did not answer RESET in time
      |    +-- VersionMismatchError  device and host speak different protocol versions
      |    +-- SchemaMismatchError   firmware generated from another .proto schema
+     +-- UserSchemaError          a user service client that does not match the firmware's service
      +-- CommandRejectedError     the device (or the host, checking first) refused a command
      |    +-- InterlockActiveError  an interlock input tripped: outputs latched safe
      |    +-- TimerInUseError       the pin's hardware timer is taken by another mode
      |    +-- NotSupportedError     the pin cannot do the mode, or the firmware lacks it
      |         +-- FeatureMissingError  the firmware was built without the mode (host check)
+     |    +-- UserError             a user service's handler refused the call with its own code
+     |    +-- UserReplyLostError    a user call ran once, but its reply was lost (a repeat's Ack)
      +-- AckTimeoutError          no Ack after every retry; also a builtin TimeoutError
      +-- BoardClosedError         the board was closed while, or before, the call ran
      +-- ReentrantCallError       a blocking board call from the I/O thread (a frame monitor)
@@ -145,6 +148,48 @@ class FeatureMissingError(NotSupportedError):
     def __init__(self, feature: str, message: str) -> None:
         super().__init__(pb.STATUS_NOT_SUPPORTED, message, sent=False)
         self.feature = feature
+
+
+class UserError(CommandRejectedError):
+    """STATUS_USER_ERROR: a user service's handler refused the call; nothing was done.
+
+    ``code`` is the handler's code, a value of the user's error enum; a generated
+    client raises the subclass it declares for that value (docs/services.md).
+    """
+
+    def __init__(self, code: int, message: str) -> None:
+        super().__init__(pb.STATUS_USER_ERROR, message)
+        self.code = code
+
+
+class UserReplyLostError(CommandRejectedError):
+    """A user call ran exactly once, but the Ack that carried its reply was lost: the
+    retransmission was answered from the device's dedupe window, which keeps statuses,
+    not replies. Declare a method that only reads ``NO_SIDE_EFFECTS`` and its repeat is
+    answered in full (docs/services.md)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(pb.STATUS_OK, message)
+
+
+class UserSchemaError(ProtoduinoError):
+    """A user service client was attached to a board whose firmware carries another
+    service (or none): the message names the .proto and both fingerprints."""
+
+    def __init__(self, proto: str, client_fingerprint: int, device_fingerprint: int) -> None:
+        device = (
+            f"0x{device_fingerprint:08X}"
+            if device_fingerprint
+            else "none (the firmware has no user service)"
+        )
+        super().__init__(
+            f"user service mismatch for {proto}: client fingerprint 0x{client_fingerprint:08X}, "
+            f"device {device}; build and flash the firmware from the same {proto} "
+            "(docs/services.md), or regenerate the client (protoduino gen)"
+        )
+        self.proto = proto
+        self.client_fingerprint = client_fingerprint
+        self.device_fingerprint = device_fingerprint
 
 
 #: The statuses that have a named error.

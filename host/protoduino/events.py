@@ -47,8 +47,6 @@ class EventKind(StrEnum):
     #: "interlock", "none"), epoch (int: the device's count of its safe states since
     #: power-up), and for an interlock pin (int: the input that tripped)
     FAILSAFE = "failsafe"
-    #: A text from the firmware. details: level ("debug".."error"), text (str)
-    LOG = "log"
     #: The device could not decode a command. details: count (int, since boot)
     DECODE_ERROR = "decode_error"
     #: The device saw our SEQ jump (details: none) or dropped an over-long frame.
@@ -131,9 +129,7 @@ class Stats:
 #: Kinds that inform without changing what the host knows of the device: when the
 #: queue is full the oldest of them is dropped first (a flood of Log lines must not
 #: push out a failsafe or a reboot).
-INFORMATIONAL = frozenset(
-    {EventKind.LOG, EventKind.DECODE_ERROR, EventKind.DEVICE_DESYNC, EventKind.RX_OVERFLOW}
-)
+INFORMATIONAL = frozenset({EventKind.DECODE_ERROR, EventKind.DEVICE_DESYNC, EventKind.RX_OVERFLOW})
 
 #: Events waiting for the callbacks, at most (a few hundred kilobytes).
 EVENT_QUEUE_LIMIT = 1024
@@ -171,7 +167,12 @@ class EventDispatcher:
     """
 
     def __init__(
-        self, name: str, *, limit: int = EVENT_QUEUE_LIMIT, close_wait: float = CLOSE_WAIT
+        self,
+        name: str,
+        *,
+        limit: int = EVENT_QUEUE_LIMIT,
+        close_wait: float = CLOSE_WAIT,
+        threaded: bool = True,
     ) -> None:
         if limit < 1:
             raise ArgumentError("limit must be at least 1")
@@ -186,14 +187,20 @@ class EventDispatcher:
         self._exited = False
         #: Events dropped because the queue was full, by kind.
         self.dropped: collections.Counter[str] = collections.Counter()
-        self._thread = threading.Thread(
-            target=self._run, name=f"protoduino-events[{name}]", daemon=True
-        )
-        self._thread.start()
+        #: None without a thread (``threaded=False``): whoever drives the board calls
+        #: :meth:`run_pending` itself (:mod:`protoduino.testing`, where no thread may run).
+        self._thread: threading.Thread | None = None
+        if threaded:
+            self._thread = threading.Thread(
+                target=self._run, name=f"protoduino-events[{name}]", daemon=True
+            )
+            self._thread.start()
 
     @property
     def thread(self) -> threading.Thread:
         """The thread that runs the callbacks (to join after :meth:`close`, which does not)."""
+        if self._thread is None:
+            raise RuntimeError(f"{self.name}: this dispatcher has no thread (threaded=False)")
         return self._thread
 
     def subscribe(self, callback: EventCallback) -> Callable[[], None]:
@@ -258,6 +265,9 @@ class EventDispatcher:
             self._cond.notify_all()
         if discarded:
             log.debug("%s: %d undelivered events discarded at close", self.name, discarded)
+        if self._thread is None:
+            self.run_pending()  # the jobs left, here: each future gets its result
+            return
         if self._thread is threading.current_thread():
             return  # a callback closing the board: the thread ends when it returns
         self._thread.join(self.close_wait)
@@ -269,28 +279,44 @@ class EventDispatcher:
                 self.close_wait,
             )
 
+    def run_pending(self) -> int:
+        """Without a thread: run what is queued, in order, on this thread; how many items ran."""
+        ran = 0
+        while (taken := self._take(block=False)) is not None:
+            self._deliver(*taken)
+            ran += 1
+        return ran
+
     def _run(self) -> None:
-        while True:
-            with self._cond:
-                while not self._queue and not self._closed:
-                    self._cond.wait()
-                if not self._queue:  # closed, and every job run
+        while (taken := self._take(block=True)) is not None:
+            self._deliver(*taken)
+
+    def _take(self, *, block: bool) -> tuple[Event | Job, list[EventCallback]] | None:
+        """The next item and the callbacks to call with it; None when there is none (and,
+        once closed, never again: jobs put after that run where they are put)."""
+        with self._cond:
+            while block and not self._queue and not self._closed:
+                self._cond.wait()
+            if not self._queue:
+                if self._closed:  # closed, and every job run
                     self._exited = True
-                    return
-                item = self._queue.popleft()
-                callbacks = list(self._callbacks)
-                if isinstance(item, Event):
-                    self._events -= 1
-            if not isinstance(item, Event):
-                try:
-                    item()
-                except Exception:
-                    log.exception("%s: event-thread job failed", self.name)
-                continue
-            for callback in callbacks:
-                if self._closed:  # close() was called during an earlier callback
-                    break
-                try:
-                    callback(item)
-                except Exception:
-                    log.exception("%s: on_event callback failed", self.name)
+                return None
+            item = self._queue.popleft()
+            if isinstance(item, Event):
+                self._events -= 1
+            return item, list(self._callbacks)
+
+    def _deliver(self, item: Event | Job, callbacks: list[EventCallback]) -> None:
+        if not isinstance(item, Event):
+            try:
+                item()
+            except Exception:
+                log.exception("%s: event-thread job failed", self.name)
+            return
+        for callback in callbacks:
+            if self._closed:  # close() was called during an earlier callback
+                break
+            try:
+                callback(item)
+            except Exception:
+                log.exception("%s: on_event callback failed", self.name)

@@ -142,6 +142,11 @@ class LinkListener(Protocol):
         """Run the timers; return the time they next need to run."""
         ...
 
+    def expect_traffic(self) -> bool:
+        """Whether answers are due (pings on, or calls outstanding): the watchdog runs only
+        then, since a device left alone is legitimately silent."""
+        ...
+
 
 Notify = Callable[[Event], None]
 
@@ -228,10 +233,6 @@ class Link:
         #: Whether the first handshake found the session still on the device.
         self.resumed_at_open = False
         self.state = LinkState.WAIT_ACK
-        #: Set by the request layer: the watchdog runs only while the host
-        #: expects answers (pings on, or commands outstanding); a device left
-        #: alone is legitimately silent.
-        self.expect_traffic: Callable[[], bool] = lambda: True
         self._rx_expected = 0
         self._last_rx = 0.0
         self._hs_started = 0.0
@@ -283,6 +284,11 @@ class Link:
             error = self.down_error or HandshakeError(self._no_answer_text())
             self.close()
             raise error
+
+    def reboot_inferred(self) -> None:
+        """The request layer found a reboot this link did not see (its EVENT BOOT was lost):
+        counted here, with the ones it saw, since the link owns its counters."""
+        self.reboots += 1
 
     def close(self) -> None:
         """Stop the I/O thread and close the port; an :meth:`open` in progress raises."""
@@ -363,7 +369,7 @@ class Link:
             # >=: at the due time this returns below, not a hair later (an exact clock
             # would otherwise be asked to tick again at the same instant, forever).
             and now - self._last_rx >= self.watchdog_timeout
-            and self.expect_traffic()
+            and self._listener.expect_traffic()
         ):
             log.warning(
                 "%s: nothing received for %.1f s; handshaking again",
@@ -377,7 +383,7 @@ class Link:
             due = min(due, self._baud_due if self._baud_phase is not None else self._hs_next)
             if not self._hs_reported:
                 due = min(due, self._hs_started + self.handshake_timeout)
-        elif self.state is LinkState.ACTIVE and self.expect_traffic():
+        elif self.state is LinkState.ACTIVE and self._listener.expect_traffic():
             due = min(due, self._last_rx + self.watchdog_timeout)
         return due
 

@@ -37,12 +37,12 @@ import os
 from collections.abc import Iterable
 from typing import Any
 
-from .board import decode_output_states
 from .capture import CapturedEvent, CapturedFrame, CapturedStats, CaptureHeader, Record
 from .constants import PacketType
 from .errors import CaptureError, ProtocolError
 from .messages import ArduinoIn, ArduinoOut, parse_in, parse_out
 from .packets import BadFrame, parse_control
+from .readback import decode_output_states
 
 COMMANDS = "/protoduino/commands"
 DEVICE = "/protoduino/device"

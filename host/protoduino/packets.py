@@ -168,24 +168,15 @@ def baud_payload(code: ControlCode, rate: int) -> bytes:
     return bytes((code,)) + struct.pack(">I", rate)
 
 
-def heartbeat_payload() -> bytes:
-    return bytes((ControlCode.HEARTBEAT,))
-
-
 def event_payload(event: int, detail: bytes = b"") -> bytes:
     return bytes((ControlCode.EVENT, event)) + detail
 
 
-_HEARTBEAT = b"\x02"
-#: HEARTBEATs are a large share of idle traffic; one shared, immutable answer.
-_HEARTBEAT_CONTROL = Control(ControlCode.HEARTBEAT)
 _CONTROL_CODES: dict[int, ControlCode] = {int(c): c for c in ControlCode}
 
 
 def parse_control(payload: bytes) -> Control:
     """Decode a CONTROL payload; raises :class:`ProtocolError` if malformed."""
-    if payload == _HEARTBEAT:
-        return _HEARTBEAT_CONTROL
     if not payload:
         raise ProtocolError("empty CONTROL payload")
     code = _CONTROL_CODES.get(payload[0])
@@ -225,8 +216,6 @@ def parse_control(payload: bytes) -> Control:
         if len(args) != BAUD_SIZE - 1:
             raise ProtocolError(f"{code.name} takes 4 argument bytes, got {len(args)}")
         return Control(code, baudrate=int.from_bytes(args, "big"))
-    if code is ControlCode.HEARTBEAT:
-        raise ProtocolError("HEARTBEAT takes no arguments")
     if not args:
         raise ProtocolError("EVENT without an event code")
     return Control(code, event=args[0], detail=bytes(args[1:]))

@@ -6,17 +6,21 @@ that ``protoduino flash`` uploads.
 
 * An installed wheel carries them, built when the wheel was built, as package data in
   ``protoduino/_programs/``, so ``pip install protoduino`` is all a user needs.
-* In a source checkout the development tools (the ``protoduino_dev`` package, installed by
-  ``./tools/dev.sh setup``) build them from the current sources with ``make`` instead, so
-  that tests and demos never run a stale copy. That is why they take precedence.
+* An installed distribution may declare a program source (entry point group
+  ``protoduino.programs``, see :mod:`protoduino.plugins`): a callable ``(name) -> Path``. The
+  development tools (``protoduino-dev``, installed in a source checkout by
+  ``./tools/dev.sh setup``) declare one that builds from the current sources with ``make``, so
+  that tests and demos never run a stale copy. That is why a declared source takes precedence.
+  The runtime never imports the tools: they declare themselves, the dependency flows from them.
 """
 
 from __future__ import annotations
 
-import importlib.util
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 
+from . import plugins
 from .errors import ArgumentError, BuildError
 
 NATIVE_SIM = "pd_sim"
@@ -40,13 +44,14 @@ def bundled(name: str) -> Path | None:
 
 
 def locate(name: str) -> Path:
-    """The path of program ``name``, built first when the development tools are installed."""
+    """The path of program ``name``: from a declared program source if any, else bundled."""
     if name not in NAMES:
         raise ArgumentError(f"unknown program {name!r}; choose from {', '.join(NAMES)}")
-    if importlib.util.find_spec("protoduino_dev") is not None:
-        from protoduino_dev.build import build_program
-
-        return build_program(name)
+    sources = plugins.declared(plugins.PROGRAMS)
+    if sources:
+        # More than one would be a broken installation; the first by name, repeatably.
+        source: Callable[[str], Path] = sources[0].load()
+        return source(name)
     path = bundled(name)
     if path is None:
         raise BuildError(

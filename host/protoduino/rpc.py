@@ -5,6 +5,12 @@ waited on with a bound; everything timed (retransmission after ACK_TIMEOUT,
 giving up after MAX_RETRIES, the 1 Hz Ping) runs in :meth:`link_tick` on the
 I/O thread.
 
+The session's rules (how the restore is sequenced and retried, what makes a
+reboot loop, how an unseen reboot is inferred, what the failsafe epoch and
+liveness tell) are the session layer's, :mod:`protoduino.session`: this
+module holds them and applies them to its table, under its one lock. What
+they decide is summed up below with the table's own rules.
+
 * Message ids start at a random value, increment, wrap and skip 0. A
   retransmission reuses its id (the device's dedupe window re-acks it without
   executing it twice).
@@ -56,6 +62,12 @@ I/O thread.
   re-handshake found it again): the restore runs, and that call is sent again
   after it, once, under a new id (the device keeps the refusal under the old
   one). It had not run, so this cannot run it twice.
+
+Lock order: this layer's lock, then the board's. :meth:`Rpc` calls its hooks
+(``restore_provider``, which takes the board's lock; ``on_done``) with its own
+lock held, so the board never calls into this layer while it holds its own
+lock: it takes what it needs under its lock, releases it, then submits.
+tests/unit/test_lock_order.py checks that order on every path it drives.
 """
 
 from __future__ import annotations
@@ -91,26 +103,26 @@ from .errors import (
 )
 from .events import Event, EventKind
 from .framing import frame_size
-from .messages import ArduinoIn, ArduinoOut, Status, status_name
+from .messages import ArduinoIn, ArduinoOut, Status, parse_in, status_name
+from .session import (
+    REBOOT_LIMIT,
+    REBOOT_WINDOW,
+    Failsafe,
+    FailsafeLiveness,
+    RebootLoop,
+    RestorePlan,
+    refused_configured_output,
+)
 
 log = logging.getLogger(__name__)
 
 #: How many finished ids are remembered to tell a late Ack from an unknown one.
 FINISHED_MEMORY = 256
 
-#: A restore message that gets no Ack is sent again (a new call) this many more times:
-#: a restore left half done would leave an output unconfigured on the device.
-RESTORE_RETRIES = 3
-
-#: A reboot loop: this many losses of the outputs within REBOOT_WINDOW seconds.
-REBOOT_LIMIT = 3
-REBOOT_WINDOW = 60.0
-
 Ack = Any  # protoduino_pb2.Ack (protobuf message classes are dynamic)
 #: Commands that carry the latest failsafe epoch the host saw (protocol.md section 7,
 #: failsafe epochs): the liveness messages, and ClearInterlock, which also re-arms.
 EPOCH_KINDS = ("ping", "heartbeat", "clear_interlock")
-Failsafe = Any  # protoduino_pb2.Failsafe
 
 
 class Call:
@@ -181,21 +193,28 @@ class Call:
 
 MessageHook = Callable[[ArduinoOut], None]
 RestoreProvider = Callable[[], list[ArduinoIn]]
+#: How a caller waits for a call: (its done event, the bound in seconds) -> whether it was set.
+#: ``threading.Event.wait`` while an I/O thread runs the link; an in-process device runs the
+#: link itself on its own clock instead (:mod:`protoduino.testing`).
+Waiter = Callable[[threading.Event, float], bool]
+
+
+def event_wait(event: threading.Event, timeout: float) -> bool:
+    return event.wait(timeout)
 
 
 class LinkPort(Protocol):
     """What the request layer needs of the link below it (:class:`~protoduino.link.Link`)."""
 
     down_error: ProtoduinoError | None
-    #: Set by :meth:`Rpc.attach`: whether the link's watchdog should expect answers.
-    expect_traffic: Callable[[], bool]
-    #: Device reboots seen (the request layer counts the ones only it can see).
-    reboots: int
 
     @property
     def active(self) -> bool: ...
 
     def send_command(self, payload: bytes) -> bool: ...
+
+    def reboot_inferred(self) -> None:
+        """Count a reboot only the request layer could see (the link owns the counter)."""
 
     def recent_frames(self) -> tuple[str, ...]:
         """The last frames on the line, to show in an error."""
@@ -236,6 +255,10 @@ class Rpc:
         reboot_window: float = REBOOT_WINDOW,
         failsafe_timeout: float = FAILSAFE_TIMEOUT,
         heartbeat_liveness: bool = False,
+        waiter: Waiter = event_wait,
+        message_hook: MessageHook | None = None,
+        restore_provider: RestoreProvider | None = None,
+        restore_values: bool = False,
     ) -> None:
         if ack_timeout <= 0 or max_retries < 0 or window < 1 or reboot_limit < 1:
             raise ArgumentError(
@@ -246,6 +269,7 @@ class Rpc:
         #: time.monotonic() unless a test injects its own; the I/O thread passes its
         #: ``now`` to link_tick, every other timestamp here comes from this clock.
         self._clock = clock
+        self._waiter = waiter
         #: Set once the link failed for good: every call fails at once with it.
         self._failed: ProtoduinoError | None = None
         self.ack_timeout = ack_timeout
@@ -258,10 +282,13 @@ class Rpc:
         self.ping_interval = ping_interval
         #: Longest a call waits for the link to come back before it fails.
         self.link_wait = link_wait
-        self.message_hook: MessageHook | None = None
-        self.restore_provider: RestoreProvider | None = None
+        #: Where every message that is no Ack goes (the board's events and inputs).
+        self.message_hook = message_hook
+        #: The messages that rebuild the board's outputs after the device lost them; called
+        #: with this layer's lock held (see "Lock order" in the module docstring).
+        self.restore_provider = restore_provider
         #: Whether the restore sends last values too (for the RESTORED event only).
-        self.restore_values = False
+        self.restore_values = restore_values
         self._lock = threading.Lock()
         # Random by default, so that ids from before a host restart do not look like
         # retransmissions to the device's dedupe window; ``first_id`` fixes it (tests).
@@ -272,11 +299,11 @@ class Rpc:
         self._inflight: dict[int, Call] = {}
         self._urgent: collections.deque[Call] = collections.deque()  # pings
         self._pending: collections.deque[Call] = collections.deque()  # user calls
-        self._restore: collections.deque[ArduinoIn] = collections.deque()
+        #: The session layer's rules (session.py), kept under this layer's lock.
+        self._plan = RestorePlan()
+        self._loop = RebootLoop(reboot_limit, reboot_window)
+        self._failsafe = FailsafeLiveness(failsafe_timeout, heartbeat_liveness)
         self._restore_call: Call | None = None
-        self._restore_failed: list[str] = []
-        self._restore_count = 0
-        self._restore_tries = 0
         self._holding = False
         self._finished: collections.deque[int] = collections.deque(maxlen=FINISHED_MEMORY)
         self._finished_set: set[int] = set()
@@ -286,22 +313,6 @@ class Rpc:
         #: Transmissions of new ids held back by the dedupe guard (a counter, for tests).
         self.guard_holds = 0
         self._closed = False
-        self.reboot_limit = reboot_limit
-        self.reboot_window = reboot_window
-        self._losses: collections.deque[float] = collections.deque()
-        #: Set once a reboot loop was detected: every user call fails with it.
-        self.loop_error: RebootLoopError | None = None
-        #: The device's failsafe timeout and whether only a Heartbeat feeds it (the
-        #: session's ConfigureFailsafe): what tells when a failsafe may have fired unseen.
-        self.failsafe_timeout = failsafe_timeout
-        self.heartbeat_liveness = heartbeat_liveness
-        #: The latest failsafe epoch the device reported (an event or a liveness Ack):
-        #: every Ping and Heartbeat carries it back (protocol.md section 7, failsafe epochs).
-        self.failsafe_epoch = 0
-        #: Until when the device's failsafe timer surely ran: the first transmission of
-        #: the last liveness message it acknowledged as one, plus the timeout. None: no
-        #: such message since the session began.
-        self._armed_until: float | None = None
         self._pinging = ping
         self._next_ping = 0.0
         self._ping_call: Call | None = None
@@ -330,9 +341,21 @@ class Rpc:
                 next_id=self._next_id,
             )
 
+    @property
+    def loop_error(self) -> RebootLoopError | None:
+        """Set once a reboot loop was detected: every user call fails with it."""
+        return self._loop.error
+
+    @property
+    def failsafe_epoch(self) -> int:
+        """The latest failsafe epoch the device reported: every Ping, Heartbeat and
+        ClearInterlock carries it back (protocol.md section 7, failsafe epochs)."""
+        return self._failsafe.epoch
+
     def attach(self, link: LinkPort) -> None:
+        """The link below, which is built on this layer as its listener: the one step that
+        ties the two together, once, before the link opens."""
         self.link = link
-        link.expect_traffic = self._expect_traffic
 
     @property
     def round_time(self) -> float:
@@ -356,7 +379,7 @@ class Rpc:
             self._pinging = bool(on)
             self._next_ping = 0.0  # resuming: ping at once, the failsafe may be close
 
-    def _expect_traffic(self) -> bool:
+    def expect_traffic(self) -> bool:
         return self._pinging or bool(self._calls)
 
     # --- submitting (any thread) ------------------------------------------------------
@@ -390,7 +413,7 @@ class Rpc:
         # The I/O thread fails every call by its deadline; the margin only
         # guards against that thread having died.
         bound = call.deadline - self._clock() + self.ack_timeout * (self.max_retries + 2) + 1.0
-        if not call.done.wait(max(0.0, bound)):
+        if not self._waiter(call.done, max(0.0, bound)):
             with self._lock:
                 self._finish(
                     call, error=AckTimeoutError(f"{call.kind} never completed (I/O thread stuck?)")
@@ -492,8 +515,8 @@ class Rpc:
         if link is None or not link.active or self._closed:
             return
         if self._holding:
-            if self._restore_call is None and self._restore and self._guard_allows_new():
-                msg = self._restore.popleft()
+            if self._restore_call is None and self._plan.pending and self._guard_allows_new():
+                msg = self._plan.next()
                 self._restore_call = self._new_call(msg, self._restore_step)
                 self._transmit(self._restore_call, now)
             queues: tuple[collections.deque[Call], ...] = (self._urgent,)
@@ -654,10 +677,8 @@ class Rpc:
 
     def _failsafe_seen(self, fs: Failsafe) -> None:
         """The device's failsafe state, from its event or a liveness Ack (lock held)."""
-        if fs.epoch != self.failsafe_epoch:
-            self.failsafe_epoch = fs.epoch
-            if fs.active:
-                self._next_ping = 0.0  # send the epoch back at once: the device re-arms
+        if self._failsafe.seen(fs):
+            self._next_ping = 0.0  # send the epoch back at once: the device re-arms
 
     def _liveness_acked(self, call: Call, ack: Ack) -> None:
         """Note what an acknowledged call tells of the failsafe (lock held).
@@ -666,47 +687,25 @@ class Rpc:
         was entered since power-up: a failsafe whose event was lost (a host
         stalled past its re-handshake, a device-to-host cut) is learned here and
         reported like the event (the Board sees it through ``message_hook``).
-        The message fed the timer if it carried the device's epoch and is the
-        session's liveness source; a ConfigureFailsafe restarts a timer that has
-        not run out (the host sends it right after opening a session).
+        Whether it fed the device's timer is the session's rule (session.py).
         """
-        if call.kind in ("ping", "heartbeat"):
-            device = ack.failsafe.epoch if ack.HasField("failsafe") else 0
-            if ack.HasField("failsafe"):
-                self._failsafe_seen(ack.failsafe)
-                if self.message_hook is not None:
-                    out = ArduinoOut()
-                    out.failsafe.CopyFrom(ack.failsafe)
-                    self.message_hook(out)
-            counts = call.kind == "heartbeat" or not self.heartbeat_liveness
-            if not (counts and call.epoch == device):
-                return
-        elif call.kind != "configure_failsafe":
-            return
-        until = call.round_start + self.failsafe_timeout
-        if self._armed_until is None or until > self._armed_until:
-            self._armed_until = until
+        if call.kind in ("ping", "heartbeat") and ack.HasField("failsafe"):
+            self._failsafe_seen(ack.failsafe)
+            if self.message_hook is not None:
+                out = ArduinoOut()
+                out.failsafe.CopyFrom(ack.failsafe)
+                self.message_hook(out)
+        self._failsafe.acked(call.kind, call.epoch, call.round_start, ack)
 
     def liveness_lapsed(self) -> bool:
         """May the device's failsafe have fired without this host hearing of it?
-
-        True when no liveness message was acknowledged within the last failsafe
-        timeout: the device may have driven its outputs safe and, having then
-        rebooted or lost the session, can no longer say so. A restore must then
-        not send the values from before (protocol.md section 7, restore policy).
-        """
-        return self._armed_until is None or self._clock() >= self._armed_until
+        (:meth:`protoduino.session.FailsafeLiveness.lapsed`, now)."""
+        return self._failsafe.lapsed(self._clock())
 
     def _lost_session(self, call: Call, ack: Ack) -> bool:
-        """Did the device refuse ``call`` because it lost what the board configured?
-
-        STATUS_NOT_INITIALISED for a Control on an output the board did
-        configure (its Init is among the restore messages) means the device
-        restarted without the host seeing it: its EVENT BOOT was lost and a
-        re-handshake (watchdog, desync) found it answering again. A Pose counts
-        by its refused item, which is such a Control. Once per call, and never
-        for the restore's own messages.
-        """
+        """Did the device refuse ``call`` because it restarted unseen (session.py,
+        :func:`~protoduino.session.refused_configured_output`)? Once per call, and never
+        for the restore's own messages."""
         if (
             ack.status != Status.STATUS_NOT_INITIALISED
             or call.restored
@@ -714,19 +713,12 @@ class Rpc:
             or self.restore_provider is None
         ):
             return False
-        control = _refused_control(_reparse(call.payload), ack)
-        if control is None:
-            return False
-        kind, pin = control
-        init = command(kind).needs_init
-        if init is None:
-            return False
         try:
             msgs = self.restore_provider()
         except Exception:
             log.exception("restore provider failed")
             return False
-        return any(_kind(m) == init and getattr(m, init).pin == pin for m in msgs)
+        return refused_configured_output(call.payload, ack, msgs)
 
     def _session_lost(self, call: Call) -> None:
         log.warning(
@@ -734,7 +726,7 @@ class Rpc:
             status_name(Status.STATUS_NOT_INITIALISED),
         )
         if self.link is not None:
-            self.link.reboots += 1
+            self.link.reboot_inferred()
         self._notify(
             Event(
                 EventKind.REBOOTED,
@@ -756,7 +748,7 @@ class Rpc:
         self._inflight.pop(call.message_id, None)
         self._finished_set.add(call.message_id)  # a late answer to it is late, not unknown
         self._finished.append(call.message_id)
-        msg = _reparse(call.payload)
+        msg = parse_in(call.payload)
         msg.message_id = self._allocate_id()
         call.message_id = msg.message_id
         call.payload = msg.SerializeToString()
@@ -768,7 +760,7 @@ class Rpc:
     def link_up(self, lost: bool, rebooted: bool) -> None:
         with self._lock:
             if rebooted:
-                self.failsafe_epoch = 0  # a new power-up counts its failsafes from 0
+                self._failsafe.rebooted()
             if lost:
                 self._outputs_lost(rebooted, self._clock())
             else:
@@ -779,16 +771,10 @@ class Rpc:
     def _outputs_lost(self, rebooted: bool, now: float) -> None:
         """The device no longer has our outputs (lock held): fail what was outstanding, restore."""
         what = "rebooted" if rebooted else "was taken over by another session"
-        self._losses.append(now)
-        while self._losses and now - self._losses[0] > self.reboot_window:
-            self._losses.popleft()
         error: DeviceRebootedError
-        if len(self._losses) >= self.reboot_limit:
-            error = self.loop_error = RebootLoopError(
-                f"the device lost its outputs {len(self._losses)} times within "
-                f"{self.reboot_window:g} s (a reboot loop: a brown-out?); the board stopped "
-                "restoring them: close it, fix the cause and open it again"
-            )
+        loop = self._loop.lost(now)
+        if loop is not None:
+            error = loop
             log.error("%s", error)
             self._notify(Event(EventKind.ERROR, str(error), {"error": str(error)}))
         else:
@@ -805,7 +791,7 @@ class Rpc:
             stale = call.sent_at and not command(call.kind).idempotent
             if (self.loop_error is not None or stale) and call is not self._ping_call:
                 self._finish(call, error=error)
-        self._restore.clear()
+        self._plan.clear()
         self._holding = False
         if self.loop_error is None and self.restore_provider is not None:
             self._begin_restore()
@@ -822,10 +808,7 @@ class Rpc:
         except Exception:
             log.exception("restore provider failed")
             msgs = []
-        self._restore = collections.deque(msgs)
-        self._restore_failed = []
-        self._restore_count = len(msgs)
-        self._restore_tries = 0
+        self._plan.start(msgs)
         if self._restore_call is not None:  # an interrupted restore: start over
             self._finish(self._restore_call, error=BoardClosedError("restore restarted"))
             self._restore_call = None
@@ -846,7 +829,7 @@ class Rpc:
         """
         with self._lock:
             self._failed = error
-            self._restore.clear()
+            self._plan.clear()
             self._holding = False
             self._restore_call = None
             for call in list(self._calls.values()):
@@ -860,7 +843,7 @@ class Rpc:
             call.attempts = 0  # a fresh set of retries once the link is back
             if call is self._restore_call:
                 self._restore_call = None
-                self._restore.appendleft(_reparse(call.payload))
+                self._plan.put_back(call.payload)
                 self._calls.pop(call.message_id, None)
             elif call.kind == "ping" and call is self._ping_call:
                 self._urgent.appendleft(call)
@@ -871,36 +854,13 @@ class Rpc:
         if call is not self._restore_call:
             return
         self._restore_call = None
-        if isinstance(call.error, AckTimeoutError) and self._restore_tries < RESTORE_RETRIES:
-            # A lossy line, not a refusal: the same message again (Inits and values are
-            # absolute, so running one twice changes nothing).
-            self._restore_tries += 1
-            self._restore.appendleft(_reparse(call.payload))
-            return
-        self._restore_tries = 0
-        if call.error is not None:
-            self._restore_failed.append(f"{call.kind}: {call.error}")
-        if not self._restore:
+        self._plan.finished(call.kind, call.payload, call.error)
+        if not self._plan.pending:
             self._holding = False
             self._restored()
 
     def _restored(self) -> None:
-        failed = list(self._restore_failed)
-        text = f"outputs restored: {self._restore_count} commands replayed " + (
-            "(last values included)" if self.restore_values else "(outputs at their safe values)"
-        )
-        if failed:
-            text += f", {len(failed)} failed ({'; '.join(failed)})"
-            log.warning(text)
-        else:
-            log.info(text)
-        self._notify(
-            Event(
-                EventKind.RESTORED,
-                text,
-                {"replayed": self._restore_count, "failed": failed, "values": self.restore_values},
-            )
-        )
+        self._notify(self._plan.event(self.restore_values))
 
     # --- closing ------------------------------------------------------------------
 
@@ -910,51 +870,8 @@ class Rpc:
             self._closed = True
             for call in list(self._calls.values()):
                 self._finish(call, error=BoardClosedError(f"the board was closed ({call.kind})"))
-            self._restore.clear()
+            self._plan.clear()
 
     def outstanding(self) -> int:
         with self._lock:
             return len(self._calls)
-
-
-def _kind(msg: ArduinoIn) -> str | None:
-    kind: str | None = msg.WhichOneof("data")
-    return kind
-
-
-def _refused_control(msg: ArduinoIn, ack: Ack) -> tuple[str, int] | None:
-    """The ArduinoIn member and pin of the Control a refusal was about, if any.
-
-    A command that names a pin is its own Control; a Pose's refused item is
-    one of its Controls (a PoseItem member of the same message type).
-    """
-    kind = _kind(msg)
-    if kind is None:
-        return None
-    body = getattr(msg, kind)
-    if kind == "pose":
-        index = ack.refused_item
-        if not 1 <= index <= len(body.items):
-            return None
-        item = body.items[index - 1]
-        member = item.WhichOneof("output")
-        if member is None:
-            return None
-        body = getattr(item, member)
-        kind = _MEMBER_OF_TYPE.get(body.DESCRIPTOR.full_name, "")
-    pin = getattr(body, "pin", None)
-    return (kind, pin) if isinstance(pin, int) else None
-
-
-#: ArduinoIn member by its message type (a Pose item's Control -> "servo_control", ...).
-_MEMBER_OF_TYPE = {
-    field.message_type.full_name: field.name
-    for field in ArduinoIn.DESCRIPTOR.oneofs_by_name["data"].fields
-    if field.message_type is not None
-}
-
-
-def _reparse(payload: bytes) -> ArduinoIn:
-    msg = ArduinoIn()
-    msg.ParseFromString(payload)
-    return msg

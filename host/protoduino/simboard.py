@@ -92,8 +92,10 @@ def _build_native() -> Path:
     return programs.locate(programs.NATIVE_SIM)
 
 
-def _native_command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
-    cmd = [str(programs.locate(programs.NATIVE_SIM))]
+def _native_command(
+    trace: Path | None, link: Path | None, control: Path | None, program: Path | None = None
+) -> list[str]:
+    cmd = [str(program if program is not None else programs.locate(programs.NATIVE_SIM))]
     if trace is not None:
         cmd += ["--trace", str(trace)]
     if link is not None:
@@ -115,10 +117,11 @@ def _build_avr() -> Path:
     return programs.locate(programs.RUNNER)
 
 
-def _avr_command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
-    return runner_command(
-        programs.locate(programs.FIRMWARE_ELF), trace=trace, link=link, control=control
-    )
+def _avr_command(
+    trace: Path | None, link: Path | None, control: Path | None, program: Path | None = None
+) -> list[str]:
+    firmware = program if program is not None else programs.locate(programs.FIRMWARE_ELF)
+    return runner_command(firmware, trace=trace, link=link, control=control)
 
 
 def runner_command(
@@ -166,6 +169,28 @@ BACKENDS: dict[str, Backend] = {
 }
 
 
+#: Backend name -> its command line for another build of its program (a user service's).
+_FIRMWARE_COMMANDS: dict[
+    str, Callable[[Path | None, Path | None, Path | None, Path], list[str]]
+] = {
+    "native": _native_command,
+    "avr": _avr_command,
+}
+
+
+def _command(
+    backend: str,
+    trace: Path | None,
+    link: Path | None,
+    control: Path | None,
+    firmware: Path | None,
+) -> list[str]:
+    if firmware is None:
+        return _backend(backend).command(trace, link, control)
+    _backend(backend)  # the name's check
+    return _FIRMWARE_COMMANDS[backend](trace, link, control, firmware)
+
+
 def _backend(name: str) -> Backend:
     try:
         return BACKENDS[name]
@@ -186,9 +211,11 @@ def command(
     trace: Path | None = None,
     link: Path | None = None,
     control: Path | None = None,
+    firmware: Path | None = None,
 ) -> list[str]:
-    """The command line that runs an already built board."""
-    return _backend(backend).command(trace, link, control)
+    """The command line that runs an already built board (``firmware``: another build
+    of its program, as :class:`SimBoard` takes it)."""
+    return _command(backend, trace, link, control, firmware)
 
 
 #: The option that makes a board owned: its stdin is the owner's pipe.
@@ -236,11 +263,15 @@ class SimBoard:
         trace: str | os.PathLike[str] | None = None,
         link: str | os.PathLike[str] | None = None,
         control: str | os.PathLike[str] | None = None,
+        firmware: str | os.PathLike[str] | None = None,
         options: Sequence[str] = (),
     ) -> None:
         self._backend = _backend(backend)
+        #: Another build of the board's program (a user service's, docs/services.md): the
+        #: simulated board's binary (native), or the firmware's ELF (avr). None: the default.
+        self.firmware = None if firmware is None else Path(firmware)
         #: More options of the board program, for tests: both backends take the line's
-        #: (--line-check, --line-max BAUD, --line-max-out BAUD: tools/simcontrol/pd_linerate.h),
+        #: (--line-check, --line-max BAUD, --line-max-out BAUD: firmware/simcontrol/pd_linerate.h),
         #: the emulated Uno its runner's too (--stats FILE ...: tools/avrsim/avrsim.c).
         self.options = tuple(options)
         self.backend = backend
@@ -265,7 +296,13 @@ class SimBoard:
             self._control_dir = Path(tempfile.mkdtemp(prefix="protoduino-"))
             self._control_path = self._control_dir / "control"
         self._control = SimControl(self._control_path)
-        cmd = owned(self._backend.command(self.trace_path, self.link, self._control_path))
+        if self.firmware is None:  # this board's backend (a subclass may bring its own)
+            cmd = self._backend.command(self.trace_path, self.link, self._control_path)
+        else:
+            cmd = _FIRMWARE_COMMANDS[self.backend](
+                self.trace_path, self.link, self._control_path, self.firmware
+            )
+        cmd = owned(cmd)
         cmd += self.options
         logger.debug("starting %s", " ".join(cmd))
         # stderr is inherited: the board writes there only when something is wrong.

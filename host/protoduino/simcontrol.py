@@ -2,7 +2,7 @@
 
 Both simulated boards (the native one and the emulated Uno) take one JSON
 object per line on a Unix stream socket and apply it to their inputs at once
-(``tools/simcontrol/pd_control.h`` is the protocol)::
+(``firmware/simcontrol/pd_control.h`` is the protocol)::
 
     {"pin": 2, "level": 0}                  drive a digital input
     {"pin": 14, "analog": 512}              an analog input, in counts 0..1023 (A0 = 14)
@@ -21,16 +21,16 @@ import json
 import socket
 import threading
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
+from .closing import ClosedOnExit
 from .errors import SimControlError, TransportError
 
 #: Upper bound on one answer's wait: the board answers between two of its steps.
 REPLY_TIMEOUT = 5.0
 
 
-class SimControl:
+class SimControl(ClosedOnExit):
     """One connection to a control socket; thread-safe, connects on first use."""
 
     def __init__(self, path: Path, *, timeout: float = REPLY_TIMEOUT) -> None:
@@ -107,14 +107,3 @@ class SimControl:
     def close(self) -> None:
         with self._lock:
             self._close_locked()
-
-    def __enter__(self) -> SimControl:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

@@ -129,7 +129,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             continue;
         }
         for (uint8_t other = (uint8_t)(pin + 1u); other < PD_MAX_PINS; other++) {
-            if (PD_OWNER_MODE(owner) != PD_MODE_DIGITAL && core.outputs.owner[other] == owner) {
+            /* Digital outputs and a user service's pins are kept by pin, not by slot. */
+            bool by_pin = PD_OWNER_MODE(owner) == PD_MODE_DIGITAL ||
+                          (PD_FEATURE_USER && PD_OWNER_MODE(owner) == PD_MODE_USER);
+            if (!by_pin && core.outputs.owner[other] == owner) {
                 abort();
             }
         }

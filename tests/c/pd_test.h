@@ -48,5 +48,7 @@ extern const pd_test_case_t pd_tests_inputs[];
 extern const pd_test_case_t pd_tests_failsafe[];
 extern const pd_test_case_t pd_tests_encode[];
 extern const pd_test_case_t pd_tests_engine[];
+/* Only in `make unit-user` (PD_FEATURE_USER, with tests/c/user/probe.proto). */
+extern const pd_test_case_t pd_tests_user[];
 
 #endif /* PD_TEST_H */

@@ -73,7 +73,8 @@ static void test_reserve_holds_the_largest_replies(void)
     CHECK(!fs.active);
 }
 
-/* A report source for the tests: slot N reports value[N] as a Log text. */
+/* A report source for the tests: slot N reports value[N], as a DecodeError's count
+ * (slot in the high half): any ArduinoOut serves, the engine does not look inside. */
 static unsigned report_value[PD_REPORT_SLOTS];
 static unsigned report_calls;
 
@@ -81,10 +82,8 @@ static bool test_report(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *ou
 {
     (void)core;
     report_calls++;
-    out->which_data = protoduino_ArduinoOut_log_tag;
-    out->data.log.level = protoduino_LogLevel_LOG_LEVEL_INFO;
-    snprintf(out->data.log.text, sizeof(out->data.log.text), "%u:%u", (unsigned)slot,
-             report_value[slot]);
+    out->which_data = protoduino_ArduinoOut_decode_error_tag;
+    out->data.decode_error.count = (uint32_t)slot << 16 | (uint32_t)report_value[slot];
     return true;
 }
 
@@ -93,9 +92,10 @@ static int reports_sent(const tdev_t *d, char *last, size_t cap)
     int n = 0;
     protoduino_ArduinoOut out;
     for (size_t i = 0; i < fake_count(&d->hal); i++) {
-        if (t_out(d, i, &out) && out.which_data == protoduino_ArduinoOut_log_tag) {
+        if (t_out(d, i, &out) && out.which_data == protoduino_ArduinoOut_decode_error_tag) {
             n++;
-            snprintf(last, cap, "%s", out.data.log.text);
+            snprintf(last, cap, "%u:%u", (unsigned)(out.data.decode_error.count >> 16),
+                     (unsigned)(out.data.decode_error.count & 0xFFFFu));
         }
     }
     return n;

@@ -115,8 +115,8 @@ static void test_other_commands_do_not_feed_the_timer(void)
     t_send_in(&d, &in);
     in = m_info(12);
     t_send_in(&d, &in);
-    const uint8_t hb[] = {PD_CONTROL_HEARTBEAT};
-    t_send_packet(&d, PD_PACKET_CONTROL, d.host_seq++, hb, 1);
+    const uint8_t old_heartbeat[] = {0x02}; /* a CONTROL, HEARTBEAT until version 3 */
+    t_send_packet(&d, PD_PACKET_CONTROL, d.host_seq++, old_heartbeat, 1);
     d.hal.now_ms = 11000;
     pd_core_poll(&d.core);
     CHECK_EQ(d.hal.servo_us[9], 1472);

@@ -54,6 +54,20 @@ def test_c_unit_tests_under_sanitizers() -> None:
     assert "runtime error" not in output  # UBSan reports without aborting otherwise
 
 
+def test_c_unit_tests_with_a_user_service() -> None:
+    """Every C test again with PD_FEATURE_USER and the probe service (tests/c/user), plus
+    the user-service tests (tests/c/test_user.c): the mechanism under the sanitizers."""
+    _need("make", "gcc")
+    result = _make("unit-user")
+    output = result.stdout + result.stderr
+    summary = re.findall(r"^(\d+) passed, (\d+) failed$", result.stdout, re.MULTILINE)
+    assert summary, f"no test summary from `make -C firmware unit-user`:\n{output[-4000:]}"
+    passed, failed = (int(n) for n in summary[-1])
+    assert result.returncode == 0 and failed == 0, output[-4000:]
+    assert passed >= MIN_C_TESTS + 8, output[-4000:]
+    assert "runtime error" not in output
+
+
 @pytest.mark.slow
 def test_fuzz_receive_path_bounded(tmp_path: Path) -> None:
     require_fuzz_tools()

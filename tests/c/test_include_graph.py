@@ -38,13 +38,20 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("link", ("pd_link",)),
     (
         "device parts",
-        ("pd_failsafe", "pd_outputs", "pd_inputs.h", "pd_inputs_state.c", "pd_dedupe"),
+        (
+            "pd_failsafe",
+            "pd_outputs",
+            "pd_inputs.h",
+            "pd_inputs_state.c",
+            "pd_dedupe",
+            "pd_user.h",  # the user service's table and state (docs/services.md)
+        ),
     ),
     ("device state", ("pd_state.h",)),
     ("outgoing messages", ("pd_out",)),
-    ("commands and inputs", ("pd_dispatch", "pd_inputs.c")),
+    ("commands and inputs", ("pd_dispatch", "pd_inputs.c", "pd_user.c")),
     ("core", ("pd_core",)),
-    ("platforms", ("posix/", "avr/", "arduino/")),
+    ("platforms", ("posix/", "simcontrol/", "avr/", "arduino/")),
 )
 
 SOURCE_SUFFIXES = (".c", ".h", ".ino")

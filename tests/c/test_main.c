@@ -2,6 +2,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "pd_features.h"
 #include "pd_test.h"
 
 int pd_test_failed_flag;
@@ -21,7 +22,11 @@ int main(int argc, char **argv)
 {
     const pd_test_case_t *tables[] = {pd_tests_codec, pd_tests_encode, pd_tests_link,
                                       pd_tests_dispatch, pd_tests_failsafe, pd_tests_motion, pd_tests_pwm, pd_tests_inputs,
-                                      pd_tests_engine};
+                                      pd_tests_engine,
+#if PD_FEATURE_USER
+                                      pd_tests_user,
+#endif
+    };
     const char *only = argc > 1 ? argv[1] : NULL; /* run tests whose name contains it */
     int passed = 0;
     int failed = 0;

@@ -55,12 +55,14 @@ def test_what_may_run_twice() -> None:
 def test_every_command_needs_the_feature_the_host_checks() -> None:
     """A pin mode's commands need its feature on the device (PD_FEATURE_<NAME>), the one
     the host checks before sending; ClearInterlock comes with digital inputs; the rest
-    are in every build."""
+    are in every build but UserCall, which comes with a user service."""
     for kind, cmd in commands.COMMANDS.items():
         if cmd.pin_mode is not None:
             assert cmd.feature == cmd.pin_mode.feature, kind
         elif kind == "clear_interlock":
             assert cmd.feature == "digital_input"
+        elif kind == "user_call":  # a firmware built with a user service (docs/services.md)
+            assert cmd.feature == "user"
         else:
             assert cmd.feature is None, kind
         if cmd.feature is not None:
@@ -168,13 +170,14 @@ def test_a_feature_off_by_default(tmp_path: Path) -> None:
     """A Feature declared off by default is 0 unless the build defines it, still has its
     DeviceInfo.features bit, and is not among make's FEATURES (nor the host's list of them)."""
     counter = '[(pin_mode) = {name: "counter" init: "counter_init" pins: "counter_pins"}];\n'
-    extra = "  FEATURE_EXTRA = 7 [(feature).off_by_default = true];\n"
+    extra = "  FEATURE_EXTRA = 8 [(feature).off_by_default = true];\n"  # 7 is FEATURE_USER
     tables = _tables_of(tmp_path, (counter, counter + extra))
-    assert ("extra", 7, False) in tables.features
+    assert ("extra", 8, False) in tables.features
+    assert ("user", 7, False) in tables.features  # the real one: user services
     header = cmdtables.c_header(tables)
     assert "#ifndef PD_FEATURE_EXTRA\n#define PD_FEATURE_EXTRA 0\n#endif" in header
     assert "#define PD_FEATURE_COUNTER 1\n" in header
-    assert "(PD_FEATURE_EXTRA ? 1u << 7 : 0u))" in header
+    assert "(PD_FEATURE_EXTRA ? 1u << 8 : 0u)" in header
     assert "extra" not in cmdtables.make_fragment(tables)
     assert "'extra'" not in cmdtables.python_module(tables)
     assert "'counter'," in cmdtables.python_module(tables)

@@ -22,9 +22,10 @@ from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 BOUND = 10.0
 
 
-def log_msg(text: str) -> Any:
+def info_msg(count: int) -> Any:
+    """An informational DATA message (a DecodeError), told apart by its count."""
     out = ArduinoOut()
-    out.log.text = text
+    out.decode_error.count = count
     return out
 
 
@@ -126,32 +127,32 @@ def test_cancelled_wait_does_not_recall_the_command(fake: FakeDevice) -> None:
 
 
 def test_events_iterate_until_close(fake: FakeDevice) -> None:
-    async def main() -> list[str]:
+    async def main() -> list[int]:
         board = await aio.open(fake.port, ack_timeout=0.1, ping=False)
         events = board.events()
-        fake.send_data(log_msg("one"))
-        fake.send_data(log_msg("two"))
-        texts = []
+        fake.send_data(info_msg(1))
+        fake.send_data(info_msg(2))
+        counts = []
         async for event in events:
-            if event.kind is EventKind.LOG:
-                texts.append(event.details["text"])
-            if len(texts) == 2:
+            if event.kind is EventKind.DECODE_ERROR:
+                counts.append(event.details["count"])
+            if len(counts) == 2:
                 await board.close()  # the iteration ends after what is buffered
-        return texts
+        return counts
 
-    assert asyncio.run(asyncio.wait_for(main(), BOUND)) == ["one", "two"]
+    assert asyncio.run(asyncio.wait_for(main(), BOUND)) == [1, 2]
 
 
 def test_event_buffer_is_bounded(fake: FakeDevice) -> None:
     async def main() -> None:
         async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
             async with board.events(maxsize=2) as events:
-                for text in ("a", "b", "c", "d"):
-                    fake.send_data(log_msg(text))
+                for count in (1, 2, 3, 4):
+                    fake.send_data(info_msg(count))
                 while events.dropped < 2:  # the consumer stalls: the oldest go
                     await asyncio.sleep(0.01)
-                got = [(await anext(events)).details["text"] for _ in range(2)]
-                assert got == ["c", "d"]
+                got = [(await anext(events)).details["count"] for _ in range(2)]
+                assert got == [3, 4]
             with pytest.raises(StopAsyncIteration):
                 await anext(events)
             with pytest.raises(ValueError):

@@ -678,3 +678,32 @@ def test_report_merge_replaces_only_the_parts_run() -> None:
     fewer = new.replace("| 5. F | f | g | new | met |\n", "").split("## 5. F")[0]
     assert report.merge(merged, fewer + "## 8. R\n\nrace\n", "x").count("> Parts") == 1
     assert "> x" in report.merge(merged, fewer + "## 8. R\n\nrace\n", "x")
+
+
+@pytest.mark.avr
+def test_services_section_measures_both_calls_and_the_footprints() -> None:
+    """Part 10: a user call and a Ping of the same size on the emulated Uno, and the builds."""
+    _need("avr")
+    from bench import services
+    from bench.core import Context
+
+    ctx = Context(
+        samples=5,
+        commands=5,
+        reps=1,
+        frames=10,
+        chunk=1024,
+        seed=7,
+        docs_dir=ROOT / "build",
+        chart_dir=None,
+        profile=False,
+    )
+    result = services.run(ctx)
+    assert "| user call `Count` (blinker) |" in result.markdown
+    assert "| blinker, every pin mode |" in result.markdown
+    assert len(result.targets) == 1 and result.targets[0].met is not None
+    user = pb.ArduinoIn(message_id=0x7FFFFFFF)
+    user.user_call.method = 3
+    ping = pb.ArduinoIn(message_id=0x7FFFFFFF)
+    ping.ping.payload = services.matched_ping_payload(user.SerializeToString())
+    assert len(ping.SerializeToString()) == len(user.SerializeToString())

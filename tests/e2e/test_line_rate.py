@@ -1,7 +1,7 @@
 """The line rate (docs/protocol.md 5, *Line rate*; issue 23) on both boards.
 
 A pseudo-terminal carries bytes whatever rate either end set, so each board is
-started with ``--line-check`` (tools/simcontrol/pd_linerate.h): a byte crosses
+started with ``--line-check`` (firmware/simcontrol/pd_linerate.h): a byte crosses
 only when the host's termios rate is the device's (the native board's
 ``pd_hal_set_baud``, the emulated Uno's UBRR0 as its firmware writes it), and
 ``--line-max`` / ``--line-max-out`` make a line that cannot carry the faster

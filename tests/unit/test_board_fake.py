@@ -47,9 +47,10 @@ class Recorder:
         return [e for e in self.events if e.kind is kind]
 
 
-def log_msg(text: str) -> Any:
+def info_msg(count: int = 1) -> Any:
+    """An informational DATA message (a DecodeError): an event no state hangs on."""
     out = ArduinoOut()
-    out.log.text = text
+    out.decode_error.count = count
     return out
 
 
@@ -261,16 +262,11 @@ def test_stop_and_failsafe_forget_values(fake: FakeDevice) -> None:
         assert 9 not in fake.values
 
 
-def test_log_and_decode_error_events(board: Board, fake: FakeDevice) -> None:
+def test_decode_error_events(board: Board, fake: FakeDevice) -> None:
     rec = Recorder(board)
-    out = ArduinoOut()
-    out.log.level = 2  # type: ignore[assignment]
-    out.log.text = "hello"
-    fake.send_data(out)
     out = ArduinoOut()
     out.decode_error.count = 3
     fake.send_data(out)
-    assert rec.wait(EventKind.LOG).details == {"level": "warning", "text": "hello"}
     assert rec.wait(EventKind.DECODE_ERROR).details == {"count": 3}
 
 
@@ -280,8 +276,8 @@ def test_callback_errors_do_not_stop_events(board: Board, fake: FakeDevice) -> N
 
     board.on_event(broken)
     rec = Recorder(board)
-    fake.send_data(log_msg("x"))
-    rec.wait(EventKind.LOG)
+    fake.send_data(info_msg())
+    rec.wait(EventKind.DECODE_ERROR)
 
 
 def test_unsubscribe(board: Board, fake: FakeDevice) -> None:
@@ -289,8 +285,8 @@ def test_unsubscribe(board: Board, fake: FakeDevice) -> None:
     unsubscribe = board.on_event(seen.append)
     unsubscribe()
     rec = Recorder(board)
-    fake.send_data(log_msg("x"))
-    rec.wait(EventKind.LOG)
+    fake.send_data(info_msg())
+    rec.wait(EventKind.DECODE_ERROR)
     assert seen == []
 
 
@@ -339,15 +335,17 @@ def test_close_from_an_event_callback(fake: FakeDevice) -> None:
         closed.set()
 
     board.on_event(close_on_log)
-    fake.send_data(log_msg("bye"))
+    fake.send_data(info_msg())
     assert closed.wait(5)
     assert board.closed
 
 
-def test_a_log_flood_behind_a_slow_callback_stays_bounded(board: Board, fake: FakeDevice) -> None:
-    # A device flooding Log lines while a callback is slow: the queue holds at most
-    # EVENT_QUEUE_LIMIT events, the oldest Log lines go first and are counted, and a
-    # failsafe arriving behind the flood is delivered all the same.
+def test_an_event_flood_behind_a_slow_callback_stays_bounded(
+    board: Board, fake: FakeDevice
+) -> None:
+    # A device flooding informational events while a callback is slow: the queue holds at
+    # most EVENT_QUEUE_LIMIT events, the oldest informational ones go first and are counted,
+    # and a failsafe arriving behind the flood is delivered all the same.
     held = threading.Event()
     release = threading.Event()
     seen: list[Event] = []
@@ -358,23 +356,23 @@ def test_a_log_flood_behind_a_slow_callback_stays_bounded(board: Board, fake: Fa
         release.wait(30)
 
     board.on_event(slow)
-    fake.send_data(log_msg("first"))
+    fake.send_data(info_msg(0))
     assert held.wait(5)  # the callback holds the event thread from here on
     flood = EVENT_QUEUE_LIMIT * 3
-    fake.send_burst([log_msg(f"flood {i}") for i in range(flood)])
+    fake.send_burst([info_msg(1000 + i) for i in range(flood)])
     failsafe = ArduinoOut()
     failsafe.failsafe.active = True
     failsafe.failsafe.cause = 1  # type: ignore[assignment]
     fake.send_data(failsafe)
     dropped = flood + 1 - EVENT_QUEUE_LIMIT  # what the queue cannot hold, failsafe included
     try:
-        assert fake.wait_for(lambda: board.stats.events_dropped == {"log": dropped}, 10)
+        assert fake.wait_for(lambda: board.stats.events_dropped == {"decode_error": dropped}, 10)
         assert board.events.waiting == EVENT_QUEUE_LIMIT
     finally:
         release.set()
     assert fake.wait_for(lambda: bool(seen) and seen[-1].kind is EventKind.FAILSAFE, 10)
-    logs = [e.details["text"] for e in seen if e.kind is EventKind.LOG]
-    assert logs == ["first"] + [f"flood {i}" for i in range(dropped, flood)]  # the newest
+    counts = [e.details["count"] for e in seen if e.kind is EventKind.DECODE_ERROR]
+    assert counts == [0] + [1000 + i for i in range(dropped, flood)]  # the newest
 
 
 def test_close_returns_and_calls_nothing_more(fake: FakeDevice) -> None:
@@ -390,7 +388,7 @@ def test_close_returns_and_calls_nothing_more(fake: FakeDevice) -> None:
 
     board.on_event(slow)
     for i in range(10):
-        fake.send_data(log_msg(str(i)))
+        fake.send_data(info_msg(i))
     assert held.wait(5)
     assert fake.wait_for(lambda: board.events.waiting == 9)
     try:
@@ -401,7 +399,7 @@ def test_close_returns_and_calls_nothing_more(fake: FakeDevice) -> None:
         release.set()
     thread.join(5)
     assert not thread.is_alive()
-    assert [e.details["text"] for e in seen] == ["0"]  # nothing was called after close()
+    assert [e.details["count"] for e in seen] == [0]  # nothing was called after close()
 
 
 def test_a_frame_monitor_cannot_call_into_the_board(board: Board, fake: FakeDevice) -> None:

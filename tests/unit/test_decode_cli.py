@@ -45,7 +45,7 @@ def test_decode_hex_prints_every_vector_packet_and_error(
         }
     assert objs[0]["message"] == {"code": "RESET", "version": 1}
     assert objs[1]["message"] == {"code": "RESET_ACK", "version": 1, "schema_id": "0x1A2B3C00"}
-    assert objs[3]["message"] == {"code": "EVENT", "event": "BOOT"}
+    assert objs[2]["message"] == {"code": "EVENT", "event": "BOOT"}
 
 
 def test_decode_raw_from_stdin_renders_protobuf(tmp_path: Path) -> None:

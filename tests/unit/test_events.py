@@ -37,20 +37,20 @@ def test_informational_events_go_first_state_changes_last() -> None:
     gate = Gate()
     dispatcher.subscribe(gate)
     try:
-        dispatcher.put(ev(EventKind.LOG, "held"))
+        dispatcher.put(ev(EventKind.DEVICE_DESYNC, "held"))
         assert gate.entered.wait(5)  # the callback holds the thread: the queue only fills
         for kind, text in [
             (EventKind.FAILSAFE, "f1"),
-            (EventKind.LOG, "l1"),
+            (EventKind.DEVICE_DESYNC, "l1"),
             (EventKind.REBOOTED, "r1"),  # full: f1 l1 r1
-            (EventKind.LOG, "l2"),  # the oldest informational one goes: f1 r1 l2
+            (EventKind.DEVICE_DESYNC, "l2"),  # the oldest informational one goes: f1 r1 l2
             (EventKind.RESTORED, "s1"),  # again: f1 r1 s1
             (EventKind.DECODE_ERROR, "d1"),  # none waiting: the new informational one goes
             (EventKind.ERROR, "e1"),  # nothing but state changes: the oldest goes
         ]:
             dispatcher.put(ev(kind, text))
             assert dispatcher.waiting <= 3
-        assert dispatcher.dropped == {"log": 2, "decode_error": 1, "failsafe": 1}
+        assert dispatcher.dropped == {"device_desync": 2, "decode_error": 1, "failsafe": 1}
         gate.release.set()
         gate.wait_seen(4)
         assert [e.text for e in gate.seen] == ["held", "r1", "s1", "e1"]
@@ -64,7 +64,7 @@ def test_close_calls_no_callback_after_it_and_leaves_a_running_one_alone() -> No
     gate = Gate()
     dispatcher.subscribe(gate)
     for i in range(10):
-        dispatcher.put(ev(EventKind.LOG, str(i)))
+        dispatcher.put(ev(EventKind.DEVICE_DESYNC, str(i)))
     assert gate.entered.wait(5)
     dispatcher.close()  # returns although the callback still runs
     thread = dispatcher.thread
@@ -85,7 +85,7 @@ def test_close_from_a_callback() -> None:
         done.set()
 
     dispatcher.subscribe(close_and_note)
-    dispatcher.put(ev(EventKind.LOG, "x"))
+    dispatcher.put(ev(EventKind.DEVICE_DESYNC, "x"))
     assert done.wait(5)
     dispatcher.thread.join(5)
     assert not dispatcher.thread.is_alive()
@@ -97,13 +97,13 @@ def test_jobs_are_never_dropped_and_still_run_at_close() -> None:
     gate = Gate()
     dispatcher.subscribe(gate)
     ran: list[int] = []
-    dispatcher.put(ev(EventKind.LOG, "held"))
+    dispatcher.put(ev(EventKind.DEVICE_DESYNC, "held"))
     assert gate.entered.wait(5)
     dispatcher.put_job(lambda: ran.append(1))
-    dispatcher.put(ev(EventKind.LOG, "a"))
-    dispatcher.put(ev(EventKind.LOG, "b"))  # the limit counts events only: "a" goes
+    dispatcher.put(ev(EventKind.DEVICE_DESYNC, "a"))
+    dispatcher.put(ev(EventKind.DEVICE_DESYNC, "b"))  # the limit counts events only: "a" goes
     dispatcher.put_job(lambda: ran.append(2))
-    assert dispatcher.dropped == {"log": 1}
+    assert dispatcher.dropped == {"device_desync": 1}
     dispatcher.close()  # the callback still holds the thread
     gate.release.set()
     dispatcher.thread.join(5)

@@ -1,9 +1,9 @@
 """The link and request layers on an in-process device: no port, no thread, no wall clock.
 
 Each test builds the two layers exactly as ``Board`` does (``Rpc`` attached to a ``Link``),
-hands the link a :class:`~virtualdevice.VirtualDevice` as its port and a
-:class:`~virtualdevice.ManualClock` as its clock, and plays the I/O thread itself. Every verdict
-is a count or an exact time on that clock.
+hands the link a :class:`~protoduino.testing.VirtualDevice` as its port and the device's
+:class:`~protoduino.testing.ManualClock` as its clock, and plays the I/O thread itself.
+Every verdict is a count or an exact time on that clock.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ from protoduino.errors import (
 from protoduino.events import Event, EventKind
 from protoduino.link import Link, LinkState
 from protoduino.messages import ArduinoIn, ArduinoOut
-from protoduino.rpc import Rpc
-from virtualdevice import ManualClock, VirtualDevice
+from protoduino.rpc import MessageHook, Rpc
+from protoduino.testing import VirtualDevice
 
 HANDSHAKE_TIMEOUT = 5.0
 WATCHDOG_TIMEOUT = 2.0
@@ -35,8 +35,15 @@ WATCHDOG_TIMEOUT = 2.0
 class Stack:
     """A Link and its Rpc over a virtual device, as Board wires them."""
 
-    def __init__(self, device: VirtualDevice, *, ping: bool = False, first_id: int = 1) -> None:
-        self.clock = ManualClock()
+    def __init__(
+        self,
+        device: VirtualDevice,
+        *,
+        ping: bool = False,
+        first_id: int = 1,
+        message_hook: MessageHook | None = None,
+    ) -> None:
+        self.clock = device.clock
         self.device = device
         self.events: list[Event] = []
         self.restore: list[ArduinoIn] = []
@@ -48,8 +55,9 @@ class Stack:
             link_wait=HANDSHAKE_TIMEOUT,
             clock=self.clock,
             first_id=first_id,
+            message_hook=message_hook,
+            restore_provider=lambda: list(self.restore),
         )
-        self.rpc.restore_provider = lambda: list(self.restore)
         self.link = Link(
             device,
             self.rpc,
@@ -61,7 +69,7 @@ class Stack:
         self.rpc.attach(self.link)
 
     def run(self, seconds: float) -> None:
-        self.device.run_until(self.link, self.clock, seconds)
+        self.device.run(seconds)
 
     def state(self) -> LinkState:
         # A call, not the attribute: each read is fresh to the type checker as well.
@@ -230,9 +238,8 @@ def test_a_call_fails_with_the_port_error_while_the_port_is_gone() -> None:
 def test_input_reports_reach_the_message_hook_and_are_no_acks() -> None:
     """An InputReport after an Init's Ack, and one between a command and its Ack, go to
     the board's hook; the request layer matches Acks as before and counts no stray one."""
-    stack = Stack(VirtualDevice())
     reports: list[ArduinoOut] = []
-    stack.rpc.message_hook = reports.append
+    stack = Stack(VirtualDevice(), message_hook=reports.append)
     stack.link.open()
     msg = ArduinoIn()
     msg.digital_input_init.pin = 2

@@ -222,14 +222,14 @@ class LinkMachine(RuleBasedStateMachine):
             out.ack.ping_echo = parse_in(call.payload).ping.payload
             self._packet(PacketType.DATA, seq, out.SerializeToString())
 
-    @rule(kind=st.sampled_from(["failsafe", "log", "decode_error"]), seq=seqs)
+    @rule(kind=st.sampled_from(["failsafe", "input_report", "decode_error"]), seq=seqs)
     def device_message(self, kind: str, seq: int | None) -> None:
         out = ArduinoOut()
         if kind == "failsafe":
             out.failsafe.active = True
             out.failsafe.cause = 1  # type: ignore[assignment]
-        elif kind == "log":
-            out.log.text = "hello"
+        elif kind == "input_report":
+            out.input_report.digital_pins = 1 << 2
         else:
             out.decode_error.count = 3
         self._packet(PacketType.DATA, seq, out.SerializeToString())

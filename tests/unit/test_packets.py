@@ -9,7 +9,6 @@ from protoduino.packets import (
     Control,
     build_packet,
     event_payload,
-    heartbeat_payload,
     parse_control,
     reset_ack_payload,
     reset_payload,
@@ -21,7 +20,8 @@ def test_control_round_trips() -> None:
     assert parse_control(reset_ack_payload(1, 0xDEADBEEF)) == Control(
         ControlCode.RESET_ACK, version=1, schema_id=0xDEADBEEF
     )
-    assert parse_control(heartbeat_payload()) == Control(ControlCode.HEARTBEAT)
+    with pytest.raises(ProtocolError, match="unknown CONTROL code 0x02"):
+        parse_control(b"\x02")  # HEARTBEAT until version 3: unassigned since
     assert parse_control(event_payload(EventCode.DESYNC, b"\x07")) == Control(
         ControlCode.EVENT, event=EventCode.DESYNC, detail=b"\x07"
     )

@@ -547,7 +547,7 @@ def test_diagnostics() -> None:
     urgent = health.event(
         Event(EventKind.FAILSAFE, "failsafe", {"active": True, "cause": "ping_timeout"})
     )
-    assert urgent and not health.event(Event(EventKind.LOG, "hello"))
+    assert urgent and not health.event(Event(EventKind.DECODE_ERROR, "decode errors: 1"))
     report = _by_name(health.report(_stats(state="disconnected")))
     assert report["protoduino r1: link"][0] == ERROR
     level, failsafe = report["protoduino r1: failsafe"]

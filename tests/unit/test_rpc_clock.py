@@ -8,7 +8,6 @@ verdict is exact.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -40,7 +39,9 @@ class FakeLink:
         self.down_error: ProtoduinoError | None = None
         self.reboots = 0
         self.sent: list[float] = []
-        self.expect_traffic: Callable[[], bool] = lambda: True
+
+    def reboot_inferred(self) -> None:
+        self.reboots += 1
 
     def send_command(self, payload: bytes) -> bool:
         if self.active:

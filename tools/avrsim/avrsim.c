@@ -9,13 +9,13 @@
  * protoduino.simboard runs both):
  * the first stdout line is the port to open (the pty's slave, or --link),
  * SIGINT/SIGTERM (and SIGHUP unless ignored) exit cleanly, so does the end of
- * the owner with --owner-fd (tools/simcontrol/pd_owner.h), SIGUSR1 resets the
+ * the owner with --owner-fd (firmware/simcontrol/pd_owner.h), SIGUSR1 resets the
  * MCU while keeping the pty,
  * and --trace writes one JSON line per output change, measured at the pins
  * (servo pulse widths, digital levels, and the duty of the timers' PWM, read
  * from their compare-output IRQs: PWM never goes through the PORT register).
  *
- * --control PATH (tools/simcontrol) drives the MCU's inputs the way the
+ * --control PATH (firmware/simcontrol) drives the MCU's inputs the way the
  * outside world would, so the firmware's own input code is what runs: a level
  * is raised on the port pin's IRQ (PIN register, pin-change and external
  * interrupts) and held there as the port's "external" level, so that simavr
@@ -48,7 +48,7 @@
  * them last (uart_byte_cycles, uart_baud: they follow a mid-run UBRR0 write,
  * the line rate's agreement), and the bytes --line-* options lost each way.
  *
- * --line-check, --line-max BAUD, --line-max-out BAUD (tools/simcontrol/pd_linerate.h,
+ * --line-check, --line-max BAUD, --line-max-out BAUD (firmware/simcontrol/pd_linerate.h,
  * as the native board): a byte crosses the pty only if the host's termios rate is
  * UART0's (within 3 %) and, with --line-max, UART0's is at most BAUD (both ways;
  * --line-max-out: from the MCU to the host only). Host bytes are judged as they

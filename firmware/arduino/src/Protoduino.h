@@ -5,6 +5,10 @@
  *
  * It owns the UART (pins 0 and 1: do not use Serial) and Timer1 (servo pulses:
  * do not use the Servo library); millis() and the rest of the core stay yours.
+ *
+ * Your own commands (docs/services.md): put what `protoduino gen robot.proto`
+ * writes and your handlers in the sketch's folder and set PD_FEATURE_USER to 1
+ * in this library's src/pd_config.h; the example ProtoduinoService does so.
  */
 #ifndef PROTODUINO_H
 #define PROTODUINO_H

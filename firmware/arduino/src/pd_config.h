@@ -15,6 +15,9 @@
 #define PD_FEATURE_ANALOG_INPUT 1
 #define PD_FEATURE_PWM 1
 #define PD_FEATURE_COUNTER 1
+/* A user service (docs/services.md): 1 when the sketch carries one (its generated
+ * files and handlers in the sketch's folder, as the ProtoduinoService example). */
+#define PD_FEATURE_USER 0
 
 /* The opening line rate (docs/protocol.md section 1): the host opens the port at
  * it (Board.open(baudrate=...) for another than 115200) and may then agree on a

@@ -68,4 +68,5 @@ COMMANDS: tuple[CommandRow, ...] = (
     CommandRow('clear_interlock', False, None, 'digital_input', False, None),
     CommandRow('pose', False, None, None, True, None),
     CommandRow('read_outputs', True, 'outputs', None, False, None),
+    CommandRow('user_call', False, 'user_reply', 'user', False, None),
 )

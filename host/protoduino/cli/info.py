@@ -30,6 +30,7 @@ def run(args: argparse.Namespace) -> int:
         rtt = board.ping()
         info = dataclasses.asdict(board.info)
         info["schema_id"] = f"0x{board.info.schema_id:08X}"
+        info["user_fingerprint"] = f"0x{board.info.user_fingerprint:08X}"  # 0: no user service
         info["reserved_pins"] = list(board.info.reserved_pins)
         info["features"] = sorted(board.info.features)  # the pin modes built in
         for mask in ("pwm_pins", "analog_pins", "counter_pins"):

@@ -10,37 +10,41 @@ Bad values are usage errors: exit status 2 and one line on stderr, from the
 argparse types in :mod:`.argtypes`, before any port is opened. Nothing the
 command line does ends in a traceback (``-vv`` logs one for a bug).
 
-The development commands (``gen``, ``soak``) live in the separate package
-``protoduino_dev`` (``dev/`` in the source checkout), which a user's
-``pip install protoduino`` does not carry: without it they are still listed,
-and say how to get them instead of failing with an import error.
+The development command ``soak`` lives in the separate distribution
+``protoduino-dev`` (``dev/`` in the source checkout), which a user's
+``pip install protoduino`` does not carry. It declares it as an entry point
+(:mod:`protoduino.plugins`); the runtime names only the command, never its
+module. Without it it is still listed, and says how to get it instead of
+failing with an import error. ``gen`` is the user's (:mod:`.gen`); without a
+.proto it runs the development tools' generator of protoduino's own schema,
+found the same way.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import logging
 import sys
 from collections.abc import Sequence
 from types import ModuleType
 from typing import NoReturn
 
-from .. import __version__
+from .. import __version__, plugins
 from ..errors import ProtoduinoError
 from .options import capture_check
 
 log = logging.getLogger("protoduino.cli")
 
-DEV_PACKAGE = "protoduino_dev"
+#: The development tools' subcommands: listed by name; their modules come by entry point.
+DEV_COMMANDS = ("soak",)
 DEV_MISSING = (
     "`protoduino {name}` is a development command: it works in a source checkout "
     "with the development tools installed (git clone, then ./tools/dev.sh setup, "
     "which installs the protoduino_dev package from dev/)"
 )
 
-#: Subcommand name -> its module.
+#: Subcommand name -> its module (a development command: its entry point group).
 COMMANDS: dict[str, str] = {
     "decode": f"{__package__}.decode",
     "ports": f"{__package__}.ports",
@@ -57,8 +61,8 @@ COMMANDS: dict[str, str] = {
     "sim": f"{__package__}.sim",
     "demo": f"{__package__}.demo",
     "ros2": f"{__package__}.ros2",
-    "gen": f"{DEV_PACKAGE}.cli.gen",
-    "soak": f"{DEV_PACKAGE}.cli.soak",
+    "gen": f"{__package__}.gen",  # a user service's code; protoduino's own by entry point
+    **{name: plugins.COMMANDS for name in DEV_COMMANDS},
 }
 
 
@@ -80,8 +84,16 @@ class _Missing:
 
 
 def _load(name: str, module: str) -> ModuleType | _Missing:
-    if module.startswith(f"{DEV_PACKAGE}.") and importlib.util.find_spec(DEV_PACKAGE) is None:
-        return _Missing(name)
+    if module == plugins.COMMANDS:
+        entry = plugins.find(plugins.COMMANDS, name)
+        if entry is None:
+            return _Missing(name)
+        try:
+            loaded: ModuleType = entry.load()
+        except ImportError:  # declared by metadata left behind, its package gone
+            log.debug("development command %s does not import", name, exc_info=True)
+            return _Missing(name)
+        return loaded
     return importlib.import_module(module)
 
 

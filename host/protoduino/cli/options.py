@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
 import sys
 import time
 import zlib
 from collections.abc import Callable
 from pathlib import Path
 
+from .. import plugins
 from ..board import Board
+from ..boardoptions import BoardOptions
 from ..capture import MIN_PART
 from ..constants import ACK_TIMEOUT, HANDSHAKE_TIMEOUT
 from ..errors import CommandRejectedError, ProtoduinoError, TransportError
@@ -142,19 +142,39 @@ def start_afresh(board: Board, args: argparse.Namespace) -> None:
 
 
 def load_url_handlers(port: str) -> None:
-    """Make ``faulty://`` known when PORT asks for it.
+    """Make PORT's URL scheme known when an installed distribution declares it (``faulty://``).
 
-    The seeded line faults are development tooling (protoduino_dev), which the runtime does
-    not import: an application that imports protoduino gets no extra URL scheme.
+    The seeded line faults are development tooling (protoduino-dev), which declares the scheme
+    by entry point (:mod:`protoduino.plugins`); the runtime never imports it by name, and an
+    application that imports protoduino gets no extra URL scheme.
     """
-    if not port.startswith("faulty://"):
+    scheme, sep, _ = port.partition("://")
+    if not sep:
         return
-    if importlib.util.find_spec("protoduino_dev") is None:
+    entry = plugins.find(plugins.SERIAL_URLS, scheme)
+    if entry is not None:
+        entry.load()  # importing it registers the scheme with pyserial
+    elif scheme == "faulty":
         raise TransportError(
-            "faulty:// URLs come with the development tools (protoduino_dev): in a source "
+            "faulty:// URLs come with the development tools (protoduino-dev): in a source "
             "checkout run ./tools/dev.sh setup"
         )
-    importlib.import_module("protoduino_dev")  # registers faulty://
+
+
+def board_options(
+    args: argparse.Namespace, *, ping: bool = True, monitor: FrameMonitor | None = None
+) -> BoardOptions:
+    """The board options a command's arguments give (the one place the CLI spells them)."""
+    return {
+        "baudrate": args.baud,
+        "ack_timeout": args.ack_timeout,
+        "handshake_timeout": args.handshake_timeout,
+        "ping": ping,
+        "monitor": monitor,
+        "capture": args.capture,
+        "capture_max_bytes": capture_max_bytes(args),
+        "session": session_of(args),
+    }
 
 
 def open_board(
@@ -162,17 +182,7 @@ def open_board(
 ) -> Board:
     """The board of a command: the port's session, the link options, ``--new-session``."""
     load_url_handlers(args.port)
-    board = Board.open(
-        args.port,
-        baudrate=args.baud,
-        ack_timeout=args.ack_timeout,
-        handshake_timeout=args.handshake_timeout,
-        ping=ping,
-        monitor=monitor,
-        capture=args.capture,
-        capture_max_bytes=capture_max_bytes(args),
-        session=session_of(args),
-    )
+    board = Board.open(args.port, **board_options(args, ping=ping, monitor=monitor))
     start_afresh(board, args)
     return board
 

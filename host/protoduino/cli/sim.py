@@ -61,6 +61,13 @@ def register(parser: argparse.ArgumentParser) -> None:
         '{"pin": 14, "analog": 512}, {"pin": 3, "pulses": 100, "hz": 2000}',
     )
     parser.add_argument(
+        "--firmware",
+        type=Path,
+        metavar="FILE",
+        help="run another build: a user service's (docs/services.md), its pd_sim (native) "
+        "or protoduino.elf (avr)",
+    )
+    parser.add_argument(
         "--detach",
         action="store_true",
         help="run the board in the background: print its port and return; it runs until "
@@ -97,7 +104,13 @@ def run(args: argparse.Namespace) -> int:
         build(args.backend)
     except ProtoduinoError as exc:
         return error("sim", exc)
-    cmd = command(args.backend, trace=args.trace, link=args.link, control=args.control)
+    cmd = command(
+        args.backend,
+        trace=args.trace,
+        link=args.link,
+        control=args.control,
+        firmware=args.firmware,
+    )
     if args.detach:
         return detach(cmd, args)
     try:

@@ -1,0 +1,125 @@
+"""The Arduino library's user-service example, built the way the IDE builds it, then run.
+
+``make -C firmware arduino-zip`` puts the blinker of examples/blinker in the library as the
+sketch ``ProtoduinoService`` (its handlers and what ``protoduino gen`` wrote). The test
+installs the zip as "Add .ZIP Library" would, switches the feature on in the installed
+library's ``src/pd_config.h`` as docs/services.md says, and compiles the sketch with Debian's
+``arduino-builder`` (the Arduino IDE 1.8's own builder) and the Arduino core; then the ELF it
+made runs on the emulated Uno and answers the service's generated client.
+"""
+
+from __future__ import annotations
+
+import importlib
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import protoduino
+import protoduino.cli.main
+import pytest
+from protoduino.simboard import SimBoard
+from simfixtures import wait_for_pin
+
+pytestmark = pytest.mark.avr
+
+ROOT = Path(__file__).resolve().parents[2]
+HARDWARE = Path("/usr/share/arduino/hardware")
+BUILDER_DIR = Path("/usr/share/arduino-builder")
+#: The Uno's flash below Optiboot (boards.txt: uno.upload.maximum_size).
+UNO_MAX_SIZE = 32256
+
+
+def _missing() -> str | None:
+    for tool in ("make", "gcc", "avr-gcc", "arduino-builder"):
+        if shutil.which(tool) is None:
+            return tool
+    if not (HARDWARE / "arduino" / "avr" / "cores" / "arduino" / "Arduino.h").exists():
+        return "arduino-core-avr (the Arduino core)"
+    return None
+
+
+def test_the_service_sketch_builds_with_arduino_builder_and_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    missing = _missing()
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+    made = subprocess.run(
+        ["make", "-s", "-C", str(ROOT / "firmware"), "arduino-zip"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert made.returncode == 0, made.stderr
+    libraries = tmp_path / "libraries"
+    with zipfile.ZipFile(ROOT / "build" / "arduino" / "Protoduino.zip") as z:
+        z.extractall(libraries)
+    config = libraries / "protoduino" / "src" / "pd_config.h"
+    text = config.read_text()
+    assert "#define PD_FEATURE_USER 0" in text
+    config.write_text(text.replace("#define PD_FEATURE_USER 0", "#define PD_FEATURE_USER 1"))
+    sketch = tmp_path / "ProtoduinoService"
+    shutil.copytree(libraries / "protoduino" / "examples" / "ProtoduinoService", sketch)
+    build = tmp_path / "build"
+    build.mkdir()
+    result = subprocess.run(
+        [
+            "arduino-builder",
+            "-compile",
+            "-fqbn",
+            "arduino:avr:uno",
+            "-hardware",
+            str(HARDWARE),
+            "-hardware",
+            str(BUILDER_DIR),
+            "-tools",
+            str(BUILDER_DIR),
+            "-tools",
+            "/usr/bin",
+            "-libraries",
+            str(libraries),
+            "-build-path",
+            str(build),
+            # Debian's core is newer than its avr-gcc 5.4 (WString.cpp wants DECIMAL_DIG;
+            # AVR doubles are 32-bit): ../shared/TOOLCHAIN.md.
+            "-prefs=compiler.cpp.extra_flags=-DDECIMAL_DIG=9",
+            str(sketch / "ProtoduinoService.ino"),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    elf = build / "ProtoduinoService.ino.elf"
+    size = subprocess.run(
+        ["avr-size", "-A", str(elf)], capture_output=True, text=True, check=True
+    ).stdout
+    sections = {line.split()[0]: int(line.split()[1]) for line in size.splitlines()[2:] if line}
+    assert sections[".text"] + sections[".data"] <= UNO_MAX_SIZE
+
+    # The sketch's firmware on the emulated Uno, called through the generated client.
+    gen = tmp_path / "gen"
+    assert (
+        protoduino.cli.main.main(
+            ["gen", str(ROOT / "examples/blinker/blinker.proto"), "--out", str(gen)]
+        )
+        == 0
+    )
+    monkeypatch.syspath_prepend(str(gen))
+    for module in ("blinker_client", "blinker_pb2"):
+        sys.modules.pop(module, None)
+    client = importlib.import_module("blinker_client")
+    with SimBoard("avr", trace=tmp_path / "trace.jsonl", firmware=elf) as sim:
+        sim.start()
+        with protoduino.Board.open(sim.port) as board:
+            blinker = client.Blinker(board)
+            reply = blinker.start_blink(client.pb.Blink(pin=13, period_ms=40))
+            assert reply.half_ms == 20
+            assert wait_for_pin(sim, 13, lambda v: len(v) >= 4)[:4] == [1, 0, 1, 0]
+            board.stop()
+            wait_for_pin(sim, 13, lambda v: v[-1] == 0)
+            assert not blinker.count(client.pb.Empty()).on

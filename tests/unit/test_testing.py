@@ -1,0 +1,160 @@
+"""protoduino.testing: a Board on an in-process device, as a user's own tests would use it.
+
+No port, no pty, no thread: each test checks that no thread started, and times are read on
+the device's clock, which moves only when a call waits or the test runs it.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from concurrent.futures import Future
+
+import pytest
+from protoduino import Board, Event, EventKind
+from protoduino.constants import ACK_TIMEOUT, MAX_RETRIES, PING_INTERVAL, PacketType
+from protoduino.errors import AckTimeoutError, CommandRejectedError
+from protoduino.messages import ArduinoIn, Status
+from protoduino.testing import VirtualDevice
+
+
+@pytest.fixture
+def device() -> Iterator[VirtualDevice]:
+    yield VirtualDevice()
+
+
+def sent(device: VirtualDevice, kind: str) -> int:
+    msgs = [ArduinoIn.FromString(p) for t, p in device.received if t is PacketType.COMMAND]
+    return sum(1 for m in msgs if m.WhichOneof("data") == kind)
+
+
+def test_a_board_opens_and_its_commands_reach_the_device(device: VirtualDevice) -> None:
+    start = device.clock()
+    threads = set(threading.enumerate())
+    with device.open_board(ping=False) as board:
+        assert set(threading.enumerate()) == threads  # no I/O thread, no event thread
+        assert isinstance(board, Board) and board.info.board == "virtual"
+        arm = board.servo(9, safe=90)
+        arm.write(45)
+        led = board.digital_output(13)
+        led.on()
+        assert device.last("servo_control").servo_control.degrees == 45
+        assert device.last("digital_control").digital_control.level is True
+        assert [m.servo_init.pin for m in device.commands("servo_init")] == [9]
+    assert device.clock() == start  # every answer came at once: no time passed
+    assert not device.connected
+
+
+def test_an_input_the_device_drives_is_read_at_once(device: VirtualDevice) -> None:
+    with device.open_board(ping=False) as board:
+        button = board.digital_input(7, pull_up=True)
+        assert button.read() is True
+        device.set_level(7, 0)
+        assert button.read() is False
+
+
+def test_callbacks_and_futures_run_when_time_passes(device: VirtualDevice) -> None:
+    with device.open_board(ping=False) as board:
+        events: list[Event] = []
+        board.on_event(events.append)
+        servo = board.servo(3)
+        future: Future[None] = servo.submit(120)
+        device.run(0)
+        assert future.done() and future.result() is None
+        device.reboot()
+        device.run(0.5)
+        assert EventKind.REBOOTED in [e.kind for e in events]
+        assert [m.servo_init.pin for m in device.commands("servo_init")] == [3, 3]  # restored
+
+
+def test_a_lost_ack_costs_exactly_one_ack_timeout(device: VirtualDevice) -> None:
+    with device.open_board(ping=False) as board:
+        servo = board.servo(9)
+        device.lose = 1
+        start = device.clock()
+        servo.write(30)
+        assert device.clock() - start == pytest.approx(ACK_TIMEOUT)
+        assert sent(device, "servo_control") == 2
+        assert len(device.commands("servo_control")) == 1  # the dedupe window held it
+        assert board.stats.retransmits == 1
+
+
+def test_a_silent_device_fails_the_call_at_its_bound(device: VirtualDevice) -> None:
+    with device.open_board(ping=False) as board:
+        servo = board.servo(9)
+        device.silent = True
+        start = device.clock()
+        with pytest.raises(AckTimeoutError):
+            servo.write(30)
+        assert device.clock() - start == pytest.approx(ACK_TIMEOUT * (MAX_RETRIES + 1))
+
+
+def test_the_automatic_ping_keeps_its_interval(device: VirtualDevice) -> None:
+    with device.open_board() as board:
+        assert board.pinging
+        first = sent(device, "ping")
+        device.run(PING_INTERVAL * 3)
+        assert sent(device, "ping") == first + 3
+
+
+def failsafes(events: list[Event]) -> list[tuple[bool, str, int]]:
+    return [
+        (e.details["active"], e.details["cause"], e.details["epoch"])
+        for e in events
+        if e.kind is EventKind.FAILSAFE
+    ]
+
+
+def test_the_failsafe_fires_at_its_timeout_and_a_liveness_message_clears_it(
+    device: VirtualDevice,
+) -> None:
+    with device.open_board(ping=False, failsafe_timeout=0.5) as board:
+        events: list[Event] = []
+        board.on_event(events.append)
+        servo = board.servo(9, safe=90)
+        servo.write(30)
+        start = device.clock()
+        device.run(0.5)  # silence: the timer restarted by ConfigureFailsafe runs out
+        assert device.failsafe_active and device.failsafe_epoch == 1
+        assert failsafes(events) == [(True, "ping_timeout", 1)]
+        assert device.clock() - start == pytest.approx(0.5)
+        with pytest.raises(CommandRejectedError) as refused:
+            servo.write(40)  # no timer behind a value
+        assert refused.value.status == Status.STATUS_FAILSAFE_EXPIRED
+        board.ping()  # carries epoch 1, which the host heard: re-armed
+        device.run(0)
+        assert not device.failsafe_active
+        assert failsafes(events)[-1] == (False, "none", 1)  # the board names no cause on clear
+        servo.write(40)
+        assert device.last("servo_control").servo_control.degrees == 40
+
+
+def test_a_liveness_message_of_an_older_epoch_re_arms_nothing(device: VirtualDevice) -> None:
+    with device.open_board(ping=False, failsafe_timeout=0.5, liveness="heartbeat") as board:
+        events: list[Event] = []
+        board.on_event(events.append)
+        device.run(0.4)
+        device.lose = 1  # the failsafe's event is lost on the way
+        device.run(0.2)
+        assert device.failsafe_active and failsafes(events) == []
+        board.heartbeat()  # written with epoch 0: it counts for nothing ...
+        device.run(0)
+        assert device.failsafe_active
+        # ... but its Ack told the host of the failsafe, once, and its epoch
+        assert failsafes(events) == [(True, "heartbeat_timeout", 1)]
+        board.heartbeat()  # now with epoch 1
+        device.run(0)
+        assert not device.failsafe_active
+        assert failsafes(events)[-1] == (False, "none", 1)
+
+
+def test_a_stop_is_a_failsafe_of_its_own_epoch(device: VirtualDevice) -> None:
+    with device.open_board(ping=False) as board:
+        events: list[Event] = []
+        board.on_event(events.append)
+        servo = board.servo(9)
+        board.stop()
+        device.run(0)
+        assert failsafes(events) == [(True, "stop", 1)]
+        servo.write(20)  # the timer still runs: a Control after a Stop is protected, not refused
+        assert device.last("servo_control").servo_control.degrees == 20

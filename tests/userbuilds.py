@@ -1,0 +1,66 @@
+"""The user-service examples (examples/, docs/services.md) built for both boards, and their
+generated clients, for the tiers that run them (e2e, reliability)."""
+
+from __future__ import annotations
+
+import importlib
+import shutil
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+#: Where `make ... USER_PROTO=examples/NAME/NAME.proto` puts a user build, per backend.
+PROGRAMS = {"native": "sim/pd_sim", "avr": "avr/protoduino.elf"}
+#: Tools each backend's build needs; a missing one skips the test.
+NEEDS = {"native": ("make", "gcc"), "avr": ("make", "gcc", "avr-gcc")}
+_built: set[str] = set()
+_lock = threading.Lock()
+
+
+def need(backend: str) -> None:
+    for tool in NEEDS[backend]:
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} is not installed (needed to build the {backend} board)")
+
+
+def build_example(name: str) -> Path:
+    """Build examples/NAME for both boards (make caches it); its build folder."""
+    need("avr")
+    with _lock:
+        if name not in _built:
+            subprocess.run(
+                [
+                    "make",
+                    "-s",
+                    "-C",
+                    str(ROOT / "firmware"),
+                    "sim",
+                    "avr",
+                    f"USER_PROTO={EXAMPLES / name / (name + '.proto')}",
+                    f"USER_SRC={EXAMPLES / name / (name + '.c')}",
+                ],
+                check=True,
+                capture_output=True,
+            )
+            _built.add(name)
+    return ROOT / "build" / "user" / name
+
+
+def program(name: str, backend: str) -> Path:
+    """examples/NAME's board program for ``backend`` (a SimBoard's ``firmware=``)."""
+    return build_example(name) / PROGRAMS[backend]
+
+
+def client(name: str, monkeypatch: pytest.MonkeyPatch) -> ModuleType:
+    """The generated client module of examples/NAME (its messages are its ``pb``)."""
+    gen = build_example(name) / "gen"
+    monkeypatch.syspath_prepend(str(gen))
+    for module in (f"{name}_client", f"{name}_pb2"):
+        sys.modules.pop(module, None)
+    return importlib.import_module(f"{name}_client")
