@@ -613,11 +613,16 @@ def test_detach_safe_state_and_release_at_the_pins(board: Board, sim: SimBoard) 
     limp = board.servo(9, safe="detach")  # no pulses until commanded
     assert limp.value == 0
     limp.write(30)
+    # At the pins before the next step: on a fast line (docs/protocol.md 5, *Line rate*)
+    # the Stop would come before the first pulse, and the release within the emulated
+    # Uno's 3 ms that tell a digital high from a pulse (tools/avrsim/pd_pins.c).
+    expect_pin(sim, 9, [0, us(30)])
     board.stop()  # its safe state: pulses stop
     expect_pin(sim, 9, [0, us(30), 0])
     assert limp.value == 0
     led = board.digital_output(13)
     led.on()
+    expect_pin(sim, 13, [0, 1], digital=True)
     led.release()  # an input: the trace says 0
     expect_pin(sim, 13, [0, 1, 0], digital=True)
     assert led.value is None

@@ -25,6 +25,7 @@ import serial
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.constants import (
     FAILSAFE_TIMEOUT,
+    FAST_BAUDRATES,
     MAX_ENCODED_FRAME,
     PROTOCOL_VERSION,
     ControlCode,
@@ -293,10 +294,14 @@ def test_handshake_bytes_and_schema_id(host: RawHost) -> None:
     assert ack.version == PROTOCOL_VERSION
     assert ack.schema_id == protoduino.SCHEMA_ID
     assert ack.boot_id is not None and ack.resumed is False  # a new session
+    # The line rates the board offers (docs/protocol.md 5, *Line rate*): some, all known.
+    assert ack.baudrates and set(ack.baudrates) <= set(FAST_BAUDRATES)
     expected = b"\0" + frame_packet(
         PacketType.CONTROL,
         0,
-        reset_ack_payload(PROTOCOL_VERSION, protoduino.SCHEMA_ID, ack.boot_id, False),
+        reset_ack_payload(
+            PROTOCOL_VERSION, protoduino.SCHEMA_ID, ack.boot_id, False, ack.baudrates
+        ),
     )
     before, answer = got[: -len(expected)], got[-len(expected) :]
     assert answer == expected
@@ -308,6 +313,7 @@ def test_handshake_bytes_and_schema_id(host: RawHost) -> None:
         schema_id=protoduino.SCHEMA_ID,
         boot_id=ack.boot_id,
         resumed=True,
+        baudrates=ack.baudrates,
     )
 
 
