@@ -404,7 +404,11 @@ def collect(trials: int, seconds: float, seed: int = 7) -> Result:
         return result
     rng = random.Random(seed)
     domain = random.SystemRandom().randint(1, 200)
-    with TemporaryDirectory(prefix="bench-ros2-") as tmp_name, loopback_only():
+    with (
+        TemporaryDirectory(prefix="bench-ros2-") as tmp_name,
+        loopback_only(),
+        contextlib.ExitStack() as stack,
+    ):
         tmp = Path(tmp_name)
         sim = SimBoard("avr", trace=tmp / "trace.jsonl")
         try:
@@ -413,6 +417,7 @@ def collect(trials: int, seconds: float, seed: int = 7) -> Result:
             from .ros2_peer import Peer  # cyclonedds: only once run() found it
 
             peer = Peer(domain)
+            stack.callback(peer.close)
             for name, streaming in (("idle", False), ("streaming", True)):
                 phase = Phase()
                 window = None
