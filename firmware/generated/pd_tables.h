@@ -67,24 +67,24 @@ enum {
  */
 #define PD_COMMANDS(X)                                                   \
     X(ping, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_ping_echo_tag)          \
-    X(servo_init, PD_FEATURE_SERVO, 0, 0)                                \
     X(servo_control, PD_FEATURE_SERVO, PD_CMD_SETS_OUTPUT, 0)            \
-    X(digital_init, PD_FEATURE_DIGITAL_OUTPUT, 0, 0)                     \
     X(digital_control, PD_FEATURE_DIGITAL_OUTPUT, PD_CMD_SETS_OUTPUT, 0) \
+    X(pwm_control, PD_FEATURE_PWM, PD_CMD_SETS_OUTPUT, 0)                \
+    X(pose, 1, PD_CMD_SETS_OUTPUT, 0)                                    \
+    X(user_call, PD_FEATURE_USER, 0, protoduino_Ack_user_reply_tag)      \
+    X(heartbeat, 1, PD_CMD_IDEMPOTENT, 0)                                \
     X(stop, 1, 0, 0)                                                     \
+    X(servo_init, PD_FEATURE_SERVO, 0, 0)                                \
+    X(digital_init, PD_FEATURE_DIGITAL_OUTPUT, 0, 0)                     \
+    X(pwm_init, PD_FEATURE_PWM, 0, 0)                                    \
     X(get_info, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_info_tag)           \
     X(configure_failsafe, 1, 0, 0)                                       \
-    X(heartbeat, 1, PD_CMD_IDEMPOTENT, 0)                                \
     X(release, 1, 0, 0)                                                  \
+    X(read_outputs, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)    \
     X(release_all, 1, 0, 0)                                              \
-    X(pwm_control, PD_FEATURE_PWM, PD_CMD_SETS_OUTPUT, 0)                \
-    X(pwm_init, PD_FEATURE_PWM, 0, 0)                                    \
     X(digital_input_init, PD_FEATURE_DIGITAL_INPUT, 0, 0)                \
     X(analog_input_init, PD_FEATURE_ANALOG_INPUT, 0, 0)                  \
     X(counter_init, PD_FEATURE_COUNTER, 0, 0)                            \
-    X(clear_interlock, PD_FEATURE_DIGITAL_INPUT, 0, 0)                   \
-    X(pose, 1, PD_CMD_SETS_OUTPUT, 0)                                    \
-    X(read_outputs, 1, PD_CMD_IDEMPOTENT, protoduino_Ack_outputs_tag)    \
-    X(user_call, PD_FEATURE_USER, 0, protoduino_Ack_user_reply_tag)
+    X(clear_interlock, PD_FEATURE_DIGITAL_INPUT, 0, 0)
 
 #endif /* PD_TABLES_H */

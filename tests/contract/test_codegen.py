@@ -60,9 +60,9 @@ def test_a_declaration_changes_both_tables_and_the_schema_id(tmp_path: Path) -> 
     """Options are not on the wire, but a command's declaration is part of the schema both
     sides must share: Heartbeat made not idempotent changes SCHEMA_ID and both tables."""
     source = (ROOT / "proto" / codegen.PROTO_NAME).read_text()
-    old = "Heartbeat heartbeat = 10 [(command).idempotent = true];"
+    old = "Heartbeat heartbeat = 8 [(command).idempotent = true];"
     assert source.count(old) == 1
-    out, result = _generate_from(tmp_path, source.replace(old, "Heartbeat heartbeat = 10;"))
+    out, result = _generate_from(tmp_path, source.replace(old, "Heartbeat heartbeat = 8;"))
     assert result.schema_id != protoduino.SCHEMA_ID
     header = (out / "firmware/generated/pd_tables.h").read_text()
     assert "X(heartbeat, 1, 0, 0)" in header

@@ -142,7 +142,7 @@ def _tables_of(tmp_path: Path, edit: tuple[str, str]) -> cmdtables.Tables:
             "not a DeviceInfo field",
         ),
         (
-            ("Pose pose = 30 [(command).sets_output = true];", "Pose pose = 30;"),
+            ("Pose pose = 6 [(command).sets_output = true];", "Pose pose = 6;"),
             None,
         ),
         (

@@ -45,7 +45,8 @@ def test_decode_hex_prints_every_vector_packet_and_error(
         }
     assert objs[0]["message"] == {"code": "RESET", "version": 1}
     assert objs[1]["message"] == {"code": "RESET_ACK", "version": 1, "schema_id": "0x1A2B3C00"}
-    assert objs[2]["message"] == {"code": "EVENT", "event": "BOOT"}
+    by_name = {p["name"]: obj for p, obj in zip(V["packets"], objs, strict=False)}
+    assert by_name["EVENT BOOT"]["message"] == {"code": "EVENT", "event": "BOOT"}
 
 
 def test_decode_raw_from_stdin_renders_protobuf(tmp_path: Path) -> None:
