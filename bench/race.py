@@ -43,6 +43,7 @@ from protoduino import Board, programs
 from protoduino.constants import PacketType
 from protoduino.errors import ProtoduinoError
 from protoduino.framing import frame_packet
+from protoduino.messages import ArduinoIn
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
 from protoduino.transport import FrameRecord
@@ -330,13 +331,19 @@ class _WireSizes:
         self.counting = False
         self.commands: list[int] = []
         self.answers: list[int] = []
-        self.last_command = 0.0  # time.monotonic() of the last COMMAND written
+        #: time.monotonic() of the last COMMAND written that is not the automatic Ping: a
+        #: Ping sent while the pins settled made the pose run's pins look 70 ms ahead of it.
+        self.last_command = 0.0
 
     def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
         item = record.item
         if not isinstance(item, Packet):
             return
-        if record.direction == "tx" and item.type is PacketType.COMMAND:
+        if (
+            record.direction == "tx"
+            and item.type is PacketType.COMMAND
+            and ArduinoIn.FromString(item.payload).WhichOneof("data") != "ping"
+        ):
             self.last_command = record.t
         if not self.counting:
             return

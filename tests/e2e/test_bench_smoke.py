@@ -682,7 +682,7 @@ def test_report_merge_replaces_only_the_parts_run() -> None:
 
 @pytest.mark.avr
 def test_services_section_measures_both_calls_and_the_footprints() -> None:
-    """Part 10: a user call and a Ping of the same size on the emulated Uno, and the builds."""
+    """Part 10: a user call and a built-in of the same size on the emulated Uno, and the builds."""
     _need("avr")
     from bench import services
     from bench.core import Context
@@ -699,11 +699,9 @@ def test_services_section_measures_both_calls_and_the_footprints() -> None:
         profile=False,
     )
     result = services.run(ctx)
-    assert "| user call `Count` (blinker) |" in result.markdown
+    assert "| user call `StopBlink` (blinker) |" in result.markdown
     assert "| blinker, every pin mode |" in result.markdown
     assert len(result.targets) == 1 and result.targets[0].met is not None
     user = pb.ArduinoIn(message_id=0x7FFFFFFF)
-    user.user_call.method = 3
-    ping = pb.ArduinoIn(message_id=0x7FFFFFFF)
-    ping.ping.payload = services.matched_ping_payload(user.SerializeToString())
-    assert len(ping.SerializeToString()) == len(user.SerializeToString())
+    user.user_call.method = 2
+    assert len(services.builtin_command()) == len(user.SerializeToString())
