@@ -203,6 +203,11 @@ class Bridge:
                     log.warning("outputs not stopped on close (the failsafe will): %s", error)
             self.board.close()
         self._routes.clear()
+        # Cyclone calls a writer's listener on its own thread: detached first, no callback
+        # runs into a bridge being torn down while the entities are deleted (the bench's
+        # DDS peer, which did not, crashed its process now and then after its part).
+        for writer in self._writers.values():
+            writer.set_listener(None)
         self._writers.clear()
         self._waitset = None
         self._wake = None
