@@ -28,6 +28,11 @@ APT_PACKAGES=(
     clang libclang-rt-14-dev               # libFuzzer + sanitizers for the C core
     ser2net                                # the RFC 2217 server of the remote-board test
 )
+#: Debian packages wanted for one command each, as package:command: missing only when the
+#: command is too (NodeSource's nodejs, for one, ships its own npm and conflicts with Debian's).
+APT_COMMANDS=(
+    npm:npm                                # fetches StandardFirmata's hex (tools/fetch_firmata.sh)
+)
 
 log() { printf '\033[1m==> %s\033[0m\n' "$*" >&2; }
 
@@ -39,6 +44,9 @@ setup_apt() {
     local missing=()
     for pkg in "${APT_PACKAGES[@]}"; do
         dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "ok installed" || missing+=("$pkg")
+    done
+    for entry in "${APT_COMMANDS[@]}"; do
+        command -v "${entry#*:}" >/dev/null 2>&1 || missing+=("${entry%%:*}")
     done
     if [ ${#missing[@]} -gt 0 ]; then
         log "installing Debian packages: ${missing[*]}"

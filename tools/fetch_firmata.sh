@@ -5,8 +5,9 @@
 # The hex ships inside the npm package avrgirl-arduino 5.0.1 (junk/hex/uno/); it is the
 # StandardFirmata 2.4 that the race measures unmodified. The tarball is pinned by version and
 # sha256, so a changed upload is refused rather than measured. Nothing is fetched when the bench
-# runs: `python -m bench` only reads the cached file. Needs `npm` (Debian's npm package when it is
-# missing, installed here as tools/dev.sh installs its other Debian packages).
+# runs: `python -m bench` only reads the cached file. Needs `npm`: Debian's npm package, which
+# tools/dev.sh declares beside every other Debian package (APT_COMMANDS) and installs, when no
+# npm is on the PATH, before this runs.
 set -euo pipefail
 
 PACKAGE=avrgirl-arduino@5.0.1
@@ -20,10 +21,8 @@ if [ -f "$dest/StandardFirmata.cpp.hex" ] && [ "$(cat "$dest/.sha256" 2>/dev/nul
 fi
 
 if ! command -v npm >/dev/null 2>&1; then
-    echo "fetch_firmata: installing Debian's npm" >&2
-    if [ "$(id -u)" -eq 0 ]; then sudo=(); else sudo=(sudo); fi
-    "${sudo[@]}" apt-get update -q
-    "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends npm
+    echo "fetch_firmata: npm is missing: tools/dev.sh setup installs it (Debian's npm)" >&2
+    exit 1
 fi
 
 tmp=$(mktemp -d)
