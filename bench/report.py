@@ -103,6 +103,21 @@ def _part(block: str) -> int | None:
     return int(match.group(1)) if match else None
 
 
+def parts_come(numbers: Sequence[int]) -> str:
+    """The subject and verb of the merge note: "Part 9 comes", "Parts 2 and 9 come",
+    "Parts 2, 5 and 9 come"."""
+    names = [str(n) for n in numbers]
+    if not names:
+        raise ValueError("a merge names at least one part")
+    if len(names) == 1:
+        return f"Part {names[0]} comes"
+    return f"Parts {', '.join(names[:-1])} and {names[-1]} come"
+
+
+#: An earlier merge's note, by its first words (parts_come's, or the older "Parts 9 come").
+_LATER_RUN = re.compile(r"> Parts? ([\d, and]+?) comes? from a later run")
+
+
 def merge(old: str, new: str, note: str) -> str:
     """``old`` (a whole report) with the parts that ``new`` (a report of some parts, from
     :func:`render`) measured put in: their sections and their rows of the targets table
@@ -135,8 +150,8 @@ def merge(old: str, new: str, note: str) -> str:
         line
         for line in old_head.rstrip().split("\n\n")
         if not (
-            (m := re.match(r"> Parts ([\d, ]+) come from a later run", line))
-            and {int(n) for n in m.group(1).split(",")} <= set(new_parts)
+            (m := _LATER_RUN.match(line))
+            and {int(n) for n in re.findall(r"\d+", m.group(1))} <= set(new_parts)
         )
     ]
     head = "\n\n".join(kept) + f"\n\n> {note}\n\n"

@@ -124,9 +124,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     text = report.render(results, described, ctx, command, notes)
     if args.merge and out.exists():
         facts = dict(described)
-        parts = ", ".join(str(section.number) for section, _result in results)
+        parts = report.parts_come([section.number for section, _result in results])
         note = (
-            f"Parts {parts} come from a later run, `{command}` "
+            f"{parts} from a later run, `{command}` "
             f"({facts.get('date (UTC)', '?')}, commit {facts.get('commit', '?')}, load average "
             f"{facts.get('load average at start', '?')}); the machine table is the earlier run's."
         )

@@ -663,8 +663,11 @@ def test_report_merge_replaces_only_the_parts_run() -> None:
         "| 8. R | r | g | 8 | **missed** |\n\n## Machine\n\nm2\n\n## 5. F\n\nnew five\n\n"
         "## 8. R\n\nrace\n"
     )
-    merged = report.merge(old, new, "Parts 5, 8 come from a later run.")
-    assert merged.startswith("# Performance\n\nheader\n\n> Parts 5, 8 come from a later run.\n")
+    assert report.parts_come([9]) == "Part 9 comes"
+    assert report.parts_come([2, 9]) == "Parts 2 and 9 come"
+    assert report.parts_come([2, 5, 9]) == "Parts 2, 5 and 9 come"
+    merged = report.merge(old, new, "Parts 5 and 8 come from a later run.")
+    assert merged.startswith("# Performance\n\nheader\n\n> Parts 5 and 8 come from a later run.\n")
     assert "new header" not in merged and "m2" not in merged and "\nm\n" in merged
     rows = [line for line in merged.splitlines() if line.startswith("| ") and ". " in line[:6]]
     assert [r.split(" | ")[0] for r in rows] == ["| 1. A", "| 5. F", "| 7. I", "| 8. R"]
@@ -673,8 +676,13 @@ def test_report_merge_replaces_only_the_parts_run() -> None:
     assert headings == ["## Targets", "## Machine", "## 1. A", "## 5. F", "## 7. I", "## 8. R"]
     assert "new five" in merged and "old five" not in merged and "old one" in merged
     # A later merge of the same parts replaces the note, one of fewer parts keeps it.
-    again = report.merge(merged, new, "Parts 5, 8 come from a later run, again.")
+    again = report.merge(merged, new, "Parts 5 and 8 come from a later run, again.")
     assert "later run.\n" not in again and again.count("> Parts") == 1
+    # ... as does one in the older wording, and one of a single part.
+    older = merged.replace("Parts 5 and 8 come", "Parts 5, 8 come")
+    assert report.merge(older, new, "y").count("later run") == 0
+    single = report.merge(merged, new, "Part 8 comes from a later run.")
+    assert report.merge(single, new, "z").count("later run") == 0
     fewer = new.replace("| 5. F | f | g | new | met |\n", "").split("## 5. F")[0]
     assert report.merge(merged, fewer + "## 8. R\n\nrace\n", "x").count("> Parts") == 1
     assert "> x" in report.merge(merged, fewer + "## 8. R\n\nrace\n", "x")
