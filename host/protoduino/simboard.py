@@ -65,10 +65,10 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 from . import programs
+from .closing import ClosedOnExit
 from .errors import ArgumentError, BuildError, TransportError
 from .flashing import MCU
 from .simcontrol import SimControl
@@ -248,7 +248,7 @@ def read_port(proc: subprocess.Popen[bytes], deadline: float, what: str) -> str:
     return line.split(b"\n", 1)[0].decode().strip()
 
 
-class SimBoard:
+class SimBoard(ClosedOnExit):
     """One simulated board process, owned by this one; a context manager whose exit stops it.
 
     ``control`` is where its input-control socket listens; by default a
@@ -414,15 +414,8 @@ class SimBoard:
             raise RuntimeError("the board is not running")
         self._proc.send_signal(sig)
 
-    def __enter__(self) -> SimBoard:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def close(self) -> None:
+        """:meth:`stop`, under the name ``with`` calls (closing.ClosedOnExit)."""
         self.stop()
 
     # -- trace ---------------------------------------------------------------

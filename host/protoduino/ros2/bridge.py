@@ -27,8 +27,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from types import TracebackType
-from typing import Any
+from typing import Any, Self
 
 from cyclonedds.core import (
     GuardCondition,
@@ -46,6 +45,7 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from ..board import Board, DigitalOutput, Servo
+from ..closing import ClosedOnExit
 from ..errors import CommandRejectedError, ProtoduinoError
 from ..events import Event, EventKind
 from . import inputs
@@ -78,7 +78,7 @@ class _Route:
     prepare: Prepare
 
 
-class Bridge:
+class Bridge(ClosedOnExit):
     """One board on ROS 2; see the module docstring.
 
     ``Bridge(port, config)`` takes a checked configuration (:func:`.load_config`);
@@ -127,17 +127,10 @@ class Bridge:
 
     # --- life cycle ----------------------------------------------------------------
 
-    def __enter__(self) -> Bridge:
+    def __enter__(self) -> Self:
+        """Start the bridge; leaving the block closes it (closing.ClosedOnExit)."""
         self.start()
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
+        return super().__enter__()
 
     def start(self) -> None:
         """Open the board, configure every output, create the DDS topics."""
