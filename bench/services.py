@@ -10,10 +10,11 @@
   alternating one by one with a random pause before each, so a slow spell of the shared
   machine lands on both. The ratio of the medians is the figure; the Acks' sizes are shown
   (the user reply is decoded with the user's schema on the host as well).
-* Footprint: flash and static RAM (``avr-size -A``) of the default firmware (no user service:
-  what the mechanism costs there is its 2 B table entry and a few instructions, against the
-  figures before it, 21,394 B and 1,094 B at e2da0e2), of the two examples' firmwares with
-  every built-in pin mode, and of the blinker with only the pin modes it needs beside it.
+* Footprint: flash and static RAM (``avr-size -A``) of the default firmware, built as part 5
+  builds it (bench/firmware.py: ``protoduino_dev.build.build_firmware``) in this run: it has
+  no user service, and what the mechanism costs there is its 2 B table entry and a few
+  instructions; then the two examples' firmwares with every built-in pin mode, and the blinker
+  with only the pin modes it needs beside it, each also as its difference from that default.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from tempfile import TemporaryDirectory
 from protoduino import Board
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.simboard import Backend, SimBoard, runner_command
+from protoduino_dev import build as builds
 
 from .boards import (
     UNO_HZ,
@@ -163,8 +165,16 @@ def _ms(s: float) -> str:
     return f"{s * 1000:.2f}"
 
 
-def _size_row(label: str, f: Footprint) -> list[str]:
-    return [label, f"{f.flash:,}", f"{f.ram:,}"]
+def _size_row(label: str, f: Footprint, default: Footprint) -> list[str]:
+    """A build's flash and static RAM, and their difference from the default firmware's."""
+    if f == default:
+        return [label, f"{f.flash:,}", f"{f.ram:,}", "-"]
+    return [
+        label,
+        f"{f.flash:,}",
+        f"{f.ram:,}",
+        f"{f.flash - default.flash:+,} / {f.ram - default.ram:+,}",
+    ]
 
 
 def run(ctx: Context) -> SectionResult:
@@ -173,8 +183,7 @@ def run(ctx: Context) -> SectionResult:
         return SectionResult(f"Not run: `{missing}` is not installed.\n")
     with TemporaryDirectory() as tmp:
         build = Path(tmp)
-        _make("avr")
-        default = footprint(ROOT / "build" / "avr" / "protoduino.elf")
+        default = footprint(builds.build_firmware())
         blinker_elf = build_example("blinker", build)
         blinker = footprint(blinker_elf)
         presses = footprint(build_example("presses", build))
@@ -188,10 +197,10 @@ def run(ctx: Context) -> SectionResult:
         ["built-in digital write, same size", _ms(builtin.p50), _ms(builtin.p90), _ms(builtin.p99)],
     ]
     sizes_rows = [
-        _size_row("default firmware (no user service)", default),
-        _size_row("blinker, every pin mode", blinker),
-        _size_row("presses, every pin mode", presses),
-        _size_row('blinker, FEATURES="digital_output"', lean),
+        _size_row("default firmware (no user service)", default, default),
+        _size_row("blinker, every pin mode", blinker, default),
+        _size_row("presses, every pin mode", presses, default),
+        _size_row('blinker, FEATURES="digital_output"', lean, default),
     ]
     markdown = (
         "A user call and a built-in command of the same size on the emulated Uno (the "
@@ -210,12 +219,15 @@ def run(ctx: Context) -> SectionResult:
         "field 19, nanopb's walk of the descriptor had cost the user call about 2,500 cycles "
         "more than a Ping at field 2).\n\n"
         "Flash and static RAM (`avr-size -A`; the budget of the default firmware is "
-        "26,624 B of flash and static RAM + deepest stack + 256 B free <= 2,048 B). The "
-        "mechanism with no user service: the default firmware, against 21,372 B and 1,093 B "
-        "without the mechanism (main at 55d3879, built the same way). A service adds "
-        "nanopb's encoder, its descriptors and scratch buffers and its handlers; a "
-        "firmware composes it with the pin modes it needs:\n\n"
-        + md_table(["build", "flash B", "static RAM B"], sizes_rows)
+        "26,624 B of flash and static RAM + deepest stack + 256 B free <= 2,048 B), each "
+        "built in this run. The default firmware carries the mechanism with no user service "
+        f"({default.flash:,} B of flash, {default.ram:,} B of static RAM here; the mechanism "
+        "is its 2 B table entry and a few instructions). A service adds nanopb's encoder, its "
+        "descriptors and scratch buffers and its handlers; a firmware composes it with the pin "
+        "modes it needs:\n\n"
+        + md_table(
+            ["build", "flash B", "static RAM B", "over the default (flash / RAM B)"], sizes_rows
+        )
     )
     target = Target(
         "user call round trip vs a built-in of the same size (emulated Uno)",

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import random
+import re
 import shutil
 import subprocess
 import sys
@@ -709,6 +710,11 @@ def test_services_section_measures_both_calls_and_the_footprints() -> None:
     result = services.run(ctx)
     assert "| user call `StopBlink` (blinker) |" in result.markdown
     assert "| blinker, every pin mode |" in result.markdown
+    # The default firmware is this run's build, the baseline of every other row.
+    assert "| default firmware (no user service) | " in result.markdown
+    assert re.search(
+        r"\| blinker, every pin mode \| [\d,]+ \| [\d,]+ \| \+[\d,]+ / \+[\d,]+ \|", result.markdown
+    )
     assert len(result.targets) == 1 and result.targets[0].met is not None
     user = pb.ArduinoIn(message_id=0x7FFFFFFF)
     user.user_call.method = 2
