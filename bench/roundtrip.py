@@ -143,7 +143,7 @@ class BoardRun:
     error: str | None = None
 
 
-def _timed(op: Callable[[int], object], n: int, rng: random.Random) -> list[float]:
+def timed(op: Callable[[int], object], n: int, rng: random.Random) -> list[float]:
     """``n`` timed calls of ``op``, each after a random pause (see :data:`MAX_GAP`)."""
     for i in range(WARMUP):
         op(i)
@@ -162,7 +162,7 @@ def busy_cycles(delta: CycleStats, idle_share: float) -> float:
     return delta.awake - idle_share * delta.cycles
 
 
-def _library_ops(board: Board, servo: Servo) -> dict[str, Callable[[int], object]]:
+def library_ops(board: Board, servo: Servo) -> dict[str, Callable[[int], object]]:
     """The public API's calls, by kind; servo writes alternate so every one moves it."""
     return {
         "servo": lambda i: servo.write(80 + 20 * (i & 1)),
@@ -193,11 +193,11 @@ def measure_board(
                 a = counter.snapshot()
                 time.sleep(IDLE_SECONDS)
                 run.idle_share = (counter.snapshot() - a).awake_share
-            ops = _library_ops(board, servo)
+            ops = library_ops(board, servo)
             for kind, _label in KINDS:
                 before = counter.snapshot() if counter is not None else None
                 link = board.stats
-                run.library[kind] += _timed(ops[kind], per_round, rng)
+                run.library[kind] += timed(ops[kind], per_round, rng)
                 after = board.stats
                 io[kind][0] += after.tx_bytes - link.tx_bytes
                 io[kind][1] += after.rx_bytes - link.rx_bytes
@@ -210,7 +210,7 @@ def measure_board(
             init.servo_init.safe_degrees = 90
             raw.call(init)
             for kind, _label in KINDS:
-                run.raw[kind] += _timed(_raw_op(raw, RAW_MESSAGES[kind]), per_round, rng)
+                run.raw[kind] += timed(_raw_op(raw, RAW_MESSAGES[kind]), per_round, rng)
     for kind, (tx, rx, calls) in io.items():
         run.wire_bytes[kind] = (tx / calls, rx / calls)
     if run.idle_share is not None:
@@ -247,9 +247,9 @@ def measure_agreed(samples: int, seed: int) -> AgreedRun:
             with started("avr", stats=stats) as sim, Board.open(sim.port, ping=False) as board:
                 run.baudrate = board.baudrate
                 servo = board.servo(9)
-                for kind, op in _library_ops(board, servo).items():
+                for kind, op in library_ops(board, servo).items():
                     link = board.stats
-                    run.library[kind] = _timed(op, samples, rng)
+                    run.library[kind] = timed(op, samples, rng)
                     after, calls = board.stats, samples + WARMUP
                     run.wire_bytes[kind] = (
                         (after.tx_bytes - link.tx_bytes) / calls,

@@ -607,6 +607,61 @@ def test_race_line_times_from_simavrs_byte() -> None:
     assert line.host_byte_us == pytest.approx(85.0)
 
 
+def test_race_wire_time_counts_each_direction_at_its_own_byte_time() -> None:
+    """The servo round trip's wire time: the command's bytes at 10 bits into the board, the
+    Ack's at simavr's 11 bits out of it; each call less its own frames' time."""
+    from bench import race
+
+    line = race.Line(11 * 8 * 17)  # 115200: 85.0 us a byte in, 93.5 us out
+    assert line.wire_seconds(17, 15) == pytest.approx((17 * 85.0 + 15 * 93.5) / 1e6)
+    assert line.wire_seconds(0, 0) == 0.0
+    got = race.beyond_wire([0.004, 0.0035], [(17, 15), (16, 14)], line)
+    assert got == pytest.approx([0.004 - 2.8475e-3, 0.0035 - 2.669e-3])
+    with pytest.raises(ValueError):
+        race.beyond_wire([0.004], [(17, 15), (16, 14)], line)
+
+
+def test_race_round_trip_target_is_the_median_of_the_runs_p50s() -> None:
+    """The target row judges the median of the runs' p50s at every rate, and not at all when
+    a run is missing; the table says which wire time it subtracted."""
+    from bench import race
+
+    line = race.Line(11 * 8 * 17)
+
+    def runs(*p50s_ms: float) -> list[Any]:
+        return [race.RoundTripRun(115_200, line, [p / 1e3] * 3, [(17, 15)] * 3) for p in p50s_ms]
+
+    fast = [race.RoundTripRun(250_000, race.Line(11 * 8 * 8), [0.2e-3], [(17, 15)])] * 5
+    met = race._round_trip_target({115_200: runs(0.4, 0.5, 0.3, 0.45, 0.2), 250_000: fast})
+    assert met.met is True and "0.40 ms (0.20-0.50) at 115,200" in met.measured
+    # The median, not the best run: three of five over the goal miss it.
+    missed = race._round_trip_target({115_200: runs(0.4, 0.6, 0.3, 0.7, 0.9), 250_000: fast})
+    assert missed.met is False and "0.60 ms (0.30-0.90)" in missed.measured
+    failed = race.RoundTripRun(115_200, error="no board")
+    partial = race._round_trip_target({115_200: [*runs(0.1, 0.1, 0.1, 0.1), failed]})
+    assert partial.met is None and "4 of 5 runs at 115,200" in partial.measured
+    table = race._round_trip_table({115_200: runs(0.4, 0.5, 0.3, 0.45, 0.2)})
+    assert "2,848 us: command 17 B x 85.0 us + Ack 15 B x 93.5 us" in table
+    assert "| **0.40** | 0.20-0.50 |" in table
+
+
+@pytest.mark.avr
+def test_race_servo_round_trips_on_the_emulated_uno() -> None:
+    """Part 9's servo round trips: one run at each rate, every call with its own frames."""
+    _need("avr")
+    from bench import race
+
+    trips = race.collect_round_trips(samples=6, seed=SEED, runs=1)
+    assert list(trips) == [115_200, race.FAST_BAUD]
+    for nominal, (run,) in trips.items():
+        assert run.error is None, run.error
+        assert run.baud == nominal and len(run.overheads) == 6 and len(run.sizes) == 6
+        assert all(cmd >= 12 and ack >= 8 for cmd, ack in run.sizes)
+    assert trips[115_200][0].line == race.Line(11 * 8 * 17)
+    assert trips[race.FAST_BAUD][0].line == race.Line(11 * 8 * 8)
+    assert race._round_trip_target(trips).met is not None
+
+
 @pytest.mark.avr
 def test_race_on_both_boards() -> None:
     """Part 9: StandardFirmata (the unmodified hex) and protoduino on the same runner; every
