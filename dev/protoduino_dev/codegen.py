@@ -29,9 +29,9 @@ dependencies: this module imports them only when it runs.
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import re
-import subprocess
 import sys
 import tempfile
 import zlib
@@ -81,16 +81,30 @@ def repo_root() -> Path:
     return Path(__file__).resolve().parents[2]
 
 
+#: The runtime's helper for the generators' tools, shared with protoduino.servicegen.
+TOOLRUN_SOURCE = "host/protoduino/toolrun.py"
+
+
+@functools.cache
+def _toolrun() -> ModuleType:
+    # By path, as constants.py: importing protoduino would import the files this writes.
+    return _load_by_path("_protoduino_toolrun", repo_root() / TOOLRUN_SOURCE)
+
+
 def _run(cmd: list[str], cwd: Path) -> None:
-    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        raise CodegenError(f"{' '.join(cmd)} failed:\n{proc.stdout}{proc.stderr}")
+    tools = _toolrun()
+    try:
+        tools.run(cmd, cwd)
+    except tools.ToolError as error:
+        raise CodegenError(str(error)) from error
 
 
 def _protoc(args: list[str], cwd: Path) -> None:
-    # grpc_tools.protoc is a module; run it in a child so its argv and any
-    # exit() stay out of this process.
-    _run([sys.executable, "-m", "grpc_tools.protoc", *args], cwd)
+    tools = _toolrun()
+    try:
+        tools.protoc(args, cwd)
+    except tools.ToolError as error:
+        raise CodegenError(str(error)) from error
 
 
 def schema_id_of(descriptor_set: bytes) -> int:
@@ -201,10 +215,14 @@ def package_imports(source: str) -> str:
 
 
 def _load_constants(path: Path) -> ModuleType:
-    # By path, not `import protoduino.constants`: the package imports generated files that a
+    return _load_by_path("_protoduino_constants", path)
+
+
+def _load_by_path(name: str, path: Path) -> ModuleType:
+    # By path, not `import protoduino.<module>`: the package imports generated files that a
     # fresh checkout may not have yet, and the checkout's file is the source, whatever is
     # installed.
-    spec = importlib.util.spec_from_file_location("_protoduino_constants", path)
+    spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
         raise CodegenError(f"cannot load {path}")
     module = importlib.util.module_from_spec(spec)

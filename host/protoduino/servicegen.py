@@ -34,13 +34,13 @@ from __future__ import annotations
 import builtins
 import importlib.util
 import re
-import subprocess
 import sys
 import tempfile
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import toolrun
 from .errors import ProtoduinoError
 
 #: The most bytes a request, reply or report takes on the wire (protoduino.options).
@@ -113,13 +113,17 @@ def _need(module: str) -> None:
 
 
 def _run(cmd: list[str], cwd: Path) -> None:
-    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        raise ServiceGenError(f"{' '.join(cmd[2:4])} failed:\n{proc.stdout}{proc.stderr}")
+    try:
+        toolrun.run(cmd, cwd)
+    except toolrun.ToolError as error:
+        raise ServiceGenError(str(error)) from error
 
 
 def _protoc(args: list[str], cwd: Path) -> None:
-    _run([sys.executable, "-m", "grpc_tools.protoc", *args], cwd)
+    try:
+        toolrun.protoc(args, cwd)
+    except toolrun.ToolError as error:
+        raise ServiceGenError(str(error)) from error
 
 
 def _mypy_plugin() -> str:

@@ -31,6 +31,7 @@ PYTHON_LAYERS: Sequence[tuple[str, Sequence[str]]] = (
             "protoduino.clock",
             "protoduino.plugins",
             "protoduino.closing",
+            "protoduino.toolrun",
             "protoduino.commands",
         ),
     ),

@@ -197,3 +197,38 @@ def test_an_error_named_like_a_builtin_gets_the_services_name(tmp_path: Path) ->
     client = (gen(proto, tmp_path / "out").files[-1]).read_text()
     assert "class MeterValueError(MeterError)" in client
     assert "class StuckError(MeterError)" in client
+
+
+def test_a_failing_tool_is_each_generators_own_error(tmp_path: Path) -> None:
+    """servicegen and the development codegen run their tools through one helper
+    (protoduino.toolrun) and each raises its own error, with the tool's command and output."""
+    from protoduino_dev import codegen
+
+    cmd = [sys.executable, "-c", "import sys; print('said'); sys.exit('refused')"]
+    with pytest.raises(servicegen.ServiceGenError, match=r"-c .* failed:\nsaid\nrefused") as user:
+        servicegen._run(cmd, tmp_path)
+    with pytest.raises(codegen.CodegenError, match=r"-c .* failed:\nsaid\nrefused") as dev:
+        codegen._run(cmd, tmp_path)
+    assert str(user.value) == str(dev.value)
+
+
+def test_the_shared_tool_helper_imports_nothing_of_the_package() -> None:
+    """codegen loads toolrun by its path: it must run where the package cannot be imported
+    (the generated files it writes are missing or broken), so toolrun imports the standard
+    library only."""
+    import ast
+
+    from protoduino import toolrun
+
+    tree = ast.parse(Path(toolrun.__file__).read_text())
+    imported = {
+        name
+        for node in ast.walk(tree)
+        if isinstance(node, (ast.Import, ast.ImportFrom))
+        for name in (
+            [a.name for a in node.names]
+            if isinstance(node, ast.Import)
+            else [("." * node.level) + (node.module or "")]
+        )
+    }
+    assert imported <= {"__future__", "subprocess", "sys", "pathlib"}, imported
