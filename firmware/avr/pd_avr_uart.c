@@ -76,20 +76,26 @@ void pd_avr_uart_init(uint32_t baud)
 }
 
 /*
- * Reading UDR0 clears the interrupt's cause, after which interrupts go back
- * on: the servo interrupt must not wait behind this one, or a pulse edge
- * would be late by the rest of this handler (~3 us under heavy traffic). It
- * cannot re-enter itself: the next byte is 87 us away at 115200 baud.
+ * The byte goes into the ring with interrupts off. It once went back on right
+ * after UDR0 was read, so that a servo edge would not wait for the store; but
+ * the USART holds two received bytes, and when this handler starts late (behind
+ * another one) the second is already there: RXC stays set after the read, so
+ * `sei` let the handler in again on top of itself, and the nested one stored
+ * its byte in the slot the outer one was about to fill (both read rx_head
+ * first). At 500,000 and 1,000,000 baud (320 and 160 cycles a byte) that cost a
+ * frame now and then (a CRC or COBS error, a retransmission); at 115200 a byte
+ * is 1,389 cycles away and it never happened. The store is a few cycles more
+ * before a servo interrupt can run.
  */
 ISR(USART_RX_vect)
 {
     uint8_t byte = UDR0;
-    sei();
-    uint8_t next = (uint8_t)(rx_head + 1u == PD_AVR_RX_SIZE ? 0u : rx_head + 1u);
+    uint8_t head = rx_head;
+    uint8_t next = (uint8_t)(head + 1u == PD_AVR_RX_SIZE ? 0u : head + 1u);
     if (next == rx_tail) {
         return; /* lost: the frame it belonged to fails its CRC; the host retries */
     }
-    rx_buf[rx_head] = byte;
+    rx_buf[head] = byte;
     rx_head = next;
 }
 
