@@ -62,8 +62,8 @@ bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len)
  * PD_AVR_RX_FAST_1M, where the host's flow control keeps every frame but an
  * 8-item Pose of microsecond values (up to 104 B) within the ring, which then
  * cannot overflow however long the loop works (firmware/README.md).
- * (The losses once seen at 500,000 were the receive interrupt nesting on
- * itself: pd_avr_uart.c.)
+ * (The losses once seen at 500,000, a frame in a few hundred, were the
+ * receive interrupt nesting on itself: pd_avr_uart.c.)
  */
 #define PD_AVR_RX_FAST_1M 96u
 
