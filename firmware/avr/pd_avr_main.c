@@ -56,12 +56,14 @@ bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len)
  * of the loop's (an input report's encoding, a command's decode) outlasts the
  * ring's line time. 48 B are 15,360 cycles at 500,000: enough on the emulated
  * Uno (64-byte Pings and GetInfo at windows 4 to 16; 6-item Poses while six
- * analog inputs sampled at 500 Hz report every 10 ms: no retransmission). At 1,000,000 they are 7,680
- * cycles, and a 6-item Pose (70 B) arriving while reports were built lost bytes
- * at every retransmission; so 1,000,000 is offered only with a ring of
- * PD_AVR_RX_FAST_1M, where the host's flow control keeps every frame but an
- * 8-item Pose of microsecond values (up to 104 B) within the ring, which then
- * cannot overflow however long the loop works (firmware/README.md).
+ * analog inputs sampled at 500 Hz report every 10 ms: no retransmission). At
+ * 1,000,000 they are 7,680 cycles, and a 6-item Pose (a 64-byte frame) arriving
+ * while reports were built lost bytes at every retransmission; so 1,000,000 is
+ * offered only with a ring of PD_AVR_RX_FAST_1M, which holds every frame a host
+ * sends for a valid command (at most 88 B: an 8-item Pose of microsecond values;
+ * a 64-byte Ping's is 85 B) within rx_buffer, so that the host's flow control
+ * never lets a frame go alone past it and the ring cannot overflow however long
+ * the loop works (tests/e2e/test_line_rate.py; firmware/README.md).
  * (The losses once seen at 500,000, a frame in a few hundred, were the
  * receive interrupt nesting on itself: pd_avr_uart.c.)
  */
