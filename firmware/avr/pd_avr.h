@@ -13,8 +13,12 @@
  * in flight (DeviceInfo.rx_buffer: the host keeps its frames in flight within
  * it, and a single frame of any length still streams through, the core taking
  * its bytes as they come). 48 rather than 128: the 80 B went to the pin modes
- * within the RAM budget (firmware/README.md). */
+ * within the RAM budget (firmware/README.md). The one place its size is set:
+ * at PD_AVR_RX_FAST_1M (96) or more the board also offers 1,000,000 baud
+ * (pd_avr_main.c). */
+#ifndef PD_AVR_RX_SIZE
 #define PD_AVR_RX_SIZE 48u
+#endif
 /* UART transmit ring: the most one received frame can make the device send
  * (PD_TX_RESERVE: pd_avr_uart.c checks it fits); a report goes only into an empty
  * ring (pd_link_send_spare), so it needs no room of its own. */

@@ -49,21 +49,32 @@ bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len)
 
 /*
  * 16 MHz divides 250,000, 500,000 and 1,000,000 baud exactly with U2X (UBRR 7,
- * 3, 1), but only 250,000 is offered: the host lets one frame longer than the
- * 48-byte receive ring go at a time (docs/protocol.md 7, *Flow control*), which
- * holds only while the main loop takes the bytes faster than the line brings
- * them. At 1,000,000 (160 cycles a byte, the two UART interrupts busy for about
- * half of them) a 58-byte Pose arriving while an input report was built lost
- * its bytes at every retransmission; at 500,000 a 64-byte Ping arriving while
- * GetInfo's 100-byte Ack was built now and then did (one retransmission in a
- * few hundred calls at window 4 and 16, tests/e2e/test_board_sim.py's burst);
- * at 250,000 none, on the emulated Uno.
+ * 3, 1). The host keeps the frames in flight within rx_buffer (the receive
+ * ring) but always lets one frame go alone, whatever its size (docs/protocol.md
+ * 7, *Flow control*): a frame longer than the ring holds only while the main
+ * loop takes its bytes faster than the line brings them, that is while no work
+ * of the loop's (an input report's encoding, a command's decode) outlasts the
+ * ring's line time. 48 B are 15,360 cycles at 500,000: enough on the emulated
+ * Uno (64-byte Pings and GetInfo at windows 4 to 16; 6-item Poses while six
+ * analog inputs sampled at 500 Hz report every 10 ms: no retransmission). At
+ * 1,000,000 they are 7,680 cycles, and a 6-item Pose (a 64-byte frame) arriving
+ * while reports were built lost bytes at every retransmission; so 1,000,000 is
+ * offered only with a ring of PD_AVR_RX_FAST_1M, which holds every frame a host
+ * sends for a valid command (at most 88 B: an 8-item Pose of microsecond values;
+ * a 64-byte Ping's is 85 B) within rx_buffer, so that the host's flow control
+ * never lets a frame go alone past it and the ring cannot overflow however long
+ * the loop works (tests/e2e/test_line_rate.py; firmware/README.md).
+ * (The losses once seen at 500,000, a frame in a few hundred, were the
+ * receive interrupt nesting on itself: pd_avr_uart.c.)
  */
+#define PD_AVR_RX_FAST_1M 96u
+
 uint8_t pd_hal_baud_rates(void *hal)
 {
     (void)hal;
 #if F_CPU == 16000000UL
-    return PD_RESET_ACK_BAUD_250K;
+    return (uint8_t)(PD_RESET_ACK_BAUD_250K | PD_RESET_ACK_BAUD_500K |
+                     (PD_AVR_RX_SIZE >= PD_AVR_RX_FAST_1M ? PD_RESET_ACK_BAUD_1M : 0u));
 #else
     return 0;
 #endif

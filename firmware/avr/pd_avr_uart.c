@@ -76,21 +76,30 @@ void pd_avr_uart_init(uint32_t baud)
 }
 
 /*
- * Reading UDR0 clears the interrupt's cause, after which interrupts go back
- * on: the servo interrupt must not wait behind this one, or a pulse edge
- * would be late by the rest of this handler (~3 us under heavy traffic). It
- * cannot re-enter itself: the next byte is 87 us away at 115200 baud.
+ * Reading UDR0 clears the interrupt's cause, and the handler claims its slot of
+ * the ring (rx_head moves on) before interrupts go back on: the servo interrupt
+ * must not wait behind this one, or a pulse edge would be late by the rest of
+ * this handler. Interrupts once went back on before the claim; but the USART
+ * holds two received bytes, and when this handler starts late (behind another
+ * one) the second is already there: RXC stays set after the read, so the
+ * handler ran again on top of itself, and the nested one stored its byte in the
+ * slot the outer one was about to fill (both had read rx_head). At 500,000 and
+ * 1,000,000 baud (320 and 160 cycles a byte) that lost a frame now and then (a
+ * CRC or COBS error, a retransmission); at 115200 the next byte is 1,389 cycles
+ * away. Now a nested handler claims the next slot. The main loop cannot see a
+ * claimed slot before its byte is in: it runs only once every handler returned.
  */
 ISR(USART_RX_vect)
 {
     uint8_t byte = UDR0;
-    sei();
-    uint8_t next = (uint8_t)(rx_head + 1u == PD_AVR_RX_SIZE ? 0u : rx_head + 1u);
+    uint8_t head = rx_head;
+    uint8_t next = (uint8_t)(head + 1u == PD_AVR_RX_SIZE ? 0u : head + 1u);
     if (next == rx_tail) {
         return; /* lost: the frame it belonged to fails its CRC; the host retries */
     }
-    rx_buf[rx_head] = byte;
     rx_head = next;
+    sei();
+    rx_buf[head] = byte;
 }
 
 int16_t pd_avr_uart_peek(void)

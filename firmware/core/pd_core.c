@@ -133,10 +133,16 @@ static __attribute__((noinline)) void send_report(pd_core_t *core)
     while (!((core->report_pending >> slot) & 1u)) {
         slot++;
     }
+    uint8_t waited = (uint8_t)((uint8_t)pd_hal_millis(core->hal) - core->report_since);
+    bool yield = waited < PD_REPORT_MAX_WAIT_MS;
+    if (pd_link_spare_blocked(&core->link, core->hal, yield)) {
+        /* Not built at all: a command's delimiter arriving meanwhile would wait
+         * for the report's build and encoding, which then go nowhere. */
+        return;
+    }
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
     if (core->report(core, slot, &out)) {
-        uint8_t waited = (uint8_t)((uint8_t)pd_hal_millis(core->hal) - core->report_since);
-        if (!pd_out_send_spare(core, &out, waited < PD_REPORT_MAX_WAIT_MS)) {
+        if (!pd_out_send_spare(core, &out, yield)) {
             return; /* no room yet, or a command arriving: the newest value, later */
         }
         if (core->report_sent != NULL) {

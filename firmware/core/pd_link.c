@@ -74,6 +74,11 @@ bool pd_link_send(pd_link_t *link, void *hal, uint8_t type, uint8_t *buf, size_t
     return true;
 }
 
+bool pd_link_spare_blocked(const pd_link_t *link, void *hal, bool yield)
+{
+    return link->rx_held || (yield && link->rx_len > 0) || pd_hal_tx_room(hal) < PD_TX_RESERVE;
+}
+
 bool pd_link_send_spare(pd_link_t *link, void *hal, uint8_t *buf, size_t len, bool yield)
 {
     /* PD_TX_FRAME_BYTES(len) without its division: at the largest payload its

@@ -233,6 +233,13 @@ bool pd_link_send(pd_link_t *link, void *hal, uint8_t type, uint8_t *buf, size_t
  */
 bool pd_link_send_spare(pd_link_t *link, void *hal, uint8_t *buf, size_t len, bool yield);
 
+/*
+ * Whether pd_link_send_spare would refuse any report now (a frame held, one
+ * arriving if `yield`, less room than a reply's): checked before a report is
+ * built and encoded, so that a command arriving does not wait behind that work.
+ */
+bool pd_link_spare_blocked(const pd_link_t *link, void *hal, bool yield);
+
 /* CONTROL EVENT with the given code (allowed in any state). */
 bool pd_link_send_event(pd_link_t *link, void *hal, uint8_t event);
 

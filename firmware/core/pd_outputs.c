@@ -308,16 +308,20 @@ protoduino_Status pd_pins_claim(pd_outputs_t *out, void *hal, uint32_t pin, uint
 protoduino_Status pd_pins_owned(const pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
                                 uint8_t *slot)
 {
+    /* The common case first, on the path from a command's last byte to its pin: an
+     * output commanded in the mode it was set up in. Only a pin that passed
+     * check_pin is ever owned (pd_pins_claim), so check_pin (a 32-bit mask shifted
+     * by the pin: a loop on the AVR) only has to name what is wrong otherwise. */
+    if (pin < PD_MAX_PINS) {
+        uint8_t owner = out->owner[pin];
+        if (owner != 0 && PD_OWNER_MODE(owner) == mode) {
+            *slot = PD_OWNER_SLOT(owner);
+            return protoduino_Status_STATUS_OK;
+        }
+    }
     protoduino_Status status = check_pin(hal, pin);
-    if (status != protoduino_Status_STATUS_OK) {
-        return status;
-    }
-    uint8_t owner = out->owner[pin];
-    if (owner == 0 || PD_OWNER_MODE(owner) != mode) {
-        return protoduino_Status_STATUS_NOT_INITIALISED;
-    }
-    *slot = PD_OWNER_SLOT(owner);
-    return protoduino_Status_STATUS_OK;
+    return status != protoduino_Status_STATUS_OK ? status
+                                                 : protoduino_Status_STATUS_NOT_INITIALISED;
 }
 
 uint8_t pd_pins_count(const pd_outputs_t *out, uint8_t mode)

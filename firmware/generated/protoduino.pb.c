@@ -6,19 +6,19 @@
 #error Regenerate this file with the current version of nanopb generator.
 #endif
 
-PB_BIND(protoduino_Ping, protoduino_Ping, AUTO)
+PB_BIND(protoduino_Ping, protoduino_Ping, 4)
 
 
 PB_BIND(protoduino_ServoInit, protoduino_ServoInit, AUTO)
 
 
-PB_BIND(protoduino_ServoControl, protoduino_ServoControl, AUTO)
+PB_BIND(protoduino_ServoControl, protoduino_ServoControl, 4)
 
 
 PB_BIND(protoduino_DigitalInit, protoduino_DigitalInit, AUTO)
 
 
-PB_BIND(protoduino_DigitalControl, protoduino_DigitalControl, AUTO)
+PB_BIND(protoduino_DigitalControl, protoduino_DigitalControl, 4)
 
 
 PB_BIND(protoduino_Stop, protoduino_Stop, AUTO)
@@ -36,19 +36,19 @@ PB_BIND(protoduino_CounterInit, protoduino_CounterInit, AUTO)
 PB_BIND(protoduino_PwmInit, protoduino_PwmInit, AUTO)
 
 
-PB_BIND(protoduino_PwmControl, protoduino_PwmControl, AUTO)
+PB_BIND(protoduino_PwmControl, protoduino_PwmControl, 4)
 
 
-PB_BIND(protoduino_ClearInterlock, protoduino_ClearInterlock, AUTO)
+PB_BIND(protoduino_ClearInterlock, protoduino_ClearInterlock, 4)
 
 
 PB_BIND(protoduino_GetInfo, protoduino_GetInfo, AUTO)
 
 
-PB_BIND(protoduino_PoseItem, protoduino_PoseItem, AUTO)
+PB_BIND(protoduino_PoseItem, protoduino_PoseItem, 4)
 
 
-PB_BIND(protoduino_Pose, protoduino_Pose, AUTO)
+PB_BIND(protoduino_Pose, protoduino_Pose, 4)
 
 
 PB_BIND(protoduino_ReadOutputs, protoduino_ReadOutputs, AUTO)
@@ -57,7 +57,7 @@ PB_BIND(protoduino_ReadOutputs, protoduino_ReadOutputs, AUTO)
 PB_BIND(protoduino_ConfigureFailsafe, protoduino_ConfigureFailsafe, AUTO)
 
 
-PB_BIND(protoduino_Heartbeat, protoduino_Heartbeat, AUTO)
+PB_BIND(protoduino_Heartbeat, protoduino_Heartbeat, 4)
 
 
 PB_BIND(protoduino_Release, protoduino_Release, AUTO)
@@ -66,10 +66,10 @@ PB_BIND(protoduino_Release, protoduino_Release, AUTO)
 PB_BIND(protoduino_ReleaseAll, protoduino_ReleaseAll, AUTO)
 
 
-PB_BIND(protoduino_UserCall, protoduino_UserCall, AUTO)
+PB_BIND(protoduino_UserCall, protoduino_UserCall, 4)
 
 
-PB_BIND(protoduino_ArduinoIn, protoduino_ArduinoIn, AUTO)
+PB_BIND(protoduino_ArduinoIn, protoduino_ArduinoIn, 4)
 
 
 PB_BIND(protoduino_DeviceInfo, protoduino_DeviceInfo, AUTO)

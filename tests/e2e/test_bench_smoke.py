@@ -464,7 +464,7 @@ def test_runner_writes_the_board_sections(tmp_path: Path) -> None:
         assert f"| {boards.LABELS[label]} | servo write |" in text
     assert "### Where the emulated Uno's round trip goes" in text
     # The round trip at the rate the Board agrees on, beside 115200's: measured, not skipped.
-    assert "### At the agreed rate" in text and "agreed on 250,000 baud" in text
+    assert "### At the agreed rate" in text and "agreed on 500,000 baud" in text
     assert "| servo write |" in text.split("### At the agreed rate")[1]
     assert "echoes one byte in" in text  # the emulator's own share, measured
     assert "### Profile of a servo write on the Uno" in text
@@ -682,8 +682,8 @@ def test_race_on_both_boards() -> None:
     # The UART rates the firmwares set: protoduino U2X with UBRR 16, Firmata's 57600 without
     # U2X (the Arduino core's exception for that rate) and UBRR 16; simavr's 11-bit bytes.
     assert ours.line == race.Line(11 * 8 * 17)
-    # The agreed rate: UBRR 7 with U2X, 250,000 baud (docs/protocol.md 5, *Line rate*).
-    assert fast.nominal_baud == race.FAST_BAUD and fast.line == race.Line(11 * 8 * 8)
+    # The agreed rate: UBRR 3 with U2X, 500,000 baud (docs/protocol.md 5, *Line rate*).
+    assert fast.nominal_baud == race.FAST_BAUD and fast.line == race.Line(11 * 8 * 4)
     assert theirs.line == race.Line(11 * 16 * 17)
     assert theirs.command_bytes == [3]  # DIGITAL_MESSAGE: 0x90 | port, two 7-bit bytes
     assert ours.command_bytes and min(ours.command_bytes) >= 12 and ours.answer_bytes

@@ -168,6 +168,8 @@ typedef struct {
     size_t len;
 } pd_fifo_t;
 
+#define PD_MAX_MARKS 8 /* --mark addresses */
+
 typedef struct {
     avr_t *avr;
     avr_uart_t *uart;
@@ -207,6 +209,12 @@ typedef struct {
     uint64_t rx_last_at;   /* cycle the last byte of a host burst was ready in UDR0; 0: none */
     uint64_t answers;      /* UART bytes sent first after a host burst's last byte */
     uint64_t answer_cycles; /* their cycles since that last byte: the MCU's answer time */
+    uint32_t mark_pc[PD_MAX_MARKS]; /* --mark: flash byte addresses */
+    int mark_count;
+    uint32_t mark_from; /* --mark-from: arm at this flash byte address instead (0: at a burst's end) */
+    uint64_t mark_at;      /* cycle a host burst's last byte was ready, until a mark is reached; 0: none */
+    uint64_t marks;        /* marks reached first after a host burst's last byte */
+    uint64_t mark_cycles;  /* their cycles since that last byte */
     int tx_blocked;        /* the pty took no more of tx: wait for it to be writable */
     size_t tx_ready;       /* leading bytes of tx already due (their due cycles only grow) */
     uint64_t passes;       /* passes of the main loop: batches and waits */
@@ -523,6 +531,9 @@ static void pd_rxc_hook(struct avr_irq_t *irq, uint32_t value, void *param)
     if (value && sim->rx.len == 0 &&
         ((in->write - in->read) & (uart_fifo_fifo_size - 1U)) <= 1U) {
         sim->rx_last_at = pd_cycles(sim);
+        if (!sim->mark_from) {
+            sim->mark_at = sim->rx_last_at;
+        }
     }
 }
 
@@ -603,7 +614,8 @@ static void pd_write_stats(pd_sim_t *sim)
             "\"sp_min\": %u, \"sp_min_pc\": %lu, \"ramend\": %u, \"passes\": %llu, "
             "\"rx_lag_max\": %llu, \"answers\": %llu, \"answer_cycles\": %llu, "
             "\"start_ns\": %llu, \"uart_byte_cycles\": %llu, \"uart_baud\": %u, "
-            "\"line_lost_in\": %llu, \"line_lost_out\": %llu}\n",
+            "\"line_lost_in\": %llu, \"line_lost_out\": %llu, \"marks\": %llu, "
+            "\"mark_cycles\": %llu}\n",
             (double)cycles / (double)sim->avr->frequency, (unsigned)sim->avr->frequency,
             (unsigned long long)cycles, (unsigned long long)sleep,
             (unsigned long long)(cycles - sleep), (unsigned long long)sim->uart_rx,
@@ -613,7 +625,8 @@ static void pd_write_stats(pd_sim_t *sim)
             (unsigned long long)sim->answer_cycles, (unsigned long long)g_start_ns,
             (unsigned long long)(sim->uart ? sim->uart->cycles_per_byte : 0U),
             (unsigned)pd_uart_baud(sim), (unsigned long long)sim->line.lost_in,
-            (unsigned long long)sim->line.lost_out);
+            (unsigned long long)sim->line.lost_out, (unsigned long long)sim->marks,
+            (unsigned long long)sim->mark_cycles);
     fflush(sim->stats);
 }
 
@@ -707,6 +720,20 @@ static void pd_track_sp(pd_sim_t *sim, avr_flashaddr_t pc)
                 memcpy(sim->sp_min_stack, &sim->avr->data[sp + 1], n);
                 sim->sp_min_len = n;
             }
+        }
+    }
+}
+
+/* --mark: the first time the MCU is about to run one of the marked addresses after a
+ * host burst's last byte was ready in UDR0, the cycles since then are counted. */
+static void pd_check_mark(pd_sim_t *sim, avr_flashaddr_t pc)
+{
+    for (int i = 0; i < sim->mark_count; i++) {
+        if (sim->mark_pc[i] == pc) {
+            sim->marks++;
+            sim->mark_cycles += pd_cycles(sim) - sim->mark_at;
+            sim->mark_at = 0;
+            return;
         }
     }
 }
@@ -1119,6 +1146,7 @@ static void pd_usage(FILE *f)
             "              [--boot ADDR] [--auto-reset] [--glitch PIN] [--stats FILE]\n"
             "              [--profile FILE] [--stack FILE] [--mcu NAME] [--freq HZ]\n"
             "              [--owner-fd FD] [--line-check] [--line-max BAUD] [--line-max-out BAUD]\n"
+            "              [--mark ADDR]... [--mark-from ADDR]\n"
             "              [FIRMWARE.elf]\n"
             "Runs an emulated Arduino Uno with UART0 on a pseudo-terminal; prints the\n"
             "port as the first stdout line. SIGUSR1 resets the MCU, SIGINT/SIGTERM exit;\n"
@@ -1127,7 +1155,9 @@ static void pd_usage(FILE *f)
             "with --profile, SIGUSR2 writes awake cycles per flash address to FILE;\n"
             "with --stats and --stack, each stats line also writes the deepest stack's bytes to FILE;\n"
             "--control PATH: a Unix socket taking JSON input commands, one per line;\n"
-            "--line-*: bytes cross only at the rate both ends set (and at most BAUD).\n");
+            "--line-*: bytes cross only at the rate both ends set (and at most BAUD);\n"
+            "--mark ADDR (with --stats): cycles from a host burst's last byte (or from\n"
+            "--mark-from's address) to the next ADDR reached.\n");
 }
 
 static void pd_cleanup(pd_sim_t *sim)
@@ -1181,6 +1211,11 @@ static void pd_run(pd_sim_t *sim)
             while (pd_cycles(sim) < target && !g_stop && !g_reset) {
                 sim->last_cycle = sim->avr->cycle;
                 avr_flashaddr_t pc = sim->avr->pc;
+                if (sim->mark_at) {
+                    pd_check_mark(sim, pc);
+                } else if (sim->mark_from && pc == sim->mark_from) {
+                    sim->mark_at = pd_cycles(sim);
+                }
                 int state = pd_run_one(sim);
                 pd_track_sp(sim, pc);
                 if (sim->reset_seen) {
@@ -1299,6 +1334,8 @@ int main(int argc, char **argv)
         {"help", no_argument, NULL, 'h'},
         {"line-check", no_argument, NULL, 'L'}, {"line-max", required_argument, NULL, 'M'},
         {"line-max-out", required_argument, NULL, 'O'},
+        {"mark", required_argument, NULL, 'K'},
+        {"mark-from", required_argument, NULL, 'F'},
         {NULL, 0, NULL, 0},
     };
     int opt;
@@ -1370,6 +1407,16 @@ int main(int argc, char **argv)
             }
             break;
         }
+        case 'K':
+            if (sim->mark_count == PD_MAX_MARKS) {
+                fprintf(stderr, "avrsim: at most %d --mark addresses\n", PD_MAX_MARKS);
+                return 2;
+            }
+            sim->mark_pc[sim->mark_count++] = (uint32_t)strtoul(optarg, NULL, 0);
+            break;
+        case 'F':
+            sim->mark_from = (uint32_t)strtoul(optarg, NULL, 0);
+            break;
         case 'h':
             pd_usage(stdout);
             return 0;
