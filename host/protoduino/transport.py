@@ -112,6 +112,38 @@ def check_port_free(url: str, *, baudrate: int = 115200) -> None:
     open_port(url, baudrate=baudrate).close()
 
 
+#: pyserial's POSIX serial port (a tty or a pty): its read and write are os.read and os.write
+#: with a select around them, which the I/O thread, already in its own select, does itself.
+_PosixSerial: type | None
+try:
+    from serial.serialposix import Serial as _PosixSerial
+except ImportError:  # pragma: no cover - not a POSIX system
+    _PosixSerial = None
+#: Errors pyserial retries rather than raises (the descriptor is non-blocking).
+_RETRY_ERRNOS = (errno.EAGAIN, errno.EALREADY, errno.EWOULDBLOCK, errno.EINPROGRESS, errno.EINTR)
+
+
+def _read_fd(fd: int) -> bytes:
+    """One read of what a plain serial port holds, after select said it is readable.
+
+    As pyserial's read with ``timeout=0`` does, less its second select: the errors it
+    retries read as nothing, the others and an empty read (a vanished device) raise
+    SerialException.
+    """
+    try:
+        data = os.read(fd, READ_CHUNK)
+    except OSError as error:
+        if error.errno in _RETRY_ERRNOS:
+            return b""
+        raise serial.SerialException(f"read failed: {error}") from error
+    if not data:
+        raise serial.SerialException(
+            "device reports readiness to read but returned no data "
+            "(device disconnected or multiple access on port?)"
+        )
+    return data
+
+
 class TransportListener(Protocol):
     """What the link implements; every method runs on the I/O thread."""
 
@@ -163,6 +195,11 @@ class Transport:
         self.baudrate = baudrate
         self.name = name or url
         self._port: Any = None
+        #: The port's file descriptor (None: it has none, or no port is open), and whether
+        #: it is a plain POSIX serial port or pty (pyserial's own class, not a subclass),
+        #: which the I/O thread then reads and writes with os.read / os.write itself.
+        self._fd: int | None = None
+        self._raw = False
         self._listener: TransportListener | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -183,6 +220,8 @@ class Transport:
         #: When the listener's timers next need a tick (time.monotonic()): the
         #: thread never sleeps past it, so a timeout fires on time, not up to TICK late.
         self._next_tick = 0.0
+        #: Whether the last read was woken by the wake-up pipe (something was queued).
+        self._woken = False
         self.last_error: Exception | None = None
         # Counters (read without a lock: single ints written by the I/O thread).
         self.rx_bytes = 0
@@ -291,6 +330,8 @@ class Transport:
 
     def _open(self) -> None:
         self._port = open_port(self.url, baudrate=self.baudrate)
+        self._fd = self._fileno()
+        self._raw = self._fd is not None and type(self._port) is _PosixSerial
         try:
             # docs/protocol.md 2: a lone 0x00 flushes the receiver's half-filled buffer.
             self._write_raw(DELIMITER)
@@ -305,6 +346,7 @@ class Transport:
 
     def _close_port(self) -> None:
         port, self._port = self._port, None
+        self._fd, self._raw = None, False
         self.connected = False
         if port is not None:
             with contextlib.suppress(Exception):
@@ -354,6 +396,7 @@ class Transport:
                     next_reopen = time.monotonic() + REOPEN_FIRST
                     reopen_delay = REOPEN_FIRST * 2
                     continue
+                items = None
                 if data:
                     self.rx_bytes += len(data)
                     if len(self.rx_head) < RX_HEAD:
@@ -364,7 +407,12 @@ class Transport:
                         for item in items:
                             self._record("rx", item)
                         listener.transport_received(items)
-                self._next_tick = listener.transport_tick(time.monotonic())
+                now = time.monotonic()
+                # Bytes of a frame not complete yet (a slow line delivers an Ack in
+                # pieces) change nothing the timers depend on: their tick waits for the
+                # frame, a wake-up, a timeout or its due time, whichever comes first.
+                if items or not data or self._woken or now >= self._next_tick:
+                    self._next_tick = listener.transport_tick(now)
         except Exception:  # pragma: no cover - a bug above must not die silently
             log.exception("%s: I/O thread crashed", self.name)
             self.last_error = TransportError(f"{self.name}: I/O thread crashed")
@@ -393,7 +441,7 @@ class Transport:
         return min(TICK, max(0.0, self._next_tick - time.monotonic()))
 
     def _read(self) -> bytes:
-        fd = self._fileno()
+        fd = self._fd
         if fd is None:
             if not self.url.lower().startswith(REMOTE_URLS):
                 self._port.timeout = min(TICK / 2, self._sleep_limit())
@@ -410,10 +458,13 @@ class Transport:
             ready, _, _ = select.select([fd, self._wake_r], [], [], self._sleep_limit())
         except ValueError as error:  # fd closed under us
             raise OSError(str(error)) from error
-        if self._wake_r in ready:
+        self._woken = self._wake_r in ready
+        if self._woken:
             with contextlib.suppress(OSError):
                 os.read(self._wake_r, 4096)
         if fd in ready:
+            if self._raw:
+                return _read_fd(fd)
             # timeout=0: one os.read of whatever is there, never byte by byte;
             # a vanished device raises SerialException here.
             return bytes(self._port.read(READ_CHUNK))
@@ -435,7 +486,9 @@ class Transport:
                     return
 
     def _flush_writes(self) -> None:
-        while (item := self._next()) is not None:
+        # The deques are looked at without the lock first (their length is atomic): most
+        # passes of the loop have nothing to write.
+        while (self._control or self._data) and (item := self._next()) is not None:
             seq = 0 if item.reset_seq else self._tx_seq
             frame = frame_packet(item.ptype, seq, item.payload)
             if item.reset_seq:
@@ -455,7 +508,21 @@ class Transport:
             self._record("tx", Packet(item.ptype, seq, item.payload))
 
     def _write_raw(self, data: bytes) -> None:
-        self._port.write(data)
+        fd = self._fd
+        if self._raw and fd is not None:
+            # What pyserial's write does first, without its select for room afterwards
+            # (one syscall, not two): the rest, if the driver took only part, goes
+            # through pyserial, which waits for room and gives up after WRITE_TIMEOUT.
+            try:
+                n = os.write(fd, data)
+            except OSError as error:
+                if error.errno not in _RETRY_ERRNOS:
+                    raise serial.SerialException(f"write failed: {error}") from error
+                n = 0
+            if n < len(data):
+                self._port.write(data[n:])
+        else:
+            self._port.write(data)
         self.tx_bytes += len(data)
 
     def _record(self, direction: str, item: Packet | BadFrame) -> None:
