@@ -10,6 +10,7 @@ import os
 import threading
 from collections.abc import Iterator
 
+import protoduino
 import pytest
 import serial
 from protoduino.constants import PacketType
@@ -147,3 +148,21 @@ def test_a_pty_is_read_and_written_by_its_descriptor(pty: tuple[int, str]) -> No
         assert listener.items == [Packet(PacketType.DATA, 7, b"\x01\x02")]
     finally:
         transport.close()
+
+
+def test_a_pose_records_the_control_a_write_of_the_same_level_records() -> None:
+    from protoduino.testing import VirtualDevice
+
+    board = VirtualDevice().open_board(ping=False)
+    led, other = board.digital_output(13), board.digital_output(12)
+    levels: tuple[bool | int, ...] = (True, False, 1, 0, True)
+    for level in levels:
+        board.pose({led: level, other: not level})
+        posed = (board._outputs[13].last, board._outputs[12].last)
+        led.write(level)  # type: ignore[arg-type]  # 1 and 0 are levels too
+        other.write(not level)
+        assert posed == (board._outputs[13].last, board._outputs[12].last)
+        assert led.value is bool(level) and other.value is (not level)
+    with pytest.raises(protoduino.CommandRejectedError):
+        board.pose({led: 2})  # still refused on the host, as a write of 2 is
+    board.close()
