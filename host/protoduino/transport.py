@@ -470,25 +470,23 @@ class Transport:
             return bytes(self._port.read(READ_CHUNK))
         return b""
 
-    def _next(self) -> _Outgoing | None:
+    def _take(self) -> _Outgoing | None:
+        """The next packet to write, out of its queue (CONTROL first).
+
+        Taken before it is written: a write that times out drops it, and any other
+        failure loses the port, whose queues are then cleared (:meth:`_lost`).
+        """
         with self._qlock:
             if self._control:
-                return self._control[0]
+                return self._control.popleft()
             if self._data:
-                return self._data[0]
+                return self._data.popleft()
             return None
-
-    def _pop(self, item: _Outgoing) -> None:
-        with self._qlock:
-            for q in (self._control, self._data):
-                if q and q[0] is item:
-                    q.popleft()
-                    return
 
     def _flush_writes(self) -> None:
         # The deques are looked at without the lock first (their length is atomic): most
         # passes of the loop have nothing to write.
-        while (self._control or self._data) and (item := self._next()) is not None:
+        while (self._control or self._data) and (item := self._take()) is not None:
             seq = 0 if item.reset_seq else self._tx_seq
             frame = frame_packet(item.ptype, seq, item.payload)
             if item.reset_seq:
@@ -500,9 +498,7 @@ class Transport:
                 # its SEQ for the next one, as docs/protocol.md 6 asks.
                 self.write_errors += 1
                 log.warning("%s: write timed out; packet dropped", self.name)
-                self._pop(item)
                 return
-            self._pop(item)
             self._tx_seq = 1 if item.reset_seq else (seq + 1) & 0xFF
             self.tx_packets += 1
             self._record("tx", Packet(item.ptype, seq, item.payload))
@@ -528,6 +524,8 @@ class Transport:
     def _record(self, direction: str, item: Packet | BadFrame) -> None:
         rec = FrameRecord(time.monotonic(), direction, item)
         self._recent.append(rec)
+        if not self._monitors:
+            return
         for monitor in list(self._monitors):
             try:
                 monitor(rec)
