@@ -13,7 +13,10 @@ late (four late retries made a 1.0 s bound 1.066 s).
 Any pyserial URL works (``/dev/ttyACM0``, ``socket://``, ``rfc2217://``,
 ``spy://``, ``loop://``). When the port has a file descriptor (serial ports,
 sockets) the thread sleeps in ``select`` on it and on a wake-up pipe, so a
-queued write leaves at once; otherwise it polls with short timeout reads.
+queued write leaves at once; otherwise it polls with short timeout reads. A
+plain POSIX port (pyserial's own class: a tty or a pty) is then read and
+written by its descriptor, as pyserial does, less the second ``select`` its
+read and write each make (host CPU per command, issue 23).
 
 If the port disappears (USB unplugged, the simulated board's pseudo-terminal
 gone) the thread closes it, tells the listener, and keeps trying to reopen it
