@@ -277,7 +277,11 @@ class Transport:
         item = _Outgoing(ptype, payload, reset_seq)
         with self._qlock:
             (self._control if ptype is PacketType.CONTROL else self._data).append(item)
-        self._wake()
+        if self._thread is not threading.current_thread():
+            # The I/O thread itself (the link's timers, an Ack that lets the next call of
+            # the window go, a monitor) needs no wake-up: every pass of its loop writes
+            # what is queued before it sleeps, and a wake-up would cost a pass of its own.
+            self._wake()
 
     def clear_queue(self) -> None:
         """Drop every queued packet (the link was reset; they are stale)."""

@@ -7,6 +7,7 @@ No clock is waited on: the layer is driven by hand, the threads only block until
 from __future__ import annotations
 
 import os
+import select
 import threading
 from collections.abc import Iterator
 
@@ -110,6 +111,16 @@ def pty() -> Iterator[tuple[int, str]]:
     os.close(master)
 
 
+def _packets(master: int, decoder: StreamDecoder) -> list[object]:
+    """The next packets the transport wrote (a bound only against a hang: 10 s)."""
+    while True:
+        ready, _, _ = select.select([master], [], [], 10)
+        assert ready, "the transport wrote nothing"
+        got: list[object] = [i for i in decoder.feed(os.read(master, 100)) if isinstance(i, Packet)]
+        if got:
+            return got
+
+
 class _Listener:
     def __init__(self) -> None:
         self.items: list[object] = []
@@ -139,10 +150,7 @@ def test_a_pty_is_read_and_written_by_its_descriptor(pty: tuple[int, str]) -> No
         assert type(transport._port) is serial.Serial
         transport.send(PacketType.COMMAND, b"\x08\x01")
         decoder = StreamDecoder()
-        got: list[object] = []
-        while not got:
-            got = [i for i in decoder.feed(os.read(master, 100)) if isinstance(i, Packet)]
-        assert got == [Packet(PacketType.COMMAND, 0, b"\x08\x01")]
+        assert _packets(master, decoder) == [Packet(PacketType.COMMAND, 0, b"\x08\x01")]
         os.write(master, frame_packet(PacketType.DATA, 7, b"\x01\x02"))
         assert listener.got.wait(10)
         assert listener.items == [Packet(PacketType.DATA, 7, b"\x01\x02")]
@@ -166,3 +174,33 @@ def test_a_pose_records_the_control_a_write_of_the_same_level_records() -> None:
     with pytest.raises(protoduino.CommandRejectedError):
         board.pose({led: 2})  # still refused on the host, as a write of 2 is
     board.close()
+
+
+class _Echo(_Listener):
+    """Answers each packet it receives, from the I/O thread (as an Ack lets the next call
+    of a window go): no wake-up is written for it, the thread's next pass sends it."""
+
+    def __init__(self, transport: Transport) -> None:
+        super().__init__()
+        self.transport = transport
+
+    def transport_received(self, items: list[object]) -> None:
+        for item in items:
+            if isinstance(item, Packet):
+                self.transport.send(PacketType.COMMAND, item.payload)
+        super().transport_received(items)
+
+
+def test_a_packet_queued_on_the_io_thread_is_written_without_a_wake_up(
+    pty: tuple[int, str],
+) -> None:
+    master, path = pty
+    transport = Transport(path)
+    transport.start(_Echo(transport))  # type: ignore[arg-type]
+    try:
+        decoder = StreamDecoder()
+        for n in range(3):
+            os.write(master, frame_packet(PacketType.DATA, n, bytes([n + 1])))
+            assert _packets(master, decoder) == [Packet(PacketType.COMMAND, n, bytes([n + 1]))]
+    finally:
+        transport.close()
