@@ -1054,6 +1054,7 @@ class Board(ClosedOnExit):
             )
         msg = ArduinoIn()
         outputs: list[PoseOutput] = []
+        pins: set[int] = set()
         records: list[tuple[int, bytes, int]] = []  # pin, its Control (for a restore), value
         for output, target in targets.items():
             if not isinstance(output, Servo | DigitalOutput | PwmOutput):
@@ -1064,7 +1065,7 @@ class Board(ClosedOnExit):
                 raise ArgumentError(f"{output!r} belongs to another board")
             item = msg.pose.items.add()
             try:
-                if output.pin in (o.pin for o in outputs):
+                if output.pin in pins:
                     raise refused(Status.STATUS_INVALID_ARGUMENT, f"pin {output.pin} twice")
                 control, width = output._pose_item(item, target)
             except CommandRejectedError as error:
@@ -1074,7 +1075,8 @@ class Board(ClosedOnExit):
             except TypeError as error:
                 raise ArgumentTypeError(f"pose: {output!r}: {error}") from None
             outputs.append(output)
-            records.append((output.pin, control.SerializeToString(), width))
+            pins.add(output.pin)
+            records.append((output.pin, control, width))
 
         def on_ok() -> None:
             for pin, control, width in records:

@@ -54,10 +54,12 @@ class Servo:
         """
         return self.board._value(self.pin, SERVO)
 
-    def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
+    def _pose_item(self, item: Any, value: object) -> tuple[bytes, int]:
+        """Fill a pose's item with ``value``; return this output's own Control (as bytes,
+        for a restore) and the value it sets."""
         msg, us = self._degrees(value)
         item.servo.CopyFrom(msg.servo_control)
-        return msg, us
+        return msg.SerializeToString(), us
 
     def to_us(self, degrees: int) -> int:
         """The pulse width the device makes for ``degrees`` (its own integer formula)."""
@@ -125,6 +127,8 @@ class DigitalOutput:
     def __init__(self, board: OutputBoard, pin: int) -> None:
         self.board = board
         self.pin = pin
+        #: Each level's Control, serialized (without a message id), once it was used.
+        self._controls: dict[int, bytes] = {}
 
     @property
     def value(self) -> bool | None:
@@ -132,10 +136,16 @@ class DigitalOutput:
         value = self.board._value(self.pin, DIGITAL)
         return None if value is None else bool(value)
 
-    def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
-        msg, level = self._level(value)  # type: ignore[arg-type]
-        item.digital.CopyFrom(msg.digital_control)
-        return msg, level
+    def _pose_item(self, item: Any, value: object) -> tuple[bytes, int]:
+        """As :meth:`Servo._pose_item`. A level has two values: each one's Control is
+        built once (a pose of digital outputs is the robot's hot call)."""
+        level = int(check_level("level", value))
+        item.digital.pin = self.pin
+        item.digital.level = bool(level)
+        control = self._controls.get(level)
+        if control is None:
+            control = self._controls[level] = self._level(bool(level))[0].SerializeToString()
+        return control, level
 
     def write(self, level: bool) -> None:
         """Drive the pin high (True or 1) or low (False or 0); any other value is refused."""
@@ -184,10 +194,11 @@ class PwmOutput:
         """The duty the device last acknowledged (the safe duty after Init, Stop, failsafe)."""
         return self.board._value(self.pin, PWM)
 
-    def _pose_item(self, item: Any, value: object) -> tuple[ArduinoIn, int]:
+    def _pose_item(self, item: Any, value: object) -> tuple[bytes, int]:
+        """As :meth:`Servo._pose_item`."""
         msg, duty = self._duty(value)
         item.pwm.CopyFrom(msg.pwm_control)
-        return msg, duty
+        return msg.SerializeToString(), duty
 
     def write(self, duty: RealNumber) -> None:
         """Set the duty, 0 (always low) .. 255 (always high); a real number is rounded

@@ -125,6 +125,40 @@ Ack = Any  # protoduino_pb2.Ack (protobuf message classes are dynamic)
 EPOCH_KINDS = ("ping", "heartbeat", "clear_interlock")
 
 
+class Done:
+    """Set once, when a call completes: what its caller waits on.
+
+    ``threading.Event``'s ``is_set``, ``set`` and ``wait``, on one lock held until
+    it is set: a call makes one per command, and an Event (a Condition, its
+    lock, a waiter lock per wait) cost more to build, wait on and set than
+    everything else its caller does. ``set`` is called once, under the
+    transaction table's lock (:meth:`Rpc._finish`); any number may wait.
+    """
+
+    __slots__ = ("_flag", "_lock")
+
+    def __init__(self) -> None:
+        self._flag = False
+        self._lock = threading.Lock()
+        self._lock.acquire()
+
+    def is_set(self) -> bool:
+        return self._flag
+
+    def set(self) -> None:
+        if not self._flag:
+            self._flag = True
+            self._lock.release()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """True once set; False if ``timeout`` seconds passed first (None: no bound)."""
+        if self._flag:
+            return True
+        if self._lock.acquire(timeout=-1 if timeout is None else max(0.0, timeout)):
+            self._lock.release()  # the next waiter passes too
+        return self._flag
+
+
 class Call:
     """One command on its way; :meth:`wait` for its Ack."""
 
@@ -181,7 +215,7 @@ class Call:
         #: The device's refusing Ack, if it refused the call (``error`` is then set).
         self.refusal: Ack | None = None
         self.error: ProtoduinoError | None = None
-        self.done = threading.Event()
+        self.done = Done()
 
     def result(self) -> Ack:
         """The Ack (status OK), or raise the call's error. Call after ``done``."""
@@ -194,12 +228,12 @@ class Call:
 MessageHook = Callable[[ArduinoOut], None]
 RestoreProvider = Callable[[], list[ArduinoIn]]
 #: How a caller waits for a call: (its done event, the bound in seconds) -> whether it was set.
-#: ``threading.Event.wait`` while an I/O thread runs the link; an in-process device runs the
+#: :meth:`Done.wait` while an I/O thread runs the link; an in-process device runs the
 #: link itself on its own clock instead (:mod:`protoduino.testing`).
-Waiter = Callable[[threading.Event, float], bool]
+Waiter = Callable[[Done, float], bool]
 
 
-def event_wait(event: threading.Event, timeout: float) -> bool:
+def event_wait(event: Done, timeout: float) -> bool:
     return event.wait(timeout)
 
 
@@ -537,15 +571,20 @@ class Rpc:
         """Complete a call (lock held); its on_done runs now, on this thread."""
         if call.done.is_set():
             return
-        self._calls.pop(call.message_id, None)
-        self._inflight.pop(call.message_id, None)
-        for queue in (self._urgent, self._pending):
-            if call in queue:
-                queue.remove(call)
-        self._finished.append(call.message_id)
-        if len(self._finished_set) >= FINISHED_MEMORY:
-            self._finished_set = set(self._finished)
-        self._finished_set.add(call.message_id)
+        mid = call.message_id
+        self._calls.pop(mid, None)
+        if self._inflight.pop(mid, None) is None:  # a call in flight is in no queue
+            for queue in (self._urgent, self._pending):
+                if call in queue:
+                    queue.remove(call)
+        finished = self._finished
+        if len(finished) == FINISHED_MEMORY:  # the oldest is forgotten as this one goes in
+            self._finished_set.discard(finished[0])
+        finished.append(mid)
+        if len(self._finished_set) >= 2 * FINISHED_MEMORY:
+            # Ids remembered elsewhere (a renumbered call's old one) without the above.
+            self._finished_set = set(finished)
+        self._finished_set.add(mid)
         call.ack, call.error = ack, error
         call.done.set()
         if call.on_done is not None:
@@ -580,33 +619,39 @@ class Rpc:
         with self._lock:
             if self._closed:
                 return now + PING_INTERVAL
-            for call in list(self._inflight.values()):
-                if now < self._attempt_due(call):
-                    continue
-                # The round is over even if this thread woke too late to send every attempt.
-                over = min(call.deadline, call.round_start + self.round_time)
-                if call.attempts > self.max_retries or now >= over:
-                    self.timeouts += 1
-                    self._finish(call, error=self._timeout_error(call))
-                else:
-                    del self._inflight[call.message_id]
-                    self._transmit(call, now)
+            # Most ticks find nothing due: the calls are walked without copies until one is.
+            if any(now >= self._attempt_due(c) for c in self._inflight.values()):
+                for call in list(self._inflight.values()):
+                    if now < self._attempt_due(call):
+                        continue
+                    # The round is over even if this thread woke too late to send every attempt.
+                    over = min(call.deadline, call.round_start + self.round_time)
+                    if call.attempts > self.max_retries or now >= over:
+                        self.timeouts += 1
+                        self._finish(call, error=self._timeout_error(call))
+                    else:
+                        del self._inflight[call.message_id]
+                        self._transmit(call, now)
             for queue in (self._urgent, self._pending):
-                for call in [c for c in queue if now >= c.deadline]:
-                    self.timeouts += 1
-                    self._finish(call, error=self._timeout_error(call))
+                if queue and any(now >= c.deadline for c in queue):
+                    for call in [c for c in queue if now >= c.deadline]:
+                        self.timeouts += 1
+                        self._finish(call, error=self._timeout_error(call))
             self._maybe_ping(now)
             self._pump(now)
             return self._next_due(now)
 
     def _next_due(self, now: float) -> float:
         """The earliest timer still pending after a tick at ``now`` (lock held)."""
-        due = [self._attempt_due(c) for c in self._inflight.values()]
-        due += [c.deadline for q in (self._urgent, self._pending) for c in q]
+        due = min(map(self._attempt_due, self._inflight.values()), default=None)
+        for queue in (self._urgent, self._pending):
+            if queue:
+                first = min(c.deadline for c in queue)
+                due = first if due is None else min(due, first)
         link = self.link
         if self._pinging and self._ping_call is None and link is not None and link.active:
-            due.append(self._next_ping)
-        return max(now, min(due, default=now + PING_INTERVAL))
+            due = self._next_ping if due is None else min(due, self._next_ping)
+        return max(now, now + PING_INTERVAL if due is None else due)
 
     def _maybe_ping(self, now: float) -> None:
         link = self.link

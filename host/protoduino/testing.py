@@ -55,7 +55,6 @@ as the I/O thread.
 from __future__ import annotations
 
 import collections
-import threading
 from typing import TYPE_CHECKING, Any
 
 from ._generated import protoduino_pb2 as pb
@@ -76,6 +75,7 @@ from .errors import ArgumentError
 from .events import EventDispatcher
 from .messages import ArduinoIn, ArduinoOut, Status
 from .packets import Packet, event_payload, parse_control, reset_ack_payload
+from .rpc import Done
 from .transport import FrameMonitor, TransportListener
 from .wiring import Wiring
 
@@ -289,11 +289,11 @@ class VirtualDevice:
         """Let ``seconds`` pass on the clock, running every timer at the time it is due."""
         self._advance(self.clock() + seconds, None)
 
-    def wait(self, event: threading.Event, timeout: float) -> bool:
+    def wait(self, event: Done, timeout: float) -> bool:
         """The board's way of waiting for a call: time passes until it is done or ``timeout``."""
         return self._advance(self.clock() + timeout, event)
 
-    def _advance(self, end: float, until: threading.Event | None) -> bool:
+    def _advance(self, end: float, until: Done | None) -> bool:
         while True:
             due = self.tick()
             if until is not None and until.is_set():

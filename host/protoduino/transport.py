@@ -13,7 +13,10 @@ late (four late retries made a 1.0 s bound 1.066 s).
 Any pyserial URL works (``/dev/ttyACM0``, ``socket://``, ``rfc2217://``,
 ``spy://``, ``loop://``). When the port has a file descriptor (serial ports,
 sockets) the thread sleeps in ``select`` on it and on a wake-up pipe, so a
-queued write leaves at once; otherwise it polls with short timeout reads.
+queued write leaves at once; otherwise it polls with short timeout reads. A
+plain POSIX port (pyserial's own class: a tty or a pty) is then read and
+written by its descriptor, as pyserial does, less the second ``select`` its
+read and write each make (host CPU per command, issue 23).
 
 If the port disappears (USB unplugged, the simulated board's pseudo-terminal
 gone) the thread closes it, tells the listener, and keeps trying to reopen it
@@ -112,6 +115,38 @@ def check_port_free(url: str, *, baudrate: int = 115200) -> None:
     open_port(url, baudrate=baudrate).close()
 
 
+#: pyserial's POSIX serial port (a tty or a pty): its read and write are os.read and os.write
+#: with a select around them, which the I/O thread, already in its own select, does itself.
+_PosixSerial: type | None
+try:
+    from serial.serialposix import Serial as _PosixSerial
+except ImportError:  # pragma: no cover - not a POSIX system
+    _PosixSerial = None
+#: Errors pyserial retries rather than raises (the descriptor is non-blocking).
+_RETRY_ERRNOS = (errno.EAGAIN, errno.EALREADY, errno.EWOULDBLOCK, errno.EINPROGRESS, errno.EINTR)
+
+
+def _read_fd(fd: int) -> bytes:
+    """One read of what a plain serial port holds, after select said it is readable.
+
+    As pyserial's read with ``timeout=0`` does, less its second select: the errors it
+    retries read as nothing, the others and an empty read (a vanished device) raise
+    SerialException.
+    """
+    try:
+        data = os.read(fd, READ_CHUNK)
+    except OSError as error:
+        if error.errno in _RETRY_ERRNOS:
+            return b""
+        raise serial.SerialException(f"read failed: {error}") from error
+    if not data:
+        raise serial.SerialException(
+            "device reports readiness to read but returned no data "
+            "(device disconnected or multiple access on port?)"
+        )
+    return data
+
+
 class TransportListener(Protocol):
     """What the link implements; every method runs on the I/O thread."""
 
@@ -163,6 +198,11 @@ class Transport:
         self.baudrate = baudrate
         self.name = name or url
         self._port: Any = None
+        #: The port's file descriptor (None: it has none, or no port is open), and whether
+        #: it is a plain POSIX serial port or pty (pyserial's own class, not a subclass),
+        #: which the I/O thread then reads and writes with os.read / os.write itself.
+        self._fd: int | None = None
+        self._raw = False
         self._listener: TransportListener | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -183,6 +223,8 @@ class Transport:
         #: When the listener's timers next need a tick (time.monotonic()): the
         #: thread never sleeps past it, so a timeout fires on time, not up to TICK late.
         self._next_tick = 0.0
+        #: Whether the last read was woken by the wake-up pipe (something was queued).
+        self._woken = False
         self.last_error: Exception | None = None
         # Counters (read without a lock: single ints written by the I/O thread).
         self.rx_bytes = 0
@@ -235,7 +277,11 @@ class Transport:
         item = _Outgoing(ptype, payload, reset_seq)
         with self._qlock:
             (self._control if ptype is PacketType.CONTROL else self._data).append(item)
-        self._wake()
+        if self._thread is not threading.current_thread():
+            # The I/O thread itself (the link's timers, an Ack that lets the next call of
+            # the window go, a monitor) needs no wake-up: every pass of its loop writes
+            # what is queued before it sleeps, and a wake-up would cost a pass of its own.
+            self._wake()
 
     def clear_queue(self) -> None:
         """Drop every queued packet (the link was reset; they are stale)."""
@@ -291,6 +337,8 @@ class Transport:
 
     def _open(self) -> None:
         self._port = open_port(self.url, baudrate=self.baudrate)
+        self._fd = self._fileno()
+        self._raw = self._fd is not None and type(self._port) is _PosixSerial
         try:
             # docs/protocol.md 2: a lone 0x00 flushes the receiver's half-filled buffer.
             self._write_raw(DELIMITER)
@@ -305,6 +353,7 @@ class Transport:
 
     def _close_port(self) -> None:
         port, self._port = self._port, None
+        self._fd, self._raw = None, False
         self.connected = False
         if port is not None:
             with contextlib.suppress(Exception):
@@ -354,6 +403,7 @@ class Transport:
                     next_reopen = time.monotonic() + REOPEN_FIRST
                     reopen_delay = REOPEN_FIRST * 2
                     continue
+                items = None
                 if data:
                     self.rx_bytes += len(data)
                     if len(self.rx_head) < RX_HEAD:
@@ -364,7 +414,12 @@ class Transport:
                         for item in items:
                             self._record("rx", item)
                         listener.transport_received(items)
-                self._next_tick = listener.transport_tick(time.monotonic())
+                now = time.monotonic()
+                # Bytes of a frame not complete yet (a slow line delivers an Ack in
+                # pieces) change nothing the timers depend on: their tick waits for the
+                # frame, a wake-up, a timeout or its due time, whichever comes first.
+                if items or not data or self._woken or now >= self._next_tick:
+                    self._next_tick = listener.transport_tick(now)
         except Exception:  # pragma: no cover - a bug above must not die silently
             log.exception("%s: I/O thread crashed", self.name)
             self.last_error = TransportError(f"{self.name}: I/O thread crashed")
@@ -393,7 +448,7 @@ class Transport:
         return min(TICK, max(0.0, self._next_tick - time.monotonic()))
 
     def _read(self) -> bytes:
-        fd = self._fileno()
+        fd = self._fd
         if fd is None:
             if not self.url.lower().startswith(REMOTE_URLS):
                 self._port.timeout = min(TICK / 2, self._sleep_limit())
@@ -410,32 +465,35 @@ class Transport:
             ready, _, _ = select.select([fd, self._wake_r], [], [], self._sleep_limit())
         except ValueError as error:  # fd closed under us
             raise OSError(str(error)) from error
-        if self._wake_r in ready:
+        self._woken = self._wake_r in ready
+        if self._woken:
             with contextlib.suppress(OSError):
                 os.read(self._wake_r, 4096)
         if fd in ready:
+            if self._raw:
+                return _read_fd(fd)
             # timeout=0: one os.read of whatever is there, never byte by byte;
             # a vanished device raises SerialException here.
             return bytes(self._port.read(READ_CHUNK))
         return b""
 
-    def _next(self) -> _Outgoing | None:
+    def _take(self) -> _Outgoing | None:
+        """The next packet to write, out of its queue (CONTROL first).
+
+        Taken before it is written: a write that times out drops it, and any other
+        failure loses the port, whose queues are then cleared (:meth:`_lost`).
+        """
         with self._qlock:
             if self._control:
-                return self._control[0]
+                return self._control.popleft()
             if self._data:
-                return self._data[0]
+                return self._data.popleft()
             return None
 
-    def _pop(self, item: _Outgoing) -> None:
-        with self._qlock:
-            for q in (self._control, self._data):
-                if q and q[0] is item:
-                    q.popleft()
-                    return
-
     def _flush_writes(self) -> None:
-        while (item := self._next()) is not None:
+        # The deques are looked at without the lock first (their length is atomic): most
+        # passes of the loop have nothing to write.
+        while (self._control or self._data) and (item := self._take()) is not None:
             seq = 0 if item.reset_seq else self._tx_seq
             frame = frame_packet(item.ptype, seq, item.payload)
             if item.reset_seq:
@@ -447,20 +505,34 @@ class Transport:
                 # its SEQ for the next one, as docs/protocol.md 6 asks.
                 self.write_errors += 1
                 log.warning("%s: write timed out; packet dropped", self.name)
-                self._pop(item)
                 return
-            self._pop(item)
             self._tx_seq = 1 if item.reset_seq else (seq + 1) & 0xFF
             self.tx_packets += 1
             self._record("tx", Packet(item.ptype, seq, item.payload))
 
     def _write_raw(self, data: bytes) -> None:
-        self._port.write(data)
+        fd = self._fd
+        if self._raw and fd is not None:
+            # What pyserial's write does first, without its select for room afterwards
+            # (one syscall, not two): the rest, if the driver took only part, goes
+            # through pyserial, which waits for room and gives up after WRITE_TIMEOUT.
+            try:
+                n = os.write(fd, data)
+            except OSError as error:
+                if error.errno not in _RETRY_ERRNOS:
+                    raise serial.SerialException(f"write failed: {error}") from error
+                n = 0
+            if n < len(data):
+                self._port.write(data[n:])
+        else:
+            self._port.write(data)
         self.tx_bytes += len(data)
 
     def _record(self, direction: str, item: Packet | BadFrame) -> None:
         rec = FrameRecord(time.monotonic(), direction, item)
         self._recent.append(rec)
+        if not self._monitors:
+            return
         for monitor in list(self._monitors):
             try:
                 monitor(rec)

@@ -1,0 +1,206 @@
+"""The request layer's cheaper hot path keeps its rules: a call's completion (Done), the
+memory of finished ids (late against unknown Acks), and the transport's raw POSIX I/O.
+
+No clock is waited on: the layer is driven by hand, the threads only block until set.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import threading
+from collections.abc import Iterator
+
+import protoduino
+import pytest
+import serial
+from protoduino.constants import PacketType
+from protoduino.errors import ProtoduinoError
+from protoduino.framing import StreamDecoder, frame_packet
+from protoduino.messages import ArduinoIn, ArduinoOut
+from protoduino.packets import Packet
+from protoduino.rpc import FINISHED_MEMORY, Done, Rpc
+from protoduino.transport import Transport
+
+
+def test_done_is_set_once_and_releases_every_waiter() -> None:
+    done = Done()
+    assert not done.is_set()
+    assert done.wait(0) is False  # not set: a zero bound returns at once
+    woke: list[bool] = []
+    waiters = [threading.Thread(target=lambda: woke.append(done.wait())) for _ in range(3)]
+    for t in waiters:
+        t.start()
+    done.set()
+    done.set()  # a second set changes nothing (and does not raise)
+    for t in waiters:
+        t.join(10)
+        assert not t.is_alive()
+    assert woke == [True, True, True]
+    assert done.is_set() and done.wait(0) and done.wait(None)
+
+
+class _Link:
+    """What Rpc needs of its link: every command is taken and kept."""
+
+    down_error: ProtoduinoError | None = None
+    active = True
+
+    def __init__(self) -> None:
+        self.sent: list[bytes] = []
+
+    def send_command(self, payload: bytes) -> bool:
+        self.sent.append(payload)
+        return True
+
+    def reboot_inferred(self) -> None:
+        pass
+
+    def recent_frames(self) -> tuple[str, ...]:
+        return ()
+
+
+def _ack(message_id: int) -> ArduinoOut:
+    out = ArduinoOut()
+    out.ack.message_id = message_id
+    return out
+
+
+def _ping() -> ArduinoIn:
+    msg = ArduinoIn()
+    msg.ping.SetInParent()
+    return msg
+
+
+def test_finished_ids_are_remembered_up_to_the_memory_and_no_further() -> None:
+    rpc = Rpc(notify=lambda event: None, ping=False, first_id=1, window=1)
+    rpc.attach(_Link())
+    calls = []
+    for _ in range(FINISHED_MEMORY + 10):
+        call = rpc.submit(_ping())
+        rpc.link_message(_ack(call.message_id))
+        assert call.done.is_set() and call.error is None
+        calls.append(call)
+    assert rpc.acks == FINISHED_MEMORY + 10
+    rpc.link_message(_ack(calls[-1].message_id))  # the newest: late
+    rpc.link_message(_ack(calls[-FINISHED_MEMORY].message_id))  # the oldest remembered: late
+    assert (rpc.late_acks, rpc.unknown_acks) == (2, 0)
+    rpc.link_message(_ack(calls[-FINISHED_MEMORY - 1].message_id))  # forgotten: unknown
+    rpc.link_message(_ack(calls[0].message_id))
+    assert (rpc.late_acks, rpc.unknown_acks) == (2, 2)
+    assert rpc.state().open_calls == ()
+
+
+def test_a_queued_call_that_fails_leaves_its_queue() -> None:
+    rpc = Rpc(notify=lambda event: None, ping=False, first_id=1, window=1)
+    link = _Link()
+    rpc.attach(link)
+    first, second = rpc.submit(_ping()), rpc.submit(_ping())
+    assert len(link.sent) == 1 and rpc.state().pending == 1  # the window holds the second
+    rpc.close()
+    assert first.error is not None and second.error is not None
+    assert rpc.state().pending == 0 and rpc.state().inflight == ()
+
+
+@pytest.fixture
+def pty() -> Iterator[tuple[int, str]]:
+    master, slave = os.openpty()
+    path = os.ttyname(slave)
+    os.close(slave)
+    yield master, path
+    os.close(master)
+
+
+def _packets(master: int, decoder: StreamDecoder) -> list[object]:
+    """The next packets the transport wrote (a bound only against a hang: 10 s)."""
+    while True:
+        ready, _, _ = select.select([master], [], [], 10)
+        assert ready, "the transport wrote nothing"
+        got: list[object] = [i for i in decoder.feed(os.read(master, 100)) if isinstance(i, Packet)]
+        if got:
+            return got
+
+
+class _Listener:
+    def __init__(self) -> None:
+        self.items: list[object] = []
+        self.got = threading.Event()
+
+    def transport_opened(self, reopened: bool) -> None:
+        pass
+
+    def transport_lost(self, error: Exception) -> None:
+        pass
+
+    def transport_received(self, items: list[object]) -> None:
+        self.items.extend(items)
+        self.got.set()
+
+    def transport_tick(self, now: float) -> float:
+        return now + 1.0
+
+
+def test_a_pty_is_read_and_written_by_its_descriptor(pty: tuple[int, str]) -> None:
+    master, path = pty
+    transport = Transport(path)
+    listener = _Listener()
+    transport.start(listener)  # type: ignore[arg-type]
+    try:
+        assert transport._raw and transport._fd is not None  # pyserial's own POSIX class
+        assert type(transport._port) is serial.Serial
+        transport.send(PacketType.COMMAND, b"\x08\x01")
+        decoder = StreamDecoder()
+        assert _packets(master, decoder) == [Packet(PacketType.COMMAND, 0, b"\x08\x01")]
+        os.write(master, frame_packet(PacketType.DATA, 7, b"\x01\x02"))
+        assert listener.got.wait(10)
+        assert listener.items == [Packet(PacketType.DATA, 7, b"\x01\x02")]
+    finally:
+        transport.close()
+
+
+def test_a_pose_records_the_control_a_write_of_the_same_level_records() -> None:
+    from protoduino.testing import VirtualDevice
+
+    board = VirtualDevice().open_board(ping=False)
+    led, other = board.digital_output(13), board.digital_output(12)
+    levels: tuple[bool | int, ...] = (True, False, 1, 0, True)
+    for level in levels:
+        board.pose({led: level, other: not level})
+        posed = (board._outputs[13].last, board._outputs[12].last)
+        led.write(level)  # type: ignore[arg-type]  # 1 and 0 are levels too
+        other.write(not level)
+        assert posed == (board._outputs[13].last, board._outputs[12].last)
+        assert led.value is bool(level) and other.value is (not level)
+    with pytest.raises(protoduino.CommandRejectedError):
+        board.pose({led: 2})  # still refused on the host, as a write of 2 is
+    board.close()
+
+
+class _Echo(_Listener):
+    """Answers each packet it receives, from the I/O thread (as an Ack lets the next call
+    of a window go): no wake-up is written for it, the thread's next pass sends it."""
+
+    def __init__(self, transport: Transport) -> None:
+        super().__init__()
+        self.transport = transport
+
+    def transport_received(self, items: list[object]) -> None:
+        for item in items:
+            if isinstance(item, Packet):
+                self.transport.send(PacketType.COMMAND, item.payload)
+        super().transport_received(items)
+
+
+def test_a_packet_queued_on_the_io_thread_is_written_without_a_wake_up(
+    pty: tuple[int, str],
+) -> None:
+    master, path = pty
+    transport = Transport(path)
+    transport.start(_Echo(transport))  # type: ignore[arg-type]
+    try:
+        decoder = StreamDecoder()
+        for n in range(3):
+            os.write(master, frame_packet(PacketType.DATA, n, bytes([n + 1])))
+            assert _packets(master, decoder) == [Packet(PacketType.COMMAND, n, bytes([n + 1]))]
+    finally:
+        transport.close()
