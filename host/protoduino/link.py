@@ -188,8 +188,14 @@ class Link:
         clock: Clock = time.monotonic,
         session: int | None = None,
         baudrate: int | None = None,
+        next_id: Callable[[], int] | None = None,
     ) -> None:
         self.transport = transport
+        #: The message id the request layer transmits next, which every RESET carries
+        #: (NEXT_ID, protocol.md section 5); a hook, so the link imports nothing above it.
+        self._next_id: Callable[[], int] = next_id if next_id is not None else lambda: 1
+        #: Set (from any thread) when the request layer asks for a re-handshake.
+        self._handshake_wanted = False
         #: Every timestamp of the link's own comes from this clock (the I/O thread's ticks
         #: pass their ``now`` from the same one).
         self._clock = clock
@@ -314,6 +320,11 @@ class Link:
         """The SEQ the link expects on the device's next packet (docs/protocol.md 6)."""
         return self._rx_expected
 
+    def request_handshake(self) -> None:
+        """Handshake again, resuming the session, at the I/O thread's next tick (the
+        request layer's ids: rpc.py's module docstring)."""
+        self._handshake_wanted = True
+
     def send_command(self, payload: bytes) -> bool:
         """Queue one COMMAND; False (nothing queued) unless the link is ACTIVE."""
         if self.state is not LinkState.ACTIVE:
@@ -379,6 +390,10 @@ class Link:
             self.watchdog_resets += 1
             self._restart("watchdog", now)
         due = self._listener.link_tick(now)
+        if self._handshake_wanted:
+            self._handshake_wanted = False
+            if self.state is LinkState.ACTIVE:
+                self._restart("message ids", now)
         if self.state is LinkState.WAIT_ACK and self.transport.connected:
             due = min(due, self._baud_due if self._baud_phase is not None else self._hs_next)
             if not self._hs_reported:
@@ -444,7 +459,9 @@ class Link:
         if self.transport.baudrate != rate:
             self.transport.set_baudrate(rate)
         self.transport.send(
-            PacketType.CONTROL, reset_payload(self.version, self.session), reset_seq=True
+            PacketType.CONTROL,
+            reset_payload(self.version, self.session, self._next_id()),
+            reset_seq=True,
         )
         self._hs_next = now + self._hs_delay
         self._hs_delay = min(self._hs_delay * 2, RESET_MAX_RETRY)

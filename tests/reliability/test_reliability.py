@@ -53,7 +53,7 @@ class Executions:
         self.arrivals[mid] += 1
         self.order.append(mid)
         kind = msg.WhichOneof("data")
-        if kind not in ("ping", "get_info") and mid not in self.fake.dedupe:
+        if kind not in ("ping", "get_info") and not self.fake.dedupe.holds(mid):
             if self.count[mid]:
                 self.evicted_retransmissions.append(mid)
             self.count[mid] += 1
