@@ -415,6 +415,10 @@ class Wire:
         self._newest = 0
         self._keys = 0
 
+    def sent_of(self, mid: int) -> _Sent:
+        """The call that last went out under the id ``mid``."""
+        return self.sent[self._key_of[mid]]
+
     def key(self, mid: int) -> int:
         """The key of the id ``mid`` just transmitted (a new one if it is a new id)."""
         key = self._key_of.get(mid)

@@ -8,7 +8,9 @@ but new firmware); CLOSED.
   at 1 s) until a RESET_ACK arrives. The first handshake fails after
   ``handshake_timeout`` with :class:`HandshakeError`; a later one (after a
   reboot or a lost port) reports the failure as an event and keeps trying.
-* Every RESET carries this host's session id; the device's RESET_ACK carries
+* Every RESET carries this host's session id and the message id the request
+  layer transmits next (NEXT_ID, asked of the ``next_id`` hook the layer above
+  hands in: the link imports nothing above it); the device's RESET_ACK carries
   its boot id (new at every power-up) and whether it resumed the session
   (kept its outputs). That answer alone says what happened while the link was
   down: the same boot id and "resumed" is a reconnect (nothing to redo); a new
@@ -19,7 +21,9 @@ but new firmware); CLOSED.
   device just cleared its link state: the next expected SEQ is 1.
 * EVENT BOOT or NOT_ACTIVE while ACTIVE, a reopened port, a SEQ jump of more
   than SEQ_DESYNC_THRESHOLD, or nothing valid received for WATCHDOG_TIMEOUT
-  while traffic is expected: handshake again (the RESET_ACK then tells).
+  while traffic is expected, or the request layer asking for it
+  (:meth:`request_handshake`: its ids would run 64 ahead of the device's newest):
+  handshake again (the RESET_ACK then tells).
 * The line rate (docs/protocol.md 5, *Line rate*), unless the board pinned one:
   after a RESET_ACK at the opening rate that offers faster rates, BAUD_SET of the
   fastest not yet failed, at the opening rate; on its BAUD_ACK the port switches

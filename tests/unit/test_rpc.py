@@ -179,7 +179,7 @@ def test_bytes_in_flight_stay_within_the_devices_receive_buffer(fake: FakeDevice
     """Flow control by bytes: at window 16, only as many frames fly as fit DeviceInfo.rx_buffer."""
     payload = bytes(10)
     longest = ping_msg(payload)
-    longest.message_id = 0xFFFFFFFF  # a 5-byte varint, the longest id
+    longest.message_id = 127  # every id is one varint byte (protocol version 5)
     size = frame_size(len(longest.SerializeToString()))
     fake.rx_buffer = 3 * size + 1  # room for three frames, not four
     held: list[Any] = []
