@@ -251,7 +251,7 @@ typedef struct _protoduino_UserCall {
 } protoduino_UserCall;
 
 typedef struct _protoduino_ArduinoIn {
-    uint32_t message_id; /* non-zero; reused by retransmissions */
+    uint32_t message_id; /* 1..127, per session (protocol version 5); reused by retransmissions */
     pb_size_t which_data;
     union {
         /* Numbered by how often they go (protocol version 4): the calls of a running robot

@@ -829,7 +829,7 @@ class ArduinoIn(_message.Message):
     COUNTER_INIT_FIELD_NUMBER: _builtins.int
     CLEAR_INTERLOCK_FIELD_NUMBER: _builtins.int
     message_id: _builtins.int
-    """non-zero; reused by retransmissions"""
+    """1..127, per session (protocol version 5); reused by retransmissions"""
     @_builtins.property
     def ping(self) -> Global___Ping:
         """Numbered by how often they go (protocol version 4): the calls of a running robot
