@@ -31,6 +31,7 @@ from protoduino._generated import protoduino_pb2 as pb  # noqa: E402
 from protoduino.constants import PacketType  # noqa: E402
 from protoduino.errors import CommandRejectedError  # noqa: E402
 from protoduino.framing import PyStreamDecoder, StreamDecoder  # noqa: E402
+from protoduino.messages import parse_out  # noqa: E402
 from protoduino.packets import Packet  # noqa: E402
 
 from bench import boards, firmware, receive, roundtrip, runner, throughput, wire  # noqa: E402
@@ -178,7 +179,8 @@ def test_protoduino_wire_sample_decodes() -> None:
     assert command[0].type is PacketType.COMMAND and ack[0].type is PacketType.DATA
     msg = pb.ArduinoIn.FromString(command[0].payload)
     assert (msg.servo_control.pin, msg.servo_control.degrees) == (9, 90)
-    reply = pb.ArduinoOut.FromString(ack[0].payload)
+    assert ack[0].payload[0] == 0x38  # the short Ack (ArduinoOut.ack_ok, protocol version 5)
+    reply = parse_out(ack[0].payload)
     assert reply.ack.message_id == msg.message_id
     assert reply.ack.status == pb.STATUS_OK
 
