@@ -34,10 +34,10 @@ from typing import Any, Protocol, TypeVar
 import serial
 from protoduino import Board
 from protoduino.closing import ClosedOnExit
-from protoduino.constants import PROTOCOL_VERSION, ControlCode, PacketType
+from protoduino.constants import MAX_MESSAGE_ID, PROTOCOL_VERSION, ControlCode, PacketType
 from protoduino.errors import ProtoduinoError
 from protoduino.framing import DELIMITER, StreamDecoder, frame_packet
-from protoduino.messages import ArduinoIn, ArduinoOut
+from protoduino.messages import ArduinoIn, parse_out
 from protoduino.packets import Packet, parse_control, reset_payload
 from protoduino.simboard import BACKENDS as BACKEND_TABLE
 from protoduino.simboard import Backend, SimBoard
@@ -345,7 +345,7 @@ class RawClient(ClosedOnExit):
         self._fd: int = self._serial.fileno()
         self._decoder = StreamDecoder()
         self._seq = 1
-        self._next_id = 0x9E3779B9  # a 5-byte varint, as the Board's random ids mostly are
+        self._next_id = 1  # as a Board's session: 1..127, wrapping (protocol version 5)
         try:
             self._handshake()
         except BaseException:
@@ -381,7 +381,7 @@ class RawClient(ClosedOnExit):
     def call(self, msg: ArduinoIn) -> float:
         """Send ``msg`` with the next id; return the seconds until its Ack was decoded."""
         mid = self._next_id
-        self._next_id += 1
+        self._next_id = mid % MAX_MESSAGE_ID + 1
         msg.message_id = mid
         frame = frame_packet(PacketType.COMMAND, self._seq, msg.SerializeToString())
         self._seq = (self._seq + 1) & 0xFF
@@ -389,7 +389,7 @@ class RawClient(ClosedOnExit):
         def is_ack(p: Packet) -> bool:
             if p.type is not PacketType.DATA:
                 return False
-            out = ArduinoOut.FromString(p.payload)
+            out = parse_out(p.payload)  # the short Ack too
             return out.WhichOneof("data") == "ack" and out.ack.message_id == mid
 
         start = time.perf_counter()

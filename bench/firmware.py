@@ -280,7 +280,7 @@ class CycleRun:
 
 
 def servo_payload_bytes() -> int:
-    """The ArduinoIn payload of the benchmarks' servo write (5-byte message id)."""
+    """The ArduinoIn payload of the benchmarks' servo write (1-byte message id)."""
     _init, command, _ack = protoduino_peer.servo_messages(protoduino_peer.FIRST_MESSAGE_ID)
     return len(command.SerializeToString())
 

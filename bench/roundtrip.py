@@ -9,7 +9,7 @@ the real firmware on simavr, its UART at 115200 baud, paced to real time).
 
 The lower bound is the time the command's and the Ack's bytes take on a 115200-baud 8N1 line
 (10 bits a byte), for the frames :mod:`bench.peers.protoduino` builds with the project's encoders
-(a 5-byte message id, as the Board's random ids mostly are).
+(a 1-byte message id and the short Ack, as protocol version 5's are).
 
 To say where the time goes, the same board is also driven by :class:`bench.boards.RawClient`
 (pyserial and the framing only, no I/O thread): the difference is the host library's share. On
@@ -135,8 +135,8 @@ class BoardRun:
     idle_share: float | None = None
     #: avr only: emulated time over wall time across the timed library blocks.
     pace: float | None = None
-    #: kind -> (command bytes, Ack bytes) per call as the Board sent and received them: its
-    #: message ids start at random, and one in 16 starts is a 4-byte varint, not 5.
+    #: kind -> (command bytes, Ack bytes) per call as the Board sent and received them (its
+    #: message ids are one varint byte since protocol version 5).
     wire_bytes: dict[str, tuple[float, float]] = field(default_factory=dict)
     #: avr only: 1-byte echo round trips through the runner's test program (no firmware).
     echo: list[float] = field(default_factory=list)
@@ -490,9 +490,9 @@ def run(ctx: Context) -> SectionResult:
         "the emulated Uno's timers and the emulator's loop (a core that idled that long also "
         "takes its time to wake, as an application's would); "
         f"percentiles by nearest rank. The wire time is the lower bound: the command's and the "
-        "Ack's bytes counted as the Board sent and received them (its message ids start at "
-        "random: 15 starts in 16 are 5-byte varints, the others make frames a byte shorter "
-        "each way), on the emulated Uno at its own line's byte time: simavr 1.6 times every "
+        "Ack's bytes counted as the Board sent and received them (message ids 1..127, one "
+        "varint byte, and the short Ack, protocol version 5), on the emulated Uno at its "
+        "own line's byte time: simavr 1.6 times every "
         f"byte as 11 bits at the 117,647 baud the firmware's UBRR sets, {EMULATED_BYTE_US:.1f} "
         f"us a byte (a real line at {BAUD} baud, 8N1, takes 86.8 us). The simulated board has "
         "no baud rate (a pty at memory speed), so its wire time, at 8N1, is only for scale. "

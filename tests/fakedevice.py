@@ -18,7 +18,6 @@ value; ``set_level``, ``set_analog`` and ``pulses`` change an input and report i
 
 from __future__ import annotations
 
-import collections
 import contextlib
 import os
 import select
@@ -33,15 +32,16 @@ from typing import Any
 from protoduino._generated.schema_id import SCHEMA_ID
 from protoduino.commands import PIN_MODES, command
 from protoduino.constants import (
-    DEDUPE_WINDOW,
+    MAX_MESSAGE_ID,
     PROTOCOL_VERSION,
     ControlCode,
     EventCode,
     PacketType,
 )
 from protoduino.framing import StreamDecoder, frame_packet
-from protoduino.messages import ArduinoIn, ArduinoOut, Status
+from protoduino.messages import ArduinoIn, ArduinoOut, Status, serialize_out
 from protoduino.packets import Packet, event_payload, parse_control, reset_ack_payload
+from protoduino.testing import DedupeWindow
 
 Reply = list[Any]
 
@@ -122,7 +122,8 @@ class FakeDevice:
         self._active = False
         self._tx_seq = 0
         self._decoder = StreamDecoder()
-        self.dedupe: collections.OrderedDict[int, int] = collections.OrderedDict()
+        #: The dedupe window and newest id, with the firmware's rules.
+        self.dedupe = DedupeWindow()
         #: pin -> "servo" | "digital"; forgotten on reboot, like a real device.
         self.pins: dict[int, str] = {}
         self.values: dict[int, int] = {}
@@ -188,7 +189,7 @@ class FakeDevice:
             self._active = False
             self._tx_seq = 0
             self._decoder.reset()
-            self.dedupe.clear()
+            self.dedupe = DedupeWindow()
             self.pins.clear()
             self.values.clear()
             self.session = 0
@@ -210,7 +211,7 @@ class FakeDevice:
     def send_burst(self, msgs: list[Any], timeout: float = 10.0) -> None:
         """Send DATA messages back to back, every byte (send_raw drops what a full pty refuses)."""
         data = b"".join(
-            frame_packet(PacketType.DATA, self.next_seq(), m.SerializeToString()) for m in msgs
+            frame_packet(PacketType.DATA, self.next_seq(), serialize_out(m)) for m in msgs
         )
         view = memoryview(data)
         deadline = time.monotonic() + timeout
@@ -228,7 +229,7 @@ class FakeDevice:
         self.send_raw(frame_packet(PacketType.CONTROL, self.next_seq(seq), payload))
 
     def send_data(self, msg: Any, *, delay: float = 0.0, seq: int | None = None) -> None:
-        payload = msg.SerializeToString()
+        payload = serialize_out(msg)  # a plain Ack in its short form, as the device sends it
         self.send_raw(frame_packet(PacketType.DATA, self.next_seq(seq), payload), delay)
 
     def next_seq(self, seq: int | None = None) -> int:
@@ -255,7 +256,7 @@ class FakeDevice:
         with self._cond:
             self.pins.clear()
             self.values.clear()
-            self.dedupe.clear()
+            self.dedupe = DedupeWindow()
 
     # --- observing ------------------------------------------------------------------
 
@@ -280,8 +281,11 @@ class FakeDevice:
         mid = msg.message_id
         kind = msg.WhichOneof("data")
         declared = command(kind)
-        if mid in self.dedupe and not declared.idempotent:
-            return [ack(mid, self.dedupe[mid])]
+        if not 1 <= mid <= MAX_MESSAGE_ID:
+            return [ack(mid, Status.STATUS_INVALID_ARGUMENT)]
+        seen = self.dedupe.check(mid, lookup=not declared.idempotent)
+        if seen is not None:
+            return [ack(mid, seen)]
         out = ack(mid)
         if kind == "ping":
             out.ack.ping_echo = msg.ping.payload
@@ -305,7 +309,7 @@ class FakeDevice:
             pin = getattr(msg, kind).pin
             self.pins[pin] = declared.pin_mode.name
             if declared.pin_mode.is_input:  # its value follows the Ack, as on the device
-                self.dedupe[mid] = out.ack.status
+                self.dedupe.add(mid, out.ack.status)
                 return [out, self.report(**{self._report_kind(pin): [pin]})]
         elif declared.is_control:
             assert declared.pin_mode is not None
@@ -333,9 +337,8 @@ class FakeDevice:
             else:
                 for mode, ctl in items:
                     self._apply(f"{mode}_control", ctl)
-        self.dedupe[mid] = out.ack.status
-        while len(self.dedupe) > DEDUPE_WINDOW:
-            self.dedupe.popitem(last=False)
+        if not declared.idempotent:
+            self.dedupe.add(mid, out.ack.status)
         return [out]
 
     # --- inputs ----------------------------------------------------------------------
@@ -425,7 +428,12 @@ class FakeDevice:
                     self._cond.notify_all()
                 if not self.answer_reset:
                     return
-                if self.version < 2 or ctl.version != self.version or ctl.session is None:
+                if (
+                    self.version < 2
+                    or ctl.version != self.version
+                    or ctl.session is None
+                    or (self.version >= 5 and not 1 <= (ctl.next_id or 0) <= MAX_MESSAGE_ID)
+                ):
                     # Version 1, or a RESET of another version: the short answer, IDLE.
                     with self._cond:
                         self._active = self.version < 2 and ctl.version == self.version
@@ -440,6 +448,8 @@ class FakeDevice:
                         self.session = ctl.session
                         self.pins.clear()
                         self.values.clear()
+                    if ctl.next_id is not None:
+                        self.dedupe.sync(ctl.next_id, clear=not resumed)
                 self.send_control(
                     reset_ack_payload(self.version, self.schema_id, self.boot_id, resumed)
                 )

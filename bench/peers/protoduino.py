@@ -12,17 +12,17 @@ from typing import Protocol
 
 from protoduino import framing
 from protoduino._generated import protoduino_pb2 as pb
-from protoduino.constants import ControlCode, EventCode, PacketType
+from protoduino.constants import MAX_MESSAGE_ID, ControlCode, EventCode, PacketType
 from protoduino.errors import ProtocolError
 from protoduino.framing import COBS_NATIVE, PyStreamDecoder, frame_packet
-from protoduino.messages import parse_out
+from protoduino.messages import parse_out, serialize_out
 from protoduino.packets import BadFrame, Packet, event_payload, parse_control
 
 from . import RxCase, Slot, WireSample, chunked
 
-#: A message id as the host's random start gives it: uniform 32-bit ids are 4 or 5 varint bytes
-#: (5 for 15 in 16 of them), so the typical wire size is the 5-byte case.
-FIRST_MESSAGE_ID = 0x9E3779B9
+#: A session's first message id: since protocol version 5 ids are 1..127 per session, one
+#: varint byte (until version 4 a random 32-bit start made them 5 bytes in 15 cases of 16).
+FIRST_MESSAGE_ID = 1
 
 #: What a busy link's device-to-host traffic is made of, by weight: one Ack per command or Ping
 #: (some with a non-OK status, Pings echoing 8 bytes), the inputs' reports, the occasional
@@ -165,7 +165,7 @@ def mixed_stream(frames: int, seed: int) -> tuple[bytes, list[int]]:
         if kind.startswith("Ack"):
             msg.ack.message_id = next_id
             ids.append(next_id)
-            next_id = (next_id + 1) & 0xFFFFFFFF or 1
+            next_id = next_id % MAX_MESSAGE_ID + 1
             if kind == "Ack with a non-OK status":
                 msg.ack.status = pb.STATUS_OUT_OF_RANGE
             elif kind == "Ack echoing an 8-byte Ping":
@@ -176,7 +176,8 @@ def mixed_stream(frames: int, seed: int) -> tuple[bytes, list[int]]:
         else:
             msg.input_report.digital_pins = 1 << 7
             msg.input_report.digital_levels = rng.getrandbits(1) << 7
-        out.append(frame_packet(PacketType.DATA, seq, msg.SerializeToString()))
+        # An Ack with only its id and STATUS_OK goes short (ack_ok), as the firmware sends it.
+        out.append(frame_packet(PacketType.DATA, seq, serialize_out(msg)))
     return b"".join(out), ids
 
 
@@ -296,13 +297,12 @@ def _frames(message_id: int) -> tuple[bytes, bytes, bytes]:
     return (
         frame_packet(PacketType.COMMAND, 1, init.SerializeToString()),
         frame_packet(PacketType.COMMAND, 2, command.SerializeToString()),
-        frame_packet(PacketType.DATA, 1, ack.SerializeToString()),
+        frame_packet(PacketType.DATA, 1, serialize_out(ack)),  # the short Ack
     )
 
 
 def wire_sample() -> WireSample:
     setup, command, ack = _frames(FIRST_MESSAGE_ID)
-    _s, small_command, small_ack = _frames(1)
     return WireSample(
         library="protoduino",
         package="protoduino",
@@ -312,11 +312,10 @@ def wire_sample() -> WireSample:
         command=command,
         command_what="COMMAND ServoControl{pin 9, degrees 90}",
         ack=ack,
-        ack_what="DATA Ack{message_id, STATUS_OK}",
+        ack_what="DATA ack_ok{message_id} (the short Ack: STATUS_OK, nothing else)",
         check="CRC-16/CCITT-FALSE",
         notes=(
-            f"message_id 0x{FIRST_MESSAGE_ID:08X} (a typical random start, a 5-byte varint); "
-            f"with an id below 128 the command is {len(small_command)} B and the Ack "
-            f"{len(small_ack)} B"
+            "message ids 1..127 per session, one varint byte (protocol version 5); an Ack "
+            "with only its id and STATUS_OK goes in its short form"
         ),
     )

@@ -56,6 +56,7 @@ from protoduino.constants import (
     ACK_TIMEOUT,
     FAILSAFE_TIMEOUT,
     HANDSHAKE_TIMEOUT,
+    MAX_MESSAGE_ID,
     MAX_RETRIES,
     WATCHDOG_TIMEOUT,
     PacketType,
@@ -63,7 +64,7 @@ from protoduino.constants import (
 from protoduino.errors import AckTimeoutError, CommandRejectedError, ProtocolError, ProtoduinoError
 from protoduino.events import Event, EventKind
 from protoduino.framing import decode_frame
-from protoduino.messages import ArduinoIn, ArduinoOut, parse_in, status_name
+from protoduino.messages import ArduinoIn, parse_in, parse_out, status_name
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
 from protoduino.transport import FrameRecord
@@ -275,6 +276,8 @@ class CallRecord:
 class _Sent:
     """One message id as seen on the wire."""
 
+    #: A key of its own: the session's count of ids given before it, plus one (ids wrap
+    #: every 127 since protocol version 5; this does not). ``wire_id`` is the id itself.
     message_id: int
     kind: str
     pin: int | None
@@ -282,6 +285,7 @@ class _Sent:
     txs: list[float] = field(default_factory=list)
     ack: float | None = None
     status: int | None = None
+    wire_id: int = 0
 
 
 @dataclass(frozen=True)
@@ -405,6 +409,24 @@ class Wire:
         self.order: list[int] = []  # ids in order of first transmission
         self.ping_txs: list[float] = []
         self.bad: Counter[str] = Counter()
+        #: Unwrapping the ids as the device tells them apart (protocol.md section 7, *Message
+        #: ids*): an id 1..63 ahead of the newest new one is new, any other one a repeat.
+        self._key_of: dict[int, int] = {}
+        self._newest = 0
+        self._keys = 0
+
+    def sent_of(self, mid: int) -> _Sent:
+        """The call that last went out under the id ``mid``."""
+        return self.sent[self._key_of[mid]]
+
+    def key(self, mid: int) -> int:
+        """The key of the id ``mid`` just transmitted (a new one if it is a new id)."""
+        key = self._key_of.get(mid)
+        if key is None or (self._newest and 1 <= (mid - self._newest) % MAX_MESSAGE_ID <= 63):
+            self._keys += 1
+            key = self._key_of[mid] = self._keys
+            self._newest = mid
+        return key
 
     def __call__(self, record: FrameRecord) -> None:
         item = record.item
@@ -414,10 +436,9 @@ class Wire:
             if record.direction == "tx" and item.type is PacketType.COMMAND:
                 self.command(record.t, item.payload)
             elif record.direction == "rx" and item.type is PacketType.DATA:
-                out = ArduinoOut()
-                out.ParseFromString(item.payload)
+                out = parse_out(item.payload)  # the short Ack as the Ack it stands for
                 if out.WhichOneof("data") == "ack":
-                    sent = self.sent.get(out.ack.message_id)
+                    sent = self.sent.get(self._key_of.get(out.ack.message_id, 0))
                     if sent is not None and sent.ack is None:
                         sent.ack, sent.status = record.t, int(out.ack.status)
         except Exception as error:  # a monitor must never take the I/O thread down
@@ -427,7 +448,7 @@ class Wire:
         """Record one COMMAND written at ``t`` (the monitor's path; a made-up run's too)."""
         msg = ArduinoIn()
         msg.ParseFromString(payload)
-        mid = msg.message_id
+        mid = self.key(msg.message_id)
         sent = self.sent.get(mid)
         if sent is None:
             kind = msg.WhichOneof("data") or "empty"
@@ -450,7 +471,7 @@ class Wire:
                 )
             elif kind == "digital_init":
                 pin, value = msg.digital_init.pin, int(msg.digital_init.safe_level)
-            sent = _Sent(mid, kind, pin, value)
+            sent = _Sent(mid, kind, pin, value, wire_id=msg.message_id)
             self.sent[mid] = sent
             self.order.append(mid)
         sent.txs.append(t)
@@ -468,6 +489,13 @@ def _write_times(writes: Iterable[tuple[float, bytes]]) -> dict[int, list[float]
                 with contextlib.suppress(ProtocolError):
                     out.setdefault(parse_in(item.payload).message_id, []).append(t)
     return out
+
+
+def _writes_of(wire: Wire, sent: _Sent) -> list[float]:
+    """When ``sent``'s frames were handed to the line: its id's writes while it was open
+    (ids wrap, so the same id's writes for other calls are left out)."""
+    end = sent.ack if sent.ack is not None else float("inf")
+    return [t for t in wire.writes.get(sent.wire_id, []) if sent.txs[0] - 0.05 <= t <= end]
 
 
 def _deg_to_us(degrees: int, lo: int = SERVO_MIN_US, hi: int = SERVO_MAX_US) -> int:
@@ -1168,7 +1196,7 @@ def _offset_bounds(
             None,
         )
         if sent is not None and len(sent.txs) == 1 and sent.ack is not None:
-            start = max([start, *wire.writes.get(sent.message_id, [])])
+            start = max([start, *_writes_of(wire, sent)])
             end = sent.ack
         # Its line is the last such one: an earlier write may have set the same level.
         line = max(
@@ -1205,7 +1233,7 @@ def _judge_failsafe(
         None,
     )
     if ping is not None and len(ping.txs) == 1 and ping.ack is not None:
-        rx_lo = max([rx_lo, *wire.writes.get(ping.message_id, [])])  # handed to the line
+        rx_lo = max([rx_lo, *_writes_of(wire, ping)])  # handed to the line
         rx_hi = ping.ack  # and answered
     later = [s for s in wire.sent.values() if s.kind == "ping" and s.txs[-1] > rx_hi]
     if later:

@@ -9,15 +9,16 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-/* UART receive ring: 4 ms of line time at 115200 baud, three servo commands
+/* UART receive ring: 8 ms of line time at 115200 baud, five servo commands
  * in flight (DeviceInfo.rx_buffer: the host keeps its frames in flight within
  * it, and a single frame of any length still streams through, the core taking
- * its bytes as they come). 48 rather than 128: the 80 B went to the pin modes
- * within the RAM budget (firmware/README.md). The one place its size is set:
+ * its bytes as they come). 96 rather than 128: the pin modes took the rest of
+ * the RAM budget; the 48 B that protocol version 5's one-byte message ids freed
+ * in the dedupe window came here (firmware/README.md). The one place its size is set:
  * at PD_AVR_RX_FAST_1M (96) or more the board also offers 1,000,000 baud
  * (pd_avr_main.c). */
 #ifndef PD_AVR_RX_SIZE
-#define PD_AVR_RX_SIZE 48u
+#define PD_AVR_RX_SIZE 96u
 #endif
 /* UART transmit ring: the most one received frame can make the device send
  * (PD_TX_RESERVE: pd_avr_uart.c checks it fits); a report goes only into an empty

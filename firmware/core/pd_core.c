@@ -98,7 +98,8 @@ bool pd_core_rx_byte(pd_core_t *core, uint8_t byte)
     } else if (event == PD_LINK_HELD) {
         return false;
     } else if (event == PD_LINK_RESET) {
-        bool resumed = pd_core_open_session(core, pd_link_session(&core->link));
+        bool resumed = pd_core_open_session(core, pd_link_session(&core->link),
+                                            pd_link_next_id(&core->link));
         pd_link_reset_ack(&core->link, core->hal, core->boot_id, resumed);
     } else if (event == PD_LINK_BAUD) {
         baud_set(core, pd_link_baud(&core->link));
@@ -192,12 +193,16 @@ void pd_core_poll(pd_core_t *core)
     }
 }
 
-bool pd_core_open_session(pd_core_t *core, const uint8_t session[4])
+bool pd_core_open_session(pd_core_t *core, const uint8_t session[4], uint8_t next_id)
 {
     /* "Not zero" by OR-ing the bytes: a const all-zero array to compare with
      * would sit in the Uno's SRAM (4 B) and take a second memcmp call. */
     uint8_t any = (uint8_t)(session[0] | session[1] | session[2] | session[3]);
-    if (any != 0 && memcmp(session, core->session, 4) == 0) {
+    bool resumed = any != 0 && memcmp(session, core->session, 4) == 0;
+    /* Either way N follows the host's next id; a new owner's ids start afresh
+     * (its id 1 must run), a resumed one's retransmissions are still recognised. */
+    pd_dedupe_sync(&core->dedupe, next_id, !resumed);
+    if (resumed) {
         return true; /* a re-handshake: not a sign of life, the timer runs on */
     }
     /* Another owner: what the previous one configured is not its to command,

@@ -60,10 +60,12 @@ void pd_core_poll(pd_core_t *core);
 void pd_core_enter_safe(pd_core_t *core, protoduino_FailsafeCause cause);
 
 /*
- * A RESET carrying `session`: the same session keeps its outputs and its
- * failsafe timer; another one releases every output and starts afresh.
- * Returns whether the session was resumed.
+ * A RESET carrying `session` and the host's next message id: the same session
+ * keeps its outputs, its failsafe timer and its dedupe window; another one
+ * releases every output and starts afresh (the window too). Either way the
+ * window's newest id becomes the one before `next_id`. Returns whether the
+ * session was resumed.
  */
-bool pd_core_open_session(pd_core_t *core, const uint8_t session[4]);
+bool pd_core_open_session(pd_core_t *core, const uint8_t session[4], uint8_t next_id);
 
 #endif /* PD_CORE_H */

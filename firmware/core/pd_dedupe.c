@@ -4,39 +4,81 @@
 
 #include "protoduino.pb.h"
 
+/* (to - from) mod PD_MAX_MESSAGE_ID, both 1..PD_MAX_MESSAGE_ID: how far `to` is ahead of `from`. */
+static uint8_t ahead(uint8_t from, uint8_t to)
+{
+    uint8_t d = (uint8_t)(to - from); /* both below 128: no 8-bit wrap beyond one period */
+    return (to >= from) ? d : (uint8_t)(d + PD_MAX_MESSAGE_ID);
+}
+
+/* Drop the entries that fell DEDUPE_WINDOW or more behind N. */
+static void forget_old(pd_dedupe_t *dd)
+{
+    for (uint8_t i = 0; i < PD_DEDUPE_WINDOW; i++) {
+        if (dd->id[i] != 0 && ahead(dd->id[i], dd->newest) >= PD_DEDUPE_WINDOW) {
+            dd->id[i] = 0;
+        }
+    }
+}
+
 void pd_dedupe_init(pd_dedupe_t *dd)
 {
     memset(dd, 0, sizeof(*dd));
+    dd->newest = PD_MAX_MESSAGE_ID; /* the id before 1 */
 }
 
-int pd_dedupe_find(const pd_dedupe_t *dd, uint32_t id)
+void pd_dedupe_sync(pd_dedupe_t *dd, uint8_t next_id, bool clear)
 {
-    /* Every new command scans the whole window and finds nothing: one byte
-     * of each id first (ids count up, so their first bytes in memory, the low
-     * ones on the Uno, tell them apart; on any byte order it is only a filter,
-     * the whole compare decides), the rest only on a match. A 32-bit compare
-     * per entry was 380 of the Uno's cycles between a command's delimiter and
-     * its Ack. */
-    const uint8_t first = *(const uint8_t *)&id;
-    for (uint8_t i = 0; i < dd->count; i++) {
-        if (*(const uint8_t *)&dd->id[i] == first && dd->id[i] == id) {
-            uint8_t pair = dd->status[i >> 1];
-            return (i & 1u) ? pair >> 4 : pair & 0x0Fu;
+    if (clear) {
+        memset(dd->id, 0, sizeof(dd->id));
+    }
+    dd->newest = (next_id > 1u) ? (uint8_t)(next_id - 1u) : (uint8_t)PD_MAX_MESSAGE_ID;
+    forget_old(dd);
+}
+
+int pd_dedupe_check(pd_dedupe_t *dd, uint8_t id, bool lookup)
+{
+    int seen = -1;
+    if (lookup && ahead(id, dd->newest) < PD_DEDUPE_WINDOW) {
+        for (uint8_t i = 0; i < PD_DEDUPE_WINDOW; i++) {
+            if (dd->id[i] == id) {
+                uint8_t pair = dd->status[i >> 1];
+                seen = (i & 1u) ? pair >> 4 : pair & 0x0Fu;
+                break;
+            }
         }
     }
-    return -1;
+    uint8_t d = ahead(dd->newest, id);
+    if (d >= 1u && d <= PD_ID_AHEAD_MAX) {
+        dd->newest = id;
+        forget_old(dd);
+    }
+    return seen;
 }
 
-void pd_dedupe_add(pd_dedupe_t *dd, uint32_t id, uint8_t status)
+void pd_dedupe_add(pd_dedupe_t *dd, uint8_t id, uint8_t status)
 {
     typedef char fits[(_protoduino_Status_MAX < 16) ? 1 : -1];
     (void)sizeof(fits);
-    dd->id[dd->next] = id;
-    uint8_t *pair = &dd->status[dd->next >> 1];
-    *pair = (dd->next & 1u) ? (uint8_t)((*pair & 0x0Fu) | (status << 4))
-                            : (uint8_t)((*pair & 0xF0u) | (status & 0x0Fu));
-    dd->next = (uint8_t)((dd->next + 1u) % PD_DEDUPE_WINDOW);
-    if (dd->count < PD_DEDUPE_WINDOW) {
-        dd->count++;
+    /* The slot of a stale entry of this id (a repeat never gets here), else the
+     * first free one from `next` on, else `next` (the oldest entry). At most 16
+     * ids are within reach of N, and the one recorded is one of them, so while
+     * the window is full none of them is ever overwritten: one of the 16 has
+     * fallen out of reach and was dropped. */
+    uint8_t slot = dd->next;
+    for (uint8_t k = 0; k < PD_DEDUPE_WINDOW; k++) {
+        uint8_t i = (uint8_t)((dd->next + k) % PD_DEDUPE_WINDOW);
+        if (dd->id[i] == id) {
+            slot = i;
+            break;
+        }
+        if (dd->id[i] == 0 && dd->id[slot] != 0) {
+            slot = i;
+        }
     }
+    dd->id[slot] = id;
+    uint8_t *pair = &dd->status[slot >> 1];
+    *pair = (slot & 1u) ? (uint8_t)((*pair & 0x0Fu) | (status << 4))
+                        : (uint8_t)((*pair & 0xF0u) | (status & 0x0Fu));
+    dd->next = (uint8_t)((slot + 1u) % PD_DEDUPE_WINDOW);
 }

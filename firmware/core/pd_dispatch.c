@@ -67,6 +67,12 @@ static __attribute__((noinline)) void send_ack(pd_core_t *core, protoduino_Ardui
     out->which_data = protoduino_ArduinoOut_ack_tag;
     out->data.ack.message_id = id;
     out->data.ack.status = (protoduino_Status)status;
+    if (status == protoduino_Status_STATUS_OK && out->data.ack.which_result == 0 &&
+        !out->data.ack.has_failsafe && out->data.ack.refused_item == 0 && out->data.ack.user_code == 0) {
+        /* Only the id and STATUS_OK: the short Ack (protocol.md section 7). */
+        out->which_data = protoduino_ArduinoOut_ack_ok_tag;
+        out->data.ack_ok = id;
+    }
     pd_out_send(core, out);
 }
 
@@ -386,8 +392,8 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
         }
         return;
     }
-    if (msg->message_id == 0) {
-        send_ack(core, &out, 0, protoduino_Status_STATUS_INVALID_ARGUMENT);
+    if (msg->message_id == 0 || msg->message_id > PD_MAX_MESSAGE_ID) {
+        send_ack(core, &out, msg->message_id, protoduino_Status_STATUS_INVALID_ARGUMENT);
         return;
     }
 
@@ -402,8 +408,9 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
     }
 #endif
     bool idempotent = known && (entry.flags & PD_CMD_IDEMPOTENT);
-    if (!idempotent) {
-        int seen = pd_dedupe_find(&core->dedupe, msg->message_id);
+    {
+        /* Every id moves N (section 7, *Message ids*); only others are looked up. */
+        int seen = pd_dedupe_check(&core->dedupe, (uint8_t)msg->message_id, !idempotent);
         if (seen >= 0) {
             /* A retransmission whose Ack was lost: answer again, do not repeat it. */
             send_ack(core, &out, msg->message_id, (uint8_t)seen);
@@ -430,7 +437,7 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
         }
     }
     if (!idempotent) {
-        pd_dedupe_add(&core->dedupe, msg->message_id, (uint8_t)status);
+        pd_dedupe_add(&core->dedupe, (uint8_t)msg->message_id, (uint8_t)status);
     }
     send_ack(core, &out, msg->message_id, (uint8_t)status);
     if (cmd.then != NULL) {

@@ -286,6 +286,10 @@ size_t pd_encode_out(const protoduino_ArduinoOut *msg, uint8_t *buf, size_t cap)
     case protoduino_ArduinoOut_failsafe_tag:
         put_failsafe(&w, protoduino_ArduinoOut_failsafe_tag, &msg->data.failsafe);
         break;
+    case protoduino_ArduinoOut_ack_ok_tag: /* a oneof's set member: written even when 0 */
+        put_tag(&w, protoduino_ArduinoOut_ack_ok_tag, WT_VARINT);
+        put_varint(&w, msg->data.ack_ok);
+        break;
     case protoduino_ArduinoOut_input_report_tag:
         at = open_msg(&w, protoduino_ArduinoOut_input_report_tag);
         put_report(&w, &msg->data.input_report);

@@ -174,7 +174,9 @@ static pd_link_event_t handle_reset(pd_link_t *link, void *hal, const pd_packet_
     link->tx_seq = 0;
     link->rx_seq = 1;
     link->tx_flush = true; /* the host may hold a partial frame from before */
-    link->active = pkt->len == PD_RESET_SIZE && pkt->payload[1] == PD_PROTOCOL_VERSION;
+    /* Ours: 7 bytes, VERSION 5, a NEXT_ID in 1..127 (pd_link_next_id). */
+    link->active = pkt->len == PD_RESET_SIZE && pkt->payload[1] == PD_PROTOCOL_VERSION &&
+                   (uint8_t)(pkt->payload[6] - 1u) < PD_MAX_MESSAGE_ID;
     if (link->active) {
         return PD_LINK_RESET;
     }

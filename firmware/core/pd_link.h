@@ -193,6 +193,12 @@ static inline const uint8_t *pd_link_session(const pd_link_t *link)
     return link->rx_buf + PD_HEADER_SIZE + 2u;
 }
 
+/* The message id the host transmits next (1..127), from the same RESET (version 5). */
+static inline uint8_t pd_link_next_id(const pd_link_t *link)
+{
+    return link->rx_buf[PD_HEADER_SIZE + 6u];
+}
+
 /* Answer PD_LINK_RESET: RESET_ACK with this power-up's id, whether the session resumed
  * and the line rates the board can switch to (pd_hal_baud_rates). */
 void pd_link_reset_ack(pd_link_t *link, void *hal, const uint8_t boot_id[4], bool resumed);

@@ -6,7 +6,7 @@
 #ifndef PD_PROTOCOL_H
 #define PD_PROTOCOL_H
 
-#define PD_PROTOCOL_VERSION 4
+#define PD_PROTOCOL_VERSION 5
 #define PD_MAX_PAYLOAD 255
 /* COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter. */
 #define PD_MAX_ENCODED_FRAME 262
@@ -17,8 +17,8 @@
 /* The range a session may configure its failsafe timeout in (seconds). */
 #define PD_FAILSAFE_MIN_MS 100UL
 #define PD_FAILSAFE_MAX_MS 60000UL
-/* CONTROL payload sizes (section 5). RESET: CODE VERSION SESSION(4). RESET_ACK: CODE VERSION SCHEMA_ID(4) BOOT_ID(4) FLAGS; its first 6 bytes (version 1's whole RESET_ACK) are all a RESET of another version gets. */
-#define PD_RESET_SIZE 6
+/* CONTROL payload sizes (section 5). RESET: CODE VERSION SESSION(4) NEXT_ID. RESET_ACK: CODE VERSION SCHEMA_ID(4) BOOT_ID(4) FLAGS; its first 6 bytes (version 1's whole RESET_ACK) are all a RESET of another version gets. */
+#define PD_RESET_SIZE 7
 #define PD_RESET_ACK_V1_SIZE 6
 #define PD_RESET_ACK_SIZE 11
 /* RESET_ACK FLAGS: the session was resumed (the device kept its outputs). */
@@ -35,6 +35,10 @@
 #define PD_BAUD_CONFIRM_MS 250UL
 #define PD_SEQ_DESYNC_THRESHOLD 50
 #define PD_DEDUPE_WINDOW 16
+/* Message ids are per session and sequential, 1..MAX_MESSAGE_ID (one varint byte), wrapping to 1 (docs/protocol.md section 7, *Message ids*). */
+#define PD_MAX_MESSAGE_ID 127
+/* An id at most this many ahead of the newest one is newer; further "ahead" is behind. The host never transmits an id further than this ahead of the device's newest (it re-handshakes first), so both ends always tell newer from older alike. */
+#define PD_ID_AHEAD_MAX 63
 /* Servo pulse defaults when a ServoInit leaves min_us/max_us at 0. */
 #define PD_SERVO_DEFAULT_MIN_US 544
 #define PD_SERVO_DEFAULT_MAX_US 2400

@@ -251,7 +251,7 @@ typedef struct _protoduino_UserCall {
 } protoduino_UserCall;
 
 typedef struct _protoduino_ArduinoIn {
-    uint32_t message_id; /* non-zero; reused by retransmissions */
+    uint32_t message_id; /* 1..127, per session (protocol version 5); reused by retransmissions */
     pb_size_t which_data;
     union {
         /* Numbered by how often they go (protocol version 4): the calls of a running robot
@@ -393,6 +393,11 @@ typedef struct _protoduino_ArduinoOut {
         protoduino_DecodeError decode_error;
         protoduino_InputReport input_report;
         protoduino_UserReport user_report;
+        /* The short Ack (protocol version 5): "the Ack of this message_id, STATUS_OK,
+     nothing else" (no result, no failsafe, no refused item, no user code). The
+     device sends it whenever the Ack would carry only the id and STATUS_OK: 2 B
+     instead of 4 to 6. A host reads it as that Ack. */
+        uint32_t ack_ok;
     } data;
 } protoduino_ArduinoOut;
 
@@ -637,6 +642,7 @@ extern "C" {
 #define protoduino_ArduinoOut_decode_error_tag   3
 #define protoduino_ArduinoOut_input_report_tag   5
 #define protoduino_ArduinoOut_user_report_tag    6
+#define protoduino_ArduinoOut_ack_ok_tag         7
 
 /* Struct field encoding specification for nanopb */
 #define protoduino_Ping_FIELDLIST(X, a) \
@@ -906,7 +912,8 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (data,ack,data.ack),   1) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,failsafe,data.failsafe),   2) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,decode_error,data.decode_error),   3) \
 X(a, STATIC,   ONEOF,    MESSAGE,  (data,input_report,data.input_report),   5) \
-X(a, STATIC,   ONEOF,    MESSAGE,  (data,user_report,data.user_report),   6)
+X(a, STATIC,   ONEOF,    MESSAGE,  (data,user_report,data.user_report),   6) \
+X(a, STATIC,   ONEOF,    UINT32,   (data,ack_ok,data.ack_ok),   7)
 #define protoduino_ArduinoOut_CALLBACK NULL
 #define protoduino_ArduinoOut_DEFAULT NULL
 #define protoduino_ArduinoOut_data_ack_MSGTYPE protoduino_Ack

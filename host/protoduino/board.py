@@ -352,6 +352,7 @@ class Board(ClosedOnExit):
             session=session,
             baudrate=baudrate,
             clock=wiring.clock,
+            next_id=self._rpc.next_message_id,
         )
         self._rpc.attach(self._link)
         # Started only now: a constructor above that refuses its options leaves no thread.

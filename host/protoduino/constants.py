@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-PROTOCOL_VERSION = 4
+PROTOCOL_VERSION = 5
 MAX_PAYLOAD = 255
 #: COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter.
 MAX_ENCODED_FRAME = 262
@@ -31,6 +31,13 @@ MAX_RETRIES = 3
 SEQ_TOLERANCE = 5
 SEQ_DESYNC_THRESHOLD = 50
 DEDUPE_WINDOW = 16
+#: Message ids are per session and sequential, 1..MAX_MESSAGE_ID (one varint byte), wrapping
+#: to 1 (docs/protocol.md section 7, *Message ids*).
+MAX_MESSAGE_ID = 127
+#: An id at most this many ahead of the newest one is newer; further "ahead" is behind. The
+#: host never transmits an id further than this ahead of the device's newest (it
+#: re-handshakes first), so both ends always tell newer from older alike.
+ID_AHEAD_MAX = 63
 
 #: Servo pulse defaults when a ServoInit leaves min_us/max_us at 0.
 SERVO_DEFAULT_MIN_US = 544
@@ -75,10 +82,10 @@ class ControlCode(IntEnum):
     BAUD_ACK = 0x05
 
 
-#: CONTROL payload sizes (section 5). RESET: CODE VERSION SESSION(4).
+#: CONTROL payload sizes (section 5). RESET: CODE VERSION SESSION(4) NEXT_ID.
 #: RESET_ACK: CODE VERSION SCHEMA_ID(4) BOOT_ID(4) FLAGS; its first 6 bytes
 #: (version 1's whole RESET_ACK) are all a RESET of another version gets.
-RESET_SIZE = 6
+RESET_SIZE = 7
 RESET_ACK_V1_SIZE = 6
 RESET_ACK_SIZE = 11
 #: RESET_ACK FLAGS: the session was resumed (the device kept its outputs).
@@ -136,6 +143,8 @@ FIRMWARE_CONSTANTS = (
     "BAUD_CONFIRM",
     "SEQ_DESYNC_THRESHOLD",
     "DEDUPE_WINDOW",
+    "MAX_MESSAGE_ID",
+    "ID_AHEAD_MAX",
     "SERVO_DEFAULT_MIN_US",
     "SERVO_DEFAULT_MAX_US",
     "SERVO_LIMIT_MIN_US",

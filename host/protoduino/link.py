@@ -8,7 +8,9 @@ but new firmware); CLOSED.
   at 1 s) until a RESET_ACK arrives. The first handshake fails after
   ``handshake_timeout`` with :class:`HandshakeError`; a later one (after a
   reboot or a lost port) reports the failure as an event and keeps trying.
-* Every RESET carries this host's session id; the device's RESET_ACK carries
+* Every RESET carries this host's session id and the message id the request
+  layer transmits next (NEXT_ID, asked of the ``next_id`` hook the layer above
+  hands in: the link imports nothing above it); the device's RESET_ACK carries
   its boot id (new at every power-up) and whether it resumed the session
   (kept its outputs). That answer alone says what happened while the link was
   down: the same boot id and "resumed" is a reconnect (nothing to redo); a new
@@ -19,7 +21,9 @@ but new firmware); CLOSED.
   device just cleared its link state: the next expected SEQ is 1.
 * EVENT BOOT or NOT_ACTIVE while ACTIVE, a reopened port, a SEQ jump of more
   than SEQ_DESYNC_THRESHOLD, or nothing valid received for WATCHDOG_TIMEOUT
-  while traffic is expected: handshake again (the RESET_ACK then tells).
+  while traffic is expected, or the request layer asking for it
+  (:meth:`request_handshake`: its ids would run 64 ahead of the device's newest):
+  handshake again (the RESET_ACK then tells).
 * The line rate (docs/protocol.md 5, *Line rate*), unless the board pinned one:
   after a RESET_ACK at the opening rate that offers faster rates, BAUD_SET of the
   fastest not yet failed, at the opening rate; on its BAUD_ACK the port switches
@@ -188,8 +192,14 @@ class Link:
         clock: Clock = time.monotonic,
         session: int | None = None,
         baudrate: int | None = None,
+        next_id: Callable[[], int] | None = None,
     ) -> None:
         self.transport = transport
+        #: The message id the request layer transmits next, which every RESET carries
+        #: (NEXT_ID, protocol.md section 5); a hook, so the link imports nothing above it.
+        self._next_id: Callable[[], int] = next_id if next_id is not None else lambda: 1
+        #: Set (from any thread) when the request layer asks for a re-handshake.
+        self._handshake_wanted = False
         #: Every timestamp of the link's own comes from this clock (the I/O thread's ticks
         #: pass their ``now`` from the same one).
         self._clock = clock
@@ -314,6 +324,11 @@ class Link:
         """The SEQ the link expects on the device's next packet (docs/protocol.md 6)."""
         return self._rx_expected
 
+    def request_handshake(self) -> None:
+        """Handshake again, resuming the session, at the I/O thread's next tick (the
+        request layer's ids: rpc.py's module docstring)."""
+        self._handshake_wanted = True
+
     def send_command(self, payload: bytes) -> bool:
         """Queue one COMMAND; False (nothing queued) unless the link is ACTIVE."""
         if self.state is not LinkState.ACTIVE:
@@ -379,6 +394,10 @@ class Link:
             self.watchdog_resets += 1
             self._restart("watchdog", now)
         due = self._listener.link_tick(now)
+        if self._handshake_wanted:
+            self._handshake_wanted = False
+            if self.state is LinkState.ACTIVE:
+                self._restart("message ids", now)
         if self.state is LinkState.WAIT_ACK and self.transport.connected:
             due = min(due, self._baud_due if self._baud_phase is not None else self._hs_next)
             if not self._hs_reported:
@@ -444,7 +463,9 @@ class Link:
         if self.transport.baudrate != rate:
             self.transport.set_baudrate(rate)
         self.transport.send(
-            PacketType.CONTROL, reset_payload(self.version, self.session), reset_seq=True
+            PacketType.CONTROL,
+            reset_payload(self.version, self.session, self._next_id()),
+            reset_seq=True,
         )
         self._hs_next = now + self._hs_delay
         self._hs_delay = min(self._hs_delay * 2, RESET_MAX_RETRY)

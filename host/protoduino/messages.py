@@ -32,11 +32,42 @@ def parse_in(payload: bytes) -> pb.ArduinoIn:
 
 
 def parse_out(payload: bytes) -> pb.ArduinoOut:
+    """Decode an ArduinoOut; the short Ack (``ack_ok``, protocol version 5) comes back as
+    the Ack it stands for, so every reader above sees one kind of Ack."""
     # FromString: one protobuf call instead of constructing then parsing (receive hot path).
     try:
-        return pb.ArduinoOut.FromString(payload)
+        msg = pb.ArduinoOut.FromString(payload)
     except DecodeError as error:
         raise ProtocolError(f"ArduinoOut does not decode: {error}") from error
+    if msg.WhichOneof("data") == "ack_ok":
+        long = pb.ArduinoOut()
+        long.ack.message_id = msg.ack_ok  # STATUS_OK and nothing else
+        return long
+    return msg
+
+
+def is_plain_ack(msg: pb.ArduinoOut) -> bool:
+    """Is ``msg`` an Ack of STATUS_OK that carries nothing but its id (the short form's)?"""
+    if msg.WhichOneof("data") != "ack":
+        return False
+    ack = msg.ack
+    return (
+        ack.status == pb.STATUS_OK
+        and ack.WhichOneof("result") is None
+        and not ack.HasField("failsafe")
+        and not ack.refused_item
+        and not ack.user_code
+    )
+
+
+def serialize_out(msg: pb.ArduinoOut) -> bytes:
+    """The bytes a device sends for ``msg``: the short Ack when it applies (protocol.md
+    section 7), as the firmware's encoder does; the simulated devices use it."""
+    if is_plain_ack(msg):
+        short = pb.ArduinoOut()
+        short.ack_ok = msg.ack.message_id
+        return short.SerializeToString()
+    return msg.SerializeToString()
 
 
 #: Which value of a pin an InputReport carries: a digital level, analog counts, a count of edges.

@@ -101,6 +101,9 @@ class Control:
     detail: bytes = b""
     #: RESET (version 2): the host session; None in version 1's shape.
     session: int | None = None
+    #: RESET (version 5): the message id the host transmits next (section 7,
+    #: *Message ids*); None in older shapes.
+    next_id: int | None = None
     #: RESET_ACK (version 2): this power-up's id and whether the session was
     #: resumed; None in the short shape a device gives a RESET of another version.
     boot_id: int | None = None
@@ -117,6 +120,8 @@ class Control:
             out["version"] = self.version
         if self.session is not None:
             out["session"] = f"0x{self.session:08X}"
+        if self.next_id is not None:
+            out["next_id"] = self.next_id
         if self.schema_id is not None:
             out["schema_id"] = f"0x{self.schema_id:08X}"
         if self.boot_id is not None:
@@ -136,10 +141,15 @@ class Control:
         return out
 
 
-def reset_payload(version: int, session: int = 1) -> bytes:
-    """RESET for host ``session``; version 1's shape (CODE VERSION) for version 1."""
+def reset_payload(version: int, session: int = 1, next_id: int = 1) -> bytes:
+    """RESET for host ``session`` whose next message id is ``next_id``; version 1's
+    shape (CODE VERSION) for version 1, versions 2 to 4's (no NEXT_ID) for them."""
     head = bytes((ControlCode.RESET, version))
-    return head if version < 2 else head + struct.pack(">I", session)
+    if version < 2:
+        return head
+    if version < 5:
+        return head + struct.pack(">I", session)
+    return head + struct.pack(">IB", session, next_id)
 
 
 def reset_ack_payload(
@@ -188,9 +198,15 @@ def parse_control(payload: bytes) -> Control:
         # a device answers it with the short RESET_ACK so the host names the mismatch.
         if len(args) == 1:
             return Control(code, version=args[0])
-        if len(args) != RESET_SIZE - 1:
-            raise ProtocolError(f"RESET takes 1 or 5 argument bytes, got {len(args)}")
-        return Control(code, version=args[0], session=int.from_bytes(args[1:5], "big"))
+        if len(args) not in (RESET_SIZE - 2, RESET_SIZE - 1):
+            raise ProtocolError(f"RESET takes 1, 5 or 6 argument bytes, got {len(args)}")
+        # Versions 2 to 4: CODE VERSION SESSION; version 5 adds NEXT_ID.
+        return Control(
+            code,
+            version=args[0],
+            session=int.from_bytes(args[1:5], "big"),
+            next_id=args[5] if len(args) == RESET_SIZE - 1 else None,
+        )
     if code is ControlCode.RESET_ACK:
         version, n = (args[0] if args else None), len(args)
         if n >= RESET_ACK_V1_SIZE - 1 and n != RESET_ACK_SIZE - 1:

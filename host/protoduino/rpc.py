@@ -11,9 +11,18 @@ liveness tell) are the session layer's, :mod:`protoduino.session`: this
 module holds them and applies them to its table, under its one lock. What
 they decide is summed up below with the table's own rules.
 
-* Message ids start at a random value, increment, wrap and skip 0. A
-  retransmission reuses its id (the device's dedupe window re-acks it without
-  executing it twice).
+* Message ids are per session and sequential, 1..127 (one varint byte on
+  the wire), wrapping to 1 (protocol.md section 7, *Message ids*). A call
+  gets its id at its first transmission, not when it is submitted, so ids go
+  out in the order they were given; a retransmission reuses it (the device's
+  dedupe window re-acks it without executing it twice). Every RESET tells
+  the device the id that goes out next (the link asks :meth:`next_message_id`).
+* Ids stay decidable: a new id never goes out 64 or more ahead of the oldest
+  call still open (it waits for that call, whose retransmission would look
+  newer than everything to the device), nor of the newest id the device
+  acknowledged (or the one before the last handshake's NEXT_ID): then the
+  device may have missed so many that newer and older can no longer be told
+  apart, and the link handshakes again (a resumed session), which re-synchronises it.
 * An Ack is matched by id only. An Ack for a call already finished (the twin
   of a retransmission, or after the call timed out) is counted as late; one
   for an id never sent is counted as unknown. Both are dropped: a stale reply
@@ -73,8 +82,8 @@ tests/unit/test_lock_order.py checks that order on every path it drives.
 from __future__ import annotations
 
 import collections
+import itertools
 import logging
-import secrets
 import threading
 import time
 from collections.abc import Callable
@@ -87,6 +96,8 @@ from .constants import (
     ACK_TIMEOUT,
     DEDUPE_WINDOW,
     FAILSAFE_TIMEOUT,
+    ID_AHEAD_MAX,
+    MAX_MESSAGE_ID,
     MAX_PAYLOAD,
     MAX_RETRIES,
     PING_INTERVAL,
@@ -103,7 +114,7 @@ from .errors import (
 )
 from .events import Event, EventKind
 from .framing import frame_size
-from .messages import ArduinoIn, ArduinoOut, Status, parse_in, status_name
+from .messages import ArduinoIn, ArduinoOut, Status, status_name
 from .session import (
     REBOOT_LIMIT,
     REBOOT_WINDOW,
@@ -170,6 +181,7 @@ class Call:
         "epoch",
         "error",
         "first_tx",
+        "key",
         "kind",
         "message_id",
         "on_done",
@@ -179,12 +191,13 @@ class Call:
         "round_start",
         "rtt",
         "sent_at",
+        "serial",
         "submitted",
     )
 
     def __init__(
         self,
-        message_id: int,
+        key: int,
         kind: str,
         payload: bytes,
         *,
@@ -192,7 +205,12 @@ class Call:
         deadline: float,
         on_done: Callable[[Call], None] | None,
     ) -> None:
-        self.message_id = message_id
+        #: The call's own number in the table, from submit to the end.
+        self.key = key
+        #: Its message id, given at its first transmission (0: not sent yet).
+        self.message_id = 0
+        #: How many ids the session gave before this one, plus one: ids wrap, this does not.
+        self.serial = 0
         self.kind = kind
         self.payload = payload
         self.submitted = submitted
@@ -247,6 +265,10 @@ class LinkPort(Protocol):
 
     def send_command(self, payload: bytes) -> bool: ...
 
+    def request_handshake(self) -> None:
+        """Handshake again (the session resumed) as soon as the link's thread can:
+        the device's newest message id may lag too far behind (module docstring)."""
+
     def reboot_inferred(self) -> None:
         """Count a reboot only the request layer could see (the link owns the counter)."""
 
@@ -261,12 +283,12 @@ class RpcState:
 
     #: The calls sent and awaiting their Ack, oldest first.
     inflight: tuple[Call, ...]
-    #: Message ids of every call not finished yet (in flight or queued).
+    #: Message ids of every call not finished yet (in flight or queued; 0: not sent yet).
     open_calls: tuple[int, ...]
     #: Calls queued behind the window: automatic Pings first, then the user's.
     urgent: int
     pending: int
-    #: The id the next call will get.
+    #: The id the next call transmitted will get.
     next_id: int
 
 
@@ -324,12 +346,20 @@ class Rpc:
         #: Whether the restore sends last values too (for the RESTORED event only).
         self.restore_values = restore_values
         self._lock = threading.Lock()
-        # Random by default, so that ids from before a host restart do not look like
-        # retransmissions to the device's dedupe window; ``first_id`` fixes it (tests).
-        if first_id is not None and not 1 <= first_id <= 0xFFFFFFFF:
-            raise ArgumentError("first_id must be 1 .. 2**32-1 (0 is never a message id)")
-        self._next_id = first_id or secrets.randbelow(0xFFFFFFFF) + 1
+        # A session's ids start at 1 (every RESET tells the device the next one);
+        # ``first_id`` starts elsewhere (tests of the wrap).
+        if first_id is not None and not 1 <= first_id <= MAX_MESSAGE_ID:
+            raise ArgumentError(f"first_id must be 1 .. {MAX_MESSAGE_ID} (0 is never a message id)")
+        self._next_id = first_id or 1
+        #: Serial of the next id given (Call.serial), and of the newest id the device
+        #: acknowledged or the one before the last handshake's NEXT_ID.
+        self._next_serial = 1
+        self._acked_serial = 0
+        self._resync_asked = False
+        #: Every call not finished, by Call.key; those with an id also by id.
         self._calls: dict[int, Call] = {}
+        self._by_id: dict[int, Call] = {}
+        self._keys = itertools.count(1)
         self._inflight: dict[int, Call] = {}
         self._urgent: collections.deque[Call] = collections.deque()  # pings
         self._pending: collections.deque[Call] = collections.deque()  # user calls
@@ -346,6 +376,10 @@ class Rpc:
         self._tx_serial = 0
         #: Transmissions of new ids held back by the dedupe guard (a counter, for tests).
         self.guard_holds = 0
+        #: New ids held back by an old call still open, and re-handshakes asked for
+        #: because the device's newest id lagged 64 behind (module docstring).
+        self.id_holds = 0
+        self.id_resyncs = 0
         self._closed = False
         self._pinging = ping
         self._next_ping = 0.0
@@ -369,7 +403,7 @@ class Rpc:
         with self._lock:
             return RpcState(
                 inflight=tuple(self._inflight.values()),
-                open_calls=tuple(self._calls),
+                open_calls=tuple(c.message_id for c in self._calls.values()),
                 urgent=len(self._urgent),
                 pending=len(self._pending),
                 next_id=self._next_id,
@@ -454,14 +488,47 @@ class Rpc:
                 )
         return call.result()
 
-    def _allocate_id(self) -> int:
+    def next_message_id(self) -> int:
+        """The id the next new transmission gets: every RESET carries it (NEXT_ID)."""
+        return self._next_id
+
+    def _allocate_id(self, call: Call) -> None:
+        """Give ``call`` the next id, at its first transmission (lock held)."""
         mid = self._next_id
-        self._next_id = self._next_id % 0xFFFFFFFF + 1  # 1 .. 2**32-1, never 0
-        return mid
+        self._next_id = mid % MAX_MESSAGE_ID + 1  # 1 .. 127, never 0
+        call.message_id = mid
+        call.serial = self._next_serial
+        self._next_serial += 1
+        self._by_id[mid] = call
+        self._finished_set.discard(mid)  # an Ack for it is this call's now
+        # message_id is field 1, serialised first: one tag byte and one value byte.
+        call.payload = bytes((0x08, mid)) + call.payload[2:]
+
+    def _release_id(self, call: Call) -> None:
+        """Take back the id just given to ``call``: it never left (lock held)."""
+        self._by_id.pop(call.message_id, None)
+        self._next_id = call.message_id
+        self._next_serial = call.serial
+        call.message_id = call.serial = 0
+
+    def _ids_allow_new(self) -> bool:
+        """May a new id go out and stay decidable on the device (module docstring)?"""
+        serial = self._next_serial
+        oldest = min((c.serial for c in self._by_id.values()), default=serial)
+        if serial - oldest > ID_AHEAD_MAX:
+            self.id_holds += 1  # it finishes (acked, or failed by its deadline)
+            return False
+        if serial - self._acked_serial > ID_AHEAD_MAX:
+            if not self._resync_asked and self.link is not None:
+                self._resync_asked = True
+                self.id_resyncs += 1
+                log.info("no Ack for the last %d ids: handshaking again", ID_AHEAD_MAX)
+                self.link.request_handshake()
+            return False
+        return True
 
     def _new_call(self, msg: ArduinoIn, on_done: Callable[[Call], None] | None) -> Call:
-        mid = self._allocate_id()
-        msg.message_id = mid
+        msg.message_id = 1  # a stand-in of the same size: the id is given at transmission
         kind = msg.WhichOneof("data") or "empty"
         epoch: int | None = None
         if kind in EPOCH_KINDS:
@@ -469,16 +536,22 @@ class Rpc:
             epoch = self.failsafe_epoch
             getattr(msg, kind).failsafe_epoch = epoch
         payload = msg.SerializeToString()
+        assert payload[:2] == b"\x08\x01"  # field 1 first: _allocate_id writes the id there
         if len(payload) > MAX_PAYLOAD:
             raise PayloadTooLargeError(
                 f"command of {len(payload)} bytes exceeds MAX_PAYLOAD ({MAX_PAYLOAD})"
             )
         now = self._clock()
         call = Call(
-            mid, kind, payload, submitted=now, deadline=now + self.call_timeout, on_done=on_done
+            next(self._keys),
+            kind,
+            payload,
+            submitted=now,
+            deadline=now + self.call_timeout,
+            on_done=on_done,
         )
         call.epoch = epoch
-        self._calls[mid] = call
+        self._calls[call.key] = call
         self.commands += 1
         return call
 
@@ -486,7 +559,12 @@ class Rpc:
 
     def _transmit(self, call: Call, now: float) -> None:
         assert self.link is not None
+        fresh = not call.message_id
+        if fresh:
+            self._allocate_id(call)
         if not self.link.send_command(call.payload):
+            if fresh:
+                self._release_id(call)
             return
         if call.attempts:
             self.retransmits += 1
@@ -549,7 +627,12 @@ class Rpc:
         if link is None or not link.active or self._closed:
             return
         if self._holding:
-            if self._restore_call is None and self._plan.pending and self._guard_allows_new():
+            if (
+                self._restore_call is None
+                and self._plan.pending
+                and self._guard_allows_new()
+                and self._ids_allow_new()
+            ):
                 msg = self._plan.next()
                 self._restore_call = self._new_call(msg, self._restore_step)
                 self._transmit(self._restore_call, now)
@@ -563,6 +646,8 @@ class Rpc:
                     # (a call requeued when the link went down), which the guard waits for.
                     self.guard_holds += 1
                     break
+                if not queue[0].message_id and not self._ids_allow_new():
+                    break
                 self._transmit(queue.popleft(), now)
 
     def _finish(
@@ -571,20 +656,20 @@ class Rpc:
         """Complete a call (lock held); its on_done runs now, on this thread."""
         if call.done.is_set():
             return
-        mid = call.message_id
-        self._calls.pop(mid, None)
-        if self._inflight.pop(mid, None) is None:  # a call in flight is in no queue
+        self._calls.pop(call.key, None)
+        in_flight = False
+        if call.message_id:
+            in_flight = self._inflight.pop(call.message_id, None) is not None
+            if self._by_id.get(call.message_id) is call:
+                del self._by_id[call.message_id]
+        if not in_flight:  # a call in flight is in no queue
             for queue in (self._urgent, self._pending):
                 if call in queue:
                     queue.remove(call)
-        finished = self._finished
-        if len(finished) == FINISHED_MEMORY:  # the oldest is forgotten as this one goes in
-            self._finished_set.discard(finished[0])
-        finished.append(mid)
-        if len(self._finished_set) >= 2 * FINISHED_MEMORY:
-            # Ids remembered elsewhere (a renumbered call's old one) without the above.
-            self._finished_set = set(finished)
-        self._finished_set.add(mid)
+        # Ids are 1..127 (protocol version 5), so the set of finished ids stays small and
+        # is never rebuilt here; an id given out again leaves it (_allocate_id).
+        self._finished.append(call.message_id)
+        self._finished_set.add(call.message_id)
         call.ack, call.error = ack, error
         call.done.set()
         if call.on_done is not None:
@@ -684,7 +769,7 @@ class Rpc:
             return
         ack = msg.ack
         with self._lock:
-            call = self._calls.get(ack.message_id)
+            call = self._by_id.get(ack.message_id)
             if call is None or call.done.is_set():
                 if ack.message_id in self._finished_set:
                     self.late_acks += 1
@@ -693,6 +778,7 @@ class Rpc:
                     log.debug("Ack for unknown message_id %d dropped", ack.message_id)
                 return
             self.acks += 1
+            self._acked_serial = max(self._acked_serial, call.serial)  # the device has it
             now = self._clock()
             if call.sent_at:
                 call.rtt = now - call.sent_at
@@ -789,21 +875,20 @@ class Rpc:
         The device stored the refusal under the old id in its dedupe window and
         would only repeat it; the call did not run, so a new id runs it once.
         """
-        self._calls.pop(call.message_id, None)
         self._inflight.pop(call.message_id, None)
+        self._by_id.pop(call.message_id, None)
         self._finished_set.add(call.message_id)  # a late answer to it is late, not unknown
         self._finished.append(call.message_id)
-        msg = parse_in(call.payload)
-        msg.message_id = self._allocate_id()
-        call.message_id = msg.message_id
-        call.payload = msg.SerializeToString()
+        call.message_id = call.serial = 0  # a new one at its next transmission
         call.first_tx = None
         call.attempts = 0
         call.restored = True
-        self._calls[call.message_id] = call
 
     def link_up(self, lost: bool, rebooted: bool) -> None:
         with self._lock:
+            # The RESET told the device our next id: its newest is the one before.
+            self._acked_serial = self._next_serial - 1
+            self._resync_asked = False
             if rebooted:
                 self._failsafe.rebooted()
             if lost:
@@ -889,7 +974,8 @@ class Rpc:
             if call is self._restore_call:
                 self._restore_call = None
                 self._plan.put_back(call.payload)
-                self._calls.pop(call.message_id, None)
+                self._calls.pop(call.key, None)
+                self._by_id.pop(call.message_id, None)
             elif call.kind == "ping" and call is self._ping_call:
                 self._urgent.appendleft(call)
             else:

@@ -31,7 +31,8 @@ time pass: :meth:`VirtualDevice.run` (``run(0)`` delivers what is due now). An i
 What the device does, per docs/protocol.md as far as the host can see: the handshake
 (RESET -> RESET_ACK with version, schema, boot id and whether the session resumed;
 NOT_ACTIVE before it), SEQ on every packet it sends, one Ack per COMMAND (STATUS_OK for every
-command; it checks no pin), the dedupe window (a retransmitted id is acknowledged again and
+command; it checks no pin), the dedupe window and message ids as the firmware keeps them
+(:class:`DedupeWindow`: a retransmitted id is acknowledged again and
 not executed again), Ping echo, a DeviceInfo with an Uno's pins, EVENT BOOT on
 :meth:`~VirtualDevice.reboot` (which forgets the dedupe window and the session), and a digital
 input's level in an InputReport right after its Init's Ack and after each
@@ -65,6 +66,8 @@ from .commands import DIGITAL_INPUT, PIN_MODES, command
 from .constants import (
     DEDUPE_WINDOW,
     FAILSAFE_TIMEOUT,
+    ID_AHEAD_MAX,
+    MAX_MESSAGE_ID,
     OPENING_BAUDRATE,
     PROTOCOL_VERSION,
     ControlCode,
@@ -73,7 +76,7 @@ from .constants import (
 )
 from .errors import ArgumentError
 from .events import EventDispatcher
-from .messages import ArduinoIn, ArduinoOut, Status
+from .messages import ArduinoIn, ArduinoOut, Status, serialize_out
 from .packets import Packet, event_payload, parse_control, reset_ack_payload
 from .rpc import Done
 from .transport import FrameMonitor, TransportListener
@@ -82,7 +85,7 @@ from .wiring import Wiring
 if TYPE_CHECKING:
     from typing_extensions import Unpack
 
-__all__ = ["ManualClock", "VirtualDevice"]
+__all__ = ["DedupeWindow", "ManualClock", "VirtualDevice"]
 
 #: What the device's DeviceInfo states: an Uno's pins (serial pins 0 and 1 reserved).
 NUM_PINS = 20
@@ -94,6 +97,47 @@ COUNTER_PINS = (2, 3)
 CONTROLS = frozenset({mode.control for mode in PIN_MODES if mode.control} | {"pose"})
 #: The schema's FailsafeCause values (pb: protoduino_pb2).
 PING_TIMEOUT, STOP = pb.FAILSAFE_CAUSE_PING_TIMEOUT, pb.FAILSAFE_CAUSE_STOP
+
+
+class DedupeWindow:
+    """The device's dedupe window and newest id N, as the firmware keeps them (pd_dedupe.c;
+    docs/protocol.md section 7, *Message ids*): ids 1..127, Y newer than N when
+    ``(Y - N) mod 127`` is 1..63, a repeat when in the window and ``(N - Y) mod 127`` is
+    below DEDUPE_WINDOW; entries that fall that far behind N are dropped."""
+
+    def __init__(self) -> None:
+        self.entries: dict[int, Status.ValueType] = {}
+        self.newest = MAX_MESSAGE_ID  # the id before 1
+
+    def sync(self, next_id: int, clear: bool) -> None:
+        """A RESET of version 5: N is the id before ``next_id``; a new session clears."""
+        if clear:
+            self.entries.clear()
+        self.newest = (next_id - 2) % MAX_MESSAGE_ID + 1
+        self._forget_old()
+
+    def check(self, mid: int, lookup: bool) -> Status.ValueType | None:
+        """The stored status if ``lookup`` and ``mid`` is a repeat; then N moves to it if newer."""
+        seen = None
+        if lookup and (self.newest - mid) % MAX_MESSAGE_ID < DEDUPE_WINDOW:
+            seen = self.entries.get(mid)
+        if 1 <= (mid - self.newest) % MAX_MESSAGE_ID <= ID_AHEAD_MAX:
+            self.newest = mid
+            self._forget_old()
+        return seen
+
+    def holds(self, mid: int) -> bool:
+        """Would ``mid`` be answered as a repeat now (nothing changes)?"""
+        return (self.newest - mid) % MAX_MESSAGE_ID < DEDUPE_WINDOW and mid in self.entries
+
+    def add(self, mid: int, status: Status.ValueType) -> None:
+        self.entries[mid] = status
+        while len(self.entries) > DEDUPE_WINDOW:
+            del self.entries[next(iter(self.entries))]
+
+    def _forget_old(self) -> None:
+        for old in [m for m in self.entries if (self.newest - m) % MAX_MESSAGE_ID >= DEDUPE_WINDOW]:
+            del self.entries[old]
 
 
 class ManualClock:
@@ -148,7 +192,7 @@ class VirtualDevice:
         self._outbox: collections.deque[Packet] = collections.deque()
         self._active = False
         self._tx_seq = 0
-        self._dedupe: collections.OrderedDict[int, Status.ValueType] = collections.OrderedDict()
+        self._dedupe = DedupeWindow()
         #: The session that owns the device (0: none) and this boot's id.
         self.session = 0
         self.boot_id = 1
@@ -225,7 +269,7 @@ class VirtualDevice:
             msg = ArduinoIn()
             msg.ParseFromString(payload)
             executed = len(self.executed)
-            self._reply(PacketType.DATA, self._answer(msg).SerializeToString())
+            self._reply(PacketType.DATA, serialize_out(self._answer(msg)))
             if self._pending_clear:  # a liveness message cleared the flag: said after its Ack
                 self._pending_clear = False
                 self._send_failsafe()
@@ -312,7 +356,7 @@ class VirtualDevice:
         """A power cycle: state, dedupe window and failsafe epoch forgotten, EVENT BOOT sent."""
         self._active = False
         self._tx_seq = 0
-        self._dedupe.clear()
+        self._dedupe = DedupeWindow()
         self.session = 0
         self.boot_id += 1
         self.failsafe_epoch, self.failsafe_active, self.failsafe_cause = 0, False, 0
@@ -329,7 +373,12 @@ class VirtualDevice:
             return
         self.resets += 1
         self._tx_seq = 0
-        if ctl.version != self.version or ctl.session is None or self.version < 2:
+        if (
+            ctl.version != self.version
+            or ctl.session is None
+            or self.version < 2
+            or (self.version >= 5 and not 1 <= (ctl.next_id or 0) <= MAX_MESSAGE_ID)
+        ):
             # Another version (or version 1 itself): the short answer every host reads.
             self._active = self.version < 2 and ctl.version == self.version
             self._reply(PacketType.CONTROL, reset_ack_payload(self.version, self.schema_id))
@@ -338,6 +387,8 @@ class VirtualDevice:
         resumed = ctl.session != 0 and ctl.session == self.session
         if not resumed:  # a session opens: its timer runs from the handshake
             self._failsafe_due = self.clock() + self._failsafe_timeout
+        if ctl.next_id is not None:
+            self._dedupe.sync(ctl.next_id, clear=not resumed)
         self.session = ctl.session
         self._reply(
             PacketType.CONTROL,
@@ -371,6 +422,11 @@ class VirtualDevice:
         mid = msg.message_id
         out.ack.message_id = mid
         kind = msg.WhichOneof("data")
+        if not 1 <= mid <= MAX_MESSAGE_ID:
+            out.ack.status = Status.STATUS_INVALID_ARGUMENT
+            return out
+        idempotent = kind in ("ping", "heartbeat", "get_info")
+        seen = self._dedupe.check(mid, lookup=not idempotent)
         if kind in ("ping", "heartbeat"):
             self._liveness(kind, getattr(msg, kind).failsafe_epoch)
             if kind == "ping":
@@ -394,8 +450,8 @@ class VirtualDevice:
             info.analog_pins = _mask(ANALOG_PINS)
             info.counter_pins = _mask(COUNTER_PINS)
             return out
-        if mid in self._dedupe:  # a retransmission: acknowledged again, not executed again
-            out.ack.status = self._dedupe[mid]
+        if seen is not None:  # a retransmission: acknowledged again, not executed again
+            out.ack.status = seen
             return out
         if kind in CONTROLS and self._fired:
             out.ack.status = Status.STATUS_FAILSAFE_EXPIRED  # no timer behind a value now
@@ -416,9 +472,7 @@ class VirtualDevice:
     def _remember(self, mid: int, status: Status.ValueType, executed: ArduinoIn | None) -> None:
         if executed is not None:
             self.executed.append(executed)
-        self._dedupe[mid] = status
-        while len(self._dedupe) > DEDUPE_WINDOW:
-            self._dedupe.popitem(last=False)
+        self._dedupe.add(mid, status)
 
     # --- the failsafe (docs/protocol.md section 7) ---------------------------------------------
 

@@ -32,6 +32,26 @@
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
+
+/* The window's bounds: a slot to write next, N an id, every entry an id, none twice. */
+static bool dedupe_sane(const pd_dedupe_t *dd)
+{
+    if (dd->next >= PD_DEDUPE_WINDOW || dd->newest == 0 || dd->newest > PD_MAX_MESSAGE_ID) {
+        return false;
+    }
+    for (uint8_t i = 0; i < PD_DEDUPE_WINDOW; i++) {
+        if (dd->id[i] > PD_MAX_MESSAGE_ID) {
+            return false;
+        }
+        for (uint8_t j = (uint8_t)(i + 1u); j < PD_DEDUPE_WINDOW; j++) {
+            if (dd->id[i] != 0 && dd->id[i] == dd->id[j]) {
+                return false;
+            }
+        }
+    }
+    return true;
+}
+
 static void feed_packet(pd_core_t *core, uint8_t type, uint8_t seq, const uint8_t *payload,
                         size_t len)
 {
@@ -54,7 +74,7 @@ static void check_invariants(const fake_hal_t *hal, const pd_core_t *core)
 {
     if (core->link.rx_len > PD_MAX_ENCODED_FRAME ||
         pd_pins_count(&core->outputs, PD_MODE_SERVO) > PD_MAX_SERVOS ||
-        core->dedupe.count > PD_DEDUPE_WINDOW) {
+        !dedupe_sane(&core->dedupe)) {
         abort();
     }
     /* Every pin of a mode with slots owns a slot of its own (the slot's pin is
@@ -110,7 +130,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     } else {
         uint8_t seq = 0;
         if (!(mode & 2u)) {
-            const uint8_t reset[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION, 0, 0, 0, 1};
+            const uint8_t reset[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION, 0, 0, 0, 1, 1};
             feed_packet(&core, PD_PACKET_CONTROL, seq++, reset, sizeof(reset));
         }
         size_t i = 0;

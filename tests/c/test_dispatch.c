@@ -74,10 +74,10 @@ static void test_degrees_to_us_every_degree(void)
             }
             tdev_t d;
             t_active(&d);
-            protoduino_ArduinoIn in = m_servo_init_deg(id++, 9, lo, hi, 0);
+            protoduino_ArduinoIn in = m_servo_init_deg(T_ID(id++), 9, lo, hi, 0);
             CHECK_EQ(t_cmd(&d, &in), S(OK));
             for (uint32_t deg = 0; deg <= 180; deg++) {
-                in = m_servo_deg(id++, 9, deg);
+                in = m_servo_deg(T_ID(id++), 9, deg);
                 CHECK_EQ(t_cmd(&d, &in), S(OK));
                 CHECK_EQ(d.hal.servo_us[9], lo + deg * (hi - lo) / 180u);
             }
@@ -333,7 +333,7 @@ static void test_ping_echo_every_byte(void)
         CHECK_EQ(ack.result.ping_echo.size, 64);
         CHECK(memcmp(ack.result.ping_echo.bytes, payload, 64) == 0);
     }
-    protoduino_ArduinoIn in = m_ping(200, NULL, 0);
+    protoduino_ArduinoIn in = m_ping(120, NULL, 0);
     CHECK_EQ(t_cmd(&d, &in), S(OK));
 }
 
@@ -395,6 +395,42 @@ static void test_one_ack_per_message(void)
     CHECK_EQ(t_status(&d, 13), S(NOT_INITIALISED));
 }
 
+/* The Ack that would carry only the id and STATUS_OK goes in its short form (2 B of
+ * payload, a 9 B frame); a refusal, a result, a failsafe state keep the long one. */
+static void test_short_ack_when_only_id_and_ok(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn init = m_digital_init(1, 13, false);
+    CHECK_EQ(t_cmd(&d, &init), S(OK));
+    fake_clear(&d.hal);
+    protoduino_ArduinoIn on = m_digital(2, 13, true);
+    CHECK_EQ(t_cmd(&d, &on), S(OK));
+    const fake_frame_t *f = fake_frame(&d.hal, 0);
+    CHECK(f != NULL);
+    CHECK_EQ(f->type, PD_PACKET_DATA);
+    CHECK_EQ(f->len, 2);
+    CHECK_EQ(f->payload[0], 0x38); /* field 7, varint */
+    CHECK_EQ(f->payload[1], 2);
+    fake_clear(&d.hal);
+    protoduino_ArduinoIn bad = m_digital(3, 12, true); /* not initialised: the long form */
+    CHECK_EQ(t_cmd(&d, &bad), S(NOT_INITIALISED));
+    protoduino_ArduinoOut out;
+    f = fake_frame(&d.hal, 0);
+    CHECK(f != NULL && f->len > 2 && f->payload[0] == 0x0A);
+    fake_clear(&d.hal);
+    protoduino_ArduinoIn ping = m_ping(4, NULL, 0); /* a result (the empty echo): long */
+    CHECK_EQ(t_cmd(&d, &ping), S(OK));
+    f = fake_frame(&d.hal, 0);
+    CHECK(f != NULL && f->payload[0] == 0x0A);
+    CHECK(t_out(&d, 0, &out));
+    CHECK_EQ(out.data.ack.which_result, protoduino_Ack_ping_echo_tag);
+    fake_clear(&d.hal);
+    CHECK_EQ(t_cmd(&d, &on), S(OK)); /* a repeat answered from the window: short too */
+    f = fake_frame(&d.hal, 0);
+    CHECK(f != NULL && f->len == 2 && f->payload[0] == 0x38 && f->payload[1] == 2);
+}
+
 /* --- dedupe window ------------------------------------------------------- */
 
 static void test_dedupe_repeat_not_executed(void)
@@ -424,32 +460,99 @@ static void test_dedupe_repeat_not_executed(void)
     CHECK_EQ(d.hal.digital[13], 0);
 }
 
+/* Entries in the window (free slots hold 0). */
+static int dd_count(const pd_dedupe_t *dd)
+{
+    int n = 0;
+    for (uint8_t i = 0; i < PD_DEDUPE_WINDOW; i++) {
+        n += dd->id[i] != 0;
+    }
+    return n;
+}
+
 static void test_dedupe_window_evicts_after_16(void)
 {
     tdev_t d;
     t_active(&d);
-    protoduino_ArduinoIn init = m_digital_init(1000, 13, false);
+    protoduino_ArduinoIn init = m_digital_init(1, 13, false);
     CHECK_EQ(t_cmd(&d, &init), S(OK));
-    /* id 1 sets the pin, ids 2..16 toggle other things: 16 entries in the window. */
-    protoduino_ArduinoIn first = m_digital(1, 13, true);
+    /* id 2 sets the pin, ids 3..16 refuse other things (still recorded), id 17 clears it. */
+    protoduino_ArduinoIn first = m_digital(2, 13, true);
     CHECK_EQ(t_cmd(&d, &first), S(OK));
-    for (uint32_t id = 2; id <= 15; id++) {
+    for (uint32_t id = 3; id <= 16; id++) {
         protoduino_ArduinoIn in = m_servo_deg(id, 9, 0); /* NOT_INITIALISED, still recorded */
         CHECK_EQ(t_cmd(&d, &in), S(NOT_INITIALISED));
     }
-    protoduino_ArduinoIn off = m_digital(16, 13, false);
+    protoduino_ArduinoIn off = m_digital(17, 13, false);
     CHECK_EQ(t_cmd(&d, &off), S(OK));
-    /* Window holds 1000, 1..16 minus the oldest (1000): id 1 is still there. */
-    CHECK_EQ(d.core.dedupe.count, PD_DEDUPE_WINDOW);
+    /* N = 17: id 2 is 15 back, inside the window (id 1, 16 back, has left it). */
+    CHECK_EQ(dd_count(&d.core.dedupe), PD_DEDUPE_WINDOW);
     CHECK_EQ(t_cmd(&d, &first), S(OK));
     CHECK_EQ(d.hal.digital[13], 0); /* deduplicated */
-    /* One more entry evicts id 1; now its retransmission executes again. */
-    protoduino_ArduinoIn in = m_servo_deg(17, 9, 0);
-    CHECK_EQ(t_cmd(&d, &in), S(NOT_INITIALISED));
+    /* A newer id, even an idempotent one, moves N: id 2 is 16 back and runs again. */
+    protoduino_ArduinoIn ping = m_ping(18, NULL, 0);
+    CHECK_EQ(t_cmd(&d, &ping), S(OK));
     CHECK_EQ(t_cmd(&d, &first), S(OK));
     CHECK_EQ(d.hal.digital[13], 1);
-    /* Executed again, id 1 is back in the window as its newest entry. */
-    CHECK_EQ(pd_dedupe_find(&d.core.dedupe, 1), S(OK));
+    CHECK(dd_count(&d.core.dedupe) <= PD_DEDUPE_WINDOW); /* never one id twice */
+}
+
+/* An id met again after a wrap never finds its old entry, even one no later
+ * command pushed out (only idempotent ones came between), and even when a
+ * newer id arrived before it (its first transmission was lost). */
+static void test_dedupe_stale_entry_of_the_same_id_executes(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn init = m_digital_init(1, 13, false);
+    CHECK_EQ(t_cmd(&d, &init), S(OK));
+    protoduino_ArduinoIn on = m_digital(5, 13, true);
+    CHECK_EQ(t_cmd(&d, &on), S(OK));
+    for (uint32_t k = 6; k <= PD_MAX_MESSAGE_ID + 4u; k++) { /* 6..127, 1..4: Pings */
+        uint32_t id = (k - 1u) % PD_MAX_MESSAGE_ID + 1u;
+        protoduino_ArduinoIn ping = m_ping(id, NULL, 0);
+        CHECK_EQ(t_cmd(&d, &ping), S(OK));
+    }
+    protoduino_ArduinoIn ping = m_ping(6, NULL, 0); /* id 5's first transmission is lost */
+    CHECK_EQ(t_cmd(&d, &ping), S(OK));
+    protoduino_ArduinoIn off = m_digital(5, 13, false); /* a new command under id 5 */
+    CHECK_EQ(t_cmd(&d, &off), S(OK));
+    CHECK_EQ(d.hal.digital[13], 0); /* executed, not answered from the old entry */
+    CHECK_EQ(dd_count(&d.core.dedupe), 1);
+    CHECK_EQ(t_cmd(&d, &off), S(OK)); /* and its own repeat is one */
+    CHECK_EQ(t_cmd(&d, &on), S(OK));
+    CHECK_EQ(d.hal.digital[13], 0);
+}
+
+/* N moves only to an id 1..63 ahead of it; anything else is older. */
+static void test_dedupe_newest_moves_only_forward(void)
+{
+    pd_dedupe_t dd;
+    pd_dedupe_init(&dd);
+    pd_dedupe_sync(&dd, 11, true);
+    CHECK_EQ(dd.newest, 10);
+    CHECK_EQ(pd_dedupe_check(&dd, 10 + PD_ID_AHEAD_MAX + 1u, true), -1); /* 64 ahead: behind */
+    CHECK_EQ(dd.newest, 10);
+    CHECK_EQ(pd_dedupe_check(&dd, 10 + PD_ID_AHEAD_MAX, false), -1); /* 63 ahead: newer */
+    CHECK_EQ(dd.newest, 10 + PD_ID_AHEAD_MAX);
+    CHECK_EQ(pd_dedupe_check(&dd, 40, true), -1); /* older: N stays */
+    CHECK_EQ(dd.newest, 10 + PD_ID_AHEAD_MAX);
+    pd_dedupe_sync(&dd, 1, false); /* NEXT_ID 1: N is 127, the id before it */
+    CHECK_EQ(dd.newest, PD_MAX_MESSAGE_ID);
+    CHECK_EQ(pd_dedupe_check(&dd, 3, true), -1); /* across the wrap: newer */
+    CHECK_EQ(dd.newest, 3);
+    CHECK_EQ(pd_dedupe_check(&dd, PD_MAX_MESSAGE_ID, true), -1);
+    CHECK_EQ(dd.newest, 3);
+}
+
+static void test_dedupe_id_outside_1_to_127_refused(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn init = m_digital_init(PD_MAX_MESSAGE_ID + 1u, 13, false);
+    CHECK_EQ(t_cmd(&d, &init), S(INVALID_ARGUMENT));
+    CHECK_EQ(d.hal.digital[13], -1);
+    CHECK_EQ(dd_count(&d.core.dedupe), 0);
 }
 
 static void test_dedupe_ping_and_info_answered_in_full(void)
@@ -469,7 +572,7 @@ static void test_dedupe_ping_and_info_answered_in_full(void)
     CHECK_EQ(t_cmd(&d, &info), S(OK));
     CHECK_EQ(t_acks(&d, 51, &ack), 1);
     CHECK_EQ(ack.which_result, protoduino_Ack_info_tag);
-    CHECK_EQ(d.core.dedupe.count, 0); /* they take no slot */
+    CHECK_EQ(dd_count(&d.core.dedupe), 0); /* they take no slot */
 }
 
 static void test_dedupe_survives_reset_not_reboot(void)
@@ -482,25 +585,47 @@ static void test_dedupe_survives_reset_not_reboot(void)
     CHECK_EQ(t_cmd(&d, &on), S(OK));
     protoduino_ArduinoIn off = m_digital(3, 13, false);
     CHECK_EQ(t_cmd(&d, &off), S(OK));
-    t_send_reset(&d, PD_PROTOCOL_VERSION); /* the host handshakes again, then retransmits */
+    t_send_reset(&d, PD_PROTOCOL_VERSION); /* the host handshakes again (NEXT_ID 4), retransmits */
+    CHECK_EQ(d.core.dedupe.newest, 3);
     CHECK_EQ(t_cmd(&d, &on), S(OK));
     CHECK_EQ(d.hal.digital[13], 0);
     pd_core_init(&d.core, &d.hal); /* a reboot forgets everything */
-    CHECK_EQ(d.core.dedupe.count, 0);
+    CHECK_EQ(dd_count(&d.core.dedupe), 0);
+}
+
+/* A new session's id 1 runs, whatever the previous owner left in the window. */
+static void test_dedupe_new_session_clears(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn init = m_digital_init(1, 13, false);
+    CHECK_EQ(t_cmd(&d, &init), S(OK));
+    protoduino_ArduinoIn on = m_digital(2, 13, true);
+    CHECK_EQ(t_cmd(&d, &on), S(OK));
+    t_send_reset_next(&d, T_SESSION + 1u, 1); /* another host, its ids from 1 */
+    CHECK_EQ(dd_count(&d.core.dedupe), 0);
+    CHECK_EQ(d.core.dedupe.newest, PD_MAX_MESSAGE_ID);
+    CHECK_EQ(t_cmd(&d, &init), S(OK)); /* its id 1: executed (the pin was released) */
+    CHECK_EQ(d.hal.digital[13], 0);
+    CHECK_EQ(t_cmd(&d, &on), S(OK));
+    CHECK_EQ(d.hal.digital[13], 1);
 }
 
 static void test_dedupe_unit(void)
 {
     pd_dedupe_t dd;
     pd_dedupe_init(&dd);
-    CHECK_EQ(pd_dedupe_find(&dd, 0), -1);
-    for (uint32_t id = 1; id <= 40; id++) {
+    pd_dedupe_sync(&dd, 1, true);
+    for (uint32_t k = 1; k <= 3u * PD_MAX_MESSAGE_ID; k++) {
+        uint8_t id = (uint8_t)((k - 1u) % PD_MAX_MESSAGE_ID + 1u);
+        CHECK_EQ(pd_dedupe_check(&dd, id, true), -1);
         pd_dedupe_add(&dd, id, (uint8_t)(id % 10));
-        CHECK_EQ(pd_dedupe_find(&dd, id), id % 10);
-        if (id > PD_DEDUPE_WINDOW) {
-            CHECK_EQ(pd_dedupe_find(&dd, id - PD_DEDUPE_WINDOW), -1);
-            CHECK_EQ(pd_dedupe_find(&dd, id - PD_DEDUPE_WINDOW + 1), (id - PD_DEDUPE_WINDOW + 1) % 10);
+        CHECK_EQ(pd_dedupe_check(&dd, id, true), id % 10);
+        for (uint8_t back = 1; back < 20 && back < k; back++) {
+            uint8_t old = (uint8_t)((id + PD_MAX_MESSAGE_ID - 1u - back) % PD_MAX_MESSAGE_ID + 1u);
+            CHECK_EQ(pd_dedupe_check(&dd, old, true), back < PD_DEDUPE_WINDOW ? old % 10 : -1);
         }
+        CHECK_EQ(dd.newest, id);
     }
 }
 
@@ -527,9 +652,14 @@ const pd_test_case_t pd_tests_dispatch[] = {
     TEST_CASE(test_board_limits_from_hal),
     TEST_CASE(test_one_ack_per_message),
     TEST_CASE(test_dedupe_repeat_not_executed),
+    TEST_CASE(test_short_ack_when_only_id_and_ok),
     TEST_CASE(test_dedupe_window_evicts_after_16),
+    TEST_CASE(test_dedupe_stale_entry_of_the_same_id_executes),
+    TEST_CASE(test_dedupe_newest_moves_only_forward),
+    TEST_CASE(test_dedupe_id_outside_1_to_127_refused),
     TEST_CASE(test_dedupe_ping_and_info_answered_in_full),
     TEST_CASE(test_dedupe_survives_reset_not_reboot),
+    TEST_CASE(test_dedupe_new_session_clears),
     TEST_CASE(test_dedupe_unit),
     {NULL, NULL},
 };

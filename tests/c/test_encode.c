@@ -49,6 +49,25 @@ static void test_encode_ack_plain(void)
     }
 }
 
+/* The short Ack (ArduinoOut.ack_ok, 7): pb_encode's bytes, the member written even at 0. */
+static void test_encode_ack_ok(void)
+{
+    const uint32_t ids[] = {0, 1, 127, 128, 0xFFFFFFFFu};
+    for (size_t i = 0; i < sizeof(ids) / sizeof(ids[0]); i++) {
+        protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
+        out.which_data = protoduino_ArduinoOut_ack_ok_tag;
+        out.data.ack_ok = ids[i];
+        CHECK_EQ(compare(&out), 0);
+    }
+    protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
+    out.which_data = protoduino_ArduinoOut_ack_ok_tag;
+    out.data.ack_ok = 5;
+    uint8_t buf[PD_ENCODE_MAX];
+    CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 2);
+    CHECK_EQ(buf[0], 0x38);
+    CHECK_EQ(buf[1], 5);
+}
+
 static void test_encode_ack_ping_echo(void)
 {
     for (size_t len = 0; len <= 64; len++) {
@@ -276,6 +295,7 @@ static void test_encode_empty(void)
 
 const pd_test_case_t pd_tests_encode[] = {
     TEST_CASE(test_encode_ack_plain),
+    TEST_CASE(test_encode_ack_ok),
     TEST_CASE(test_encode_ack_ping_echo),
     TEST_CASE(test_encode_ack_info),
     TEST_CASE(test_encode_failsafe_decode_error),

@@ -78,7 +78,7 @@ static void test_reset_of_another_version_leaves_the_session(void)
     t_active(&d);
     protoduino_ArduinoIn in = m_digital_init(1, 13, true);
     CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
-    const uint8_t other[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION + 1, 0, 0, 0, 9};
+    const uint8_t other[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION + 1, 0, 0, 0, 9, 1};
     t_send_packet(&d, PD_PACKET_CONTROL, 0, other, sizeof(other));
     CHECK(!d.core.link.active);
     CHECK_EQ(d.hal.digital[13], 1); /* not released: no session was opened */
@@ -456,7 +456,7 @@ static pd_link_event_t feed_link(pd_link_t *link, fake_hal_t *hal, const uint8_t
 
 static void link_active(pd_link_t *link, fake_hal_t *hal)
 {
-    const uint8_t reset[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION, 0xDE, 0xAD, 0xBE, 0xEF};
+    const uint8_t reset[PD_RESET_SIZE] = {PD_CONTROL_RESET, PD_PROTOCOL_VERSION, 0xDE, 0xAD, 0xBE, 0xEF, 1};
     uint8_t wire[32];
     unsigned counts[PD_LINK_OVERFLOW + 1] = {0};
     fake_init(hal);

@@ -64,9 +64,16 @@ void t_send_reset(tdev_t *d, uint8_t version)
 
 void t_send_reset_session(tdev_t *d, uint32_t session)
 {
+    /* The id after the newest one sent, as a host's RESET carries it. */
+    t_send_reset_next(d, session, (uint8_t)(d->last_id % PD_MAX_MESSAGE_ID + 1u));
+}
+
+void t_send_reset_next(tdev_t *d, uint32_t session, uint8_t next_id)
+{
     const uint8_t payload[PD_RESET_SIZE] = {
-        PD_CONTROL_RESET,       PD_PROTOCOL_VERSION,    (uint8_t)(session >> 24),
+        PD_CONTROL_RESET,         PD_PROTOCOL_VERSION,     (uint8_t)(session >> 24),
         (uint8_t)(session >> 16), (uint8_t)(session >> 8), (uint8_t)session,
+        next_id,
     };
     const uint8_t flush = 0;
     t_feed(d, &flush, 1);
@@ -82,6 +89,13 @@ void t_send_in(tdev_t *d, const protoduino_ArduinoIn *in)
         abort();
     }
     t_send_packet(d, PD_PACKET_COMMAND, d->host_seq++, buf, s.bytes_written);
+    if (in->message_id >= 1u && in->message_id <= PD_MAX_MESSAGE_ID) {
+        uint32_t ahead = (in->message_id + PD_MAX_MESSAGE_ID - (d->last_id ? d->last_id : PD_MAX_MESSAGE_ID)) %
+                         PD_MAX_MESSAGE_ID;
+        if (ahead >= 1u && ahead <= PD_ID_AHEAD_MAX) {
+            d->last_id = (uint8_t)in->message_id;
+        }
+    }
 }
 
 bool t_out(const tdev_t *d, size_t i, protoduino_ArduinoOut *out)
@@ -92,7 +106,17 @@ bool t_out(const tdev_t *d, size_t i, protoduino_ArduinoOut *out)
     }
     memset(out, 0, sizeof(*out));
     pb_istream_t s = pb_istream_from_buffer(f->payload, f->len);
-    return pb_decode(&s, protoduino_ArduinoOut_fields, out);
+    if (!pb_decode(&s, protoduino_ArduinoOut_fields, out)) {
+        return false;
+    }
+    if (out->which_data == protoduino_ArduinoOut_ack_ok_tag) {
+        /* The short Ack is the Ack of that id with STATUS_OK and nothing else, as a host reads it. */
+        uint32_t id = out->data.ack_ok;
+        memset(out, 0, sizeof(*out));
+        out->which_data = protoduino_ArduinoOut_ack_tag;
+        out->data.ack.message_id = id;
+    }
+    return true;
 }
 
 int t_acks(const tdev_t *d, uint32_t id, protoduino_Ack *ack)

@@ -15,7 +15,11 @@ typedef struct tdev {
     fake_hal_t hal;
     pd_core_t core;
     uint8_t host_seq; /* SEQ of the next packet the host sends */
+    uint8_t last_id;  /* the newest message id the host sent (0: none yet): RESET's NEXT_ID follows it */
 } tdev_t;
+
+/* The k-th message id of a session (k from 1): 1..127, wrapping to 1 as a host's do. */
+#define T_ID(k) ((uint32_t)(((k) - 1u) % PD_MAX_MESSAGE_ID + 1u))
 
 /* Power up (the BOOT frame stays in the fake's log). */
 void t_boot(tdev_t *d);
@@ -31,6 +35,8 @@ void t_send_reset(tdev_t *d, uint8_t version);
 /* The session every test's host uses unless it says otherwise. */
 #define T_SESSION 0x5E551011u
 void t_send_reset_session(tdev_t *d, uint32_t session);
+/* The same with an explicit NEXT_ID (1..127). */
+void t_send_reset_next(tdev_t *d, uint32_t session, uint8_t next_id);
 /* Encode and send one ArduinoIn as a COMMAND with the host's next SEQ. */
 void t_send_in(tdev_t *d, const protoduino_ArduinoIn *in);
 

@@ -8,6 +8,7 @@ import crcmod.predefined
 import pytest
 from protoduino.constants import ControlCode, PacketType
 from protoduino.framing import StreamDecoder, cobs_decode, cobs_encode, frame_packet
+from protoduino.messages import Status, parse_in, parse_out, serialize_out
 from protoduino.packets import BadFrame, Packet, build_packet, crc16, parse_control, parse_packet
 from wirevectors import INVALID_FRAME_REASONS, load
 
@@ -89,3 +90,25 @@ def test_version_2_handshake_vectors_parse_field_by_field() -> None:
     assert (ack.version, ack.schema_id, ack.boot_id, ack.resumed) == (2, 0x1A2B3C00, 7, True)
     old = parse_control(by_name["RESET_ACK from device, version 1, schema id 0x1A2B3C00"])
     assert (old.version, old.schema_id, old.boot_id) == (1, 0x1A2B3C00, None)
+
+
+def test_version_5_vectors_parse_field_by_field() -> None:
+    by_name = {v["name"]: bytes.fromhex(v["payload"]) for v in V["packets"]}
+    reset = parse_control(by_name["RESET from host, version 5, session 0x5E551011, next id 1"])
+    assert (reset.code, reset.version, reset.session, reset.next_id) == (
+        ControlCode.RESET,
+        5,
+        0x5E551011,
+        1,
+    )
+    on = parse_in(by_name["COMMAND version 5: digital write, message id 1, pin 13, level 1"])
+    assert (on.message_id, on.digital_control.pin, on.digital_control.level) == (1, 13, True)
+    off = parse_in(by_name["COMMAND version 5: digital write, message id 2, pin 13, level 0"])
+    assert (off.message_id, off.digital_control.pin, off.digital_control.level) == (2, 13, False)
+    # The short Ack reads as the long one: the Ack of id 1, STATUS_OK, nothing else.
+    short = by_name["DATA version 5: short Ack (ack_ok) of message id 1"]
+    assert short == bytes((0x38, 0x01))
+    ack = parse_out(short)
+    assert ack.WhichOneof("data") == "ack"
+    assert (ack.ack.message_id, ack.ack.status) == (1, Status.STATUS_OK)
+    assert serialize_out(ack) == short

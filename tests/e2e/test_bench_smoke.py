@@ -32,6 +32,7 @@ from protoduino._generated import protoduino_pb2 as pb  # noqa: E402
 from protoduino.constants import PacketType  # noqa: E402
 from protoduino.errors import CommandRejectedError  # noqa: E402
 from protoduino.framing import PyStreamDecoder, StreamDecoder  # noqa: E402
+from protoduino.messages import parse_out  # noqa: E402
 from protoduino.packets import Packet  # noqa: E402
 
 from bench import boards, firmware, receive, roundtrip, runner, throughput, wire  # noqa: E402
@@ -179,7 +180,8 @@ def test_protoduino_wire_sample_decodes() -> None:
     assert command[0].type is PacketType.COMMAND and ack[0].type is PacketType.DATA
     msg = pb.ArduinoIn.FromString(command[0].payload)
     assert (msg.servo_control.pin, msg.servo_control.degrees) == (9, 90)
-    reply = pb.ArduinoOut.FromString(ack[0].payload)
+    assert ack[0].payload[0] == 0x38  # the short Ack (ArduinoOut.ack_ok, protocol version 5)
+    reply = parse_out(ack[0].payload)
     assert reply.ack.message_id == msg.message_id
     assert reply.ack.status == pb.STATUS_OK
 
@@ -464,7 +466,7 @@ def test_runner_writes_the_board_sections(tmp_path: Path) -> None:
         assert f"| {boards.LABELS[label]} | servo write |" in text
     assert "### Where the emulated Uno's round trip goes" in text
     # The round trip at the rate the Board agrees on, beside 115200's: measured, not skipped.
-    assert "### At the agreed rate" in text and "agreed on 500,000 baud" in text
+    assert "### At the agreed rate" in text and "agreed on 1,000,000 baud" in text
     assert "| servo write |" in text.split("### At the agreed rate")[1]
     assert "echoes one byte in" in text  # the emulator's own share, measured
     assert "### Profile of a servo write on the Uno" in text
@@ -658,7 +660,7 @@ def test_race_servo_round_trips_on_the_emulated_uno() -> None:
         assert run.baud == nominal and len(run.overheads) == 6 and len(run.sizes) == 6
         assert all(cmd >= 12 and ack >= 8 for cmd, ack in run.sizes)
     assert trips[115_200][0].line == race.Line(11 * 8 * 17)
-    assert trips[race.FAST_BAUD][0].line == race.Line(11 * 8 * 8)
+    assert trips[race.FAST_BAUD][0].line == race.Line(11 * 8 * 2)
     assert race._round_trip_target(trips).met is not None
 
 
@@ -682,8 +684,8 @@ def test_race_on_both_boards() -> None:
     # The UART rates the firmwares set: protoduino U2X with UBRR 16, Firmata's 57600 without
     # U2X (the Arduino core's exception for that rate) and UBRR 16; simavr's 11-bit bytes.
     assert ours.line == race.Line(11 * 8 * 17)
-    # The agreed rate: UBRR 3 with U2X, 500,000 baud (docs/protocol.md 5, *Line rate*).
-    assert fast.nominal_baud == race.FAST_BAUD and fast.line == race.Line(11 * 8 * 4)
+    # The agreed rate: UBRR 1 with U2X, 1,000,000 baud (docs/protocol.md 5, *Line rate*).
+    assert fast.nominal_baud == race.FAST_BAUD and fast.line == race.Line(11 * 8 * 2)
     assert theirs.line == race.Line(11 * 16 * 17)
     assert theirs.command_bytes == [3]  # DIGITAL_MESSAGE: 0x90 | port, two 7-bit bytes
     assert ours.command_bytes and min(ours.command_bytes) >= 12 and ours.answer_bytes

@@ -60,7 +60,7 @@ def _works(board: protoduino.Board) -> None:
 #: The rates each board offers (RESET_ACK FLAGS): the Uno firmware leaves 1,000,000 out
 #: while its receive ring is below PD_AVR_RX_FAST_1M (firmware/avr/pd_avr_main.c says
 #: why), the native board has no UART to limit it.
-OFFERED = {"native": (1_000_000, 500_000, 250_000), "avr": (500_000, 250_000)}
+OFFERED = {"native": (1_000_000, 500_000, 250_000), "avr": (1_000_000, 500_000, 250_000)}
 
 
 def test_agreement_reaches_the_fastest_common_rate(start_board: StartBoard) -> None:
@@ -130,9 +130,9 @@ def test_the_emulated_uart_follows_the_switch(tmp_path: Path) -> None:
         with protoduino.Board.open(sim.port) as board:
             _works(board)
             line = snapshot(sim.pid, stats)
-    # UBRR0 3 with U2X: 500,000 baud, and simavr's byte time (11 bits of 32 cycles).
-    assert line["uart_baud"] == 500_000
-    assert line["uart_byte_cycles"] == 11 * 8 * 4
+    # UBRR0 1 with U2X: 1,000,000 baud, and simavr's byte time (11 bits of 16 cycles).
+    assert line["uart_baud"] == 1_000_000
+    assert line["uart_byte_cycles"] == 11 * 8 * 2
     # Nothing the device sent was lost to a rate mismatch. (A host may lose its first
     # probe: it can follow the BAUD_ACK before the device, which waits for the ack's
     # last bit to leave, has switched; that is what the probe's retries are for.)

@@ -305,10 +305,10 @@ def _raw_marker(port: str, session: int) -> None:
         ser.write(
             b"\0"
             + frame_packet(
-                PacketType.CONTROL, 0, reset_payload(protoduino.PROTOCOL_VERSION, session)
+                PacketType.CONTROL, 0, reset_payload(protoduino.PROTOCOL_VERSION, session, 1)
             )
         )
-        msg = ArduinoIn(message_id=0x7E57)
+        msg = ArduinoIn(message_id=1)  # NEXT_ID 1: new to the device whatever its window holds
         msg.digital_control.pin, msg.digital_control.level = 13, True
         sent = False
         deadline = time.monotonic() + 5.0

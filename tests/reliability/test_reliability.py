@@ -42,23 +42,41 @@ class Executions:
     def __init__(self, fake: FakeDevice, drop: Callable[[Any, int], bool]) -> None:
         self.fake = fake
         self.drop = drop  # (msg, how many times this id arrived) -> drop the reply?
+        # By call, not by id: ids wrap every 127 (protocol version 5). A call's key is
+        # given when its id is new as the device tells (1..63 ahead of the newest one).
         self.count: collections.Counter[int] = collections.Counter()
         self.arrivals: collections.Counter[int] = collections.Counter()
-        self.order: list[int] = []  # ids in the order they arrived
+        self.order: list[int] = []  # keys in order of arrival
         self.evicted_retransmissions: list[int] = []
+        self._key_of: dict[int, int] = {}
+        self._newest = 0  # the newest id (0: none yet) and its key
+        self._newest_key = 0
         fake.handler = self
+
+    def key(self, mid: int) -> int:
+        """``mid`` unwrapped: the id itself on the first lap, then counting on past 127."""
+        d = (mid - self._newest) % 127
+        known = self._key_of.get(mid)
+        if known is not None and not 1 <= d <= 63:
+            return known  # a repeat of a call seen before
+        key = mid if not self._newest else self._newest_key + (d if d <= 63 else d - 127)
+        self._key_of[mid] = key
+        if not self._newest or 1 <= d <= 63:
+            self._newest, self._newest_key = mid, key
+        return key
 
     def __call__(self, msg: Any) -> list[Any]:
         mid = msg.message_id
-        self.arrivals[mid] += 1
-        self.order.append(mid)
+        key = self.key(mid)
+        self.arrivals[key] += 1
+        self.order.append(key)
         kind = msg.WhichOneof("data")
-        if kind not in ("ping", "get_info") and mid not in self.fake.dedupe:
-            if self.count[mid]:
-                self.evicted_retransmissions.append(mid)
-            self.count[mid] += 1
+        if kind not in ("ping", "get_info") and not self.fake.dedupe.holds(mid):
+            if self.count[key]:
+                self.evicted_retransmissions.append(key)
+            self.count[key] += 1
         replies = self.fake.default_reply(msg)
-        return [] if self.drop(msg, self.arrivals[mid]) else replies
+        return [] if self.drop(msg, self.arrivals[key]) else replies
 
 
 def stream_writes(board: Board, threads: int = 4, per_thread: int = 15) -> None:
@@ -142,7 +160,7 @@ def test_an_older_id_retransmitted_after_x_counts_against_xs_window(fake: FakeDe
             # Y's first copy never reaches the device: not executed, not acked.
             if msg.WhichOneof("data") == "servo_control" and not ids:
                 ids.append(msg.message_id)
-                ex.arrivals[msg.message_id] += 1
+                ex.arrivals[ex.key(msg.message_id)] += 1
                 return []
             return original(msg)
 
@@ -459,7 +477,7 @@ def _made_up_run(*, reboot: bool, stray: int | None = None, at: float = 2.5) -> 
     scenario = soak.Scenario("made-up", commands=1, servos=1, digitals=0, recovery_commands=1)
     wire = soak.Wire()
     lines: list[dict[str, Any]] = []
-    ids = iter(range(100, 200))
+    ids = iter(range(1, 100))
 
     def send(build: Callable[[Any], None], txs: list[float], line: int | None) -> None:
         msg = protoduino.messages.ArduinoIn()
@@ -467,7 +485,7 @@ def _made_up_run(*, reboot: bool, stray: int | None = None, at: float = 2.5) -> 
         msg.message_id = next(ids)
         for t in txs:
             wire.command(t, msg.SerializeToString())
-        sent = wire.sent[msg.message_id]
+        sent = wire.sent_of(msg.message_id)
         sent.ack, sent.status = txs[-1] + 0.001, 0
         if line is not None:
             lines.append({"t": txs[-1] + 0.0005 - 1000, "pin": 3, "mode": "servo", "value": line})
@@ -500,7 +518,7 @@ def _made_up_run(*, reboot: bool, stray: int | None = None, at: float = 2.5) -> 
         lines.append({"t": 0.1021, "pin": 3, "mode": "servo", "value": 0})
         send(init, [1000.600], soak.servo_safe(0))  # the restore
     wire.command(1000.650, xmsg.SerializeToString())  # X again, same id
-    wire.sent[x].ack, wire.sent[x].status = 1000.651, 0
+    wire.sent_of(x).ack, wire.sent_of(x).status = 1000.651, 0
     lines.append({"t": 0.6505, "pin": 3, "mode": "servo", "value": v1})  # ran again
     send(control(v2), [1000.810], v2)
     send(lambda m: m.ping.SetInParent(), [1000.820], None)  # acknowledged: no failsafe till 1010.8

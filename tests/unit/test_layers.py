@@ -24,7 +24,8 @@ from protoduino.errors import (
 )
 from protoduino.events import Event, EventKind
 from protoduino.link import Link, LinkState
-from protoduino.messages import ArduinoIn, ArduinoOut
+from protoduino.messages import ArduinoIn, ArduinoOut, parse_in
+from protoduino.packets import Control, parse_control
 from protoduino.rpc import MessageHook, Rpc
 from protoduino.testing import VirtualDevice
 
@@ -65,6 +66,7 @@ class Stack:
             watchdog_timeout=WATCHDOG_TIMEOUT,
             notify=self.events.append,
             clock=self.clock,
+            next_id=self.rpc.next_message_id,
         )
         self.rpc.attach(self.link)
 
@@ -165,7 +167,7 @@ def test_a_device_reboot_restores_the_configuration_first() -> None:
 
 
 def test_message_ids_wrap_around_without_zero() -> None:
-    stack = Stack(VirtualDevice(), first_id=0xFFFFFFFE)
+    stack = Stack(VirtualDevice(), first_id=126)
     stack.link.open()
     ids = []
     for pin in (2, 3, 4):
@@ -173,8 +175,74 @@ def test_message_ids_wrap_around_without_zero() -> None:
         stack.device.deliver()
         assert call.done.is_set() and call.error is None
         ids.append(call.message_id)
-    assert ids == [0xFFFFFFFE, 0xFFFFFFFF, 1]
+    assert ids == [126, 127, 1]
     assert stack.rpc.state().next_id == 2
+    # The device ran all three: after the wrap, id 1 is newer than 127 (ahead by 1).
+    assert [m.digital_init.pin for m in stack.device.executed] == [2, 3, 4]
+
+
+def test_an_id_is_given_at_the_first_transmission_not_at_submit() -> None:
+    stack = Stack(VirtualDevice())
+    stack.link.open()
+    stack.rpc.window = 1
+    held = [stack.rpc.submit(digital_init(pin)) for pin in (2, 3, 4)]
+    # Only the first went out: the others have no id yet, and a Ping submitted now, urgent,
+    # overtakes them and takes the next id, so ids go on the wire in the order given.
+    assert [c.message_id for c in held] == [stack.rpc.state().next_id - 1, 0, 0]
+    ping = ArduinoIn()
+    ping.ping.SetInParent()
+    urgent = stack.rpc.submit(ping, urgent=True)
+    stack.device.deliver()
+    stack.run(0.1)
+    assert all(c.done.is_set() and c.error is None for c in [*held, urgent])
+    first = held[0].message_id
+    assert urgent.message_id == first % 127 + 1
+    assert [c.message_id for c in held[1:]] == [first % 127 + 2, first % 127 + 3]
+    wire = [parse_in(p).message_id for t, p in stack.device.received if t is PacketType.COMMAND]
+    assert wire[-4:] == [first, first % 127 + 1, first % 127 + 2, first % 127 + 3]
+
+
+class AckLosingDevice(VirtualDevice):
+    """Runs every command; while ``lose_acks`` is set, its DATA never reaches the host."""
+
+    lose_acks = False
+
+    def _reply(self, ptype: PacketType, payload: bytes) -> None:
+        if not (self.lose_acks and ptype is PacketType.DATA):
+            super()._reply(ptype, payload)
+
+
+def test_ids_never_go_64_ahead_of_the_acked_one_a_resumed_handshake_resyncs() -> None:
+    # Every Ack lost: the device runs each command, the host hears nothing. 63 ids past the
+    # newest one the device acknowledged (none yet: the one before the first RESET's
+    # NEXT_ID), the host handshakes again (the session resumed; the RESET's NEXT_ID
+    # re-synchronises the device's newest id) before it sends a 64th.
+    device = AckLosingDevice()
+    stack = Stack(device)
+    stack.link.open()
+    stack.link.watchdog_timeout = 1000.0  # not the watchdog's re-handshake
+    stack.rpc.window = 100
+    device.lose_acks = True
+    device.received.clear()
+    for _ in range(70):
+        msg = ArduinoIn()
+        msg.ping.SetInParent()
+        stack.rpc.submit(msg)
+    stack.run(0.1)
+    wire = [
+        (ptype, parse_control(p) if ptype is PacketType.CONTROL else parse_in(p).message_id)
+        for ptype, p in device.received
+    ]
+    reset = next(i for i, (ptype, _) in enumerate(wire) if ptype is PacketType.CONTROL)
+    assert [mid for _, mid in wire[:reset]] == list(range(1, 64))
+    ctl = wire[reset][1]
+    assert isinstance(ctl, Control) and ctl.next_id == 64
+    assert stack.rpc.id_resyncs == 1 and stack.link.state is LinkState.ACTIVE
+    # After it, the 63 go again with their ids (the session resumed) and id 64 is new; 65
+    # waits for id 1 to finish (it would be 64 ahead of an id still open).
+    after = [mid for ptype, mid in wire[reset + 1 :] if isinstance(mid, int)]
+    assert sorted(set(after)) == list(range(1, 65))
+    assert stack.rpc.id_holds > 0
 
 
 def test_a_silent_device_fails_the_handshake_at_its_timeout() -> None:

@@ -140,6 +140,7 @@ class LinkMachine(RuleBasedStateMachine):
             handshake_timeout=5.0,
             notify=self.events.append,
             clock=self.clock,
+            next_id=self.rpc.next_message_id,
         )
         self.rpc.attach(self.link)
         self.decoder = StreamDecoder()

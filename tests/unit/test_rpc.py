@@ -12,10 +12,16 @@ import protoduino
 import pytest
 from fakedevice import FakeDevice, ack
 from protoduino import Board
-from protoduino.framing import frame_size
+from protoduino.constants import PacketType
+from protoduino.framing import StreamDecoder, frame_size
 from protoduino.messages import ArduinoIn, Status
+from protoduino.packets import Packet, parse_control
 
 ACK_TIMEOUT = 0.1
+
+
+def packets_in(raw: bytes | bytearray) -> list[Packet]:
+    return [p for p in StreamDecoder().feed(bytes(raw)) if isinstance(p, Packet)]
 
 
 @pytest.fixture
@@ -31,24 +37,29 @@ def ping_msg(payload: bytes = b"") -> Any:
 
 
 def test_message_ids_increment(board: Board, fake: FakeDevice) -> None:
-    # The wrap past 2**32 - 1 (to 1, never 0): tests/unit/test_layers.py, on a chosen first id.
+    # The wrap past 127 (to 1, never 0): tests/unit/test_layers.py, on a chosen first id.
     first = board.rpc_state().next_id
     for _ in range(3):
         board.ping()
     ids = [r.msg.message_id for r in fake.commands("ping")]
-    assert ids == [first, first % 0xFFFFFFFF + 1, (first % 0xFFFFFFFF + 1) % 0xFFFFFFFF + 1]
+    assert ids == [first, first % 127 + 1, (first % 127 + 1) % 127 + 1]
 
 
-def test_message_ids_start_at_random(tmp_path: Path) -> None:
-    starts = set()
-    for i in range(3):
+def test_message_ids_start_at_1_each_session(tmp_path: Path) -> None:
+    # A new host session starts at 1, and its RESET says so (NEXT_ID): the device clears its
+    # window for a new session, so the previous session's ids cannot pass for repeats.
+    for i in range(2):
         directory = tmp_path / str(i)
         directory.mkdir()
         with FakeDevice(directory) as f, Board.open(f.port, ping=False):
             pass
-        starts.add(f.commands("get_info")[0].msg.message_id)
-    assert 0 not in starts
-    assert len(starts) > 1  # three equal 32-bit random starts: about 1 in 2**64
+        assert f.commands("get_info")[0].msg.message_id == 1
+    resets = [
+        parse_control(p.payload)
+        for p in packets_in(f.raw_rx)
+        if p.type is PacketType.CONTROL and p.payload[0] == 0
+    ]
+    assert resets and all(r.next_id == 1 for r in resets)
 
 
 def test_dropped_ack_is_retransmitted_with_the_same_id(board: Board, fake: FakeDevice) -> None:
@@ -115,7 +126,7 @@ def test_late_ack_never_completes_the_wrong_call(board: Board, fake: FakeDevice)
 
 
 def test_unknown_ack_is_counted_and_dropped(board: Board, fake: FakeDevice) -> None:
-    fake.send_data(ack((board.rpc_state().next_id + 1000) % 0xFFFFFFFF + 1))
+    fake.send_data(ack((board.rpc_state().next_id + 50) % 127 + 1))  # not given yet
     assert fake.wait_for(lambda: board.stats.unknown_acks == 1)
     board.ping()
 
@@ -168,7 +179,7 @@ def test_bytes_in_flight_stay_within_the_devices_receive_buffer(fake: FakeDevice
     """Flow control by bytes: at window 16, only as many frames fly as fit DeviceInfo.rx_buffer."""
     payload = bytes(10)
     longest = ping_msg(payload)
-    longest.message_id = 0xFFFFFFFF  # a 5-byte varint, the longest id
+    longest.message_id = 127  # every id is one varint byte (protocol version 5)
     size = frame_size(len(longest.SerializeToString()))
     fake.rx_buffer = 3 * size + 1  # room for three frames, not four
     held: list[Any] = []

@@ -51,6 +51,9 @@ class FakeLink:
     def recent_frames(self) -> tuple[str, ...]:
         return ()
 
+    def request_handshake(self) -> None:
+        pass
+
 
 def setup() -> tuple[Clock, FakeLink, Rpc]:
     clock = Clock()

@@ -829,7 +829,7 @@ class ArduinoIn(_message.Message):
     COUNTER_INIT_FIELD_NUMBER: _builtins.int
     CLEAR_INTERLOCK_FIELD_NUMBER: _builtins.int
     message_id: _builtins.int
-    """non-zero; reused by retransmissions"""
+    """1..127, per session (protocol version 5); reused by retransmissions"""
     @_builtins.property
     def ping(self) -> Global___Ping:
         """Numbered by how often they go (protocol version 4): the calls of a running robot
@@ -1248,6 +1248,13 @@ class ArduinoOut(_message.Message):
     DECODE_ERROR_FIELD_NUMBER: _builtins.int
     INPUT_REPORT_FIELD_NUMBER: _builtins.int
     USER_REPORT_FIELD_NUMBER: _builtins.int
+    ACK_OK_FIELD_NUMBER: _builtins.int
+    ack_ok: _builtins.int
+    """The short Ack (protocol version 5): "the Ack of this message_id, STATUS_OK,
+    nothing else" (no result, no failsafe, no refused item, no user code). The
+    device sends it whenever the Ack would carry only the id and STATUS_OK: 2 B
+    instead of 4 to 6. A host reads it as that Ack.
+    """
     @_builtins.property
     def ack(self) -> Global___Ack: ...
     @_builtins.property
@@ -1266,12 +1273,13 @@ class ArduinoOut(_message.Message):
         decode_error: Global___DecodeError | None = ...,
         input_report: Global___InputReport | None = ...,
         user_report: Global___UserReport | None = ...,
+        ack_ok: _builtins.int = ...,
     ) -> None: ...
-    _HasFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "user_report", b"user_report"]  # noqa: Y015
+    _HasFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "ack_ok", b"ack_ok", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "user_report", b"user_report"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "user_report", b"user_report"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["ack", b"ack", "ack_ok", b"ack_ok", "data", b"data", "decode_error", b"decode_error", "failsafe", b"failsafe", "input_report", b"input_report", "user_report", b"user_report"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
-    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ack", "failsafe", "decode_error", "input_report", "user_report"]  # noqa: Y015
+    _WhichOneofReturnType_data: _TypeAlias = _typing.Literal["ack", "failsafe", "decode_error", "input_report", "user_report", "ack_ok"]  # noqa: Y015
     _WhichOneofArgType_data: _TypeAlias = _typing.Literal["data", b"data"]  # noqa: Y015
     def WhichOneof(self, oneof_group: _WhichOneofArgType_data) -> _WhichOneofReturnType_data | None: ...
 
