@@ -127,9 +127,6 @@ from .session import (
 
 log = logging.getLogger(__name__)
 
-#: How many finished ids are remembered to tell a late Ack from an unknown one.
-FINISHED_MEMORY = 256
-
 Ack = Any  # protoduino_pb2.Ack (protobuf message classes are dynamic)
 #: Commands that carry the latest failsafe epoch the host saw (protocol.md section 7,
 #: failsafe epochs): the liveness messages, and ClearInterlock, which also re-arms.
@@ -369,7 +366,8 @@ class Rpc:
         self._failsafe = FailsafeLiveness(failsafe_timeout, heartbeat_liveness)
         self._restore_call: Call | None = None
         self._holding = False
-        self._finished: collections.deque[int] = collections.deque(maxlen=FINISHED_MEMORY)
+        # Finished ids not given out again, to tell a late Ack from an unknown one (ids are
+        # 1..127, so this holds at most 127).
         self._finished_set: set[int] = set()
         # Dedupe guard: id -> serial number of its last transmission, in that order.
         self._tx_log: collections.OrderedDict[int, int] = collections.OrderedDict()
@@ -666,10 +664,8 @@ class Rpc:
             for queue in (self._urgent, self._pending):
                 if call in queue:
                     queue.remove(call)
-        # Ids are 1..127 (protocol version 5), so the set of finished ids stays small and
-        # is never rebuilt here; an id given out again leaves it (_allocate_id).
-        self._finished.append(call.message_id)
-        self._finished_set.add(call.message_id)
+        if call.message_id:  # an id given out again leaves the set (_allocate_id)
+            self._finished_set.add(call.message_id)
         call.ack, call.error = ack, error
         call.done.set()
         if call.on_done is not None:
@@ -878,7 +874,6 @@ class Rpc:
         self._inflight.pop(call.message_id, None)
         self._by_id.pop(call.message_id, None)
         self._finished_set.add(call.message_id)  # a late answer to it is late, not unknown
-        self._finished.append(call.message_id)
         call.message_id = call.serial = 0  # a new one at its next transmission
         call.first_tx = None
         call.attempts = 0

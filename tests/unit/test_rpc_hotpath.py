@@ -14,12 +14,12 @@ from collections.abc import Iterator
 import protoduino
 import pytest
 import serial
-from protoduino.constants import PacketType
+from protoduino.constants import MAX_MESSAGE_ID, PacketType
 from protoduino.errors import ProtoduinoError
 from protoduino.framing import StreamDecoder, frame_packet
 from protoduino.messages import ArduinoIn, ArduinoOut
 from protoduino.packets import Packet
-from protoduino.rpc import FINISHED_MEMORY, Done, Rpc
+from protoduino.rpc import Done, Rpc
 from protoduino.transport import Transport
 
 
@@ -53,6 +53,9 @@ class _Link:
         self.sent.append(payload)
         return True
 
+    def request_handshake(self) -> None:
+        raise AssertionError("every id is acked at once here: no re-handshake is due")
+
     def reboot_inferred(self) -> None:
         pass
 
@@ -72,22 +75,31 @@ def _ping() -> ArduinoIn:
     return msg
 
 
-def test_finished_ids_are_remembered_up_to_the_memory_and_no_further() -> None:
+def test_a_finished_id_is_late_until_it_is_given_out_again() -> None:
+    """Ids wrap at 127 (protocol version 5): an Ack for a finished id is late, not unknown,
+    until the id goes to a new call, whose Ack it then is; an id never given out is unknown."""
     rpc = Rpc(notify=lambda event: None, ping=False, first_id=1, window=1)
-    rpc.attach(_Link())
+    link = _Link()
+    rpc.attach(link)
     calls = []
-    for _ in range(FINISHED_MEMORY + 10):
+    for _ in range(MAX_MESSAGE_ID + 10):  # past the wrap: ids 1..127, then 1..10 again
         call = rpc.submit(_ping())
         rpc.link_message(_ack(call.message_id))
         assert call.done.is_set() and call.error is None
         calls.append(call)
-    assert rpc.acks == FINISHED_MEMORY + 10
+    assert [c.message_id for c in calls[-11:]] == [127, *range(1, 11)]
+    assert rpc.acks == MAX_MESSAGE_ID + 10
     rpc.link_message(_ack(calls[-1].message_id))  # the newest: late
-    rpc.link_message(_ack(calls[-FINISHED_MEMORY].message_id))  # the oldest remembered: late
+    rpc.link_message(_ack(127))  # finished before the wrap, not given out since: late
     assert (rpc.late_acks, rpc.unknown_acks) == (2, 0)
-    rpc.link_message(_ack(calls[-FINISHED_MEMORY - 1].message_id))  # forgotten: unknown
-    rpc.link_message(_ack(calls[0].message_id))
-    assert (rpc.late_acks, rpc.unknown_acks) == (2, 2)
+    fresh = Rpc(notify=lambda event: None, ping=False, first_id=1, window=1)
+    fresh.attach(_Link())
+    fresh.link_message(_ack(5))  # never given out in this session: unknown
+    assert (fresh.late_acks, fresh.unknown_acks) == (0, 1)
+    pending = rpc.submit(_ping())  # id 11: its Ack completes it, whatever came before
+    assert pending.message_id == 11 and not pending.done.is_set()
+    rpc.link_message(_ack(11))
+    assert pending.done.is_set() and pending.error is None
     assert rpc.state().open_calls == ()
 
 
