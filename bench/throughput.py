@@ -72,7 +72,7 @@ POINT_TIMEOUT = 120.0
 
 def _uno_rx_ring() -> int:
     """The Uno firmware's receive ring, PD_AVR_RX_SIZE, read from firmware/avr/pd_avr.h so
-    that the report's text cannot go stale when the ring is resized (128 -> 64 -> 48 B)."""
+    that the report's text cannot go stale when the ring is resized (128 -> 64 -> 48 -> 96 B)."""
     header = Path(__file__).resolve().parents[1] / "firmware" / "avr" / "pd_avr.h"
     found = re.search(r"#define PD_AVR_RX_SIZE (\d+)", header.read_text())
     if found is None:

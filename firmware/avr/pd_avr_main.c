@@ -54,7 +54,7 @@ bool pd_hal_write(void *hal, const uint8_t *data, uint16_t len)
  * 7, *Flow control*): a frame longer than the ring holds only while the main
  * loop takes its bytes faster than the line brings them, that is while no work
  * of the loop's (an input report's encoding, a command's decode) outlasts the
- * ring's line time. 48 B are 15,360 cycles at 500,000: enough on the emulated
+ * ring's line time. The ring of before protocol version 5, 48 B, was 15,360 cycles at 500,000: enough on the emulated
  * Uno (64-byte Pings and GetInfo at windows 4 to 16; 6-item Poses while six
  * analog inputs sampled at 500 Hz report every 10 ms: no retransmission). At
  * 1,000,000 they are 7,680 cycles, and a 6-item Pose (a 64-byte frame) arriving

@@ -387,6 +387,11 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
         out.data.decode_error.count = core->decode_errors;
         pd_out_send(core, &out);
         if (msg->message_id != 0) {
+            if (msg->message_id <= PD_MAX_MESSAGE_ID) {
+                /* Its Ack tells the host the device saw this id, so N must have moved
+                 * with it (section 7, *Message ids*: every id moves N); not recorded. */
+                (void)pd_dedupe_check(&core->dedupe, (uint8_t)msg->message_id, false);
+            }
             memset(&out, 0, sizeof(out));
             send_ack(core, &out, msg->message_id, protoduino_Status_STATUS_DECODE_ERROR);
         }

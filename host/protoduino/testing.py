@@ -425,7 +425,7 @@ class VirtualDevice:
         if not 1 <= mid <= MAX_MESSAGE_ID:
             out.ack.status = Status.STATUS_INVALID_ARGUMENT
             return out
-        idempotent = kind in ("ping", "heartbeat", "get_info")
+        idempotent = kind is not None and command(kind).idempotent  # as the firmware's table
         seen = self._dedupe.check(mid, lookup=not idempotent)
         if kind in ("ping", "heartbeat"):
             self._liveness(kind, getattr(msg, kind).failsafe_epoch)

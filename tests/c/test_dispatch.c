@@ -316,6 +316,34 @@ static void test_decode_error(void)
     CHECK_EQ(d.hal.servo_us[9], 544);
 }
 
+/* A decode error's Ack tells the host the device saw its id, so the id moves the device's
+ * newest id N like any other: else 63 of them in a row, then Pings, would leave N behind the
+ * host's acknowledged ids, and an id of the next lap would be answered from the previous
+ * lap's entry without running. */
+static void test_decode_errors_move_the_newest_id(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_digital_init(1, 13, false);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_digital(2, 13, true);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.digital[13], 1);
+    for (uint8_t id = 3; id <= 65; id++) { /* a servo_init claiming 10 bytes, holding 2 */
+        const uint8_t bad[] = {0x08, id, 0x1a, 0x0a, 0x08, 0x09};
+        fake_clear(&d.hal);
+        t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, bad, sizeof(bad));
+        CHECK_EQ(t_status(&d, id), S(DECODE_ERROR));
+    }
+    for (uint32_t id = 66; id <= 128; id++) { /* Pings 66..127, then 1 */
+        in = m_ping(id == 128 ? 1 : id, NULL, 0);
+        CHECK_EQ(t_cmd(&d, &in), S(OK));
+    }
+    in = m_digital(2, 13, false); /* id 2 of the next lap: a new command, it runs */
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.digital[13], 0);
+}
+
 static void test_ping_echo_every_byte(void)
 {
     tdev_t d;
@@ -647,6 +675,7 @@ const pd_test_case_t pd_tests_dispatch[] = {
     TEST_CASE(test_message_id_zero),
     TEST_CASE(test_unknown_command),
     TEST_CASE(test_decode_error),
+    TEST_CASE(test_decode_errors_move_the_newest_id),
     TEST_CASE(test_ping_echo_every_byte),
     TEST_CASE(test_get_info),
     TEST_CASE(test_board_limits_from_hal),
