@@ -145,8 +145,9 @@ def test_poses_beside_input_reports_are_never_retransmitted(start_board: StartBo
     A 6-item Pose (a 64-byte frame; longer than the Uno's receive ring of before protocol
     version 5, 48 B, so the host let it go alone) arriving while input reports are built: at
     1,000,000 baud with that ring its bytes were lost at every retransmission
-    (firmware/avr/pd_avr_main.c). Judged by the link's counters: every Pose acknowledged at its first transmission, no frame
-    dropped either way, no receive overflow, and reports really went meanwhile.
+    (firmware/avr/pd_avr_main.c). Judged by the link's counters: every Pose acknowledged at
+    its first transmission, no frame dropped either way, no receive overflow, and reports
+    really went meanwhile.
     """
     sim = start_board("--line-check")
     with protoduino.Board.open(sim.port, window=4, ping=False) as board:
