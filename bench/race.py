@@ -46,7 +46,7 @@ from protoduino import Board, programs
 from protoduino.constants import PacketType
 from protoduino.errors import ProtoduinoError
 from protoduino.framing import frame_packet
-from protoduino.messages import ArduinoIn, ArduinoOut
+from protoduino.messages import ArduinoIn, parse_out
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
 from protoduino.transport import FrameRecord
@@ -374,12 +374,14 @@ class _WireSizes:
 
 
 class _CallFrames:
-    """Frame monitor: each COMMAND's wire size by message id, in the order sent, and each
-    Ack's by the message id it answers (the first of each, should one be sent again)."""
+    """Frame monitor: each COMMAND's wire size, in the order sent (a retransmission is not a
+    new command), and the wire size of the first Ack of each. Message ids come round again
+    after 127 (protocol version 5), so an Ack goes to the latest command of its id."""
 
     def __init__(self) -> None:
-        self.commands: dict[int, int] = {}
-        self.acks: dict[int, int] = {}
+        self.commands: list[tuple[int, int]] = []  # (message id, bytes)
+        self.acks: dict[int, int] = {}  # position in commands -> the Ack's bytes
+        self._latest: dict[int, int] = {}  # message id -> its latest command's position
 
     def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
         item = record.item
@@ -387,19 +389,25 @@ class _CallFrames:
             return
         if record.direction == "tx" and item.type is PacketType.COMMAND:
             message_id = ArduinoIn.FromString(item.payload).message_id
-            self.commands.setdefault(message_id, _wire_size(item))
+            latest = self._latest.get(message_id)
+            if latest is not None and latest not in self.acks:
+                return  # sent again, not answered yet: the same command
+            self._latest[message_id] = len(self.commands)
+            self.commands.append((message_id, _wire_size(item)))
         elif record.direction == "rx" and item.type is PacketType.DATA:
-            out = ArduinoOut.FromString(item.payload)
+            out = parse_out(item.payload)
             if out.WhichOneof("data") == "ack":
-                self.acks.setdefault(out.ack.message_id, _wire_size(item))
+                position = self._latest.get(out.ack.message_id)
+                if position is not None:
+                    self.acks.setdefault(position, _wire_size(item))
 
     def sizes(self, skip: int) -> list[tuple[int, int]]:
         """(command bytes, Ack bytes) of each command after the first ``skip``."""
-        sent = list(self.commands.items())[skip:]
-        missing = [mid for mid, _size in sent if mid not in self.acks]
+        sent = list(enumerate(self.commands))[skip:]
+        missing = [mid for position, (mid, _size) in sent if position not in self.acks]
         if missing:
             raise RuntimeError(f"no Ack seen for message ids {missing[:5]}")
-        return [(size, self.acks[mid]) for mid, size in sent]
+        return [(size, self.acks[position]) for position, (_mid, size) in sent]
 
 
 @dataclass(slots=True)

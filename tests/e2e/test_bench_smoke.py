@@ -776,3 +776,37 @@ def test_services_section_measures_both_calls_and_the_footprints() -> None:
     user = pb.ArduinoIn(message_id=0x7FFFFFFF)
     user.user_call.method = 2
     assert len(services.builtin_command()) == len(user.SerializeToString())
+
+
+def test_race_call_frames_pair_each_command_with_its_ack_across_the_id_wrap() -> None:
+    """Ids come round after 127 (protocol version 5): each Ack goes to the latest command of
+    its id, a retransmission is not a new command, and the short Ack counts as an Ack."""
+    from protoduino.messages import ArduinoIn, serialize_out
+    from protoduino.transport import FrameRecord
+
+    from bench import race
+
+    frames = race._CallFrames()
+
+    def send(mid: int, degrees: int) -> None:
+        msg = ArduinoIn(message_id=mid)
+        msg.servo_control.pin, msg.servo_control.degrees = 9, degrees
+        frames(FrameRecord(0.0, "tx", Packet(PacketType.COMMAND, 1, msg.SerializeToString())))
+
+    def ack(mid: int) -> None:
+        out = pb.ArduinoOut()
+        out.ack.message_id = mid
+        frames(FrameRecord(0.0, "rx", Packet(PacketType.DATA, 1, serialize_out(out))))
+
+    for i in range(130):  # ids 1..127, then 1, 2, 3
+        mid = i % 127 + 1
+        send(mid, i % 180)
+        if i == 5:
+            send(mid, i % 180)  # sent again before its Ack: the same command
+        ack(mid)
+    sizes = frames.sizes(skip=0)
+    assert len(sizes) == 130
+    assert {a for _c, a in sizes} == {9}  # every Ack the short form's 9 bytes
+    send(4, 0)  # no Ack for this one
+    with pytest.raises(RuntimeError, match=r"message ids \[4\]"):
+        frames.sizes(skip=0)
