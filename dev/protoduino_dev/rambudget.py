@@ -64,12 +64,19 @@ def _get_info() -> ArduinoIn:
     return msg
 
 
-def _oversized_pose() -> ArduinoIn:
+def _oversized_pose(*, full_decode: bool = False) -> ArduinoIn:
     """A Pose with one item more than the firmware's bound (8): nanopb refuses it while it is
-    as deep in the decode as a Pose can take it."""
+    as deep in the decode as a Pose can take it.
+
+    ``full_decode``: with an unknown field after the Pose (field 127, skipped by nanopb), so
+    that the payload is not of the host's usual shape and the firmware takes nanopb's whole
+    decode of ArduinoIn, whose walk of the oneof goes one level deeper than the short decode
+    (pd_dispatch_decode): the deepest stack is on that way."""
     msg = ArduinoIn()
     for pin in (*SERVO_PINS, DIGITAL_INPUT_PINS[0]):
         msg.pose.items.add().servo.pin = pin
+    if full_decode:
+        msg.MergeFromString(b"\xf8\x07\x01")  # field 127, varint 1: unknown to the schema
     return msg
 
 
@@ -104,13 +111,14 @@ def exercise(board: Board, control: SimControl, rounds: int = ROUNDS) -> int:
         for call in calls:
             call.result(timeout=CALL_TIMEOUT)
         board.request(_get_info())
-        try:
-            board.request(_oversized_pose())
-        except CommandRejectedError as refused:
-            if refused.status != Status.STATUS_DECODE_ERROR:
-                raise AssertionError(f"an oversized Pose was refused with {refused}") from None
-        else:
-            raise AssertionError("a Pose of 9 items decoded")
+        for deep in (False, True):
+            try:
+                board.request(_oversized_pose(full_decode=deep))
+            except CommandRejectedError as refused:
+                if refused.status != Status.STATUS_DECODE_ERROR:
+                    raise AssertionError(f"an oversized Pose was refused with {refused}") from None
+            else:
+                raise AssertionError("a Pose of 9 items decoded")
     reports = board.stats.input_reports
     if reports <= rounds:
         raise AssertionError(f"only {reports} InputReports in {rounds} rounds of moving inputs")

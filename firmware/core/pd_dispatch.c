@@ -334,20 +334,123 @@ typedef char pd_assert_in_is_id_and_oneof[
      offsetof(protoduino_ArduinoIn, data) + sizeof(((protoduino_ArduinoIn *)0)->data) ==
          sizeof(protoduino_ArduinoIn)) ? 1 : -1];
 
+/* Each ArduinoIn member's size by its field number (0: not a member), as nanopb's
+ * field iterator would find it; in flash. Its descriptor is the one nanopb's
+ * ArduinoIn descriptor holds for it: every field but the first is a member, so
+ * member N is submessage N - 2 (test_short_decode_descriptors checks it). */
+static const uint8_t pd_member_size[] PD_ROM = {
+#define PD_MEMBER(name, feature_, flags_, result_)                                   \
+    [protoduino_ArduinoIn_##name##_tag] = (uint8_t)sizeof(((protoduino_ArduinoIn *)0)->data.name),
+    PD_COMMANDS(PD_MEMBER)
+#undef PD_MEMBER
+};
+
+#define PD_MEMBER_FITS(name, feature_, flags_, result_)                              \
+    && sizeof(((protoduino_ArduinoIn *)0)->data.name) <= 255u
+typedef char pd_assert_member_sizes_fit[(1 PD_COMMANDS(PD_MEMBER_FITS)) ? 1 : -1];
+#undef PD_MEMBER_FITS
+
+/* nanopb's decode of the whole ArduinoIn: `stream` its bytes; its descriptor. */
+static const pb_msgdesc_t *plan_full(pb_istream_t *stream, protoduino_ArduinoIn *in,
+                                     const uint8_t *payload, size_t len)
+{
+    *stream = pb_istream_from_buffer(payload, len);
+    /*
+     * NOINIT (decode_flags): nanopb would walk every field descriptor of
+     * ArduinoIn to set proto3's defaults. Zeros are those defaults, and nanopb
+     * zeroes (and sets to defaults) the oneof member it decodes whenever
+     * which_data did not name it yet, so only the fields outside the oneof are
+     * zeroed here. Zeroing the whole 104 B after every frame instead was 350 of
+     * the Uno's cycles per command (and 320 on the Ack's path when it ran before
+     * the decode).
+     */
+    in->message_id = 0;
+    in->which_data = 0;
+    return protoduino_ArduinoIn_fields;
+}
+
+/*
+ * The payload as a host writes it: the message id (field 1, a one-byte varint),
+ * then one command (field 2..15, length-delimited, a one-byte tag and a one-byte
+ * length) that ends the payload. For those (every command a host library sends),
+ * the two header fields are read here and nanopb decodes the command's own
+ * message alone, with its own descriptor, instead of first walking ArduinoIn's
+ * field descriptors to find it: this is framing, the command's fields are still
+ * nanopb's to decode. It does exactly what nanopb's decode of the whole
+ * ArduinoIn does for such a payload (pb_decode.c: the message id's varint; for
+ * the oneof member, decode_static_field zeroes it and sets its defaults when its
+ * descriptor has any, then pb_dec_submessage decodes the submessage's bytes with
+ * PB_DECODE_NOINIT), so the result, and a decode error, are the same: the unit
+ * tests and fuzz_dispatch.c compare the two on every input they make. Anything
+ * else (another order, a second field, a longer id, tag or length, a wrong wire
+ * type, a member numbered 16 or more) is left to the full decode: NULL, and
+ * nothing written. Otherwise: the command's descriptor, `stream` its bytes.
+ */
+static const pb_msgdesc_t *plan_short(pb_istream_t *stream, protoduino_ArduinoIn *in,
+                                      const uint8_t *payload, size_t len)
+{
+    if (len < 4u || payload[0] != ((protoduino_ArduinoIn_message_id_tag << 3) | PB_WT_VARINT) ||
+        payload[1] >= 0x80u || payload[3] >= 0x80u || (size_t)payload[3] + 4u != len ||
+        (payload[2] & 0x87u) != PB_WT_STRING) {
+        return NULL;
+    }
+    pb_size_t tag = (pb_size_t)(payload[2] >> 3);
+    uint8_t size;
+    if (tag >= sizeof(pd_member_size)) {
+        return NULL;
+    }
+    pd_rom_copy(&size, &pd_member_size[tag], 1u);
+    if (size == 0) {
+        return NULL; /* not a member: field 1 again, or none */
+    }
+    in->message_id = payload[1];
+    in->which_data = tag;
+    memset(&in->data, 0, size);
+    *stream = pb_istream_from_buffer(payload + 4, payload[3]);
+    return protoduino_ArduinoIn_msg.submsg_info[tag - 2u];
+}
+
+/* The flags nanopb decodes `desc` with, the whole ArduinoIn (above) or a member: as
+ * decode_static_field, a member's defaults are set only when it has any to set
+ * (a submessage, a default value or a callback; none of the Controls). */
+static unsigned int decode_flags(const pb_msgdesc_t *desc)
+{
+    if (desc != protoduino_ArduinoIn_fields &&
+        (desc->default_value != NULL || desc->field_callback != NULL || desc->submsg_info[0] != NULL)) {
+        return 0u;
+    }
+    return PB_DECODE_NOINIT;
+}
+
+int pd_dispatch_decode_short(protoduino_ArduinoIn *in, const uint8_t *payload, size_t len)
+{
+    pb_istream_t stream;
+    const pb_msgdesc_t *desc = plan_short(&stream, in, payload, len);
+    if (desc == NULL) {
+        return -1;
+    }
+    return pb_decode_ex(&stream, desc, &in->data, decode_flags(desc)) ? 1 : 0;
+}
+
+bool pd_dispatch_decode_full(protoduino_ArduinoIn *in, const uint8_t *payload, size_t len)
+{
+    pb_istream_t stream;
+    const pb_msgdesc_t *desc = plan_full(&stream, in, payload, len);
+    return pb_decode_ex(&stream, desc, in, decode_flags(desc));
+}
+
 bool pd_dispatch_decode(pd_core_t *core, const uint8_t *payload, size_t len)
 {
-    pb_istream_t stream = pb_istream_from_buffer(payload, len);
-    /*
-     * NOINIT: nanopb would walk every field descriptor of ArduinoIn to set
-     * proto3's defaults. Zeros are those defaults, and nanopb zeroes (and sets
-     * to defaults) the oneof member it decodes whenever which_data did not name
-     * it yet, so only the fields outside the oneof are zeroed here. Zeroing the
-     * whole 104 B after every frame instead was 350 of the Uno's cycles per
-     * command (and 320 on the Ack's path when it ran before the decode).
-     */
-    core->in.message_id = 0;
-    core->in.which_data = 0;
-    return pb_decode_ex(&stream, protoduino_ArduinoIn_fields, &core->in, PB_DECODE_NOINIT);
+    /* One call of nanopb for both ways, which the Uno's build inlines here as it did the
+     * one decode before: a Pose's decode the other way, the deepest stack, stays as deep. */
+    pb_istream_t stream;
+    void *dest = &core->in.data;
+    const pb_msgdesc_t *desc = plan_short(&stream, &core->in, payload, len);
+    if (desc == NULL) {
+        desc = plan_full(&stream, &core->in, payload, len);
+        dest = &core->in;
+    }
+    return pb_decode_ex(&stream, desc, dest, decode_flags(desc));
 }
 
 /*

@@ -42,6 +42,17 @@ typedef struct pd_command {
  */
 bool pd_dispatch_decode(struct pd_core *core, const uint8_t *payload, size_t len);
 
+/*
+ * pd_dispatch_decode's two ways, into `in`. _short takes a payload of the usual
+ * shape (the message id, then one command, each tag and length one byte) and
+ * has nanopb decode the command alone with its own descriptor: 1 decoded, 0 not,
+ * -1 another shape. _full is nanopb's decode of the whole ArduinoIn, for every
+ * other payload. Where _short takes a payload, both leave `in` and the answer
+ * the same (the unit tests and fuzz_dispatch.c compare them).
+ */
+int pd_dispatch_decode_short(protoduino_ArduinoIn *in, const uint8_t *payload, size_t len);
+bool pd_dispatch_decode_full(protoduino_ArduinoIn *in, const uint8_t *payload, size_t len);
+
 /* Run and answer the checked COMMAND in core->in (`decoded`: what pd_dispatch_decode said). */
 void pd_dispatch_command(struct pd_core *core, bool decoded);
 

@@ -17,17 +17,22 @@
  *            7     the host's SEQ jumps by len (gaps and desyncs)
  *
  * The device is booted and handshaken (RESET) first. Checked after every
- * operation: at most one Ack per COMMAND packet, and at the end the bounds
+ * operation: at most one Ack per COMMAND packet; for every COMMAND payload,
+ * that the short decode (pd_dispatch_decode_short), where it takes the payload,
+ * leaves the ArduinoIn and the answer as nanopb's decode of the whole message
+ * does (pd_dispatch_decode_full); and at the end the bounds
  * fuzz_rx.c checks. The fake HAL aborts on a malformed frame sent and on any
  * pin write outside the board's rules; ASan and UBSan catch the rest.
  */
 #include <stddef.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "fake_hal.h"
 #include "pd_cobs.h"
 #include "pd_core.h"
+#include "pd_dispatch.h"
 #include "pd_packet.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -70,6 +75,25 @@ static void feed_packet(pd_core_t *core, uint8_t type, uint8_t seq, const uint8_
         pd_core_rx_byte(core, frame[i]);
     }
     pd_core_rx_byte(core, 0);
+}
+
+/* The short decode and the full one agree on `payload` (each from the same stale bytes). */
+static void check_decodes_agree(const uint8_t *payload, size_t len)
+{
+    protoduino_ArduinoIn fast, full;
+    memset(&fast, 0xA5, sizeof(fast));
+    memset(&full, 0xA5, sizeof(full));
+    int r = pd_dispatch_decode_short(&fast, payload, len);
+    if (r < 0) {
+        if (memcmp(&fast, &full, sizeof(fast)) != 0) {
+            abort(); /* left to the full decode, yet written */
+        }
+        return;
+    }
+    bool ok = pd_dispatch_decode_full(&full, payload, len);
+    if ((r == 1) != ok || memcmp(&fast, &full, sizeof(fast)) != 0) {
+        abort();
+    }
 }
 
 static size_t acks_sent(const fake_hal_t *hal)
@@ -129,6 +153,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             seq = (uint8_t)(seq + len);
             break;
         default:
+            check_decodes_agree(arg, len);
             feed_packet(&core, PD_PACKET_COMMAND, seq++, arg, len);
             if (acks_sent(&hal) > 1) {
                 abort(); /* exactly one Ack per ArduinoIn, never two */

@@ -3,6 +3,7 @@
 
 #include <pb_encode.h>
 
+#include "pd_dispatch.h"
 #include "pd_schema.h"
 #include "pd_test.h"
 #include "test_util.h"
@@ -657,6 +658,208 @@ static void test_dedupe_unit(void)
     }
 }
 
+/* --- the short decode (pd_dispatch_decode_short) against nanopb's whole decode --- */
+
+/*
+ * Both decodes of `payload`, each into an ArduinoIn filled with the same stale
+ * bytes (what the previous command left), compared byte for byte with the
+ * answer: -1 when the short decode left the payload to the full one, else what
+ * it said; *same tells whether the two agreed.
+ */
+static int decode_both(const uint8_t *payload, size_t len, bool *same)
+{
+    protoduino_ArduinoIn fast, full;
+    memset(&fast, 0xA5, sizeof(fast));
+    memset(&full, 0xA5, sizeof(full));
+    int r = pd_dispatch_decode_short(&fast, payload, len);
+    if (r < 0) {
+        /* Nothing written: the full decode starts from what it would have. */
+        protoduino_ArduinoIn untouched;
+        memset(&untouched, 0xA5, sizeof(untouched));
+        *same = memcmp(&fast, &untouched, sizeof(fast)) == 0;
+        return r;
+    }
+    bool ok = pd_dispatch_decode_full(&full, payload, len);
+    *same = (r == 1) == ok && memcmp(&fast, &full, sizeof(fast)) == 0;
+    return r;
+}
+
+static size_t encode_in(const protoduino_ArduinoIn *in, uint8_t *buf, size_t cap)
+{
+    pb_ostream_t s = pb_ostream_from_buffer(buf, cap);
+    if (!pb_encode(&s, protoduino_ArduinoIn_fields, in)) {
+        return 0;
+    }
+    return s.bytes_written;
+}
+
+/* What a host sends, one of each shape the short decode takes (and the Controls twice). */
+static size_t short_bases(protoduino_ArduinoIn *ins, size_t cap)
+{
+    size_t n = 0;
+    const uint8_t bytes[64] = {1, 2, 3, 0x80, 0xff, 0};
+    ins[n++] = m_digital(7, 13, true);
+    ins[n++] = m_digital(127, 0, false); /* an empty DigitalControl: length 0 */
+    ins[n++] = m_servo_deg(1, 9, 180);
+    ins[n++] = m_servo_us(42, 10, 2400);
+    ins[n++] = m_ping(3, bytes, sizeof(bytes));
+    ins[n++] = m_servo_init_us(4, 9, 1000, 2000, 1500);
+    ins[n++] = m_stop(5);
+    ins[n++] = m_info(6);
+    protoduino_ArduinoIn in = protoduino_ArduinoIn_init_zero;
+    in.message_id = 8;
+    in.which_data = protoduino_ArduinoIn_pwm_control_tag;
+    in.data.pwm_control.pin = 3;
+    in.data.pwm_control.duty = 255;
+    ins[n++] = in;
+    in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
+    in.message_id = 9;
+    in.which_data = protoduino_ArduinoIn_pose_tag;
+    in.data.pose.items_count = 3;
+    in.data.pose.items[0].which_output = protoduino_PoseItem_servo_tag;
+    in.data.pose.items[0].output.servo.pin = 9;
+    in.data.pose.items[0].output.servo.which_value = protoduino_ServoControl_degrees_tag;
+    in.data.pose.items[0].output.servo.value.degrees = 90;
+    in.data.pose.items[1].which_output = protoduino_PoseItem_digital_tag;
+    in.data.pose.items[1].output.digital.pin = 13;
+    in.data.pose.items[1].output.digital.level = true;
+    in.data.pose.items[2].which_output = protoduino_PoseItem_pwm_tag;
+    in.data.pose.items[2].output.pwm.pin = 11;
+    in.data.pose.items[2].output.pwm.duty = 128;
+    ins[n++] = in;
+    in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
+    in.message_id = 10;
+    in.which_data = protoduino_ArduinoIn_heartbeat_tag;
+    in.data.heartbeat.failsafe_epoch = 200;
+    ins[n++] = in;
+    in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
+    in.message_id = 11;
+    in.which_data = protoduino_ArduinoIn_configure_failsafe_tag;
+    in.data.configure_failsafe.timeout_ms = 60000;
+    in.data.configure_failsafe.liveness = protoduino_Liveness_LIVENESS_HEARTBEAT;
+    ins[n++] = in;
+    (void)cap;
+    return n;
+}
+
+/*
+ * Every payload a host library writes takes the short way, and it agrees with
+ * the full decode on every one-byte change of those payloads (256 values at
+ * each place), every truncation and every byte appended: the statuses of
+ * protocol.md section 7 (rule 10's decode error among them) follow from the
+ * decoded ArduinoIn and whether it decoded, so they agree too.
+ */
+static void test_short_decode_matches_full(void)
+{
+    protoduino_ArduinoIn ins[16];
+    size_t count = short_bases(ins, sizeof(ins) / sizeof(ins[0]));
+    size_t taken = 0, refused = 0, full = 0;
+    for (size_t k = 0; k < count; k++) {
+        uint8_t base[PD_MAX_PAYLOAD];
+        uint8_t buf[PD_MAX_PAYLOAD + 1];
+        size_t n = encode_in(&ins[k], base, sizeof(base));
+        CHECK(n >= 4u);
+        bool same = false;
+        CHECK_EQ(decode_both(base, n, &same), 1); /* a host's payload: the short way, decoded */
+        CHECK(same);
+        for (size_t i = 0; i < n; i++) {
+            for (unsigned v = 0; v < 256u; v++) {
+                memcpy(buf, base, n);
+                buf[i] = (uint8_t)v;
+                int r = decode_both(buf, n, &same);
+                CHECK(same);
+                taken += r == 1;
+                refused += r == 0;
+                full += r < 0;
+            }
+        }
+        for (size_t cut = 0; cut < n; cut++) {
+            decode_both(base, cut, &same);
+            CHECK(same);
+        }
+        for (unsigned v = 0; v < 256u; v++) {
+            memcpy(buf, base, n);
+            buf[n] = (uint8_t)v;
+            CHECK_EQ(decode_both(buf, n + 1u, &same), -1); /* a byte after the command */
+            CHECK(same);
+        }
+    }
+    /* All three outcomes were compared, not only the easy one. */
+    CHECK(taken > 0u);
+    CHECK(refused > 0u);
+    CHECK(full > 0u);
+}
+
+/* The descriptor the generated header gives member `name` (its MSGTYPE, which
+ * codegen.share_descriptors may point at another message of the same shape). */
+#define T_CAT2(a, b) a##b
+#define T_CAT(a, b) T_CAT2(a, b)
+#define T_MEMBER_DESC(name) (&T_CAT(protoduino_ArduinoIn_data_##name##_MSGTYPE, _msg))
+
+/* The short decode takes member N's descriptor from nanopb's ArduinoIn descriptor as
+ * submessage N - 2: true while every field but the message id is a member, in order. */
+static void test_short_decode_descriptors(void)
+{
+    size_t members = 0;
+#define T_MEMBER(name, feature_, flags_, result_)                                    \
+    CHECK(protoduino_ArduinoIn_msg.submsg_info[protoduino_ArduinoIn_##name##_tag - 2] == \
+          T_MEMBER_DESC(name));                                                      \
+    members++;
+    PD_COMMANDS(T_MEMBER)
+#undef T_MEMBER
+    CHECK_EQ(members + 1u, protoduino_ArduinoIn_msg.field_count);
+    CHECK_EQ(members + 1u, protoduino_ArduinoIn_msg.largest_tag);
+}
+
+/* Shapes the short decode leaves to nanopb's whole decode, which still runs them. */
+static void test_other_shapes_still_decode(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_digital_init(1, 13, false);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    bool same = false;
+    /* The command first, the id after it. */
+    const uint8_t id_last[] = {0x22, 0x04, 0x08, 0x0d, 0x10, 0x01, 0x08, 0x02};
+    CHECK_EQ(decode_both(id_last, sizeof(id_last), &same), -1);
+    fake_clear(&d.hal);
+    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, id_last, sizeof(id_last));
+    CHECK_EQ(t_status(&d, 2), S(OK));
+    CHECK_EQ(d.hal.digital[13], 1);
+    /* A two-byte length (4 as 0x84 0x00) and a two-byte id (3 as 0x83 0x00). */
+    const uint8_t long_len[] = {0x08, 0x03, 0x22, 0x84, 0x00, 0x08, 0x0d, 0x10, 0x00};
+    CHECK_EQ(decode_both(long_len, sizeof(long_len), &same), -1);
+    fake_clear(&d.hal);
+    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, long_len, sizeof(long_len));
+    CHECK_EQ(t_status(&d, 3), S(OK));
+    CHECK_EQ(d.hal.digital[13], 0);
+    const uint8_t long_id[] = {0x08, 0x84, 0x00, 0x22, 0x04, 0x08, 0x0d, 0x10, 0x01};
+    CHECK_EQ(decode_both(long_id, sizeof(long_id), &same), -1);
+    fake_clear(&d.hal);
+    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, long_id, sizeof(long_id));
+    CHECK_EQ(t_status(&d, 4), S(OK));
+    CHECK_EQ(d.hal.digital[13], 1);
+}
+
+/* A payload of the short shape whose command does not decode: rule 10, as before. */
+static void test_short_decode_error(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_digital_init(1, 13, false);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    /* id 7, DigitalControl{pin: 300}: wider than the device's one-byte pin. */
+    const uint8_t wide[] = {0x08, 0x07, 0x22, 0x05, 0x08, 0xac, 0x02, 0x10, 0x01};
+    bool same = false;
+    CHECK_EQ(decode_both(wide, sizeof(wide), &same), 0);
+    CHECK(same);
+    fake_clear(&d.hal);
+    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, wide, sizeof(wide));
+    CHECK_EQ(fake_count(&d.hal), 2); /* the DecodeError event, then the Ack */
+    CHECK_EQ(t_status(&d, 7), S(DECODE_ERROR));
+    CHECK_EQ(d.hal.digital[13], 0);
+}
+
 const pd_test_case_t pd_tests_dispatch[] = {
     TEST_CASE(test_ack_ok_every_command),
     TEST_CASE(test_servo_init_defaults_and_safe_at_once),
@@ -676,6 +879,10 @@ const pd_test_case_t pd_tests_dispatch[] = {
     TEST_CASE(test_unknown_command),
     TEST_CASE(test_decode_error),
     TEST_CASE(test_decode_errors_move_the_newest_id),
+    TEST_CASE(test_short_decode_matches_full),
+    TEST_CASE(test_short_decode_descriptors),
+    TEST_CASE(test_other_shapes_still_decode),
+    TEST_CASE(test_short_decode_error),
     TEST_CASE(test_ping_echo_every_byte),
     TEST_CASE(test_get_info),
     TEST_CASE(test_board_limits_from_hal),
