@@ -48,6 +48,17 @@ def pin_values(trace: list[dict[str, Any]], pin: int) -> list[int]:
     return [int(e["value"]) for e in trace if e["pin"] == pin]
 
 
+def wait_until(predicate: Callable[[], bool], timeout: float = 60.0) -> bool:
+    """Poll ``predicate`` until it holds (True) or ``timeout`` seconds pass (False): the
+    verdict is the predicate's; the timeout only bounds how long a failing test waits."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
+
+
 def wait_for_pin(
     sim: SimBoard, pin: int, ok: Callable[[list[int]], bool], timeout: float = 30.0
 ) -> list[int]:

@@ -22,7 +22,7 @@ from protoduino import Board, Event, EventKind
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard
 from protoduino.transport import FrameRecord
-from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS, pin_values
+from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS, pin_values, wait_until
 
 SAFE_90_US = 544 + 90 * (2400 - 544) // 180  # 1472
 
@@ -41,15 +41,6 @@ def sim(sim_board: SimBoard) -> SimBoard:
 def board(sim: SimBoard) -> Iterator[Board]:
     with Board.open(sim.port) as b:
         yield b
-
-
-def wait_until(predicate: Callable[[], bool], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.02)
-    return True
 
 
 BOARD_NAME = {"native": "sim", "avr": "uno"}

@@ -10,15 +10,13 @@ at 1 again, run although the first session left the same ids in the device's win
 from __future__ import annotations
 
 import functools
-import time
-from collections.abc import Callable
 from concurrent.futures import Future, wait
 
 import protoduino_dev  # noqa: F401  (registers faulty://)
 import pytest
 from protoduino import Board
 from protoduino.simboard import SimBoard
-from simfixtures import pin_values
+from simfixtures import pin_values, wait_until
 
 #: The outputs of the lossy session (2..19: every pin but the serial ones). A write may run
 #: after a later one when its first transmission is lost (the host keeps several in
@@ -41,15 +39,6 @@ def changes(values: list[int]) -> list[int]:
         if not out or out[-1] != value:
             out.append(value)
     return out
-
-
-def wait_until(predicate: Callable[[], bool], timeout: float = 60.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.02)
-    return True
 
 
 def test_every_command_runs_once_across_wraps_on_a_lossy_line(sim: SimBoard) -> None:
