@@ -29,6 +29,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "dedupe_sane.h"
 #include "fake_hal.h"
 #include "pd_cobs.h"
 #include "pd_core.h"
@@ -39,26 +40,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 /* ArduinoOut's first byte when it carries an Ack: field 1, length-delimited. */
 #define ACK_TAG 0x0Au
-
-
-/* The window's bounds: a slot to write next, N an id, every entry an id, none twice. */
-static bool dedupe_sane(const pd_dedupe_t *dd)
-{
-    if (dd->next >= PD_DEDUPE_WINDOW || dd->newest == 0 || dd->newest > PD_MAX_MESSAGE_ID) {
-        return false;
-    }
-    for (uint8_t i = 0; i < PD_DEDUPE_WINDOW; i++) {
-        if (dd->id[i] > PD_MAX_MESSAGE_ID) {
-            return false;
-        }
-        for (uint8_t j = (uint8_t)(i + 1u); j < PD_DEDUPE_WINDOW; j++) {
-            if (dd->id[i] != 0 && dd->id[i] == dd->id[j]) {
-                return false;
-            }
-        }
-    }
-    return true;
-}
 
 static void feed_packet(pd_core_t *core, uint8_t type, uint8_t seq, const uint8_t *payload,
                         size_t len)

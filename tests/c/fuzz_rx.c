@@ -25,32 +25,13 @@
 #include <stdint.h>
 #include <stdlib.h>
 
+#include "dedupe_sane.h"
 #include "fake_hal.h"
 #include "pd_cobs.h"
 #include "pd_core.h"
 #include "pd_packet.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
-
-
-/* The window's bounds: a slot to write next, N an id, every entry an id, none twice. */
-static bool dedupe_sane(const pd_dedupe_t *dd)
-{
-    if (dd->next >= PD_DEDUPE_WINDOW || dd->newest == 0 || dd->newest > PD_MAX_MESSAGE_ID) {
-        return false;
-    }
-    for (uint8_t i = 0; i < PD_DEDUPE_WINDOW; i++) {
-        if (dd->id[i] > PD_MAX_MESSAGE_ID) {
-            return false;
-        }
-        for (uint8_t j = (uint8_t)(i + 1u); j < PD_DEDUPE_WINDOW; j++) {
-            if (dd->id[i] != 0 && dd->id[i] == dd->id[j]) {
-                return false;
-            }
-        }
-    }
-    return true;
-}
 
 static void feed_packet(pd_core_t *core, uint8_t type, uint8_t seq, const uint8_t *payload,
                         size_t len)

@@ -812,33 +812,33 @@ static void test_short_decode_descriptors(void)
 }
 
 /* Shapes the short decode leaves to nanopb's whole decode, which still runs them. */
+/* A digital write to pin 13 in a shape the short decode leaves to the full one: it still
+ * runs, answered under `id`, and the pin shows `level`. */
+static void check_other_shape(tdev_t *d, const uint8_t *payload, size_t len, uint32_t id,
+                              int level)
+{
+    bool same = false;
+    CHECK_EQ(decode_both(payload, len, &same), -1);
+    fake_clear(&d->hal);
+    t_send_packet(d, PD_PACKET_COMMAND, d->host_seq++, payload, len);
+    CHECK_EQ(t_status(d, id), S(OK));
+    CHECK_EQ(d->hal.digital[13], level);
+}
+
 static void test_other_shapes_still_decode(void)
 {
     tdev_t d;
     t_active(&d);
     protoduino_ArduinoIn in = m_digital_init(1, 13, false);
     CHECK_EQ(t_cmd(&d, &in), S(OK));
-    bool same = false;
     /* The command first, the id after it. */
     const uint8_t id_last[] = {0x22, 0x04, 0x08, 0x0d, 0x10, 0x01, 0x08, 0x02};
-    CHECK_EQ(decode_both(id_last, sizeof(id_last), &same), -1);
-    fake_clear(&d.hal);
-    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, id_last, sizeof(id_last));
-    CHECK_EQ(t_status(&d, 2), S(OK));
-    CHECK_EQ(d.hal.digital[13], 1);
+    check_other_shape(&d, id_last, sizeof(id_last), 2, 1);
     /* A two-byte length (4 as 0x84 0x00) and a two-byte id (3 as 0x83 0x00). */
     const uint8_t long_len[] = {0x08, 0x03, 0x22, 0x84, 0x00, 0x08, 0x0d, 0x10, 0x00};
-    CHECK_EQ(decode_both(long_len, sizeof(long_len), &same), -1);
-    fake_clear(&d.hal);
-    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, long_len, sizeof(long_len));
-    CHECK_EQ(t_status(&d, 3), S(OK));
-    CHECK_EQ(d.hal.digital[13], 0);
+    check_other_shape(&d, long_len, sizeof(long_len), 3, 0);
     const uint8_t long_id[] = {0x08, 0x84, 0x00, 0x22, 0x04, 0x08, 0x0d, 0x10, 0x01};
-    CHECK_EQ(decode_both(long_id, sizeof(long_id), &same), -1);
-    fake_clear(&d.hal);
-    t_send_packet(&d, PD_PACKET_COMMAND, d.host_seq++, long_id, sizeof(long_id));
-    CHECK_EQ(t_status(&d, 4), S(OK));
-    CHECK_EQ(d.hal.digital[13], 1);
+    check_other_shape(&d, long_id, sizeof(long_id), 4, 1);
 }
 
 /* A payload of the short shape whose command does not decode: rule 10, as before. */
