@@ -587,7 +587,13 @@ def test_failsafe_after_ping_silence(sim_board: SimBoard, active: RawHost) -> No
     assert active.ack(9).status == Status.STATUS_OK
     sent = time.monotonic()
     _expect(sim_board, 11, [0, 1])
-    last_ping_t = next(c["t"] for c in sim_board.trace() if c["pin"] == 11 and c["value"] == 1)
+    # _expect's pulse tolerance lets a trace of [0] agree with [0, 1]: wait for the high's
+    # own line (the emulated Uno writes it once the high outlasts a servo pulse).
+    deadline = time.monotonic() + TRACE_TIMEOUT
+    while not (highs := [c["t"] for c in sim_board.trace() if c["pin"] == 11 and c["value"] == 1]):
+        assert time.monotonic() < deadline, f"pin 11: trace {_changes(sim_board, 11)}, no high"
+        time.sleep(0.01)
+    last_ping_t = highs[0]
 
     event = active.wait(_is_failsafe, timeout=FAILSAFE_TIMEOUT + 3.0)
     waited = time.monotonic() - sent
