@@ -360,6 +360,11 @@ class Rpc:
         self._inflight: dict[int, Call] = {}
         self._urgent: collections.deque[Call] = collections.deque()  # pings
         self._pending: collections.deque[Call] = collections.deque()  # user calls
+        #: No queued call's deadline is earlier than this (inf: none queued). Lowered as a
+        #: call joins a queue, made exact again only when it is reached: a tick then looks
+        #: at the queues, where looking at every queued call on every tick cost O(n) per
+        #: pass and O(n^2) for a burst of n submits (issue 23).
+        self._queued_due = float("inf")
         #: The session layer's rules (session.py), kept under this layer's lock.
         self._plan = RestorePlan()
         self._loop = RebootLoop(reboot_limit, reboot_window)
@@ -467,6 +472,7 @@ class Rpc:
                 raise self.loop_error.with_traceback(None)
             call = self._new_call(msg, on_done)
             (self._urgent if urgent else self._pending).append(call)
+            self._queued(call)
             self._pump(self._clock())
         return call
 
@@ -489,6 +495,10 @@ class Rpc:
     def next_message_id(self) -> int:
         """The id the next new transmission gets: every RESET carries it (NEXT_ID)."""
         return self._next_id
+
+    def _queued(self, call: Call) -> None:
+        """``call`` joined a queue (lock held): its deadline is a timer (``_queued_due``)."""
+        self._queued_due = min(self._queued_due, call.deadline)
 
     def _allocate_id(self, call: Call) -> None:
         """Give ``call`` the next id, at its first transmission (lock held)."""
@@ -587,10 +597,13 @@ class Rpc:
         Ids transmitted after X's first transmission may each have been
         executed after X; with the new one they must stay under DEDUPE_WINDOW.
         """
+        # A call transmitted to this boot holds its id until it finishes or is renumbered
+        # (which clears first_tx): the calls with ids are the few in flight or requeued,
+        # not every call queued behind the window.
         oldest = min(
             (
                 c.first_tx
-                for c in self._calls.values()
+                for c in self._by_id.values()
                 if c.first_tx is not None and not command(c.kind).idempotent
             ),
             default=None,
@@ -713,11 +726,15 @@ class Rpc:
                     else:
                         del self._inflight[call.message_id]
                         self._transmit(call, now)
-            for queue in (self._urgent, self._pending):
-                if queue and any(now >= c.deadline for c in queue):
+            if now >= self._queued_due:
+                for queue in (self._urgent, self._pending):
                     for call in [c for c in queue if now >= c.deadline]:
                         self.timeouts += 1
                         self._finish(call, error=self._timeout_error(call))
+                self._queued_due = min(
+                    (c.deadline for q in (self._urgent, self._pending) for c in q),
+                    default=float("inf"),
+                )
             self._maybe_ping(now)
             self._pump(now)
             return self._next_due(now)
@@ -725,10 +742,8 @@ class Rpc:
     def _next_due(self, now: float) -> float:
         """The earliest timer still pending after a tick at ``now`` (lock held)."""
         due = min(map(self._attempt_due, self._inflight.values()), default=None)
-        for queue in (self._urgent, self._pending):
-            if queue:
-                first = min(c.deadline for c in queue)
-                due = first if due is None else min(due, first)
+        if self._queued_due != float("inf"):  # a lower bound: at worst a tick comes early
+            due = self._queued_due if due is None else min(due, self._queued_due)
         link = self.link
         if self._pinging and self._ping_call is None and link is not None and link.active:
             due = self._next_ping if due is None else min(due, self._next_ping)
@@ -745,6 +760,7 @@ class Rpc:
         msg.ping.SetInParent()
         self._ping_call = self._new_call(msg, self._ping_done)
         self._urgent.append(self._ping_call)
+        self._queued(self._ping_call)
         self.pings += 1
 
     def _ping_done(self, call: Call) -> None:
@@ -790,6 +806,7 @@ class Rpc:
                     self._renumber(call)
                     if call not in self._pending:
                         self._pending.appendleft(call)
+                        self._queued(call)
             else:
                 self.rejected += 1
                 call.refusal = ack  # it may say more (a Pose's refused_item)
@@ -973,8 +990,10 @@ class Rpc:
                 self._by_id.pop(call.message_id, None)
             elif call.kind == "ping" and call is self._ping_call:
                 self._urgent.appendleft(call)
+                self._queued(call)
             else:
                 self._pending.appendleft(call)
+                self._queued(call)
 
     def _restore_step(self, call: Call) -> None:
         if call is not self._restore_call:
