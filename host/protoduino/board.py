@@ -104,7 +104,7 @@ from .errors import (
     UserError,
     UserReplyLostError,
 )
-from .events import Event, EventCallback, EventDispatcher, EventKind, Stats
+from .events import Event, EventCallback, EventDispatcher, EventKind, EventThreadFuture, Stats
 from .inputs import AnalogInput, Counter, DigitalInput, InputTable
 from .link import Link
 from .messages import ArduinoIn, ArduinoOut, InputKind, Status, status_name
@@ -195,16 +195,6 @@ def _user_reply(call: Call) -> bytes:
 
 def _output_states(call: Call) -> dict[int, OutputState]:
     return decode_output_states(call.result().outputs)
-
-
-def _resolve(future: Future[T], call: Call, value: Callable[[Call], T]) -> None:
-    """Complete ``future`` with ``value(call)`` (which raises the call's error)."""
-    try:
-        result = value(call)
-    except BaseException as exc:  # the caller sees exactly what the blocking call raises
-        future.set_exception(exc)
-    else:
-        future.set_result(result)
 
 
 #: The automatic Ping comes at least this many times per failsafe timeout.
@@ -1359,16 +1349,17 @@ class Board(ClosedOnExit):
     ) -> Future[T]:
         """Send without waiting; the future gets ``value(call)`` or the call's error.
 
-        It is resolved on the event thread (after ``on_ok``, in Ack order). The
-        request layer fails every call by its deadline, so every future is
-        resolved, at the latest with the blocking call's timeout error, or with
-        BoardClosedError at :meth:`close`.
+        It is resolved as the call completes (on the I/O thread, after ``on_ok``, in
+        Ack order); its done-callbacks run on the event thread
+        (:class:`~protoduino.events.EventThreadFuture`). The request layer fails
+        every call by its deadline, so every future is resolved, at the latest with
+        the blocking call's timeout error, or with BoardClosedError at :meth:`close`.
         """
-        future: Future[T] = Future()
+        future: EventThreadFuture[T] = EventThreadFuture(self._events.put_job)
         future.set_running_or_notify_cancel()  # sent is sent: cancel() says False
 
         def then(call: Call) -> None:
-            self._events.put_job(lambda: _resolve(future, call, value))
+            future.settle(lambda: value(call))
 
         self._submit(msg, on_ok, then)
         return future

@@ -112,3 +112,49 @@ def test_jobs_are_never_dropped_and_still_run_at_close() -> None:
     assert [e.text for e in gate.seen] == ["held"]
     dispatcher.put_job(lambda: ran.append(3))  # after the thread ended: run at once, here
     assert ran == [1, 2, 3]
+
+
+def test_a_future_resolves_where_it_is_settled_and_calls_back_on_the_event_thread() -> None:
+    """EventThreadFuture (the submit forms'): ``result()`` sees the value as soon as it is
+    settled, with the event thread held in a callback; the done-callbacks added before run
+    there afterwards, in order with the events, and never on the thread that settled it."""
+    from protoduino.events import EventThreadFuture
+
+    dispatcher = EventDispatcher("test", close_wait=5.0)
+    gate = Gate()
+    dispatcher.subscribe(gate)
+    order: list[str] = []
+    threads: list[str] = []
+    try:
+        dispatcher.put(ev(EventKind.DEVICE_DESYNC, "first"))
+        gate.entered.wait(30)  # the event thread is held in the callback
+        future: EventThreadFuture[int] = EventThreadFuture(dispatcher.put_job)
+
+        def callback(f: object) -> None:
+            threads.append(threading.current_thread().name)
+            order.append("callback")
+
+        def failing(f: object) -> None:
+            raise RuntimeError("a callback's failure is logged, the next one still runs")
+
+        future.add_done_callback(failing)
+        future.add_done_callback(callback)
+        io = threading.Thread(target=future.settle, args=(lambda: 42,), name="io")
+        io.start()  # settled on a thread of its own, as the board's I/O thread does
+        io.join(30)
+        assert future.result(0) == 42  # resolved there, the event thread still held
+        assert order == []
+        dispatcher.put(ev(EventKind.DEVICE_DESYNC, "after"))
+        gate.release.set()
+        gate.wait_seen(2)
+        assert order == ["callback"]
+        assert threads[0].startswith("protoduino-events")
+        # Added once done: called at once by the thread that adds it.
+        future.add_done_callback(callback)
+        assert threads[1] == threading.current_thread().name
+        failed: EventThreadFuture[int] = EventThreadFuture(dispatcher.put_job)
+        failed.settle(lambda: 1 // 0)
+        assert isinstance(failed.exception(0), ZeroDivisionError)
+    finally:
+        gate.release.set()
+        dispatcher.close()
