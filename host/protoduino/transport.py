@@ -25,6 +25,18 @@ with a bounded backoff until the transport is closed.
 The transmit SEQ counter lives here because docs/protocol.md section 6 ties it to
 the write itself: it advances only after the whole frame was written, and a
 frame that failed to write keeps its SEQ.
+
+One exception to "the I/O thread writes": a COMMAND sent from another thread
+(a caller's own submit, its window free) onto a plain POSIX port, when nothing
+is queued and no frame monitor watches, is written by that thread at once,
+which saves the wake-up and a pass of the I/O thread per command (issue 23).
+One lock (``_wlock``) is held around taking a packet, giving it its SEQ and
+writing it, by whichever thread writes, and around opening, closing and
+re-rating the port: frames leave whole, in the order they were sent, their
+SEQs in order on the wire. The write is the same (:meth:`_write_item`): a
+timeout drops the packet and keeps its SEQ; any other failure is handed to
+the I/O thread, which loses the port as if its own write had failed. Reading,
+the timers and losing the port stay the I/O thread's.
 """
 
 from __future__ import annotations
@@ -207,6 +219,11 @@ class Transport:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._qlock = threading.Lock()
+        #: Held around taking a packet, giving it its SEQ and writing it, and around
+        #: opening, closing and re-rating the port (module docstring: a caller's own write).
+        self._wlock = threading.Lock()
+        #: A caller's write that failed other than by a timeout: the I/O thread loses the port.
+        self._write_failure: Exception | None = None
         self._control: collections.deque[_Outgoing] = collections.deque()
         self._data: collections.deque[_Outgoing] = collections.deque()
         self._wake_r, self._wake_w = os.pipe()
@@ -230,6 +247,8 @@ class Transport:
         self.rx_bytes = 0
         self.tx_bytes = 0
         self.tx_packets = 0
+        #: Packets written by the thread that sent them, not the I/O thread (a counter).
+        self.direct_writes = 0
         self.write_errors = 0
         self.opens = 0
         #: Bytes received since the port was last opened, and the first RX_HEAD of them.
@@ -273,8 +292,31 @@ class Transport:
     # --- sending ------------------------------------------------------------
 
     def send(self, ptype: PacketType, payload: bytes, *, reset_seq: bool = False) -> None:
-        """Queue one packet; CONTROL packets go ahead of anything queued."""
+        """Queue one packet; CONTROL packets go ahead of anything queued.
+
+        A COMMAND from a thread other than the I/O thread, onto a plain POSIX port with
+        nothing queued and no monitor, is written here and now (module docstring).
+        """
         item = _Outgoing(ptype, payload, reset_seq)
+        if (
+            self._raw
+            and ptype is PacketType.COMMAND
+            and not self._monitors  # they run on the I/O thread only (FrameMonitor)
+            and self._thread is not None
+            and self._thread is not threading.current_thread()
+        ):
+            with self._wlock:
+                # Under the lock: the port may have closed, or something been queued,
+                # since; a queued packet goes first, so this one queues behind it.
+                if (
+                    self._raw
+                    and not self._monitors
+                    and not self._control
+                    and not self._data
+                    and not self.closed
+                ):
+                    self._direct_write(item)
+                    return
         with self._qlock:
             (self._control if ptype is PacketType.CONTROL else self._data).append(item)
         if self._thread is not threading.current_thread():
@@ -290,7 +332,8 @@ class Transport:
             self._data.clear()
 
     def add_monitor(self, monitor: FrameMonitor) -> None:
-        self._monitors.append(monitor)
+        with self._wlock:  # a caller's own write (no monitor) ends first; none starts after
+            self._monitors.append(monitor)
 
     def remove_monitor(self, monitor: FrameMonitor) -> None:
         with contextlib.suppress(ValueError):
@@ -306,9 +349,10 @@ class Transport:
         It applies to the bytes written after it: the link changes it only between
         frames, once what it waited for has arrived. A port reopened later opens at it.
         """
-        self.baudrate = rate
-        if self._port is not None:
-            self._port.baudrate = rate
+        with self._wlock:  # never in the middle of a caller's frame
+            self.baudrate = rate
+            if self._port is not None:
+                self._port.baudrate = rate
 
     @property
     def tx_seq(self) -> int:
@@ -336,12 +380,14 @@ class Transport:
                     os.close(fd)
 
     def _open(self) -> None:
-        self._port = open_port(self.url, baudrate=self.baudrate)
-        self._fd = self._fileno()
-        self._raw = self._fd is not None and type(self._port) is _PosixSerial
+        port = open_port(self.url, baudrate=self.baudrate)
         try:
-            # docs/protocol.md 2: a lone 0x00 flushes the receiver's half-filled buffer.
-            self._write_raw(DELIMITER)
+            with self._wlock:
+                self._port = port
+                self._fd = self._fileno()
+                self._raw = self._fd is not None and type(self._port) is _PosixSerial
+                # docs/protocol.md 2: a lone 0x00 flushes the receiver's half-filled buffer.
+                self._write_raw(DELIMITER)
         except Exception as error:  # any URL handler's failure, in the ProtoduinoError tree
             self._close_port()
             raise TransportError(f"cannot open {self.url}: {error}") from error
@@ -352,9 +398,11 @@ class Transport:
         self.opens += 1
 
     def _close_port(self) -> None:
-        port, self._port = self._port, None
-        self._fd, self._raw = None, False
-        self.connected = False
+        with self._wlock:  # no caller is writing to the descriptor as it closes
+            port, self._port = self._port, None
+            self._fd, self._raw = None, False
+            self.connected = False
+            self._write_failure = None  # the port it was about is gone
         if port is not None:
             with contextlib.suppress(Exception):
                 port.close()
@@ -392,6 +440,8 @@ class Transport:
                     self._stop.wait(min(TICK * 5, max(0.0, next_reopen - time.monotonic())))
                     continue
                 try:
+                    if self._write_failure is not None:  # a caller's write failed
+                        raise self._write_failure
                     self._flush_writes()
                     data = self._read()
                     # A packet queued while select slept (its wake-up ended the
@@ -493,22 +543,49 @@ class Transport:
     def _flush_writes(self) -> None:
         # The deques are looked at without the lock first (their length is atomic): most
         # passes of the loop have nothing to write.
-        while (self._control or self._data) and (item := self._take()) is not None:
-            seq = 0 if item.reset_seq else self._tx_seq
-            frame = frame_packet(item.ptype, seq, item.payload)
-            if item.reset_seq:
-                frame = DELIMITER + frame  # flush the device's receiver before a reset
-            try:
-                self._write_raw(frame)
-            except serial.SerialTimeoutException:
-                # Stuck port: drop this packet (the layers above retransmit) but keep
-                # its SEQ for the next one, as docs/protocol.md 6 asks.
-                self.write_errors += 1
-                log.warning("%s: write timed out; packet dropped", self.name)
+        while self._control or self._data:
+            with self._wlock:  # taken and written as one: a caller's write goes after it
+                item = self._take()
+                rec = None if item is None else self._write_item(item)
+            if rec is None:
                 return
-            self._tx_seq = 1 if item.reset_seq else (seq + 1) & 0xFF
-            self.tx_packets += 1
-            self._record("tx", Packet(item.ptype, seq, item.payload))
+            self._show(rec)  # the monitors, with no lock held (they may send, or go)
+
+    def _direct_write(self, item: _Outgoing) -> None:
+        """Write a caller's COMMAND on its own thread (``_wlock`` held; module docstring)."""
+        try:
+            self._write_item(item)  # no monitor to show it to: add_monitor takes _wlock
+        except (serial.SerialException, OSError) as error:
+            # Lost with the port, as the I/O thread's own failed write would be: it
+            # loses the port (the link goes down there, on its thread), woken for it.
+            self._write_failure = error
+            self._wake()
+            return
+        self.direct_writes += 1
+
+    def _write_item(self, item: _Outgoing) -> FrameRecord | None:
+        """Give ``item`` its SEQ, write it and keep its record (``_wlock`` held: the
+        recent frames in the order written); None if the write timed out.
+
+        A write that times out drops the packet (the layers above retransmit) and
+        keeps its SEQ for the next one, as docs/protocol.md 6 asks; any other failure
+        raises.
+        """
+        seq = 0 if item.reset_seq else self._tx_seq
+        frame = frame_packet(item.ptype, seq, item.payload)
+        if item.reset_seq:
+            frame = DELIMITER + frame  # flush the device's receiver before a reset
+        try:
+            self._write_raw(frame)
+        except serial.SerialTimeoutException:
+            self.write_errors += 1
+            log.warning("%s: write timed out; packet dropped", self.name)
+            return None
+        self._tx_seq = 1 if item.reset_seq else (seq + 1) & 0xFF
+        self.tx_packets += 1
+        rec = FrameRecord(time.monotonic(), "tx", Packet(item.ptype, seq, item.payload))
+        self._recent.append(rec)
+        return rec
 
     def _write_raw(self, data: bytes) -> None:
         fd = self._fd
@@ -531,6 +608,10 @@ class Transport:
     def _record(self, direction: str, item: Packet | BadFrame) -> None:
         rec = FrameRecord(time.monotonic(), direction, item)
         self._recent.append(rec)
+        self._show(rec)
+
+    def _show(self, rec: FrameRecord) -> None:
+        """Hand ``rec`` to the monitors (the I/O thread, no lock held)."""
         if not self._monitors:
             return
         for monitor in list(self._monitors):

@@ -8,6 +8,7 @@ pins in their traces.
 from __future__ import annotations
 
 import functools
+import itertools
 import threading
 from collections.abc import Callable
 from concurrent.futures import Future, wait
@@ -18,8 +19,10 @@ import protoduino
 import pytest
 from fakedevice import FakeDevice, ack
 from protoduino import Board
+from protoduino.constants import MAX_MESSAGE_ID
 from protoduino.messages import ArduinoOut, Status
 from protoduino.simboard import SimBoard
+from protoduino.transport import Transport
 from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
 #: Long enough that a held Ack never times out while a test looks at the futures.
@@ -205,3 +208,63 @@ def test_futures_reach_the_pins(sim_board: SimBoard) -> None:
             wait_for_pin(sim_board, servo.pin, functools.partial(ends_near, want))
         wait_for_pin(sim_board, 13, lambda v: v[-1:] == [1])
         assert board.stats.timeouts == 0 and board.stats.rejected == 0
+
+
+def test_callers_own_writes_keep_seq_and_ids_in_order(tmp_path: Path) -> None:
+    """A caller writes its own COMMAND when nothing is queued (transport.py's docstring),
+    the I/O thread the ones an Ack lets go: with both at once, from four threads, every
+    SEQ on the wire follows the one before and the message ids go out in the order given."""
+    with (
+        FakeDevice(tmp_path) as fake,
+        Board.open(fake.port, ack_timeout=PATIENT, max_retries=0, ping=False) as board,
+    ):
+        led = board.digital_output(13)
+        transport = board._transport  # the real port's transport: counters of who wrote
+        assert isinstance(transport, Transport)
+        direct, written = transport.direct_writes, transport.tx_packets
+        go = threading.Event()
+        held: list[Any] = []
+
+        def hold_four(msg: Any) -> list[Any]:
+            """The first four Acks wait, the device's thread with them, until ``go``; then
+            it sends them itself (one thread sends, in SEQ order)."""
+            if len(held) < 4 and msg.WhichOneof("data") == "digital_control":
+                held.extend(fake.default_reply(msg))
+                if len(held) < 4:
+                    return []
+                go.wait(PATIENT)
+                fake.handler = fake.default_reply
+                return held
+            return fake.default_reply(msg)
+
+        fake.handler = hold_four
+        first = [led.submit(i % 2 == 0) for i in range(8)]  # window 4: four wait
+        assert fake.wait_for(lambda: len(fake.commands("digital_control")) == 4)
+        assert transport.direct_writes - direct == 4  # the window's four: the caller wrote
+        go.set()  # their Acks let the four that wait go, from the I/O thread
+        done, _ = wait(first, timeout=PATIENT)
+        assert len(done) == 8
+        for f in first:
+            f.result()
+        by_io = (transport.tx_packets - written) - (transport.direct_writes - direct)
+        assert by_io == 4
+
+        def hammer() -> None:
+            futures = [led.submit(i % 2 == 0) for i in range(40)]
+            for i in range(5):
+                led.write(i % 2 == 0)
+            wait(futures, timeout=PATIENT * 4)
+
+        threads = [threading.Thread(target=hammer) for _ in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(PATIENT * 4)
+        assert not any(t.is_alive() for t in threads)
+        received = fake.commands()
+        seqs = [r.seq for r in received]
+        assert all((b - a) & 0xFF == 1 for a, b in itertools.pairwise(seqs)), str(seqs)
+        ids = [r.msg.message_id for r in received]
+        assert all(b == a % MAX_MESSAGE_ID + 1 for a, b in itertools.pairwise(ids)), str(ids)
+        assert len(fake.commands("digital_control")) == 8 + 4 * 45
+        assert board._link.seq_desyncs == 0 and board._link.handshakes == 1
