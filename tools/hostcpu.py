@@ -6,6 +6,7 @@ Uno (``avr``), with the call pattern of bench/race.py: digital writes one at a t
 random pause of up to 2 ms, servo writes after up to 20 ms, then flat out at window 4
 (digital submits, and poses of six digital outputs), whose CPU is the run's over its calls.
 
+A call's round trip (wall clock, the blocking call's own) is given beside its CPU.
 Each thread's own CPU over each phase comes from /proc/self/task/TID/schedstat (ns), to
 say where the time goes (caller, I/O thread, event thread).
 
@@ -62,18 +63,22 @@ def timed_singles(
     label: str, n: int, gap: float, call: Callable[[int], object], rng: random.Random
 ) -> None:
     cpu: list[float] = []
+    wall: list[float] = []
     t0 = thread_cpu()
     for i in range(n):
         time.sleep(rng.uniform(0.0, gap))
         c0 = time.process_time()
+        w0 = time.perf_counter()
         call(i)
+        wall.append(time.perf_counter() - w0)
         cpu.append(time.process_time() - c0)
     t1 = thread_cpu()
     cpu.sort()
     print(
         f"{label:18s} median {statistics.median(cpu) * 1e6:6.0f} us  "
         f"p10 {cpu[len(cpu) // 10] * 1e6:5.0f}  p90 {cpu[len(cpu) * 9 // 10] * 1e6:5.0f}  "
-        f"(per thread over the phase, sleeps included, us/call: {per_thread(t0, t1, n)})"
+        f"(round trip median {statistics.median(wall) * 1e6:.0f} us; "
+        f"per thread over the phase, sleeps included, us/call: {per_thread(t0, t1, n)})"
     )
 
 
