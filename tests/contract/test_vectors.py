@@ -113,6 +113,7 @@ def test_version_5_vectors_parse_field_by_field() -> None:
     assert (ack.ack.message_id, ack.ack.status) == (1, Status.STATUS_OK)
     assert serialize_out(ack) == short
 
+
 def test_version_6_vectors_parse_field_by_field() -> None:
     by_name = {v["name"]: bytes.fromhex(v["payload"]) for v in V["packets"]}
     reset = parse_control(by_name["RESET from host, version 6, session 0x5E551011, next id 1"])
