@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from protoduino._generated import protoduino_pb2 as pb
 from protoduino._generated.schema_id import SCHEMA_ID
 from protoduino.commands import PIN_MODES, command
 from protoduino.constants import (
@@ -325,9 +326,16 @@ class FakeDevice:
             self.pins.clear()
             self.values.clear()
         elif kind == "pose":  # all or nothing; only the pin-mode check (what the tests need)
-            # A PoseItem's oneof member is named after its pin mode ("servo", "digital").
+            # A PoseItem's oneof member is named after its pin mode ("servo", "digital"); the
+            # masks' pins follow the items, upwards (protocol version 6), as on the device.
             items = [
                 (i.WhichOneof("output"), getattr(i, i.WhichOneof("output"))) for i in msg.pose.items
+            ]
+            pose = msg.pose
+            items += [
+                ("digital", pb.DigitalControl(pin=pin, level=bool(pose.digital_levels >> pin & 1)))
+                for pin in range(32)
+                if pose.digital_pins >> pin & 1
             ]
             for n, (mode, ctl) in enumerate(items, 1):
                 if self.pins.get(ctl.pin) != mode:

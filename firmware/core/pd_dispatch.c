@@ -219,7 +219,7 @@ static protoduino_Status cmd_pose(pd_core_t *core, pd_cmd_t *cmd)
     protoduino_Status status =
         pd_outputs_pose(&core->outputs, core->hal, &cmd->in->data.pose, &bad);
     if (status != protoduino_Status_STATUS_OK) {
-        cmd->ack->refused_item = (uint32_t)bad + 1u;
+        cmd->ack->refused_item = bad;
     }
     return status;
 }

@@ -555,14 +555,20 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
 {
     uint32_t seen = 0;
 
-    *bad = 0;
-    if (msg->items_count == 0) {
-        return protoduino_Status_STATUS_INVALID_ARGUMENT;
+    *bad = 1;
+    if (msg->items_count == 0 && msg->digital_pins == 0) {
+        return protoduino_Status_STATUS_INVALID_ARGUMENT; /* sets nothing */
     }
-    /* Pass 0 checks every item, pass 1 applies them all (servos held, so that
+    *bad = 0;
+    if (msg->digital_levels & ~msg->digital_pins) {
+        return protoduino_Status_STATUS_INVALID_ARGUMENT; /* a level for no pin: no output named */
+    }
+    /* Pass 0 checks every item, then every pin of the mask in ascending order (numbered
+     * after the items), pass 1 applies them all in the same order (servos held, so that
      * their new widths start at the same frame). */
     for (uint8_t pass = 0; pass < 2; pass++) {
-        for (uint8_t i = 0; i < msg->items_count; i++) {
+        uint8_t i = 0;
+        for (; i < msg->items_count; i++) {
             const protoduino_PoseItem *item = &msg->items[i];
             protoduino_Status status = protoduino_Status_STATUS_INVALID_ARGUMENT;
             uint32_t pin = 0;
@@ -587,10 +593,35 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
                     status = protoduino_Status_STATUS_INVALID_ARGUMENT; /* a pin twice */
                 }
                 if (status != protoduino_Status_STATUS_OK) {
-                    *bad = i;
+                    *bad = (uint8_t)(i + 1u);
                     return status;
                 }
                 seen |= 1UL << pin;
+            }
+        }
+        /* The masks, one pin a turn: each exactly as its DigitalControl. The masks
+         * shift one place per pin (a variable 32-bit shift is a loop on the AVR);
+         * at most 32 turns, and none past the highest pin set. */
+        uint32_t pins = msg->digital_pins;
+        uint32_t levels = msg->digital_levels;
+        uint32_t bit = 1;
+        for (uint8_t pin = 0; pins != 0; pin++, pins >>= 1, levels >>= 1, bit <<= 1) {
+            if (!(pins & 1u)) {
+                continue;
+            }
+            protoduino_DigitalControl control = {pin, (levels & 1u) != 0};
+            protoduino_Status status = PD_FEATURE_DIGITAL_OUTPUT
+                                           ? digital_control(out, hal, &control, pass)
+                                           : protoduino_Status_STATUS_NOT_SUPPORTED;
+            i++;
+            if (pass == 0) {
+                if (status == protoduino_Status_STATUS_OK && (seen & bit)) {
+                    status = protoduino_Status_STATUS_INVALID_ARGUMENT; /* also an item */
+                }
+                if (status != protoduino_Status_STATUS_OK) {
+                    *bad = i;
+                    return status;
+                }
             }
         }
         pd_hal_servo_hold(hal, pass == 0);

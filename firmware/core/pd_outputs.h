@@ -153,8 +153,12 @@ protoduino_Status pd_outputs_pwm_control(pd_outputs_t *out, void *hal,
 
 /*
  * Several outputs at once, all or nothing: every item is checked (in order,
- * each as its Control would be; a pin twice is STATUS_INVALID_ARGUMENT) before
- * any is applied. On a refusal *bad is the offending item's index.
+ * each as its Control would be; a pin twice is STATUS_INVALID_ARGUMENT), then
+ * every pin of digital_pins in ascending order (as its DigitalControl; a pin
+ * also named by an item is STATUS_INVALID_ARGUMENT), before any is applied.
+ * On a refusal *bad is Ack.refused_item: the offending item's position counted
+ * from 1, the mask's pins counted on after the items; 1 for a Pose that sets
+ * nothing, 0 for a level bit outside digital_pins (protocol.md section 7, rule 7).
  */
 protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino_Pose *msg,
                                   uint8_t *bad);

@@ -6,7 +6,7 @@
 #ifndef PD_PROTOCOL_H
 #define PD_PROTOCOL_H
 
-#define PD_PROTOCOL_VERSION 5
+#define PD_PROTOCOL_VERSION 6
 #define PD_MAX_PAYLOAD 255
 /* COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter. */
 #define PD_MAX_ENCODED_FRAME 262

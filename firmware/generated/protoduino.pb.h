@@ -204,9 +204,17 @@ typedef struct _protoduino_PoseItem {
     } output;
 } protoduino_PoseItem;
 
+/* Digital outputs go in the two masks (protocol version 6), bit P for pin P as in
+ OutputStates: a Pose of six digital outputs is 14 to 17 bytes on the wire where
+ six DigitalControl items took 47 to 59. A PoseItem.digital still decodes and
+ counts as it did. The masks' pins are checked and applied after the items, in
+ ascending pin order, and numbered after them (refused_item: items + 1 for the
+ lowest pin, and so on). */
 typedef struct _protoduino_Pose {
     pb_size_t items_count;
-    protoduino_PoseItem items[8]; /* 1..8 items, each pin at most once */
+    protoduino_PoseItem items[8]; /* 0..8 items, each pin at most once */
+    uint32_t digital_pins; /* bit P: the Pose sets digital output P's level */
+    uint32_t digital_levels; /* bit P: that level is high; only bits of digital_pins */
 } protoduino_Pose;
 
 /* Ask what the device drives now (OutputStates, returned in the Ack). */
@@ -482,7 +490,7 @@ extern "C" {
 #define protoduino_ClearInterlock_init_default   {0}
 #define protoduino_GetInfo_init_default          {0}
 #define protoduino_PoseItem_init_default         {0, {protoduino_ServoControl_init_default}}
-#define protoduino_Pose_init_default             {0, {protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default}}
+#define protoduino_Pose_init_default             {0, {protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default}, 0, 0}
 #define protoduino_ReadOutputs_init_default      {0}
 #define protoduino_ConfigureFailsafe_init_default {0, _protoduino_Liveness_MIN}
 #define protoduino_Heartbeat_init_default        {0}
@@ -512,7 +520,7 @@ extern "C" {
 #define protoduino_ClearInterlock_init_zero      {0}
 #define protoduino_GetInfo_init_zero             {0}
 #define protoduino_PoseItem_init_zero            {0, {protoduino_ServoControl_init_zero}}
-#define protoduino_Pose_init_zero                {0, {protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero}}
+#define protoduino_Pose_init_zero                {0, {protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero}, 0, 0}
 #define protoduino_ReadOutputs_init_zero         {0}
 #define protoduino_ConfigureFailsafe_init_zero   {0, _protoduino_Liveness_MIN}
 #define protoduino_Heartbeat_init_zero           {0}
@@ -567,6 +575,8 @@ extern "C" {
 #define protoduino_PoseItem_digital_tag          2
 #define protoduino_PoseItem_pwm_tag              3
 #define protoduino_Pose_items_tag                1
+#define protoduino_Pose_digital_pins_tag         2
+#define protoduino_Pose_digital_levels_tag       3
 #define protoduino_ConfigureFailsafe_timeout_ms_tag 1
 #define protoduino_ConfigureFailsafe_liveness_tag 2
 #define protoduino_Heartbeat_failsafe_epoch_tag  1
@@ -743,7 +753,9 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (output,pwm,output.pwm),   3)
 #define protoduino_PoseItem_output_pwm_MSGTYPE protoduino_PwmControl
 
 #define protoduino_Pose_FIELDLIST(X, a) \
-X(a, STATIC,   REPEATED, MESSAGE,  items,             1)
+X(a, STATIC,   REPEATED, MESSAGE,  items,             1) \
+X(a, STATIC,   SINGULAR, UINT32,   digital_pins,      2) \
+X(a, STATIC,   SINGULAR, UINT32,   digital_levels,    3)
 #define protoduino_Pose_CALLBACK NULL
 #define protoduino_Pose_DEFAULT NULL
 #define protoduino_Pose_items_MSGTYPE protoduino_PoseItem
@@ -988,7 +1000,7 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 /* Maximum encoded size of messages (where known) */
 #define protoduino_Ack_size                      117
 #define protoduino_AnalogInputInit_size          19
-#define protoduino_ArduinoIn_size                96
+#define protoduino_ArduinoIn_size                108
 #define protoduino_ArduinoOut_size               119
 #define protoduino_ClearInterlock_size           3
 #define protoduino_ConfigureFailsafe_size        8
@@ -1005,7 +1017,7 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_OutputStates_size             75
 #define protoduino_Ping_size                     69
 #define protoduino_PoseItem_size                 9
-#define protoduino_Pose_size                     88
+#define protoduino_Pose_size                     100
 #define protoduino_PwmControl_size               7
 #define protoduino_PwmInit_size                  7
 #define protoduino_ReadOutputs_size              0

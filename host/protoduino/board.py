@@ -130,8 +130,10 @@ log = logging.getLogger(__name__)
 #: Ping payloads are bounded by the schema (protoduino.options: 64 bytes).
 MAX_PING_PAYLOAD = 64
 
-#: A Pose's most items (protoduino.options: Pose.items max_count).
+#: A Pose's most items (protoduino.options: Pose.items max_count): its servos and PWM outputs.
 MAX_POSE_ITEMS = 8
+#: Pins a Pose's digital masks hold (Pose.digital_pins, a uint32: bit P for pin P).
+POSE_MASK_PINS = 32
 
 #: Servo speed limits step once per 20 ms servo frame: a limit is a whole
 #: number of us per frame, 1 .. 255 (ServoInit.max_speed, docs/protocol.md).
@@ -1012,11 +1014,13 @@ class Board(ClosedOnExit):
 
         ``targets`` maps each output to its value: degrees for a :class:`Servo`
         (any real number, rounded as :meth:`Servo.write` rounds), a level for a
-        :class:`DigitalOutput`, a duty for a :class:`PwmOutput`. The device checks
-        every value before it applies any; the servos' new widths start at the
-        same servo frame (digital levels change at once, as the command runs).
-        A refusal, on the host or by the device, raises
-        :class:`CommandRejectedError` whose ``output`` is the offending output.
+        :class:`DigitalOutput`, a duty for a :class:`PwmOutput`. At most 8 servos
+        and PWM outputs, and any number of digital outputs (they travel as two
+        bit masks, a few bytes for all of them). The device checks every value
+        before it applies any; the servos' new widths start at the same servo
+        frame (digital levels change at once, as the command runs). A refusal, on
+        the host or by the device, raises :class:`CommandRejectedError` whose
+        ``output`` is the offending output.
         """
         msg, on_ok, value = self._pose(targets)
         call = self._submit(msg, on_ok)
@@ -1038,14 +1042,16 @@ class Board(ClosedOnExit):
             raise ArgumentTypeError(
                 f"a pose is a mapping of outputs to values, not {type(targets).__name__}"
             )
-        if not 1 <= len(targets) <= MAX_POSE_ITEMS:
-            raise refused(
-                Status.STATUS_INVALID_ARGUMENT,
-                f"a pose sets 1 to {MAX_POSE_ITEMS} outputs, not {len(targets)}",
-            )
+        if not targets:
+            raise refused(Status.STATUS_INVALID_ARGUMENT, "a pose sets at least one output")
         msg = ArduinoIn()
-        outputs: list[PoseOutput] = []
-        pins: set[int] = set()
+        pose = msg.pose
+        # The device's order (protocol.md section 7, rule 7), which Ack.refused_item counts
+        # in from 1: the items as listed, then the masks' pins upwards.
+        items: list[PoseOutput] = []
+        masked: dict[int, DigitalOutput] = {}
+        pins = levels = 0
+        seen: set[int] = set()
         records: list[tuple[int, bytes, int]] = []  # pin, its Control (for a restore), value
         for output, target in targets.items():
             if not isinstance(output, Servo | DigitalOutput | PwmOutput):
@@ -1054,20 +1060,33 @@ class Board(ClosedOnExit):
                 )
             if output.board is not self:
                 raise ArgumentError(f"{output!r} belongs to another board")
-            item = msg.pose.items.add()
             try:
-                if output.pin in pins:
+                if output.pin in seen:
                     raise refused(Status.STATUS_INVALID_ARGUMENT, f"pin {output.pin} twice")
-                control, width = output._pose_item(item, target)
+                if isinstance(output, DigitalOutput) and output.pin < POSE_MASK_PINS:
+                    control, width = output._pose_level(target)
+                    pins |= 1 << output.pin
+                    levels |= width << output.pin
+                    masked[output.pin] = output
+                else:
+                    if len(items) == MAX_POSE_ITEMS:
+                        raise refused(
+                            Status.STATUS_INVALID_ARGUMENT,
+                            f"a pose sets at most {MAX_POSE_ITEMS} servos and PWM outputs",
+                        )
+                    control, width = output._pose_item(pose.items.add(), target)
+                    items.append(output)
             except CommandRejectedError as error:
                 raise CommandRejectedError(
                     error.status, f"pose: {output!r}: {error}", sent=False, output=output
                 ) from None
             except TypeError as error:
                 raise ArgumentTypeError(f"pose: {output!r}: {error}") from None
-            outputs.append(output)
-            pins.add(output.pin)
+            seen.add(output.pin)
             records.append((output.pin, control, width))
+        pose.digital_pins = pins
+        pose.digital_levels = levels
+        outputs = items + [masked[pin] for pin in sorted(masked)]
 
         def on_ok() -> None:
             for pin, control, width in records:

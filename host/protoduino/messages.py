@@ -95,6 +95,29 @@ def _pins(mask: int) -> Iterator[int]:
         pin += 1
 
 
+def pose_refused(pose: pb.Pose, refused_item: int) -> Message | None:
+    """The Control a Pose's ``Ack.refused_item`` names.
+
+    The device's order (protocol.md section 7, rule 7): the items counted from 1, then the
+    pins of ``digital_pins`` upwards, counted on, each a DigitalControl. None for 0 (no
+    output named) or a position past them.
+    """
+    if refused_item < 1:
+        return None
+    if refused_item <= len(pose.items):
+        item = pose.items[refused_item - 1]
+        member = item.WhichOneof("output")
+        if member is None:
+            return None
+        control: Message = getattr(item, member)
+        return control
+    for n, pin in enumerate(_pins(pose.digital_pins), len(pose.items) + 1):
+        if n == refused_item:
+            level = bool(pose.digital_levels >> pin & 1)
+            return pb.DigitalControl(pin=pin, level=level)
+    return None
+
+
 def input_values(report: pb.InputReport) -> list[tuple[InputKind, int, int]]:
     """Every value an InputReport carries: (kind, pin, value), a digital level as a bool.
 

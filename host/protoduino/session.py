@@ -26,7 +26,7 @@ from typing import Any
 from .commands import command
 from .errors import AckTimeoutError, ProtoduinoError, RebootLoopError
 from .events import Event, EventKind
-from .messages import ArduinoIn, Status, parse_in
+from .messages import ArduinoIn, Status, parse_in, pose_refused
 
 log = logging.getLogger(__name__)
 
@@ -213,14 +213,10 @@ def _refused_control(msg: ArduinoIn, ack: Ack) -> tuple[str, int] | None:
         return None
     body = getattr(msg, kind)
     if kind == "pose":
-        index = ack.refused_item
-        if not 1 <= index <= len(body.items):
+        control = pose_refused(body, ack.refused_item)
+        if control is None:
             return None
-        item = body.items[index - 1]
-        member = item.WhichOneof("output")
-        if member is None:
-            return None
-        body = getattr(item, member)
+        body = control
         kind = _MEMBER_OF_TYPE.get(body.DESCRIPTOR.full_name, "")
     pin = getattr(body, "pin", None)
     return (kind, pin) if isinstance(pin, int) else None

@@ -148,6 +148,7 @@ void pd_hal_servo_write(void *ctx, uint8_t channel, uint8_t pin, uint16_t us)
     }
     hal->servo_us[pin] = us;
     hal->servo_writes[pin]++;
+    hal->written_at[pin] = ++hal->writes;
 }
 
 void pd_hal_servo_hold(void *ctx, bool hold)
@@ -172,6 +173,7 @@ void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
     hal->servo_us[pin] = -1; /* a detached servo's pin may become a digital output */
     hal->digital[pin] = level ? 1 : 0;
     hal->digital_writes[pin]++;
+    hal->written_at[pin] = ++hal->writes;
 }
 
 void pd_hal_servo_detach(void *ctx, uint8_t channel, uint8_t pin)
@@ -206,6 +208,7 @@ void pd_hal_pwm_write(void *ctx, uint8_t pin, uint8_t duty)
     }
     hal->pwm[pin] = duty;
     hal->pwm_writes[pin]++;
+    hal->written_at[pin] = ++hal->writes;
 }
 
 void pd_hal_pwm_release(void *ctx, uint8_t pin)

@@ -47,6 +47,8 @@ typedef struct fake_hal {
     uint32_t count[PD_MAX_PINS];
     unsigned servo_writes[PD_MAX_PINS];
     unsigned digital_writes[PD_MAX_PINS];
+    unsigned writes;             /* servo, digital and PWM writes since fake_init */
+    unsigned written_at[PD_MAX_PINS]; /* `writes` after the pin's last write (0: none): the order */
     unsigned outputs_safe_calls; /* pd_hal_outputs_safe() since fake_init */
     uint8_t baud_rates;          /* what pd_hal_baud_rates() answers (0 after fake_init: none) */
     uint32_t baud;               /* the last pd_hal_set_baud() rate (0: none since fake_init) */

@@ -727,6 +727,15 @@ static size_t short_bases(protoduino_ArduinoIn *ins, size_t cap)
     in.data.pose.items[2].output.pwm.pin = 11;
     in.data.pose.items[2].output.pwm.duty = 128;
     ins[n++] = in;
+    in.data.pose.digital_pins = (1UL << 2) | (1UL << 7) | (1UL << 19); /* version 6's masks */
+    in.data.pose.digital_levels = 1UL << 7;
+    ins[n++] = in;
+    in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
+    in.message_id = 12;
+    in.which_data = protoduino_ArduinoIn_pose_tag;
+    in.data.pose.digital_pins = 0xFCu; /* six digital outputs, masks only */
+    in.data.pose.digital_levels = 0x54u;
+    ins[n++] = in;
     in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
     in.message_id = 10;
     in.which_data = protoduino_ArduinoIn_heartbeat_tag;

@@ -257,6 +257,16 @@ static void test_no_commanded_output_without_a_running_timer(void)
     CHECK_EQ(t_cmd(&d, &in), S(FAILSAFE_EXPIRED));
     in = m_digital(12, 13, true);
     CHECK_EQ(t_cmd(&d, &in), S(FAILSAFE_EXPIRED));
+    /* A Pose of masks only (protocol version 6): refused the same way, no output named. */
+    in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
+    in.message_id = 40;
+    in.which_data = protoduino_ArduinoIn_pose_tag;
+    in.data.pose.digital_pins = 1UL << 13;
+    in.data.pose.digital_levels = 1UL << 13;
+    CHECK_EQ(t_cmd(&d, &in), S(FAILSAFE_EXPIRED));
+    protoduino_Ack ack;
+    CHECK_EQ(t_acks(&d, 40, &ack), 1);
+    CHECK_EQ(ack.refused_item, 0);
     CHECK_EQ(d.hal.servo_us[9], 1472);
     CHECK_EQ(d.hal.digital[13], 0);
     /* Inits only drive safe values: allowed. */

@@ -116,6 +116,124 @@ static void test_pose_all_or_nothing(void)
     CHECK_EQ(t_cmd(&d, &empty), S(INVALID_ARGUMENT));
 }
 
+/* A Pose with `n` items and the digital masks (protocol version 6). */
+static protoduino_ArduinoIn m_pose_masks(uint32_t id, const protoduino_PoseItem *items, size_t n,
+                                         uint32_t pins, uint32_t levels)
+{
+    protoduino_ArduinoIn in = m_pose(id, items, n);
+    in.data.pose.digital_pins = pins;
+    in.data.pose.digital_levels = levels;
+    return in;
+}
+
+#define BIT(p) (1UL << (p))
+
+/* The arm, and digital outputs on 2, 4, 7, 8 (safe low); 12 stays unconfigured. */
+static void arm_leds(tdev_t *d)
+{
+    arm(d);
+    uint32_t pins[] = {2, 4, 7, 8};
+    for (uint32_t i = 0; i < 4; i++) {
+        protoduino_ArduinoIn in = m_digital_init(120 + i, pins[i], false);
+        CHECK_EQ(t_cmd(d, &in), S(OK));
+    }
+}
+
+/* The masks set every pin they name, after the items, in ascending pin order, in the
+ * servos' one hold; pins outside digital_pins are untouched. */
+static void test_pose_masks_apply_after_the_items(void)
+{
+    tdev_t d;
+    arm_leds(&d);
+    unsigned holds = d.hal.servo_holds;
+    unsigned writes2 = d.hal.digital_writes[2];
+    protoduino_PoseItem items[] = {servo_item(6, 30), servo_item(3, 10)};
+    protoduino_ArduinoIn in =
+        m_pose_masks(1, items, 2, BIT(13) | BIT(8) | BIT(7) | BIT(4), BIT(13) | BIT(7));
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.servo_us[6], US(30));
+    CHECK_EQ(d.hal.servo_us[3], US(10));
+    CHECK_EQ(d.hal.digital[4], 0);
+    CHECK_EQ(d.hal.digital[7], 1);
+    CHECK_EQ(d.hal.digital[8], 0);
+    CHECK_EQ(d.hal.digital[13], 1);
+    CHECK_EQ(d.hal.digital_writes[2], writes2); /* not in the mask */
+    CHECK_EQ(d.hal.servo_holds, holds + 1);
+    CHECK(!d.hal.servo_held);
+    /* The order: the items as listed, then the mask's pins upwards. */
+    CHECK(d.hal.written_at[6] < d.hal.written_at[3]);
+    CHECK(d.hal.written_at[3] < d.hal.written_at[4]);
+    CHECK(d.hal.written_at[4] < d.hal.written_at[7]);
+    CHECK(d.hal.written_at[7] < d.hal.written_at[8]);
+    CHECK(d.hal.written_at[8] < d.hal.written_at[13]);
+
+    /* A Pose of masks alone; a digital item beside them still counts as before. */
+    in = m_pose_masks(2, NULL, 0, BIT(2) | BIT(13), BIT(2));
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.digital[2], 1);
+    CHECK_EQ(d.hal.digital[13], 0);
+    protoduino_PoseItem digital[] = {digital_item(8, true)};
+    in = m_pose_masks(3, digital, 1, BIT(4), BIT(4));
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.digital[8], 1);
+    CHECK_EQ(d.hal.digital[4], 1);
+}
+
+/* Every refusal of a Pose with masks: its status, refused_item (the items counted from 1,
+ * then the mask's pins upwards, counted on; 0 for a level outside the mask) and nothing
+ * applied, neither the items nor the mask's pins below the refused one. */
+static void test_pose_masks_all_or_nothing(void)
+{
+    tdev_t d;
+    arm_leds(&d);
+    protoduino_PoseItem two[] = {servo_item(3, 10), servo_item(5, 20)};
+    protoduino_PoseItem with13[] = {servo_item(3, 10), digital_item(13, true)};
+    protoduino_PoseItem bad_item[] = {servo_item(3, 10), servo_item(5, 181)};
+    const uint32_t four = BIT(2) | BIT(4) | BIT(7) | BIT(8);
+    struct {
+        const protoduino_PoseItem *items;
+        size_t n;
+        uint32_t pins, levels;
+        int status;
+        uint32_t refused;
+    } cases[] = {
+        /* the 5th mask pin, 12, is not a digital output: item 2 + 5 */
+        {two, 2, four | BIT(12), four, S(NOT_INITIALISED), 7},
+        /* a servo's pin in the mask: its DigitalControl's status first */
+        {two, 2, four | BIT(5), four, S(NOT_INITIALISED), 5},
+        /* a pin both an item and in the mask */
+        {with13, 2, four | BIT(13), four, S(INVALID_ARGUMENT), 7},
+        {two, 2, four | BIT(1), four, S(RESERVED_PIN), 3}, /* pin 1 first */
+        {two, 2, four | BIT(20), four, S(INVALID_PIN), 7},
+        {two, 2, four | BIT(31), four, S(INVALID_PIN), 7},
+        /* a level outside the mask: no output named */
+        {two, 2, four, four | BIT(13), S(INVALID_ARGUMENT), 0},
+        {NULL, 0, four, BIT(12), S(INVALID_ARGUMENT), 0},
+        /* an item's refusal comes before the mask's */
+        {bad_item, 2, four | BIT(12), four, S(OUT_OF_RANGE), 2},
+        /* nothing to set: refused as an empty Pose always was */
+        {NULL, 0, 0, 0, S(INVALID_ARGUMENT), 1},
+        {NULL, 0, 0, BIT(4), S(INVALID_ARGUMENT), 1},
+    };
+    for (size_t c = 0; c < sizeof(cases) / sizeof(cases[0]); c++) {
+        uint32_t id = (uint32_t)(10 + c);
+        protoduino_ArduinoIn in =
+            m_pose_masks(id, cases[c].items, cases[c].n, cases[c].pins, cases[c].levels);
+        unsigned writes = d.hal.writes;
+        CHECK_EQ(t_cmd(&d, &in), cases[c].status);
+        protoduino_Ack ack;
+        CHECK_EQ(t_acks(&d, id, &ack), 1);
+        CHECK_EQ(ack.status, cases[c].status);
+        CHECK_EQ(ack.refused_item, cases[c].refused);
+        CHECK_EQ(d.hal.writes, writes); /* no output written at all */
+        CHECK_EQ(d.hal.servo_us[3], US(90));
+        CHECK_EQ(d.hal.digital[2], 0);
+        CHECK_EQ(d.hal.digital[7], 0);
+        CHECK_EQ(d.hal.digital[13], 0);
+        CHECK(!d.hal.servo_held);
+    }
+}
+
 static void test_read_outputs(void)
 {
     tdev_t d;
@@ -234,6 +352,8 @@ static void test_pose_with_speed_limits_steps_together(void)
 const pd_test_case_t pd_tests_motion[] = {
     TEST_CASE(test_pose_applies_every_item_held),
     TEST_CASE(test_pose_all_or_nothing),
+    TEST_CASE(test_pose_masks_apply_after_the_items),
+    TEST_CASE(test_pose_masks_all_or_nothing),
     TEST_CASE(test_read_outputs),
     TEST_CASE(test_speed_limit_steps_per_frame),
     TEST_CASE(test_speed_limit_bounds),

@@ -112,3 +112,21 @@ def test_version_5_vectors_parse_field_by_field() -> None:
     assert ack.WhichOneof("data") == "ack"
     assert (ack.ack.message_id, ack.ack.status) == (1, Status.STATUS_OK)
     assert serialize_out(ack) == short
+
+
+def test_version_6_vectors_parse_field_by_field() -> None:
+    by_name = {v["name"]: bytes.fromhex(v["payload"]) for v in V["packets"]}
+    reset = parse_control(by_name["RESET from host, version 6, session 0x5E551011, next id 1"])
+    assert (reset.code, reset.version, reset.session, reset.next_id) == (
+        ControlCode.RESET,
+        6,
+        0x5E551011,
+        1,
+    )
+    name = "COMMAND version 6: Pose of six digital outputs (pins 2..7; 2, 4, 6 high), message id 3"
+    pose = parse_in(by_name[name])
+    assert pose.message_id == 3
+    assert len(pose.pose.items) == 0
+    assert (pose.pose.digital_pins, pose.pose.digital_levels) == (0xFC, 0x54)
+    wire = next(bytes.fromhex(v["wire"]) for v in V["packets"] if v["name"] == name)
+    assert len(wire) == 16  # six DigitalControl items in version 5: 47 to 59 B

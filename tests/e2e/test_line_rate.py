@@ -142,9 +142,10 @@ def test_the_emulated_uart_follows_the_switch(tmp_path: Path) -> None:
 def test_poses_beside_input_reports_are_never_retransmitted(start_board: StartBoard) -> None:
     """The agreed rate under the load that once lost frames on the emulated Uno.
 
-    A 6-item Pose (a 64-byte frame; longer than the Uno's receive ring of before protocol
-    version 5, 48 B, so the host let it go alone) arriving while input reports are built: at
-    1,000,000 baud with that ring its bytes were lost at every retransmission
+    A Pose of six servo items and four digital outputs in its masks (62 to 68-byte frames; longer
+    than the Uno's receive ring of before protocol version 5, 48 B, so the host let it go
+    alone) arriving while input reports are built: at 1,000,000 baud with that ring the bytes
+    of such a Pose (then six items, 64 B) were lost at every retransmission
     (firmware/avr/pd_avr_main.c). Judged by the link's counters: every Pose acknowledged at
     its first transmission, no frame dropped either way, no receive overflow, and reports
     really went meanwhile.
@@ -152,7 +153,7 @@ def test_poses_beside_input_reports_are_never_retransmitted(start_board: StartBo
     sim = start_board("--line-check")
     with protoduino.Board.open(sim.port, window=4, ping=False) as board:
         assert board.baudrate == OFFERED[sim.backend][0]
-        servos = [board.servo(pin) for pin in (9, 10)]
+        servos = [board.servo(pin) for pin in (9, 10, 3, 5, 6, 11)]
         outputs = [board.digital_output(pin) for pin in (2, 4, 7, 8)]
         for pin in range(14, 20):
             board.analog_input(pin, rate_hz=500.0, heartbeat=0.01)
@@ -160,8 +161,8 @@ def test_poses_beside_input_reports_are_never_retransmitted(start_board: StartBo
         poses = []
         for i in range(150):
             targets: dict[PoseOutput, PoseValue] = {
-                servos[0]: 10 + i % 160,
-                servos[1]: 170 - i % 160,
+                servo: (10 + i % 160) if n % 2 else (170 - i % 160)
+                for n, servo in enumerate(servos)
             }
             for bit, output in enumerate(outputs):
                 targets[output] = bool((i >> bit) & 1)

@@ -39,10 +39,11 @@ def test_pose_message_and_readback(board: Board, fake: FakeDevice) -> None:
     board.pose({a: 10, b: 180, led: True})
     (sent,) = fake.commands("pose")
     items = sent.msg.pose.items
-    assert [i.WhichOneof("output") for i in items] == ["servo", "servo", "digital"]
+    assert [i.WhichOneof("output") for i in items] == ["servo", "servo"]
     assert (items[0].servo.pin, items[0].servo.degrees) == (3, 10)
     assert (items[1].servo.pin, items[1].servo.degrees) == (5, 180)
-    assert (items[2].digital.pin, items[2].digital.level) == (13, True)
+    # A digital output travels in the masks (protocol version 6), not as an item.
+    assert (sent.msg.pose.digital_pins, sent.msg.pose.digital_levels) == (1 << 13, 1 << 13)
     assert (a.value, b.value, led.value) == (us(10), 2000, True)
     assert board.submit_pose({a: 20}).result(BOUND) is None
     assert a.value == us(20)
@@ -60,9 +61,10 @@ def test_pose_checked_before_sending(board: Board, fake: FakeDevice) -> None:
         board.pose({})
     assert info.value.status == Status.STATUS_INVALID_ARGUMENT
     nine: dict[protoduino.board.PoseOutput, int] = {board.servo(pin): 0 for pin in range(2, 10)}
-    nine[led] = False
-    with pytest.raises(protoduino.CommandRejectedError):
-        board.pose(nine)  # more than 8 items
+    nine[protoduino.Servo(board, 10, 544, 2400)] = 0  # a ninth (the board has 8 slots)
+    with pytest.raises(protoduino.CommandRejectedError) as info:
+        board.pose(nine)  # more than 8 items: servos and PWM outputs
+    assert getattr(info.value.output, "pin", None) == 10 and info.value.sent is False
     before = len(fake.commands())
     twin = protoduino.Servo(board, 3, 544, 2400)
     with pytest.raises(protoduino.CommandRejectedError) as info:
@@ -76,6 +78,46 @@ def test_pose_checked_before_sending(board: Board, fake: FakeDevice) -> None:
         board.pose([(a, 10)])  # type: ignore[arg-type]
     assert len(fake.commands()) == before  # nothing went out
     assert a.value == us(90)
+
+
+def test_pose_digital_outputs_in_the_masks(board: Board, fake: FakeDevice) -> None:
+    """Any number of digital outputs besides at most 8 servos and PWM outputs: the masks hold
+    them, a bit per pin; the readback takes their levels."""
+    servos = [board.servo(pin) for pin in range(2, 10)]
+    leds = [board.digital_output(pin) for pin in (17, 11, 13, 12)]
+    targets: dict[protoduino.board.PoseOutput, float] = {s: 45 for s in servos}
+    targets.update({led: led.pin % 2 == 1 for led in leds})
+    board.pose(targets)
+    (sent,) = fake.commands("pose")
+    assert [i.servo.pin for i in sent.msg.pose.items] == list(range(2, 10))
+    want_pins = sum(1 << p for p in (11, 12, 13, 17))
+    want_levels = sum(1 << p for p in (11, 13, 17))
+    assert (sent.msg.pose.digital_pins, sent.msg.pose.digital_levels) == (want_pins, want_levels)
+    assert [led.value for led in leds] == [True, True, True, False]
+    assert fake.values[17] == 1 and fake.values[12] == 0
+
+
+def test_device_refusal_of_a_mask_pin_names_the_output(board: Board, fake: FakeDevice) -> None:
+    """refused_item counts the items from 1, then the masks' pins upwards (the device's
+    order), whatever order the mapping had."""
+    a = board.servo(3)
+    leds = {pin: board.digital_output(pin) for pin in (13, 4, 8)}
+
+    def refuse(position: int) -> Any:
+        def handler(msg: Any) -> list[Any]:
+            out = ack(msg.message_id, Status.STATUS_NOT_INITIALISED)
+            out.ack.refused_item = position
+            return [out]
+
+        return handler
+
+    targets: dict[protoduino.board.PoseOutput, int] = {leds[13]: 1, a: 10, leds[4]: 0, leds[8]: 1}
+    for position, want in [(1, a), (2, leds[4]), (3, leds[8]), (4, leds[13])]:
+        fake.handler = refuse(position)
+        with pytest.raises(protoduino.CommandRejectedError) as info:
+            board.pose(targets)
+        assert info.value.output is want and info.value.sent is True
+    assert [led.value for led in leds.values()] == [False, False, False]  # nothing recorded
 
 
 def test_pose_of_another_board(board: Board, tmp_path: Path) -> None:

@@ -174,8 +174,9 @@ def test_pose_with_pwm_items(board: Board, fake: FakeDevice) -> None:
     motor = board.pwm_output(3)
     board.pose({servo: 30, led: True, motor: 99.6})
     (pose,) = sent(fake, "pose")
-    assert [i.WhichOneof("output") for i in pose.pose.items] == ["servo", "digital", "pwm"]
-    assert pose.pose.items[2].pwm.duty == 100
+    assert [i.WhichOneof("output") for i in pose.pose.items] == ["servo", "pwm"]
+    assert pose.pose.items[1].pwm.duty == 100
+    assert (pose.pose.digital_pins, pose.pose.digital_levels) == (1 << 13, 1 << 13)  # version 6
     assert fake.values == {9: 30, 13: 1, 3: 100}
     assert motor.value == 100
     with pytest.raises(protoduino.CommandRejectedError) as info:

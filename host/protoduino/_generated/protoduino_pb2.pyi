@@ -643,21 +643,37 @@ Global___PoseItem: _TypeAlias = PoseItem  # noqa: Y015
 
 @_typing.final
 class Pose(_message.Message):
+    """Digital outputs go in the two masks (protocol version 6), bit P for pin P as in
+    OutputStates: a Pose of six digital outputs is 14 to 17 bytes on the wire where
+    six DigitalControl items took 47 to 59. A PoseItem.digital still decodes and
+    counts as it did. The masks' pins are checked and applied after the items, in
+    ascending pin order, and numbered after them (refused_item: items + 1 for the
+    lowest pin, and so on).
+    """
+
     DESCRIPTOR: _descriptor.Descriptor
 
     ITEMS_FIELD_NUMBER: _builtins.int
+    DIGITAL_PINS_FIELD_NUMBER: _builtins.int
+    DIGITAL_LEVELS_FIELD_NUMBER: _builtins.int
+    digital_pins: _builtins.int
+    """bit P: the Pose sets digital output P's level"""
+    digital_levels: _builtins.int
+    """bit P: that level is high; only bits of digital_pins"""
     @_builtins.property
     def items(self) -> _containers.RepeatedCompositeFieldContainer[Global___PoseItem]:
-        """1..8 items, each pin at most once"""
+        """0..8 items, each pin at most once"""
 
     def __init__(
         self,
         *,
         items: _abc.Iterable[Global___PoseItem] | None = ...,
+        digital_pins: _builtins.int = ...,
+        digital_levels: _builtins.int = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["items", b"items"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["digital_levels", b"digital_levels", "digital_pins", b"digital_pins", "items", b"items"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
