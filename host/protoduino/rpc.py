@@ -178,11 +178,13 @@ class Call:
         "epoch",
         "error",
         "first_tx",
+        "frame",
         "key",
         "kind",
         "message_id",
         "on_done",
         "payload",
+        "protected",
         "refusal",
         "restored",
         "round_start",
@@ -210,6 +212,10 @@ class Call:
         self.serial = 0
         self.kind = kind
         self.payload = payload
+        #: Whether running it twice could matter (not idempotent): the dedupe guard's.
+        self.protected = not command(kind).idempotent
+        #: The most bytes its frame takes on the wire (the payload's length never changes).
+        self.frame = frame_size(len(payload))
         self.submitted = submitted
         self.deadline = deadline
         self.on_done = on_done
@@ -614,11 +620,7 @@ class Rpc:
         # (which clears first_tx): the calls with ids are the few in flight or requeued,
         # not every call queued behind the window.
         oldest = min(
-            (
-                c.first_tx
-                for c in self._by_id.values()
-                if c.first_tx is not None and not command(c.kind).idempotent
-            ),
+            (c.first_tx for c in self._by_id.values() if c.first_tx is not None and c.protected),
             default=None,
         )
         if oldest is None:
@@ -642,8 +644,8 @@ class Rpc:
         """
         if self.rx_budget is None or not self._inflight:
             return True
-        used = sum(frame_size(len(c.payload)) for c in self._inflight.values())
-        return used + frame_size(len(call.payload)) <= self.rx_budget
+        used = sum(c.frame for c in self._inflight.values())
+        return used + call.frame <= self.rx_budget
 
     def _pump(self, now: float) -> None:
         """Send what may be sent now (lock held)."""

@@ -298,12 +298,13 @@ class Transport:
         nothing queued and no monitor, is written here and now (module docstring).
         """
         item = _Outgoing(ptype, payload, reset_seq)
+        io = self._thread is threading.current_thread()
         if (
             self._raw
+            and not io
             and ptype is PacketType.COMMAND
             and not self._monitors  # they run on the I/O thread only (FrameMonitor)
             and self._thread is not None
-            and self._thread is not threading.current_thread()
         ):
             with self._wlock:
                 # Under the lock: the port may have closed, or something been queued,
@@ -319,7 +320,7 @@ class Transport:
                     return
         with self._qlock:
             (self._control if ptype is PacketType.CONTROL else self._data).append(item)
-        if self._thread is not threading.current_thread():
+        if not io:
             # The I/O thread itself (the link's timers, an Ack that lets the next call of
             # the window go, a monitor) needs no wake-up: every pass of its loop writes
             # what is queued before it sleeps, and a wake-up would cost a pass of its own.
