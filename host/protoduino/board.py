@@ -32,13 +32,16 @@ Non-blocking calls: every command also has a ``submit`` form that returns a
 :class:`concurrent.futures.Future` at once, resolved by the Ack with the same
 value or error the blocking call returns or raises; arguments are checked
 before anything is sent, so a bad one raises at once, as in the blocking call.
-Futures are resolved on the event thread, in the order their Acks arrived and
-in order with the events (never on the I/O thread: a slow done-callback must
-not stall the link, and a callback may command the board, even blocking). A
-submitted command cannot be recalled: ``future.cancel()`` returns False.
+A future is resolved as its Ack is read (on the I/O thread: a caller blocked in
+``result()`` wakes without a hop through the event thread); its done-callbacks
+run on the event thread, in the order the Acks arrived and in order with the
+events (never on the I/O thread: a slow done-callback must not stall the link,
+and a callback may command the board, even blocking). A submitted command
+cannot be recalled: ``future.cancel()`` returns False.
 
 Threads per board: the transport's I/O thread and one event thread that runs
-the ``on_event`` callbacks and resolves futures. Both stop in :meth:`Board.close`.
+the ``on_event`` callbacks and the futures' done-callbacks. Both stop in
+:meth:`Board.close`.
 """
 
 from __future__ import annotations
