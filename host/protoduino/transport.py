@@ -28,15 +28,18 @@ frame that failed to write keeps its SEQ.
 
 One exception to "the I/O thread writes": a COMMAND sent from another thread
 (a caller's own submit, its window free) onto a plain POSIX port, when nothing
-is queued and no frame monitor watches, is written by that thread at once,
-which saves the wake-up and a pass of the I/O thread per command (issue 23).
-One lock (``_wlock``) is held around taking a packet, giving it its SEQ and
-writing it, by whichever thread writes, and around opening, closing and
-re-rating the port: frames leave whole, in the order they were sent, their
-SEQs in order on the wire. The write is the same (:meth:`_write_item`): a
-timeout drops the packet and keeps its SEQ; any other failure is handed to
-the I/O thread, which loses the port as if its own write had failed. Reading,
-the timers and losing the port stay the I/O thread's.
+is queued, is written by that thread at once, which saves the wake-up and a
+pass of the I/O thread per command (issue 23). One lock (``_wlock``) is held
+around taking a packet, giving it its SEQ and writing it, by whichever thread
+writes, and around opening, closing and re-rating the port: frames leave
+whole, in the order they were sent, their SEQs in order on the wire. The
+write is the same (:meth:`_write_item`): a timeout drops the packet and keeps
+its SEQ; any other failure is handed to the I/O thread, which loses the port
+as if its own write had failed. Reading, the timers, the frame monitors and
+losing the port stay the I/O thread's: a frame written by a caller is shown to
+the monitors by the I/O thread, before anything it reads after it (the record
+is queued under the lock that the write holds, and the I/O thread takes that
+lock to collect the records before it shows what it read).
 """
 
 from __future__ import annotations
@@ -224,6 +227,9 @@ class Transport:
         self._wlock = threading.Lock()
         #: A caller's write that failed other than by a timeout: the I/O thread loses the port.
         self._write_failure: Exception | None = None
+        #: Records of frames written (by any thread, under ``_wlock``), in that order,
+        #: that the I/O thread has still to show to the monitors.
+        self._unshown: collections.deque[FrameRecord] = collections.deque()
         self._control: collections.deque[_Outgoing] = collections.deque()
         self._data: collections.deque[_Outgoing] = collections.deque()
         self._wake_r, self._wake_w = os.pipe()
@@ -299,23 +305,11 @@ class Transport:
         """
         item = _Outgoing(ptype, payload, reset_seq)
         io = self._thread is threading.current_thread()
-        if (
-            self._raw
-            and not io
-            and ptype is PacketType.COMMAND
-            and not self._monitors  # they run on the I/O thread only (FrameMonitor)
-            and self._thread is not None
-        ):
+        if self._raw and not io and ptype is PacketType.COMMAND and self._thread is not None:
             with self._wlock:
                 # Under the lock: the port may have closed, or something been queued,
                 # since; a queued packet goes first, so this one queues behind it.
-                if (
-                    self._raw
-                    and not self._monitors
-                    and not self._control
-                    and not self._data
-                    and not self.closed
-                ):
+                if self._raw and not self._control and not self._data and not self.closed:
                     self._direct_write(item)
                     return
         with self._qlock:
@@ -333,7 +327,7 @@ class Transport:
             self._data.clear()
 
     def add_monitor(self, monitor: FrameMonitor) -> None:
-        with self._wlock:  # a caller's own write (no monitor) ends first; none starts after
+        with self._wlock:  # a frame being written is shown to it, or not, whole
             self._monitors.append(monitor)
 
     def remove_monitor(self, monitor: FrameMonitor) -> None:
@@ -447,7 +441,8 @@ class Transport:
                     data = self._read()
                     # A packet queued while select slept (its wake-up ended the
                     # sleep) leaves now, not after the timer tick below: that
-                    # tick is on no request's critical path.
+                    # tick is on no request's critical path. The monitors see every
+                    # frame written so far (a caller's too) before what was just read.
                     self._flush_writes()
                 except (serial.SerialException, OSError) as error:
                     self._lost(error)
@@ -549,13 +544,25 @@ class Transport:
                 item = self._take()
                 rec = None if item is None else self._write_item(item)
             if rec is None:
-                return
-            self._show(rec)  # the monitors, with no lock held (they may send, or go)
+                break
+        self._show_written()
+
+    def _show_written(self) -> None:
+        """Show the monitors the frames written since last time, in the order written
+        (the I/O thread; the monitors run with no lock held: they may send, or go)."""
+        if not self._monitors:
+            self._unshown.clear()  # nobody to show them to
+            return
+        with self._wlock:  # a caller between its write and its record: it finishes first
+            records = list(self._unshown)
+            self._unshown.clear()
+        for rec in records:
+            self._show(rec)
 
     def _direct_write(self, item: _Outgoing) -> None:
         """Write a caller's COMMAND on its own thread (``_wlock`` held; module docstring)."""
         try:
-            self._write_item(item)  # no monitor to show it to: add_monitor takes _wlock
+            self._write_item(item)  # the I/O thread shows it to the monitors
         except (serial.SerialException, OSError) as error:
             # Lost with the port, as the I/O thread's own failed write would be: it
             # loses the port (the link goes down there, on its thread), woken for it.
@@ -586,6 +593,8 @@ class Transport:
         self.tx_packets += 1
         rec = FrameRecord(time.monotonic(), "tx", Packet(item.ptype, seq, item.payload))
         self._recent.append(rec)
+        if self._monitors:
+            self._unshown.append(rec)
         return rec
 
     def _write_raw(self, data: bytes) -> None:

@@ -19,10 +19,11 @@ import protoduino
 import pytest
 from fakedevice import FakeDevice, ack
 from protoduino import Board
-from protoduino.constants import MAX_MESSAGE_ID
-from protoduino.messages import ArduinoOut, Status
+from protoduino.constants import MAX_MESSAGE_ID, PacketType
+from protoduino.messages import ArduinoOut, Status, parse_out
+from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
-from protoduino.transport import Transport
+from protoduino.transport import FrameRecord, Transport
 from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
 #: Long enough that a held Ack never times out while a test looks at the futures.
@@ -213,7 +214,8 @@ def test_futures_reach_the_pins(sim_board: SimBoard) -> None:
 def test_callers_own_writes_keep_seq_and_ids_in_order(tmp_path: Path) -> None:
     """A caller writes its own COMMAND when nothing is queued (transport.py's docstring),
     the I/O thread the ones an Ack lets go: with both at once, from four threads, every
-    SEQ on the wire follows the one before and the message ids go out in the order given."""
+    SEQ on the wire follows the one before and the message ids go out in the order given.
+    A frame monitor sees every frame on the I/O thread, each command before its Ack."""
     with (
         FakeDevice(tmp_path) as fake,
         Board.open(fake.port, ack_timeout=PATIENT, max_retries=0, ping=False) as board,
@@ -221,6 +223,19 @@ def test_callers_own_writes_keep_seq_and_ids_in_order(tmp_path: Path) -> None:
         led = board.digital_output(13)
         transport = board._transport  # the real port's transport: counters of who wrote
         assert isinstance(transport, Transport)
+        seen: list[tuple[str, str, int]] = []  # thread, direction, message id
+
+        def monitor(rec: FrameRecord) -> None:
+            item = rec.item
+            assert isinstance(item, Packet)
+            if item.type is PacketType.COMMAND:
+                seen.append((threading.current_thread().name, rec.direction, item.payload[1]))
+            elif item.type is PacketType.DATA:
+                out = parse_out(item.payload)
+                if out.WhichOneof("data") == "ack":
+                    seen.append((threading.current_thread().name, "ack", out.ack.message_id))
+
+        board.add_frame_monitor(monitor)
         direct, written = transport.direct_writes, transport.tx_packets
         go = threading.Event()
         held: list[Any] = []
@@ -268,3 +283,14 @@ def test_callers_own_writes_keep_seq_and_ids_in_order(tmp_path: Path) -> None:
         assert all(b == a % MAX_MESSAGE_ID + 1 for a, b in itertools.pairwise(ids)), str(ids)
         assert len(fake.commands("digital_control")) == 8 + 4 * 45
         assert board._link.seq_desyncs == 0 and board._link.handshakes == 1
+        assert {name for name, _, _ in seen} == {transport._thread.name}  # type: ignore[union-attr]
+        sent = [mid for _, direction, mid in seen if direction == "tx"]
+        assert sent == ids[-len(sent) :]  # every command after the monitor came, in order
+        assert len(sent) == 8 + 4 * 45
+        open_ids: set[int] = set()
+        for _, direction, mid in seen:
+            if direction == "tx":
+                open_ids.add(mid)
+            else:
+                assert mid in open_ids, f"the Ack of {mid} shown before its command"
+                open_ids.discard(mid)
