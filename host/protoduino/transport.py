@@ -39,7 +39,10 @@ as if its own write had failed. Reading, the timers, the frame monitors and
 losing the port stay the I/O thread's: a frame written by a caller is shown to
 the monitors by the I/O thread, before anything it reads after it (the record
 is queued under the lock that the write holds, and the I/O thread takes that
-lock to collect the records before it shows what it read).
+lock to collect the records before it shows what it read). Such a write wakes no
+thread: the I/O thread learns of the call's retransmission timer at its next tick,
+TICK at the latest, so with an Ack timeout under TICK (20 ms; 250 ms by default) a
+first retransmission may go out up to TICK late.
 """
 
 from __future__ import annotations
@@ -301,7 +304,7 @@ class Transport:
         """Queue one packet; CONTROL packets go ahead of anything queued.
 
         A COMMAND from a thread other than the I/O thread, onto a plain POSIX port with
-        nothing queued and no monitor, is written here and now (module docstring).
+        nothing queued, is written here and now (module docstring).
         """
         item = _Outgoing(ptype, payload, reset_seq)
         io = self._thread is threading.current_thread()
