@@ -560,17 +560,19 @@ static void test_dedupe_newest_moves_only_forward(void)
     pd_dedupe_init(&dd);
     pd_dedupe_sync(&dd, 11, true);
     CHECK_EQ(dd.newest, 10);
-    CHECK_EQ(pd_dedupe_check(&dd, 10 + PD_ID_AHEAD_MAX + 1u, true), -1); /* 64 ahead: behind */
+    pd_dedupe_done(&dd, 10 + PD_ID_AHEAD_MAX + 1u, 0); /* 64 ahead: behind */
     CHECK_EQ(dd.newest, 10);
-    CHECK_EQ(pd_dedupe_check(&dd, 10 + PD_ID_AHEAD_MAX, false), -1); /* 63 ahead: newer */
+    CHECK_EQ(pd_dedupe_lookup(&dd, 10 + PD_ID_AHEAD_MAX), -1);
+    CHECK_EQ(dd.newest, 10); /* a lookup moves nothing */
+    pd_dedupe_done(&dd, 10 + PD_ID_AHEAD_MAX, -1); /* 63 ahead: newer */
     CHECK_EQ(dd.newest, 10 + PD_ID_AHEAD_MAX);
-    CHECK_EQ(pd_dedupe_check(&dd, 40, true), -1); /* older: N stays */
+    pd_dedupe_done(&dd, 40, 0); /* older: N stays */
     CHECK_EQ(dd.newest, 10 + PD_ID_AHEAD_MAX);
     pd_dedupe_sync(&dd, 1, false); /* NEXT_ID 1: N is 127, the id before it */
     CHECK_EQ(dd.newest, PD_MAX_MESSAGE_ID);
-    CHECK_EQ(pd_dedupe_check(&dd, 3, true), -1); /* across the wrap: newer */
+    pd_dedupe_done(&dd, 3, 0); /* across the wrap: newer */
     CHECK_EQ(dd.newest, 3);
-    CHECK_EQ(pd_dedupe_check(&dd, PD_MAX_MESSAGE_ID, true), -1);
+    pd_dedupe_done(&dd, PD_MAX_MESSAGE_ID, 0);
     CHECK_EQ(dd.newest, 3);
 }
 
@@ -647,12 +649,12 @@ static void test_dedupe_unit(void)
     pd_dedupe_sync(&dd, 1, true);
     for (uint32_t k = 1; k <= 3u * PD_MAX_MESSAGE_ID; k++) {
         uint8_t id = (uint8_t)((k - 1u) % PD_MAX_MESSAGE_ID + 1u);
-        CHECK_EQ(pd_dedupe_check(&dd, id, true), -1);
-        pd_dedupe_add(&dd, id, (uint8_t)(id % 10));
-        CHECK_EQ(pd_dedupe_check(&dd, id, true), id % 10);
+        CHECK_EQ(pd_dedupe_lookup(&dd, id), -1);
+        pd_dedupe_done(&dd, id, id % 10);
+        CHECK_EQ(pd_dedupe_lookup(&dd, id), id % 10);
         for (uint8_t back = 1; back < 20 && back < k; back++) {
             uint8_t old = (uint8_t)((id + PD_MAX_MESSAGE_ID - 1u - back) % PD_MAX_MESSAGE_ID + 1u);
-            CHECK_EQ(pd_dedupe_check(&dd, old, true), back < PD_DEDUPE_WINDOW ? old % 10 : -1);
+            CHECK_EQ(pd_dedupe_lookup(&dd, old), back < PD_DEDUPE_WINDOW ? old % 10 : -1);
         }
         CHECK_EQ(dd.newest, id);
     }
