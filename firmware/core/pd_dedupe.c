@@ -36,27 +36,21 @@ void pd_dedupe_sync(pd_dedupe_t *dd, uint8_t next_id, bool clear)
     forget_old(dd);
 }
 
-int pd_dedupe_check(pd_dedupe_t *dd, uint8_t id, bool lookup)
+int pd_dedupe_lookup(const pd_dedupe_t *dd, uint8_t id)
 {
-    int seen = -1;
-    if (lookup && ahead(id, dd->newest) < PD_DEDUPE_WINDOW) {
+    if (ahead(id, dd->newest) < PD_DEDUPE_WINDOW) {
         for (uint8_t i = 0; i < PD_DEDUPE_WINDOW; i++) {
             if (dd->id[i] == id) {
                 uint8_t pair = dd->status[i >> 1];
-                seen = (i & 1u) ? pair >> 4 : pair & 0x0Fu;
-                break;
+                return (i & 1u) ? pair >> 4 : pair & 0x0Fu;
             }
         }
     }
-    uint8_t d = ahead(dd->newest, id);
-    if (d >= 1u && d <= PD_ID_AHEAD_MAX) {
-        dd->newest = id;
-        forget_old(dd);
-    }
-    return seen;
+    return -1;
 }
 
-void pd_dedupe_add(pd_dedupe_t *dd, uint8_t id, uint8_t status)
+/* Record an executed command (replacing a stale entry of the same id). */
+static void add(pd_dedupe_t *dd, uint8_t id, uint8_t status)
 {
     typedef char fits[(_protoduino_Status_MAX < 16) ? 1 : -1];
     (void)sizeof(fits);
@@ -81,4 +75,16 @@ void pd_dedupe_add(pd_dedupe_t *dd, uint8_t id, uint8_t status)
     *pair = (slot & 1u) ? (uint8_t)((*pair & 0x0Fu) | (status << 4))
                         : (uint8_t)((*pair & 0xF0u) | (status & 0x0Fu));
     dd->next = (uint8_t)((slot + 1u) % PD_DEDUPE_WINDOW);
+}
+
+void pd_dedupe_done(pd_dedupe_t *dd, uint8_t id, int status)
+{
+    uint8_t d = ahead(dd->newest, id);
+    if (d >= 1u && d <= PD_ID_AHEAD_MAX) {
+        dd->newest = id;
+        forget_old(dd);
+    }
+    if (status >= 0) {
+        add(dd, id, (uint8_t)status);
+    }
 }

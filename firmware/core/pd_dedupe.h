@@ -40,11 +40,23 @@ void pd_dedupe_init(pd_dedupe_t *dd);
 /* A RESET of this version: N is the id before `next_id` (1..127); `clear` for a new session. */
 void pd_dedupe_sync(pd_dedupe_t *dd, uint8_t next_id, bool clear);
 /*
- * A command with id `id` (1..127) arrived: its stored status if `lookup` and
- * it is a repeat (see above), else -1; then N moves to it if it is newer.
+ * Split in two so that only the first stands between a command's delimiter and
+ * its pin: pd_dedupe_lookup before the command runs, pd_dedupe_done once it ran
+ * and its Ack is on its way (respond() in pd_dispatch.c). Nothing reads the
+ * window between the two, so the pair decides as one call at either end would.
+ *
+ * A command with id `id` (1..127) arrived: its stored status if it is a repeat
+ * (see above), else -1. Changes nothing.
  */
-int pd_dedupe_check(pd_dedupe_t *dd, uint8_t id, bool lookup);
-/* Record an executed command (replacing a stale entry of the same id). */
-void pd_dedupe_add(pd_dedupe_t *dd, uint8_t id, uint8_t status);
+int pd_dedupe_lookup(const pd_dedupe_t *dd, uint8_t id);
+/*
+ * The command with id `id` (1..127) was answered: N moves to it if it is newer
+ * (every id does that, section 7: idempotent commands and undecodable payloads
+ * too), dropping the entries that fall too far behind; then, if `status` is 0
+ * or more, the command is recorded as executed with that status (replacing a
+ * stale entry of the same id). -1: not recorded (an idempotent command, a
+ * payload that did not decode). Never called for a repeat (it moves nothing).
+ */
+void pd_dedupe_done(pd_dedupe_t *dd, uint8_t id, int status);
 
 #endif /* PD_DEDUPE_H */

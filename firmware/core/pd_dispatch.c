@@ -490,13 +490,13 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
         out.data.decode_error.count = core->decode_errors;
         pd_out_send(core, &out);
         if (msg->message_id != 0) {
+            memset(&out, 0, sizeof(out));
+            send_ack(core, &out, msg->message_id, protoduino_Status_STATUS_DECODE_ERROR);
             if (msg->message_id <= PD_MAX_MESSAGE_ID) {
                 /* Its Ack tells the host the device saw this id, so N must have moved
                  * with it (section 7, *Message ids*: every id moves N); not recorded. */
-                (void)pd_dedupe_check(&core->dedupe, (uint8_t)msg->message_id, false);
+                pd_dedupe_done(&core->dedupe, (uint8_t)msg->message_id, -1);
             }
-            memset(&out, 0, sizeof(out));
-            send_ack(core, &out, msg->message_id, protoduino_Status_STATUS_DECODE_ERROR);
         }
         return;
     }
@@ -516,9 +516,9 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
     }
 #endif
     bool idempotent = known && (entry.flags & PD_CMD_IDEMPOTENT);
-    {
-        /* Every id moves N (section 7, *Message ids*); only others are looked up. */
-        int seen = pd_dedupe_check(&core->dedupe, (uint8_t)msg->message_id, !idempotent);
+    if (!idempotent) {
+        /* Only a lookup here: N moves (and old entries go) after the Ack is on its way. */
+        int seen = pd_dedupe_lookup(&core->dedupe, (uint8_t)msg->message_id);
         if (seen >= 0) {
             /* A retransmission whose Ack was lost: answer again, do not repeat it. */
             send_ack(core, &out, msg->message_id, (uint8_t)seen);
@@ -544,10 +544,10 @@ static __attribute__((noinline)) void respond(pd_core_t *core, const protoduino_
             out.data.ack.which_result = 0; /* a refusal carries no result */
         }
     }
-    if (!idempotent) {
-        pd_dedupe_add(&core->dedupe, (uint8_t)msg->message_id, (uint8_t)status);
-    }
     send_ack(core, &out, msg->message_id, (uint8_t)status);
+    /* The window's bookkeeping while the Ack's bytes go out (pd_dedupe.h): every id
+     * moves N (section 7, *Message ids*); only others are recorded. */
+    pd_dedupe_done(&core->dedupe, (uint8_t)msg->message_id, idempotent ? -1 : (int)status);
     if (cmd.then != NULL) {
         cmd.then(core);
     }

@@ -963,9 +963,23 @@ class Rpc:
     def _begin_restore(self) -> None:
         """Replay the board's session (lock held); user calls wait until it is done."""
         assert self.restore_provider is not None
-        # The device's dedupe window is empty: what went out before is void.
+        # The device lost the outputs. A call sent to it that changes outputs and is still
+        # open (from _session_lost: the device restarted unseen) may have run there, and
+        # its id may be in the window; but the restore's own ids go out first, and past
+        # DEDUPE_WINDOW - 1 of them its retransmission would run again. So it is not sent
+        # again, as after a reboot (_outputs_lost). What is left is idempotent or unsent:
+        # what went out before guards nothing.
         self._tx_log.clear()
-        for call in self._calls.values():
+        for call in list(self._calls.values()):
+            if call.first_tx is not None and not command(call.kind).idempotent:
+                self._finish(
+                    call,
+                    error=DeviceRebootedError(
+                        "the device restarted unseen while the call was outstanding; its "
+                        "outputs are being re-initialised at their safe values and the call "
+                        "is not sent again"
+                    ),
+                )
             call.first_tx = None
         try:
             msgs = self.restore_provider()

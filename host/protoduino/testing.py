@@ -103,41 +103,76 @@ class DedupeWindow:
     """The device's dedupe window and newest id N, as the firmware keeps them (pd_dedupe.c;
     docs/protocol.md section 7, *Message ids*): ids 1..127, Y newer than N when
     ``(Y - N) mod 127`` is 1..63, a repeat when in the window and ``(N - Y) mod 127`` is
-    below DEDUPE_WINDOW; entries that fall that far behind N are dropped."""
+    below DEDUPE_WINDOW; entries that fall that far behind N are dropped.
+
+    Slot for slot: DEDUPE_WINDOW slots (0: free) and ``next``, the slot the next entry
+    overwrites, so that a full window evicts the entry the firmware's would. As the firmware,
+    :meth:`lookup` before a command runs, :meth:`done` once it is answered."""
 
     def __init__(self) -> None:
-        self.entries: dict[int, Status.ValueType] = {}
+        self.ids = [0] * DEDUPE_WINDOW
+        self.statuses: list[Status.ValueType] = [Status.STATUS_OK] * DEDUPE_WINDOW
+        self.next = 0
         self.newest = MAX_MESSAGE_ID  # the id before 1
+
+    @property
+    def entries(self) -> dict[int, Status.ValueType]:
+        """The recorded ids and their statuses (a copy)."""
+        return {mid: self.statuses[i] for i, mid in enumerate(self.ids) if mid}
 
     def sync(self, next_id: int, clear: bool) -> None:
         """A RESET of version 5: N is the id before ``next_id``; a new session clears."""
         if clear:
-            self.entries.clear()
+            self.ids = [0] * DEDUPE_WINDOW
         self.newest = (next_id - 2) % MAX_MESSAGE_ID + 1
         self._forget_old()
 
-    def check(self, mid: int, lookup: bool) -> Status.ValueType | None:
-        """The stored status if ``lookup`` and ``mid`` is a repeat; then N moves to it if newer."""
-        seen = None
-        if lookup and (self.newest - mid) % MAX_MESSAGE_ID < DEDUPE_WINDOW:
-            seen = self.entries.get(mid)
-        if 1 <= (mid - self.newest) % MAX_MESSAGE_ID <= ID_AHEAD_MAX:
-            self.newest = mid
-            self._forget_old()
-        return seen
+    def lookup(self, mid: int) -> Status.ValueType | None:
+        """The stored status if ``mid`` is a repeat now, else None; nothing changes."""
+        if (self.newest - mid) % MAX_MESSAGE_ID < DEDUPE_WINDOW and mid in self.ids:
+            return self.statuses[self.ids.index(mid)]
+        return None
 
     def holds(self, mid: int) -> bool:
         """Would ``mid`` be answered as a repeat now (nothing changes)?"""
-        return (self.newest - mid) % MAX_MESSAGE_ID < DEDUPE_WINDOW and mid in self.entries
+        return self.lookup(mid) is not None
+
+    def done(self, mid: int, status: Status.ValueType | None) -> None:
+        """``mid`` was answered: N moves to it if newer (every id), dropping the entries that
+        fall behind; then it is recorded with ``status`` unless that is None (not executed:
+        idempotent, or it did not decode)."""
+        if 1 <= (mid - self.newest) % MAX_MESSAGE_ID <= ID_AHEAD_MAX:
+            self.newest = mid
+            self._forget_old()
+        if status is not None:
+            self.add(mid, status)
+
+    def check(self, mid: int, lookup: bool) -> Status.ValueType | None:
+        """:meth:`lookup` (if ``lookup``) and N's move of :meth:`done` at once, before the
+        command runs: the same decisions, since nothing reads the window in between."""
+        seen = self.lookup(mid) if lookup else None
+        self.done(mid, None)
+        return seen
 
     def add(self, mid: int, status: Status.ValueType) -> None:
-        self.entries[mid] = status
-        while len(self.entries) > DEDUPE_WINDOW:
-            del self.entries[next(iter(self.entries))]
+        """Record an executed command as pd_dedupe.c's add(): in the slot of a stale entry of
+        this id, else the first free slot from ``next`` on, else slot ``next``."""
+        slot = self.next
+        for k in range(DEDUPE_WINDOW):
+            i = (self.next + k) % DEDUPE_WINDOW
+            if self.ids[i] == mid:
+                slot = i
+                break
+            if self.ids[i] == 0 and self.ids[slot] != 0:
+                slot = i
+        self.ids[slot] = mid
+        self.statuses[slot] = status
+        self.next = (slot + 1) % DEDUPE_WINDOW
 
     def _forget_old(self) -> None:
-        for old in [m for m in self.entries if (self.newest - m) % MAX_MESSAGE_ID >= DEDUPE_WINDOW]:
-            del self.entries[old]
+        for i, mid in enumerate(self.ids):
+            if mid and (self.newest - mid) % MAX_MESSAGE_ID >= DEDUPE_WINDOW:
+                self.ids[i] = 0
 
 
 class ManualClock:

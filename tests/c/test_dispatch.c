@@ -560,17 +560,19 @@ static void test_dedupe_newest_moves_only_forward(void)
     pd_dedupe_init(&dd);
     pd_dedupe_sync(&dd, 11, true);
     CHECK_EQ(dd.newest, 10);
-    CHECK_EQ(pd_dedupe_check(&dd, 10 + PD_ID_AHEAD_MAX + 1u, true), -1); /* 64 ahead: behind */
+    pd_dedupe_done(&dd, 10 + PD_ID_AHEAD_MAX + 1u, 0); /* 64 ahead: behind */
     CHECK_EQ(dd.newest, 10);
-    CHECK_EQ(pd_dedupe_check(&dd, 10 + PD_ID_AHEAD_MAX, false), -1); /* 63 ahead: newer */
+    CHECK_EQ(pd_dedupe_lookup(&dd, 10 + PD_ID_AHEAD_MAX), -1);
+    CHECK_EQ(dd.newest, 10); /* a lookup moves nothing */
+    pd_dedupe_done(&dd, 10 + PD_ID_AHEAD_MAX, -1); /* 63 ahead: newer */
     CHECK_EQ(dd.newest, 10 + PD_ID_AHEAD_MAX);
-    CHECK_EQ(pd_dedupe_check(&dd, 40, true), -1); /* older: N stays */
+    pd_dedupe_done(&dd, 40, 0); /* older: N stays */
     CHECK_EQ(dd.newest, 10 + PD_ID_AHEAD_MAX);
     pd_dedupe_sync(&dd, 1, false); /* NEXT_ID 1: N is 127, the id before it */
     CHECK_EQ(dd.newest, PD_MAX_MESSAGE_ID);
-    CHECK_EQ(pd_dedupe_check(&dd, 3, true), -1); /* across the wrap: newer */
+    pd_dedupe_done(&dd, 3, 0); /* across the wrap: newer */
     CHECK_EQ(dd.newest, 3);
-    CHECK_EQ(pd_dedupe_check(&dd, PD_MAX_MESSAGE_ID, true), -1);
+    pd_dedupe_done(&dd, PD_MAX_MESSAGE_ID, 0);
     CHECK_EQ(dd.newest, 3);
 }
 
@@ -640,6 +642,40 @@ static void test_dedupe_new_session_clears(void)
     CHECK_EQ(d.hal.digital[13], 1);
 }
 
+/* With its slots out of insertion order, a full window overwrites slot `next`, not the
+ * entry inserted first (tests/unit/test_testing.py checks protoduino.testing.DedupeWindow
+ * on the same steps). */
+static void test_dedupe_full_window_evicts_slot_next(void)
+{
+    pd_dedupe_t dd;
+    pd_dedupe_init(&dd);
+    pd_dedupe_sync(&dd, 1, true); /* N = 127 */
+    /* Id 2, then 1 (its first transmission lost), then 3..16: slots 0..15, next 0. */
+    static const uint8_t order[PD_DEDUPE_WINDOW] = {2,  1,  3,  4,  5,  6,  7,  8,
+                                                    9, 10, 11, 12, 13, 14, 15, 16};
+    for (uint8_t k = 0; k < PD_DEDUPE_WINDOW; k++) {
+        CHECK_EQ(pd_dedupe_lookup(&dd, order[k]), -1);
+        pd_dedupe_done(&dd, order[k], protoduino_Status_STATUS_OK);
+        CHECK_EQ(dd.id[k], order[k]);
+    }
+    CHECK_EQ(dd.next, 0);
+    CHECK_EQ(dd.newest, 16);
+    pd_dedupe_done(&dd, 17, -1); /* a Ping: N 17, id 1 (16 back) dropped */
+    CHECK_EQ(dd.id[1], 0);
+    pd_dedupe_done(&dd, 17, protoduino_Status_STATUS_OK); /* the free slot after next */
+    CHECK_EQ(dd.id[1], 17);
+    CHECK_EQ(dd.next, 2);
+    /* An id out of reach (44 behind N: no repeat, N stays), the window full: slot 2 (id 3). */
+    CHECK_EQ(pd_dedupe_lookup(&dd, 100), -1);
+    pd_dedupe_done(&dd, 100, protoduino_Status_STATUS_NOT_INITIALISED);
+    CHECK_EQ(dd.newest, 17);
+    CHECK_EQ(dd.next, 3);
+    CHECK_EQ(dd.id[0], 2);
+    CHECK_EQ(dd.id[2], 100);
+    CHECK_EQ(pd_dedupe_lookup(&dd, 2), protoduino_Status_STATUS_OK);
+    CHECK_EQ(pd_dedupe_lookup(&dd, 3), -1);
+}
+
 static void test_dedupe_unit(void)
 {
     pd_dedupe_t dd;
@@ -647,12 +683,12 @@ static void test_dedupe_unit(void)
     pd_dedupe_sync(&dd, 1, true);
     for (uint32_t k = 1; k <= 3u * PD_MAX_MESSAGE_ID; k++) {
         uint8_t id = (uint8_t)((k - 1u) % PD_MAX_MESSAGE_ID + 1u);
-        CHECK_EQ(pd_dedupe_check(&dd, id, true), -1);
-        pd_dedupe_add(&dd, id, (uint8_t)(id % 10));
-        CHECK_EQ(pd_dedupe_check(&dd, id, true), id % 10);
+        CHECK_EQ(pd_dedupe_lookup(&dd, id), -1);
+        pd_dedupe_done(&dd, id, id % 10);
+        CHECK_EQ(pd_dedupe_lookup(&dd, id), id % 10);
         for (uint8_t back = 1; back < 20 && back < k; back++) {
             uint8_t old = (uint8_t)((id + PD_MAX_MESSAGE_ID - 1u - back) % PD_MAX_MESSAGE_ID + 1u);
-            CHECK_EQ(pd_dedupe_check(&dd, old, true), back < PD_DEDUPE_WINDOW ? old % 10 : -1);
+            CHECK_EQ(pd_dedupe_lookup(&dd, old), back < PD_DEDUPE_WINDOW ? old % 10 : -1);
         }
         CHECK_EQ(dd.newest, id);
     }
@@ -905,6 +941,7 @@ const pd_test_case_t pd_tests_dispatch[] = {
     TEST_CASE(test_dedupe_ping_and_info_answered_in_full),
     TEST_CASE(test_dedupe_survives_reset_not_reboot),
     TEST_CASE(test_dedupe_new_session_clears),
+    TEST_CASE(test_dedupe_full_window_evicts_slot_next),
     TEST_CASE(test_dedupe_unit),
     {NULL, NULL},
 };

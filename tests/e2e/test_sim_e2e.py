@@ -44,7 +44,7 @@ from protoduino.packets import (
     reset_payload,
 )
 from protoduino.simboard import SimBoard
-from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS
+from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS, wait_until
 
 VECTORS = Path(__file__).resolve().parents[1] / "vectors" / "wire_v1.json"
 #: Generous bound for any single reply; the simulated board answers in well under 1 ms.
@@ -186,50 +186,74 @@ def _changes(board: SimBoard, pin: int) -> list[Any]:
     return [c["value"] for c in board.trace() if c["pin"] == pin]
 
 
+def _lines(board: SimBoard, pin: int) -> list[dict[str, Any]]:
+    return [c for c in board.trace() if c["pin"] == pin]
+
+
 def _settle(board: SimBoard, host: RawHost) -> None:
     """A GetInfo round trip: every earlier command has been executed."""
     # Any id of 1..127 does for a round trip (GetInfo is answered in full, never as a repeat).
     host.command(pb.ArduinoIn(message_id=host.seq % 127 + 1, get_info=pb.GetInfo()))
 
 
-def _agrees(board: SimBoard, actual: list[int], expected: list[int]) -> bool:
-    """Does a pin's trace show ``expected``?
+def _tolerance(line: dict[str, Any]) -> int:
+    """A measured pulse width (servo) or duty (PWM) may be a few units off; a digital level
+    is exact: 0 never stands for 1."""
+    return 0 if line["mode"] == "digital" else PULSE_TOLERANCE_US
+
+
+def _agrees(board: SimBoard, actual: list[dict[str, Any]], expected: list[int]) -> bool:
+    """Does a pin's trace (its lines) show ``expected``?
 
     The native board traces every change exactly. A backend that measures its
     pins (the emulated Uno) sees a servo value only at its next pulse, so a
     value held for less than one 20 ms frame, or a digital low set right after
     the pin became an output, may never show; pulse widths are measured to
     within PULSE_TOLERANCE_US (and jitter of a microsecond may show as a
-    "change"). There the trace must follow ``expected`` in order, skipping
-    values perhaps, repeating none beyond the tolerance, and end on its last.
+    "change"), digital levels exactly. There the trace must follow ``expected``
+    in order, skipping values perhaps, repeating none beyond the tolerance, and
+    end on its last.
     """
+    values = [int(line["value"]) for line in actual]
     if board.backend == "native":
-        return actual == expected
+        return values == expected
     if not expected or not actual:
-        return actual == expected
+        return values == expected
     i = 0  # expected[i] is the value the pin shows now; jitter may repeat it
-    for a in actual:
-        while abs(a - expected[i]) > PULSE_TOLERANCE_US:
+    for line in actual:
+        while abs(line["value"] - expected[i]) > _tolerance(line):
             i += 1
             if i == len(expected):
                 return False
-    return abs(actual[-1] - expected[-1]) <= PULSE_TOLERANCE_US
+    return abs(values[-1] - expected[-1]) <= _tolerance(actual[-1])
 
 
 def _expect(board: SimBoard, pin: int, expected: list[int]) -> None:
-    """Wait (bounded) until the trace of ``pin`` agrees with ``expected``."""
-    deadline = time.monotonic() + TRACE_TIMEOUT
-    while not _agrees(board, actual := _changes(board, pin), expected):
-        assert time.monotonic() < deadline, f"pin {pin}: trace {actual}, expected {expected}"
-        time.sleep(0.01)
+    """Wait until the trace of ``pin`` agrees with ``expected`` (the verdict is the trace's;
+    TRACE_TIMEOUT only bounds how long a failing test waits)."""
+    ok = wait_until(lambda: _agrees(board, _lines(board, pin), expected), TRACE_TIMEOUT)
+    assert ok, f"pin {pin}: trace {_changes(board, pin)}, expected {expected}"
 
 
 def _expect_last(board: SimBoard, pin: int, value: int) -> None:
-    """Wait (bounded) until the latest trace line of ``pin`` shows ``value``."""
-    deadline = time.monotonic() + TRACE_TIMEOUT
-    while not _agrees(board, (actual := _changes(board, pin))[-1:], [value]):
-        assert time.monotonic() < deadline, f"pin {pin}: trace {actual}, expected last {value}"
-        time.sleep(0.01)
+    """Wait until the latest trace line of ``pin`` shows ``value`` (as :func:`_expect`)."""
+    ok = wait_until(lambda: _agrees(board, _lines(board, pin)[-1:], [value]), TRACE_TIMEOUT)
+    assert ok, f"pin {pin}: trace {_changes(board, pin)}, expected last {value}"
+
+
+def test_agrees_compares_digital_levels_exactly() -> None:
+    """The emulated Uno's comparison (no board needed): a digital trace of [0] does not agree
+    with [0, 1] (the flake this rule fixed), a servo width 2 us off does."""
+    uno = SimBoard("avr")  # never started: _agrees reads its backend only
+
+    def lines(mode: str, *values: int) -> list[dict[str, Any]]:
+        return [{"t": 0.0, "pin": 9, "mode": mode, "value": v} for v in values]
+
+    assert not _agrees(uno, lines("digital", 0), [0, 1])
+    assert _agrees(uno, lines("digital", 0, 1), [0, 1])
+    assert not _agrees(uno, lines("digital", 1, 0), [1, 0, 1])
+    assert _agrees(uno, lines("servo", 1498, 2002), [1500, 2000])
+    assert not _agrees(uno, lines("servo", 1500, 2004), [1500, 2000])
 
 
 def _quiet(board: SimBoard) -> None:
@@ -586,14 +610,10 @@ def test_failsafe_after_ping_silence(sim_board: SimBoard, active: RawHost) -> No
     assert active.ack(8).status == Status.STATUS_OK
     assert active.ack(9).status == Status.STATUS_OK
     sent = time.monotonic()
+    # A digital level is compared exactly: this waits for the high's own line (the emulated
+    # Uno writes it once the high outlasts a servo pulse), whose time is the Ping's arrival.
     _expect(sim_board, 11, [0, 1])
-    # _expect's pulse tolerance lets a trace of [0] agree with [0, 1]: wait for the high's
-    # own line (the emulated Uno writes it once the high outlasts a servo pulse).
-    deadline = time.monotonic() + TRACE_TIMEOUT
-    while not (highs := [c["t"] for c in sim_board.trace() if c["pin"] == 11 and c["value"] == 1]):
-        assert time.monotonic() < deadline, f"pin 11: trace {_changes(sim_board, 11)}, no high"
-        time.sleep(0.01)
-    last_ping_t = highs[0]
+    last_ping_t = next(c["t"] for c in _lines(sim_board, 11) if c["value"] == 1)
 
     event = active.wait(_is_failsafe, timeout=FAILSAFE_TIMEOUT + 3.0)
     waited = time.monotonic() - sent
@@ -608,7 +628,7 @@ def test_failsafe_after_ping_silence(sim_board: SimBoard, active: RawHost) -> No
         _expect_last(sim_board, pin, value)
     safe_lines = [c for c in sim_board.trace() if c["t"] > last_ping_t]
     assert sorted(c["pin"] for c in safe_lines) == sorted(safe)
-    assert all(_agrees(sim_board, [c["value"]], [safe[c["pin"]]]) for c in safe_lines), safe_lines
+    assert all(_agrees(sim_board, [c], [safe[c["pin"]]]) for c in safe_lines), safe_lines
     for line in safe_lines:
         delay = line["t"] - last_ping_t
         # At the pin too: the firmware starts a servo frame at once on entering the

@@ -15,7 +15,7 @@ from protoduino import Board, Event, EventKind
 from protoduino.constants import ACK_TIMEOUT, MAX_RETRIES, PING_INTERVAL, PacketType
 from protoduino.errors import AckTimeoutError, CommandRejectedError
 from protoduino.messages import ArduinoIn, Status
-from protoduino.testing import VirtualDevice
+from protoduino.testing import DedupeWindow, VirtualDevice
 
 
 @pytest.fixture
@@ -158,3 +158,45 @@ def test_a_stop_is_a_failsafe_of_its_own_epoch(device: VirtualDevice) -> None:
         assert failsafes(events) == [(True, "stop", 1)]
         servo.write(20)  # the timer still runs: a Control after a Stop is protected, not refused
         assert device.last("servo_control").servo_control.degrees == 20
+
+
+def _recorded(window: DedupeWindow, ids: list[int], newest: int) -> None:
+    """Commands ``ids`` executed in that order (OK), then a Ping of id ``newest``."""
+    for mid in ids:
+        assert window.lookup(mid) is None
+        window.done(mid, Status.STATUS_OK)
+    window.done(newest, None)
+
+
+def test_dedupe_window_overflow_evicts_slot_next_as_the_firmware() -> None:
+    """tests/c/test_dispatch.c's test_dedupe_full_window_evicts_slot_next, step for step:
+    with the slots out of insertion order, a full window overwrites slot ``next``, not the
+    entry inserted first."""
+    window = DedupeWindow()
+    window.sync(1, clear=True)  # N = 127
+    # Id 2, then 1 (its first transmission lost), then 3..16: slots 0..15, next 0, N 16.
+    _recorded(window, [2, 1, *range(3, 17)], newest=16)
+    assert window.ids == [2, 1, *range(3, 17)] and window.next == 0
+    window.done(17, None)  # a Ping: N 17, id 1 (16 back) dropped: slot 1 free
+    assert window.ids[1] == 0 and window.newest == 17
+    window.done(17, Status.STATUS_OK)  # a command under 17 takes the free slot after next
+    assert window.ids == [2, 17, *range(3, 17)] and window.next == 2
+    # An id out of reach (44 behind N: no repeat, and N stays) with the window full: the
+    # firmware overwrites slot 2 (id 3); the id inserted first (2) stays.
+    assert window.lookup(100) is None
+    window.done(100, Status.STATUS_NOT_INITIALISED)
+    assert window.newest == 17 and window.next == 3
+    assert window.ids == [2, 17, 100, *range(4, 17)]
+    assert window.lookup(2) == Status.STATUS_OK and window.lookup(3) is None
+
+
+def test_dedupe_window_lookup_changes_nothing_and_every_id_moves_n() -> None:
+    window = DedupeWindow()
+    window.sync(11, clear=True)  # N = 10
+    window.done(5, Status.STATUS_OK)  # older: recorded, N stays
+    assert window.lookup(5) == Status.STATUS_OK and window.newest == 10
+    assert window.lookup(40) is None and window.newest == 10  # a lookup moves nothing
+    window.done(40, None)  # not recorded (idempotent, or it did not decode), N moves
+    assert window.newest == 40 and window.entries == {}  # 5 fell 35 behind: dropped
+    window.done(40 + 64, Status.STATUS_OK)  # 64 ahead: behind, N stays
+    assert window.newest == 40 and window.lookup(104) is None  # out of reach
