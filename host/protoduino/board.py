@@ -32,12 +32,13 @@ Non-blocking calls: every command also has a ``submit`` form that returns a
 :class:`concurrent.futures.Future` at once, resolved by the Ack with the same
 value or error the blocking call returns or raises; arguments are checked
 before anything is sent, so a bad one raises at once, as in the blocking call.
-A future is resolved as its Ack is read (on the I/O thread: a caller blocked in
-``result()`` wakes without a hop through the event thread); its done-callbacks
-run on the event thread, in the order the Acks arrived and in order with the
-events (never on the I/O thread: a slow done-callback must not stall the link,
-and a callback may command the board, even blocking). A submitted command
-cannot be recalled: ``future.cancel()`` returns False.
+A future without a done-callback is resolved as its Ack is read (on the I/O
+thread: a caller blocked in ``result()`` wakes without a hop through the event
+thread); one with a done-callback is resolved on the event thread, its callbacks
+with it, in the order the Acks arrived and in order with the events (never on
+the I/O thread: a slow done-callback must not stall the link, and a callback may
+command the board, even blocking). A submitted command cannot be recalled:
+``future.cancel()`` returns False.
 
 Threads per board: the transport's I/O thread and one event thread that runs
 the ``on_event`` callbacks and the futures' done-callbacks. Both stop in
@@ -1372,7 +1373,7 @@ class Board(ClosedOnExit):
         """Send without waiting; the future gets ``value(call)`` or the call's error.
 
         It is resolved as the call completes (on the I/O thread, after ``on_ok``, in
-        Ack order); its done-callbacks run on the event thread
+        Ack order), or on the event thread if it has done-callbacks
         (:class:`~protoduino.events.EventThreadFuture`). The request layer fails
         every call by its deadline, so every future is resolved, at the latest with
         the blocking call's timeout error, or with BoardClosedError at :meth:`close`.

@@ -156,26 +156,40 @@ def _call_back(fn: Callable[[Future[T]], object], future: Future[T]) -> None:
 
 
 class EventThreadFuture(Future[T]):
-    """A future resolved where its result is known, its done-callbacks on the event thread.
+    """A future resolved on the thread that learns its result unless it has
+    done-callbacks, which then run on the event thread with its resolution.
 
-    The board's submit forms resolve theirs on the I/O thread as the Ack arrives: a
-    caller blocked in ``result()`` or ``concurrent.futures.wait`` wakes from there,
-    without a hop through the event thread (20-50 us of CPU per call on the emulated
-    Uno, issue 23). User code never runs on the I/O thread: a done-callback added
-    before the future was resolved is handed to ``post`` (the event thread's queue,
-    :meth:`EventDispatcher.put_job`) when the resolving thread would call it, so the
-    callbacks still run there, in Ack order and in order with the events, and may
-    block or command the board. One added after is called at once by the thread
-    that adds it, as :meth:`concurrent.futures.Future.add_done_callback` says.
+    The board's submit forms settle theirs on the I/O thread as the Ack arrives. A
+    future nobody added a done-callback to is resolved right there: a caller blocked
+    in ``result()`` or ``concurrent.futures.wait`` wakes without a hop through the
+    event thread (20-50 us of CPU per call on the emulated Uno, issue 23). One with a
+    done-callback is resolved on the event thread (``post``:
+    :meth:`EventDispatcher.put_job`), as every future was before: its callbacks run
+    there as it resolves, in Ack order and in order with the events, may block or
+    command the board, and have run once a waiter sees it done. User code never runs
+    on the I/O thread: a callback added while the future is being resolved there is
+    posted to the event thread too; one added once it is done is called at once by
+    the thread that adds it, as :meth:`concurrent.futures.Future.add_done_callback`
+    says.
     """
 
     def __init__(self, post: Callable[[Job], None]) -> None:
         super().__init__()
         self._post = post
-        #: The thread resolving this future (:meth:`settle`), whose callbacks go to ``post``.
+        #: Guards the choice between resolving here and on the event thread.
+        self._choice = threading.Lock()
+        self._has_callbacks = False
+        #: The thread resolving it where its result is known (None: not that way, or not yet).
         self._resolver: int | None = None
 
     def add_done_callback(self, fn: Callable[[Future[T]], object]) -> None:
+        with self._choice:
+            late = self._resolver is not None  # resolving (or resolved) on its own thread
+            self._has_callbacks = True
+        if not late:
+            super().add_done_callback(fn)  # resolved on the event thread: called there
+            return
+
         def deliver(future: Future[T]) -> None:
             if threading.get_ident() == self._resolver:
                 self._post(lambda: _call_back(fn, future))
@@ -185,8 +199,18 @@ class EventThreadFuture(Future[T]):
         super().add_done_callback(deliver)
 
     def settle(self, result: Callable[[], T]) -> None:
-        """Resolve with ``result()``, or with what it raises (the caller's exception)."""
-        self._resolver = threading.get_ident()
+        """Resolve with ``result()``, or with what it raises (the caller's exception):
+        here, or on the event thread if a done-callback was added (class docstring)."""
+        with self._choice:
+            here = not self._has_callbacks
+            if here:
+                self._resolver = threading.get_ident()
+        if here:
+            self._resolve(result)
+        else:
+            self._post(lambda: self._resolve(result))
+
+    def _resolve(self, result: Callable[[], T]) -> None:
         try:
             value = result()
         except BaseException as exc:  # the caller sees exactly what the blocking call raises

@@ -114,10 +114,11 @@ def test_jobs_are_never_dropped_and_still_run_at_close() -> None:
     assert ran == [1, 2, 3]
 
 
-def test_a_future_resolves_where_it_is_settled_and_calls_back_on_the_event_thread() -> None:
-    """EventThreadFuture (the submit forms'): ``result()`` sees the value as soon as it is
-    settled, with the event thread held in a callback; the done-callbacks added before run
-    there afterwards, in order with the events, and never on the thread that settled it."""
+def test_a_future_resolves_where_it_is_settled_unless_it_has_done_callbacks() -> None:
+    """EventThreadFuture (the submit forms'): without a done-callback, ``result()`` sees the
+    value as soon as it is settled, the event thread held in a callback; with one, it is
+    resolved on the event thread, its callbacks run as it resolves, in order with the
+    events, never on the thread that settled it; one added once it is done runs at once."""
     from protoduino.events import EventThreadFuture
 
     dispatcher = EventDispatcher("test", close_wait=5.0)
@@ -125,33 +126,42 @@ def test_a_future_resolves_where_it_is_settled_and_calls_back_on_the_event_threa
     dispatcher.subscribe(gate)
     order: list[str] = []
     threads: list[str] = []
+
+    def settle_on_own_thread(future: EventThreadFuture[int], value: int) -> None:
+        io = threading.Thread(target=future.settle, args=(lambda: value,), name="io")
+        io.start()  # as the board's I/O thread settles it
+        io.join(30)
+        assert not io.is_alive()
+
+    def callback(f: object) -> None:
+        threads.append(threading.current_thread().name)
+        order.append("callback")
+
+    def failing(f: object) -> None:
+        raise RuntimeError("a callback's failure is logged, the next one still runs")
+
     try:
         dispatcher.put(ev(EventKind.DEVICE_DESYNC, "first"))
         gate.entered.wait(30)  # the event thread is held in the callback
-        future: EventThreadFuture[int] = EventThreadFuture(dispatcher.put_job)
+        plain: EventThreadFuture[int] = EventThreadFuture(dispatcher.put_job)
+        settle_on_own_thread(plain, 42)
+        assert plain.result(0) == 42  # resolved there, the event thread still held
 
-        def callback(f: object) -> None:
-            threads.append(threading.current_thread().name)
-            order.append("callback")
-
-        def failing(f: object) -> None:
-            raise RuntimeError("a callback's failure is logged, the next one still runs")
-
-        future.add_done_callback(failing)
-        future.add_done_callback(callback)
-        io = threading.Thread(target=future.settle, args=(lambda: 42,), name="io")
-        io.start()  # settled on a thread of its own, as the board's I/O thread does
-        io.join(30)
-        assert future.result(0) == 42  # resolved there, the event thread still held
-        assert order == []
+        watched: EventThreadFuture[int] = EventThreadFuture(dispatcher.put_job)
+        watched.add_done_callback(failing)
+        watched.add_done_callback(callback)
+        settle_on_own_thread(watched, 7)
+        assert not watched.done() and order == []  # its resolution waits its turn
         dispatcher.put(ev(EventKind.DEVICE_DESYNC, "after"))
         gate.release.set()
+        assert watched.result(30) == 7
         gate.wait_seen(2)
         assert order == ["callback"]
         assert threads[0].startswith("protoduino-events")
         # Added once done: called at once by the thread that adds it.
-        future.add_done_callback(callback)
-        assert threads[1] == threading.current_thread().name
+        watched.add_done_callback(callback)
+        plain.add_done_callback(callback)
+        assert threads[1:] == [threading.current_thread().name] * 2
         failed: EventThreadFuture[int] = EventThreadFuture(dispatcher.put_job)
         failed.settle(lambda: 1 // 0)
         assert isinstance(failed.exception(0), ZeroDivisionError)
