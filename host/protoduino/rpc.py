@@ -371,12 +371,6 @@ class Rpc:
         #: at the queues, where looking at every queued call on every tick cost O(n) per
         #: pass and O(n^2) for a burst of n submits (issue 23).
         self._queued_due = float("inf")
-        #: When the timers next need a tick: exact after a full tick, lowered (``_sooner``)
-        #: wherever a timer is set earlier or something the tick decides on changed (0.0:
-        #: tick fully). A tick before it has nothing to do and returns it at once: the I/O
-        #: thread ticks twice per command (after the write, after the Ack), and a full
-        #: tick walked the table for nothing (issue 23).
-        self._due = 0.0
         #: The session layer's rules (session.py), kept under this layer's lock.
         self._plan = RestorePlan()
         self._loop = RebootLoop(reboot_limit, reboot_window)
@@ -461,7 +455,6 @@ class Rpc:
         with self._lock:
             self._pinging = bool(on)
             self._next_ping = 0.0  # resuming: ping at once, the failsafe may be close
-            self._due = 0.0
 
     def expect_traffic(self) -> bool:
         return self._pinging or bool(self._calls)
@@ -512,11 +505,6 @@ class Rpc:
     def _queued(self, call: Call) -> None:
         """``call`` joined a queue (lock held): its deadline is a timer (``_queued_due``)."""
         self._queued_due = min(self._queued_due, call.deadline)
-        self._sooner(call.deadline)
-
-    def _sooner(self, due: float) -> None:
-        """A timer is due at ``due`` (lock held): the next tick comes by then."""
-        self._due = min(self._due, due)
 
     def _allocate_id(self, call: Call) -> None:
         """Give ``call`` the next id, at its first transmission (lock held)."""
@@ -599,7 +587,6 @@ class Rpc:
             call.round_start = now
         call.attempts += 1
         call.sent_at = now
-        self._sooner(self._attempt_due(call))
         self._inflight[call.message_id] = call
         self._tx_serial += 1
         if call.first_tx is None:
@@ -725,9 +712,6 @@ class Rpc:
 
     def link_tick(self, now: float) -> float:
         """Run the timers; return when they next need to run (the I/O thread sleeps until then)."""
-        due = self._due  # one float, read without the lock: a submit lowers it under the
-        if now < due:  # lock, and the tick that follows its wake-up (or TICK) sees it
-            return due
         with self._lock:
             if self._closed:
                 return now + PING_INTERVAL
@@ -755,8 +739,7 @@ class Rpc:
                 )
             self._maybe_ping(now)
             self._pump(now)
-            self._due = self._next_due(now)
-            return self._due
+            return self._next_due(now)
 
     def _next_due(self, now: float) -> float:
         """The earliest timer still pending after a tick at ``now`` (lock held)."""
@@ -784,7 +767,6 @@ class Rpc:
 
     def _ping_done(self, call: Call) -> None:
         self._ping_call = None
-        self._sooner(self._next_ping)  # the next Ping's timer runs again
         if call.error is not None:
             self.ping_failures += 1
             log.debug("automatic ping failed: %s", call.error)
@@ -843,7 +825,6 @@ class Rpc:
         """The device's failsafe state, from its event or a liveness Ack (lock held)."""
         if self._failsafe.seen(fs):
             self._next_ping = 0.0  # send the epoch back at once: the device re-arms
-            self._due = 0.0
 
     def _liveness_acked(self, call: Call, ack: Ack) -> None:
         """Note what an acknowledged call tells of the failsafe (lock held).
@@ -929,7 +910,6 @@ class Rpc:
             else:
                 self._requeue_inflight()  # a reconnect: the dedupe window still has them
             self._next_ping = 0.0
-            self._due = 0.0
             self._pump(self._clock())
 
     def _outputs_lost(self, rebooted: bool, now: float) -> None:
@@ -996,7 +976,6 @@ class Rpc:
 
     def link_down(self, reason: str) -> None:
         with self._lock:
-            self._due = 0.0
             self._requeue_inflight()
 
     def link_failed(self, error: ProtoduinoError) -> None:
@@ -1008,7 +987,6 @@ class Rpc:
         """
         with self._lock:
             self._failed = error
-            self._due = 0.0
             self._plan.clear()
             self._holding = False
             self._restore_call = None
@@ -1051,7 +1029,6 @@ class Rpc:
         """Fail every outstanding call with BoardClosedError; idempotent."""
         with self._lock:
             self._closed = True
-            self._due = 0.0
             for call in list(self._calls.values()):
                 self._finish(call, error=BoardClosedError(f"the board was closed ({call.kind})"))
             self._plan.clear()
