@@ -590,7 +590,8 @@ def _explain(avr: BoardRun, host_board: BoardRun, target: Target) -> str:
         "one write once its last byte is due), so the emulator can only lengthen a round "
         "trip, never shorten it; on a loaded machine the runner also waits for a core. "
         f"{echo_text}{_pace_text(avr.pace)}The host library adds {servo.host:,.0f} us (its I/O "
-        "thread wakes up to write the command, and the caller wakes up at the Ack), "
+        "thread wakes up at the Ack and resolves the call, and the caller wakes up from its "
+        "wait; the caller writes its own command when nothing is queued), "
         f"{servo.host / servo.library * 100:.0f} % of the round trip. The emulator's share would "
         "be a real Uno's USB-serial bridge latency instead, which this bench cannot measure.\n"
     )

@@ -70,7 +70,10 @@ they decide is summed up below with the table's own rules.
   the board configured has restarted unseen (its EVENT BOOT lost, then a
   re-handshake found it again): the restore runs, and that call is sent again
   after it, once, under a new id (the device keeps the refusal under the old
-  one). It had not run, so this cannot run it twice.
+  one). It had not run, so this cannot run it twice. Any other call still
+  open that was sent and changes outputs fails with DeviceRebootedError, as
+  after a seen reboot: it may have run, and the restore's own ids would push
+  it out of the device's dedupe window before it could be sent again.
 
 Lock order: this layer's lock, then the board's. :meth:`Rpc` calls its hooks
 (``restore_provider``, which takes the board's lock; ``on_done``) with its own
