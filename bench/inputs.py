@@ -95,6 +95,8 @@ class BoardResult:
     coalesced: int = 0
     idle_rtt: list[float] = field(default_factory=list)
     stream_rtt: list[float] = field(default_factory=list)
+    #: The wire sizes of the analog InputReport frames while streaming (bytes, framed).
+    stream_report_bytes: list[int] = field(default_factory=list)
     reaction: list[float] = field(default_factory=list)  # edge -> PWM 0 at the pin (s)
     reaction_lost: int = 0
     error: str | None = None
@@ -153,6 +155,8 @@ class AnalogCounter:
         self.last_ms: dict[int, int] = {}
         #: The longest time between two reports of a pin's value (device ms).
         self.max_gap_ms: collections.Counter[int] = collections.Counter()
+        #: The wire size of each analog InputReport frame (bytes, framed).
+        self.frame_bytes: list[int] = []
 
     def rate(self, pin: int) -> float:
         """Values per second of the device's clock: (n - 1) over the span of their times."""
@@ -170,6 +174,8 @@ class AnalogCounter:
             msg = parse_out(item.payload)
             if msg.WhichOneof("data") == "input_report":
                 report = msg.input_report
+                if report.analog_pins:
+                    self.frame_bytes.append(len(frame_packet(item.type, item.seq, item.payload)))
                 for pin in range(32):
                     if report.analog_pins >> pin & 1:
                         self.values[pin] += 1
@@ -182,7 +188,7 @@ class AnalogCounter:
 
 def measure_streaming(
     board: Board, seconds: float, pings: int
-) -> tuple[dict[int, float], dict[int, int], int, list[float], list[float]]:
+) -> tuple[dict[int, float], dict[int, int], int, list[float], list[float], list[int]]:
     idle = [board.ping() for _ in range(pings)]
     counter = AnalogCounter()
     board.add_frame_monitor(counter)
@@ -204,7 +210,30 @@ def measure_streaming(
     log.debug("analog values received in %.3f s of the host's clock: %s", elapsed, counter.values)
     rates = {pin: counter.rate(pin) for pin in board.info.analog_pins}
     gaps = {pin: counter.max_gap_ms[pin] for pin in board.info.analog_pins}
-    return rates, gaps, coalesced, idle, streaming
+    return rates, gaps, coalesced, idle, streaming, counter.frame_bytes
+
+
+def _preempt_text(result: BoardResult, idle: float, busy: float) -> str:
+    """What streaming adds to a Ping's round trip, against the report frame it waits behind.
+
+    The device builds a report only when its send ring has room to spare and no command is
+    arriving (control preempts data), but an Ack still goes after the report bytes already
+    in the ring: a COBS frame cannot be cut. An Ack that finds the line busy waits for the
+    rest of such a frame, so the extra wait is an absolute time set by the report's size,
+    not a share of the idle round trip.
+    """
+    if not result.stream_report_bytes or busy <= idle:
+        return ""
+    size = statistics.median(result.stream_report_bytes)
+    frame = size * board_byte_us(result.backend) / 1e6
+    return (
+        f" Streaming adds {_ms(busy - idle)} ms to the round trip; a report frame of the six "
+        f"channels is {size:.0f} B, {_ms(frame)} ms on the wire. The device builds a report "
+        "only while no command is arriving and its send ring has room to spare, but an Ack "
+        "goes after the report bytes already in the ring (a frame cannot be cut): the added "
+        "wait is set by that frame's wire time, not by the idle round trip, so the ratio "
+        "grows as the idle round trip shrinks."
+    )
 
 
 def _pwm_line(trace: Trace, duty: int, since: int) -> tuple[int, float] | None:
@@ -288,6 +317,7 @@ def collect(trials: int, seconds: float, pings: int, seed: int = 7) -> list[Boar
             result.coalesced,
             result.idle_rtt,
             result.stream_rtt,
+            result.stream_report_bytes,
         ) = measure_streaming(board, seconds, pings)
         result.reaction, result.reaction_lost = measure_reaction(board, sim, trace, trials, rng)
 
@@ -386,7 +416,7 @@ def run(ctx: Context) -> SectionResult:
         parts.append(
             f"Reports coalesced by the device while streaming: {result.coalesced}. Ping round "
             f"trip p50: {_ms(idle)} ms idle, {_ms(busy)} ms while streaming ({ratio:.2f}x, "
-            f"{len(result.stream_rtt)} Pings).\n"
+            f"{len(result.stream_rtt)} Pings).{_preempt_text(result, idle, busy)}\n"
         )
         if result.backend == "avr":
             targets += [

@@ -561,7 +561,7 @@ def run_protoduino(
                 last_write=lambda: sizes.last_command,
             )
             run.cpu["pose (6 outputs)"] = [run.poses.cpu / run.poses.calls]
-            rates, _gaps, _coalesced, _idle, _busy = inputs.measure_streaming(
+            rates, _gaps, _coalesced, _idle, _busy, _sizes = inputs.measure_streaming(
                 board, analog_seconds, 5
             )
             run.analog = rates
