@@ -343,73 +343,99 @@ def _wire_size(packet: Packet) -> int:
     return len(frame_packet(packet.type, packet.seq, packet.payload))
 
 
-class _WireSizes:
-    """Frame monitor: the wire size of every digital write the host sends and of its Ack (not
-    the automatic Ping's frames, nor reports)."""
+class _Frames:
+    """Frame monitor that only keeps what it sees: the I/O thread appends each packet's
+    record, and the sizes are worked out afterwards, so that the bench's own bookkeeping
+    (a protobuf parse per frame) neither delays an Ack nor counts in the host CPU it
+    measures."""
 
     def __init__(self) -> None:
         self.counting = False
-        self.commands: list[int] = []
-        self.answers: list[int] = []
-        self._awaiting: set[int] = set()  # message ids of digital writes not yet answered
-        #: time.monotonic() of the last COMMAND written that is not the automatic Ping: a
-        #: Ping sent while the pins settled made the pose run's pins look 70 ms ahead of it.
-        self.last_command = 0.0
+        #: (counting when seen, the record) for every packet, in the order shown.
+        self.records: list[tuple[bool, FrameRecord]] = []
 
     def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
-        item = record.item
-        if not isinstance(item, Packet):
-            return
-        if record.direction == "tx" and item.type is PacketType.COMMAND:
-            msg = ArduinoIn.FromString(item.payload)
-            kind = msg.WhichOneof("data")
-            if kind != "ping":
-                self.last_command = record.t
-            if self.counting and kind == "digital_control":
-                self.commands.append(_wire_size(item))
-                self._awaiting.add(msg.message_id)
-        elif self.counting and record.direction == "rx" and item.type is PacketType.DATA:
-            out = parse_out(item.payload)
-            if out.WhichOneof("data") == "ack" and out.ack.message_id in self._awaiting:
-                self._awaiting.discard(out.ack.message_id)
-                self.answers.append(_wire_size(item))
+        if isinstance(record.item, Packet):
+            self.records.append((self.counting, record))
+
+    def packets(self) -> list[tuple[bool, str, Packet, float]]:
+        """(counting, direction, packet, time) of each packet seen so far."""
+        out = []
+        for counting, rec in list(self.records):
+            assert isinstance(rec.item, Packet)
+            out.append((counting, rec.direction, rec.item, rec.t))
+        return out
 
 
-class _CallFrames:
-    """Frame monitor: each COMMAND's wire size, in the order sent (a retransmission is not a
-    new command), and the wire size of the first Ack of each. Message ids come round again
-    after 127 (protocol version 5), so an Ack goes to the latest command of its id."""
+class _WireSizes(_Frames):
+    """The wire size of every digital write the host sends while counting and of its Ack
+    (not the automatic Ping's frames, nor reports); when the last COMMAND other than a
+    Ping was written."""
 
-    def __init__(self) -> None:
-        self.commands: list[tuple[int, int]] = []  # (message id, bytes)
-        self.acks: dict[int, int] = {}  # position in commands -> the Ack's bytes
-        self._latest: dict[int, int] = {}  # message id -> its latest command's position
+    @property
+    def last_command(self) -> float:
+        """time.monotonic() of the last COMMAND written that is not the automatic Ping: a
+        Ping sent while the pins settled made the pose run's pins look 70 ms ahead of it."""
+        last = 0.0
+        for _counting, direction, item, t in self.packets():
+            if (
+                direction == "tx"
+                and item.type is PacketType.COMMAND
+                and ArduinoIn.FromString(item.payload).WhichOneof("data") != "ping"
+            ):
+                last = t
+        return last
 
-    def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
-        item = record.item
-        if not isinstance(item, Packet):
-            return
-        if record.direction == "tx" and item.type is PacketType.COMMAND:
-            message_id = ArduinoIn.FromString(item.payload).message_id
-            latest = self._latest.get(message_id)
-            if latest is not None and latest not in self.acks:
-                return  # sent again, not answered yet: the same command
-            self._latest[message_id] = len(self.commands)
-            self.commands.append((message_id, _wire_size(item)))
-        elif record.direction == "rx" and item.type is PacketType.DATA:
-            out = parse_out(item.payload)
-            if out.WhichOneof("data") == "ack":
-                position = self._latest.get(out.ack.message_id)
-                if position is not None:
-                    self.acks.setdefault(position, _wire_size(item))
+    def sizes(self) -> tuple[list[int], list[int]]:
+        """(the digital writes' command bytes, their Acks' bytes), in the order seen."""
+        commands: list[int] = []
+        answers: list[int] = []
+        awaiting: set[int] = set()  # message ids of digital writes not yet answered
+        for counting, direction, item, _t in self.packets():
+            if not counting:
+                continue
+            if direction == "tx" and item.type is PacketType.COMMAND:
+                msg = ArduinoIn.FromString(item.payload)
+                if msg.WhichOneof("data") == "digital_control":
+                    commands.append(_wire_size(item))
+                    awaiting.add(msg.message_id)
+            elif direction == "rx" and item.type is PacketType.DATA:
+                out = parse_out(item.payload)
+                if out.WhichOneof("data") == "ack" and out.ack.message_id in awaiting:
+                    awaiting.discard(out.ack.message_id)
+                    answers.append(_wire_size(item))
+        return commands, answers
+
+
+class _CallFrames(_Frames):
+    """Each COMMAND's wire size, in the order sent (a retransmission is not a new command),
+    and the wire size of the first Ack of each. Message ids come round again after 127
+    (protocol version 5), so an Ack goes to the latest command of its id."""
 
     def sizes(self, skip: int) -> list[tuple[int, int]]:
         """(command bytes, Ack bytes) of each command after the first ``skip``."""
-        sent = list(enumerate(self.commands))[skip:]
-        missing = [mid for position, (mid, _size) in sent if position not in self.acks]
+        commands: list[tuple[int, int]] = []  # (message id, bytes)
+        acks: dict[int, int] = {}  # position in commands -> the Ack's bytes
+        latest: dict[int, int] = {}  # message id -> its latest command's position
+        for _counting, direction, item, _t in self.packets():
+            if direction == "tx" and item.type is PacketType.COMMAND:
+                message_id = ArduinoIn.FromString(item.payload).message_id
+                known = latest.get(message_id)
+                if known is not None and known not in acks:
+                    continue  # sent again, not answered yet: the same command
+                latest[message_id] = len(commands)
+                commands.append((message_id, _wire_size(item)))
+            elif direction == "rx" and item.type is PacketType.DATA:
+                out = parse_out(item.payload)
+                if out.WhichOneof("data") == "ack":
+                    position = latest.get(out.ack.message_id)
+                    if position is not None:
+                        acks.setdefault(position, _wire_size(item))
+        sent = list(enumerate(commands))[skip:]
+        missing = [mid for position, (mid, _size) in sent if position not in acks]
         if missing:
             raise RuntimeError(f"no Ack seen for message ids {missing[:5]}")
-        return [(size, self.acks[position]) for position, (_mid, size) in sent]
+        return [(size, acks[position]) for position, (_mid, size) in sent]
 
 
 @dataclass(slots=True)
@@ -517,7 +543,7 @@ def run_protoduino(
                 rng=rng,
             )
             sizes.counting = False
-            run.command_bytes, run.answer_bytes = sizes.commands, sizes.answers
+            run.command_bytes, run.answer_bytes = sizes.sizes()
             run.servo = _time_writes(
                 run,
                 clock,

@@ -460,9 +460,15 @@ class Transport:
                     self.rx_since_open += len(data)
                     items = self._decoder.feed(data)
                     if items:
-                        for item in items:
-                            self._record("rx", item)
+                        # Dated and kept as read, shown to the monitors once the layers
+                        # above have them: a monitor (a capture writing its line) is not
+                        # on an Ack's way to its caller. What the listener has written in
+                        # answer is shown after them (the next pass), as it went out after.
+                        records = [self._record("rx", item) for item in items]
                         listener.transport_received(items)
+                        if self._monitors:
+                            for rec in records:
+                                self._show(rec)
                 now = time.monotonic()
                 # Bytes of a frame not complete yet (a slow line delivers an Ack in
                 # pieces) change nothing the timers depend on: their tick waits for the
@@ -618,10 +624,10 @@ class Transport:
             self._port.write(data)
         self.tx_bytes += len(data)
 
-    def _record(self, direction: str, item: Packet | BadFrame) -> None:
+    def _record(self, direction: str, item: Packet | BadFrame) -> FrameRecord:
         rec = FrameRecord(time.monotonic(), direction, item)
         self._recent.append(rec)
-        self._show(rec)
+        return rec
 
     def _show(self, rec: FrameRecord) -> None:
         """Hand ``rec`` to the monitors (the I/O thread, no lock held)."""
