@@ -294,3 +294,35 @@ def test_callers_own_writes_keep_seq_and_ids_in_order(tmp_path: Path) -> None:
             else:
                 assert mid in open_ids, f"the Ack of {mid} shown before its command"
                 open_ids.discard(mid)
+
+
+def test_a_monitor_sees_an_ack_after_its_call_has_it(tmp_path: Path) -> None:
+    """A frame read is shown to the monitors once the layers above have it (transport.py):
+    when a monitor sees an Ack, the future it answers is already resolved, so a slow
+    monitor (a capture writing its line) is never on the way from the Ack to its caller."""
+    with (
+        FakeDevice(tmp_path) as fake,
+        Board.open(fake.port, ack_timeout=PATIENT, max_retries=0, ping=False) as board,
+    ):
+        led = board.digital_output(13)
+        holder = Holder(fake)  # each Ack waits until its future is known here
+        current: list[Future[None]] = []
+        resolved_when_shown: list[bool] = []
+
+        def monitor(rec: FrameRecord) -> None:
+            item = rec.item
+            if (
+                rec.direction == "rx"
+                and isinstance(item, Packet)
+                and item.type is PacketType.DATA
+                and parse_out(item.payload).WhichOneof("data") == "ack"
+            ):
+                resolved_when_shown.append(current[-1].done())
+
+        board.add_frame_monitor(monitor)
+        for i in range(20):
+            current.append(led.submit(i % 2 == 0))
+            assert fake.wait_for(lambda: bool(holder.held))
+            holder.release()
+            current[-1].result(PATIENT)
+        assert resolved_when_shown == [True] * 20
