@@ -5,9 +5,10 @@ static variables and, if it reaches them, corrupts them silently. The emulated U
 (tools/avrsim, ``--stats``) records the lowest stack pointer after every instruction,
 interrupts included. :func:`exercise` drives the firmware the way that takes its stack
 deepest: every command at its largest, four in flight so that the UART interrupts land inside
-the deepest decode (a Pose, four nested messages in nanopb), with every kind of input
-configured and moving (counter, pin-change and ADC interrupts land anywhere, and reports
-compete with the Acks for the transmit ring). :class:`RamBudget` compares the low-water mark
+the deepest decode (a Pose, four nested messages in nanopb), then the fullest Pose (eight
+servo items and digital outputs in its masks), with every kind of input configured and
+moving (counter, pin-change and ADC interrupts land anywhere, and reports compete with the
+Acks for the transmit ring). :class:`RamBudget` compares the low-water mark
 with the end of the static data (the linker's ``_end``; the firmware has no heap).
 
 One scenario for ``tests/e2e/test_stack_margin.py`` (which fails when the 256 B are not free)
@@ -91,8 +92,7 @@ def exercise(board: Board, control: SimControl, rounds: int = ROUNDS) -> int:
     for pin in COUNTER_PINS:
         board.counter(pin, edge="both", rate_hz=1000)
         control.pulses(pin, 100_000, 5_000)  # 10,000 edges a second each, the whole run
-    for pin in DIGITAL_INPUT_PINS:
-        board.digital_input(pin)
+    inputs = [board.digital_input(pin) for pin in DIGITAL_INPUT_PINS]
     for pin in ANALOG_PINS:
         board.analog_input(pin, rate_hz=1000, threshold=0)
     for round_ in range(rounds):
@@ -119,6 +119,28 @@ def exercise(board: Board, control: SimControl, rounds: int = ROUNDS) -> int:
                     raise AssertionError(f"an oversized Pose was refused with {refused}") from None
             else:
                 raise AssertionError("a Pose of 9 items decoded")
+    # The fullest Pose of all (protocol version 6): eight servo items and digital outputs in
+    # its masks, each applied as its own DigitalControl after the items. No pin is free, so
+    # the digital inputs' pins become outputs for it; counters and analog inputs go on.
+    for each in inputs:
+        each.release()
+    outputs = [board.digital_output(pin) for pin in DIGITAL_INPUT_PINS]
+    for round_ in range(rounds):
+        for pin in ANALOG_PINS:
+            control.analog(pin, (round_ * 89 + pin * 37) % 1024)
+        level = bool(round_ & 1)
+        calls = [
+            board.submit_pose(
+                {**{s: 40 + round_ for s in servos}, **dict.fromkeys(outputs, level)}
+            ),
+            board.submit_read_outputs(),
+            board.submit_ping(bytes(range(64))),
+            board.submit_pose(
+                {**{s: 140 - round_ for s in servos}, **dict.fromkeys(outputs, not level)}
+            ),
+        ]
+        for call in calls:
+            call.result(timeout=CALL_TIMEOUT)
     reports = board.stats.input_reports
     if reports <= rounds:
         raise AssertionError(f"only {reports} InputReports in {rounds} rounds of moving inputs")
