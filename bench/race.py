@@ -936,6 +936,11 @@ def _quote(ours: BoardRun, theirs: BoardRun, fast: BoardRun | None = None) -> st
             f"{theirs.flat.rate:,.0f}/s whose pins end {_ms(theirs.flat.behind)} ms behind the "
             "host (no flow control)"
         )
+        if ours.poses is not None:
+            text += (
+                f", and {ours.poses.rate:,.0f} acknowledged changes/s with poses of six outputs "
+                f"at 115200, the last {_ms(ours.poses.behind)} ms behind"
+            )
     return text
 
 
