@@ -31,7 +31,6 @@ from dataclasses import dataclass, field
 from protoduino import Board, Event, EventKind
 from protoduino.constants import PacketType
 from protoduino.errors import InterlockActiveError, ProtoduinoError
-from protoduino.framing import frame_packet
 from protoduino.inputs import Reading
 from protoduino.messages import parse_out
 from protoduino.packets import Packet
@@ -40,7 +39,7 @@ from protoduino.transport import FrameRecord
 
 from .boards import LABELS, Percentiles, Trace, on_each_board
 from .core import Context, Section, SectionResult, Target, md_table
-from .wire import board_byte_us
+from .wire import board_byte_us, frame_bytes
 
 log = logging.getLogger(__name__)
 
@@ -74,7 +73,7 @@ class ReportFrames:
         if not self.counting or record.direction != "rx" or not isinstance(item, Packet):
             return
         if item.type is PacketType.DATA and item.payload[:1] == REPORT_TAG:
-            self.sizes.append(len(frame_packet(PacketType.DATA, item.seq, item.payload)))
+            self.sizes.append(frame_bytes(item))
 
 
 #: The first byte of an ArduinoOut holding an InputReport (field 5, length-delimited).
@@ -175,7 +174,7 @@ class AnalogCounter:
             if msg.WhichOneof("data") == "input_report":
                 report = msg.input_report
                 if report.analog_pins:
-                    self.frame_bytes.append(len(frame_packet(item.type, item.seq, item.payload)))
+                    self.frame_bytes.append(frame_bytes(item))
                 for pin in range(32):
                     if report.analog_pins >> pin & 1:
                         self.values[pin] += 1

@@ -45,7 +45,6 @@ from typing import Any, TypeVar
 from protoduino import Board, programs
 from protoduino.constants import PacketType
 from protoduino.errors import ProtoduinoError
-from protoduino.framing import frame_packet
 from protoduino.messages import ArduinoIn, parse_out
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
@@ -65,6 +64,7 @@ from .boards import (
 from .core import Context, Section, SectionResult, Target, md_table, require
 from .motion import us, wait_changes
 from .peers import firmata_board
+from .wire import frame_bytes
 
 log = logging.getLogger(__name__)
 
@@ -338,11 +338,6 @@ def _last_falls(events: Sequence[dict[str, Any]], pins: Sequence[int]) -> dict[i
     return {pin: float(e["t"]) for pin, e in last.items() if int(e["value"]) == 0}
 
 
-def _wire_size(packet: Packet) -> int:
-    """The packet's frame as it went on the wire (COBS, CRC, delimiter), in bytes."""
-    return len(frame_packet(packet.type, packet.seq, packet.payload))
-
-
 class _Frames:
     """Frame monitor that only keeps what it sees: the I/O thread appends each packet's
     record, and the sizes are worked out afterwards, so that the bench's own bookkeeping
@@ -351,20 +346,16 @@ class _Frames:
 
     def __init__(self) -> None:
         self.counting = False
-        #: (counting when seen, the record) for every packet, in the order shown.
-        self.records: list[tuple[bool, FrameRecord]] = []
+        #: (counting when seen, direction, packet, time) of every packet, in the order shown.
+        self.records: list[tuple[bool, str, Packet, float]] = []
 
     def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
         if isinstance(record.item, Packet):
-            self.records.append((self.counting, record))
+            self.records.append((self.counting, record.direction, record.item, record.t))
 
     def packets(self) -> list[tuple[bool, str, Packet, float]]:
-        """(counting, direction, packet, time) of each packet seen so far."""
-        out = []
-        for counting, rec in list(self.records):
-            assert isinstance(rec.item, Packet)
-            out.append((counting, rec.direction, rec.item, rec.t))
-        return out
+        """The records so far (a copy: the I/O thread may still append)."""
+        return list(self.records)
 
 
 class _WireSizes(_Frames):
@@ -397,13 +388,13 @@ class _WireSizes(_Frames):
             if direction == "tx" and item.type is PacketType.COMMAND:
                 msg = ArduinoIn.FromString(item.payload)
                 if msg.WhichOneof("data") == "digital_control":
-                    commands.append(_wire_size(item))
+                    commands.append(frame_bytes(item))
                     awaiting.add(msg.message_id)
             elif direction == "rx" and item.type is PacketType.DATA:
                 out = parse_out(item.payload)
                 if out.WhichOneof("data") == "ack" and out.ack.message_id in awaiting:
                     awaiting.discard(out.ack.message_id)
-                    answers.append(_wire_size(item))
+                    answers.append(frame_bytes(item))
         return commands, answers
 
 
@@ -424,13 +415,13 @@ class _CallFrames(_Frames):
                 if known is not None and known not in acks:
                     continue  # sent again, not answered yet: the same command
                 latest[message_id] = len(commands)
-                commands.append((message_id, _wire_size(item)))
+                commands.append((message_id, frame_bytes(item)))
             elif direction == "rx" and item.type is PacketType.DATA:
                 out = parse_out(item.payload)
                 if out.WhichOneof("data") == "ack":
                     position = latest.get(out.ack.message_id)
                     if position is not None:
-                        acks.setdefault(position, _wire_size(item))
+                        acks.setdefault(position, frame_bytes(item))
         sent = list(enumerate(commands))[skip:]
         missing = [mid for position, (mid, _size) in sent if position not in acks]
         if missing:

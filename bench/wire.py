@@ -13,6 +13,9 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
+from protoduino.framing import frame_packet
+from protoduino.packets import Packet
+
 from . import charts
 from .core import Chart, Context, MissingDependencyError, Section, SectionResult, md_table
 from .peers import WireSample, firmata, mavlink, pigweed, protoduino, serialtransfer, telemetrix
@@ -43,6 +46,11 @@ EMULATED_BYTE_US = 11 * 8 * 17 / 16.0
 def wire_time_us(nbytes: int, baud: int = BAUD) -> float:
     """Time ``nbytes`` take on an 8N1 line, in microseconds."""
     return nbytes * BITS_PER_BYTE / baud * 1e6
+
+
+def frame_bytes(packet: Packet) -> int:
+    """The packet's frame as it went on the wire (COBS, CRC, delimiter), in bytes."""
+    return len(frame_packet(packet.type, packet.seq, packet.payload))
 
 
 def board_byte_us(backend: str) -> float:

@@ -466,9 +466,8 @@ class Transport:
                         # answer is shown after them (the next pass), as it went out after.
                         records = [self._record("rx", item) for item in items]
                         listener.transport_received(items)
-                        if self._monitors:
-                            for rec in records:
-                                self._show(rec)
+                        for rec in records:
+                            self._show(rec)
                 now = time.monotonic()
                 # Bytes of a frame not complete yet (a slow line delivers an Ack in
                 # pieces) change nothing the timers depend on: their tick waits for the
