@@ -887,7 +887,7 @@ def judge(
             used[chosen.message_id] = boot
             matched_ids.add(chosen.message_id)
             continue
-        if failsafe.possible(pin, value, h):
+        if failsafe.possible(pin, value, h, tol):
             failsafe_lines.append(h)
             continue
         if candidates:
@@ -1029,7 +1029,8 @@ def _boundaries(
 class _Failsafe:
     """Could the device's failsafe have driven ``pin`` to ``value`` at host time ``h``?
 
-    Only to the safe value of the pin's latest Init, and only if no Ping the
+    Only to the safe value of the pin's latest Init (within ``tol``: a measured pulse
+    width, like a commanded one), and only if no Ping the
     device certainly received (acknowledged) went out less than
     FAILSAFE_TIMEOUT before.
     """
@@ -1046,10 +1047,10 @@ class _Failsafe:
         self._ping_tx = [tx for tx, _ in pings]
         self._ping_ack = [ack for _, ack in pings]
 
-    def possible(self, pin: int, value: int, h: float) -> bool:
+    def possible(self, pin: int, value: int, h: float, tol: int = 0) -> bool:
         inits = self._inits.get(pin, [])
         i = bisect.bisect_right([t for t, _ in inits], h)
-        if i == 0 or inits[i - 1][1] != value:
+        if i == 0 or abs(inits[i - 1][1] - value) > tol:
             return False
         first = bisect.bisect_right(self._ping_tx, h - FAILSAFE_TIMEOUT + SLOP)
         return not any(ack <= h for ack in self._ping_ack[first:])

@@ -465,7 +465,9 @@ def test_judge_sees_hung_calls(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
 # --- the judge on a made-up run: what counts as a duplicate -----------------------------
 
 
-def _made_up_run(*, reboot: bool, stray: int | None = None, at: float = 2.5) -> soak.SoakResult:
+def _made_up_run(
+    *, reboot: bool, stray: int | None = None, at: float = 2.5, backend: str = "native"
+) -> soak.SoakResult:
     """One servo on pin 3; command X runs, its Ack is lost, X is sent again and runs again.
 
     With ``reboot`` the device restarted in between (and the session was
@@ -474,7 +476,9 @@ def _made_up_run(*, reboot: bool, stray: int | None = None, at: float = 2.5) -> 
     """
     from types import SimpleNamespace
 
-    scenario = soak.Scenario("made-up", commands=1, servos=1, digitals=0, recovery_commands=1)
+    scenario = soak.Scenario(
+        "made-up", commands=1, servos=1, digitals=0, recovery_commands=1, backend=backend
+    )
     wire = soak.Wire()
     lines: list[dict[str, Any]] = []
     ids = iter(range(1, 100))
@@ -556,6 +560,17 @@ def test_judge_counts_a_safe_value_while_pings_were_answered() -> None:
     assert (result.corrupted, result.failsafe_lines) == (1, 0)
     later = _made_up_run(reboot=True, stray=soak.servo_safe(0), at=11.0)  # 10 s of silence
     assert (later.corrupted, later.failsafe_lines) == (0, 1)
+
+
+def test_judge_takes_a_measured_safe_width_within_the_pulse_tolerance() -> None:
+    """On the emulated Uno a pulse is measured at the pin, give or take a microsecond or
+    two (BACKEND_TRAITS): the failsafe's safe width measured 1 us off is still the
+    failsafe, as a commanded width is still its command; 4 us off (beyond the 3 us
+    tolerance) is not."""
+    off = _made_up_run(reboot=True, stray=soak.servo_safe(0) + 1, at=11.0, backend="avr")
+    assert (off.corrupted, off.failsafe_lines) == (0, 1)
+    beyond = _made_up_run(reboot=True, stray=soak.servo_safe(0) + 4, at=11.0, backend="avr")
+    assert (beyond.corrupted, beyond.failsafe_lines) == (1, 0)
 
 
 # --- the soak command -------------------------------------------------------------------
