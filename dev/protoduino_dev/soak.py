@@ -15,9 +15,9 @@ records every COMMAND transmitted (the session restore's replays and every
 retransmission included) and every Ack received. :func:`run` then checks:
 
 * **no corrupted execution**: every output change in the trace is explained by
-  a command transmitted for that pin with exactly that value (within the
-  emulated Uno's pulse measurement tolerance) shortly before, or is an Init's,
-  a Stop's or the failsafe's safe value, or a reboot's 0;
+  a command transmitted for that pin with that value shortly before, or is an
+  Init's, a Stop's or the failsafe's safe value (a pulse width within the
+  emulated Uno's measurement tolerance, for all of them), or a reboot's 0;
 * **at most once**: no message id explains two changes within one device boot
   (a reboot empties the device's dedupe window, see docs/protocol.md 7);
 * **no hung call**: every call returned or raised within
