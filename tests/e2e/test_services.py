@@ -119,6 +119,15 @@ def test_blinker_drives_its_pin_and_the_failsafe_makes_it_safe(
         with pytest.raises(protoduino.CommandRejectedError) as expired:
             blinker.start_blink(pbu.Blink(pin=13, period_ms=40))
         assert expired.value.status == pb.STATUS_FAILSAFE_EXPIRED
+        # The refusal names the rpc and what lifts it, for the asyncio form as well.
+        text = str(expired.value)
+        assert text.startswith("StartBlink refused by the device: STATUS_FAILSAFE_EXPIRED: ")
+        assert "board.ping() re-arms it, then call StartBlink again" in text
+        with pytest.raises(protoduino.CommandRejectedError) as submitted:
+            blinker.submit_start_blink(pbu.Blink(pin=13, period_ms=40)).result(timeout=30)
+        assert str(submitted.value) == text
+        board.ping()  # the remedy it names
+        assert blinker.start_blink(pbu.Blink(pin=13, period_ms=40)).half_ms == 20
         board.pinging = True
 
 
