@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 import json
+import re
 import subprocess
 import sys
 import threading
@@ -26,7 +27,7 @@ from protoduino._generated import protoduino_pb2 as pb
 from protoduino.events import Event, EventKind
 from protoduino.simboard import SimBoard
 from simfixtures import pin_values, wait_for_pin
-from userbuilds import client, need, program
+from userbuilds import ROOT, client, need, program
 
 BACKENDS = ["native", "avr"]
 
@@ -276,3 +277,120 @@ def test_the_command_line_runs_a_user_build(
         assert json.loads(info.stdout)["info"]["user_fingerprint"] == f"0x{mod.FINGERPRINT:08X}"
     finally:
         subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
+
+
+def _make(cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        ["make", "-s", "-C", str(ROOT / "firmware"), *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=600,
+    )
+
+
+def test_a_relative_user_path_is_explained(tmp_path: Path) -> None:
+    """make -C runs in firmware/: a path relative to the caller's folder names the rule."""
+    need("native")
+    (tmp_path / "t").mkdir()
+    for suffix in (".proto", ".c"):
+        (tmp_path / "t" / f"blinker{suffix}").write_bytes(
+            (ROOT / "examples" / "blinker" / f"blinker{suffix}").read_bytes()
+        )
+    built = _make(
+        tmp_path,
+        "sim",
+        f"BUILD={tmp_path / 'build'}",
+        "USER_PROTO=t/blinker.proto",
+        "USER_SRC=t/blinker.c",
+    )
+    assert built.returncode != 0
+    assert "USER_PROTO=t/blinker.proto: no such file" in built.stderr, built.stderr
+    assert 'give an absolute one, e.g. USER_PROTO="$PWD/t/blinker.proto"' in built.stderr
+    built = _make(
+        tmp_path,
+        "sim",
+        f"BUILD={tmp_path / 'build'}",
+        f"USER_PROTO={tmp_path / 't' / 'blinker.proto'}",
+        "USER_SRC=t/blinker.c",
+    )
+    assert "USER_SRC=t/blinker.c: no such file" in built.stderr, built.stderr
+
+
+#: A service whose handler reads a table of TABLE bytes kept in the Uno's flash.
+BIG_PROTO = """syntax = "proto3";
+package big;
+message Index { uint32 at = 1; }
+message Value { uint32 value = 1; }
+service Big { rpc Look(Index) returns (Value); }
+"""
+BIG_C = """#include "big_service.h"
+#ifdef __AVR__
+#include <avr/pgmspace.h>
+static const uint8_t table[TABLE] PROGMEM = {1, 2, 3};
+#define READ(p) pgm_read_byte(p)
+#else
+static const uint8_t table[TABLE] = {1, 2, 3};
+#define READ(p) (*(p))
+#endif
+
+uint8_t big_look(pd_user_ctx_t *ctx, const big_Index *request, big_Value *reply)
+{
+    (void)ctx;
+    reply->value = READ(&table[request->at % sizeof table]);
+    return 0;
+}
+
+void big_safe(void *hal, uint8_t pin) { (void)hal; (void)pin; }
+void big_release(void *hal, uint8_t pin) { (void)hal; (void)pin; }
+void big_poll(pd_user_ctx_t *ctx, uint32_t now_ms) { (void)ctx; (void)now_ms; }
+"""
+
+
+def _build_big(tmp_path: Path, table: int) -> tuple[subprocess.CompletedProcess[str], Path]:
+    folder = tmp_path / str(table)
+    folder.mkdir()
+    (folder / "big.proto").write_text(BIG_PROTO)
+    (folder / "big.c").write_text(BIG_C.replace("TABLE", str(table)))
+    built = _make(
+        folder,
+        "avr",
+        f"BUILD={folder / 'build'}",
+        f"USER_PROTO={folder / 'big.proto'}",
+        f"USER_SRC={folder / 'big.c'}",
+    )
+    return built, folder / "build" / "user" / "big" / "avr" / "protoduino.hex"
+
+
+def test_a_build_over_the_flash_says_what_to_do(tmp_path: Path) -> None:
+    """Over the default firmware's budget: built, with what it means and which FEATURES
+    shrink it. Over the flash Optiboot leaves (32,256 B of the Uno's 32,768), or over the
+    chip's: refused with the same advice, and no hex."""
+    need("avr")
+    hint = "For room, build only the pin modes it uses: FEATURES lists them (this build: FEATURES="
+    built, hex_file = _build_big(tmp_path, 1000)
+    assert built.returncode == 0, built.stderr
+    assert "over the default firmware's 26624 B budget but fits the Uno (32256 B" in built.stdout
+    assert hint in built.stdout
+    assert hex_file.is_file()
+    flash = int(re.findall(r"flash (\d+) B", built.stdout)[0])
+
+    # 200 B past what Optiboot leaves: linked, but no hex.
+    built, hex_file = _build_big(tmp_path, 1000 + 32256 - flash + 200)
+    assert built.returncode != 0, built.stdout
+    assert re.search(
+        r"flash 32[45]\d\d B does not fit the Uno: 32256 B \(32768 less Optiboot's "
+        r"512\); no hex written",
+        built.stderr,
+    ), built.stderr
+    assert hint in built.stderr
+    assert not hex_file.exists()
+
+    # Past the chip's 32 KB: the linker refuses, and the build says the same.
+    built, hex_file = _build_big(tmp_path, 7000)
+    assert built.returncode != 0, built.stdout
+    assert "region `text' overflowed" in built.stderr
+    assert "does not fit the Uno: larger than its 32768 B of flash" in built.stderr
+    assert hint in built.stderr
+    assert not hex_file.exists()
