@@ -344,10 +344,11 @@ def c_header(s: Service) -> str:
             ]
     lines += [
         "/* A pin the service claimed (pd_user_claim), to its safe state: the failsafe, Stop",
-        " * and interlocks call it. */",
-        f"void {low}_safe(void *hal, uint8_t pin);",
-        "/* A pin the service claimed, released (Release, ReleaseAll, a new session). */",
-        f"void {low}_release(void *hal, uint8_t pin);",
+        " * and interlocks call it (ctx->hal for the pins; it may publish a report). */",
+        f"void {low}_safe(pd_user_ctx_t *ctx, uint8_t pin);",
+        "/* A pin the service claimed, released (pd_user_release, Release, ReleaseAll, a new",
+        " * session); the pin is no longer the service's here. */",
+        f"void {low}_release(pd_user_ctx_t *ctx, uint8_t pin);",
         "/* Every pass of the device's main loop: work that takes time, in slices. */",
         f"void {low}_poll(pd_user_ctx_t *ctx, uint32_t now_ms);",
         "",

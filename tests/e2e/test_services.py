@@ -26,7 +26,7 @@ from protoduino import aio
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.events import Event, EventKind
 from protoduino.simboard import SimBoard
-from simfixtures import pin_values, wait_for_pin
+from simfixtures import pin_values, wait_for_pin, wait_until
 from userbuilds import ROOT, client, need, program
 
 BACKENDS = ["native", "avr"]
@@ -69,11 +69,13 @@ def test_blinker_drives_its_pin_and_the_failsafe_makes_it_safe(
     mod = client("blinker", monkeypatch)
     pbu = mod.pb
     events: list[Event] = []
+    stopped: list[Any] = []  # the safe hook's reports (its ctx lets it publish)
     with protoduino.Board.open(blinker_sim.port, failsafe_timeout=0.5) as board:
         board.on_event(events.append)
         assert board.info.user_fingerprint == mod.FINGERPRINT
         assert "servo" in board.info.features  # the built-ins are all there
         blinker = mod.Blinker(board)
+        blinker.on_stopped(lambda report: stopped.append(report.value))
 
         # Refusals of the handler's own: named errors, nothing done.
         with pytest.raises(mod.BadPeriodError) as bad:
@@ -102,11 +104,14 @@ def test_blinker_drives_its_pin_and_the_failsafe_makes_it_safe(
         else:  # the native board's clock is this machine's: never early on average
             assert sum(gaps) / len(gaps) >= 0.019, gaps
 
-        # Stop: the service's safe state (low), and it stays there.
+        # Stop: the service's safe state (low), and it stays there; its safe hook says so.
+        assert stopped == []
         board.stop()
         wait_for_pin(blinker_sim, 13, lambda v: v[-1] == 0)
         after = blinker.count(pbu.Empty())
         assert not after.on
+        assert wait_until(lambda: len(stopped) == 1)
+        assert stopped[0].count == after.count and not stopped[0].on
         assert blinker.count(pbu.Empty()).count == after.count
 
         # The failsafe: no sign of life for 0.5 s and the pin goes low, by itself.
@@ -116,6 +121,7 @@ def test_blinker_drives_its_pin_and_the_failsafe_makes_it_safe(
         board.pinging = False
         wait_for_event(events, "ping_timeout")
         assert pin_values(blinker_sim.trace(), 13)[-1] == 0
+        assert wait_until(lambda: len(stopped) == 2)
         assert not blinker.count(pbu.Empty()).on  # NO_SIDE_EFFECTS: answered while expired
         with pytest.raises(protoduino.CommandRejectedError) as expired:
             blinker.start_blink(pbu.Blink(pin=13, period_ms=40))
@@ -188,6 +194,14 @@ def test_presses_reads_its_button_and_reports_every_change(
         latest = presses.changes()
         assert latest is not None and latest.value.count == 2
         assert pressed.time_ms >= first.time_ms
+
+        # The handler releases the pin it claimed (pd_user_release): free for any mode.
+        assert presses.unwatch(pbu.Empty()).count == 2
+        button = board.digital_input(2, pull_up=True)
+        presses_sim.set_level(2, 1)
+        assert wait_until(lambda: button.read() is True)
+        with pytest.raises(mod.PinUnavailableError):  # the handler's claim is refused now
+            presses.watch_button(pbu.Watch(pin=2, debounce_ms=5))
 
 
 def test_reports_as_an_async_iterator(
@@ -342,8 +356,8 @@ uint8_t big_look(pd_user_ctx_t *ctx, const big_Index *request, big_Value *reply)
     return 0;
 }
 
-void big_safe(void *hal, uint8_t pin) { (void)hal; (void)pin; }
-void big_release(void *hal, uint8_t pin) { (void)hal; (void)pin; }
+void big_safe(pd_user_ctx_t *ctx, uint8_t pin) { (void)ctx; (void)pin; }
+void big_release(pd_user_ctx_t *ctx, uint8_t pin) { (void)ctx; (void)pin; }
 void big_poll(pd_user_ctx_t *ctx, uint32_t now_ms) { (void)ctx; (void)now_ms; }
 """
 
