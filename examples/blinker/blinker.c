@@ -69,26 +69,39 @@ uint8_t blinker_count(pd_user_ctx_t *ctx, const blinker_Empty *request, blinker_
     return 0;
 }
 
-/* The failsafe, Stop or an interlock: low, and no more toggling until started again. */
-void blinker_safe(void *hal, uint8_t pin)
+bool blinker_stopped(pd_user_ctx_t *ctx, blinker_Toggles *report)
+{
+    (void)ctx;
+    report->count = blink.toggles;
+    report->on = blink.on;
+    return true;
+}
+
+/* The failsafe, Stop or an interlock: low, no more toggling until started again, and
+ * the host told so (a Stopped report). */
+void blinker_safe(pd_user_ctx_t *ctx, uint8_t pin)
 {
     if (pin == blink.pin) {
+        bool was_on = blink.on;
         blink.on = false;
         if (blink.level) {
             blink.level = false;
             blink.toggles++;
         }
+        if (was_on) {
+            blinker_publish_stopped(ctx);
+        }
     }
-    pd_hal_digital_write(hal, pin, false);
+    pd_hal_digital_write(ctx->hal, pin, false);
 }
 
-void blinker_release(void *hal, uint8_t pin)
+void blinker_release(pd_user_ctx_t *ctx, uint8_t pin)
 {
     if (pin == blink.pin) {
         blink.on = false;
         blink.level = false;
     }
-    pd_hal_digital_release(hal, pin);
+    pd_hal_digital_release(ctx->hal, pin);
 }
 
 void blinker_poll(pd_user_ctx_t *ctx, uint32_t now_ms)

@@ -1,7 +1,7 @@
 /*
  * The button counter's handlers (docs/services.md): the handler claims the pin
  * and configures it; the poll hook debounces it and publishes each change as a
- * Changes report, built when it can go out (newest wins).
+ * Changes report, built when it can go out (newest wins); Unwatch releases the pin.
  */
 #include "presses_service.h"
 
@@ -61,19 +61,29 @@ bool presses_changes(pd_user_ctx_t *ctx, presses_Press *report)
     return button.watching;
 }
 
-/* An input has no safe state: the failsafe leaves it as it is. */
-void presses_safe(void *hal, uint8_t pin)
+uint8_t presses_unwatch(pd_user_ctx_t *ctx, const presses_Empty *request, presses_Press *reply)
 {
-    (void)hal;
+    (void)request;
+    fill(reply);
+    if (button.watching) {
+        (void)pd_user_release(ctx, button.pin); /* presses_release below does the rest */
+    }
+    return 0;
+}
+
+/* An input has no safe state: the failsafe leaves it as it is. */
+void presses_safe(pd_user_ctx_t *ctx, uint8_t pin)
+{
+    (void)ctx;
     (void)pin;
 }
 
-void presses_release(void *hal, uint8_t pin)
+void presses_release(pd_user_ctx_t *ctx, uint8_t pin)
 {
     if (pin == button.pin) {
         button.watching = false;
     }
-    pd_hal_input_release(hal, pin);
+    pd_hal_input_release(ctx->hal, pin);
 }
 
 void presses_poll(pd_user_ctx_t *ctx, uint32_t now_ms)

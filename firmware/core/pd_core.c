@@ -31,6 +31,9 @@ void pd_core_init(pd_core_t *core, void *hal)
     core->in_decoded = false;
     pd_dedupe_init(&core->dedupe);
     pd_outputs_init(&core->outputs);
+#if PD_FEATURE_USER
+    core->outputs.core = core;
+#endif
     core->failsafe.epoch = 0; /* counts since power-up; a new session keeps it */
     core->failsafe.cause = 0;
     pd_failsafe_init(&core->failsafe, pd_hal_millis(hal));

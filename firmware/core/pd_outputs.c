@@ -186,16 +186,15 @@ static void digital_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t s
 #if PD_FEATURE_USER
 static void user_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
-    (void)out;
     (void)slot;
-    pd_user_pin_safe(hal, pin);
+    pd_user_pin_safe(out->core, hal, pin);
 }
 
 static void user_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
-    (void)out;
     (void)slot;
-    pd_user_pin_release(hal, pin);
+    out->owner[pin] = 0; /* the service's no longer, in its hook already (pd_user_release) */
+    pd_user_pin_release(out->core, hal, pin);
 }
 #define PD_MODES_USER(X) X(PD_MODE_USER, by_pin, user_safe, user_release)
 #else

@@ -114,6 +114,9 @@ typedef struct pd_outputs {
     uint32_t digital_level; /* bit N: current level of pin N */
     uint32_t stepped_at;    /* pd_hal_millis() of the last speed step */
     pd_inputs_t inputs;     /* the input modes' state (pd_inputs.h) */
+#if PD_FEATURE_USER
+    struct pd_core *core;   /* the device whose table this is: the user hooks' ctx (pd_user.h) */
+#endif
 } pd_outputs_t;
 
 

@@ -88,6 +88,14 @@ protoduino_Status pd_user_claim(pd_user_ctx_t *ctx, uint8_t pin)
     return pd_pins_claim(&ctx->core->outputs, ctx->hal, pin, PD_MODE_USER, &slot);
 }
 
+protoduino_Status pd_user_release(pd_user_ctx_t *ctx, uint8_t pin)
+{
+    if (!pd_user_owns(ctx, pin)) {
+        return protoduino_Status_STATUS_NOT_INITIALISED;
+    }
+    return pd_outputs_release(&ctx->core->outputs, ctx->hal, pin);
+}
+
 bool pd_user_owns(const pd_user_ctx_t *ctx, uint8_t pin)
 {
     return pin < PD_MAX_PINS && PD_OWNER_MODE(ctx->core->outputs.owner[pin]) == PD_MODE_USER;

@@ -51,8 +51,9 @@ typedef uint8_t (*pd_user_handler_fn)(pd_user_ctx_t *ctx, const void *request, v
 /* A report: fill the zeroed report message with the newest value; false: nothing to send. */
 typedef bool (*pd_user_report_fn)(pd_user_ctx_t *ctx, void *report);
 
-/* A claimed pin's safe state, or its release (back to an input without pull-up). */
-typedef void (*pd_user_pin_fn)(void *hal, uint8_t pin);
+/* A claimed pin's safe state, or its release (back to an input without pull-up). `ctx`
+ * as a handler's: the hook may publish a report (pd_user_publish) or read the time. */
+typedef void (*pd_user_pin_fn)(pd_user_ctx_t *ctx, uint8_t pin);
 
 /* Periodic work, every pass of the main loop (at least every few ms). */
 typedef void (*pd_user_poll_fn)(pd_user_ctx_t *ctx, uint32_t now_ms);
@@ -103,10 +104,18 @@ typedef struct pd_user_state {
  * Claim `pin` for the service (as an Init does for a built-in mode): refused
  * with the status an Init would get (STATUS_INVALID_PIN, STATUS_RESERVED_PIN,
  * STATUS_PIN_IN_USE when a built-in mode has it). A claimed pin is the
- * service's until Release / ReleaseAll / a new session, which call its
- * `release` hook; the failsafe, Stop and interlocks call its `safe` hook.
+ * service's until pd_user_release, Release, ReleaseAll or a new session, which
+ * call its `release` hook; the failsafe, Stop and interlocks call its `safe` hook.
  */
 protoduino_Status pd_user_claim(pd_user_ctx_t *ctx, uint8_t pin);
+
+/*
+ * Release `pin`, which the service claimed, as a Release command would: the service's
+ * `release` hook runs (the pin no longer the service's there), and the pin is free for
+ * any mode. STATUS_NOT_INITIALISED, changing nothing, for a pin the service does not hold
+ * (never a built-in's).
+ */
+protoduino_Status pd_user_release(pd_user_ctx_t *ctx, uint8_t pin);
 
 /* Whether the service holds `pin` (it may have been released since its claim). */
 bool pd_user_owns(const pd_user_ctx_t *ctx, uint8_t pin);
@@ -134,17 +143,19 @@ void pd_user_poll(struct pd_core *core, uint32_t now);
 /* The pin table's user mode (pd_outputs.c): a claimed pin to the service's safe state, or
  * released (by default: an input without pull-up, as at power-up). Inline here, with the
  * table's types: the pin table sits below the modules that act on the whole device. */
-static inline void pd_user_pin_safe(void *hal, uint8_t pin)
+static inline void pd_user_pin_safe(struct pd_core *core, void *hal, uint8_t pin)
 {
+    pd_user_ctx_t ctx = {core, hal};
     if (pd_user_service.safe != NULL) {
-        pd_user_service.safe(hal, pin);
+        pd_user_service.safe(&ctx, pin);
     }
 }
 
-static inline void pd_user_pin_release(void *hal, uint8_t pin)
+static inline void pd_user_pin_release(struct pd_core *core, void *hal, uint8_t pin)
 {
+    pd_user_ctx_t ctx = {core, hal};
     if (pd_user_service.release != NULL) {
-        pd_user_service.release(hal, pin);
+        pd_user_service.release(&ctx, pin);
     } else {
         pd_hal_digital_release(hal, pin);
     }

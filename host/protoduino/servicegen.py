@@ -1,7 +1,9 @@
 """``protoduino gen robot.proto --out DIR``: a user service for both sides (docs/services.md).
 
 From the user's ``robot.proto`` (its messages, one ``service``, an optional error
-enum named ``<Service>Error``, nanopb bounds in ``robot.options`` beside it) this
+enum named ``<Service>Error`` (another enum with ``Error`` in its name is refused:
+its codes would not be read), nanopb bounds in ``robot.options`` beside it, each
+name with or without the package: ``robot.Msg.field`` or ``Msg.field``) this
 writes into DIR:
 
 * ``robot.pb.c``, ``robot.pb.h``: nanopb 0.4.7's structs and descriptors (the C
@@ -173,6 +175,12 @@ def describe(proto: Path, descriptor_set: bytes) -> Service:
     error_enum = f"{svc.name}Error"
     errors: tuple[tuple[str, int], ...] = ()
     for enum in f.enum_type:
+        if "Error" in enum.name and enum.name != error_enum:
+            raise ServiceGenError(
+                f"{proto.name}: enum {enum.name}: the handlers' error codes are the enum named "
+                f"after the service, {error_enum} (<Service>Error); any other is not read, and "
+                f"its codes would arrive as a plain UserError: rename it {error_enum}"
+            )
         if enum.name == error_enum:
             errors = tuple((v.name, v.number) for v in enum.value if v.number != 0)
             if any(not 1 <= n <= 255 for _, n in errors):
@@ -189,6 +197,31 @@ def describe(proto: Path, descriptor_set: bytes) -> Service:
         errors=errors,
         error_enum=error_enum if errors else "",
     )
+
+
+def with_package(options: str, package: str) -> str:
+    """A ``.options`` file's text whose names may leave out the package.
+
+    nanopb matches a line's name against the full one, package included
+    (``tally.Add.name max_size:16``): a line without it (``Add.name max_size:16``)
+    would match nothing, and its bound would be missing. Each such line is followed
+    by its copy with the package, so both spellings work. Comment lines, wildcards
+    (``*``) and lines that open or close a block comment stay as they are.
+    """
+    if not package:
+        return options
+    out = []
+    for line in options.splitlines():
+        out.append(line)
+        name = line.split(None, 1)[0] if line.strip() else ""
+        if (
+            name
+            and not name.startswith(("#", "//", "/*", "*", ".", f"{package}."))
+            and "/*" not in line
+            and "*/" not in line
+        ):
+            out.append(f"{package}.{line.lstrip()}")
+    return "\n".join(out) + "\n"
 
 
 def _check_sizes(service: Service, header: str) -> None:
@@ -236,9 +269,12 @@ def generate(proto: Path, out: Path) -> Generated:
     )
     nanopb = [sys.executable, "-W", "ignore", "-m", "nanopb.generator.nanopb_generator"]
     options = src / f"{proto.stem}.options"
-    if options.exists():
-        nanopb += ["-f", str(options)]
-    _run([*nanopb, "-I", str(src), "-D", str(out), "-q", str(proto)], src)
+    with tempfile.TemporaryDirectory() as tmp:
+        if options.exists():
+            packaged = Path(tmp) / options.name
+            packaged.write_text(with_package(options.read_text(), service.package))
+            nanopb += ["-f", str(packaged)]
+        _run([*nanopb, "-I", str(src), "-D", str(out), "-q", str(proto)], src)
     header = (out / f"{proto.stem}.pb.h").read_text()
     _check_sizes(service, header)
     written = [
@@ -308,10 +344,11 @@ def c_header(s: Service) -> str:
             ]
     lines += [
         "/* A pin the service claimed (pd_user_claim), to its safe state: the failsafe, Stop",
-        " * and interlocks call it. */",
-        f"void {low}_safe(void *hal, uint8_t pin);",
-        "/* A pin the service claimed, released (Release, ReleaseAll, a new session). */",
-        f"void {low}_release(void *hal, uint8_t pin);",
+        " * and interlocks call it (ctx->hal for the pins; it may publish a report). */",
+        f"void {low}_safe(pd_user_ctx_t *ctx, uint8_t pin);",
+        "/* A pin the service claimed, released (pd_user_release, Release, ReleaseAll, a new",
+        " * session); the pin is no longer the service's here. */",
+        f"void {low}_release(pd_user_ctx_t *ctx, uint8_t pin);",
         "/* Every pass of the device's main loop: work that takes time, in slices. */",
         f"void {low}_poll(pd_user_ctx_t *ctx, uint32_t now_ms);",
         "",

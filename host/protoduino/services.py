@@ -23,8 +23,18 @@ from typing import TYPE_CHECKING, ClassVar, Generic, TypeVar
 
 from google.protobuf.message import DecodeError, Message
 
+from ._generated import protoduino_pb2 as pb
 from .aio import _Stream
-from .errors import ArgumentError, ArgumentTypeError, ProtocolError, UserError, UserSchemaError
+from .errors import (
+    ArgumentError,
+    ArgumentTypeError,
+    CommandRejectedError,
+    ProtocolError,
+    UserError,
+    UserSchemaError,
+    rejection,
+)
+from .messages import status_name
 from .userreports import RawReport
 
 if TYPE_CHECKING:
@@ -97,11 +107,33 @@ class ServiceClient:
             )
         return body
 
-    def _named(self, error: UserError, name: str) -> UserError:
-        """The client's own error for the handler's code (UserError for an unknown one)."""
-        named = self.ERRORS.get(error.code, UserError)
-        label = getattr(named, "NAME", "") or str(error.code)
-        return named(error.code, f"{name} refused by its handler: {label}")
+    def _named(self, error: CommandRejectedError, name: str) -> CommandRejectedError:
+        """The refusal of rpc ``name`` as the user should read it: the client's own error
+        for the handler's code (UserError for an unknown one); the failsafe's and an
+        interlock's refusals naming the rpc and what lifts them; any other unchanged."""
+        if isinstance(error, UserError):
+            named = self.ERRORS.get(error.code, UserError)
+            label = getattr(named, "NAME", "") or str(error.code)
+            return named(error.code, f"{name} refused by its handler: {label}")
+        if error.status == pb.STATUS_FAILSAFE_EXPIRED:
+            feed = "board.heartbeat()" if self.board.liveness == "heartbeat" else "board.ping()"
+            why = (
+                "the failsafe fired (no liveness message within its timeout) and holds every "
+                f"output safe: {feed} re-arms it, then call {name} again"
+            )
+        elif error.status == pb.STATUS_INTERLOCK_ACTIVE:
+            why = (
+                "an interlock input tripped and holds every output safe: once the input is "
+                f"back at its normal level, board.clear_interlock(), then call {name} again"
+            )
+        else:
+            return error
+        return rejection(
+            error.status,
+            f"{name} refused by the device: {status_name(error.status)}: {why} (an rpc that "
+            "only reads is never refused: option idempotency_level = NO_SIDE_EFFECTS)",
+            sent=error.sent,
+        )
 
     @staticmethod
     def _decode(name: str, raw: bytes, reply: type[M]) -> M:
@@ -119,8 +151,11 @@ class ServiceClient:
         body = self._request(name, request, expected)
         try:
             raw = self.board.call_user(method, body)
-        except UserError as error:
-            raise self._named(error, name) from error
+        except CommandRejectedError as error:
+            named = self._named(error, name)
+            if named is error:
+                raise
+            raise named from error
         return self._decode(name, raw, reply)
 
     def _submit(
@@ -134,7 +169,7 @@ class ServiceClient:
         def done(f: Future[bytes]) -> None:
             try:
                 value = self._decode(name, f.result(), reply)
-            except UserError as error:
+            except CommandRejectedError as error:
                 out.set_exception(self._named(error, name))
             except BaseException as error:  # the caller sees what the board raised
                 out.set_exception(error)

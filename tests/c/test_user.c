@@ -169,6 +169,31 @@ static void test_user_pins_share_the_pin_table_and_go_safe(void)
     CHECK_EQ(probe_record.released_pins, 1ul << 5);
 }
 
+static void test_a_handler_releases_its_own_pins_never_a_builtins(void)
+{
+    tdev_t d;
+    t_active(&d);
+    reset_record();
+    probe_Req req = {5, {0, {0}}};
+    protoduino_ArduinoIn in = m_user(30, 3, &req); /* the probe claims pin 5 */
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    in = m_digital_init(31, 6, false);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    pd_user_ctx_t ctx = {&d.core, &d.hal};
+    CHECK(pd_user_owns(&ctx, 5));
+    CHECK_EQ(pd_user_release(&ctx, 6), protoduino_Status_STATUS_NOT_INITIALISED);
+    CHECK_EQ(pd_user_release(&ctx, 7), protoduino_Status_STATUS_NOT_INITIALISED);
+    CHECK_EQ(probe_record.released_pins, 0ul);
+    CHECK_EQ(pd_user_release(&ctx, 5), protoduino_Status_STATUS_OK);
+    CHECK_EQ(probe_record.released_pins, 1ul << 5); /* its release hook ran */
+    CHECK(!pd_user_owns(&ctx, 5));
+    CHECK_EQ(pd_user_release(&ctx, 5), protoduino_Status_STATUS_NOT_INITIALISED);
+    in = m_digital_init(32, 5, false); /* free for any mode again */
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+    in = m_digital_init(33, 6, true); /* the built-in's pin is still its own */
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
+}
+
 static void test_reports_newest_wins_with_the_count_of_replaced(void)
 {
     tdev_t d;
@@ -252,6 +277,7 @@ const pd_test_case_t pd_tests_user[] = {
     TEST_CASE(test_the_handlers_code_unknown_methods_and_bad_requests),
     TEST_CASE(test_the_failsafe_refuses_commanding_methods_not_reads),
     TEST_CASE(test_user_pins_share_the_pin_table_and_go_safe),
+    TEST_CASE(test_a_handler_releases_its_own_pins_never_a_builtins),
     TEST_CASE(test_reports_newest_wins_with_the_count_of_replaced),
     TEST_CASE(test_the_encoder_writes_the_user_shapes_as_pb_encode),
     {NULL, NULL},

@@ -166,6 +166,14 @@ def test_the_c_compiles_with_the_core_warnings(tmp_path: Path) -> None:
             "",
             "rpc F: a client stream is not supported",
         ),
+        (
+            'syntax = "proto3"; enum Errors { NONE = 0; JAMMED = 1; }'
+            " message A { uint32 x = 1; } service S { rpc F(A) returns (A); }",
+            "",
+            "enum Errors: the handlers' error codes are the enum named after the service, "
+            "SError (<Service>Error); any other is not read, and its codes would arrive as a "
+            "plain UserError: rename it SError",
+        ),
     ],
 )
 def test_what_it_cannot_carry_is_refused_by_name(
@@ -232,3 +240,33 @@ def test_the_shared_tool_helper_imports_nothing_of_the_package() -> None:
         )
     }
     assert imported <= {"__future__", "subprocess", "sys", "pathlib"}, imported
+
+
+@pytest.mark.parametrize("name", ["strs.Name.text", "Name.text", "*.text"])
+def test_an_options_name_may_leave_out_the_package(tmp_path: Path, name: str) -> None:
+    """nanopb matches names with their package; the generator takes them either way."""
+    proto = tmp_path / "strs.proto"
+    proto.write_text(
+        'syntax = "proto3"; package strs; message Name { string text = 1; }'
+        " service Names { rpc Set(Name) returns (Name); }"
+    )
+    (tmp_path / "strs.options").write_text(
+        f"// the bound of the one string\n{name} max_size:16 // a comment\n"
+    )
+    gen(proto, tmp_path / "out")
+    header = (tmp_path / "out" / "strs.pb.h").read_text()
+    assert "char text[16];" in header
+
+
+def test_a_service_without_its_error_enum_is_told_the_rule(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    proto = tmp_path / "bare.proto"
+    proto.write_text(
+        'syntax = "proto3"; message A { uint32 x = 1; } service Bare { rpc F(A) returns (A); }'
+    )
+    assert main(["gen", str(proto), "--out", str(tmp_path / "out")]) == 0
+    printed = capsys.readouterr().out
+    assert "Bare: no error enum BareError (<Service>Error)" in printed
+    assert main(["gen", str(EXAMPLE), "--out", str(tmp_path / "ex")]) == 0
+    assert "no error enum" not in capsys.readouterr().out

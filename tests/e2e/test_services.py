@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 import json
+import re
 import subprocess
 import sys
 import threading
@@ -25,8 +26,8 @@ from protoduino import aio
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.events import Event, EventKind
 from protoduino.simboard import SimBoard
-from simfixtures import pin_values, wait_for_pin
-from userbuilds import client, need, program
+from simfixtures import pin_values, wait_for_pin, wait_until
+from userbuilds import ROOT, client, need, program
 
 BACKENDS = ["native", "avr"]
 
@@ -68,11 +69,13 @@ def test_blinker_drives_its_pin_and_the_failsafe_makes_it_safe(
     mod = client("blinker", monkeypatch)
     pbu = mod.pb
     events: list[Event] = []
+    stopped: list[Any] = []  # the safe hook's reports (its ctx lets it publish)
     with protoduino.Board.open(blinker_sim.port, failsafe_timeout=0.5) as board:
         board.on_event(events.append)
         assert board.info.user_fingerprint == mod.FINGERPRINT
         assert "servo" in board.info.features  # the built-ins are all there
         blinker = mod.Blinker(board)
+        blinker.on_stopped(lambda report: stopped.append(report.value))
 
         # Refusals of the handler's own: named errors, nothing done.
         with pytest.raises(mod.BadPeriodError) as bad:
@@ -101,11 +104,14 @@ def test_blinker_drives_its_pin_and_the_failsafe_makes_it_safe(
         else:  # the native board's clock is this machine's: never early on average
             assert sum(gaps) / len(gaps) >= 0.019, gaps
 
-        # Stop: the service's safe state (low), and it stays there.
+        # Stop: the service's safe state (low), and it stays there; its safe hook says so.
+        assert stopped == []
         board.stop()
         wait_for_pin(blinker_sim, 13, lambda v: v[-1] == 0)
         after = blinker.count(pbu.Empty())
         assert not after.on
+        assert wait_until(lambda: len(stopped) == 1)
+        assert stopped[0].count == after.count and not stopped[0].on
         assert blinker.count(pbu.Empty()).count == after.count
 
         # The failsafe: no sign of life for 0.5 s and the pin goes low, by itself.
@@ -115,10 +121,20 @@ def test_blinker_drives_its_pin_and_the_failsafe_makes_it_safe(
         board.pinging = False
         wait_for_event(events, "ping_timeout")
         assert pin_values(blinker_sim.trace(), 13)[-1] == 0
+        assert wait_until(lambda: len(stopped) == 2)
         assert not blinker.count(pbu.Empty()).on  # NO_SIDE_EFFECTS: answered while expired
         with pytest.raises(protoduino.CommandRejectedError) as expired:
             blinker.start_blink(pbu.Blink(pin=13, period_ms=40))
         assert expired.value.status == pb.STATUS_FAILSAFE_EXPIRED
+        # The refusal names the rpc and what lifts it, for the asyncio form as well.
+        text = str(expired.value)
+        assert text.startswith("StartBlink refused by the device: STATUS_FAILSAFE_EXPIRED: ")
+        assert "board.ping() re-arms it, then call StartBlink again" in text
+        with pytest.raises(protoduino.CommandRejectedError) as submitted:
+            blinker.submit_start_blink(pbu.Blink(pin=13, period_ms=40)).result(timeout=30)
+        assert str(submitted.value) == text
+        board.ping()  # the remedy it names
+        assert blinker.start_blink(pbu.Blink(pin=13, period_ms=40)).half_ms == 20
         board.pinging = True
 
 
@@ -178,6 +194,14 @@ def test_presses_reads_its_button_and_reports_every_change(
         latest = presses.changes()
         assert latest is not None and latest.value.count == 2
         assert pressed.time_ms >= first.time_ms
+
+        # The handler releases the pin it claimed (pd_user_release): free for any mode.
+        assert presses.unwatch(pbu.Empty()).count == 2
+        button = board.digital_input(2, pull_up=True)
+        presses_sim.set_level(2, 1)
+        assert wait_until(lambda: button.read() is True)
+        with pytest.raises(mod.PinUnavailableError):  # the handler's claim is refused now
+            presses.watch_button(pbu.Watch(pin=2, debounce_ms=5))
 
 
 def test_reports_as_an_async_iterator(
@@ -267,3 +291,120 @@ def test_the_command_line_runs_a_user_build(
         assert json.loads(info.stdout)["info"]["user_fingerprint"] == f"0x{mod.FINGERPRINT:08X}"
     finally:
         subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
+
+
+def _make(cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        ["make", "-s", "-C", str(ROOT / "firmware"), *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=600,
+    )
+
+
+def test_a_relative_user_path_is_explained(tmp_path: Path) -> None:
+    """make -C runs in firmware/: a path relative to the caller's folder names the rule."""
+    need("native")
+    (tmp_path / "t").mkdir()
+    for suffix in (".proto", ".c"):
+        (tmp_path / "t" / f"blinker{suffix}").write_bytes(
+            (ROOT / "examples" / "blinker" / f"blinker{suffix}").read_bytes()
+        )
+    built = _make(
+        tmp_path,
+        "sim",
+        f"BUILD={tmp_path / 'build'}",
+        "USER_PROTO=t/blinker.proto",
+        "USER_SRC=t/blinker.c",
+    )
+    assert built.returncode != 0
+    assert "USER_PROTO=t/blinker.proto: no such file" in built.stderr, built.stderr
+    assert 'give an absolute one, e.g. USER_PROTO="$PWD/t/blinker.proto"' in built.stderr
+    built = _make(
+        tmp_path,
+        "sim",
+        f"BUILD={tmp_path / 'build'}",
+        f"USER_PROTO={tmp_path / 't' / 'blinker.proto'}",
+        "USER_SRC=t/blinker.c",
+    )
+    assert "USER_SRC=t/blinker.c: no such file" in built.stderr, built.stderr
+
+
+#: A service whose handler reads a table of TABLE bytes kept in the Uno's flash.
+BIG_PROTO = """syntax = "proto3";
+package big;
+message Index { uint32 at = 1; }
+message Value { uint32 value = 1; }
+service Big { rpc Look(Index) returns (Value); }
+"""
+BIG_C = """#include "big_service.h"
+#ifdef __AVR__
+#include <avr/pgmspace.h>
+static const uint8_t table[TABLE] PROGMEM = {1, 2, 3};
+#define READ(p) pgm_read_byte(p)
+#else
+static const uint8_t table[TABLE] = {1, 2, 3};
+#define READ(p) (*(p))
+#endif
+
+uint8_t big_look(pd_user_ctx_t *ctx, const big_Index *request, big_Value *reply)
+{
+    (void)ctx;
+    reply->value = READ(&table[request->at % sizeof table]);
+    return 0;
+}
+
+void big_safe(pd_user_ctx_t *ctx, uint8_t pin) { (void)ctx; (void)pin; }
+void big_release(pd_user_ctx_t *ctx, uint8_t pin) { (void)ctx; (void)pin; }
+void big_poll(pd_user_ctx_t *ctx, uint32_t now_ms) { (void)ctx; (void)now_ms; }
+"""
+
+
+def _build_big(tmp_path: Path, table: int) -> tuple[subprocess.CompletedProcess[str], Path]:
+    folder = tmp_path / str(table)
+    folder.mkdir()
+    (folder / "big.proto").write_text(BIG_PROTO)
+    (folder / "big.c").write_text(BIG_C.replace("TABLE", str(table)))
+    built = _make(
+        folder,
+        "avr",
+        f"BUILD={folder / 'build'}",
+        f"USER_PROTO={folder / 'big.proto'}",
+        f"USER_SRC={folder / 'big.c'}",
+    )
+    return built, folder / "build" / "user" / "big" / "avr" / "protoduino.hex"
+
+
+def test_a_build_over_the_flash_says_what_to_do(tmp_path: Path) -> None:
+    """Over the default firmware's budget: built, with what it means and which FEATURES
+    shrink it. Over the flash Optiboot leaves (32,256 B of the Uno's 32,768), or over the
+    chip's: refused with the same advice, and no hex."""
+    need("avr")
+    hint = "For room, build only the pin modes it uses: FEATURES lists them (this build: FEATURES="
+    built, hex_file = _build_big(tmp_path, 1000)
+    assert built.returncode == 0, built.stderr
+    assert "over the default firmware's 26624 B budget but fits the Uno (32256 B" in built.stdout
+    assert hint in built.stdout
+    assert hex_file.is_file()
+    flash = int(re.findall(r"flash (\d+) B", built.stdout)[0])
+
+    # 200 B past what Optiboot leaves: linked, but no hex.
+    built, hex_file = _build_big(tmp_path, 1000 + 32256 - flash + 200)
+    assert built.returncode != 0, built.stdout
+    assert re.search(
+        r"flash 32[45]\d\d B does not fit the Uno: 32256 B \(32768 less Optiboot's "
+        r"512\); no hex written",
+        built.stderr,
+    ), built.stderr
+    assert hint in built.stderr
+    assert not hex_file.exists()
+
+    # Past the chip's 32 KB: the linker refuses, and the build says the same.
+    built, hex_file = _build_big(tmp_path, 7000)
+    assert built.returncode != 0, built.stdout
+    assert "region `text' overflowed" in built.stderr
+    assert "does not fit the Uno: larger than its 32768 B of flash" in built.stderr
+    assert hint in built.stderr
+    assert not hex_file.exists()

@@ -60,7 +60,17 @@ def answer(fake: FakeDevice, msg: Any) -> list[Any]:
     elif call.method in (2, 4):
         out.ack.status = pb.STATUS_USER_ERROR
         out.ack.user_code = 7 if call.method == 2 else 99
+    elif call.method in REFUSALS:
+        out.ack.status = REFUSALS[call.method]
     return [out]
+
+
+#: Methods the fake refuses with a device status, as the failsafe, an interlock or dispatch do.
+REFUSALS = {
+    5: pb.STATUS_INTERLOCK_ACTIVE,
+    6: pb.STATUS_FAILSAFE_EXPIRED,
+    7: pb.STATUS_NO_FREE_RESOURCE,
+}
 
 
 @pytest.fixture
@@ -84,6 +94,30 @@ def test_calls_replies_and_named_errors(board: Board) -> None:
     assert type(other.value) is UserError and other.value.code == 99
     with pytest.raises(protoduino.UserReplyLostError):
         probe.echo(pb.Ping(), method=3)
+
+
+def test_the_failsafes_and_an_interlocks_refusals_name_the_rpc_and_the_remedy(
+    board: Board,
+) -> None:
+    probe = Probe(board)
+    with pytest.raises(protoduino.InterlockActiveError) as interlock:
+        probe.echo(pb.Ping(), method=5)
+    assert str(interlock.value).startswith(
+        "Echo refused by the device: STATUS_INTERLOCK_ACTIVE: an interlock input tripped"
+    )
+    assert "board.clear_interlock(), then call Echo again" in str(interlock.value)
+    with pytest.raises(protoduino.CommandRejectedError) as expired:
+        probe.echo(pb.Ping(), method=6)
+    assert expired.value.status == pb.STATUS_FAILSAFE_EXPIRED
+    assert "the failsafe fired" in str(expired.value)
+    assert "board.ping() re-arms it, then call Echo again" in str(expired.value)
+    board.liveness = "heartbeat"  # the remedy follows the board's liveness source
+    with pytest.raises(protoduino.CommandRejectedError) as beat:
+        probe.echo(pb.Ping(), method=6)
+    assert "board.heartbeat() re-arms it" in str(beat.value)
+    with pytest.raises(protoduino.CommandRejectedError) as other:  # any other: as it was
+        probe.echo(pb.Ping(), method=7)
+    assert str(other.value) == "user_call rejected by the device: STATUS_NO_FREE_RESOURCE"
 
 
 def test_the_host_refuses_what_cannot_be_sent(board: Board, fake: FakeDevice) -> None:

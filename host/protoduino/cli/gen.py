@@ -52,6 +52,11 @@ def run(args: argparse.Namespace) -> int:
         print(path)
     service = result.service
     print(f"{service.name}: {len(service.methods)} rpcs, fingerprint 0x{service.fingerprint:08X}")
+    if not service.errors:  # the rule, where a user would look for their codes' names
+        print(
+            f"{service.name}: no error enum {service.name}Error (<Service>Error): a handler's "
+            "codes arrive as protoduino.UserError"
+        )
     return 0
 
 

@@ -46,16 +46,16 @@ bool probe_level(pd_user_ctx_t *ctx, probe_Rep *report)
     return probe_record.level != 0;
 }
 
-void probe_safe(void *hal, uint8_t pin)
+void probe_safe(pd_user_ctx_t *ctx, uint8_t pin)
 {
     probe_record.safe_pins |= 1ul << pin;
-    pd_hal_digital_write(hal, pin, false);
+    pd_hal_digital_write(ctx->hal, pin, false);
 }
 
-void probe_release(void *hal, uint8_t pin)
+void probe_release(pd_user_ctx_t *ctx, uint8_t pin)
 {
     probe_record.released_pins |= 1ul << pin;
-    pd_hal_digital_release(hal, pin);
+    pd_hal_digital_release(ctx->hal, pin);
 }
 
 void probe_poll(pd_user_ctx_t *ctx, uint32_t now_ms)
