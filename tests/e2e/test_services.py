@@ -25,7 +25,7 @@ from protoduino import aio
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.events import Event, EventKind
 from protoduino.simboard import SimBoard
-from simfixtures import pin_values, wait_for_pin
+from simfixtures import pin_values, wait_for_pin, wait_until
 from userbuilds import client, need, program
 
 BACKENDS = ["native", "avr"]
@@ -120,6 +120,26 @@ def test_blinker_drives_its_pin_and_the_failsafe_makes_it_safe(
             blinker.start_blink(pbu.Blink(pin=13, period_ms=40))
         assert expired.value.status == pb.STATUS_FAILSAFE_EXPIRED
         board.pinging = True
+
+
+def test_a_reboot_empties_the_service(
+    blinker_sim: SimBoard, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A reboot clears the service's state on both boards (docs/services.md, *A reboot*):
+    the emulated Uno's C runtime does at reset; the simulated board restores the user's
+    static data as the program started with it."""
+    mod = client("blinker", monkeypatch)
+    pbu = mod.pb
+    with protoduino.Board.open(blinker_sim.port) as board:
+        blinker = mod.Blinker(board)
+        blinker.start_blink(pbu.Blink(pin=13, period_ms=40))
+        wait_for_pin(blinker_sim, 13, lambda v: len(v) >= 3)
+        before = blinker.count(pbu.Empty())
+        assert before.on and before.count >= 3
+        blinker_sim.reboot()
+        assert wait_until(lambda: board.stats.reboots == 1), "no reboot noticed"
+        after = blinker.count(pbu.Empty())
+        assert (after.count, after.on) == (0, False)
 
 
 def wait_for_event(events: list[Event], cause: str, timeout: float = 30.0) -> None:
