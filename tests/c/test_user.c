@@ -215,6 +215,29 @@ static int same_as_pb_encode(const protoduino_ArduinoOut *msg)
     return n == s.bytes_written && memcmp(ours, theirs, n) == 0 ? 0 : (int)n + 1000;
 }
 
+static void test_a_reply_beyond_its_bounds_is_sent_within_them(void)
+{
+    tdev_t d;
+    t_active(&d);
+    reset_record();
+    protoduino_ArduinoIn in = m_user(20, 5, NULL);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK); /* it ran: never a refusal */
+    CHECK_EQ(probe_record.overfills, 1);
+    protoduino_Ack ack;
+    CHECK_EQ(t_acks(&d, 20, &ack), 1);
+    CHECK_EQ(ack.which_result, protoduino_Ack_user_reply_tag);
+    probe_Label label = probe_Label_init_zero;
+    pb_istream_t s = pb_istream_from_buffer(ack.result.user_reply.bytes, ack.result.user_reply.size);
+    CHECK(pb_decode(&s, probe_Label_fields, &label));
+    CHECK_EQ(strcmp(label.text, "xxxxxxx"), 0); /* its last byte is the terminator's */
+    CHECK_EQ(label.values_count, 3);
+    CHECK_EQ(label.values[2], 3);
+    CHECK(label.has_tag);
+    CHECK_EQ(strcmp(label.tag.text, "yyy"), 0);
+    CHECK_EQ(label.tag.blob.size, 4);
+    CHECK_EQ(label.tag.blob.bytes[3], 'z');
+}
+
 static void test_the_encoder_writes_the_user_shapes_as_pb_encode(void)
 {
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
@@ -253,6 +276,7 @@ const pd_test_case_t pd_tests_user[] = {
     TEST_CASE(test_the_failsafe_refuses_commanding_methods_not_reads),
     TEST_CASE(test_user_pins_share_the_pin_table_and_go_safe),
     TEST_CASE(test_reports_newest_wins_with_the_count_of_replaced),
+    TEST_CASE(test_a_reply_beyond_its_bounds_is_sent_within_them),
     TEST_CASE(test_the_encoder_writes_the_user_shapes_as_pb_encode),
     {NULL, NULL},
 };

@@ -142,6 +142,22 @@ def test_a_reboot_empties_the_service(
         assert (after.count, after.on) == (0, False)
 
 
+def test_a_call_that_ran_is_answered_as_run_even_past_its_reply_bounds(
+    backend: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The probe's Overfill handler fills its reply's strings to their last byte, and a
+    count and a size past their arrays: the call ran, so it is answered as run, its reply
+    within the bounds nanopb encodes (docs/services.md, *What a user call guarantees*)."""
+    mod = client("probe", monkeypatch)
+    pbu = mod.pb
+    with start("probe", backend, tmp_path) as sim, protoduino.Board.open(sim.port) as board:
+        probe = mod.Probe(board)
+        label = probe.overfill(pbu.Empty())
+        assert label.text == "x" * 7  # the string's last byte is its terminator's
+        assert list(label.values) == [1, 2, 3]
+        assert (label.tag.text, label.tag.blob) == ("yyy", b"zzzz")
+
+
 def wait_for_event(events: list[Event], cause: str, timeout: float = 30.0) -> None:
     """Wait for the board's FAILSAFE event of ``cause`` (the device's verdict: ``timeout``
     only bounds how long a failing test waits)."""
