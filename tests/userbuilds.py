@@ -69,3 +69,14 @@ def client(name: str, monkeypatch: pytest.MonkeyPatch) -> ModuleType:
     for module in (f"{name}_client", f"{name}_pb2"):
         sys.modules.pop(module, None)
     return importlib.import_module(f"{name}_client")
+
+
+def nested_proto(levels: int) -> str:
+    """A .proto whose message Level<levels> nests ``levels`` levels of messages (Level1 has
+    no message field), and message Empty; the caller adds the service."""
+    lines = ['syntax = "proto3";', "", "message Level1 { uint32 value = 1; }"]
+    lines += [
+        f"message Level{n} {{ uint32 value = 1; Level{n - 1} down = 2; }}"
+        for n in range(2, levels + 1)
+    ]
+    return "\n".join([*lines, "message Empty {}", ""])
