@@ -238,6 +238,28 @@ static void test_a_reply_beyond_its_bounds_is_sent_within_them(void)
     CHECK_EQ(label.tag.blob.bytes[3], 'z');
 }
 
+static void test_a_report_beyond_its_bounds_is_sent_within_them(void)
+{
+    tdev_t d;
+    t_active(&d);
+    reset_record();
+    pd_user_ctx_t ctx = {&d.core, &d.hal};
+    probe_record.level = 9;
+    probe_record.report_blob = 200;
+    pd_user_publish(&ctx, 4);
+    pd_core_poll(&d.core);
+    protoduino_ArduinoOut out;
+    CHECK(t_out(&d, 0, &out)); /* sent, not dropped */
+    CHECK_EQ(out.which_data, protoduino_ArduinoOut_user_report_tag);
+    probe_Rep rep = probe_Rep_init_zero;
+    pb_istream_t s = pb_istream_from_buffer(out.data.user_report.body.bytes,
+                                            out.data.user_report.body.size);
+    CHECK(pb_decode(&s, probe_Rep_fields, &rep));
+    CHECK_EQ(rep.value, 9);
+    CHECK_EQ(rep.blob.size, sizeof(rep.blob.bytes));
+    CHECK_EQ(rep.blob.bytes[0], 'r');
+}
+
 static void test_the_encoder_writes_the_user_shapes_as_pb_encode(void)
 {
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
@@ -277,6 +299,7 @@ const pd_test_case_t pd_tests_user[] = {
     TEST_CASE(test_user_pins_share_the_pin_table_and_go_safe),
     TEST_CASE(test_reports_newest_wins_with_the_count_of_replaced),
     TEST_CASE(test_a_reply_beyond_its_bounds_is_sent_within_them),
+    TEST_CASE(test_a_report_beyond_its_bounds_is_sent_within_them),
     TEST_CASE(test_the_encoder_writes_the_user_shapes_as_pb_encode),
     {NULL, NULL},
 };
