@@ -1,5 +1,6 @@
-"""The user-service examples (examples/, docs/services.md) built for both boards, and their
-generated clients, for the tiers that run them (e2e, reliability)."""
+"""The user-service examples (examples/, docs/services.md) and the C tests' probe service
+(tests/c/user) built for both boards, and their generated clients, for the tiers that run
+them (e2e, reliability)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
+#: Services that are not in examples/: their folder (NAME.proto and NAME.c in it).
+FOLDERS = {"probe": ROOT / "tests" / "c" / "user"}
 #: Where `make ... USER_PROTO=examples/NAME/NAME.proto` puts a user build, per backend.
 PROGRAMS = {"native": "sim/pd_sim", "avr": "avr/protoduino.elf"}
 #: Tools each backend's build needs; a missing one skips the test.
@@ -30,8 +33,10 @@ def need(backend: str) -> None:
 
 
 def build_example(name: str) -> Path:
-    """Build examples/NAME for both boards (make caches it); its build folder."""
+    """Build examples/NAME (or a folder of FOLDERS) for both boards (make caches it); its
+    build folder."""
     need("avr")
+    folder = FOLDERS.get(name, EXAMPLES / name)
     with _lock:
         if name not in _built:
             subprocess.run(
@@ -42,8 +47,8 @@ def build_example(name: str) -> Path:
                     str(ROOT / "firmware"),
                     "sim",
                     "avr",
-                    f"USER_PROTO={EXAMPLES / name / (name + '.proto')}",
-                    f"USER_SRC={EXAMPLES / name / (name + '.c')}",
+                    f"USER_PROTO={folder / (name + '.proto')}",
+                    f"USER_SRC={folder / (name + '.c')}",
                 ],
                 check=True,
                 capture_output=True,
@@ -64,3 +69,14 @@ def client(name: str, monkeypatch: pytest.MonkeyPatch) -> ModuleType:
     for module in (f"{name}_client", f"{name}_pb2"):
         sys.modules.pop(module, None)
     return importlib.import_module(f"{name}_client")
+
+
+def nested_proto(levels: int) -> str:
+    """A .proto whose message Level<levels> nests ``levels`` levels of messages (Level1 has
+    no message field), and message Empty; the caller adds the service."""
+    lines = ['syntax = "proto3";', "", "message Level1 { uint32 value = 1; }"]
+    lines += [
+        f"message Level{n} {{ uint32 value = 1; Level{n - 1} down = 2; }}"
+        for n in range(2, levels + 1)
+    ]
+    return "\n".join([*lines, "message Empty {}", ""])

@@ -2,8 +2,10 @@
 
 #if PD_FEATURE_USER
 
+#include <stddef.h>
 #include <string.h>
 
+#include <pb_common.h>
 #include <pb_decode.h>
 #include <pb_encode.h>
 
@@ -43,6 +45,50 @@ static uint8_t method_of_bit(uint8_t bit)
     return 0;
 }
 
+/*
+ * A reply or report as the handler left it, brought within the bounds nanopb encodes, so
+ * that its encoding cannot fail (docs/services.md, *What a user call guarantees*): nanopb
+ * refuses a string with no terminator within its array, a bytes field's size or a repeated
+ * field's count beyond its array, and nothing else a message within the 64 B can hold. So a
+ * string ends at its last byte at the latest, a size or a count is at most its array's,
+ * in every submessage present (the active member of a oneof). Recursion: one level per
+ * nesting level, which the generator bounds (servicegen.MAX_USER_DEPTH).
+ */
+static void bound_message(const pb_msgdesc_t *desc, void *msg)
+{
+    pb_field_iter_t f;
+    if (!pb_field_iter_begin(&f, desc, msg)) {
+        return; /* no fields */
+    }
+    do {
+        pb_size_t count = 1;
+        if (PB_HTYPE(f.type) == PB_HTYPE_ONEOF && *(const pb_size_t *)f.pSize != f.tag) {
+            continue; /* not the member the oneof holds */
+        }
+        if (PB_HTYPE(f.type) == PB_HTYPE_REPEATED) {
+            pb_size_t *n = (pb_size_t *)f.pSize; /* a fixed count's is array_size itself */
+            if (*n > f.array_size) {
+                *n = f.array_size;
+            }
+            count = *n;
+        }
+        for (pb_size_t i = 0; i < count; i++) {
+            char *item = (char *)f.pData + (size_t)i * f.data_size;
+            if (PB_LTYPE(f.type) == PB_LTYPE_STRING) {
+                item[f.data_size - 1u] = '\0';
+            } else if (PB_LTYPE(f.type) == PB_LTYPE_BYTES) {
+                pb_bytes_array_t *bytes = (pb_bytes_array_t *)(void *)item;
+                pb_size_t room = (pb_size_t)(f.data_size - offsetof(pb_bytes_array_t, bytes));
+                if (bytes->size > room) {
+                    bytes->size = room;
+                }
+            } else if (PB_LTYPE_IS_SUBMSG(f.type)) {
+                bound_message(f.submsg_desc, item);
+            }
+        }
+    } while (pb_field_iter_next(&f));
+}
+
 uint8_t pd_user_flags(uint8_t method)
 {
     const pd_user_method_t *m = method_of(method);
@@ -72,13 +118,16 @@ protoduino_Status pd_user_call(pd_core_t *core, const protoduino_UserCall *call,
         ack->user_code = code;
         return protoduino_Status_STATUS_USER_ERROR;
     }
-    /* Fits: the generator checks every reply's nanopb bound against the 48 B. */
+    /* The handler ran: from here on the answer is OK. Within its bounds the reply encodes,
+     * and fits (the generator checks every reply's nanopb bound against the 64 B). */
+    bound_message(m->reply, pd_user_service.reply_buf);
     pb_ostream_t out = pb_ostream_from_buffer(ack->result.user_reply.bytes,
                                               sizeof(ack->result.user_reply.bytes));
-    if (!pb_encode(&out, m->reply, pd_user_service.reply_buf)) {
-        return protoduino_Status_STATUS_INVALID_ARGUMENT;
+    if (pb_encode(&out, m->reply, pd_user_service.reply_buf)) {
+        ack->result.user_reply.size = (pb_size_t)out.bytes_written;
+    } else { /* unreachable by the above; were it not, OK without a reply: "ran, reply lost" */
+        ack->which_result = 0;
     }
-    ack->result.user_reply.size = (pb_size_t)out.bytes_written;
     return protoduino_Status_STATUS_OK;
 }
 
@@ -156,6 +205,7 @@ bool pd_user_report(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *out)
                                                  sizeof(out->data.user_report.body.bytes));
         /* Built now, as it goes out: the newest value by construction. */
         if (m != NULL && m->report(&ctx, pd_user_service.reply_buf) &&
+            (bound_message(m->reply, pd_user_service.reply_buf), true) &&
             pb_encode(&os, m->reply, pd_user_service.reply_buf)) {
             out->which_data = protoduino_ArduinoOut_user_report_tag;
             out->data.user_report.report = method_of_bit(bit);

@@ -7,7 +7,8 @@
  * --link makes a symlink to it) as the first line on stdout, then runs the
  * core until SIGINT/SIGTERM/SIGHUP, or with --owner-fd until its owner is
  * gone (pd_owner.h says the rule).
- * SIGUSR1 is a simulated reboot. The pins are
+ * SIGUSR1 is a simulated reboot (the core and a user service's statics as at
+ * power-up, see sim_user_reset). The pins are
  * virtual: every change is written to the trace as one JSON object per line,
  * flushed per line, with t = seconds since the process started (monotonic).
  * --control PATH opens the input-control socket (firmware/simcontrol): levels,
@@ -99,6 +100,68 @@ static const pd_board_info_t sim_board = {
 
 static volatile sig_atomic_t sim_stop;
 static volatile sig_atomic_t sim_reboot;
+
+/*
+ * A user service's static variables (docs/services.md: a reboot empties the device). An
+ * MCU's C runtime puts every static back at reset; here the core is initialised again, and
+ * the user's own statics, which no init function of ours knows, are put back from a copy
+ * taken before the core ran: firmware/Makefile links the user's sources into the two
+ * sections below (posix/pd_user_sections.ld), whose bounds the linker provides. Weak: a
+ * board without a service has neither section.
+ */
+extern char __start_pd_user_data[] __attribute__((weak));
+extern char __stop_pd_user_data[] __attribute__((weak));
+extern char __start_pd_user_bss[] __attribute__((weak));
+extern char __stop_pd_user_bss[] __attribute__((weak));
+
+typedef struct {
+    char *start;
+    size_t size;
+    char *copy; /* as the program started */
+} sim_user_section_t;
+
+static sim_user_section_t sim_user_sections[2];
+
+/* Byte by byte and not instrumented: the sections hold AddressSanitizer's red zones
+ * between the user's variables, which are only bytes to a copy of the whole. */
+__attribute__((no_sanitize_address)) static void sim_copy_bytes(char *to, const char *from,
+                                                                size_t size)
+{
+    volatile char *out = to;
+    const volatile char *in = from;
+    for (size_t i = 0; i < size; i++) {
+        out[i] = in[i];
+    }
+}
+
+static void sim_user_keep(void)
+{
+    char *bounds[2][2] = {{__start_pd_user_data, __stop_pd_user_data},
+                          {__start_pd_user_bss, __stop_pd_user_bss}};
+    for (size_t i = 0; i < 2; i++) {
+        sim_user_section_t *sec = &sim_user_sections[i];
+        sec->start = bounds[i][0];
+        sec->size = (bounds[i][0] != NULL) ? (size_t)(bounds[i][1] - bounds[i][0]) : 0u;
+        if (sec->size != 0) {
+            sec->copy = malloc(sec->size); /* the POSIX board's own, never the firmware's */
+            if (sec->copy == NULL) {
+                perror("pd_sim: the user service's statics");
+                exit(1);
+            }
+            sim_copy_bytes(sec->copy, sec->start, sec->size);
+        }
+    }
+}
+
+static void sim_user_reset(void)
+{
+    for (size_t i = 0; i < 2; i++) {
+        const sim_user_section_t *sec = &sim_user_sections[i];
+        if (sec->size != 0) {
+            sim_copy_bytes(sec->start, sec->copy, sec->size);
+        }
+    }
+}
 
 /*
  * The board's clock, in seconds since start: the host's monotonic clock, except
@@ -600,6 +663,7 @@ int main(int argc, char **argv)
      * client ever sees a stale BOOT from power-up racing its handshake. A
      * reboot (SIGUSR1) sends BOOT to whoever is connected.
      */
+    sim_user_keep();
     pd_core_init(&core, &hal);
     printf("%s\n", link_path ? link_path : slave_name);
     fflush(stdout);
@@ -615,6 +679,7 @@ int main(int argc, char **argv)
             }
             rx_len = rx_off = 0;
             hal.baud = PD_BAUD; /* a reset UART is at the opening rate */
+            sim_user_reset();   /* and the service's statics are as at power-up */
             pd_core_init(&core, &hal);
         }
         /* Bytes the core left last time (their replies need transmit room) go first. */

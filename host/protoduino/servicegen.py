@@ -21,7 +21,8 @@ is not used; declare ``message Empty {}``); ``option idempotency_level =
 NO_SIDE_EFFECTS`` marks a method that only reads (its repeats are answered in full
 and the failsafe never refuses it), ``IDEMPOTENT`` one that may be repeated;
 every message a method carries is at most 64 bytes on the wire (nanopb's bound,
-so every string, bytes and repeated field needs its max_size / max_count).
+so every string, bytes and repeated field needs its max_size / max_count) and nests
+at most MAX_USER_LEVELS levels of messages (the Uno's stack: see the constants).
 
 The fingerprint is the CRC-32 of the user file's FileDescriptorSet without
 source info, serialised deterministically (as SCHEMA_ID is of protoduino's own,
@@ -47,6 +48,23 @@ from .errors import ProtoduinoError
 
 #: The most bytes a request, reply or report takes on the wire (protoduino.options).
 MAX_USER_BYTES = 64
+
+# What a user message costs the Uno's stack. nanopb decodes (and encodes) a message in
+# nested calls, one set of frames for each level of messages in messages; measured on the
+# emulated Uno with every pin mode in (the runner's --stats low-water mark,
+# tests/e2e/test_stack_margin.py), a user call whose request nests L levels takes
+# 511, 678, 831 and 999 B of stack for L = 2..5: 145 to 168 B a level.
+#: The Uno's stack a level of a user message takes (the measured 168 B, rounded up).
+NANOPB_LEVEL_STACK = 170
+#: The Uno's stack a user call takes besides its levels (the measured line's intercept).
+USER_CALL_STACK = 200
+#: The firmware's own deepest stack with every pin mode, which the RAM budget holds
+#: (a Pose decoded in full: tests/e2e/test_stack_margin.py measures it).
+FIRMWARE_STACK = 696
+#: The most levels a user message may nest (a message with no message field is one level;
+#: a message-typed field adds its message's levels): deeper, a user call would take the
+#: stack deeper than the firmware's own deepest path, which the RAM budget is measured at.
+MAX_USER_LEVELS = (FIRMWARE_STACK - USER_CALL_STACK) // NANOPB_LEVEL_STACK
 NANOPB_VERSION = "0.4.7"
 
 
@@ -224,6 +242,59 @@ def with_package(options: str, package: str) -> str:
     return "\n".join(out) + "\n"
 
 
+def _levels(proto: Path, descriptor_set: bytes) -> dict[str, tuple[str, ...]]:
+    """Each message's deepest chain of nested messages, by short name (a message with no
+    message field: itself alone); refuses a message that contains itself."""
+    from google.protobuf import descriptor_pb2
+
+    fds = descriptor_pb2.FileDescriptorSet()
+    fds.ParseFromString(descriptor_set)
+    (f,) = fds.file
+    types: dict[str, descriptor_pb2.DescriptorProto] = {}
+    pending = [(f".{f.package}" if f.package else "", m) for m in f.message_type]
+    while pending:
+        scope, message = pending.pop(0)
+        full = f"{scope}.{message.name}"
+        types[full] = message
+        pending += [(full, nested) for nested in message.nested_type]
+    chains: dict[str, tuple[str, ...]] = {}
+
+    def chain(full: str, seen: tuple[str, ...]) -> tuple[str, ...]:
+        name = full.rsplit(".", 1)[-1]
+        if full in seen:
+            cycle = [each.rsplit(".", 1)[-1] for each in seen[seen.index(full) :]]
+            raise ServiceGenError(
+                f"{proto.name}: message {name} contains itself ({' > '.join([*cycle, name])}): "
+                "a user message needs a bound on the device (no malloc)"
+            )
+        if full not in chains:
+            inner = [
+                chain(field.type_name, (*seen, full))
+                for field in types[full].field
+                if field.type == field.TYPE_MESSAGE
+            ]
+            chains[full] = (name, *max(inner, key=len, default=()))
+        return chains[full]
+
+    return {full.rsplit(".", 1)[-1]: chain(full, ()) for full in types}
+
+
+def _check_levels(service: Service, levels: dict[str, tuple[str, ...]]) -> None:
+    """Every message a method carries nests at most MAX_USER_LEVELS levels of messages."""
+    for m in service.methods:
+        for msg in (m.reply,) if m.report else (m.request, m.reply):
+            nested = levels[msg]
+            if len(nested) > MAX_USER_LEVELS:
+                stack = USER_CALL_STACK + len(nested) * NANOPB_LEVEL_STACK
+                raise ServiceGenError(
+                    f"{service.proto}: message {msg} nests {len(nested)} levels of messages "
+                    f"({' > '.join(nested)}), more than the {MAX_USER_LEVELS} a user message "
+                    f"may have: nanopb takes about {NANOPB_LEVEL_STACK} B of the Uno's stack "
+                    f"a level, so a call would take about {stack} B, deeper than the "
+                    f"firmware's own deepest ({FIRMWARE_STACK} B; docs/services.md, *Limits*)"
+                )
+
+
 def _check_sizes(service: Service, header: str) -> None:
     """Every message a method carries has a nanopb bound within MAX_USER_BYTES."""
     for m in service.methods:
@@ -257,6 +328,7 @@ def generate(proto: Path, out: Path) -> Generated:
         desc = Path(tmp) / "user.desc"
         _protoc(["-I.", f"--descriptor_set_out={desc}", proto.name], src)
         service = describe(proto, desc.read_bytes())
+        _check_levels(service, _levels(proto, desc.read_bytes()))
     _protoc(
         [
             "-I.",

@@ -373,7 +373,8 @@ class SimBoard(ClosedOnExit):
         return self._proc is not None and self._proc.poll() is None
 
     def reboot(self) -> None:
-        """Simulated power cycle: outputs released, link IDLE, EVENT BOOT; same port."""
+        """Simulated power cycle: outputs released, link IDLE, a user service's statics as at
+        power-up, EVENT BOOT; same port."""
         self._signal(signal.SIGUSR1)
 
     def kill(self) -> None:

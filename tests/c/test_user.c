@@ -240,6 +240,51 @@ static int same_as_pb_encode(const protoduino_ArduinoOut *msg)
     return n == s.bytes_written && memcmp(ours, theirs, n) == 0 ? 0 : (int)n + 1000;
 }
 
+static void test_a_reply_beyond_its_bounds_is_sent_within_them(void)
+{
+    tdev_t d;
+    t_active(&d);
+    reset_record();
+    protoduino_ArduinoIn in = m_user(20, 5, NULL);
+    CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK); /* it ran: never a refusal */
+    CHECK_EQ(probe_record.overfills, 1);
+    protoduino_Ack ack;
+    CHECK_EQ(t_acks(&d, 20, &ack), 1);
+    CHECK_EQ(ack.which_result, protoduino_Ack_user_reply_tag);
+    probe_Label label = probe_Label_init_zero;
+    pb_istream_t s = pb_istream_from_buffer(ack.result.user_reply.bytes, ack.result.user_reply.size);
+    CHECK(pb_decode(&s, probe_Label_fields, &label));
+    CHECK_EQ(strcmp(label.text, "xxxxxxx"), 0); /* its last byte is the terminator's */
+    CHECK_EQ(label.values_count, 3);
+    CHECK_EQ(label.values[2], 3);
+    CHECK(label.has_tag);
+    CHECK_EQ(strcmp(label.tag.text, "yyy"), 0);
+    CHECK_EQ(label.tag.blob.size, 4);
+    CHECK_EQ(label.tag.blob.bytes[3], 'z');
+}
+
+static void test_a_report_beyond_its_bounds_is_sent_within_them(void)
+{
+    tdev_t d;
+    t_active(&d);
+    reset_record();
+    pd_user_ctx_t ctx = {&d.core, &d.hal};
+    probe_record.level = 9;
+    probe_record.report_blob = 200;
+    pd_user_publish(&ctx, 4);
+    pd_core_poll(&d.core);
+    protoduino_ArduinoOut out;
+    CHECK(t_out(&d, 0, &out)); /* sent, not dropped */
+    CHECK_EQ(out.which_data, protoduino_ArduinoOut_user_report_tag);
+    probe_Rep rep = probe_Rep_init_zero;
+    pb_istream_t s = pb_istream_from_buffer(out.data.user_report.body.bytes,
+                                            out.data.user_report.body.size);
+    CHECK(pb_decode(&s, probe_Rep_fields, &rep));
+    CHECK_EQ(rep.value, 9);
+    CHECK_EQ(rep.blob.size, sizeof(rep.blob.bytes));
+    CHECK_EQ(rep.blob.bytes[0], 'r');
+}
+
 static void test_the_encoder_writes_the_user_shapes_as_pb_encode(void)
 {
     protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
@@ -279,6 +324,8 @@ const pd_test_case_t pd_tests_user[] = {
     TEST_CASE(test_user_pins_share_the_pin_table_and_go_safe),
     TEST_CASE(test_a_handler_releases_its_own_pins_never_a_builtins),
     TEST_CASE(test_reports_newest_wins_with_the_count_of_replaced),
+    TEST_CASE(test_a_reply_beyond_its_bounds_is_sent_within_them),
+    TEST_CASE(test_a_report_beyond_its_bounds_is_sent_within_them),
     TEST_CASE(test_the_encoder_writes_the_user_shapes_as_pb_encode),
     {NULL, NULL},
 };

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 from protoduino import servicegen
 from protoduino.cli.main import main
+from userbuilds import nested_proto
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "blinker" / "blinker.proto"
@@ -187,6 +188,50 @@ def test_what_it_cannot_carry_is_refused_by_name(
     with pytest.raises(servicegen.ServiceGenError, match=r"^mine\.proto: ") as error:
         gen(proto, tmp_path / "out")
     assert message in str(error.value)
+
+
+@pytest.mark.parametrize(
+    "rpc",
+    [
+        "rpc F(Level{n}) returns (Empty);",
+        "rpc F(Empty) returns (Level{n});",
+        "rpc F(Empty) returns (stream Level{n});",
+    ],
+)
+def test_a_message_nested_deeper_than_the_stack_allows_is_refused(
+    tmp_path: Path, rpc: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The Uno's stack bounds how deep a user message nests (issue 32: deeper ones ran the
+    stack into static data); the largest accepted is measured in test_stack_margin.py."""
+    top = servicegen.MAX_USER_LEVELS
+    accepted = tmp_path / "ok" / "mine.proto"
+    accepted.parent.mkdir()
+    accepted.write_text(nested_proto(top) + f"service S {{ {rpc.format(n=top)} }}\n")
+    gen(accepted, tmp_path / "out-ok")
+    refused = tmp_path / "mine.proto"
+    refused.write_text(nested_proto(top + 1) + f"service S {{ {rpc.format(n=top + 1)} }}\n")
+    chain = " > ".join(f"Level{n}" for n in range(top + 1, 0, -1))
+    expected = (
+        f"mine.proto: message Level{top + 1} nests {top + 1} levels of messages ({chain}), "
+        f"more than the {top} a user message may have"
+    )
+    with pytest.raises(servicegen.ServiceGenError) as error:
+        gen(refused, tmp_path / "out")
+    assert str(error.value).startswith(expected), error.value
+    assert main(["gen", str(refused), "--out", str(tmp_path / "out-cli")]) == 1
+    assert expected in capsys.readouterr().err
+
+
+def test_a_message_that_contains_itself_is_refused(tmp_path: Path) -> None:
+    proto = tmp_path / "mine.proto"
+    proto.write_text(
+        'syntax = "proto3"; message A { B b = 1; } message B { A a = 1; }'
+        " service S { rpc F(A) returns (A); }"
+    )
+    with pytest.raises(
+        servicegen.ServiceGenError, match=r"^mine\.proto: message A contains itself \(A > B > A\)"
+    ):
+        gen(proto, tmp_path / "out")
 
 
 def test_error_names_and_method_names() -> None:

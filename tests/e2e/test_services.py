@@ -138,6 +138,42 @@ def test_blinker_drives_its_pin_and_the_failsafe_makes_it_safe(
         board.pinging = True
 
 
+def test_a_reboot_empties_the_service(
+    blinker_sim: SimBoard, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A reboot clears the service's state on both boards (docs/services.md, *A reboot*):
+    the emulated Uno's C runtime does at reset; the simulated board restores the user's
+    static data as the program started with it."""
+    mod = client("blinker", monkeypatch)
+    pbu = mod.pb
+    with protoduino.Board.open(blinker_sim.port) as board:
+        blinker = mod.Blinker(board)
+        blinker.start_blink(pbu.Blink(pin=13, period_ms=40))
+        wait_for_pin(blinker_sim, 13, lambda v: len(v) >= 3)
+        before = blinker.count(pbu.Empty())
+        assert before.on and before.count >= 3
+        blinker_sim.reboot()
+        assert wait_until(lambda: board.stats.reboots == 1), "no reboot noticed"
+        after = blinker.count(pbu.Empty())
+        assert (after.count, after.on) == (0, False)
+
+
+def test_a_call_that_ran_is_answered_as_run_even_past_its_reply_bounds(
+    backend: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The probe's Overfill handler fills its reply's strings to their last byte, and a
+    count and a size past their arrays: the call ran, so it is answered as run, its reply
+    within the bounds nanopb encodes (docs/services.md, *What a user call guarantees*)."""
+    mod = client("probe", monkeypatch)
+    pbu = mod.pb
+    with start("probe", backend, tmp_path) as sim, protoduino.Board.open(sim.port) as board:
+        probe = mod.Probe(board)
+        label = probe.overfill(pbu.Empty())
+        assert label.text == "x" * 7  # the string's last byte is its terminator's
+        assert list(label.values) == [1, 2, 3]
+        assert (label.tag.text, label.tag.blob) == ("yyy", b"zzzz")
+
+
 def wait_for_event(events: list[Event], cause: str, timeout: float = 30.0) -> None:
     """Wait for the board's FAILSAFE event of ``cause`` (the device's verdict: ``timeout``
     only bounds how long a failing test waits)."""

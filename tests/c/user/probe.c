@@ -39,10 +39,32 @@ uint8_t probe_claim(pd_user_ctx_t *ctx, const probe_Req *request, probe_Rep *rep
     return 0;
 }
 
+/* A handler that leaves its reply beyond the bounds nanopb encodes: each string without
+ * room for its terminator, a count and a size larger than their arrays. It ran all the
+ * same (the count), and its reply reaches the host within the bounds. */
+uint8_t probe_overfill(pd_user_ctx_t *ctx, const probe_Empty *request, probe_Label *reply)
+{
+    (void)ctx;
+    (void)request;
+    probe_record.overfills++;
+    memset(reply->text, 'x', sizeof(reply->text));
+    for (pb_size_t i = 0; i < sizeof(reply->values) / sizeof(reply->values[0]); i++) {
+        reply->values[i] = i + 1u;
+    }
+    reply->values_count = 200;
+    reply->has_tag = true;
+    memset(reply->tag.text, 'y', sizeof(reply->tag.text));
+    memset(reply->tag.blob.bytes, 'z', sizeof(reply->tag.blob.bytes));
+    reply->tag.blob.size = 200;
+    return 0;
+}
+
 bool probe_level(pd_user_ctx_t *ctx, probe_Rep *report)
 {
     (void)ctx;
     report->value = probe_record.level;
+    report->blob.size = probe_record.report_blob; /* past its 40 B when a test says so */
+    memset(report->blob.bytes, 'r', sizeof(report->blob.bytes));
     return probe_record.level != 0;
 }
 
