@@ -41,16 +41,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import toolrun
-from .errors import ProtoduinoError
+from .errors import ServiceGenError
 
 #: The most bytes a request, reply or report takes on the wire (protoduino.options).
 MAX_USER_BYTES = 64
 NANOPB_VERSION = "0.4.7"
-
-
-class ServiceGenError(ProtoduinoError):
-    """The user's .proto cannot become a service (the message says what to change),
-    or a generator tool failed or is missing."""
 
 
 @dataclass(frozen=True, slots=True)

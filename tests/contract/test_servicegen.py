@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 from protoduino import servicegen
 from protoduino.cli.main import main
+from protoduino.errors import ServiceGenError
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "blinker" / "blinker.proto"
@@ -176,7 +177,7 @@ def test_what_it_cannot_carry_is_refused_by_name(
     proto.write_text(text)
     if options:
         (tmp_path / "mine.options").write_text(options)
-    with pytest.raises(servicegen.ServiceGenError, match=r"^mine\.proto: ") as error:
+    with pytest.raises(ServiceGenError, match=r"^mine\.proto: ") as error:
         gen(proto, tmp_path / "out")
     assert message in str(error.value)
 
@@ -205,7 +206,7 @@ def test_a_failing_tool_is_each_generators_own_error(tmp_path: Path) -> None:
     from protoduino_dev import codegen
 
     cmd = [sys.executable, "-c", "import sys; print('said'); sys.exit('refused')"]
-    with pytest.raises(servicegen.ServiceGenError, match=r"-c .* failed:\nsaid\nrefused") as user:
+    with pytest.raises(ServiceGenError, match=r"-c .* failed:\nsaid\nrefused") as user:
         servicegen._run(cmd, tmp_path)
     with pytest.raises(codegen.CodegenError, match=r"-c .* failed:\nsaid\nrefused") as dev:
         codegen._run(cmd, tmp_path)
