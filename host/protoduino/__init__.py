@@ -12,6 +12,7 @@ See README.md for the API and docs/protocol.md for the wire protocol.
 from __future__ import annotations
 
 from ._generated.schema_id import SCHEMA_ID
+from ._version import __version__
 from .board import Board, effective_speed
 from .boardoptions import BoardOptions
 from .constants import PROTOCOL_VERSION
@@ -54,8 +55,6 @@ from .events import Event, EventKind, Stats
 from .inputs import AnalogInput, Counter, DigitalInput, Reading
 from .outputs import DigitalOutput, PwmOutput, Servo
 from .readback import DeviceInfo, OutputState
-
-__version__ = "0.1.0"
 
 __all__ = [
     "PROTOCOL_VERSION",
