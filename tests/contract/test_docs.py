@@ -82,3 +82,60 @@ def test_the_schema_and_the_protocol_text_name_the_protocol_version() -> None:
     assert f"wire protocol version {version}," in first, first
     title = (ROOT / "docs/protocol.md").read_text(encoding="utf-8").splitlines()[0]
     assert title == f"# The protoduino wire protocol, version {version}"
+
+
+#: Where SimBoard's docstring and docs/api.md state each of the emulated Uno's trace limits:
+#: (the limit's macro in tools/avrsim/pd_pins.h, the words whose quantity is that limit).
+TRACE_LIMITS = (
+    ("PD_PINS_PWM_STEADY_US", r"had no edge for (\S+ \w+)"),
+    ("PD_PINS_MAX_PULSE_US", r"a high of at most (\S+ \w+) is a pulse"),
+    ("PD_PINS_MAX_PERIOD_US", r"pulses at most (\S+ \w+) apart are a servo"),
+    ("PD_PINS_MAX_PERIOD_US", r"value 0 once (\S+ \w+) passed without one"),
+    ("PD_PINS_MAX_PERIOD_US", r"1 then 0 once (\S+ \w+) passed without another"),
+    ("PD_PINS_LOW_WAIT_US", r"output low shows 0 once (\S+ \w+) passed"),
+    ("PD_PINS_HYST_US", r"a change smaller than (\S+ \w+) does not show"),
+)
+
+
+def _pins_limits() -> dict[str, float]:
+    header = (ROOT / "tools/avrsim/pd_pins.h").read_text(encoding="utf-8")
+    found = re.findall(r"^#define (PD_PINS_\w+_US) ([\d.]+)U?L?\b", header, re.M)
+    return {name: float(value) for name, value in found}
+
+
+def _quantity(us: float) -> str:
+    """A limit as the docs write it: "5 ms", "0.75 us"."""
+    return f"{us / 1000:g} ms" if us >= 1000 else f"{us:g} us"
+
+
+def _trace_limits_stated(text: str) -> dict[str, set[str]]:
+    flat = " ".join(text.split())
+    stated: dict[str, set[str]] = {}
+    for macro, words in TRACE_LIMITS:
+        found = re.findall(words, flat)
+        assert len(found) == 1, f"{words!r} should be stated once, found {found}"
+        stated.setdefault(macro, set()).add(found[0])
+    return stated
+
+
+def test_simboard_states_the_emulated_unos_trace_limits() -> None:
+    """A SimBoard user has the docstring and docs/api.md, not tools/avrsim: both state the
+    limits the runner's pin measurement has, with its numbers."""
+    from protoduino.simboard import SimBoard
+
+    limits = _pins_limits()
+    assert set(limits) == {macro for macro, _ in TRACE_LIMITS}, "a limit the docs do not state"
+    api = (ROOT / "docs/api.md").read_text(encoding="utf-8")
+    for where, text in (("SimBoard's docstring", SimBoard.__doc__ or ""), ("docs/api.md", api)):
+        stated = _trace_limits_stated(text)
+        for macro, us in limits.items():
+            assert stated[macro] == {_quantity(us)}, f"{where}: {macro} is {_quantity(us)}"
+
+
+def test_a_wrong_limit_in_the_text_is_caught() -> None:
+    """The comparison above reads the number the words give, whatever it is."""
+    assert _quantity(5000) == "5 ms" and _quantity(0.75) == "0.75 us"
+    text = (ROOT / "docs/api.md").read_text(encoding="utf-8")
+    wrong = text.replace("had no edge for\n  5 ms", "had no edge for\n  8 ms", 1)
+    assert wrong != text
+    assert _trace_limits_stated(wrong)["PD_PINS_PWM_STEADY_US"] == {"8 ms"}
