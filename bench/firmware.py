@@ -39,7 +39,14 @@ from protoduino import Board
 from protoduino.errors import BuildError
 from protoduino_dev import build as builds
 from protoduino_dev import runnerstats
-from protoduino_dev.rambudget import FREE_BYTES, RamBudget, exercise
+from protoduino_dev.rambudget import (
+    FREE_BYTES,
+    RamBudget,
+    StaticRam,
+    build_static_ram,
+    exercise,
+    sections,
+)
 
 from . import charts
 from .boards import UNO_HZ, BoardUnavailableError, CycleCounter, CycleStats, started
@@ -203,14 +210,8 @@ def _tool(name: str) -> str:
 
 def footprint(elf: Path) -> Footprint:
     """The ELF's sections as ``avr-size -A`` reports them."""
-    out = subprocess.run(
-        [_tool("avr-size"), "-A", str(elf)], capture_output=True, text=True, check=True, timeout=60
-    ).stdout
-    sizes: dict[str, int] = {}
-    for line in out.splitlines():
-        fields = line.split()
-        if len(fields) >= 2 and fields[0].startswith(".") and fields[1].isdigit():
-            sizes[fields[0]] = int(fields[1])
+    _tool("avr-size")
+    sizes = sections(elf)
     return Footprint(sizes.get(".text", 0), sizes.get(".data", 0), sizes.get(".bss", 0))
 
 
@@ -404,7 +405,8 @@ def measure_ram(elf: Path) -> RamBudget:
 def run(ctx: Context) -> SectionResult:
     load = os.getloadavg()[0]
     try:
-        elf = builds.build_firmware()
+        static = build_static_ram()
+        elf = builds.FIRMWARE_ELF
         size = footprint(elf)
         costs = feature_costs(size)
     except (BuildError, BoardUnavailableError, subprocess.SubprocessError, OSError) as error:
@@ -493,7 +495,7 @@ def run(ctx: Context) -> SectionResult:
         cycles = measure_cycles(ctx.samples, ctx.commands)
     except BoardUnavailableError as error:
         parts.append(f"Cycles per command not measured: {error}.\n")
-        return SectionResult("\n".join(parts), targets, quotes=_quotes(size))
+        return SectionResult("\n".join(parts), targets, quotes=_quotes(size, static, ram))
     parts.append(_cycles_markdown(cycles, ctx, load))
     chart_list: list[Chart] = []
     if ctx.chart_dir is not None and cycles.profile:
@@ -515,7 +517,7 @@ def run(ctx: Context) -> SectionResult:
         chart_list.append(
             Chart(path, "Awake cycles per servo write on the Uno by part, before and after")
         )
-    return SectionResult("\n".join(parts), targets, chart_list, quotes=_quotes(size))
+    return SectionResult("\n".join(parts), targets, chart_list, quotes=_quotes(size, static, ram))
 
 
 def _footprint_verdict(size: Footprint, ram: RamBudget | None) -> str:
@@ -533,15 +535,34 @@ def _footprint_verdict(size: Footprint, ram: RamBudget | None) -> str:
     )
 
 
-def _quotes(size: Footprint) -> dict[str, str]:
-    """The footprint as README.md and firmware/README.md quote it (bench.report.quote)."""
+def _quotes(size: Footprint, static: StaticRam, ram: RamBudget | None) -> dict[str, str]:
+    """The footprint as README.md and firmware/README.md quote it (bench.report.quote): the
+    build's figures (tests/c/test_footprint.py compares them with the build's), and the
+    deepest stack when the emulated Uno ran."""
+    quotes = build_quotes(size, static)
+    if ram is not None:
+        quotes["stack"] = stack_quote(ram)
+    return quotes
+
+
+def build_quotes(size: Footprint, static: StaticRam) -> dict[str, str]:
+    """The quotes that come from the build alone: the footprint and where the static RAM goes."""
     return {
         "footprint": f"flash {size.flash:,} B of the {FLASH_BUDGET:,} B budget and static RAM "
         f"{size.ram:,} B (static RAM + the deepest stack + {RAM_FREE} B free <= {RAM_TOTAL:,} B; "
         f"for comparison, StandardFirmata (the hex part 9 races): "
         f"{' and '.join(firmata_sizes())}, "
-        f"StandardFirmataPlus: {FIRMATA_PLUS[0]:,} B and {FIRMATA_PLUS[1]:,} B)"
+        f"StandardFirmataPlus: {FIRMATA_PLUS[0]:,} B and {FIRMATA_PLUS[1]:,} B)",
+        "static_ram": static.describe(),
     }
+
+
+def stack_quote(ram: RamBudget) -> str:
+    """The RAM budget's measured part, as firmware/README.md quotes it."""
+    return (
+        f"static RAM {ram.static:,} B and a deepest stack of {ram.stack:,} B, so {ram.free:,} B "
+        f"stay free"
+    )
 
 
 def _cycles_markdown(c: CycleRun, ctx: Context, load: float) -> str:
@@ -652,3 +673,19 @@ def _profile_markdown(c: CycleRun) -> str:
 
 
 SECTION = Section(5, "firmware", "Firmware", run)
+
+
+def write_build_quotes() -> list[Path]:
+    """Rewrite the figures that come from the build alone (:func:`build_quotes`) in the
+    documents that quote them, without running the rest of the bench: after a firmware
+    change, which tests/c/test_footprint.py otherwise reports. Returns the files changed."""
+    from . import report
+    from .runner import QUOTING
+
+    return report.quote(QUOTING, build_quotes(footprint(builds.FIRMWARE_ELF), build_static_ram()))
+
+
+if __name__ == "__main__":  # python -m bench.firmware
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    for changed in write_build_quotes():
+        log.info("rewrote the build's figures in %s", changed)

@@ -15,8 +15,9 @@ from simfixtures import sim_board  # noqa: F401  (the fixture, found by pytest b
 # Hypothesis's 200 ms per-example deadline judges the machine's load, not the code: with
 # other work on the cores an example can take longer, and the test fails as "flaky".
 settings.register_profile("dev", deadline=None)
-# CI (.ci/run sets CI=true) also draws the same examples every run, so that a verdict never
-# depends on the draw; a developer's runs keep exploring new ones.
+# Under CI=true (which CI services such as GitHub Actions and GitLab CI set; .ci/run does not set
+# it itself) the same examples are drawn every run, so that a verdict never depends on the draw;
+# a developer's runs keep exploring new ones.
 settings.register_profile("ci", deadline=None, derandomize=True)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
 

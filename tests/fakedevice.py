@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from protoduino import __version__
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino._generated.schema_id import SCHEMA_ID
 from protoduino.commands import PIN_MODES, command
@@ -292,7 +293,7 @@ class FakeDevice:
             out.ack.ping_echo = msg.ping.payload
         elif kind == "get_info":
             info = out.ack.info
-            info.firmware_version = "0.1.0"
+            info.firmware_version = __version__
             info.protocol_version = self.version
             info.schema_id = self.schema_id
             info.board = self.board_name

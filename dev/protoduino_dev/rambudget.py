@@ -27,7 +27,7 @@ from protoduino import Board, CommandRejectedError, Servo
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simcontrol import SimControl
 
-from . import stackwalk
+from . import build, stackwalk
 
 #: The ATmega328P's RAM (0x100 .. RAMEND = 0x8FF).
 RAM_BYTES = 2048
@@ -194,3 +194,120 @@ class RamBudget:
             f"at 0x{self.sp_min_pc:x}) = {self.static + self.stack} B; {self.free} B free "
             f"(budget: {FREE_BYTES} B free of {RAM_BYTES} B){where}"
         )
+
+
+#: The parts of the core's state that firmware/ramsizes/pd_ram_sizes.c measures (its
+#: ``pd_size_<name>`` arrays), as firmware/README.md names them.
+CORE_PARTS = (
+    ("packet", "the received packet"),
+    ("command", "its decoded command"),
+    ("dedupe", "the dedupe window"),
+    ("registry", "the pin registry and the outputs' state"),
+    ("inputs", "the inputs'"),
+    ("rest", "the link, failsafe, session and report state"),
+)
+
+
+@dataclass(frozen=True, slots=True)
+class StaticRam:
+    """Where the Uno build's static RAM goes (.data + .bss, bytes), read from the build itself:
+    the ELF's symbols and the core's parts (:func:`static_ram`)."""
+
+    total: int
+    core: dict[str, int]  # CORE_PARTS' names -> bytes; they add up to the core's state
+    descriptors: int  # nanopb's message descriptors and submessage tables (.data)
+    tx_ring: int
+    rx_ring: int
+    channels: int  # the servo driver's
+
+    @property
+    def rest(self) -> int:
+        return (
+            self.total
+            - sum(self.core.values())
+            - self.descriptors
+            - self.tx_ring
+            - self.rx_ring
+            - self.channels
+        )
+
+    def describe(self) -> str:
+        """The breakdown as firmware/README.md quotes it (bench part 5 writes it there)."""
+        core = ", ".join(f"{label} {self.core[name]}" for name, label in CORE_PARTS)
+        return (
+            f"static RAM {self.total:,} B: the core {sum(self.core.values())} ({core}), "
+            f"nanopb's message descriptors {self.descriptors} (.data), the transmit ring "
+            f"{self.tx_ring}, the receive ring {self.rx_ring}, the servo driver's channels "
+            f"{self.channels}, the rest {self.rest}"
+        )
+
+
+def sections(elf: Path) -> dict[str, int]:
+    """The ELF's section sizes as ``avr-size -A`` reports them (flash is .text + .data, static
+    RAM .data + .bss)."""
+    out = subprocess.run(
+        ["avr-size", "-A", str(elf)], check=True, capture_output=True, text=True, timeout=60
+    ).stdout
+    sizes: dict[str, int] = {}
+    for line in out.splitlines():
+        fields = line.split()
+        if len(fields) >= 2 and fields[0].startswith(".") and fields[1].isdigit():
+            sizes[fields[0]] = int(fields[1])
+    return sizes
+
+
+def _sized_symbols(path: Path) -> dict[str, tuple[int, int]]:
+    """name -> (address, size) of every sized symbol in an ELF or object (``avr-nm -S``), GCC's
+    ``.lto_priv.N`` suffixes dropped."""
+    out = subprocess.run(
+        ["avr-nm", "-S", str(path)], check=True, capture_output=True, text=True, timeout=60
+    ).stdout
+    found = {}
+    for line in out.splitlines():
+        fields = line.split()
+        if len(fields) == 4:
+            name = fields[3].split(".lto_priv.")[0]
+            found[name] = (int(fields[0], 16), int(fields[1], 16))
+    return found
+
+
+def static_ram(elf: Path, sizes: Path) -> StaticRam:
+    """The breakdown of ``elf``'s static RAM; ``sizes`` is the same build's pd_ram_sizes.o
+    (``make -C firmware avr avr-ram-sizes`` writes both)."""
+    symbols = _sized_symbols(elf)
+    parts = {name[len("pd_size_") :]: size for name, (_, size) in _sized_symbols(sizes).items()}
+    core = {
+        "packet": parts["packet"],
+        "command": parts["command"],
+        "dedupe": parts["dedupe"],
+        "registry": parts["outputs"] - parts["inputs"],
+        "inputs": parts["inputs"],
+    }
+    core["rest"] = parts["core"] - sum(core.values())
+    if symbols["core"][1] != parts["core"]:
+        raise AssertionError(f"{sizes} is not {elf}'s build: core {parts['core']} B")
+    # Merged constants (-fmerge-all-constants) share an address: each is counted once.
+    descriptors = {
+        address: size
+        for name, (address, size) in symbols.items()
+        if name.startswith("protoduino_") and name.endswith(("_msg", "_submsg_info"))
+    }
+    size = sections(elf)
+    return StaticRam(
+        total=size.get(".data", 0) + size.get(".bss", 0),
+        core=core,
+        descriptors=sum(descriptors.values()),
+        tx_ring=symbols["tx_buf"][1],
+        rx_ring=symbols["rx_buf"][1],
+        channels=symbols["channels"][1],
+    )
+
+
+#: The object pd_ram_sizes.c compiles to beside the default build's ELF (make avr-ram-sizes).
+RAM_SIZES_OBJECT = build.FIRMWARE_ELF.parent / "pd_ram_sizes.o"
+
+
+def build_static_ram() -> StaticRam:
+    """Build the default Uno firmware and its parts' sizes; where its static RAM goes."""
+    build.make(build.FIRMWARE_DIR, "avr", "avr-ram-sizes")
+    return static_ram(build.FIRMWARE_ELF, RAM_SIZES_OBJECT)

@@ -20,9 +20,6 @@
 #include "pd_user.h"
 #include "protoduino.pb.h"
 
-/* Reported in DeviceInfo.firmware_version; follows the Python package's version. */
-#define PD_FIRMWARE_VERSION "0.1.0"
-
 struct pd_core;
 
 /*

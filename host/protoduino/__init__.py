@@ -12,6 +12,7 @@ See README.md for the API and docs/protocol.md for the wire protocol.
 from __future__ import annotations
 
 from ._generated.schema_id import SCHEMA_ID
+from ._version import __version__
 from .board import Board, effective_speed
 from .boardoptions import BoardOptions
 from .constants import PROTOCOL_VERSION
@@ -19,11 +20,14 @@ from .errors import (
     AckTimeoutError,
     ArgumentError,
     ArgumentTypeError,
+    BadCommandError,
     BoardClosedError,
     BuildError,
     CaptureError,
     CommandRejectedError,
+    ConfigError,
     DeviceRebootedError,
+    ExtraMissingError,
     FeatureMissingError,
     FlashError,
     HandshakeError,
@@ -38,6 +42,7 @@ from .errors import (
     RebootLoopError,
     ReentrantCallError,
     SchemaMismatchError,
+    ServiceGenError,
     SimControlError,
     TimerInUseError,
     TransportError,
@@ -51,8 +56,6 @@ from .inputs import AnalogInput, Counter, DigitalInput, Reading
 from .outputs import DigitalOutput, PwmOutput, Servo
 from .readback import DeviceInfo, OutputState
 
-__version__ = "0.1.0"
-
 __all__ = [
     "PROTOCOL_VERSION",
     "SCHEMA_ID",
@@ -60,12 +63,14 @@ __all__ = [
     "AnalogInput",
     "ArgumentError",
     "ArgumentTypeError",
+    "BadCommandError",
     "Board",
     "BoardClosedError",
     "BoardOptions",
     "BuildError",
     "CaptureError",
     "CommandRejectedError",
+    "ConfigError",
     "Counter",
     "DeviceInfo",
     "DeviceRebootedError",
@@ -73,6 +78,7 @@ __all__ = [
     "DigitalOutput",
     "Event",
     "EventKind",
+    "ExtraMissingError",
     "FeatureMissingError",
     "FlashError",
     "HandshakeError",
@@ -90,6 +96,7 @@ __all__ = [
     "RebootLoopError",
     "ReentrantCallError",
     "SchemaMismatchError",
+    "ServiceGenError",
     "Servo",
     "SimControlError",
     "Stats",

@@ -29,6 +29,11 @@
      +-- ArgumentError            a value refused before anything ran; also a builtin ValueError
      +-- ArgumentTypeError        an argument of the wrong type; also a builtin TypeError
      +-- InputTimeoutError        an input's wait_for saw no matching value in time (TimeoutError)
+     +-- ServiceGenError          a user's .proto cannot become a service (protoduino gen)
+     +-- ConfigError              the ROS 2 bridge's robot.yaml is invalid; also a ValueError
+     +-- ExtraMissingError        a package of the ``ros2`` extra is missing; also an ImportError
+     +-- BadCommandError          the ROS 2 bridge refuses a message (a Twist, a servo command);
+                                  also a ValueError
 
 A refusal the device would give too (a pin that does not exist, an angle outside
 0..180) is a :class:`CommandRejectedError` with ``sent=False``; ArgumentError and
@@ -278,3 +283,21 @@ class ArgumentTypeError(ProtoduinoError, TypeError):
 
 class InputTimeoutError(ProtoduinoError, TimeoutError):
     """An input's ``wait_for`` saw no value that matched before its timeout."""
+
+
+class ServiceGenError(ProtoduinoError):
+    """The user's .proto cannot become a service (the message says what to change),
+    or a generator tool failed or is missing (:mod:`protoduino.servicegen`)."""
+
+
+class ConfigError(ProtoduinoError, ValueError):
+    """The ROS 2 bridge's configuration is invalid (the message names the key)."""
+
+
+class ExtraMissingError(ProtoduinoError, ImportError):
+    """A package of the ``ros2`` extra (cyclonedds, PyYAML) is not installed."""
+
+
+class BadCommandError(ProtoduinoError, ValueError):
+    """A message the ROS 2 bridge refuses, a Twist (:mod:`protoduino.ros2.drive`) or a servo
+    command (:mod:`protoduino.ros2.servos`): logged, counted on /diagnostics, nothing moves."""

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import toolrun
-from .errors import ProtoduinoError
+from .errors import ServiceGenError
 
 #: The most bytes a request, reply or report takes on the wire (protoduino.options).
 MAX_USER_BYTES = 64
@@ -66,11 +66,6 @@ FIRMWARE_STACK = 696
 #: stack deeper than the firmware's own deepest path, which the RAM budget is measured at.
 MAX_USER_LEVELS = (FIRMWARE_STACK - USER_CALL_STACK) // NANOPB_LEVEL_STACK
 NANOPB_VERSION = "0.4.7"
-
-
-class ServiceGenError(ProtoduinoError):
-    """The user's .proto cannot become a service (the message says what to change),
-    or a generator tool failed or is missing."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -376,7 +376,7 @@ static void test_get_info(void)
     CHECK_EQ(t_acks(&d, 9, &ack), 1);
     CHECK_EQ(ack.which_result, protoduino_Ack_info_tag);
     const protoduino_DeviceInfo *info = &ack.result.info;
-    CHECK(strcmp(info->firmware_version, "0.1.0") == 0);
+    CHECK(strcmp(info->firmware_version, PD_FIRMWARE_VERSION) == 0);
     CHECK(strcmp(info->board, "fake") == 0);
     CHECK_EQ(info->protocol_version, PD_PROTOCOL_VERSION);
     CHECK_EQ(info->schema_id, PD_SCHEMA_ID);

@@ -5,6 +5,7 @@
 #include <pb_encode.h>
 
 #include "pd_encode.h"
+#include "pd_protocol.h"
 #include "pd_test.h"
 
 /* 0 if both encoders agree (and every smaller buffer is refused), else the differing length. */
@@ -93,7 +94,7 @@ static void test_encode_ack_info(void)
     protoduino_DeviceInfo *info = &out.data.ack.result.info;
     out.data.ack.which_result = protoduino_Ack_info_tag;
     CHECK_EQ(compare(&out), 0); /* all defaults: an empty nested message */
-    strcpy(info->firmware_version, "0.1.0");
+    strcpy(info->firmware_version, PD_FIRMWARE_VERSION);
     strcpy(info->board, "uno");
     info->protocol_version = 1;
     info->schema_id = 0x614404ADu;

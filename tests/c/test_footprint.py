@@ -19,24 +19,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from protoduino_dev import rambudget
 
 ROOT = Path(__file__).resolve().parents[2]
 ELF = ROOT / "build" / "avr" / "protoduino.elf"
 FLASH_BUDGET = 26_624
 #: The ATmega328P's RAM: the static data alone must leave room for a stack.
 RAM_BYTES = 2_048
-
-
-def _sections(elf: Path) -> dict[str, int]:
-    out = subprocess.run(
-        ["avr-size", "-A", str(elf)], capture_output=True, text=True, check=True, timeout=60
-    ).stdout
-    sizes: dict[str, int] = {}
-    for line in out.splitlines():
-        parts = line.split()
-        if len(parts) == 3 and parts[0].startswith(".") and parts[1].isdigit():
-            sizes[parts[0]] = int(parts[1])
-    return sizes
 
 
 def test_uno_firmware_within_the_flash_budget(
@@ -56,7 +45,7 @@ def test_uno_firmware_within_the_flash_budget(
     printed = re.search(r"flash (\d+) B .*static RAM (\d+) B", build.stdout)
     assert printed, f"the build did not print the sizes:\n{build.stdout}"
 
-    sections = _sections(ELF)
+    sections = rambudget.sections(ELF)
     flash = sections[".text"] + sections.get(".data", 0)
     ram = sections.get(".data", 0) + sections.get(".bss", 0) + sections.get(".noinit", 0)
     assert (int(printed.group(1)), int(printed.group(2))) == (flash, ram)
@@ -70,3 +59,35 @@ def test_uno_firmware_within_the_flash_budget(
         )
     assert flash <= FLASH_BUDGET
     assert ram < RAM_BYTES
+
+
+def _quoted(doc: Path, name: str) -> str:
+    """The figure ``name`` a document quotes between its bench markers (bench.report.quote)."""
+    found = re.findall(rf"<!-- bench:{name} -->(.*?)<!-- /bench:{name} -->", doc.read_text(), re.S)
+    assert len(found) == 1, f"{doc}: {len(found)} quotes of {name}"
+    return str(found[0])
+
+
+def test_the_readmes_quote_the_builds_figures() -> None:
+    """firmware/README.md's and README.md's footprint and firmware/README.md's static RAM
+    breakdown are this build's (the bench writes them; `python -m bench.firmware` rewrites
+    them after a change), not a figure of another time."""
+    for tool in ("make", "avr-gcc", "avr-size", "avr-nm"):
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} is not installed (Debian packages gcc-avr, binutils-avr)")
+    static = rambudget.build_static_ram()
+    sections = rambudget.sections(ELF)
+    flash = sections[".text"] + sections.get(".data", 0)
+    rerun = "rerun `python -m bench.firmware`"
+    for doc in (ROOT / "firmware/README.md", ROOT / "README.md"):
+        figures = re.match(
+            r"flash ([\d,]+) B of .* static RAM ([\d,]+) B", _quoted(doc, "footprint")
+        )
+        assert figures, f"{doc}: the footprint quote does not give flash and static RAM"
+        quoted = tuple(int(n.replace(",", "")) for n in figures.groups())
+        assert quoted == (flash, static.total), (
+            f"{doc}: {quoted}, the build {flash, static.total}: {rerun}"
+        )
+    assert _quoted(ROOT / "firmware/README.md", "static_ram") == static.describe(), rerun
+    # The parts are read, not guessed: each exists in this build, and they fit in the total.
+    assert static.rest >= 0 and min(static.core.values()) > 0

@@ -51,7 +51,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("outgoing messages", ("pd_out",)),
     ("commands and inputs", ("pd_dispatch", "pd_inputs.c", "pd_user.c")),
     ("core", ("pd_core",)),
-    ("platforms", ("posix/", "simcontrol/", "avr/", "arduino/")),
+    # ramsizes/: not firmware, the Uno build's sizes of the core's parts (firmware/Makefile).
+    ("platforms", ("posix/", "simcontrol/", "avr/", "arduino/", "ramsizes/")),
 )
 
 SOURCE_SUFFIXES = (".c", ".h", ".ino")

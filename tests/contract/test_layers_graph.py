@@ -26,6 +26,7 @@ PYTHON_LAYERS: Sequence[tuple[str, Sequence[str]]] = (
         "declarations",
         (
             "protoduino._generated*",
+            "protoduino._version",
             "protoduino.constants",
             "protoduino.errors",
             "protoduino.clock",

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 from protoduino import servicegen
 from protoduino.cli.main import main
+from protoduino.errors import ServiceGenError
 from userbuilds import nested_proto
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -185,7 +186,7 @@ def test_what_it_cannot_carry_is_refused_by_name(
     proto.write_text(text)
     if options:
         (tmp_path / "mine.options").write_text(options)
-    with pytest.raises(servicegen.ServiceGenError, match=r"^mine\.proto: ") as error:
+    with pytest.raises(ServiceGenError, match=r"^mine\.proto: ") as error:
         gen(proto, tmp_path / "out")
     assert message in str(error.value)
 
@@ -215,7 +216,7 @@ def test_a_message_nested_deeper_than_the_stack_allows_is_refused(
         f"mine.proto: message Level{top + 1} nests {top + 1} levels of messages ({chain}), "
         f"more than the {top} a user message may have"
     )
-    with pytest.raises(servicegen.ServiceGenError) as error:
+    with pytest.raises(ServiceGenError) as error:
         gen(refused, tmp_path / "out")
     assert str(error.value).startswith(expected), error.value
     assert main(["gen", str(refused), "--out", str(tmp_path / "out-cli")]) == 1
@@ -229,7 +230,7 @@ def test_a_message_that_contains_itself_is_refused(tmp_path: Path) -> None:
         " service S { rpc F(A) returns (A); }"
     )
     with pytest.raises(
-        servicegen.ServiceGenError, match=r"^mine\.proto: message A contains itself \(A > B > A\)"
+        ServiceGenError, match=r"^mine\.proto: message A contains itself \(A > B > A\)"
     ):
         gen(proto, tmp_path / "out")
 
@@ -258,7 +259,7 @@ def test_a_failing_tool_is_each_generators_own_error(tmp_path: Path) -> None:
     from protoduino_dev import codegen
 
     cmd = [sys.executable, "-c", "import sys; print('said'); sys.exit('refused')"]
-    with pytest.raises(servicegen.ServiceGenError, match=r"-c .* failed:\nsaid\nrefused") as user:
+    with pytest.raises(ServiceGenError, match=r"-c .* failed:\nsaid\nrefused") as user:
         servicegen._run(cmd, tmp_path)
     with pytest.raises(codegen.CodegenError, match=r"-c .* failed:\nsaid\nrefused") as dev:
         codegen._run(cmd, tmp_path)

@@ -14,6 +14,7 @@ import subprocess
 import zipfile
 from pathlib import Path
 
+import protoduino
 import pytest
 
 pytestmark = pytest.mark.avr
@@ -87,6 +88,7 @@ def test_the_zip_installs_and_its_example_builds_as_in_the_ide(tmp_path: Path) -
     )
     assert properties["name"] == "Protoduino"
     assert properties["architectures"] == "avr"
+    assert properties["version"] == protoduino.__version__  # the one source (_version.py)
 
     # The IDE turns the .ino into C++ with Arduino.h included first.
     sketch = tmp_path / "sketch" / "Protoduino.ino.cpp"

@@ -105,7 +105,7 @@ class Recorder:
 
 def test_every_api_call(board: Board, sim: SimBoard) -> None:
     assert board.info.board == BOARD_NAME[sim.backend]
-    assert board.info.firmware_version == "0.1.0"
+    assert board.info.firmware_version == protoduino.__version__
     assert board.info.protocol_version == protoduino.PROTOCOL_VERSION
     assert board.info.schema_id == protoduino.SCHEMA_ID
     assert (board.info.num_pins, board.info.max_servos) == (20, 8)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 from fakedevice import FakeDevice
+from protoduino import __version__
 from protoduino.cli.main import COMMANDS, main
 from protoduino.cli.ports import classify
 from protoduino.simboard import SimBoard
@@ -127,7 +128,7 @@ def test_board_commands_against_the_sim(
 ) -> None:
     port = sim_board.port
     assert main(["info", port]) == 0
-    assert "firmware_version  0.1.0" in capsys.readouterr().out
+    assert f"firmware_version  {__version__}" in capsys.readouterr().out
     assert main(["ping", port, "-c", "2", "-i", "0.01", "-q"]) == 0
     assert "2 sent, 2 answered, 0 lost" in capsys.readouterr().out
     # Each change is awaited in the trace before the next command: an Ack says the

@@ -516,7 +516,10 @@ def test_get_info(sim_board: SimBoard, active: RawHost) -> None:
     ack = active.command(_T(message_id=5, get_info=pb.GetInfo()))
     info = ack.info
     assert ack.status == Status.STATUS_OK
-    assert (info.board, info.firmware_version) == (BOARD_NAME[sim_board.backend], "0.1.0")
+    assert (info.board, info.firmware_version) == (
+        BOARD_NAME[sim_board.backend],
+        protoduino.__version__,
+    )
     assert info.protocol_version == PROTOCOL_VERSION
     assert info.schema_id == protoduino.SCHEMA_ID
     assert (info.num_pins, info.max_servos, list(info.reserved_pins)) == (20, 8, [0, 1])

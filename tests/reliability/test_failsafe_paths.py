@@ -289,11 +289,24 @@ CHILD = textwrap.dedent(
     board = protoduino.Board.open(sys.argv[1], failsafe_timeout=float(sys.argv[2]))
     board.servo(9, safe=90).write(10)
     board.digital_output(12, safe=False).on()
-    board.digital_output(13, safe=False)
+    marker = board.digital_output(13, safe=False)
     print(board.session, flush=True)
-    sys.stdin.read()
+    for _ in sys.stdin:  # each line: an on and off edge of pin 13, a mark on the board's clock
+        marker.on()
+        marker.off()
+        print("marked", flush=True)
     """
 )
+
+
+def _mark_time(trace: list[dict[str, Any]], n: int) -> float | None:
+    """The board's time of the child's ``n``-th mark (the off edge after pin 13's ``n``-th on
+    edge), or None before it shows in the trace."""
+    lines = [c for c in trace if c["pin"] == 13]
+    ons = [i for i, c in enumerate(lines) if c["value"] == 1]
+    if len(ons) < n or ons[n - 1] + 1 >= len(lines):
+        return None
+    return float(lines[ons[n - 1] + 1]["t"])
 
 
 def _raw_marker(port: str, session: int) -> None:
@@ -341,17 +354,40 @@ def test_host_process_killed(sim: SimBoard) -> None:
     )
     try:
         assert child.stdout is not None
+        assert child.stdin is not None
         session = int(child.stdout.readline())
-        _wait_trace(sim, lambda tr: 1 if pin_values(tr, 12)[-1:] == [1] else None, 5.0, "pin 12 on")
-        time.sleep(2 * t)  # the child pings: alive for longer than T, nothing goes safe
+        on = _wait_trace(
+            sim,
+            lambda tr: next((c["t"] for c in tr if c["pin"] == 12 and c["value"] == 1), None),
+            5.0,
+            "pin 12 on",
+        )
+        # The child pings: alive for 2T on the board's clock, and nothing goes safe. The child's
+        # marks on pin 13 date that span; the wall clock only paces them.
+        marks, mark = 0, on
+        while mark < on + 2 * t:
+            child.stdin.write("mark\n")
+            child.stdin.flush()
+            assert child.stdout.readline() == "marked\n"
+            marks += 1
+            mark = _wait_trace(sim, lambda tr, n=marks: _mark_time(tr, n), 5.0, f"mark {marks}")
+            time.sleep(0.1)
+        assert [c for c in _lines(sim, 12) if on < c["t"] <= mark] == []
         assert pin_values(sim.trace(), 12)[-1] == 1
         killed = time.monotonic()
         os.kill(child.pid, signal.SIGKILL)
         child.wait(5)
         _raw_marker(sim.port, session)
         late = time.monotonic() - killed  # how long after the kill the marker was set, at most
+        last_mark = mark
         mark = _wait_trace(
-            sim, lambda tr: ([c["t"] for c in tr if c["pin"] == 13] or [None])[-1], 5, "mark"
+            sim,
+            lambda tr: next(
+                (c["t"] for c in tr if c["pin"] == 13 and c["value"] == 1 and c["t"] > last_mark),
+                None,
+            ),
+            5,
+            "mark",
         )
         # The last Ping came at most T/4 before the kill, the kill at most `late` before the
         # mark: the failsafe fires T after that Ping, i.e. in this window around the mark.

@@ -16,11 +16,11 @@ pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing
 pytest.importorskip("rosbags", reason="rosbags is not installed")
 
 import numpy as np
+from protoduino.errors import BadCommandError, ConfigError
 from protoduino.events import Event, EventKind, Stats
 from protoduino.ros2 import msgs
 from protoduino.ros2.config import (
     BridgeConfig,
-    ConfigError,
     DigitalInputConfig,
     DriveConfig,
     MotorConfig,
@@ -31,7 +31,6 @@ from protoduino.ros2.config import (
 from protoduino.ros2.dds import dds_topic, ros_topic
 from protoduino.ros2.diagnostics import ERROR, OK, WARN, Health
 from protoduino.ros2.drive import (
-    BadCommandError,
     DiffDrive,
     Motor,
     WheelCommand,

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -12,10 +11,11 @@ import protoduino
 import pytest
 from fakedevice import FakeDevice, ack
 from protoduino import Board
-from protoduino.constants import PacketType
+from protoduino.constants import PING_INTERVAL, PacketType
 from protoduino.framing import StreamDecoder, frame_size
-from protoduino.messages import ArduinoIn, Status
+from protoduino.messages import ArduinoIn, Status, parse_in
 from protoduino.packets import Packet, parse_control
+from protoduino.testing import VirtualDevice
 
 ACK_TIMEOUT = 0.1
 
@@ -209,21 +209,32 @@ def test_bytes_in_flight_stay_within_the_devices_receive_buffer(fake: FakeDevice
         assert board.stats.retransmits == 0
 
 
-def test_automatic_ping_and_pause(fake: FakeDevice) -> None:
-    with Board.open(fake.port, ping=True) as board:
-        assert fake.wait_for(lambda: len(fake.commands("ping")) >= 2, timeout=3)
+def _pings_sent(device: VirtualDevice) -> int:
+    """The Pings the board sent (the device keeps them out of ``executed``)."""
+    return sum(
+        1
+        for kind, payload in device.received
+        if kind is PacketType.COMMAND and parse_in(payload).WhichOneof("data") == "ping"
+    )
+
+
+def test_automatic_ping_and_pause() -> None:
+    """The board's automatic Ping, paused and resumed, judged on the device's manual clock: a
+    pause of several intervals sends none (no wall-clock sleep decides it). The layer's exact
+    schedule is tests/unit/test_layers.py's."""
+    device = VirtualDevice()
+    with device.open_board(ping=True) as board:
+        device.run(2.5 * PING_INTERVAL)
+        assert _pings_sent(device) >= 2
         board.pinging = False
-        # A ping already sent still gets its Ack: wait until none is in flight or queued.
-        assert fake.wait_for(
-            lambda: not board.rpc_state().inflight and board.rpc_state().urgent == 0
-        )
-        count = len(fake.commands("ping"))
-        # More than one ping interval without a ping; the exact schedule, and that a pause
-        # sends none at all, are judged on an injected clock in tests/unit/test_layers.py.
-        time.sleep(1.3)
-        assert len(fake.commands("ping")) == count
+        device.run(PING_INTERVAL)  # a Ping already sent or queued is answered meanwhile
+        assert not board.rpc_state().inflight and board.rpc_state().urgent == 0
+        count = _pings_sent(device)
+        device.run(5 * PING_INTERVAL)
+        assert _pings_sent(device) == count
         board.pinging = True
-        assert fake.wait_for(lambda: len(fake.commands("ping")) > count, timeout=2)
+        device.run(1.5 * PING_INTERVAL)
+        assert _pings_sent(device) > count
         assert board.stats.pings >= 3
         assert board.stats.rtt is not None
 

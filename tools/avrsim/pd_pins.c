@@ -1,7 +1,7 @@
 /*
  * pd_pins.c: classify pin activity into servo pulses and digital levels.
  *
- * The rules, all in emulated time:
+ * The rules, all in emulated time (the numbers are pd_pins.h's PD_PINS_*_US):
  * - A level is the pin's output state (DDR and PORT bits both set). The
  *   runner samples on every register write; a sample equal to the previous
  *   level is ignored. This is what makes the measurement immune to
@@ -43,8 +43,6 @@
 
 #include <math.h>
 #include <string.h>
-
-#define PD_HYST_US 0.75
 
 static void pd_emit(pd_pins_t *pins, int n, uint64_t cycle, enum pd_pin_mode mode,
                     unsigned value)
@@ -105,7 +103,7 @@ static void pd_pulse(pd_pins_t *pins, int n, uint64_t rise, uint64_t fall)
             p->servo = 1;
             p->cand = 0;
             pd_emit_servo(pins, n, p->cand_rise, p->cand_us);
-            if (fabs(us - p->servo_us) >= PD_HYST_US) {
+            if (fabs(us - p->servo_us) >= PD_PINS_HYST_US) {
                 pd_set_cand(p, rise, fall, us);
             }
         } else {
@@ -115,17 +113,17 @@ static void pd_pulse(pd_pins_t *pins, int n, uint64_t rise, uint64_t fall)
             pd_set_cand(p, rise, fall, us);
         }
     } else if (p->cand) {
-        if (fabs(us - p->servo_us) < PD_HYST_US) {
+        if (fabs(us - p->servo_us) < PD_PINS_HYST_US) {
             p->cand = 0; /* the candidate was an outlier */
         } else {
             double cand_us = p->cand_us;
             p->cand = 0;
             pd_emit_servo(pins, n, p->cand_rise, cand_us);
-            if (fabs(us - cand_us) >= PD_HYST_US) {
+            if (fabs(us - cand_us) >= PD_PINS_HYST_US) {
                 pd_set_cand(p, rise, fall, us);
             }
         }
-    } else if (fabs(us - p->servo_us) >= PD_HYST_US) {
+    } else if (fabs(us - p->servo_us) >= PD_PINS_HYST_US) {
         pd_set_cand(p, rise, fall, us);
     }
     p->last_rise = rise;
@@ -205,10 +203,10 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
 {
     memset(pins, 0, sizeof *pins);
     pins->cycles_per_us = (double)frequency / 1e6;
-    pins->max_pulse = (uint64_t)frequency * 3U / 1000U;
-    pins->max_period = (uint64_t)frequency * 50U / 1000U;
-    pins->low_wait = (uint64_t)frequency * 50U / 1000U;
-    pins->pwm_steady = (uint64_t)frequency * 5U / 1000U;
+    pins->max_pulse = (uint64_t)frequency * PD_PINS_MAX_PULSE_US / 1000000U;
+    pins->max_period = (uint64_t)frequency * PD_PINS_MAX_PERIOD_US / 1000000U;
+    pins->low_wait = (uint64_t)frequency * PD_PINS_LOW_WAIT_US / 1000000U;
+    pins->pwm_steady = (uint64_t)frequency * PD_PINS_PWM_STEADY_US / 1000000U;
     pins->emit = emit;
     pins->ctx = ctx;
     for (int n = 0; n < PD_PINS_COUNT; n++) {

@@ -16,6 +16,17 @@
 
 #define PD_PINS_COUNT 20 /* Uno: D0..D13, A0..A5 = 14..19 */
 
+/*
+ * What the trace can show, in emulated microseconds: the one place these numbers are
+ * written. protoduino.simboard.SimBoard's docstring and docs/api.md state them to the
+ * package's users, who have no copy of this file (tests/contract/test_docs.py compares).
+ */
+#define PD_PINS_MAX_PULSE_US 3000UL   /* a longer high is a digital 1, not a pulse */
+#define PD_PINS_MAX_PERIOD_US 50000UL /* pulses further apart are not one servo signal */
+#define PD_PINS_LOW_WAIT_US 50000UL   /* how long an output low waits for a first pulse */
+#define PD_PINS_PWM_STEADY_US 5000UL  /* a PWM pin without an edge this long: duty 0 or 255 */
+#define PD_PINS_HYST_US 0.75          /* a smaller change of a servo's width is no change */
+
 enum pd_pin_mode {
     PD_PIN_MODE_NONE = 0,
     PD_PIN_MODE_DIGITAL,
@@ -61,8 +72,8 @@ typedef struct {
     double cycles_per_us;
     uint64_t max_pulse;  /* longer highs are digital levels */
     uint64_t max_period; /* pulses further apart are not one servo signal */
-    uint64_t low_wait;   /* how long an output low waits for a first pulse (50 ms) */
-    uint64_t pwm_steady; /* a PWM pin without an edge this long is at duty 0 or 255 (5 ms) */
+    uint64_t low_wait;   /* how long an output low waits for a first pulse */
+    uint64_t pwm_steady; /* a PWM pin without an edge this long is at duty 0 or 255 */
     pd_pins_emit_fn emit;
     void *ctx;
 } pd_pins_t;

@@ -41,7 +41,8 @@ def register(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.proto is None:
         return _builtin(args)
-    from ..servicegen import ServiceGenError, generate
+    from ..errors import ServiceGenError
+    from ..servicegen import generate
 
     try:
         result = generate(args.proto, args.out if args.out is not None else Path.cwd())

@@ -19,14 +19,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from .config import (
-    EXTRA_MISSING,
-    BridgeConfig,
-    ConfigError,
-    ExtraMissingError,
-    load_config,
-    parse_config,
-)
+from ..errors import ConfigError, ExtraMissingError
+from .config import EXTRA_MISSING, BridgeConfig, load_config, parse_config
 
 if TYPE_CHECKING:
     from .bridge import Bridge

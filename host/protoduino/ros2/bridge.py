@@ -46,13 +46,13 @@ from cyclonedds.util import duration
 
 from ..board import Board, DigitalOutput, Servo
 from ..closing import ClosedOnExit
-from ..errors import CommandRejectedError, ProtoduinoError
+from ..errors import BadCommandError, CommandRejectedError, ConfigError, ProtoduinoError
 from ..events import Event, EventKind
 from . import inputs
-from .config import BridgeConfig, ConfigError, ServoConfig
+from .config import BridgeConfig, ServoConfig
 from .dds import DEFAULT_QOS, SENSOR_QOS, dds_topic, ros_topic
 from .diagnostics import Health
-from .drive import BadCommandError, DiffDrive, Motor, twist_to_wheels
+from .drive import DiffDrive, Motor, twist_to_wheels
 from .msgs import Bool, DiagnosticArray, Empty, Float32, Float64, Int32MultiArray, JointState, Twist
 from .servos import joint_pose, servo_degrees
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
-from ..errors import ProtoduinoError
+from ..errors import ConfigError, ExtraMissingError
 
 #: ROS 2's defaults (the usual cmd_vel watchdog and the diagnostics rate).
 CMD_VEL_TIMEOUT = 0.5
@@ -38,14 +38,6 @@ T = TypeVar("T")
 
 # A ROS 2 name token: letters, digits and underscores, not starting with a digit.
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-
-
-class ConfigError(ProtoduinoError, ValueError):
-    """The bridge's configuration is invalid (the message names the key)."""
-
-
-class ExtraMissingError(ProtoduinoError, ImportError):
-    """A package of the ``ros2`` extra (cyclonedds, PyYAML) is not installed."""
 
 
 EXTRA_MISSING = "the ROS 2 bridge needs {package}: pip install 'protoduino[ros2]'"

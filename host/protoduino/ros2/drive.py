@@ -20,15 +20,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
+from ..errors import BadCommandError
 from .config import DriveConfig, MotorConfig
 
 #: A PWM duty's range (analogWrite's).
 MAX_DUTY = 255
-
-
-class BadCommandError(ValueError):
-    """A message the bridge refuses, a Twist here or a servo command (:mod:`.servos`):
-    logged, counted on /diagnostics, nothing moves."""
 
 
 class PwmOutput(Protocol):

@@ -42,7 +42,8 @@ def example_config() -> BridgeConfig:
     try:
         import yaml
     except ImportError:
-        from .config import EXTRA_MISSING, ExtraMissingError
+        from ..errors import ExtraMissingError
+        from .config import EXTRA_MISSING
 
         raise ExtraMissingError(EXTRA_MISSING.format(package="PyYAML")) from None
     return parse_config(yaml.safe_load(ROBOT_YAML))

@@ -12,8 +12,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from ..errors import BadCommandError
 from .config import ServoConfig
-from .drive import BadCommandError
 
 
 def servo_degrees(value: float) -> int:
