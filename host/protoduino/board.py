@@ -575,7 +575,7 @@ class Board(ClosedOnExit):
                 )
             current = self._outputs.get(pin)
             if current is not None and current.mode is not SERVO:
-                raise refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
+                raise refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is {current.mode.a_pin}")
             servos = sum(1 for o in self._outputs.values() if o.mode is SERVO)
             if current is None and servos >= self.info.max_servos:
                 raise refused(
@@ -639,7 +639,7 @@ class Board(ClosedOnExit):
         with self._lock:
             current = self._outputs.get(pin)
             if current is not None and current.mode is not DIGITAL:
-                raise refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
+                raise refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is {current.mode.a_pin}")
         msg = ArduinoIn()
         msg.digital_init.pin = pin
         msg.digital_init.safe_level = safe
@@ -1303,7 +1303,7 @@ class Board(ClosedOnExit):
         if mode.feature not in self.info.features:
             raise FeatureMissingError(
                 mode.feature,
-                f"{mode.name.replace('_', ' ')}: {feature_hint(mode.feature)} "
+                f"{mode.words}: {feature_hint(mode.feature)} "
                 f"({status_name(Status.STATUS_NOT_SUPPORTED)})",
             )
 
@@ -1314,7 +1314,7 @@ class Board(ClosedOnExit):
             if pin not in capable:
                 raise refused(
                     Status.STATUS_NOT_SUPPORTED,
-                    f"pin {pin} cannot be a {mode.name.replace('_', ' ')} pin on this "
+                    f"pin {pin} cannot be {mode.a_pin} on this "
                     f"{self.info.board} (those are {', '.join(map(str, capable)) or 'none'})",
                 )
 
@@ -1324,7 +1324,7 @@ class Board(ClosedOnExit):
         if current is not None and current.mode is not mode:
             raise refused(
                 Status.STATUS_PIN_IN_USE,
-                f"pin {pin} is a {current.mode.name.replace('_', ' ')} pin",
+                f"pin {pin} is {current.mode.a_pin}",
             )
 
     def _pins_of(self, mode: PinMode) -> set[int]:

@@ -15,7 +15,7 @@ def test_pwm(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert capsys.readouterr().out.strip() == "pwm 3: 128"
     (init,) = fake.commands("pwm_init")
     assert init.msg.pwm_init.safe_duty == 4 and fake.values[3] == 128
-    assert main(["pwm", fake.port, "4", "10"]) == 1
+    assert main(["pwm", fake.port, "4", "10"]) == 2  # refused before anything is sent
     err = capsys.readouterr().err
     assert "protoduino pwm:" in err and "STATUS_NOT_SUPPORTED" in err and "3, 9, 10, 11" in err
 
@@ -41,8 +41,10 @@ def test_read_once(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None
 def test_read_refuses_a_pin_that_cannot(
     fake: FakeDevice, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(["read", fake.port, "2", "--analog"]) == 1
-    assert "STATUS_NOT_SUPPORTED" in capsys.readouterr().err
+    assert main(["read", fake.port, "2", "--analog"]) == 2  # refused before anything is sent
+    err = capsys.readouterr().err
+    assert "pin 2 cannot be an analog input pin on this fake" in err
+    assert "STATUS_NOT_SUPPORTED" in err
     assert fake.commands("analog_input_init") == []
 
 

@@ -33,7 +33,7 @@ from typing import NoReturn
 
 from .. import __version__, plugins
 from ..errors import ProtoduinoError
-from .options import capture_check
+from .options import capture_check, error
 
 log = logging.getLogger("protoduino.cli")
 
@@ -163,8 +163,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _stdout_gone()
         return 0
     except ProtoduinoError as exc:  # a command that let one through: still one line
-        print(f"protoduino {args.command}: {exc}", file=sys.stderr)
-        return 1
+        return error(args.command, exc)
     except Exception as exc:  # a bug: one line, the traceback only with -vv
         log.debug("traceback", exc_info=True)
         print(

@@ -14,12 +14,19 @@ from ..board import Board
 from ..boardoptions import BoardOptions
 from ..capture import MIN_PART
 from ..constants import ACK_TIMEOUT, HANDSHAKE_TIMEOUT
-from ..errors import CommandRejectedError, ProtoduinoError, TransportError
+from ..errors import (
+    ArgumentError,
+    ArgumentTypeError,
+    CommandRejectedError,
+    ProtoduinoError,
+    TransportError,
+)
 from ..messages import Status
 from ..transport import FrameMonitor
 from . import argtypes
 
-#: Refusals that mean a value on the command line is wrong for this device: exit status 2.
+#: Refusals by the device that mean a value on the command line is wrong for it (a pin it
+#: does not have or keeps for itself, found out only from its info): exit status 2.
 BAD_VALUE = frozenset({Status.STATUS_INVALID_PIN, Status.STATUS_RESERVED_PIN})
 
 
@@ -187,16 +194,29 @@ def open_board(
     return board
 
 
-def error(command: str, message: object) -> int:
-    print(f"protoduino {command}: {message}", file=sys.stderr)
+def exit_status(problem: object) -> int:
+    """The exit status of a command that ends on ``problem`` (README, "Exit statuses"): 2 for
+    a value refused before anything was sent (by the host, with the status the device would
+    give, ``sent=False``; an ``ArgumentError``) and for a pin the device does not have or
+    keeps for itself, known only from its info; 1 for anything else that went wrong."""
+    if isinstance(problem, ArgumentError | ArgumentTypeError):
+        return 2
+    if isinstance(problem, CommandRejectedError):
+        return 2 if not problem.sent or problem.status in BAD_VALUE else 1
     return 1
+
+
+def error(command: str, problem: object) -> int:
+    """Say what went wrong in one line on stderr; its exit status (:func:`exit_status`)."""
+    print(f"protoduino {command}: {problem}", file=sys.stderr)
+    return exit_status(problem)
 
 
 def with_board(
     command: str, args: argparse.Namespace, body: Callable[[Board], int], *, ping: bool = True
 ) -> int:
-    """Open the board, run ``body``, close it; a ProtoduinoError becomes exit status 1,
-    and so does a capture that stopped (:func:`capture_verdict`)."""
+    """Open the board, run ``body``, close it; a ProtoduinoError becomes its line and exit
+    status (:func:`error`), and a capture that stopped makes it 1 (:func:`capture_verdict`)."""
     try:
         board = open_board(args, ping=ping)
     except ProtoduinoError as exc:
@@ -204,12 +224,6 @@ def with_board(
     try:
         with board:
             rc = body(board)
-    except CommandRejectedError as exc:
-        # A pin the device does not have or keeps for itself is a bad value on the
-        # command line like any other (exit status 2), found out only from its info.
-        rc = error(command, exc)
-        if exc.status in BAD_VALUE:
-            rc = 2
     except ProtoduinoError as exc:
         rc = error(command, exc)
     return capture_verdict(command, board, rc)
