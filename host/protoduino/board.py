@@ -57,6 +57,7 @@ from typing import TYPE_CHECKING, Any, Literal, SupportsFloat, TypeVar
 
 from ._generated import protoduino_pb2 as pb
 from .arguments import (
+    Pin,
     RealNumber,
     check_failsafe_ms,
     check_int,
@@ -64,6 +65,7 @@ from .arguments import (
     check_session,
     interval_ms,
     period_ms,
+    pin_number,
     refused,
     whole_number,
 )
@@ -479,7 +481,7 @@ class Board(ClosedOnExit):
 
     def servo(
         self,
-        pin: int,
+        pin: Pin,
         safe: int | Literal["detach"] | None = None,
         *,
         safe_us: int | None = None,
@@ -511,7 +513,7 @@ class Board(ClosedOnExit):
 
     def submit_servo(
         self,
-        pin: int,
+        pin: Pin,
         safe: int | Literal["detach"] | None = None,
         *,
         safe_us: int | None = None,
@@ -528,7 +530,7 @@ class Board(ClosedOnExit):
 
     def _servo_init(  # noqa: PLR0917  (servo()'s arguments, checked in one place)
         self,
-        pin: int,
+        pin: Pin,
         safe: int | Literal["detach"] | None,
         safe_us: int | None,
         min_us: int,
@@ -617,7 +619,7 @@ class Board(ClosedOnExit):
             )
         return us_per_s
 
-    def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
+    def digital_output(self, pin: Pin, safe: bool = False) -> DigitalOutput:
         """Configure ``pin`` as a digital output; it takes its ``safe`` level at once.
 
         Again with the same ``safe`` level, it changes nothing at the pin.
@@ -626,13 +628,13 @@ class Board(ClosedOnExit):
         self._send(msg, on_ok)
         return output
 
-    def submit_digital_output(self, pin: int, safe: bool = False) -> Future[DigitalOutput]:
+    def submit_digital_output(self, pin: Pin, safe: bool = False) -> Future[DigitalOutput]:
         """:meth:`digital_output` without waiting: a future of the output, resolved by the Ack."""
         msg, on_ok, output = self._digital_init(pin, safe)
         return self._future(msg, on_ok, _returning(output))
 
     def _digital_init(
-        self, pin: int, safe: bool
+        self, pin: Pin, safe: bool
     ) -> tuple[ArduinoIn, Callable[[], None], DigitalOutput]:
         pin = self._check_pin(pin, DIGITAL)
         safe = check_level("safe", safe)  # bool("no") and bool(2) are True: no guessing
@@ -646,7 +648,7 @@ class Board(ClosedOnExit):
         state = _Output(DIGITAL, msg.SerializeToString(), int(safe))
         return msg, lambda: self._set_output(pin, state), DigitalOutput(self, pin)
 
-    def pwm_output(self, pin: int, safe: RealNumber = 0) -> PwmOutput:
+    def pwm_output(self, pin: Pin, safe: RealNumber = 0) -> PwmOutput:
         """Configure ``pin`` as a PWM output (duty 0..255); it takes its ``safe`` duty at once.
 
         The failsafe, :meth:`stop` and an interlock drive it back to ``safe`` (0,
@@ -658,12 +660,12 @@ class Board(ClosedOnExit):
         self._send(msg, on_ok)
         return output
 
-    def submit_pwm_output(self, pin: int, safe: RealNumber = 0) -> Future[PwmOutput]:
+    def submit_pwm_output(self, pin: Pin, safe: RealNumber = 0) -> Future[PwmOutput]:
         """:meth:`pwm_output` without waiting: a future of the output, resolved by the Ack."""
         msg, on_ok, output = self._pwm_init(pin, safe)
         return self._future(msg, on_ok, _returning(output))
 
-    def _pwm_init(self, pin: int, safe: object) -> tuple[ArduinoIn, Callable[[], None], PwmOutput]:
+    def _pwm_init(self, pin: Pin, safe: object) -> tuple[ArduinoIn, Callable[[], None], PwmOutput]:
         # The device's order (docs/protocol.md section 7, rule 13).
         pin = self._check_pin(pin, PWM)
         if pin in TIMER0_PWM_PINS.get(self.info.board, ()):
@@ -696,7 +698,7 @@ class Board(ClosedOnExit):
 
     def digital_input(
         self,
-        pin: int,
+        pin: Pin,
         *,
         pull_up: bool = False,
         debounce_ms: int = 0,
@@ -718,7 +720,7 @@ class Board(ClosedOnExit):
 
     def submit_digital_input(
         self,
-        pin: int,
+        pin: Pin,
         *,
         pull_up: bool = False,
         debounce_ms: int = 0,
@@ -730,13 +732,13 @@ class Board(ClosedOnExit):
         return self._future(msg, on_ok, _returning(make()))
 
     def _digital_input_init(
-        self, pin: int, pull_up: object, debounce_ms: object, interlock: object
+        self, pin: Pin, pull_up: object, debounce_ms: object, interlock: object
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], DigitalInput]]:
         # The device's order (docs/protocol.md section 7, rules 11 and 14): the feature,
         # the arguments, the pin, then whether it is free.
         if not isinstance(pull_up, bool):
             raise ArgumentTypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
-        pin = check_int("pin", pin)
+        pin = self.pin_number(pin)
         self._check_feature(DIGITAL_INPUT)
         debounce = check_int("debounce_ms", debounce_ms)
         if not 0 <= debounce <= DEBOUNCE_MAX_MS:
@@ -762,7 +764,7 @@ class Board(ClosedOnExit):
         return msg, self._input_recorder(pin, DIGITAL_INPUT, msg), make
 
     def analog_input(
-        self, pin: int, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
+        self, pin: Pin, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
     ) -> AnalogInput:
         """Configure analog input ``pin`` (``info.analog_pins``; A0 is 14 on the Uno).
 
@@ -776,14 +778,14 @@ class Board(ClosedOnExit):
         return self._input(msg, on_ok, make)
 
     def submit_analog_input(
-        self, pin: int, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
+        self, pin: Pin, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
     ) -> Future[AnalogInput]:
         """:meth:`analog_input` without waiting, resolved by the Ack."""
         msg, on_ok, make = self._analog_input_init(pin, rate_hz, threshold, heartbeat)
         return self._future(msg, on_ok, _returning(make()))
 
     def _analog_input_init(
-        self, pin: int, rate_hz: object, threshold: object, heartbeat: object
+        self, pin: Pin, rate_hz: object, threshold: object, heartbeat: object
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], AnalogInput]]:
         # The device's order (rules 11 and 14): the feature, the pin's number, the
         # arguments, a reserved pin, the pin's ADC, then whether it is free.
@@ -807,7 +809,7 @@ class Board(ClosedOnExit):
         return msg, self._input_recorder(pin, ANALOG_INPUT, msg), make
 
     def counter(
-        self, pin: int, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
+        self, pin: Pin, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
     ) -> Counter:
         """Count ``edge`` edges on ``pin`` (``info.counter_pins``) in an interrupt.
 
@@ -819,14 +821,14 @@ class Board(ClosedOnExit):
         return self._input(msg, on_ok, make)
 
     def submit_counter(
-        self, pin: int, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
+        self, pin: Pin, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
     ) -> Future[Counter]:
         """:meth:`counter` without waiting, resolved by the Ack."""
         msg, on_ok, make = self._counter_init(pin, edge, pull_up, rate_hz)
         return self._future(msg, on_ok, _returning(make()))
 
     def _counter_init(
-        self, pin: int, edge: object, pull_up: object, rate_hz: object
+        self, pin: Pin, edge: object, pull_up: object, rate_hz: object
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], Counter]]:
         # As an analog input's (rule 14), with the pin's interrupt.
         if not isinstance(pull_up, bool):
@@ -954,18 +956,18 @@ class Board(ClosedOnExit):
         msg.heartbeat.SetInParent()
         return msg
 
-    def release(self, pin: int) -> None:
+    def release(self, pin: Pin) -> None:
         """Release an output: a servo's pulses stop, a digital pin becomes an input.
 
         The pin is then free for any mode (and a servo's slot for another pin).
         """
         self._send(*self._release(pin))
 
-    def submit_release(self, pin: int) -> Future[None]:
+    def submit_release(self, pin: Pin) -> Future[None]:
         """:meth:`release` without waiting: a future resolved by the Ack."""
         return self._future(*self._release(pin), _no_value)
 
-    def _release(self, pin: int) -> tuple[ArduinoIn, Callable[[], None]]:
+    def _release(self, pin: Pin) -> tuple[ArduinoIn, Callable[[], None]]:
         pin = self._check_pin(pin)
         with self._lock:
             if pin not in self._outputs:
@@ -1278,10 +1280,17 @@ class Board(ClosedOnExit):
 
     # --- internals ------------------------------------------------------------------------
 
+    def pin_number(self, pin: object) -> int:
+        """The number of ``pin``, given by number or by its name on the board as Arduino
+        writes it: ``"A0"`` is the device's first analog input (``info.analog_pins``, 14 on
+        the Uno). Every method that takes a pin takes either."""
+        return pin_number(pin, self.info.analog_pins)
+
     def _check_pin(self, pin: object, mode: PinMode | None = None, *, reserved: bool = True) -> int:
-        """The pin as an int, checked as the device does first: ``mode``'s feature built in
-        (rule 11), the pin's number, and (unless ``reserved=False``) not reserved."""
-        pin = check_int("pin", pin)
+        """The pin as an int (:meth:`pin_number`), checked as the device does first:
+        ``mode``'s feature built in (rule 11), the pin's number, and (unless
+        ``reserved=False``) not reserved."""
+        pin = self.pin_number(pin)
         if self._closed:
             raise BoardClosedError("the board is closed")
         if mode is not None:

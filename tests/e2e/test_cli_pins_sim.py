@@ -56,3 +56,12 @@ def test_read_prints_what_the_firmware_reads(
 def test_servo_takes_a_real_angle(sim_board: SimBoard) -> None:
     assert main(["servo", sim_board.port, "9", "89.6"]) == 0  # 90 degrees: 1472 us
     wait_for_pin(sim_board, 9, lambda v: bool(v) and abs(v[-1] - 1472) <= PULSE_TOLERANCE_US)
+
+
+def test_an_analog_pin_by_its_board_name(
+    sim_board: SimBoard, capsys: pytest.CaptureFixture[str]
+) -> None:
+    sim_board.set_analog(15, 456)  # A1
+    assert main(["read", sim_board.port, "A1", "--analog", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert (got["pin"], got["value"]) == (15, 456)

@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
             kind: InputKind = item.kind or default_kind(args)
             # Listening before the Init: its first value, and every change after it,
             # reach the printer in the order they came.
-            board.inputs.add_sink(kind, item.pin, printer.sink(kind))
+            board.inputs.add_sink(kind, board.pin_number(item.pin), printer.sink(kind))
             watched.append((kind, configure(board, item.pin, kind, args)))
         started: set[int] = set()
         changes = 0
