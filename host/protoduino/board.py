@@ -242,6 +242,39 @@ TIMER0_PWM_PINS: dict[str, frozenset[int]] = {
 }
 
 
+def conflict(
+    board: str, pin: int, mode: PinMode, held: Mapping[int, PinMode]
+) -> CommandRejectedError | None:
+    """Why configuring ``pin`` as ``mode`` is refused while the pins of ``held`` are
+    configured (pin -> mode), in the device's order (docs/protocol.md section 7, rule 13);
+    None if nothing rules it out. The same mode again is a new configuration, not a conflict.
+
+    A servo while a Timer1 pin does PWM (the timer would have to do both), then the pin
+    itself held by another mode, then PWM on a Timer1 pin while a servo runs. The board
+    checks what it configured with it; ``protoduino``'s commands, which resume a session an
+    earlier command configured, explain the device's own refusal with it from what the
+    device says it drives (``read_outputs``).
+    """
+    timer1 = TIMER1_PWM_PINS.get(board, frozenset())
+    if mode is SERVO:
+        pwm = sorted(p for p in timer1 if held.get(p) is PWM)
+        if pwm:  # checked before the pin itself, as the device does
+            return refused(
+                Status.STATUS_TIMER_IN_USE,
+                f"pin {pwm[0]} does PWM on the timer the servos need (release it first)",
+            )
+    current = held.get(pin)
+    if current is not None and current is not mode:
+        return refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is {current.a_pin}")
+    if mode is PWM and pin in timer1 and SERVO in held.values():
+        return refused(
+            Status.STATUS_TIMER_IN_USE,
+            f"pin {pin}'s PWM timer makes the servo pulses while a servo runs "
+            "(release the servos first, or use another PWM pin)",
+        )
+    return None
+
+
 #: What a pose sets.
 PoseOutput = Servo | DigitalOutput | PwmOutput
 
@@ -569,15 +602,8 @@ class Board(ClosedOnExit):
                 raise refused(Status.STATUS_OUT_OF_RANGE, f"safe {safe} degrees is outside 0..180")
             init.safe_degrees = safe
         with self._lock:
-            pwm = sorted(self._timer1_pins() & self._pins_of(PWM))
-            if pwm:  # checked before the pin itself, as the device does (rule 13)
-                raise refused(
-                    Status.STATUS_TIMER_IN_USE,
-                    f"pin {pwm[0]} does PWM on the timer the servos need (release it first)",
-                )
+            self._check_free(pin, SERVO)
             current = self._outputs.get(pin)
-            if current is not None and current.mode is not SERVO:
-                raise refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is {current.mode.a_pin}")
             servos = sum(1 for o in self._outputs.values() if o.mode is SERVO)
             if current is None and servos >= self.info.max_servos:
                 raise refused(
@@ -639,9 +665,7 @@ class Board(ClosedOnExit):
         pin = self._check_pin(pin, DIGITAL)
         safe = check_level("safe", safe)  # bool("no") and bool(2) are True: no guessing
         with self._lock:
-            current = self._outputs.get(pin)
-            if current is not None and current.mode is not DIGITAL:
-                raise refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is {current.mode.a_pin}")
+            self._check_free(pin, DIGITAL)
         msg = ArduinoIn()
         msg.digital_init.pin = pin
         msg.digital_init.safe_level = safe
@@ -678,12 +702,6 @@ class Board(ClosedOnExit):
         duty = whole_number("safe", safe)
         with self._lock:
             self._check_free(pin, PWM)
-            if pin in self._timer1_pins() and any(o.mode is SERVO for o in self._outputs.values()):
-                raise refused(
-                    Status.STATUS_TIMER_IN_USE,
-                    f"pin {pin}'s PWM timer makes the servo pulses while a servo runs "
-                    "(release the servos first, or use another PWM pin)",
-                )
         if not 0 <= duty <= PWM_MAX_DUTY:
             raise refused(
                 Status.STATUS_OUT_OF_RANGE, f"safe duty {duty} is outside 0..{PWM_MAX_DUTY}"
@@ -1328,20 +1346,11 @@ class Board(ClosedOnExit):
                 )
 
     def _check_free(self, pin: int, mode: PinMode) -> None:
-        """Refuse a pin another mode holds (lock held); the same mode is a new configuration."""
-        current = self._outputs.get(pin)
-        if current is not None and current.mode is not mode:
-            raise refused(
-                Status.STATUS_PIN_IN_USE,
-                f"pin {pin} is {current.mode.a_pin}",
-            )
-
-    def _pins_of(self, mode: PinMode) -> set[int]:
-        """The pins configured as ``mode`` (lock held)."""
-        return {pin for pin, out in self._outputs.items() if out.mode is mode}
-
-    def _timer1_pins(self) -> frozenset[int]:
-        return TIMER1_PWM_PINS.get(self.info.board, frozenset())
+        """Refuse what the pins this board configured rule out (lock held): :func:`conflict`."""
+        held = {p: out.mode for p, out in self._outputs.items()}
+        refusal = conflict(self.info.board, pin, mode, held)
+        if refusal is not None:
+            raise refusal
 
     def _control(self, pin: int, msg: ArduinoIn, value: int) -> None:
         if self._closed:

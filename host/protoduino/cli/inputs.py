@@ -12,9 +12,11 @@ from dataclasses import dataclass
 
 from ..arguments import Pin
 from ..board import Board
+from ..commands import ANALOG_INPUT, COUNTER, DIGITAL_INPUT, PinMode
 from ..inputs import Input, Reading
 from ..messages import InputKind
 from . import argtypes
+from .options import configuring
 
 KINDS: tuple[InputKind, ...] = ("digital", "analog", "counter")
 
@@ -65,12 +67,21 @@ def default_kind(args: argparse.Namespace) -> InputKind:
     return "counter" if args.counter else "digital"
 
 
+#: Each kind's pin mode.
+MODES: dict[InputKind, PinMode] = {
+    "digital": DIGITAL_INPUT,
+    "analog": ANALOG_INPUT,
+    "counter": COUNTER,
+}
+
+
 def configure(board: Board, pin: Pin, kind: InputKind, args: argparse.Namespace) -> Input:
-    if kind == "analog":
-        return board.analog_input(pin)
-    if kind == "counter":
-        return board.counter(pin, edge=args.edge, pull_up=args.pull_up)
-    return board.digital_input(pin, pull_up=args.pull_up, debounce_ms=args.debounce)
+    with configuring(board, pin, MODES[kind]):
+        if kind == "analog":
+            return board.analog_input(pin)
+        if kind == "counter":
+            return board.counter(pin, edge=args.edge, pull_up=args.pull_up)
+        return board.digital_input(pin, pull_up=args.pull_up, debounce_ms=args.debounce)
 
 
 def show(kind: InputKind, reading: Reading, *, as_json: bool) -> str:

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from .. import plugins
-from ..board import Board
+from ..arguments import Pin
+from ..board import Board, conflict
 from ..boardoptions import BoardOptions
 from ..capture import MIN_PART
+from ..commands import PIN_MODES, PinMode
 from ..constants import ACK_TIMEOUT, HANDSHAKE_TIMEOUT
 from ..errors import (
     ArgumentError,
@@ -20,6 +23,7 @@ from ..errors import (
     CommandRejectedError,
     ProtoduinoError,
     TransportError,
+    rejection,
 )
 from ..messages import Status
 from ..transport import FrameMonitor
@@ -227,6 +231,34 @@ def with_board(
     except ProtoduinoError as exc:
         rc = error(command, exc)
     return capture_verdict(command, board, rc)
+
+
+#: The device's refusals that the outputs it drives can explain.
+IN_USE = frozenset({Status.STATUS_PIN_IN_USE, Status.STATUS_TIMER_IN_USE})
+_MODES = {mode.name: mode for mode in PIN_MODES}
+
+
+@contextlib.contextmanager
+def configuring(board: Board, pin: Pin, mode: PinMode) -> Iterator[None]:
+    """Configure ``pin`` as ``mode`` inside; a device's refusal of a pin or timer in use is
+    then said as the API says its own (:func:`protoduino.board.conflict`), from what the
+    device drives (``read_outputs``). A command resumes the port's session, whose outputs an
+    earlier command configured: its board never saw them, so the device refuses, not the
+    host, with a bare status. What no output explains (an input the session keeps) keeps it.
+    """
+    try:
+        yield
+    except CommandRejectedError as exc:
+        if not exc.sent or exc.status not in IN_USE:
+            raise
+        try:
+            held = {p: _MODES[out.mode] for p, out in board.read_outputs().items()}
+        except ProtoduinoError:
+            raise exc from None
+        why = conflict(board.info.board, board.pin_number(pin), mode, held)
+        if why is None or why.status != exc.status:
+            raise
+        raise rejection(exc.status, str(why)) from exc
 
 
 def add_hold(parser: argparse.ArgumentParser, safe: str) -> None:

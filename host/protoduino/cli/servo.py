@@ -6,9 +6,10 @@ import argparse
 
 from ..arguments import whole_number
 from ..board import Board
+from ..commands import SERVO
 from ..constants import SERVO_LIMIT_MAX_US, SERVO_LIMIT_MIN_US, SERVO_MAX_DEGREES
 from . import argtypes
-from .options import add_hold, add_port, hold, with_board
+from .options import add_hold, add_port, configuring, hold, with_board
 
 US = argtypes.integer(SERVO_LIMIT_MIN_US, SERVO_LIMIT_MAX_US, name="microseconds")
 
@@ -56,7 +57,8 @@ def _whole(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
 
     def body(board: Board) -> int:
-        servo = board.servo(args.pin, safe=args.safe, min_us=args.min_us, max_us=args.max_us)
+        with configuring(board, args.pin, SERVO):
+            servo = board.servo(args.pin, safe=args.safe, min_us=args.min_us, max_us=args.max_us)
         if args.us:
             servo.write_us(args.angle)
             print(f"servo {args.pin}: {_whole(args)} us")
