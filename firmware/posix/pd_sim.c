@@ -6,7 +6,8 @@
  * Opens a pseudo-terminal in raw mode, prints the slave's path (or PATH when
  * --link makes a symlink to it) as the first line on stdout, then runs the
  * core until SIGINT/SIGTERM/SIGHUP, or with --owner-fd until its owner is
- * gone (pd_owner.h says the rule).
+ * gone (pd_owner.h says the rule). The exit status is 0, or 130 (128 + SIGINT)
+ * after a Ctrl-C, as a shell reports an interrupted command.
  * SIGUSR1 is a simulated reboot (the core and a user service's statics as at
  * power-up, see sim_user_reset). The pins are
  * virtual: every change is written to the trace as one JSON object per line,
@@ -98,7 +99,7 @@ static const pd_board_info_t sim_board = {
     .clock_timer_pins = (1UL << 5) | (1UL << 6),
 };
 
-static volatile sig_atomic_t sim_stop;
+static volatile sig_atomic_t sim_stop; /* the signal that stopped it, 0 while running */
 static volatile sig_atomic_t sim_reboot;
 
 /*
@@ -527,7 +528,7 @@ static void on_signal(int sig)
     if (sig == SIGUSR1) {
         sim_reboot = 1;
     } else {
-        sim_stop = 1;
+        sim_stop = sig;
     }
 }
 
@@ -728,5 +729,5 @@ int main(int argc, char **argv)
     }
     close(slave_fd);
     close(hal.master);
-    return 0;
+    return sim_stop == SIGINT ? 128 + SIGINT : 0;
 }

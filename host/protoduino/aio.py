@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any, Generic, Self, SupportsFloat, TypeVar
 
 from . import board as _board
 from . import inputs as _inputs
-from .arguments import RealNumber
+from .arguments import Pin, RealNumber
 from .board import Edge, Interlock, OutputState
 from .boardoptions import BoardOptions
 from .constants import SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
@@ -421,7 +421,7 @@ class Board:
 
     async def servo(
         self,
-        pin: int,
+        pin: Pin,
         safe: int | None = None,
         *,
         safe_us: int | None = None,
@@ -441,15 +441,15 @@ class Board:
         )
         return Servo(await _wait(future))
 
-    async def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
+    async def digital_output(self, pin: Pin, safe: bool = False) -> DigitalOutput:
         return DigitalOutput(await _wait(self.sync.submit_digital_output(pin, safe)))
 
-    async def pwm_output(self, pin: int, safe: RealNumber = 0) -> PwmOutput:
+    async def pwm_output(self, pin: Pin, safe: RealNumber = 0) -> PwmOutput:
         return PwmOutput(await _wait(self.sync.submit_pwm_output(pin, safe)))
 
     async def digital_input(
         self,
-        pin: int,
+        pin: Pin,
         *,
         pull_up: bool = False,
         debounce_ms: int = 0,
@@ -462,7 +462,7 @@ class Board:
         return await self._first(DigitalInput(self, await _wait(future)))
 
     async def analog_input(
-        self, pin: int, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
+        self, pin: Pin, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
     ) -> AnalogInput:
         """:meth:`protoduino.Board.analog_input`: returns once its first value is known."""
         future = self.sync.submit_analog_input(
@@ -471,7 +471,7 @@ class Board:
         return await self._first(AnalogInput(self, await _wait(future)))
 
     async def counter(
-        self, pin: int, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
+        self, pin: Pin, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
     ) -> Counter:
         """:meth:`protoduino.Board.counter`: returns once its first count is known."""
         future = self.sync.submit_counter(pin, edge=edge, pull_up=pull_up, rate_hz=rate_hz)
@@ -502,7 +502,7 @@ class Board:
         """
         await _wait(self.sync.submit_heartbeat())
 
-    async def release(self, pin: int) -> None:
+    async def release(self, pin: Pin) -> None:
         await _wait(self.sync.submit_release(pin))
 
     async def release_all(self) -> None:

@@ -8,6 +8,8 @@ board and its outputs call them before anything is sent.
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Sequence
 from decimal import Decimal
 from fractions import Fraction
 from numbers import Integral, Real
@@ -21,6 +23,38 @@ def check_int(name: str, value: object) -> int:
     if isinstance(value, bool) or not isinstance(value, Integral):
         raise ArgumentTypeError(f"{name} must be an int, not {type(value).__name__}")
     return int(value)
+
+
+#: A pin as the board's methods and the command line take it: its number, or its name
+#: on the board as Arduino writes it ("A0").
+Pin = int | str
+
+_ANALOG_NAME = re.compile(r"A(\d{1,3})", re.IGNORECASE)
+
+
+def pin_number(value: object, analog_pins: Sequence[int]) -> int:
+    """A pin's number: an int as it is, a board name as the device names it.
+
+    ``"A0"`` is the first of the device's analog inputs in its own table
+    (``DeviceInfo.analog_pins``: 14 on the Uno), ``"A5"`` the sixth (19): the names
+    come from the device, not from a list kept here, so a board with other analog
+    pins has them right. A name the device lacks (``"A6"`` on the Uno) is refused
+    as a pin it does not have (STATUS_INVALID_PIN); any other string (``"9"``) is
+    the wrong type, as it was.
+    """
+    if not isinstance(value, str):
+        return check_int("pin", value)
+    found = _ANALOG_NAME.fullmatch(value)
+    if found is None:
+        raise ArgumentTypeError(f"pin must be an int or a board name such as 'A0', not {value!r}")
+    index = int(found[1])
+    if index >= len(analog_pins):
+        names = f"A0..A{len(analog_pins) - 1}" if analog_pins else "none"
+        raise refused(
+            Status.STATUS_INVALID_PIN,
+            f"pin {value} does not exist (its analog pins by name: {names})",
+        )
+    return analog_pins[index]
 
 
 #: Real numbers: numbers.Real (int, float, Fraction, numpy's) and Decimal, which the

@@ -57,6 +57,7 @@ from typing import TYPE_CHECKING, Any, Literal, SupportsFloat, TypeVar
 
 from ._generated import protoduino_pb2 as pb
 from .arguments import (
+    Pin,
     RealNumber,
     check_failsafe_ms,
     check_int,
@@ -64,6 +65,7 @@ from .arguments import (
     check_session,
     interval_ms,
     period_ms,
+    pin_number,
     refused,
     whole_number,
 )
@@ -238,6 +240,39 @@ TIMER0_PWM_PINS: dict[str, frozenset[int]] = {
     "uno": frozenset({5, 6}),
     "sim": frozenset({5, 6}),
 }
+
+
+def conflict(
+    board: str, pin: int, mode: PinMode, held: Mapping[int, PinMode]
+) -> CommandRejectedError | None:
+    """Why configuring ``pin`` as ``mode`` is refused while the pins of ``held`` are
+    configured (pin -> mode), in the device's order (docs/protocol.md section 7, rule 13);
+    None if nothing rules it out. The same mode again is a new configuration, not a conflict.
+
+    A servo while a Timer1 pin does PWM (the timer would have to do both), then the pin
+    itself held by another mode, then PWM on a Timer1 pin while a servo runs. The board
+    checks what it configured with it; ``protoduino``'s commands, which resume a session an
+    earlier command configured, explain the device's own refusal with it from what the
+    device says it drives (``read_outputs``).
+    """
+    timer1 = TIMER1_PWM_PINS.get(board, frozenset())
+    if mode is SERVO:
+        pwm = sorted(p for p in timer1 if held.get(p) is PWM)
+        if pwm:  # checked before the pin itself, as the device does
+            return refused(
+                Status.STATUS_TIMER_IN_USE,
+                f"pin {pwm[0]} does PWM on the timer the servos need (release it first)",
+            )
+    current = held.get(pin)
+    if current is not None and current is not mode:
+        return refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is {current.a_pin}")
+    if mode is PWM and pin in timer1 and SERVO in held.values():
+        return refused(
+            Status.STATUS_TIMER_IN_USE,
+            f"pin {pin}'s PWM timer makes the servo pulses while a servo runs "
+            "(release the servos first, or use another PWM pin)",
+        )
+    return None
 
 
 #: What a pose sets.
@@ -479,7 +514,7 @@ class Board(ClosedOnExit):
 
     def servo(
         self,
-        pin: int,
+        pin: Pin,
         safe: int | Literal["detach"] | None = None,
         *,
         safe_us: int | None = None,
@@ -511,7 +546,7 @@ class Board(ClosedOnExit):
 
     def submit_servo(
         self,
-        pin: int,
+        pin: Pin,
         safe: int | Literal["detach"] | None = None,
         *,
         safe_us: int | None = None,
@@ -528,7 +563,7 @@ class Board(ClosedOnExit):
 
     def _servo_init(  # noqa: PLR0917  (servo()'s arguments, checked in one place)
         self,
-        pin: int,
+        pin: Pin,
         safe: int | Literal["detach"] | None,
         safe_us: int | None,
         min_us: int,
@@ -567,15 +602,8 @@ class Board(ClosedOnExit):
                 raise refused(Status.STATUS_OUT_OF_RANGE, f"safe {safe} degrees is outside 0..180")
             init.safe_degrees = safe
         with self._lock:
-            pwm = sorted(self._timer1_pins() & self._pins_of(PWM))
-            if pwm:  # checked before the pin itself, as the device does (rule 13)
-                raise refused(
-                    Status.STATUS_TIMER_IN_USE,
-                    f"pin {pwm[0]} does PWM on the timer the servos need (release it first)",
-                )
+            self._check_free(pin, SERVO)
             current = self._outputs.get(pin)
-            if current is not None and current.mode is not SERVO:
-                raise refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
             servos = sum(1 for o in self._outputs.values() if o.mode is SERVO)
             if current is None and servos >= self.info.max_servos:
                 raise refused(
@@ -617,7 +645,7 @@ class Board(ClosedOnExit):
             )
         return us_per_s
 
-    def digital_output(self, pin: int, safe: bool = False) -> DigitalOutput:
+    def digital_output(self, pin: Pin, safe: bool = False) -> DigitalOutput:
         """Configure ``pin`` as a digital output; it takes its ``safe`` level at once.
 
         Again with the same ``safe`` level, it changes nothing at the pin.
@@ -626,27 +654,25 @@ class Board(ClosedOnExit):
         self._send(msg, on_ok)
         return output
 
-    def submit_digital_output(self, pin: int, safe: bool = False) -> Future[DigitalOutput]:
+    def submit_digital_output(self, pin: Pin, safe: bool = False) -> Future[DigitalOutput]:
         """:meth:`digital_output` without waiting: a future of the output, resolved by the Ack."""
         msg, on_ok, output = self._digital_init(pin, safe)
         return self._future(msg, on_ok, _returning(output))
 
     def _digital_init(
-        self, pin: int, safe: bool
+        self, pin: Pin, safe: bool
     ) -> tuple[ArduinoIn, Callable[[], None], DigitalOutput]:
         pin = self._check_pin(pin, DIGITAL)
         safe = check_level("safe", safe)  # bool("no") and bool(2) are True: no guessing
         with self._lock:
-            current = self._outputs.get(pin)
-            if current is not None and current.mode is not DIGITAL:
-                raise refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is a {current.mode.name} pin")
+            self._check_free(pin, DIGITAL)
         msg = ArduinoIn()
         msg.digital_init.pin = pin
         msg.digital_init.safe_level = safe
         state = _Output(DIGITAL, msg.SerializeToString(), int(safe))
         return msg, lambda: self._set_output(pin, state), DigitalOutput(self, pin)
 
-    def pwm_output(self, pin: int, safe: RealNumber = 0) -> PwmOutput:
+    def pwm_output(self, pin: Pin, safe: RealNumber = 0) -> PwmOutput:
         """Configure ``pin`` as a PWM output (duty 0..255); it takes its ``safe`` duty at once.
 
         The failsafe, :meth:`stop` and an interlock drive it back to ``safe`` (0,
@@ -658,12 +684,12 @@ class Board(ClosedOnExit):
         self._send(msg, on_ok)
         return output
 
-    def submit_pwm_output(self, pin: int, safe: RealNumber = 0) -> Future[PwmOutput]:
+    def submit_pwm_output(self, pin: Pin, safe: RealNumber = 0) -> Future[PwmOutput]:
         """:meth:`pwm_output` without waiting: a future of the output, resolved by the Ack."""
         msg, on_ok, output = self._pwm_init(pin, safe)
         return self._future(msg, on_ok, _returning(output))
 
-    def _pwm_init(self, pin: int, safe: object) -> tuple[ArduinoIn, Callable[[], None], PwmOutput]:
+    def _pwm_init(self, pin: Pin, safe: object) -> tuple[ArduinoIn, Callable[[], None], PwmOutput]:
         # The device's order (docs/protocol.md section 7, rule 13).
         pin = self._check_pin(pin, PWM)
         if pin in TIMER0_PWM_PINS.get(self.info.board, ()):
@@ -676,12 +702,6 @@ class Board(ClosedOnExit):
         duty = whole_number("safe", safe)
         with self._lock:
             self._check_free(pin, PWM)
-            if pin in self._timer1_pins() and any(o.mode is SERVO for o in self._outputs.values()):
-                raise refused(
-                    Status.STATUS_TIMER_IN_USE,
-                    f"pin {pin}'s PWM timer makes the servo pulses while a servo runs "
-                    "(release the servos first, or use another PWM pin)",
-                )
         if not 0 <= duty <= PWM_MAX_DUTY:
             raise refused(
                 Status.STATUS_OUT_OF_RANGE, f"safe duty {duty} is outside 0..{PWM_MAX_DUTY}"
@@ -696,7 +716,7 @@ class Board(ClosedOnExit):
 
     def digital_input(
         self,
-        pin: int,
+        pin: Pin,
         *,
         pull_up: bool = False,
         debounce_ms: int = 0,
@@ -718,7 +738,7 @@ class Board(ClosedOnExit):
 
     def submit_digital_input(
         self,
-        pin: int,
+        pin: Pin,
         *,
         pull_up: bool = False,
         debounce_ms: int = 0,
@@ -730,13 +750,13 @@ class Board(ClosedOnExit):
         return self._future(msg, on_ok, _returning(make()))
 
     def _digital_input_init(
-        self, pin: int, pull_up: object, debounce_ms: object, interlock: object
+        self, pin: Pin, pull_up: object, debounce_ms: object, interlock: object
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], DigitalInput]]:
         # The device's order (docs/protocol.md section 7, rules 11 and 14): the feature,
         # the arguments, the pin, then whether it is free.
         if not isinstance(pull_up, bool):
             raise ArgumentTypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
-        pin = check_int("pin", pin)
+        pin = self.pin_number(pin)
         self._check_feature(DIGITAL_INPUT)
         debounce = check_int("debounce_ms", debounce_ms)
         if not 0 <= debounce <= DEBOUNCE_MAX_MS:
@@ -762,7 +782,7 @@ class Board(ClosedOnExit):
         return msg, self._input_recorder(pin, DIGITAL_INPUT, msg), make
 
     def analog_input(
-        self, pin: int, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
+        self, pin: Pin, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
     ) -> AnalogInput:
         """Configure analog input ``pin`` (``info.analog_pins``; A0 is 14 on the Uno).
 
@@ -776,14 +796,14 @@ class Board(ClosedOnExit):
         return self._input(msg, on_ok, make)
 
     def submit_analog_input(
-        self, pin: int, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
+        self, pin: Pin, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
     ) -> Future[AnalogInput]:
         """:meth:`analog_input` without waiting, resolved by the Ack."""
         msg, on_ok, make = self._analog_input_init(pin, rate_hz, threshold, heartbeat)
         return self._future(msg, on_ok, _returning(make()))
 
     def _analog_input_init(
-        self, pin: int, rate_hz: object, threshold: object, heartbeat: object
+        self, pin: Pin, rate_hz: object, threshold: object, heartbeat: object
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], AnalogInput]]:
         # The device's order (rules 11 and 14): the feature, the pin's number, the
         # arguments, a reserved pin, the pin's ADC, then whether it is free.
@@ -807,7 +827,7 @@ class Board(ClosedOnExit):
         return msg, self._input_recorder(pin, ANALOG_INPUT, msg), make
 
     def counter(
-        self, pin: int, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
+        self, pin: Pin, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
     ) -> Counter:
         """Count ``edge`` edges on ``pin`` (``info.counter_pins``) in an interrupt.
 
@@ -819,14 +839,14 @@ class Board(ClosedOnExit):
         return self._input(msg, on_ok, make)
 
     def submit_counter(
-        self, pin: int, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
+        self, pin: Pin, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
     ) -> Future[Counter]:
         """:meth:`counter` without waiting, resolved by the Ack."""
         msg, on_ok, make = self._counter_init(pin, edge, pull_up, rate_hz)
         return self._future(msg, on_ok, _returning(make()))
 
     def _counter_init(
-        self, pin: int, edge: object, pull_up: object, rate_hz: object
+        self, pin: Pin, edge: object, pull_up: object, rate_hz: object
     ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], Counter]]:
         # As an analog input's (rule 14), with the pin's interrupt.
         if not isinstance(pull_up, bool):
@@ -954,18 +974,18 @@ class Board(ClosedOnExit):
         msg.heartbeat.SetInParent()
         return msg
 
-    def release(self, pin: int) -> None:
+    def release(self, pin: Pin) -> None:
         """Release an output: a servo's pulses stop, a digital pin becomes an input.
 
         The pin is then free for any mode (and a servo's slot for another pin).
         """
         self._send(*self._release(pin))
 
-    def submit_release(self, pin: int) -> Future[None]:
+    def submit_release(self, pin: Pin) -> Future[None]:
         """:meth:`release` without waiting: a future resolved by the Ack."""
         return self._future(*self._release(pin), _no_value)
 
-    def _release(self, pin: int) -> tuple[ArduinoIn, Callable[[], None]]:
+    def _release(self, pin: Pin) -> tuple[ArduinoIn, Callable[[], None]]:
         pin = self._check_pin(pin)
         with self._lock:
             if pin not in self._outputs:
@@ -1278,10 +1298,17 @@ class Board(ClosedOnExit):
 
     # --- internals ------------------------------------------------------------------------
 
+    def pin_number(self, pin: object) -> int:
+        """The number of ``pin``, given by number or by its name on the board as Arduino
+        writes it: ``"A0"`` is the device's first analog input (``info.analog_pins``, 14 on
+        the Uno). Every method that takes a pin takes either."""
+        return pin_number(pin, self.info.analog_pins)
+
     def _check_pin(self, pin: object, mode: PinMode | None = None, *, reserved: bool = True) -> int:
-        """The pin as an int, checked as the device does first: ``mode``'s feature built in
-        (rule 11), the pin's number, and (unless ``reserved=False``) not reserved."""
-        pin = check_int("pin", pin)
+        """The pin as an int (:meth:`pin_number`), checked as the device does first:
+        ``mode``'s feature built in (rule 11), the pin's number, and (unless
+        ``reserved=False``) not reserved."""
+        pin = self.pin_number(pin)
         if self._closed:
             raise BoardClosedError("the board is closed")
         if mode is not None:
@@ -1303,7 +1330,7 @@ class Board(ClosedOnExit):
         if mode.feature not in self.info.features:
             raise FeatureMissingError(
                 mode.feature,
-                f"{mode.name.replace('_', ' ')}: {feature_hint(mode.feature)} "
+                f"{mode.words}: {feature_hint(mode.feature)} "
                 f"({status_name(Status.STATUS_NOT_SUPPORTED)})",
             )
 
@@ -1314,25 +1341,16 @@ class Board(ClosedOnExit):
             if pin not in capable:
                 raise refused(
                     Status.STATUS_NOT_SUPPORTED,
-                    f"pin {pin} cannot be a {mode.name.replace('_', ' ')} pin on this "
+                    f"pin {pin} cannot be {mode.a_pin} on this "
                     f"{self.info.board} (those are {', '.join(map(str, capable)) or 'none'})",
                 )
 
     def _check_free(self, pin: int, mode: PinMode) -> None:
-        """Refuse a pin another mode holds (lock held); the same mode is a new configuration."""
-        current = self._outputs.get(pin)
-        if current is not None and current.mode is not mode:
-            raise refused(
-                Status.STATUS_PIN_IN_USE,
-                f"pin {pin} is a {current.mode.name.replace('_', ' ')} pin",
-            )
-
-    def _pins_of(self, mode: PinMode) -> set[int]:
-        """The pins configured as ``mode`` (lock held)."""
-        return {pin for pin, out in self._outputs.items() if out.mode is mode}
-
-    def _timer1_pins(self) -> frozenset[int]:
-        return TIMER1_PWM_PINS.get(self.info.board, frozenset())
+        """Refuse what the pins this board configured rule out (lock held): :func:`conflict`."""
+        held = {p: out.mode for p, out in self._outputs.items()}
+        refusal = conflict(self.info.board, pin, mode, held)
+        if refusal is not None:
+            raise refusal
 
     def _control(self, pin: int, msg: ArduinoIn, value: int) -> None:
         if self._closed:

@@ -58,6 +58,17 @@ class PinMode:
         return 1 << pb.Feature.Value(f"FEATURE_{self.feature.upper()}")
 
     @property
+    def words(self) -> str:
+        """Its name as messages write it: "analog input"."""
+        return self.name.replace("_", " ")
+
+    @property
+    def a_pin(self) -> str:
+        """ "a servo pin", "an analog input pin": the phrase the refusals name it by."""
+        article = "an" if self.name[0] in "aeiou" else "a"
+        return f"{article} {self.words} pin"
+
+    @property
     def is_input(self) -> bool:
         """An input: configured once, its values come in InputReports."""
         return self.control is None

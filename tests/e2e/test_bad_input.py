@@ -30,7 +30,7 @@ WRONG_TYPES: list[tuple[str, Callable[[Board], object]]] = [
     ("servo safe_us str", lambda b: b.servo(9, safe_us="1500")),  # type: ignore[arg-type]
     ("servo min_us float", lambda b: b.servo(9, min_us=1000.5)),  # type: ignore[arg-type]
     ("servo max_us None", lambda b: b.servo(9, max_us=None)),  # type: ignore[arg-type]
-    ("digital pin str", lambda b: b.digital_output("13")),  # type: ignore[arg-type]
+    ("digital pin str", lambda b: b.digital_output("13")),  # a digit string is no pin name
     ("digital pin float", lambda b: b.digital_output(13.0)),  # type: ignore[arg-type]
     ("digital safe str", lambda b: b.digital_output(13, safe="no")),  # type: ignore[arg-type]
     ("digital safe None", lambda b: b.digital_output(13, safe=None)),  # type: ignore[arg-type]

@@ -95,6 +95,24 @@ def test_servo_and_pin(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> 
     assert "servo 9: 45 degrees" in out and "pin 13: on" in out
 
 
+def test_servo_takes_a_real_angle_as_the_api_does(
+    fake: FakeDevice, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """ANGLE is any real number, rounded as Servo.write rounds (half to even: 45.5 -> 46)."""
+    assert main(["servo", fake.port, "9", "45.5"]) == 0
+    assert fake.values[9] == 46
+    assert main(["servo", fake.port, "9", "1500.4", "--us"]) == 0
+    assert fake.values[9] == 1500
+    assert main(["servo", fake.port, "9", "180.4"]) == 0  # 180 once rounded: within 0..180
+    assert fake.values[9] == 180
+    out = capsys.readouterr().out
+    assert "servo 9: 46 degrees" in out and "servo 9: 1500 us" in out
+    with pytest.raises(SystemExit) as usage:  # 181 once rounded: refused before the port opens
+        main(["servo", fake.port, "9", "180.6"])
+    assert usage.value.code == 2
+    assert "180.6 degrees is outside 0..180" in capsys.readouterr().err
+
+
 def test_servo_refuses_bad_values_before_sending(
     fake: FakeDevice, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -18,6 +19,7 @@ import pytest
 from protoduino.cli.main import main
 from protoduino.simboard import SimBoard
 from serial.tools import list_ports
+from simfixtures import SIM_BACKENDS
 
 #: Bounds a failing (hanging) command only.
 HANG = 60.0
@@ -40,7 +42,9 @@ DEFAULT_SIGINT = (
 )
 
 
-def _interrupt_after(argv: list[str], marker: str) -> tuple[int, str, str]:
+def _interrupt_after(
+    argv: list[str], marker: str, env: dict[str, str] | None = None
+) -> tuple[int, str, str]:
     """Run the command in a process group of its own (as a shell's foreground job), and
     once a stdout line contains ``marker`` send SIGINT to the whole group, as Ctrl-C does."""
     proc = subprocess.Popen(
@@ -50,6 +54,7 @@ def _interrupt_after(argv: list[str], marker: str) -> tuple[int, str, str]:
         stdin=subprocess.DEVNULL,
         text=True,
         start_new_session=True,
+        env=None if env is None else {**os.environ, **env},
     )
     seen: list[str] = []
     try:
@@ -88,6 +93,31 @@ def test_ctrl_c_on_demo_ends_cleanly(tmp_path: Path) -> None:
     assert _gone(int(started[1])), "the demo left its simulated board running"
 
 
+def test_ctrl_c_on_watch_exits_130(sim_board: SimBoard) -> None:
+    rc, out, err = _interrupt_after(["watch", sim_board.port, "2"], "pin 2 digital:")
+    assert rc == 130, (out, err)
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("backend", SIM_BACKENDS)
+def test_ctrl_c_on_sim_exits_130(backend: str) -> None:
+    rc, out, err = _interrupt_after(["sim", "--backend", backend], "/dev/")  # its port first
+    assert rc == 130, (out, err)
+
+
+def test_ctrl_c_on_ros2_exits_130() -> None:
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed (needed to build the native board)")
+    pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing")
+    pytest.importorskip("rosbags.typesys", reason="rosbags is not installed")
+    import test_ros2 as ros
+
+    env = {"CYCLONEDDS_URI": ros.LOOPBACK, "ROS_DOMAIN_ID": str(ros.DOMAIN)}
+    rc, out, err = _interrupt_after(["ros2", "--sim", "native"], "topics:", env)
+    assert rc == 130, (out, err)
+    assert "protoduino ros2: stopped" in err  # it stopped as on SIGTERM, the outputs safe
+
+
 def _gone(pid: int) -> bool:
     """Exited: no such process, or a zombie waiting for its parent."""
     try:
@@ -103,12 +133,13 @@ def _gone(pid: int) -> bool:
         (["servo", "{port}", "0", "45"], "pin 0 is reserved"),
         (["pin", "{port}", "1", "on"], "pin 1 is reserved"),
         (["servo", "{port}", "99", "45"], "pin 99 does not exist"),
+        (["pwm", "{port}", "4", "100"], "pin 4 cannot be a pwm pin"),  # refused before sending
     ],
 )
 def test_a_pin_the_device_lacks_or_reserves_exits_2(
-    native: SimBoard, capsys: pytest.CaptureFixture[str], argv: list[str], why: str
+    sim_board: SimBoard, capsys: pytest.CaptureFixture[str], argv: list[str], why: str
 ) -> None:
-    rc = main([a.format(port=native.port) for a in argv])
+    rc = main([a.format(port=sim_board.port) for a in argv])
     assert rc == 2
     assert why in capsys.readouterr().err
 

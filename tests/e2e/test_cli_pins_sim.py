@@ -9,6 +9,7 @@ import time
 import pytest
 from protoduino.cli.main import main
 from protoduino.simboard import SimBoard
+from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
 #: Bounds a failing test's wait only.
 BOUND = 30.0
@@ -50,3 +51,17 @@ def test_read_prints_what_the_firmware_reads(
     assert json.loads(capsys.readouterr().out)["value"] == 321
     assert main(["read", sim.port, "2", "--pull-up"]) == 0
     assert capsys.readouterr().out.startswith("pin 2 digital: 0 (")
+
+
+def test_servo_takes_a_real_angle(sim_board: SimBoard) -> None:
+    assert main(["servo", sim_board.port, "9", "89.6"]) == 0  # 90 degrees: 1472 us
+    wait_for_pin(sim_board, 9, lambda v: bool(v) and abs(v[-1] - 1472) <= PULSE_TOLERANCE_US)
+
+
+def test_an_analog_pin_by_its_board_name(
+    sim_board: SimBoard, capsys: pytest.CaptureFixture[str]
+) -> None:
+    sim_board.set_analog(15, 456)  # A1
+    assert main(["read", sim_board.port, "A1", "--analog", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert (got["pin"], got["value"]) == (15, 456)

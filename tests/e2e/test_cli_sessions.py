@@ -100,3 +100,26 @@ def test_flash_refuses_a_port_a_running_board_holds(
     # Once the board let go, flash goes ahead (here to the stand-in for avrdude).
     assert main(["flash", port, "--hex", os.devnull]) == 0
     assert uploads == [port]
+
+
+def test_a_pin_or_timer_an_earlier_command_holds_is_said_as_the_api_says_it(
+    sim_board: SimBoard, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The device refuses (its board did not configure the pin: an earlier command did), and
+    the command says why as Board's own check does, not only the status: exit status 1."""
+    port = sim_board.port
+    assert main(["pwm", port, "10", "100"]) == 0
+    capsys.readouterr()
+    cases = [
+        (["servo", port, "9", "45"], "pin 10 does PWM on the timer the servos need"),
+        (["pin", port, "10", "on"], "pin 10 is a pwm pin (STATUS_PIN_IN_USE)"),
+        (["read", port, "10"], "pin 10 is a pwm pin (STATUS_PIN_IN_USE)"),
+    ]
+    for argv, why in cases:
+        assert main(argv) == 1, argv
+        assert why in capsys.readouterr().err, argv
+    assert main(["servo", port, "9", "45", "--new-session"]) == 0
+    assert main(["pwm", port, "10", "100"]) == 1
+    err = capsys.readouterr().err
+    assert "pin 10's PWM timer makes the servo pulses while a servo runs" in err
+    assert "(STATUS_TIMER_IN_USE)" in err

@@ -143,3 +143,23 @@ def test_servo_refuses_what_has_no_nearest_degree(board: Board, fake: FakeDevice
         with pytest.raises(protoduino.ArgumentTypeError):
             servo.write(wrong)  # type: ignore[arg-type]
     assert len(fake.commands()) == before
+
+
+def test_pins_by_their_board_names(board: Board, fake: FakeDevice) -> None:
+    """ "A0".."A5" are the device's own analog pins in its table's order (14..19 here, as on
+    the Uno), wherever a method takes a pin; a name it lacks is a pin it does not have."""
+    assert board.pin_number("A0") == 14 and board.pin_number("a5") == 19
+    assert board.analog_input("A1").pin == 15
+    assert fake.commands("analog_input_init")[-1].msg.analog_input_init.pin == 15
+    assert board.digital_output("A2").pin == 16
+    assert fake.commands("digital_init")[-1].msg.digital_init.pin == 16
+    board.release("A2")
+    assert fake.commands("release")[-1].msg.release.pin == 16
+    before = len(fake.commands())
+    with pytest.raises(protoduino.CommandRejectedError) as missing:
+        board.servo("A6")
+    assert missing.value.status == Status.STATUS_INVALID_PIN and not missing.value.sent
+    assert "pin A6 does not exist (its analog pins by name: A0..A5)" in str(missing.value)
+    with pytest.raises(TypeError):
+        board.digital_input("D3")
+    assert len(fake.commands()) == before

@@ -97,7 +97,7 @@ def test_control_checks(board: Board, fake: FakeDevice) -> None:
     with pytest.raises(TypeError):
         servo.write("4.5")  # type: ignore[arg-type]
     with pytest.raises(TypeError):
-        board.servo("9")  # type: ignore[arg-type]
+        board.servo("9")
     with pytest.raises(TypeError):
         board.servo(10, safe=90, safe_us=1500)
     assert len(fake.commands()) == before

@@ -15,7 +15,7 @@ def test_pwm(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert capsys.readouterr().out.strip() == "pwm 3: 128"
     (init,) = fake.commands("pwm_init")
     assert init.msg.pwm_init.safe_duty == 4 and fake.values[3] == 128
-    assert main(["pwm", fake.port, "4", "10"]) == 1
+    assert main(["pwm", fake.port, "4", "10"]) == 2  # refused before anything is sent
     err = capsys.readouterr().err
     assert "protoduino pwm:" in err and "STATUS_NOT_SUPPORTED" in err and "3, 9, 10, 11" in err
 
@@ -41,8 +41,10 @@ def test_read_once(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None
 def test_read_refuses_a_pin_that_cannot(
     fake: FakeDevice, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(["read", fake.port, "2", "--analog"]) == 1
-    assert "STATUS_NOT_SUPPORTED" in capsys.readouterr().err
+    assert main(["read", fake.port, "2", "--analog"]) == 2  # refused before anything is sent
+    err = capsys.readouterr().err
+    assert "pin 2 cannot be an analog input pin on this fake" in err
+    assert "STATUS_NOT_SUPPORTED" in err
     assert fake.commands("analog_input_init") == []
 
 
@@ -68,3 +70,23 @@ def test_watch_prints_the_values_then_each_change(
     assert shown == [
         (2, "digital", True), (14, "analog", 5), (2, "digital", False), (14, "analog", 99)
     ]  # fmt: skip
+
+
+def test_pins_by_their_board_names(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+    """PIN may be a board name as Arduino writes it: A0 is the device's first analog pin."""
+    fake.analog[15] = 321
+    assert main(["read", fake.port, "A1", "--analog", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pin"] == 15
+    assert main(["pin", fake.port, "a2", "on"]) == 0
+    assert fake.commands("digital_init")[-1].msg.digital_init.pin == 16 and fake.values[16] == 1
+    assert capsys.readouterr().out.strip() == "pin A2: on"
+    assert main(["watch", fake.port, "A3:analog", "--json", "--duration", "0.01"]) == 0
+    assert json.loads(capsys.readouterr().out.splitlines()[0])["pin"] == 17
+    assert main(["servo", fake.port, "A6", "90"]) == 2  # the Uno has A0..A5
+    assert "pin A6 does not exist" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:
+        main(["pin", fake.port, "D3", "on"])
+    assert usage.value.code == 2
+    assert "'D3' is not a pin (want a number 0..255 or a name such as A0)" in (
+        capsys.readouterr().err
+    )

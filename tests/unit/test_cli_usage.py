@@ -132,3 +132,33 @@ def test_verbose_anywhere(argv: list[str], level: int, capsys: pytest.CaptureFix
     assert args.verbose + args.verbose_after == level
     assert main(argv) == 0
     assert "Traceback" not in capsys.readouterr().err
+
+
+#: The console script as pip writes it (its entry point loaded, then called), with a Ctrl-C
+#: arriving while the command imports the package: the import of protoduino.board raises
+#: KeyboardInterrupt, as SIGINT would at that moment.
+CTRL_C_AT_START = """
+import importlib.abc, sys
+from importlib.metadata import entry_points
+
+class CtrlC(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name == "protoduino.board":
+            raise KeyboardInterrupt
+        return None
+
+sys.meta_path.insert(0, CtrlC())
+(script,) = entry_points(group="console_scripts", name="protoduino")
+sys.exit(script.load()())
+"""
+
+
+def test_ctrl_c_while_the_command_starts_exits_130_without_a_traceback() -> None:
+    done = subprocess.run(
+        [sys.executable, "-c", CTRL_C_AT_START, "ports"],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=60,
+    )
+    assert (done.returncode, done.stderr) == (130, "")

@@ -88,3 +88,24 @@ def test_decode_bad_hex_exits_2(capsys: pytest.CaptureFixture[str], tmp_path: Pa
     capture.write_text("zz not hex")
     assert main(["decode", "--hex", str(capture)]) == 2
     assert "not hex" in capsys.readouterr().err
+
+
+def test_decode_into_a_reader_that_closes_early_ends_quietly(tmp_path: Path) -> None:
+    """``protoduino decode robot.jsonl | head``: the broken pipe is on stdout, not the input,
+    so it ends as a Unix tool does (no "cannot read", no traceback), not with status 2."""
+    cmd = pb.ArduinoIn(message_id=7, servo_control=pb.ServoControl(pin=9, degrees=45))
+    frame = frame_packet(PacketType.COMMAND, 1, cmd.SerializeToString())
+    capture = tmp_path / "robot.bin"
+    capture.write_bytes(frame * 20000)  # far more output than a pipe buffers
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "protoduino.cli.main", "decode", str(capture)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None and proc.stderr is not None
+    first = proc.stdout.readline()  # the reader takes one line, as `head -1` does
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    rc = proc.wait(timeout=60)
+    assert json.loads(first)["ok"] is True
+    assert err == "" and rc == 0, (rc, err)

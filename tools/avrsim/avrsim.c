@@ -8,7 +8,8 @@
  * The command-line contract is the native simulated board's (firmware/posix/pd_sim.c, as
  * protoduino.simboard runs both):
  * the first stdout line is the port to open (the pty's slave, or --link),
- * SIGINT/SIGTERM (and SIGHUP unless ignored) exit cleanly, so does the end of
+ * SIGINT/SIGTERM (and SIGHUP unless ignored) exit cleanly (status 0; 130 after a
+ * SIGINT, 128 + SIGINT as a shell reports a Ctrl-C), so does the end of
  * the owner with --owner-fd (firmware/simcontrol/pd_owner.h), SIGUSR1 resets the
  * MCU while keeping the pty,
  * and --trace writes one JSON line per output change, measured at the pins
@@ -238,7 +239,7 @@ typedef struct {
 static pd_sim_t g_sim;
 static void pd_start_rx(pd_sim_t *sim);
 static uint64_t g_start_ns; /* trace and pacing time zero: the process start */
-static volatile sig_atomic_t g_stop;
+static volatile sig_atomic_t g_stop; /* the signal that stopped it, 0 while running */
 static volatile sig_atomic_t g_reset;
 static volatile sig_atomic_t g_dump_stats;
 
@@ -249,7 +250,7 @@ static void pd_on_signal(int sig)
     } else if (sig == SIGUSR2) {
         g_dump_stats = 1;
     } else {
-        g_stop = 1;
+        g_stop = sig;
     }
 }
 
@@ -1557,5 +1558,5 @@ int main(int argc, char **argv)
     if (port_out) {
         fclose(port_out);
     }
-    return 0;
+    return g_stop == SIGINT ? 128 + SIGINT : 0;
 }

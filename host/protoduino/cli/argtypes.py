@@ -11,6 +11,8 @@ import argparse
 import math
 from collections.abc import Callable
 
+from ..arguments import Pin
+
 
 def _bounds(low: float | None, high: float | None, low_open: bool) -> str:
     if low is not None and high is not None:
@@ -72,7 +74,21 @@ seconds = number(0.0, name="seconds")
 #: Counts and sizes.
 count = integer(0, name="count")
 positive_count = integer(1, name="count")
-#: A pin number; the device's own range is checked against its DeviceInfo.
-pin = integer(0, 255, name="pin")
+_pin_number = integer(0, 255, name="pin")
+
+
+def pin(text: str) -> Pin:
+    """A pin: its number, or its name on the board as Arduino writes it ("A0"); the board
+    resolves the name from the device's own table and checks either against its
+    DeviceInfo (:meth:`protoduino.Board.pin_number`)."""
+    if text[:1] in "aA" and text[1:].isdigit():
+        return text.upper()
+    if not text.strip().lstrip("+-").isdigit():
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a pin (want a number 0..255 or a name such as A0)"
+        )
+    return _pin_number(text)
+
+
 #: Serial baud rates.
 baud = integer(1, name="baud rate")

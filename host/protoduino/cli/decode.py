@@ -11,6 +11,7 @@ read, so memory stays the same whatever the file's size. Exit status: 0; 1
 when the capture is damaged (lines that are not records, binary garbage, a
 missing start: each reported on stderr, the rest still decoded) or the input
 is neither a capture nor wire bytes (no frame in it); 2 when it cannot be read.
+Piped into a reader that stops early (``| head``), it ends quietly with 0.
 """
 
 from __future__ import annotations
@@ -128,6 +129,8 @@ def run(args: argparse.Namespace) -> int:
         if args.mcap is not None:
             return error("decode", f"{name} is not a capture; --mcap needs one (--capture FILE)")
         return _raw(args, name, f, head)
+    except BrokenPipeError:
+        raise  # stdout's reader left (`| head`), not the input: main() ends quietly
     except OSError as exc:
         print(f"protoduino decode: cannot read {name}: {exc.strerror}", file=sys.stderr)
         return 2

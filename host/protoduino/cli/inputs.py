@@ -10,17 +10,20 @@ import argparse
 import json
 from dataclasses import dataclass
 
+from ..arguments import Pin
 from ..board import Board
+from ..commands import ANALOG_INPUT, COUNTER, DIGITAL_INPUT, PinMode
 from ..inputs import Input, Reading
 from ..messages import InputKind
 from . import argtypes
+from .options import configuring
 
 KINDS: tuple[InputKind, ...] = ("digital", "analog", "counter")
 
 
 @dataclass(frozen=True, slots=True)
 class Spec:
-    pin: int
+    pin: Pin  # a number or a name ("A0"), as the board's methods take it
     kind: InputKind | None  # None: the command's default
 
 
@@ -36,7 +39,9 @@ def spec(text: str) -> Spec:
 def add_input_options(parser: argparse.ArgumentParser) -> None:
     kind = parser.add_mutually_exclusive_group()
     kind.add_argument(
-        "--analog", action="store_true", help="PIN is an analog input (A0 is 14 on the Uno)"
+        "--analog",
+        action="store_true",
+        help="PIN is an analog input (A0, or its number: 14 on the Uno)",
     )
     kind.add_argument("--counter", action="store_true", help="PIN counts pulses")
     parser.add_argument("--pull-up", action="store_true", help="turn on the pin's pull-up")
@@ -62,12 +67,21 @@ def default_kind(args: argparse.Namespace) -> InputKind:
     return "counter" if args.counter else "digital"
 
 
-def configure(board: Board, pin: int, kind: InputKind, args: argparse.Namespace) -> Input:
-    if kind == "analog":
-        return board.analog_input(pin)
-    if kind == "counter":
-        return board.counter(pin, edge=args.edge, pull_up=args.pull_up)
-    return board.digital_input(pin, pull_up=args.pull_up, debounce_ms=args.debounce)
+#: Each kind's pin mode.
+MODES: dict[InputKind, PinMode] = {
+    "digital": DIGITAL_INPUT,
+    "analog": ANALOG_INPUT,
+    "counter": COUNTER,
+}
+
+
+def configure(board: Board, pin: Pin, kind: InputKind, args: argparse.Namespace) -> Input:
+    with configuring(board, pin, MODES[kind]):
+        if kind == "analog":
+            return board.analog_input(pin)
+        if kind == "counter":
+            return board.counter(pin, edge=args.edge, pull_up=args.pull_up)
+        return board.digital_input(pin, pull_up=args.pull_up, debounce_ms=args.debounce)
 
 
 def show(kind: InputKind, reading: Reading, *, as_json: bool) -> str:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 from collections.abc import Sequence
 from types import ModuleType
@@ -32,7 +33,7 @@ from typing import NoReturn
 
 from .. import __version__, plugins
 from ..errors import ProtoduinoError
-from .options import capture_check
+from .options import capture_check, error
 
 log = logging.getLogger("protoduino.cli")
 
@@ -129,6 +130,18 @@ def build_parser() -> Parser:
     return parser
 
 
+def _stdout_gone() -> None:
+    """Stdout's reader left: what is still buffered goes nowhere, so the flush at exit
+    prints no "Exception ignored" (Python's docs, signal module, "Note on SIGPIPE")."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # not a file (a test's capture)
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, fd)
+    os.close(devnull)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args, unknown = parser.parse_known_args(argv)
@@ -147,10 +160,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except BrokenPipeError:
         # Output piped into `head` and the like: not an error.
+        _stdout_gone()
         return 0
     except ProtoduinoError as exc:  # a command that let one through: still one line
-        print(f"protoduino {args.command}: {exc}", file=sys.stderr)
-        return 1
+        return error(args.command, exc)
     except Exception as exc:  # a bug: one line, the traceback only with -vv
         log.debug("traceback", exc_info=True)
         print(

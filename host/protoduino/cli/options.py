@@ -3,23 +3,34 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from .. import plugins
-from ..board import Board
+from ..arguments import Pin
+from ..board import Board, conflict
 from ..boardoptions import BoardOptions
 from ..capture import MIN_PART
+from ..commands import PIN_MODES, PinMode
 from ..constants import ACK_TIMEOUT, HANDSHAKE_TIMEOUT
-from ..errors import CommandRejectedError, ProtoduinoError, TransportError
+from ..errors import (
+    ArgumentError,
+    ArgumentTypeError,
+    CommandRejectedError,
+    ProtoduinoError,
+    TransportError,
+    rejection,
+)
 from ..messages import Status
 from ..transport import FrameMonitor
 from . import argtypes
 
-#: Refusals that mean a value on the command line is wrong for this device: exit status 2.
+#: Refusals by the device that mean a value on the command line is wrong for it (a pin it
+#: does not have or keeps for itself, found out only from its info): exit status 2.
 BAD_VALUE = frozenset({Status.STATUS_INVALID_PIN, Status.STATUS_RESERVED_PIN})
 
 
@@ -187,16 +198,29 @@ def open_board(
     return board
 
 
-def error(command: str, message: object) -> int:
-    print(f"protoduino {command}: {message}", file=sys.stderr)
+def exit_status(problem: object) -> int:
+    """The exit status of a command that ends on ``problem`` (README, "Exit statuses"): 2 for
+    a value refused before anything was sent (by the host, with the status the device would
+    give, ``sent=False``; an ``ArgumentError``) and for a pin the device does not have or
+    keeps for itself, known only from its info; 1 for anything else that went wrong."""
+    if isinstance(problem, ArgumentError | ArgumentTypeError):
+        return 2
+    if isinstance(problem, CommandRejectedError):
+        return 2 if not problem.sent or problem.status in BAD_VALUE else 1
     return 1
+
+
+def error(command: str, problem: object) -> int:
+    """Say what went wrong in one line on stderr; its exit status (:func:`exit_status`)."""
+    print(f"protoduino {command}: {problem}", file=sys.stderr)
+    return exit_status(problem)
 
 
 def with_board(
     command: str, args: argparse.Namespace, body: Callable[[Board], int], *, ping: bool = True
 ) -> int:
-    """Open the board, run ``body``, close it; a ProtoduinoError becomes exit status 1,
-    and so does a capture that stopped (:func:`capture_verdict`)."""
+    """Open the board, run ``body``, close it; a ProtoduinoError becomes its line and exit
+    status (:func:`error`), and a capture that stopped makes it 1 (:func:`capture_verdict`)."""
     try:
         board = open_board(args, ping=ping)
     except ProtoduinoError as exc:
@@ -204,15 +228,37 @@ def with_board(
     try:
         with board:
             rc = body(board)
-    except CommandRejectedError as exc:
-        # A pin the device does not have or keeps for itself is a bad value on the
-        # command line like any other (exit status 2), found out only from its info.
-        rc = error(command, exc)
-        if exc.status in BAD_VALUE:
-            rc = 2
     except ProtoduinoError as exc:
         rc = error(command, exc)
     return capture_verdict(command, board, rc)
+
+
+#: The device's refusals that the outputs it drives can explain.
+IN_USE = frozenset({Status.STATUS_PIN_IN_USE, Status.STATUS_TIMER_IN_USE})
+_MODES = {mode.name: mode for mode in PIN_MODES}
+
+
+@contextlib.contextmanager
+def configuring(board: Board, pin: Pin, mode: PinMode) -> Iterator[None]:
+    """Configure ``pin`` as ``mode`` inside; a device's refusal of a pin or timer in use is
+    then said as the API says its own (:func:`protoduino.board.conflict`), from what the
+    device drives (``read_outputs``). A command resumes the port's session, whose outputs an
+    earlier command configured: its board never saw them, so the device refuses, not the
+    host, with a bare status. What no output explains (an input the session keeps) keeps it.
+    """
+    try:
+        yield
+    except CommandRejectedError as exc:
+        if not exc.sent or exc.status not in IN_USE:
+            raise
+        try:
+            held = {p: _MODES[out.mode] for p, out in board.read_outputs().items()}
+        except ProtoduinoError:
+            raise exc from None
+        why = conflict(board.info.board, board.pin_number(pin), mode, held)
+        if why is None or why.status != exc.status:
+            raise
+        raise rejection(exc.status, str(why)) from exc
 
 
 def add_hold(parser: argparse.ArgumentParser, safe: str) -> None:

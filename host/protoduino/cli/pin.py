@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 
 from ..board import Board
+from ..commands import DIGITAL
 from . import argtypes
-from .options import add_hold, add_port, hold, with_board
+from .options import add_hold, add_port, configuring, hold, with_board
 
 HELP = "set a digital output pin on or off"
 
@@ -25,7 +26,8 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     def body(board: Board) -> int:
-        out = board.digital_output(args.pin, safe=LEVELS[args.safe])
+        with configuring(board, args.pin, DIGITAL):
+            out = board.digital_output(args.pin, safe=LEVELS[args.safe])
         level = LEVELS[args.level]
         out.write(level)
         print(f"pin {args.pin}: {'on' if level else 'off'}")

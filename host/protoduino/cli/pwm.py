@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 
 from ..board import Board
+from ..commands import PWM
 from ..constants import PWM_MAX_DUTY
 from . import argtypes
-from .options import add_hold, add_port, hold, with_board
+from .options import add_hold, add_port, configuring, hold, with_board
 
 HELP = "set a PWM output's duty (0..255, as analogWrite)"
 
@@ -26,7 +27,8 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     def body(board: Board) -> int:
-        out = board.pwm_output(args.pin, safe=args.safe)
+        with configuring(board, args.pin, PWM):
+            out = board.pwm_output(args.pin, safe=args.safe)
         out.write(args.duty)
         print(f"pwm {args.pin}: {out.value}")
         hold(board, args.hold)

@@ -3,7 +3,8 @@
 The configuration is read and checked before the port is opened (a bad one is
 a usage error, exit status 2). The bridge runs in the foreground; SIGINT and
 SIGTERM end it cleanly (every output driven safe by the device's Stop, then the
-board closed). ``--sim`` instead of PORT starts a simulated board owned by this
+board closed); the exit status is then 130 after Ctrl-C, as every command's, and 0 after
+SIGTERM. ``--sim`` instead of PORT starts a simulated board owned by this
 process (stopped after the bridge) and, without ``--config``, bridges the
 example robot of docs/ros2.md: the README's one command. docs/ros2.md has the details.
 """
@@ -109,7 +110,11 @@ def _bridge(args: argparse.Namespace) -> int:
     except ProtoduinoError as exc:
         return error("ros2", exc)
 
+    interrupted = False
+
     def stop(signum: int, frame: FrameType | None) -> None:
+        nonlocal interrupted
+        interrupted = interrupted or signum == signal.SIGINT
         bridge.stop()
 
     signal.signal(signal.SIGTERM, stop)
@@ -128,4 +133,6 @@ def _bridge(args: argparse.Namespace) -> int:
     except ProtoduinoError as exc:
         return error("ros2", exc)
     print("protoduino ros2: stopped", file=sys.stderr)
-    return 0
+    # Stopped the same way either way (the outputs safe); Ctrl-C says so as every command
+    # does (130), while a service manager's SIGTERM is a normal end.
+    return 130 if interrupted else 0

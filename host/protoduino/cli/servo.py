@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 
+from ..arguments import whole_number
 from ..board import Board
+from ..commands import SERVO
 from ..constants import SERVO_LIMIT_MAX_US, SERVO_LIMIT_MIN_US, SERVO_MAX_DEGREES
 from . import argtypes
-from .options import add_hold, add_port, hold, with_board
+from .options import add_hold, add_port, configuring, hold, with_board
 
 US = argtypes.integer(SERVO_LIMIT_MIN_US, SERVO_LIMIT_MAX_US, name="microseconds")
 
@@ -19,9 +21,10 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("pin", type=argtypes.pin, metavar="PIN")
     parser.add_argument(
         "angle",
-        type=argtypes.integer(name="angle"),
+        type=argtypes.number(name="angle"),
         metavar="ANGLE",
-        help="0..180 degrees, or us with --us",
+        help="0..180 degrees, or us with --us; a real number, rounded to a whole as "
+        "Servo.write rounds (45.5 -> 46)",
     )
     parser.add_argument("--us", action="store_true", help="ANGLE is a pulse width in microseconds")
     parser.add_argument(
@@ -40,22 +43,28 @@ def check(args: argparse.Namespace) -> str | None:
     if args.min_us >= args.max_us:
         return f"--min-us {args.min_us} must be below --max-us {args.max_us}"
     low, high = (args.min_us, args.max_us) if args.us else (0, SERVO_MAX_DEGREES)
-    if not low <= args.angle <= high:
+    if not low <= _whole(args) <= high:
         unit = "us" if args.us else "degrees"
-        return f"{args.angle} {unit} is outside {low}..{high}; nothing sent"
+        return f"{args.angle:g} {unit} is outside {low}..{high}; nothing sent"
     return None
+
+
+def _whole(args: argparse.Namespace) -> int:
+    """ANGLE as the whole degrees (or us) the device gets: the API's rounding."""
+    return whole_number("us" if args.us else "degrees", args.angle)
 
 
 def run(args: argparse.Namespace) -> int:
 
     def body(board: Board) -> int:
-        servo = board.servo(args.pin, safe=args.safe, min_us=args.min_us, max_us=args.max_us)
+        with configuring(board, args.pin, SERVO):
+            servo = board.servo(args.pin, safe=args.safe, min_us=args.min_us, max_us=args.max_us)
         if args.us:
             servo.write_us(args.angle)
-            print(f"servo {args.pin}: {args.angle} us")
+            print(f"servo {args.pin}: {_whole(args)} us")
         else:
             servo.write(args.angle)
-            print(f"servo {args.pin}: {args.angle} degrees")
+            print(f"servo {args.pin}: {_whole(args)} degrees")
         hold(board, args.hold)
         return 0
 

@@ -3,7 +3,8 @@
 Each change prints a line with the value and its age (seconds since the report
 that carried it reached the host); ``--every S`` also prints every input every S
 seconds, so a quiet input still shows how fresh its value is. Ends after
-``--duration`` seconds, after ``--count`` changes, or at Ctrl-C (exit status 0).
+``--duration`` seconds, after ``--count`` changes, with exit status 0, or at Ctrl-C
+(130, as every command).
 """
 
 from __future__ import annotations
@@ -98,35 +99,32 @@ def run(args: argparse.Namespace) -> int:
             kind: InputKind = item.kind or default_kind(args)
             # Listening before the Init: its first value, and every change after it,
             # reach the printer in the order they came.
-            board.inputs.add_sink(kind, item.pin, printer.sink(kind))
+            board.inputs.add_sink(kind, board.pin_number(item.pin), printer.sink(kind))
             watched.append((kind, configure(board, item.pin, kind, args)))
         started: set[int] = set()
         changes = 0
         end = time.monotonic() + args.duration if args.duration else None
         tick = time.monotonic() + args.every if args.every else None
-        try:
-            while True:
-                now = time.monotonic()
-                due = min(t for t in (end, tick, now + 1.0) if t is not None)
-                got = printer.get(max(0.0, due - now))
-                if got is not None:
-                    kind, reading = got
-                    print(show(kind, reading, as_json=args.json), flush=True)
-                    if reading.pin in started:
-                        changes += 1
-                    started.add(reading.pin)
-                    if args.count is not None and changes >= args.count:
-                        return 0
-                now = time.monotonic()
-                if tick is not None and now >= tick:
-                    tick = now + args.every
-                    for kind, source in watched:
-                        latest = source.reading()
-                        if latest is not None:
-                            print(show(kind, latest, as_json=args.json), flush=True)
-                if end is not None and now >= end:
+        while True:  # Ctrl-C: KeyboardInterrupt, exit status 130 (main)
+            now = time.monotonic()
+            due = min(t for t in (end, tick, now + 1.0) if t is not None)
+            got = printer.get(max(0.0, due - now))
+            if got is not None:
+                kind, reading = got
+                print(show(kind, reading, as_json=args.json), flush=True)
+                if reading.pin in started:
+                    changes += 1
+                started.add(reading.pin)
+                if args.count is not None and changes >= args.count:
                     return 0
-        except KeyboardInterrupt:
-            return 0
+            now = time.monotonic()
+            if tick is not None and now >= tick:
+                tick = now + args.every
+                for kind, source in watched:
+                    latest = source.reading()
+                    if latest is not None:
+                        print(show(kind, latest, as_json=args.json), flush=True)
+            if end is not None and now >= end:
+                return 0
 
     return with_board("watch", args, body)
