@@ -12,9 +12,9 @@ from concurrent.futures import Future
 
 import pytest
 from protoduino import Board, Event, EventKind
-from protoduino.constants import ACK_TIMEOUT, MAX_RETRIES, PING_INTERVAL, PacketType
+from protoduino.constants import ACK_TIMEOUT, MAX_RETRIES, PING_INTERVAL
 from protoduino.errors import AckTimeoutError, CommandRejectedError
-from protoduino.messages import ArduinoIn, Status
+from protoduino.messages import Status
 from protoduino.testing import DedupeWindow, VirtualDevice
 
 
@@ -24,8 +24,7 @@ def device() -> Iterator[VirtualDevice]:
 
 
 def sent(device: VirtualDevice, kind: str) -> int:
-    msgs = [ArduinoIn.FromString(p) for t, p in device.received if t is PacketType.COMMAND]
-    return sum(1 for m in msgs if m.WhichOneof("data") == kind)
+    return len(device.arrivals(kind))
 
 
 def test_a_board_opens_and_its_commands_reach_the_device(device: VirtualDevice) -> None:
