@@ -589,7 +589,9 @@ class VirtualDevice:
             msg.ParseFromString(packet.payload)
             self.received.append(Received(packet.seq, msg, self.clock()))
             self._received()
-            replies = self.handler(msg)
+        # Outside the lock: a test's handler may hold its answer back (a pty's thread waits).
+        replies = self.handler(msg)
+        with self._lock():
             self._send_all(replies)
 
     def _received(self) -> None:
@@ -632,6 +634,10 @@ class VirtualDevice:
     def default_reply(self, msg: ArduinoIn) -> Reply:
         """The firmware's answer: the Ack, then what follows it (an input's first value, a
         Failsafe message)."""
+        with self._lock():
+            return self._firmware_reply(msg)
+
+    def _firmware_reply(self, msg: ArduinoIn) -> Reply:
         mid = msg.message_id
         kind = msg.WhichOneof("data")
         if not 1 <= mid <= MAX_MESSAGE_ID:
@@ -902,10 +908,17 @@ class VirtualDevice:
         with self._lock():
             due = self._failsafe_due
             if due is not None and not self._fired and self.clock() >= due:
-                self._fired = True  # once per silence
-                self._enter_failsafe(PING_TIMEOUT)
-                if self._active:
-                    self._send_all([self._failsafe_message()])
+                self.expire_failsafe()
+
+    def expire_failsafe(self) -> None:
+        """The failsafe's timer runs out now (on a pty, without waiting its timeout): every
+        output safe, a new epoch, the Failsafe event; values refused until a liveness message."""
+        with self._lock():
+            self._fired = True  # once per silence
+            self._enter_failsafe(PING_TIMEOUT)
+            if self._active:
+                self._send_all([self._failsafe_message()])
+        self._flush()
 
     def _enter_failsafe(self, cause: int) -> None:
         self.values.clear()  # every output at its safe value
