@@ -335,6 +335,7 @@ class VirtualDevice:
         self.pins: dict[int, str] = {}
         self.values: dict[int, int] = {}
         self._inits: dict[int, bytes] = {}
+        self._counter_edge: dict[int, int] = {}
         #: Interlock inputs: pin -> trip level; the pin whose interlock latched (None: none).
         self.trips: dict[int, int] = {}
         self.latched: int | None = None
@@ -384,9 +385,10 @@ class VirtualDevice:
 
     # --- what a test drives -------------------------------------------------------------------
 
-    def set_level(self, pin: int, level: int) -> None:
+    def set_level(self, pin: int, level: bool | int) -> float:
         """A digital input's level changes (after its debounce): reported at once, an
-        interlock at its trip level trips; the board has it on return (in-process)."""
+        interlock at its trip level trips; the board has it on return (in-process). Returns
+        the device's time, as SimBoard's ``set_level`` returns the board's."""
         with self._lock():
             self.levels[pin] = 1 if level else 0
             if self.pins.get(pin) == "digital_input":
@@ -394,22 +396,31 @@ class VirtualDevice:
                 if self.trips.get(pin) == self.levels[pin] and self.latched is None:
                     self._send_all(self._trip(pin))
         self._flush()
+        return self.clock()
 
-    def set_analog(self, pin: int, counts: int) -> None:
-        """An analog input's counts (0..1023) change: reported at once."""
+    def set_analog(self, pin: int, counts: int) -> float:
+        """An analog input's counts (0..1023) change: reported at once (no threshold, no
+        sample rate). Returns the device's time."""
         with self._lock():
             self.analog[pin] = counts
             if self.pins.get(pin) == "analog_input":
                 self._send_all([self.report(analog=[pin])])
         self._flush()
+        return self.clock()
 
-    def pulses(self, pin: int, count: int) -> None:
-        """``count`` edges on a counter's pin: the new count is reported at once."""
+    def pulses(self, pin: int, count: int, hz: float | None = None) -> float:
+        """``count`` pulses on ``pin``, each away from its level and back (as SimBoard's): a
+        counter there counts their edges of its kind (both: two a pulse), and the new count is
+        reported at once. The fake times no pin: ``hz`` is taken for SimBoard's signature and
+        not used. Returns the device's time."""
+        del hz
         with self._lock():
             if self.pins.get(pin) == "counter":
-                self.counts[pin] = (self.counts.get(pin, 0) + count) % 2**32
+                edges = count * (2 if self._counter_edge.get(pin) == pb.EDGE_BOTH else 1)
+                self.counts[pin] = (self.counts.get(pin, 0) + edges) % 2**32
                 self._send_all([self.report(counters=[pin])])
         self._flush()
+        return self.clock()
 
     def user_report(self, report: int, body: bytes, *, coalesced: int = 0) -> None:
         """A user service's report ``report`` (1..) with its encoded message ``body``."""
@@ -803,6 +814,7 @@ class VirtualDevice:
             return status, after
         if mode.name == "counter":
             self.counts[pin] = 0  # counted since this Init
+            self._counter_edge[pin] = init.edge
             return status, [self.report(counters=[pin])]
         return status, [self.report(analog=[pin])]
 

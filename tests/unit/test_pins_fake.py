@@ -292,7 +292,7 @@ def test_analog_input_and_counter(board: Board, fake: PtyDevice) -> None:
     c = init.counter_init
     assert (c.pin, c.edge, c.pull_up, c.interval_ms) == (3, pb.EDGE_BOTH, True, 10)
     assert wheel.read() == 0
-    fake.pulses(3, 100)
+    fake.pulses(3, 50)  # both edges: two a pulse
     assert wheel.wait_for(lambda n: n >= 100, timeout=30) == 100
     assert pot.read() == 1023  # a report without pin 14 leaves its value alone
 

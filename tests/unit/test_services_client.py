@@ -118,11 +118,7 @@ def test_reports_reach_their_callback_and_the_latest(board: Board, fake: PtyDevi
         done.set()
 
     probe.on_level(on_level)
-    out = pb.ArduinoOut()
-    out.user_report.report = 5
-    out.user_report.body = pb.Ping(payload=b"level").SerializeToString()
-    out.user_report.coalesced = 3
-    fake.send_data(out)
+    fake.user_report(5, pb.Ping(payload=b"level").SerializeToString(), coalesced=3)
     assert done.wait(10)
     assert got == [b"level"]
     latest = probe.level()

@@ -107,3 +107,15 @@ def test_a_lost_first_report_costs_one_round_time_on_the_fake_clock_not_the_wall
         device.handler = device.default_reply
         device.pulses(2, 3)
         assert wheel.read() == 3
+
+
+def test_pulses_count_as_the_simulated_boards_count_them() -> None:
+    """SimBoard.pulses(pin, count, hz): each pulse leaves the level and comes back, so a
+    counter of both edges counts two a pulse; the fake takes the same call."""
+    device = VirtualDevice()
+    with device.open_board(ping=False) as board:
+        rising = board.counter(2)
+        both = board.counter(3, edge="both")
+        device.pulses(2, 5, 100)
+        device.pulses(3, 5, 100)
+        assert (rising.read(), both.read()) == (5, 10)
