@@ -14,8 +14,9 @@ every input and nothing older:
   reads the latest value when it runs. A callback slower than its input skips values
   (counted in ``board.stats.input_changes_skipped``) rather than being fed stale ones.
 
-Ages are host times: a :class:`Reading`'s ``received`` is ``time.monotonic()`` when
-its report arrived, and ``age`` the seconds since. It leaves out the report's time on
+Ages are host times: a :class:`Reading`'s ``received`` is the board's clock when its report
+arrived (``time.monotonic()``; a :mod:`protoduino.testing` device's manual clock for a board
+on one), and an input's ``age`` the seconds since on that clock. It leaves out the report's time on
 the wire (at 115200 baud about 2 ms for the largest report) and in the device's
 transmit queue behind Acks; ``time_ms`` is the device's own clock when the values were
 taken (milliseconds since its boot, wrapping at 2**32), for ordering and intervals on
@@ -56,12 +57,14 @@ class Reading:
     value: int
     #: The device's clock (ms since its boot, wrapping) when the value was taken.
     time_ms: int
-    #: time.monotonic() on the host when the report arrived.
+    #: The board's clock when the report arrived: time.monotonic() on the host (a
+    #: protoduino.testing device's manual clock for a board on it).
     received: float
 
     @property
     def age(self) -> float:
-        """Seconds since the report that carried this value arrived (host clock)."""
+        """Seconds since the report that carried this value arrived, by time.monotonic()
+        (an input's ``age`` reads the board's own clock)."""
         return time.monotonic() - self.received
 
 
@@ -274,11 +277,15 @@ class InputTable:
         finally:
             remove()
 
+    def age(self, reading: Reading) -> float:
+        """Seconds since ``reading`` arrived, on the board's clock (the table's)."""
+        return self._clock() - reading.received
+
     def _describe(self, kind: InputKind, pin: int) -> str:
         slot = self._slots.get((kind, pin))
         if slot is None or slot.reading is None:
             return "none yet"
-        return f"{slot.reading.value}, {slot.reading.age:.3f} s old"
+        return f"{slot.reading.value}, {self.age(slot.reading):.3f} s old"
 
 
 #: What a DigitalInput's wait_for takes: a level, or a test of the level.
@@ -312,9 +319,10 @@ class Input:
 
     @property
     def age(self) -> float | None:
-        """Seconds since the latest report of this input arrived (None: none yet)."""
+        """Seconds since the latest report of this input arrived, on the board's clock
+        (None: none yet)."""
         reading = self.reading()
-        return None if reading is None else reading.age
+        return None if reading is None else self._table.age(reading)
 
     def on_change(self, callback: Callable[[Reading], None]) -> Callable[[], None]:
         """Call ``callback(reading)`` on the board's event thread when the value changes.

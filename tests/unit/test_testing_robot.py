@@ -119,3 +119,16 @@ def test_pulses_count_as_the_simulated_boards_count_them() -> None:
         device.pulses(2, 5, 100)
         device.pulses(3, 5, 100)
         assert (rising.read(), both.read()) == (5, 10)
+
+
+def test_an_inputs_age_is_read_on_the_fakes_clock() -> None:
+    """A robot that distrusts a stale battery value: the age is the board's clock's, so a
+    test moves it with the device's clock."""
+    device = VirtualDevice()
+    with device.open_board(ping=False) as board:
+        battery = board.analog_input(14)
+        assert battery.age == 0.0
+        device.run(2.5)  # nothing reported for 2.5 s (the fake sends no analog heartbeat)
+        assert battery.age == pytest.approx(2.5)
+        device.set_analog(14, 600)
+        assert battery.age == 0.0
