@@ -53,11 +53,12 @@ Poses are refused with STATUS_FAILSAFE_EXPIRED until the next such liveness mess
 (a Stop advances the epoch and sends its event too, but refuses nothing: the timer still
 runs); each liveness Ack carries the failsafe state once one was entered.
 
-What it is not: it times no pin (no servo pulse, no PWM wave, no debounce, no sample rate,
-threshold or heartbeat of an analog input: it reports every change the test makes at once),
-keeps a commanded value per pin (:attr:`~VirtualDevice.values`; absent: at its safe value)
-rather than the outputs' states (ReadOutputs is answered empty), and runs no user handler (a
-UserCall is acknowledged; a test's :attr:`~VirtualDevice.handler` answers it). For the
+What it is not: it times no pin (no servo pulse or speed limit in motion, no PWM wave, no
+debounce, no sample rate, threshold or heartbeat of an analog input: it reports every change
+the test makes at once, and nothing else), keeps a commanded value per pin
+(:attr:`~VirtualDevice.values`; absent: at its safe value; ReadOutputs answers with those, a
+servo already where it goes), and runs no user handler (a UserCall is acknowledged; a test's
+:attr:`~VirtualDevice.handler` answers it). For the
 firmware itself, use :class:`protoduino.simboard.SimBoard` (the firmware compiled for this
 machine, or the Uno's on an emulated ATmega328P).
 
@@ -74,6 +75,7 @@ import collections
 import contextlib
 import os
 import select
+import struct
 import threading
 import time
 import tty
@@ -94,6 +96,8 @@ from .constants import (
     MAX_MESSAGE_ID,
     OPENING_BAUDRATE,
     PROTOCOL_VERSION,
+    SERVO_DEFAULT_MAX_US,
+    SERVO_DEFAULT_MIN_US,
     ControlCode,
     EventCode,
     PacketType,
@@ -251,6 +255,22 @@ class ManualClock:
         self.now += seconds
 
 
+def _degrees_to_us(init: pb.ServoInit, degrees: int) -> int:
+    """A servo's width for ``degrees`` (0..180), as the firmware's degrees_to_us rounds it."""
+    lo = init.min_us or SERVO_DEFAULT_MIN_US
+    hi = init.max_us or SERVO_DEFAULT_MAX_US
+    return lo + degrees * (hi - lo) // 180
+
+
+def _servo_safe_us(init_bytes: bytes) -> int:
+    """A servo's safe width from its ServoInit (0: limp, no pulse)."""
+    init = pb.ServoInit.FromString(init_bytes)
+    which = init.WhichOneof("safe")
+    if which == "safe_degrees":
+        return _degrees_to_us(init, init.safe_degrees)
+    return init.safe_us if which == "safe_us" else 0
+
+
 #: Pins of one mode the firmware holds at once (pd_outputs.h, pd_inputs.h; servos: max_servos).
 SLOTS = {"pwm": 4, "digital_input": 8, "analog_input": 6, "counter": 2}
 
@@ -336,6 +356,7 @@ class VirtualDevice:
         self.values: dict[int, int] = {}
         self._inits: dict[int, bytes] = {}
         self._counter_edge: dict[int, int] = {}
+        self._servo_us: dict[int, int] = {}
         #: Interlock inputs: pin -> trip level; the pin whose interlock latched (None: none).
         self.trips: dict[int, int] = {}
         self.latched: int | None = None
@@ -743,7 +764,9 @@ class VirtualDevice:
             return Status.STATUS_OK, [self._failsafe_message()]
         if kind == "clear_interlock":
             return self._clear_interlock(msg.clear_interlock.failsafe_epoch)
-        return Status.STATUS_OK, []  # read_outputs (answered empty), user_call
+        if kind == "read_outputs":
+            self._read_outputs(out.ack.outputs)
+        return Status.STATUS_OK, []  # a user_call: acknowledged (a test's handler answers it)
 
     # --- pins ---------------------------------------------------------------------------------
 
@@ -825,6 +848,30 @@ class VirtualDevice:
             self.values[ctl.pin] = ctl.duty
         else:
             self.values[ctl.pin] = getattr(ctl, str(ctl.WhichOneof("value")))
+            init = pb.ServoInit.FromString(self._inits[ctl.pin])
+            us = ctl.us if ctl.WhichOneof("value") == "us" else _degrees_to_us(init, ctl.degrees)
+            self._servo_us[ctl.pin] = us
+
+    def _read_outputs(self, states: Any) -> None:
+        """ReadOutputs as pd_outputs_read answers it: each output's value now (its commanded
+        one, else its safe one), in pin order; a servo is where it goes (the fake times no
+        pin: no speed limit in motion)."""
+        states.SetInParent()
+        servos = bytearray()
+        for pin in sorted(self.pins):
+            mode, init = self.pins[pin], self._inits[pin]
+            if mode == "servo":
+                us = self._servo_us[pin] if pin in self.values else _servo_safe_us(init)
+                servos += struct.pack("<BHH", pin, us, us)
+            elif mode == "digital":
+                states.digital_pins |= 1 << pin
+                safe = int(pb.DigitalInit.FromString(init).safe_level)
+                states.digital_levels |= self.values.get(pin, safe) << pin
+            elif mode == "pwm":
+                states.pwm_pins |= 1 << pin
+                safe = pb.PwmInit.FromString(init).safe_duty
+                states.pwm_duties.append(self.values.get(pin, safe))
+        states.servos = bytes(servos)
 
     def _pose(self, pose: Any, out: ArduinoOut) -> Status.ValueType:
         """All or nothing: every item's pin in its mode, or none is set (refused_item: which)."""

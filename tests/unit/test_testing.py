@@ -199,3 +199,23 @@ def test_dedupe_window_lookup_changes_nothing_and_every_id_moves_n() -> None:
     assert window.newest == 40 and window.entries == {}  # 5 fell 35 behind: dropped
     window.done(40 + 64, Status.STATUS_OK)  # 64 ahead: behind, N stays
     assert window.newest == 40 and window.lookup(104) is None  # out of reach
+
+
+def test_read_outputs_reports_what_the_device_drives(device: VirtualDevice) -> None:
+    with device.open_board(ping=False) as board:
+        arm = board.servo(9, safe=90)  # 544..2400 us: 90 degrees is 544 + 928 us
+        arm.write(45)  # 544 + 45 * 1856 / 180 = 1008 us
+        board.servo(10, safe_us=1500, min_us=1000, max_us=2000)
+        board.digital_output(13, safe=True)
+        motor = board.pwm_output(3, safe=10)
+        motor.write(200)
+        found = {pin: (s.mode, s.value, s.target) for pin, s in board.read_outputs().items()}
+        assert found == {
+            3: ("pwm", 200, 200),
+            9: ("servo", 1008, 1008),
+            10: ("servo", 1500, 1500),
+            13: ("digital", 1, 1),
+        }
+        board.stop()  # every output at its safe value
+        safe = {pin: (s.mode, s.value) for pin, s in board.read_outputs().items()}
+        assert safe == {3: ("pwm", 10), 9: ("servo", 1472), 10: ("servo", 1500), 13: ("digital", 1)}
