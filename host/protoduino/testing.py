@@ -967,17 +967,20 @@ class VirtualDevice:
         with self._lock():
             due = self._failsafe_due
             if due is not None and not self._fired and self.clock() >= due:
-                self.expire_failsafe()
+                self._expire()
 
     def expire_failsafe(self) -> None:
         """The failsafe's timer runs out now (on a pty, without waiting its timeout): every
         output safe, a new epoch, the Failsafe event; values refused until a liveness message."""
         with self._lock():
-            self._fired = True  # once per silence
-            self._enter_failsafe(PING_TIMEOUT)
-            if self._active:
-                self._send_all([self._failsafe_message()])
+            self._expire()
         self._flush()
+
+    def _expire(self) -> None:
+        self._fired = True  # once per silence
+        self._enter_failsafe(PING_TIMEOUT)
+        if self._active:
+            self._send_all([self._failsafe_message()])
 
     def _enter_failsafe(self, cause: int) -> None:
         self.values.clear()  # every output at its safe value
