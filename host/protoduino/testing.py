@@ -38,8 +38,8 @@ schema, boot id and whether the session resumed; NOT_ACTIVE before it; a new ses
 every pin), SEQ on every packet it sends, one Ack per COMMAND, the dedupe window and message
 ids as the firmware keeps them (:class:`DedupeWindow`: a retransmitted id is acknowledged
 again and not executed again), Ping echo, a DeviceInfo with an Uno's pins, EVENT BOOT on
-:meth:`~VirtualDevice.reboot`, the pin table with the firmware's checks (a pin it does not
-have, a reserved one, one another mode holds, a mode the pin cannot do, the servos' Timer1
+:meth:`~VirtualDevice.reboot`, the pin table with the firmware's checks (a pin mode left
+out of its ``features``, a pin it does not have, a reserved one, one another mode holds, a mode the pin cannot do, the servos' Timer1
 shared with PWM on pins 9 and 10, Timer0's pins 5 and 6, servo and counter slots), an input's
 value in an InputReport right after its Init's Ack and after each change the test makes
 (:meth:`~VirtualDevice.set_level`, :meth:`~VirtualDevice.set_analog`,
@@ -699,6 +699,8 @@ class VirtualDevice:
             status: Status.ValueType = Status.STATUS_FAILSAFE_EXPIRED  # no timer behind a value
         elif declared.sets_output and self.latched is not None:
             status = Status.STATUS_INTERLOCK_ACTIVE  # outputs stay safe until ClearInterlock
+        elif not self._built_in(declared):
+            status = Status.STATUS_NOT_SUPPORTED  # the table's answer for a feature left out
         else:
             status, after = self._execute(declared, msg, out)
         out.ack.status = status
@@ -709,6 +711,13 @@ class VirtualDevice:
         if not declared.idempotent:
             self.dedupe.add(mid, status)
         return [out, *after]
+
+    def _built_in(self, declared: Command) -> bool:
+        """Whether ``features`` has the pin-mode feature the command needs (a user service's
+        calls are the test's to answer: see ``handler``)."""
+        if declared.feature is None or declared.feature == "user":
+            return True
+        return bool(self.features >> pb.Feature.Value(f"FEATURE_{declared.feature.upper()}") & 1)
 
     def _info(self, info: Any) -> None:
         info.firmware_version = self.firmware_version

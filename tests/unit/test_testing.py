@@ -7,14 +7,15 @@ the device's clock, which moves only when a call waits or the test runs it.
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 
 import pytest
 from protoduino import Board, Event, EventKind
+from protoduino._generated import protoduino_pb2 as pb
 from protoduino.constants import ACK_TIMEOUT, MAX_RETRIES, PING_INTERVAL
 from protoduino.errors import AckTimeoutError, CommandRejectedError
-from protoduino.messages import Status
+from protoduino.messages import ArduinoIn, Status
 from protoduino.testing import DedupeWindow, VirtualDevice
 
 
@@ -219,3 +220,29 @@ def test_read_outputs_reports_what_the_device_drives(device: VirtualDevice) -> N
         board.stop()  # every output at its safe value
         safe = {pin: (s.mode, s.value) for pin, s in board.read_outputs().items()}
         assert safe == {3: ("pwm", 10), 9: ("servo", 1472), 10: ("servo", 1500), 13: ("digital", 1)}
+
+
+def test_the_device_refuses_what_it_would_refuse_after_the_boards_checks(
+    device: VirtualDevice,
+) -> None:
+    """board.request sends a message as given (no host check): the device's own checks."""
+    device.features &= ~(1 << pb.FEATURE_COUNTER)  # a firmware built without counters
+    with device.open_board(ping=False) as board:
+        board.servo(9)
+
+        def refusal(fill: Callable[[ArduinoIn], object]) -> int:
+            msg = ArduinoIn()
+            fill(msg)
+            with pytest.raises(CommandRejectedError) as refused:
+                board.request(msg)
+            return refused.value.status
+
+        assert refusal(lambda m: m.counter_init.SetInParent()) == Status.STATUS_NOT_SUPPORTED
+        assert refusal(lambda m: setattr(m.pwm_init, "pin", 10)) == Status.STATUS_TIMER_IN_USE
+        assert refusal(lambda m: setattr(m.pwm_init, "pin", 5)) == Status.STATUS_TIMER_IN_USE
+        assert refusal(lambda m: setattr(m.pwm_init, "pin", 4)) == Status.STATUS_NOT_SUPPORTED
+        assert refusal(lambda m: setattr(m.digital_init, "pin", 9)) == Status.STATUS_PIN_IN_USE
+        assert refusal(lambda m: setattr(m.digital_init, "pin", 1)) == Status.STATUS_RESERVED_PIN
+        assert refusal(lambda m: setattr(m.digital_init, "pin", 20)) == Status.STATUS_INVALID_PIN
+        assert refusal(lambda m: setattr(m.pwm_control, "pin", 3)) == Status.STATUS_NOT_INITIALISED
+        assert refusal(lambda m: m.analog_input_init.SetInParent()) == Status.STATUS_RESERVED_PIN
