@@ -39,8 +39,9 @@ every pin), SEQ on every packet it sends, one Ack per COMMAND, the dedupe window
 ids as the firmware keeps them (:class:`DedupeWindow`: a retransmitted id is acknowledged
 again and not executed again), Ping echo, a DeviceInfo with an Uno's pins, EVENT BOOT on
 :meth:`~VirtualDevice.reboot`, the pin table with the firmware's checks (a pin mode left
-out of its ``features``, a pin it does not have, a reserved one, one another mode holds, a mode the pin cannot do, the servos' Timer1
-shared with PWM on pins 9 and 10, Timer0's pins 5 and 6, servo and counter slots), an input's
+out of its ``features``, a pin it does not have, a reserved one, one another mode holds, a
+mode the pin cannot do, the servos' Timer1 shared with PWM on pins 9 and 10, Timer0's pins 5
+and 6, servo and counter slots), an input's
 value in an InputReport right after its Init's Ack and after each change the test makes
 (:meth:`~VirtualDevice.set_level`, :meth:`~VirtualDevice.set_analog`,
 :meth:`~VirtualDevice.pulses`), interlocks (an input at its trip level drives every output
