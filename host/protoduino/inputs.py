@@ -43,6 +43,7 @@ from .errors import (
     ProtocolError,
 )
 from .messages import InputKind, input_values
+from .rpc import Done, Waiter
 
 #: Values one waiter (``wait_for``, an asyncio iterator) keeps before the oldest is dropped.
 SINK_BUFFER = 64
@@ -98,9 +99,18 @@ class InputTable:
     ``post`` hands a job to the board's event thread (``EventDispatcher.put_job``).
     """
 
-    def __init__(self, post: Callable[[Job], None], clock: Clock = time.monotonic) -> None:
+    def __init__(
+        self,
+        post: Callable[[Job], None],
+        clock: Clock = time.monotonic,
+        *,
+        wait: Waiter | None = None,
+    ) -> None:
         self._post = post
         self._clock = clock
+        #: A board without an I/O thread (protoduino.testing): how a caller waits while it
+        #: runs the link itself; None: the I/O thread feeds the waits below.
+        self._wait = wait
         self._cond = threading.Condition()
         self._slots: dict[tuple[InputKind, int], _Slot] = {}
         self._closed = False
@@ -251,6 +261,8 @@ class InputTable:
         """
         if not timeout >= 0 or math.isinf(timeout):  # NaN, negative, infinite
             raise ArgumentError(f"timeout must be a finite number of seconds >= 0, not {timeout!r}")
+        if self._wait is not None:
+            return self._wait_inline(self._wait, kind, pin, predicate, timeout)
         seen: collections.deque[Reading] = collections.deque(maxlen=SINK_BUFFER)
         current, remove = self.add_sink(kind, pin, seen.append)
         try:
@@ -276,6 +288,41 @@ class InputTable:
                         return reading
         finally:
             remove()
+
+    def _wait_inline(
+        self,
+        wait: Waiter,
+        kind: InputKind,
+        pin: int,
+        predicate: Callable[[Reading], bool],
+        timeout: float,
+    ) -> Reading:
+        """:meth:`wait_for` without an I/O thread: ``wait`` runs the link (and its clock) on
+        this thread until a value holds or ``timeout`` passed, so the sink, on this thread
+        too, tests each value as it arrives."""
+        found: list[Reading] = []
+        done = Done()
+
+        def sink(reading: Reading) -> None:
+            if not found and predicate(reading):
+                found.append(reading)
+                done.set()
+
+        current, remove = self.add_sink(kind, pin, sink)
+        try:
+            if current is not None and predicate(current):
+                return current
+            wait(done, timeout)
+        finally:
+            remove()
+        if found:
+            return found[0]
+        if self._closed:
+            raise BoardClosedError("the board was closed while waiting for an input")
+        raise InputTimeoutError(
+            f"{kind} input {pin}: no matching value within {timeout:g} s "
+            f"(latest: {self._describe(kind, pin)})"
+        )
 
     def age(self, reading: Reading) -> float:
         """Seconds since ``reading`` arrived, on the board's clock (the table's)."""

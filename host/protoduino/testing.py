@@ -26,7 +26,8 @@ the wall clock: a call returns as soon as its answer is in, an input's first val
 Blocking calls return as on a real board (the device answers while the call waits). A
 ``submit`` form's future, an ``on_change`` or ``on_event`` callback, runs when the test lets
 time pass: :meth:`VirtualDevice.run` (``run(0)`` delivers what is due now). An input's
-``wait_for`` would block (nothing runs while it waits): read the input instead.
+``wait_for`` waits as a call does: at once if its value holds, else on the device's clock
+until one the device sends holds, or its timeout (exactly, on that clock).
 
 :class:`PtyDevice` is the same device on a pseudo-terminal, answering from a thread of its
 own on the wall clock: for tests that need the real transport (protoduino's own tests of the
@@ -380,7 +381,9 @@ class VirtualDevice:
     def open_board(self, **options: Unpack[BoardOptions]) -> Board:
         """A :class:`~protoduino.Board` on this device (the options of ``Board.open``; no
         ``monitor`` or ``capture``: there are no frames)."""
-        wiring = Wiring(port=self, clock=self.clock, wait=self.wait, events=self._dispatcher)
+        wiring = Wiring(
+            port=self, clock=self.clock, wait=self.wait, events=self._dispatcher, inline=True
+        )
         return Board(self.url, wiring=wiring, **options)
 
     def _dispatcher(self) -> EventDispatcher:

@@ -12,7 +12,7 @@ import threading
 
 import pytest
 from protoduino import Board
-from protoduino.errors import CommandRejectedError
+from protoduino.errors import CommandRejectedError, InputTimeoutError
 from protoduino.messages import Status
 from protoduino.testing import VirtualDevice
 
@@ -132,3 +132,16 @@ def test_an_inputs_age_is_read_on_the_fakes_clock() -> None:
         assert battery.age == pytest.approx(2.5)
         device.set_analog(14, 600)
         assert battery.age == 0.0
+
+
+def test_an_inputs_wait_for_waits_on_the_fakes_clock() -> None:
+    """A robot that waits for its button with a timeout: the wait runs the fake's clock, so
+    its timeout is exact and costs no wall time."""
+    device = VirtualDevice()
+    with device.open_board(ping=False) as board:
+        button = board.digital_input(7, pull_up=True)
+        assert button.wait_for(True, timeout=5.0) is True  # already: at once
+        start = device.clock()
+        with pytest.raises(InputTimeoutError):
+            button.wait_for(False, timeout=5.0)
+        assert device.clock() - start == pytest.approx(5.0)  # the manual clock ran
