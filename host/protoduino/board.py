@@ -121,7 +121,7 @@ from .readback import DeviceInfo as DeviceInfo  # noqa: PLC0414
 from .readback import OutputState as OutputState  # noqa: PLC0414
 from .readback import decode_device_info, failsafe_cause
 from .readback import decode_output_states as decode_output_states  # noqa: PLC0414
-from .rpc import Ack, Call, Done, Rpc, RpcState
+from .rpc import Ack, Call, Rpc, RpcState
 from .transport import FrameMonitor
 from .userreports import UserReportTable
 from .wiring import Wiring, serial_wiring
@@ -335,8 +335,6 @@ class Board(ClosedOnExit):
             else None
         )
         self._transport = wiring.port
-        # How a caller waits: on the wall clock, or on a fake device's (protoduino.testing).
-        self._waiter = wiring.wait
         if monitor is not None:
             self._transport.add_monitor(monitor)
         if self._capture is not None:
@@ -877,15 +875,8 @@ class Board(ClosedOnExit):
         self._send(msg, on_ok)
         created = make()
         assert isinstance(created, DigitalInput | AnalogInput | Counter)
-        # Waited for as a call's Ack is (the board's waiter): on a fake device's manual
-        # clock, time passes instead of the wall clock's.
-        first = Done()
-        current, remove = self._inputs.add_sink(created.kind, created.pin, lambda _r: first.set())
-        try:
-            if current is None:
-                self._waiter(first, self.round_time)
-        finally:
-            remove()
+        with contextlib.suppress(ProtoduinoError):
+            created._wait(lambda _reading: True, self.round_time)
         return created
 
     def clear_interlock(self) -> None:
