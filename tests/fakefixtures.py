@@ -10,19 +10,19 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from fakedevice import FakeDevice
 from protoduino import Board
+from protoduino.testing import PtyDevice
 
 
 @pytest.fixture
-def fake(tmp_path: Path) -> Iterator[FakeDevice]:
+def fake(tmp_path: Path) -> Iterator[PtyDevice]:
     """A fake device answering like the firmware; its handler can be replaced per test."""
-    with FakeDevice(tmp_path) as device:
+    with PtyDevice(tmp_path) as device:
         yield device
 
 
 @pytest.fixture
-def board(fake: FakeDevice) -> Iterator[Board]:
+def board(fake: PtyDevice) -> Iterator[Board]:
     """A Board on ``fake``: short Ack timeout, no automatic Ping (tests send what they mean)."""
     with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
         yield b

@@ -389,7 +389,9 @@ class Board(ClosedOnExit):
         # Started only now: a constructor above that refuses its options leaves no thread.
         self._events = wiring.events()
         # Callbacks of inputs run on the event thread, in order with the events.
-        self._inputs = InputTable(self._events.put_job, wiring.clock)
+        self._inputs = InputTable(
+            self._events.put_job, wiring.clock, wait=wiring.wait if wiring.inline else None
+        )
         # The user service's reports (docs/services.md), newest wins as the inputs'.
         self.user_reports = UserReportTable(self._events.put_job)
         # From here on anything that ends the open early (an error, a KeyboardInterrupt

@@ -14,8 +14,9 @@ every input and nothing older:
   reads the latest value when it runs. A callback slower than its input skips values
   (counted in ``board.stats.input_changes_skipped``) rather than being fed stale ones.
 
-Ages are host times: a :class:`Reading`'s ``received`` is ``time.monotonic()`` when
-its report arrived, and ``age`` the seconds since. It leaves out the report's time on
+Ages are host times: a :class:`Reading`'s ``received`` is the board's clock when its report
+arrived (``time.monotonic()``; a :mod:`protoduino.testing` device's manual clock for a board
+on one), and an input's ``age`` the seconds since on that clock. It leaves out the report's time on
 the wire (at 115200 baud about 2 ms for the largest report) and in the device's
 transmit queue behind Acks; ``time_ms`` is the device's own clock when the values were
 taken (milliseconds since its boot, wrapping at 2**32), for ordering and intervals on
@@ -42,6 +43,7 @@ from .errors import (
     ProtocolError,
 )
 from .messages import InputKind, input_values
+from .rpc import Done, Waiter
 
 #: Values one waiter (``wait_for``, an asyncio iterator) keeps before the oldest is dropped.
 SINK_BUFFER = 64
@@ -56,12 +58,14 @@ class Reading:
     value: int
     #: The device's clock (ms since its boot, wrapping) when the value was taken.
     time_ms: int
-    #: time.monotonic() on the host when the report arrived.
+    #: The board's clock when the report arrived: time.monotonic() on the host (a
+    #: protoduino.testing device's manual clock for a board on it).
     received: float
 
     @property
     def age(self) -> float:
-        """Seconds since the report that carried this value arrived (host clock)."""
+        """Seconds since the report that carried this value arrived, by time.monotonic()
+        (an input's ``age`` reads the board's own clock)."""
         return time.monotonic() - self.received
 
 
@@ -95,9 +99,18 @@ class InputTable:
     ``post`` hands a job to the board's event thread (``EventDispatcher.put_job``).
     """
 
-    def __init__(self, post: Callable[[Job], None], clock: Clock = time.monotonic) -> None:
+    def __init__(
+        self,
+        post: Callable[[Job], None],
+        clock: Clock = time.monotonic,
+        *,
+        wait: Waiter | None = None,
+    ) -> None:
         self._post = post
         self._clock = clock
+        #: A board without an I/O thread (protoduino.testing): how a caller waits while it
+        #: runs the link itself; None: the I/O thread feeds the waits below.
+        self._wait = wait
         self._cond = threading.Condition()
         self._slots: dict[tuple[InputKind, int], _Slot] = {}
         self._closed = False
@@ -248,6 +261,8 @@ class InputTable:
         """
         if not timeout >= 0 or math.isinf(timeout):  # NaN, negative, infinite
             raise ArgumentError(f"timeout must be a finite number of seconds >= 0, not {timeout!r}")
+        if self._wait is not None:
+            return self._wait_inline(self._wait, kind, pin, predicate, timeout)
         seen: collections.deque[Reading] = collections.deque(maxlen=SINK_BUFFER)
         current, remove = self.add_sink(kind, pin, seen.append)
         try:
@@ -274,11 +289,50 @@ class InputTable:
         finally:
             remove()
 
+    def _wait_inline(
+        self,
+        wait: Waiter,
+        kind: InputKind,
+        pin: int,
+        predicate: Callable[[Reading], bool],
+        timeout: float,
+    ) -> Reading:
+        """:meth:`wait_for` without an I/O thread: ``wait`` runs the link (and its clock) on
+        this thread until a value holds or ``timeout`` passed, so the sink, on this thread
+        too, tests each value as it arrives."""
+        found: list[Reading] = []
+        done = Done()
+
+        def sink(reading: Reading) -> None:
+            if not found and predicate(reading):
+                found.append(reading)
+                done.set()
+
+        current, remove = self.add_sink(kind, pin, sink)
+        try:
+            if current is not None and predicate(current):
+                return current
+            wait(done, timeout)
+        finally:
+            remove()
+        if found:
+            return found[0]
+        if self._closed:
+            raise BoardClosedError("the board was closed while waiting for an input")
+        raise InputTimeoutError(
+            f"{kind} input {pin}: no matching value within {timeout:g} s "
+            f"(latest: {self._describe(kind, pin)})"
+        )
+
+    def age(self, reading: Reading) -> float:
+        """Seconds since ``reading`` arrived, on the board's clock (the table's)."""
+        return self._clock() - reading.received
+
     def _describe(self, kind: InputKind, pin: int) -> str:
         slot = self._slots.get((kind, pin))
         if slot is None or slot.reading is None:
             return "none yet"
-        return f"{slot.reading.value}, {slot.reading.age:.3f} s old"
+        return f"{slot.reading.value}, {self.age(slot.reading):.3f} s old"
 
 
 #: What a DigitalInput's wait_for takes: a level, or a test of the level.
@@ -312,9 +366,10 @@ class Input:
 
     @property
     def age(self) -> float | None:
-        """Seconds since the latest report of this input arrived (None: none yet)."""
+        """Seconds since the latest report of this input arrived, on the board's clock
+        (None: none yet)."""
         reading = self.reading()
-        return None if reading is None else reading.age
+        return None if reading is None else self._table.age(reading)
 
     def on_change(self, callback: Callable[[Reading], None]) -> Callable[[], None]:
         """Call ``callback(reading)`` on the board's event thread when the value changes.

@@ -48,6 +48,9 @@ class Wiring:
     wait: Waiter
     #: Called once the options were all accepted: an event thread starts only then.
     events: Callable[[], EventDispatcher]
+    #: No I/O thread: a waiting caller runs the link itself (``wait``), so an input's
+    #: ``wait_for`` waits through ``wait`` too (protoduino.testing).
+    inline: bool = False
 
 
 def serial_wiring(url: str, baudrate: int | None) -> Wiring:

@@ -12,10 +12,10 @@ from typing import Any
 
 import protoduino
 import pytest
-from fakedevice import FakeDevice, ack
 from protoduino import EventKind, aio
 from protoduino.messages import ArduinoOut, Status
 from protoduino.simboard import SimBoard
+from protoduino.testing import PtyDevice, ack
 from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
 #: Bounds a failing test's wait only.
@@ -29,10 +29,10 @@ def info_msg(count: int) -> Any:
     return out
 
 
-def test_commands_and_values(fake: FakeDevice) -> None:
+def test_commands_and_values(fake: PtyDevice) -> None:
     async def main() -> None:
         async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
-            assert board.info.board == "fake"
+            assert board.info.board == "virtual"
             servo = await board.servo(9, safe=10)
             assert isinstance(servo.sync, protoduino.Servo) and servo.pin == 9
             await servo.write(45)
@@ -44,14 +44,14 @@ def test_commands_and_values(fake: FakeDevice) -> None:
             assert fake.values == {9: 1500, 13: 0}
             assert await board.ping(b"x") > 0
             await board.stop()
-            assert fake.commands("stop")
+            assert fake.arrivals("stop")
             assert board.stats.timeouts == 0
         assert board.closed
 
     asyncio.run(asyncio.wait_for(main(), BOUND))
 
 
-def test_the_loop_keeps_running_while_commands_wait(fake: FakeDevice) -> None:
+def test_the_loop_keeps_running_while_commands_wait(fake: PtyDevice) -> None:
     """Awaiting a held Ack leaves the loop free; gather runs commands side by side."""
     released = threading.Event()
 
@@ -76,10 +76,10 @@ def test_the_loop_keeps_running_while_commands_wait(fake: FakeDevice) -> None:
         async with await aio.open(fake.port, ack_timeout=BOUND, ping=False) as board:
             servos = [await board.servo(pin) for pin in (3, 5, 6)]
             fake.handler = hold
-            before = len(fake.commands())
+            before = len(fake.arrivals())
             writes = asyncio.gather(*(s.write(20 + s.pin) for s in servos))
             ticks = 0
-            while len(fake.commands()) < before + 3:  # the loop runs: this loop ticks
+            while len(fake.arrivals()) < before + 3:  # the loop runs: this loop ticks
                 ticks += 1
                 await asyncio.sleep(0.01)
             assert not writes.done()
@@ -91,7 +91,7 @@ def test_the_loop_keeps_running_while_commands_wait(fake: FakeDevice) -> None:
     asyncio.run(asyncio.wait_for(main(), BOUND))
 
 
-def test_errors_are_the_blocking_calls(fake: FakeDevice) -> None:
+def test_errors_are_the_blocking_calls(fake: PtyDevice) -> None:
     async def main() -> None:
         async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
             servo = await board.servo(9)
@@ -112,7 +112,7 @@ def test_errors_are_the_blocking_calls(fake: FakeDevice) -> None:
     asyncio.run(asyncio.wait_for(main(), BOUND))
 
 
-def test_cancelled_wait_does_not_recall_the_command(fake: FakeDevice) -> None:
+def test_cancelled_wait_does_not_recall_the_command(fake: PtyDevice) -> None:
     async def main() -> None:
         async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
             servo = await board.servo(9)
@@ -126,7 +126,7 @@ def test_cancelled_wait_does_not_recall_the_command(fake: FakeDevice) -> None:
     asyncio.run(asyncio.wait_for(main(), BOUND))
 
 
-def test_events_iterate_until_close(fake: FakeDevice) -> None:
+def test_events_iterate_until_close(fake: PtyDevice) -> None:
     async def main() -> list[int]:
         board = await aio.open(fake.port, ack_timeout=0.1, ping=False)
         events = board.events()
@@ -143,7 +143,7 @@ def test_events_iterate_until_close(fake: FakeDevice) -> None:
     assert asyncio.run(asyncio.wait_for(main(), BOUND)) == [1, 2]
 
 
-def test_event_buffer_is_bounded(fake: FakeDevice) -> None:
+def test_event_buffer_is_bounded(fake: PtyDevice) -> None:
     async def main() -> None:
         async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
             async with board.events(maxsize=2) as events:
@@ -183,7 +183,7 @@ def test_aio_reaches_the_pins(sim_board: SimBoard) -> None:
     wait_for_pin(sim_board, 13, lambda v: 1 in v)
 
 
-def test_heartbeat_and_release_do_not_block_the_loop(fake: FakeDevice) -> None:
+def test_heartbeat_and_release_do_not_block_the_loop(fake: PtyDevice) -> None:
     """Issue 20, item 12: heartbeat(), release(), release_all() are awaited, the loop free."""
     released = threading.Event()
     held = ("heartbeat", "release", "release_all")
@@ -213,12 +213,12 @@ def test_heartbeat_and_release_do_not_block_the_loop(fake: FakeDevice) -> None:
             led = await board.digital_output(13)
             await board.digital_output(12)
             fake.handler = hold
-            before = len(fake.commands())
+            before = len(fake.arrivals())
             calls = asyncio.gather(
                 board.heartbeat(), servo.release(), board.release(12), led.release()
             )
             ticks = 0
-            while len(fake.commands()) < before + 4:  # the loop runs while the Acks are held
+            while len(fake.arrivals()) < before + 4:  # the loop runs while the Acks are held
                 ticks += 1
                 await asyncio.sleep(0.01)
             assert not calls.done() and ticks > 0
@@ -227,7 +227,7 @@ def test_heartbeat_and_release_do_not_block_the_loop(fake: FakeDevice) -> None:
             assert servo.value is None and led.value is None  # forgotten at the Acks
             await board.digital_output(13)
             await board.release_all()
-            kinds = [r.kind for r in fake.commands()[before:]]
+            kinds = [r.kind for r in fake.arrivals()[before:]]
             assert kinds.count("heartbeat") == 1 and kinds.count("release") == 3, kinds
             assert kinds[-1] == "release_all"
 

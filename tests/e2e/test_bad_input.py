@@ -16,10 +16,10 @@ from typing import Any
 import protoduino
 import protoduino_dev  # noqa: F401  (registers faulty://, which the bad-URL cases use)
 import pytest
-from fakedevice import FakeDevice
 from protoduino import Board
 from protoduino.messages import Status
 from protoduino.simboard import SimBoard
+from protoduino.testing import PtyDevice
 
 WRONG_TYPES: list[tuple[str, Callable[[Board], object]]] = [
     ("servo pin bool", lambda b: b.servo(True)),
@@ -42,18 +42,18 @@ WRONG_TYPES: list[tuple[str, Callable[[Board], object]]] = [
 
 @pytest.mark.parametrize(("why", "action"), WRONG_TYPES, ids=[w[0] for w in WRONG_TYPES])
 def test_wrong_types_raise_type_error_and_send_nothing(
-    board: Board, fake: FakeDevice, why: str, action: Callable[[Board], object]
+    board: Board, fake: PtyDevice, why: str, action: Callable[[Board], object]
 ) -> None:
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     with pytest.raises(TypeError):
         action(board)
-    assert len(fake.commands()) == before
+    assert len(fake.arrivals()) == before
 
 
-def test_wrong_types_on_output_objects(board: Board, fake: FakeDevice) -> None:
+def test_wrong_types_on_output_objects(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9)
     led = board.digital_output(13)
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     bad: list[Callable[[], None]] = [
         lambda: servo.write(True),  # a bool is no angle
         lambda: servo.write("90"),  # type: ignore[arg-type]
@@ -67,25 +67,25 @@ def test_wrong_types_on_output_objects(board: Board, fake: FakeDevice) -> None:
     for action in bad:
         with pytest.raises(TypeError):
             action()
-    assert len(fake.commands()) == before
+    assert len(fake.arrivals()) == before
     led.write(1)  # type: ignore[arg-type]  # an int level is a level
     assert fake.values[13] == 1
 
 
 @pytest.mark.parametrize("level", [2, -1, 255])
 def test_digital_levels_other_than_0_and_1_are_refused(
-    board: Board, fake: FakeDevice, level: int
+    board: Board, fake: PtyDevice, level: int
 ) -> None:
     """bool(2) is True: an int that is not 0 or 1 is refused, not read as "on"."""
     led = board.digital_output(13)
     led.write(0)  # type: ignore[arg-type]
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     with pytest.raises(protoduino.CommandRejectedError, match="not a level") as info:
         led.write(level)  # type: ignore[arg-type]
     assert info.value.status == Status.STATUS_OUT_OF_RANGE and not info.value.sent
     with pytest.raises(protoduino.CommandRejectedError, match="not a level"):
         board.digital_output(12, safe=level)  # type: ignore[arg-type]
-    assert len(fake.commands()) == before
+    assert len(fake.arrivals()) == before
     assert fake.values[13] == 0
 
 
@@ -95,11 +95,11 @@ def test_digital_levels_other_than_0_and_1_are_refused(
     ids=str,
 )
 def test_nonsense_options_are_refused_before_anything_starts(
-    fake: FakeDevice, options: dict[str, Any]
+    fake: PtyDevice, options: dict[str, Any]
 ) -> None:
     with pytest.raises(ValueError, match="required"):
         Board.open(fake.port, **options)
-    assert not fake.commands() and fake.resets == 0  # the port was never even opened
+    assert not fake.arrivals() and fake.resets == 0  # the port was never even opened
 
 
 @pytest.mark.parametrize(
@@ -111,17 +111,17 @@ def test_nonsense_options_are_refused_before_anything_starts(
         ("nosuchscheme://x", "cannot open"),
     ],
 )
-def test_bad_urls_are_transport_errors(fake: FakeDevice, url: str, text: str) -> None:
+def test_bad_urls_are_transport_errors(fake: PtyDevice, url: str, text: str) -> None:
     with pytest.raises(protoduino.TransportError, match=text):
         Board.open(url.format(port=fake.port), handshake_timeout=0.5)
 
 
-def test_every_call_on_a_closed_board_raises_board_closed(fake: FakeDevice) -> None:
+def test_every_call_on_a_closed_board_raises_board_closed(fake: PtyDevice) -> None:
     board = Board.open(fake.port, ping=False)
     servo = board.servo(9)
     led = board.digital_output(13)
     board.close()
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     calls: list[Callable[[], object]] = [
         lambda: servo.write(10),
         lambda: servo.write_us(1500),
@@ -135,7 +135,7 @@ def test_every_call_on_a_closed_board_raises_board_closed(fake: FakeDevice) -> N
     for call in calls:
         with pytest.raises(protoduino.BoardClosedError):
             call()
-    assert len(fake.commands()) == before
+    assert len(fake.arrivals()) == before
 
 
 # --- the device's own refusals through the API ---------------------------------------

@@ -10,7 +10,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
-from fakedevice import FakeDevice
 from protoduino import Board, CaptureError
 from protoduino.capture import (
     CapturedEvent,
@@ -26,6 +25,7 @@ from protoduino.constants import PacketType
 from protoduino.messages import parse_in, parse_out
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
+from protoduino.testing import PtyDevice
 from simfixtures import wait_for_pin
 
 
@@ -102,7 +102,7 @@ def test_mcap_export_reads_back_with_the_schemas(
     from mcap_protobuf.decoder import DecoderFactory
 
     cap, out = tmp_path / "s.jsonl", tmp_path / "s.mcap"
-    with FakeDevice(tmp_path) as fake:
+    with PtyDevice(tmp_path) as fake:
         with Board.open(fake.port, capture=cap) as board:
             servo = board.servo(9, safe=90)
             for angle in (10, 20, 30):
@@ -158,7 +158,7 @@ def test_decode_refuses_what_is_not_a_capture_for_mcap(
     assert "capture version 99" in capsys.readouterr().err
 
 
-def test_a_capture_that_cannot_be_written_opens_nothing(fake: FakeDevice, tmp_path: Path) -> None:
+def test_a_capture_that_cannot_be_written_opens_nothing(fake: PtyDevice, tmp_path: Path) -> None:
     with pytest.raises(CaptureError, match="cannot write the capture"):
         Board.open(fake.port, capture=tmp_path / "no-such-dir" / "c.jsonl")
     assert fake.resets == 0
@@ -193,7 +193,7 @@ def test_follow_starts_over_when_a_new_session_restarts_the_capture(tmp_path: Pa
     assert isinstance(next(records), CaptureEnd)
 
 
-def test_monitor_follows_a_session_another_process_owns(fake: FakeDevice, tmp_path: Path) -> None:
+def test_monitor_follows_a_session_another_process_owns(fake: PtyDevice, tmp_path: Path) -> None:
     """The session is this process's; the monitor is another one and reads only the file."""
     cap = tmp_path / "live.jsonl"
     with Board.open(fake.port, capture=cap) as board:

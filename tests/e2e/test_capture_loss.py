@@ -18,7 +18,6 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from fakedevice import FakeDevice
 from protoduino import Board, CaptureError
 from protoduino.capture import CapturedFrame, CaptureEnd, CaptureHeader
 from protoduino.capturefollow import follow
@@ -26,6 +25,7 @@ from protoduino.capturereader import Damage, read_capture
 from protoduino.cli.main import main
 from protoduino.events import Event, EventKind
 from protoduino.simboard import SimBoard
+from protoduino.testing import PtyDevice
 
 #: tmpfs takes whole pages: this leaves the capture one 4 KiB page after the filler.
 DISK = 64 * 1024
@@ -63,7 +63,7 @@ def _wait(condition: Callable[[], bool]) -> bool:
     return condition()
 
 
-def test_a_full_disk_stops_the_capture_not_the_board(fake: FakeDevice, full_disk: Path) -> None:
+def test_a_full_disk_stops_the_capture_not_the_board(fake: PtyDevice, full_disk: Path) -> None:
     cap = full_disk / "robot.jsonl"
     events: list[Event] = []
     lock = threading.Lock()
@@ -106,7 +106,7 @@ def test_a_full_disk_stops_the_capture_not_the_board(fake: FakeDevice, full_disk
 
 
 def test_a_command_whose_capture_stopped_exits_1(
-    fake: FakeDevice, full_disk: Path, capsys: pytest.CaptureFixture[str]
+    fake: PtyDevice, full_disk: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     cap = full_disk / "ping.jsonl"
     rc = main(["ping", fake.port, "-c", "200", "-i", "0", "-q", "--capture", str(cap)])
@@ -117,7 +117,7 @@ def test_a_command_whose_capture_stopped_exits_1(
     assert "records (" in err and "bytes) were not written" in err
 
 
-def test_a_capture_whose_header_cannot_be_written_opens_nothing(fake: FakeDevice) -> None:
+def test_a_capture_whose_header_cannot_be_written_opens_nothing(fake: PtyDevice) -> None:
     if not Path("/dev/full").exists():
         pytest.skip("/dev/full is missing")
     with pytest.raises(CaptureError, match="cannot write the capture /dev/full: No space left"):
@@ -125,7 +125,7 @@ def test_a_capture_whose_header_cannot_be_written_opens_nothing(fake: FakeDevice
     assert fake.resets == 0
 
 
-def test_capture_max_bytes_rotates_to_a_second_part(fake: FakeDevice, tmp_path: Path) -> None:
+def test_capture_max_bytes_rotates_to_a_second_part(fake: PtyDevice, tmp_path: Path) -> None:
     cap = tmp_path / "c.jsonl"
     old = tmp_path / "c.jsonl.1"
     with Board.open(fake.port, capture=cap, capture_max_bytes=4096) as board:
@@ -173,7 +173,7 @@ def test_a_capture_grows_about_160_bytes_per_command(tmp_path: Path) -> None:
     assert size >= 500 * per_command  # the counters lines add to it, nothing else is left out
 
 
-def test_follow_reads_every_frame_across_live_rotations(fake: FakeDevice, tmp_path: Path) -> None:
+def test_follow_reads_every_frame_across_live_rotations(fake: PtyDevice, tmp_path: Path) -> None:
     """A follower started before the capture exists waits for it, then goes from part to
     part as the writer rotates, and misses no frame of the session silently: a part that was
     rotated away before it could be read (two rotations within one poll) is reported."""

@@ -6,11 +6,11 @@ import json
 from pathlib import Path
 
 import pytest
-from fakedevice import FakeDevice
 from protoduino import __version__
 from protoduino.cli.main import COMMANDS, main
 from protoduino.cli.ports import classify
 from protoduino.simboard import SimBoard
+from protoduino.testing import PtyDevice
 from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
 
 MINE = ["ports", "ping", "servo", "pin", "pwm", "read", "watch", "info", "monitor", "demo"]
@@ -47,10 +47,10 @@ def test_missing_port_is_a_clean_error(tmp_path: Path, capsys: pytest.CaptureFix
     assert "protoduino info:" in err and "no-such-port" in err
 
 
-def test_info(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+def test_info(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["info", fake.port]) == 0
     out = capsys.readouterr().out
-    assert "board             fake" in out
+    assert "board             virtual" in out
     assert "pwm_pins          [3, 9, 10, 11]" in out
     # The link counters, as README and --help promise.
     assert "link counters" in out
@@ -67,21 +67,21 @@ def test_info(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
     )
 
 
-def test_ping(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ping(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["ping", fake.port, "-c", "3", "-i", "0.01", "-s", "4"]) == 0
     out = capsys.readouterr().out
     assert "3 sent, 3 answered, 0 lost" in out
     assert "rtt min/avg/max/stddev" in out
-    assert [bytes(p.msg.ping.payload) for p in fake.commands("ping")][-3:] == [b"\0\1\2\3"] * 3
+    assert [bytes(p.msg.ping.payload) for p in fake.arrivals("ping")][-3:] == [b"\0\1\2\3"] * 3
 
 
-def test_ping_counts_losses(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ping_counts_losses(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     fake.handler = lambda msg: [] if msg.WhichOneof("data") == "ping" else fake.default_reply(msg)
     assert main(["ping", fake.port, "-c", "1", "--ack-timeout", "0.05", "-q"]) == 1
     assert "1 sent, 0 answered, 1 lost" in capsys.readouterr().out
 
 
-def test_servo_and_pin(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+def test_servo_and_pin(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["servo", fake.port, "9", "45"]) == 0
     assert fake.values[9] == 45
     assert main(["servo", fake.port, "9", "1500", "--us"]) == 0
@@ -90,13 +90,13 @@ def test_servo_and_pin(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> 
     assert fake.values[13] == 1
     assert main(["pin", fake.port, "13", "off", "--safe", "on"]) == 0
     assert fake.values[13] == 0
-    assert fake.commands("digital_init")[-1].msg.digital_init.safe_level is True
+    assert fake.arrivals("digital_init")[-1].msg.digital_init.safe_level is True
     out = capsys.readouterr().out
     assert "servo 9: 45 degrees" in out and "pin 13: on" in out
 
 
 def test_servo_takes_a_real_angle_as_the_api_does(
-    fake: FakeDevice, capsys: pytest.CaptureFixture[str]
+    fake: PtyDevice, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """ANGLE is any real number, rounded as Servo.write rounds (half to even: 45.5 -> 46)."""
     assert main(["servo", fake.port, "9", "45.5"]) == 0
@@ -114,7 +114,7 @@ def test_servo_takes_a_real_angle_as_the_api_does(
 
 
 def test_servo_refuses_bad_values_before_sending(
-    fake: FakeDevice, capsys: pytest.CaptureFixture[str]
+    fake: PtyDevice, capsys: pytest.CaptureFixture[str]
 ) -> None:
     with pytest.raises(SystemExit) as usage:  # a usage error, before the port is opened
         main(["servo", fake.port, "9", "200"])
@@ -123,10 +123,10 @@ def test_servo_refuses_bad_values_before_sending(
     # A reserved pin is a bad value too (2), refused by the host once it has the device's info.
     assert main(["servo", fake.port, "0", "90"]) == 2
     assert "STATUS_RESERVED_PIN" in capsys.readouterr().err
-    assert fake.commands("servo_init") == []
+    assert fake.arrivals("servo_init") == []
 
 
-def test_monitor_readable_and_json(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+def test_monitor_readable_and_json(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["monitor", fake.port, "--duration", "0.3", "--stats-every", "0"]) == 0
     out = capsys.readouterr().out
     assert "tx CONTROL seq=0" in out and '"RESET"' in out

@@ -17,12 +17,12 @@ from typing import Any
 
 import protoduino
 import pytest
-from fakedevice import FakeDevice, ack
 from protoduino import Board
 from protoduino.constants import MAX_MESSAGE_ID, PacketType
 from protoduino.messages import ArduinoOut, Status, parse_out
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
+from protoduino.testing import PtyDevice, ack
 from protoduino.transport import FrameRecord, Transport
 from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
@@ -33,7 +33,7 @@ PATIENT = 5.0
 class Holder:
     """A fake-device handler that keeps the Acks of Controls until released."""
 
-    def __init__(self, fake: FakeDevice) -> None:
+    def __init__(self, fake: PtyDevice) -> None:
         self.fake = fake
         self.held: list[Any] = []
         self.lock = threading.Lock()
@@ -56,16 +56,16 @@ class Holder:
 
 def test_several_calls_in_flight_from_one_thread(tmp_path: Path) -> None:
     with (
-        FakeDevice(tmp_path) as fake,
+        PtyDevice(tmp_path) as fake,
         Board.open(fake.port, ack_timeout=PATIENT, max_retries=0, ping=False) as board,
     ):
         servo = board.servo(9)
         led = board.digital_output(13)
         holder = Holder(fake)
-        before = len(fake.commands())
+        before = len(fake.arrivals())
         futures = [servo.submit(10), servo.submit_us(1500), led.submit(True)]
         # Every one reached the device before any Ack came back: nothing blocked.
-        assert fake.wait_for(lambda: len(fake.commands()) == before + 3)
+        assert fake.wait_for(lambda: len(fake.arrivals()) == before + 3)
         assert not any(f.done() for f in futures)
         assert all(f.running() and not f.cancel() for f in futures)  # sent is sent
         holder.release()
@@ -75,22 +75,22 @@ def test_several_calls_in_flight_from_one_thread(tmp_path: Path) -> None:
         assert fake.values == {9: 1500, 13: 1}
 
 
-def test_future_values(board: Board, fake: FakeDevice) -> None:
+def test_future_values(board: Board, fake: PtyDevice) -> None:
     servo = board.submit_servo(9, safe=10).result(PATIENT)
     assert isinstance(servo, protoduino.Servo) and servo.pin == 9
     led = board.submit_digital_output(13, safe=True).result(PATIENT)
     assert isinstance(led, protoduino.DigitalOutput) and led.pin == 13
-    assert [r.kind for r in fake.commands()][-2:] == ["servo_init", "digital_init"]
+    assert [r.kind for r in fake.arrivals()][-2:] == ["servo_init", "digital_init"]
     rtt = board.submit_ping(b"abc").result(PATIENT)
     assert isinstance(rtt, float) and rtt > 0
     assert board.submit_stop().result(PATIENT) is None
-    assert fake.commands("stop")
+    assert fake.arrivals("stop")
 
 
-def test_argument_errors_raise_at_once(board: Board, fake: FakeDevice) -> None:
+def test_argument_errors_raise_at_once(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9, min_us=1000, max_us=2000)
     led = board.digital_output(13)
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     refused: list[tuple[Callable[[], object], int]] = [
         (lambda: servo.submit(181), Status.STATUS_OUT_OF_RANGE),
         (lambda: servo.submit_us(999), Status.STATUS_OUT_OF_RANGE),
@@ -106,10 +106,10 @@ def test_argument_errors_raise_at_once(board: Board, fake: FakeDevice) -> None:
         servo.submit("4.5")  # type: ignore[arg-type]
     with pytest.raises(TypeError):
         led.submit("on")  # type: ignore[arg-type]
-    assert len(fake.commands()) == before  # nothing went out
+    assert len(fake.arrivals()) == before  # nothing went out
 
 
-def test_device_refusal_in_the_future(board: Board, fake: FakeDevice) -> None:
+def test_device_refusal_in_the_future(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9)
     fake.handler = lambda msg: [ack(msg.message_id, Status.STATUS_OUT_OF_RANGE)]
     error = servo.submit(10).exception(PATIENT)
@@ -121,16 +121,16 @@ def test_device_refusal_in_the_future(board: Board, fake: FakeDevice) -> None:
     assert info.value.status == Status.STATUS_OUT_OF_RANGE
 
 
-def test_silence_times_out(board: Board, fake: FakeDevice) -> None:
+def test_silence_times_out(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9)
     fake.handler = lambda msg: []
     future = servo.submit(10)
     error = future.exception(PATIENT)
     assert isinstance(error, protoduino.AckTimeoutError) and isinstance(error, TimeoutError)
-    assert len(fake.commands("servo_control")) == 4  # the first try and three retries
+    assert len(fake.arrivals("servo_control")) == 4  # the first try and three retries
 
 
-def test_wrong_ping_echo(board: Board, fake: FakeDevice) -> None:
+def test_wrong_ping_echo(board: Board, fake: PtyDevice) -> None:
     def bad_echo(msg: Any) -> list[Any]:
         out = ArduinoOut()
         out.ack.message_id = msg.message_id
@@ -142,19 +142,19 @@ def test_wrong_ping_echo(board: Board, fake: FakeDevice) -> None:
 
 
 def test_close_fails_outstanding_futures(tmp_path: Path) -> None:
-    with FakeDevice(tmp_path) as fake:
+    with PtyDevice(tmp_path) as fake:
         board = Board.open(fake.port, ack_timeout=PATIENT, max_retries=0, ping=False)
         servo = board.servo(9)
         Holder(fake)
         future = servo.submit(10)
-        assert fake.wait_for(lambda: bool(fake.commands("servo_control")))
+        assert fake.wait_for(lambda: bool(fake.arrivals("servo_control")))
         board.close()
         assert isinstance(future.exception(PATIENT), protoduino.BoardClosedError)
         with pytest.raises(protoduino.BoardClosedError):
             servo.submit(20)
 
 
-def test_done_callback_may_command_the_board(board: Board, fake: FakeDevice) -> None:
+def test_done_callback_may_command_the_board(board: Board, fake: PtyDevice) -> None:
     """Futures resolve on the event thread, not the I/O thread: a blocking call works there."""
     servo = board.servo(9)
     seen: list[str] = []
@@ -175,7 +175,7 @@ def record(order: list[int], value: int, future: Future[None]) -> None:
     order.append(value)
 
 
-def test_futures_in_ack_order_with_blocking_calls(board: Board, fake: FakeDevice) -> None:
+def test_futures_in_ack_order_with_blocking_calls(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9)
     order: list[int] = []
     futures = []
@@ -217,7 +217,7 @@ def test_callers_own_writes_keep_seq_and_ids_in_order(tmp_path: Path) -> None:
     SEQ on the wire follows the one before and the message ids go out in the order given.
     A frame monitor sees every frame on the I/O thread, each command before its Ack."""
     with (
-        FakeDevice(tmp_path) as fake,
+        PtyDevice(tmp_path) as fake,
         Board.open(fake.port, ack_timeout=PATIENT, max_retries=0, ping=False) as board,
     ):
         led = board.digital_output(13)
@@ -254,7 +254,7 @@ def test_callers_own_writes_keep_seq_and_ids_in_order(tmp_path: Path) -> None:
 
         fake.handler = hold_four
         first = [led.submit(i % 2 == 0) for i in range(8)]  # window 4: four wait
-        assert fake.wait_for(lambda: len(fake.commands("digital_control")) == 4)
+        assert fake.wait_for(lambda: len(fake.arrivals("digital_control")) == 4)
         assert transport.direct_writes - direct == 4  # the window's four: the caller wrote
         go.set()  # their Acks let the four that wait go, from the I/O thread
         done, _ = wait(first, timeout=PATIENT)
@@ -276,12 +276,12 @@ def test_callers_own_writes_keep_seq_and_ids_in_order(tmp_path: Path) -> None:
         for t in threads:
             t.join(PATIENT * 4)
         assert not any(t.is_alive() for t in threads)
-        received = fake.commands()
+        received = fake.arrivals()
         seqs = [r.seq for r in received]
         assert all((b - a) & 0xFF == 1 for a, b in itertools.pairwise(seqs)), str(seqs)
         ids = [r.msg.message_id for r in received]
         assert all(b == a % MAX_MESSAGE_ID + 1 for a, b in itertools.pairwise(ids)), str(ids)
-        assert len(fake.commands("digital_control")) == 8 + 4 * 45
+        assert len(fake.arrivals("digital_control")) == 8 + 4 * 45
         assert board._link.seq_desyncs == 0 and board._link.handshakes == 1
         assert {name for name, _, _ in seen} == {transport._thread.name}  # type: ignore[union-attr]
         sent = [mid for _, direction, mid in seen if direction == "tx"]
@@ -301,7 +301,7 @@ def test_a_monitor_sees_an_ack_after_its_call_has_it(tmp_path: Path) -> None:
     when a monitor sees an Ack, the future it answers is already resolved, so a slow
     monitor (a capture writing its line) is never on the way from the Ack to its caller."""
     with (
-        FakeDevice(tmp_path) as fake,
+        PtyDevice(tmp_path) as fake,
         Board.open(fake.port, ack_timeout=PATIENT, max_retries=0, ping=False) as board,
     ):
         led = board.digital_output(13)

@@ -17,10 +17,10 @@ from typing import Any
 
 import protoduino
 import pytest
-from fakedevice import FakeDevice, ack
 from protoduino import Board, aio, effective_speed
 from protoduino.messages import Status
 from protoduino.simboard import SimBoard
+from protoduino.testing import PtyDevice, ack
 from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
 BOUND = 10.0
@@ -33,11 +33,11 @@ def us(degrees: int, lo: int = 544, hi: int = 2400) -> int:
 # --- poses: the host side ----------------------------------------------------------
 
 
-def test_pose_message_and_readback(board: Board, fake: FakeDevice) -> None:
+def test_pose_message_and_readback(board: Board, fake: PtyDevice) -> None:
     a, b = board.servo(3), board.servo(5, min_us=1000, max_us=2000)
     led = board.digital_output(13)
     board.pose({a: 10, b: 180, led: True})
-    (sent,) = fake.commands("pose")
+    (sent,) = fake.arrivals("pose")
     items = sent.msg.pose.items
     assert [i.WhichOneof("output") for i in items] == ["servo", "servo"]
     assert (items[0].servo.pin, items[0].servo.degrees) == (3, 10)
@@ -49,10 +49,10 @@ def test_pose_message_and_readback(board: Board, fake: FakeDevice) -> None:
     assert a.value == us(20)
 
 
-def test_pose_checked_before_sending(board: Board, fake: FakeDevice) -> None:
+def test_pose_checked_before_sending(board: Board, fake: PtyDevice) -> None:
     a, b = board.servo(3), board.servo(5)
     led = board.digital_output(13)
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     with pytest.raises(protoduino.CommandRejectedError) as info:
         board.pose({a: 10, b: 181, led: True})
     assert info.value.output is b and info.value.sent is False
@@ -65,7 +65,7 @@ def test_pose_checked_before_sending(board: Board, fake: FakeDevice) -> None:
     with pytest.raises(protoduino.CommandRejectedError) as info:
         board.pose(nine)  # more than 8 items: servos and PWM outputs
     assert getattr(info.value.output, "pin", None) == 10 and info.value.sent is False
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     twin = protoduino.Servo(board, 3, 544, 2400)
     with pytest.raises(protoduino.CommandRejectedError) as info:
         board.pose({a: 10, twin: 20})
@@ -76,11 +76,11 @@ def test_pose_checked_before_sending(board: Board, fake: FakeDevice) -> None:
         board.pose({led: "on"})  # type: ignore[dict-item]
     with pytest.raises(TypeError):
         board.pose([(a, 10)])  # type: ignore[arg-type]
-    assert len(fake.commands()) == before  # nothing went out
+    assert len(fake.arrivals()) == before  # nothing went out
     assert a.value == us(90)
 
 
-def test_pose_digital_outputs_in_the_masks(board: Board, fake: FakeDevice) -> None:
+def test_pose_digital_outputs_in_the_masks(board: Board, fake: PtyDevice) -> None:
     """Any number of digital outputs besides at most 8 servos and PWM outputs: the masks hold
     them, a bit per pin; the readback takes their levels."""
     servos = [board.servo(pin) for pin in range(2, 10)]
@@ -88,7 +88,7 @@ def test_pose_digital_outputs_in_the_masks(board: Board, fake: FakeDevice) -> No
     targets: dict[protoduino.board.PoseOutput, float] = {s: 45 for s in servos}
     targets.update({led: led.pin % 2 == 1 for led in leds})
     board.pose(targets)
-    (sent,) = fake.commands("pose")
+    (sent,) = fake.arrivals("pose")
     assert [i.servo.pin for i in sent.msg.pose.items] == list(range(2, 10))
     want_pins = sum(1 << p for p in (11, 12, 13, 17))
     want_levels = sum(1 << p for p in (11, 13, 17))
@@ -97,7 +97,7 @@ def test_pose_digital_outputs_in_the_masks(board: Board, fake: FakeDevice) -> No
     assert fake.values[17] == 1 and fake.values[12] == 0
 
 
-def test_device_refusal_of_a_mask_pin_names_the_output(board: Board, fake: FakeDevice) -> None:
+def test_device_refusal_of_a_mask_pin_names_the_output(board: Board, fake: PtyDevice) -> None:
     """refused_item counts the items from 1, then the masks' pins upwards (the device's
     order), whatever order the mapping had."""
     a = board.servo(3)
@@ -122,13 +122,13 @@ def test_device_refusal_of_a_mask_pin_names_the_output(board: Board, fake: FakeD
 
 def test_pose_of_another_board(board: Board, tmp_path: Path) -> None:
     (tmp_path / "other").mkdir()
-    with FakeDevice(tmp_path / "other") as other_fake, Board.open(other_fake.port) as other:
+    with PtyDevice(tmp_path / "other") as other_fake, Board.open(other_fake.port) as other:
         theirs = other.servo(3)
         with pytest.raises(ValueError, match="another board"):
             board.pose({theirs: 10})
 
 
-def test_device_refusal_names_the_output(board: Board, fake: FakeDevice) -> None:
+def test_device_refusal_names_the_output(board: Board, fake: PtyDevice) -> None:
     a, b = board.servo(3), board.servo(5)
 
     def refuse_second(msg: Any) -> list[Any]:
@@ -146,16 +146,16 @@ def test_device_refusal_names_the_output(board: Board, fake: FakeDevice) -> None
     assert (a.value, b.value) == (us(90), us(90))  # nothing recorded
 
 
-def test_pose_values_are_restored_after_a_reboot(fake: FakeDevice) -> None:
+def test_pose_values_are_restored_after_a_reboot(fake: PtyDevice) -> None:
     """With ``restore="last"``; by default a reboot brings the outputs back safe only."""
     with Board.open(fake.port, restore="last") as board:
         a = board.servo(3)
         led = board.digital_output(13)
         board.pose({a: 33, led: True})
-        restored = len(fake.commands())
+        restored = len(fake.arrivals())
         fake.reboot()
         assert fake.wait_for(lambda: fake.values == {3: 33, 13: 1}, BOUND)
-        kinds = [r.kind for r in fake.commands()[restored:] if r.kind != "ping"]
+        kinds = [r.kind for r in fake.arrivals()[restored:] if r.kind != "ping"]
         assert kinds[:5] == [
             "configure_failsafe",
             "servo_init",
@@ -165,7 +165,7 @@ def test_pose_values_are_restored_after_a_reboot(fake: FakeDevice) -> None:
         ]
 
 
-def test_a_pose_after_an_unseen_reboot_restores_the_session(board: Board, fake: FakeDevice) -> None:
+def test_a_pose_after_an_unseen_reboot_restores_the_session(board: Board, fake: PtyDevice) -> None:
     """The device forgot everything without an EVENT BOOT: the pose's refused item (a
     configured output) starts the restore, then the pose runs once, under a new id."""
     a, b = board.servo(3), board.servo(5)
@@ -174,7 +174,7 @@ def test_a_pose_after_an_unseen_reboot_restores_the_session(board: Board, fake: 
     board.pose({a: 10, b: 20, led: True})
     assert fake.pins == {3: "servo", 5: "servo", 13: "digital"}
     assert fake.values == {3: 10, 5: 20, 13: 1}
-    refused, again = fake.commands("pose")
+    refused, again = fake.arrivals("pose")
     assert refused.msg.message_id != again.msg.message_id
     assert board.stats.reboots == 1 and board.stats.rejected == 0
     unconfigured = protoduino.Servo(board, 10, 544, 2400)  # never configured: a refusal
@@ -186,24 +186,24 @@ def test_a_pose_after_an_unseen_reboot_restores_the_session(board: Board, fake: 
 # --- speed limits: the host side ---------------------------------------------------
 
 
-def test_speed_limit_in_the_init(board: Board, fake: FakeDevice) -> None:
+def test_speed_limit_in_the_init(board: Board, fake: PtyDevice) -> None:
     fast = board.servo(3, max_speed_us=500)
     assert fast.max_speed_us == 500
     slow = board.servo(5, max_speed=60)  # degrees/s: 60 * 1856 / 180 = 618.7 -> 619 us/s
     assert slow.max_speed_us == effective_speed(619) == 600  # whole us per 20 ms frame
     free = board.servo(6)
     assert free.max_speed_us == 0
-    speeds = [r.msg.servo_init.max_speed for r in fake.commands("servo_init")]
+    speeds = [r.msg.servo_init.max_speed for r in fake.arrivals("servo_init")]
     assert speeds == [500, 619, 0]
     assert effective_speed(1) == 50 and effective_speed(12750) == 12750
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     for kwargs in ({"max_speed_us": 12751}, {"max_speed_us": 0}, {"max_speed": -1.0}):
         with pytest.raises(protoduino.CommandRejectedError) as info:
             board.servo(9, **kwargs)
         assert info.value.status == Status.STATUS_INVALID_ARGUMENT and not info.value.sent
     with pytest.raises(TypeError):
         board.servo(9, max_speed=10, max_speed_us=100)
-    assert len(fake.commands()) == before
+    assert len(fake.arrivals()) == before
 
 
 # --- at the pins: both boards ---------------------------------------------------------

@@ -1,6 +1,6 @@
 """Reliability under faults: exactly-once across lost Acks, and seeded fault scenarios.
 
-Part one drives the request layer against the scripted fake device, whose
+Part one drives the request layer against the pty fake (PtyDevice), whose
 dedupe window behaves like the firmware's (the last 16 ids), to pin down the
 dedupe guard in ``protoduino.rpc``: a retransmission must still find its id in
 the device's window. Part two runs short seeded scenarios of every fault kind
@@ -20,15 +20,14 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import fakedevice
 import protoduino
 import pytest
-from fakedevice import FakeDevice
 from protoduino import Board
 from protoduino.constants import DEDUPE_WINDOW, FAILSAFE_TIMEOUT, WATCHDOG_TIMEOUT, PacketType
 from protoduino.packets import Packet
 from protoduino.rpc import Rpc
 from protoduino.simboard import SimBoard
+from protoduino.testing import PtyDevice, ack
 from protoduino.transport import FrameRecord
 from protoduino_dev import faults, soak
 from simfixtures import SIM_BACKENDS
@@ -39,7 +38,7 @@ from simfixtures import SIM_BACKENDS
 class Executions:
     """Wraps the fake's reply: counts real executions (not dedupe hits) and drops replies."""
 
-    def __init__(self, fake: FakeDevice, drop: Callable[[Any, int], bool]) -> None:
+    def __init__(self, fake: PtyDevice, drop: Callable[[Any, int], bool]) -> None:
         self.fake = fake
         self.drop = drop  # (msg, how many times this id arrived) -> drop the reply?
         # By call, not by id: ids wrap every 127 (protocol version 5). A call's key is
@@ -103,7 +102,7 @@ def test_fake_device_window_is_the_firmwares() -> None:
     assert DEDUPE_WINDOW == 16  # the figure the guard and these tests are built on
 
 
-def test_lost_ack_while_later_commands_stream_executes_once(fake: FakeDevice) -> None:
+def test_lost_ack_while_later_commands_stream_executes_once(fake: PtyDevice) -> None:
     """The hazard: X's Ack is lost, newer calls complete quickly, X is retransmitted.
 
     Without the guard dozens of newer ids run in the 0.2 s before X's
@@ -131,7 +130,7 @@ def test_lost_ack_while_later_commands_stream_executes_once(fake: FakeDevice) ->
         assert board.stats.retransmits == 1 and board.stats.timeouts == 0
 
 
-def test_an_older_id_retransmitted_after_x_counts_against_xs_window(fake: FakeDevice) -> None:
+def test_an_older_id_retransmitted_after_x_counts_against_xs_window(fake: PtyDevice) -> None:
     """Y goes out before X but is lost; X runs, its Acks are lost twice; Y's retransmission runs.
 
     Y then sits in the device's window after X, so the guard must count it:
@@ -175,7 +174,7 @@ def test_an_older_id_retransmitted_after_x_counts_against_xs_window(fake: FakeDe
         assert max(ex.count.values()) == 1, ex.evicted_retransmissions
 
 
-def test_many_lost_acks_under_load_never_execute_twice(fake: FakeDevice) -> None:
+def test_many_lost_acks_under_load_never_execute_twice(fake: PtyDevice) -> None:
     """Seeded random loss of Acks with eight threads calling: every id runs at most once."""
     import random
 
@@ -194,7 +193,7 @@ def test_many_lost_acks_under_load_never_execute_twice(fake: FakeDevice) -> None
         assert max(ex.count.values()) == 1, ex.evicted_retransmissions
 
 
-def test_a_call_in_flight_across_a_reboot_never_reaches_the_new_boot(fake: FakeDevice) -> None:
+def test_a_call_in_flight_across_a_reboot_never_reaches_the_new_boot(fake: PtyDevice) -> None:
     """It may have run on the old boot (and be what reset it): it fails, it is not sent again."""
     swallowed: list[int] = []
 
@@ -214,13 +213,13 @@ def test_a_call_in_flight_across_a_reboot_never_reaches_the_new_boot(fake: FakeD
         assert board.stats.reboots == 1
         assert fake.wait_for(lambda: fake.pins == {9: "servo"})  # re-initialised
         assert fake.values == {}  # at its safe value
-        again = [r for r in fake.commands("servo_control") if r.msg.message_id == swallowed[0]]
+        again = [r for r in fake.arrivals("servo_control") if r.msg.message_id == swallowed[0]]
         assert len(again) == 1  # once, on the old boot only
         servo.write(60)  # the dedupe guard starts again from the empty window
         assert fake.values == {9: 60}
 
 
-def test_a_restore_message_without_ack_is_sent_again(fake: FakeDevice) -> None:
+def test_a_restore_message_without_ack_is_sent_again(fake: PtyDevice) -> None:
     """Every Ack of the replayed Init lost (four attempts): the restore must not skip it."""
     events: list[protoduino.Event] = []
     lost: list[int] = []
@@ -246,7 +245,7 @@ def test_a_restore_message_without_ack_is_sent_again(fake: FakeDevice) -> None:
         assert fake.pins == {9: "servo"} and fake.values == {9: 45}
 
 
-def test_a_device_that_lost_its_configuration_unseen_is_restored(fake: FakeDevice) -> None:
+def test_a_device_that_lost_its_configuration_unseen_is_restored(fake: PtyDevice) -> None:
     """No EVENT BOOT reached the host, yet the device forgot everything (rebooted unseen).
 
     Its STATUS_NOT_INITIALISED for a configured output triggers the restore,
@@ -264,7 +263,7 @@ def test_a_device_that_lost_its_configuration_unseen_is_restored(fake: FakeDevic
         assert fake.pins == {9: "servo", 13: "digital"}
         assert fake.values == {9: 120}
         refused, again = [
-            r for r in fake.commands("servo_control") if r.msg.servo_control.degrees == 120
+            r for r in fake.arrivals("servo_control") if r.msg.servo_control.degrees == 120
         ]
         assert refused.msg.message_id != again.msg.message_id
         assert board.stats.reboots == 1 and board.stats.rejected == 0
@@ -274,18 +273,18 @@ def test_a_device_that_lost_its_configuration_unseen_is_restored(fake: FakeDevic
         assert fake.values == {9: 120, 13: 1}
 
 
-def test_a_refusal_on_an_unconfigured_output_is_still_a_refusal(fake: FakeDevice) -> None:
+def test_a_refusal_on_an_unconfigured_output_is_still_a_refusal(fake: PtyDevice) -> None:
     with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
         servo = board.servo(9)
         fake.handler = lambda msg: (
-            [fakedevice.ack(msg.message_id, protoduino.messages.Status.STATUS_NOT_INITIALISED)]
+            [ack(msg.message_id, protoduino.messages.Status.STATUS_NOT_INITIALISED)]
             if msg.WhichOneof("data") == "servo_control"
             else fake.default_reply(msg)
         )
         with pytest.raises(protoduino.CommandRejectedError) as info:
             servo.write(10)  # restored once, refused again: the refusal stands
         assert info.value.status == protoduino.messages.Status.STATUS_NOT_INITIALISED
-        assert len(fake.commands("servo_control")) == 2
+        assert len(fake.arrivals("servo_control")) == 2
         assert board.stats.reboots == 1
 
 
@@ -617,7 +616,7 @@ def test_soak_command_refuses_nonsense(capsys: pytest.CaptureFixture[str]) -> No
 
 
 def test_a_held_new_ping_does_not_block_the_retransmission_it_waits_for(
-    fake: FakeDevice,
+    fake: PtyDevice,
 ) -> None:
     """X's Ack is lost, newer ids fill the guard, the link restarts (X goes back to the queue).
 
@@ -625,7 +624,7 @@ def test_a_held_new_ping_does_not_block_the_retransmission_it_waits_for(
     queue for X to finish; X, in the other queue, must still go out again when
     the link is back, or both would wait until X's deadline.
     """
-    import fakedevice as fd
+    from protoduino.testing import ack as fd_ack
 
     dropping = threading.Event()
     dropping.set()
@@ -657,7 +656,7 @@ def test_a_held_new_ping_does_not_block_the_retransmission_it_waits_for(
         board.pinging = True  # an automatic Ping falls due: a new id, held by the guard
         assert fake.wait_for(lambda: board.rpc_state().urgent > 0)
         fake.answer_reset = False  # the link stays down a moment
-        fake.send_data(fd.ack(1), seq=200)  # a SEQ far off: the host re-handshakes
+        fake.send_data(fd_ack(1), seq=200)  # a SEQ far off: the host re-handshakes
         assert fake.wait_for(lambda: board.stats.seq_desyncs == 1)
         dropping.clear()
         fake.answer_reset = True  # link up: the Ping still waits, X must go out again

@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 import protoduino
 import pytest
-from fakedevice import FakeDevice
 from protoduino import Board, Event, EventKind
 from protoduino.messages import ArduinoOut, Status
+from protoduino.testing import PtyDevice
 
 
 @pytest.mark.parametrize(
@@ -40,7 +40,7 @@ from protoduino.messages import ArduinoOut, Status
     ],
 )
 def test_wrong_options_are_refused_before_any_thread(
-    fake: FakeDevice, options: dict[str, Any], error: type[Exception]
+    fake: PtyDevice, options: dict[str, Any], error: type[Exception]
 ) -> None:
     before = set(threading.enumerate())
     with pytest.raises(error) as info:
@@ -48,7 +48,7 @@ def test_wrong_options_are_refused_before_any_thread(
     assert isinstance(info.value, protoduino.ProtoduinoError)
     assert not isinstance(info.value, protoduino.LinkError)  # nothing blames the firmware
     assert set(threading.enumerate()) <= before
-    assert fake.commands() == []  # nothing was sent
+    assert fake.arrivals() == []  # nothing was sent
     with Board.open(fake.port, ping=False) as board:  # the port was not even held
         assert board.stats.state == "active"
 
@@ -57,14 +57,14 @@ def test_wrong_options_are_refused_before_any_thread(
     ("timeout", "ms"),
     [(Decimal("0.1"), 100), (Fraction(1, 2), 500), (np.float32(0.25), 250), (60, 60000)],
 )
-def test_failsafe_timeout_is_any_real_number(fake: FakeDevice, timeout: object, ms: int) -> None:
+def test_failsafe_timeout_is_any_real_number(fake: PtyDevice, timeout: object, ms: int) -> None:
     with Board.open(fake.port, ping=False, failsafe_timeout=timeout) as board:  # type: ignore[arg-type]
         assert board.failsafe_timeout == ms / 1000
-    sent = fake.commands("configure_failsafe")
+    sent = fake.arrivals("configure_failsafe")
     assert [r.msg.configure_failsafe.timeout_ms for r in sent] == [ms]
 
 
-def _failsafe_event(fake: FakeDevice, board: Board) -> Event:
+def _failsafe_event(fake: PtyDevice, board: Board) -> Event:
     seen: list[Event] = []
     done = threading.Event()
 
@@ -82,14 +82,14 @@ def _failsafe_event(fake: FakeDevice, board: Board) -> Event:
     return seen[0]
 
 
-def test_a_heartbeat_failsafe_is_named_for_the_heartbeat(fake: FakeDevice) -> None:
+def test_a_heartbeat_failsafe_is_named_for_the_heartbeat(fake: PtyDevice) -> None:
     with Board.open(fake.port, ping=False, liveness="heartbeat") as board:
         event = _failsafe_event(fake, board)
     assert event.details == {"active": True, "cause": "heartbeat_timeout", "epoch": 0}
     assert "ping" not in event.text
 
 
-def test_a_ping_failsafe_keeps_its_name(fake: FakeDevice) -> None:
+def test_a_ping_failsafe_keeps_its_name(fake: PtyDevice) -> None:
     with Board.open(fake.port, ping=False) as board:
         event = _failsafe_event(fake, board)
     assert event.details == {"active": True, "cause": "ping_timeout", "epoch": 0}
@@ -112,7 +112,7 @@ def test_a_ping_failsafe_keeps_its_name(fake: FakeDevice) -> None:
     ],
 )
 def test_servo_write_takes_real_numbers(
-    board: Board, fake: FakeDevice, degrees: Any, sent: int
+    board: Board, fake: PtyDevice, degrees: Any, sent: int
 ) -> None:
     servo = board.servo(9)
     servo.write(degrees)
@@ -124,7 +124,7 @@ def test_servo_write_takes_real_numbers(
     assert fake.values[9] == sent
 
 
-def test_servo_write_us_rounds_to_the_microsecond(board: Board, fake: FakeDevice) -> None:
+def test_servo_write_us_rounds_to_the_microsecond(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9)
     servo.write_us(1500.5)  # half to even
     assert fake.values[9] == 1500
@@ -132,9 +132,9 @@ def test_servo_write_us_rounds_to_the_microsecond(board: Board, fake: FakeDevice
     assert fake.values[9] == 1502
 
 
-def test_servo_refuses_what_has_no_nearest_degree(board: Board, fake: FakeDevice) -> None:
+def test_servo_refuses_what_has_no_nearest_degree(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9)
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     for value in (math.nan, math.inf, -math.inf, Decimal("NaN"), 180.6, -0.6):
         with pytest.raises(protoduino.CommandRejectedError) as info:
             servo.write(value)
@@ -142,24 +142,24 @@ def test_servo_refuses_what_has_no_nearest_degree(board: Board, fake: FakeDevice
     for wrong in (True, "45", None, 45j):
         with pytest.raises(protoduino.ArgumentTypeError):
             servo.write(wrong)  # type: ignore[arg-type]
-    assert len(fake.commands()) == before
+    assert len(fake.arrivals()) == before
 
 
-def test_pins_by_their_board_names(board: Board, fake: FakeDevice) -> None:
+def test_pins_by_their_board_names(board: Board, fake: PtyDevice) -> None:
     """ "A0".."A5" are the device's own analog pins in its table's order (14..19 here, as on
     the Uno), wherever a method takes a pin; a name it lacks is a pin it does not have."""
     assert board.pin_number("A0") == 14 and board.pin_number("a5") == 19
     assert board.analog_input("A1").pin == 15
-    assert fake.commands("analog_input_init")[-1].msg.analog_input_init.pin == 15
+    assert fake.arrivals("analog_input_init")[-1].msg.analog_input_init.pin == 15
     assert board.digital_output("A2").pin == 16
-    assert fake.commands("digital_init")[-1].msg.digital_init.pin == 16
+    assert fake.arrivals("digital_init")[-1].msg.digital_init.pin == 16
     board.release("A2")
-    assert fake.commands("release")[-1].msg.release.pin == 16
-    before = len(fake.commands())
+    assert fake.arrivals("release")[-1].msg.release.pin == 16
+    before = len(fake.arrivals())
     with pytest.raises(protoduino.CommandRejectedError) as missing:
         board.servo("A6")
     assert missing.value.status == Status.STATUS_INVALID_PIN and not missing.value.sent
     assert "pin A6 does not exist (its analog pins by name: A0..A5)" in str(missing.value)
     with pytest.raises(TypeError):
         board.digital_input("D3")
-    assert len(fake.commands()) == before
+    assert len(fake.arrivals()) == before

@@ -1,4 +1,4 @@
-"""Board API against the scripted fake device: checks before sending, restore, events, threads."""
+"""Board API against the pty fake (PtyDevice): checks before sending, restore, events, threads."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ from typing import Any
 
 import protoduino
 import pytest
-from fakedevice import FakeDevice, ack
 from protoduino import Board, Event, EventKind
 from protoduino.events import EVENT_QUEUE_LIMIT
 from protoduino.messages import ArduinoOut, Status
+from protoduino.testing import PtyDevice, ack
 from protoduino.transport import FrameRecord
 
 
@@ -72,19 +72,19 @@ REJECTIONS: list[tuple[str, Callable[[Board], object], int]] = [
 
 @pytest.mark.parametrize(("why", "action", "status"), REJECTIONS, ids=[r[0] for r in REJECTIONS])
 def test_checked_before_sending(
-    board: Board, fake: FakeDevice, why: str, action: Callable[[Board], object], status: int
+    board: Board, fake: PtyDevice, why: str, action: Callable[[Board], object], status: int
 ) -> None:
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     with pytest.raises(protoduino.CommandRejectedError) as info:
         action(board)
     assert info.value.status == status
     assert info.value.sent is False
-    assert len(fake.commands()) == before  # nothing went out
+    assert len(fake.arrivals()) == before  # nothing went out
 
 
-def test_control_checks(board: Board, fake: FakeDevice) -> None:
+def test_control_checks(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9, min_us=1000, max_us=2000)
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     bad: list[Callable[[], None]] = [
         lambda: servo.write(181),
         lambda: servo.write(-1),
@@ -100,13 +100,13 @@ def test_control_checks(board: Board, fake: FakeDevice) -> None:
         board.servo("9")
     with pytest.raises(TypeError):
         board.servo(10, safe=90, safe_us=1500)
-    assert len(fake.commands()) == before
+    assert len(fake.arrivals()) == before
     servo.write_us(2000)
     servo.write(180)
     assert fake.values[9] == 180
 
 
-def test_pin_in_use_and_free_slots(board: Board, fake: FakeDevice) -> None:
+def test_pin_in_use_and_free_slots(board: Board, fake: PtyDevice) -> None:
     board.digital_output(13)
     with pytest.raises(protoduino.CommandRejectedError) as info:
         board.servo(13)
@@ -123,7 +123,7 @@ def test_pin_in_use_and_free_slots(board: Board, fake: FakeDevice) -> None:
     assert info.value.status == Status.STATUS_NO_FREE_RESOURCE and not info.value.sent
 
 
-def test_outputs_reach_the_device(board: Board, fake: FakeDevice) -> None:
+def test_outputs_reach_the_device(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9, safe=90)
     servo.write(45)
     led = board.digital_output(13, safe=False)
@@ -131,14 +131,14 @@ def test_outputs_reach_the_device(board: Board, fake: FakeDevice) -> None:
     assert fake.values == {9: 45, 13: 1}
     led.off()
     assert fake.values[13] == 0
-    init = fake.commands("servo_init")[0].msg.servo_init
+    init = fake.arrivals("servo_init")[0].msg.servo_init
     assert (init.pin, init.min_us, init.max_us, init.safe_degrees) == (9, 544, 2400, 90)
-    assert fake.commands("digital_init")[0].msg.digital_init.safe_level is False
+    assert fake.arrivals("digital_init")[0].msg.digital_init.safe_level is False
     board.stop()
-    assert fake.commands("stop")
+    assert fake.arrivals("stop")
 
 
-def test_device_rejection_is_sent_true(board: Board, fake: FakeDevice) -> None:
+def test_device_rejection_is_sent_true(board: Board, fake: PtyDevice) -> None:
     fake.handler = lambda msg: [ack(msg.message_id, Status.STATUS_PIN_IN_USE)]
     with pytest.raises(protoduino.CommandRejectedError) as info:
         board.servo(9)
@@ -154,16 +154,16 @@ def _configure_a_session(board: Board) -> tuple[protoduino.Servo, protoduino.Dig
     return servo, led
 
 
-def test_restore_after_reboot_brings_outputs_up_safe(board: Board, fake: FakeDevice) -> None:
+def test_restore_after_reboot_brings_outputs_up_safe(board: Board, fake: PtyDevice) -> None:
     """The default policy: every output re-initialised (at its safe value), no stale values."""
     rec = Recorder(board)
     servo, _ = _configure_a_session(board)
-    mark = len(fake.commands())
+    mark = len(fake.arrivals())
     fake.reboot()
     restored = rec.wait(EventKind.RESTORED)
     assert restored.details == {"replayed": 4, "failed": [], "values": False}
     rec.wait(EventKind.REBOOTED)
-    replay = [r.kind for r in fake.commands()[mark:] if r.kind != "ping"]
+    replay = [r.kind for r in fake.arrivals()[mark:] if r.kind != "ping"]
     assert replay[:4] == ["configure_failsafe", "servo_init", "digital_init", "servo_init"]
     assert fake.pins == {9: "servo", 13: "digital", 10: "servo"}
     assert fake.values == {}  # nothing moved back to a pose of the previous boot
@@ -171,28 +171,28 @@ def test_restore_after_reboot_brings_outputs_up_safe(board: Board, fake: FakeDev
     assert fake.values[9] == 50
 
 
-def test_restore_last_values_when_opted_in(fake: FakeDevice) -> None:
+def test_restore_last_values_when_opted_in(fake: PtyDevice) -> None:
     with Board.open(fake.port, restore="last") as board:
         rec = Recorder(board)
         _configure_a_session(board)
-        mark = len(fake.commands())
+        mark = len(fake.arrivals())
         fake.reboot()
         restored = rec.wait(EventKind.RESTORED)
         assert restored.details == {"replayed": 6, "failed": [], "values": True}
-        replay = [r.kind for r in fake.commands()[mark:] if r.kind != "ping"]
+        replay = [r.kind for r in fake.arrivals()[mark:] if r.kind != "ping"]
         assert replay[:6] == ["configure_failsafe", "servo_init", "digital_init", "servo_init",
                               "servo_control", "digital_control"]  # fmt: skip
         assert fake.values == {9: 45, 13: 1}
 
 
-def test_a_call_in_flight_at_a_reboot_fails_and_is_not_replayed(fake: FakeDevice) -> None:
+def test_a_call_in_flight_at_a_reboot_fails_and_is_not_replayed(fake: PtyDevice) -> None:
     """Defect 3: the command whose execution reset the board is never sent again."""
     # ack_timeout 0.5: room for the reboot before retries run out.
     with Board.open(fake.port, ack_timeout=0.5, ping=False) as board:
         _call_in_flight_at_a_reboot(board, fake)
 
 
-def _call_in_flight_at_a_reboot(board: Board, fake: FakeDevice) -> None:
+def _call_in_flight_at_a_reboot(board: Board, fake: PtyDevice) -> None:
     rec = Recorder(board)
     servo = board.servo(9)
     swallowed: list[int] = []
@@ -208,13 +208,13 @@ def _call_in_flight_at_a_reboot(board: Board, fake: FakeDevice) -> None:
     with pytest.raises(protoduino.DeviceRebootedError, match="rebooted"):
         servo.write(120)
     rec.wait(EventKind.RESTORED)
-    assert [r.kind for r in fake.commands()].count("servo_control") == 1  # never replayed
+    assert [r.kind for r in fake.arrivals()].count("servo_control") == 1  # never replayed
     assert 9 not in fake.values and fake.pins == {9: "servo"}  # back, at its safe value
     servo.write(60)  # the application decides what comes next
     assert fake.values[9] == 60
 
 
-def test_a_reboot_loop_stops_restoring(fake: FakeDevice) -> None:
+def test_a_reboot_loop_stops_restoring(fake: PtyDevice) -> None:
     with Board.open(fake.port, ping=False, reboot_limit=3, reboot_window=60.0) as board:
         rec = Recorder(board)
         servo = board.servo(9)
@@ -222,7 +222,7 @@ def test_a_reboot_loop_stops_restoring(fake: FakeDevice) -> None:
             fake.reboot()
             rec.wait(EventKind.RESTORED, count=n)
             board.ping()
-        inits = len(fake.commands("servo_init"))
+        inits = len(fake.arrivals("servo_init"))
         fake.reboot()
         error = rec.wait(EventKind.ERROR)
         assert "reboot loop" in error.text
@@ -230,11 +230,11 @@ def test_a_reboot_loop_stops_restoring(fake: FakeDevice) -> None:
             servo.write(10)
         with pytest.raises(protoduino.RebootLoopError):
             board.ping()
-        assert len(fake.commands("servo_init")) == inits  # no third restore
+        assert len(fake.arrivals("servo_init")) == inits  # no third restore
         assert len(rec.of(EventKind.RESTORED)) == 2
 
 
-def test_stop_and_failsafe_forget_values(fake: FakeDevice) -> None:
+def test_stop_and_failsafe_forget_values(fake: PtyDevice) -> None:
     # Even with restore="last", a value the device overrode with the safe one
     # (Stop, a failsafe) is not driven again after a reboot.
     with Board.open(fake.port, ack_timeout=0.1, ping=False, restore="last") as board:
@@ -242,27 +242,27 @@ def test_stop_and_failsafe_forget_values(fake: FakeDevice) -> None:
         servo = board.servo(9)
         servo.write(30)
         board.stop()
+        assert rec.wait(EventKind.FAILSAFE).details == {"active": True, "cause": "stop", "epoch": 1}
+        assert 9 not in fake.values  # the stop drove it safe
         fake.reboot()
         rec.wait(EventKind.RESTORED)
-        assert 9 not in fake.values  # the stop latched it safe; the restore keeps it so
+        assert 9 not in fake.values  # the restore keeps it so
         servo.write(60)
         assert fake.values[9] == 60
-        failsafe = ArduinoOut()
-        failsafe.failsafe.active = True
-        failsafe.failsafe.cause = 1  # type: ignore[assignment]
-        fake.send_data(failsafe)
-        event = rec.wait(EventKind.FAILSAFE)
-        assert event.details == {"active": True, "cause": "ping_timeout", "epoch": 0}
-        mark = len(fake.commands())
+        fake.expire_failsafe()  # a new boot's epoch 0 runs out
+        event = rec.wait(EventKind.FAILSAFE, count=2)
+        assert event.details == {"active": True, "cause": "ping_timeout", "epoch": 1}
+        assert 9 not in fake.values
+        mark = len(fake.arrivals())
         fake.reboot()
         restored = rec.wait(EventKind.RESTORED, count=2)
         assert restored.details["replayed"] == 2  # no value left to replay
-        replay = [r.kind for r in fake.commands()[mark:] if r.kind != "ping"]
+        replay = [r.kind for r in fake.arrivals()[mark:] if r.kind != "ping"]
         assert replay[:2] == ["configure_failsafe", "servo_init"]
         assert 9 not in fake.values
 
 
-def test_decode_error_events(board: Board, fake: FakeDevice) -> None:
+def test_decode_error_events(board: Board, fake: PtyDevice) -> None:
     rec = Recorder(board)
     out = ArduinoOut()
     out.decode_error.count = 3
@@ -270,7 +270,7 @@ def test_decode_error_events(board: Board, fake: FakeDevice) -> None:
     assert rec.wait(EventKind.DECODE_ERROR).details == {"count": 3}
 
 
-def test_callback_errors_do_not_stop_events(board: Board, fake: FakeDevice) -> None:
+def test_callback_errors_do_not_stop_events(board: Board, fake: PtyDevice) -> None:
     def broken(event: Event) -> None:
         raise RuntimeError("user bug")
 
@@ -280,7 +280,7 @@ def test_callback_errors_do_not_stop_events(board: Board, fake: FakeDevice) -> N
     rec.wait(EventKind.DECODE_ERROR)
 
 
-def test_unsubscribe(board: Board, fake: FakeDevice) -> None:
+def test_unsubscribe(board: Board, fake: PtyDevice) -> None:
     seen: list[Event] = []
     unsubscribe = board.on_event(seen.append)
     unsubscribe()
@@ -290,7 +290,7 @@ def test_unsubscribe(board: Board, fake: FakeDevice) -> None:
     assert seen == []
 
 
-def test_concurrent_callers(board: Board, fake: FakeDevice) -> None:
+def test_concurrent_callers(board: Board, fake: PtyDevice) -> None:
     servos = [board.servo(pin) for pin in range(2, 10)]
     errors: list[BaseException] = []
 
@@ -316,8 +316,8 @@ def test_several_boards_at_once(tmp_path: Path) -> None:
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
     with (
-        FakeDevice(tmp_path / "a") as fa,
-        FakeDevice(tmp_path / "b") as fb,
+        PtyDevice(tmp_path / "a") as fa,
+        PtyDevice(tmp_path / "b") as fb,
         Board.open(fa.port) as a,
         Board.open(fb.port) as b,
     ):
@@ -326,7 +326,7 @@ def test_several_boards_at_once(tmp_path: Path) -> None:
         assert (fa.values[9], fb.values[9]) == (10, 20)
 
 
-def test_close_from_an_event_callback(fake: FakeDevice) -> None:
+def test_close_from_an_event_callback(fake: PtyDevice) -> None:
     board = Board.open(fake.port, ping=False)
     closed = threading.Event()
 
@@ -340,9 +340,7 @@ def test_close_from_an_event_callback(fake: FakeDevice) -> None:
     assert board.closed
 
 
-def test_an_event_flood_behind_a_slow_callback_stays_bounded(
-    board: Board, fake: FakeDevice
-) -> None:
+def test_an_event_flood_behind_a_slow_callback_stays_bounded(board: Board, fake: PtyDevice) -> None:
     # A device flooding informational events while a callback is slow: the queue holds at
     # most EVENT_QUEUE_LIMIT events, the oldest informational ones go first and are counted,
     # and a failsafe arriving behind the flood is delivered all the same.
@@ -375,7 +373,7 @@ def test_an_event_flood_behind_a_slow_callback_stays_bounded(
     assert counts == [0] + [1000 + i for i in range(dropped, flood)]  # the newest
 
 
-def test_close_returns_and_calls_nothing_more(fake: FakeDevice) -> None:
+def test_close_returns_and_calls_nothing_more(fake: PtyDevice) -> None:
     board = Board.open(fake.port, ping=False)
     held = threading.Event()
     release = threading.Event()
@@ -402,7 +400,7 @@ def test_close_returns_and_calls_nothing_more(fake: FakeDevice) -> None:
     assert [e.details["count"] for e in seen] == [0]  # nothing was called after close()
 
 
-def test_a_frame_monitor_cannot_call_into_the_board(board: Board, fake: FakeDevice) -> None:
+def test_a_frame_monitor_cannot_call_into_the_board(board: Board, fake: PtyDevice) -> None:
     # A monitor runs on the I/O thread: a call from it would wait for an answer that only
     # that thread can deliver (the link stalled for 8 s). It is refused at once instead.
     errors: list[BaseException] = []
@@ -421,7 +419,7 @@ def test_a_frame_monitor_cannot_call_into_the_board(board: Board, fake: FakeDevi
     board.ping(b"main")  # its Ack is the frame the monitor sees
     assert len(errors) == 1 and isinstance(errors[0], protoduino.ReentrantCallError), errors
     assert "I/O thread" in str(errors[0])
-    assert [p.msg.ping.payload for p in fake.commands("ping")] == [b"main"]
+    assert [p.msg.ping.payload for p in fake.arrivals("ping")] == [b"main"]
     assert board.stats.timeouts == 0 and board.stats.retransmits == 0
     board.close()  # closing from a monitor is fine too: nothing waits
 
@@ -430,7 +428,7 @@ def _open_fds() -> set[int]:
     return {int(name) for name in os.listdir("/proc/self/fd")}
 
 
-def test_closing_from_a_frame_monitor_leaves_no_descriptor_open(fake: FakeDevice) -> None:
+def test_closing_from_a_frame_monitor_leaves_no_descriptor_open(fake: PtyDevice) -> None:
     # close() from the I/O thread cannot wait for that thread to end; the thread
     # closes the port and its wake-up pipe itself on the way out.
     before = _open_fds()

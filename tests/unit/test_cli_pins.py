@@ -1,4 +1,4 @@
-"""``protoduino pwm``, ``read`` and ``watch`` against the scripted fake device."""
+"""``protoduino pwm``, ``read`` and ``watch`` against the pty fake (PtyDevice)."""
 
 from __future__ import annotations
 
@@ -6,26 +6,26 @@ import json
 from typing import Any
 
 import pytest
-from fakedevice import FakeDevice
 from protoduino.cli.main import main
+from protoduino.testing import PtyDevice
 
 
-def test_pwm(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+def test_pwm(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["pwm", fake.port, "3", "127.5", "--safe", "4"]) == 0
     assert capsys.readouterr().out.strip() == "pwm 3: 128"
-    (init,) = fake.commands("pwm_init")
+    (init,) = fake.arrivals("pwm_init")
     assert init.msg.pwm_init.safe_duty == 4 and fake.values[3] == 128
     assert main(["pwm", fake.port, "4", "10"]) == 2  # refused before anything is sent
     err = capsys.readouterr().err
     assert "protoduino pwm:" in err and "STATUS_NOT_SUPPORTED" in err and "3, 9, 10, 11" in err
 
 
-def test_read_once(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+def test_read_once(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     fake.levels[2] = 0
     assert main(["read", fake.port, "2", "--pull-up", "--debounce", "10"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("pin 2 digital: 0 (") and out.rstrip().endswith("ms old)")
-    init = fake.commands("digital_input_init")[0].msg.digital_input_init
+    init = fake.arrivals("digital_input_init")[0].msg.digital_input_init
     assert (init.pull_up, init.debounce_ms) == (True, 10)
     fake.analog[14] = 777
     fake.time_ms = 5000
@@ -35,21 +35,21 @@ def test_read_once(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None
     assert got["time_ms"] == 5000 and got["age"] >= 0
     assert main(["read", fake.port, "3", "--counter", "--edge", "both", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["value"] == 0
-    assert fake.commands("counter_init")[0].msg.counter_init.edge == 2  # EDGE_BOTH
+    assert fake.arrivals("counter_init")[0].msg.counter_init.edge == 2  # EDGE_BOTH
 
 
 def test_read_refuses_a_pin_that_cannot(
-    fake: FakeDevice, capsys: pytest.CaptureFixture[str]
+    fake: PtyDevice, capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert main(["read", fake.port, "2", "--analog"]) == 2  # refused before anything is sent
     err = capsys.readouterr().err
-    assert "pin 2 cannot be an analog input pin on this fake" in err
+    assert "pin 2 cannot be an analog input pin on this virtual" in err
     assert "STATUS_NOT_SUPPORTED" in err
-    assert fake.commands("analog_input_init") == []
+    assert fake.arrivals("analog_input_init") == []
 
 
 def test_watch_prints_the_values_then_each_change(
-    fake: FakeDevice, capsys: pytest.CaptureFixture[str]
+    fake: PtyDevice, capsys: pytest.CaptureFixture[str]
 ) -> None:
     def then_change_both(msg: Any) -> list[Any]:
         replies = fake.default_reply(msg)  # the Ack and the first value
@@ -72,13 +72,13 @@ def test_watch_prints_the_values_then_each_change(
     ]  # fmt: skip
 
 
-def test_pins_by_their_board_names(fake: FakeDevice, capsys: pytest.CaptureFixture[str]) -> None:
+def test_pins_by_their_board_names(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     """PIN may be a board name as Arduino writes it: A0 is the device's first analog pin."""
     fake.analog[15] = 321
     assert main(["read", fake.port, "A1", "--analog", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["pin"] == 15
     assert main(["pin", fake.port, "a2", "on"]) == 0
-    assert fake.commands("digital_init")[-1].msg.digital_init.pin == 16 and fake.values[16] == 1
+    assert fake.arrivals("digital_init")[-1].msg.digital_init.pin == 16 and fake.values[16] == 1
     assert capsys.readouterr().out.strip() == "pin A2: on"
     assert main(["watch", fake.port, "A3:analog", "--json", "--duration", "0.01"]) == 0
     assert json.loads(capsys.readouterr().out.splitlines()[0])["pin"] == 17

@@ -88,7 +88,7 @@ def digital_init(pin: int) -> ArduinoIn:
 
 
 def commands(device: VirtualDevice) -> int:
-    return sum(1 for ptype, _ in device.received if ptype is PacketType.COMMAND)
+    return len(device.received)
 
 
 def test_open_handshakes_with_one_reset() -> None:
@@ -198,18 +198,22 @@ def test_an_id_is_given_at_the_first_transmission_not_at_submit() -> None:
     first = held[0].message_id
     assert urgent.message_id == first % 127 + 1
     assert [c.message_id for c in held[1:]] == [first % 127 + 2, first % 127 + 3]
-    wire = [parse_in(p).message_id for t, p in stack.device.received if t is PacketType.COMMAND]
+    wire = [r.msg.message_id for r in stack.device.received]
     assert wire[-4:] == [first, first % 127 + 1, first % 127 + 2, first % 127 + 3]
 
 
 class AckLosingDevice(VirtualDevice):
-    """Runs every command; while ``lose_acks`` is set, its DATA never reaches the host."""
+    """Runs every command; while ``lose_acks`` is set, its answers never reach the host."""
 
     lose_acks = False
 
-    def _reply(self, ptype: PacketType, payload: bytes) -> None:
-        if not (self.lose_acks and ptype is PacketType.DATA):
-            super()._reply(ptype, payload)
+    def __init__(self) -> None:
+        super().__init__()
+        self.handler = self.losing_reply
+
+    def losing_reply(self, msg: ArduinoIn) -> list[ArduinoOut]:
+        replies = self.default_reply(msg)
+        return [] if self.lose_acks else replies
 
 
 def test_ids_never_go_64_ahead_of_the_acked_one_a_resumed_handshake_resyncs() -> None:
@@ -223,7 +227,7 @@ def test_ids_never_go_64_ahead_of_the_acked_one_a_resumed_handshake_resyncs() ->
     stack.link.watchdog_timeout = 1000.0  # not the watchdog's re-handshake
     stack.rpc.window = 100
     device.lose_acks = True
-    device.received.clear()
+    device.packets.clear()
     for _ in range(70):
         msg = ArduinoIn()
         msg.ping.SetInParent()
@@ -231,7 +235,7 @@ def test_ids_never_go_64_ahead_of_the_acked_one_a_resumed_handshake_resyncs() ->
     stack.run(0.1)
     wire = [
         (ptype, parse_control(p) if ptype is PacketType.CONTROL else parse_in(p).message_id)
-        for ptype, p in device.received
+        for ptype, p in device.packets
     ]
     reset = next(i for i, (ptype, _) in enumerate(wire) if ptype is PacketType.CONTROL)
     assert [mid for _, mid in wire[:reset]] == list(range(1, 64))
@@ -266,8 +270,7 @@ def test_a_device_on_another_protocol_version_is_refused() -> None:
 
 
 def pings(device: VirtualDevice) -> int:
-    msgs = [ArduinoIn.FromString(p) for t, p in device.received if t is PacketType.COMMAND]
-    return sum(1 for m in msgs if m.WhichOneof("data") == "ping")
+    return len(device.arrivals("ping"))
 
 
 def test_pings_keep_their_interval_and_stop_while_paused() -> None:
@@ -317,8 +320,7 @@ def test_input_reports_reach_the_message_hook_and_are_no_acks() -> None:
     assert [r.WhichOneof("data") for r in reports] == ["input_report"]
     assert reports[0].input_report.digital_pins == 1 << 2
     assert reports[0].input_report.digital_levels == 1 << 2
-    stack.device.levels[2] = 0
-    stack.device.report()  # a change, queued before the next command's Ack
+    stack.device.set_level(2, 0)  # a change, queued before the next command's Ack
     second = stack.rpc.submit(digital_init(13))
     assert stack.device.deliver() == 2
     assert second.done.is_set() and second.error is None

@@ -1,4 +1,4 @@
-"""Link layer against the scripted fake device: handshake, checks, SEQ, watchdog, events."""
+"""Link layer against the pty fake (PtyDevice): handshake, checks, SEQ, watchdog, events."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ from typing import Any
 
 import protoduino
 import pytest
-from fakedevice import FakeDevice, ack
 from protoduino import Board, EventKind
 from protoduino.constants import EventCode, PacketType
 from protoduino.framing import cobs_encode, frame_packet
 from protoduino.packets import build_packet, event_payload
+from protoduino.testing import PtyDevice, ack
 
 
 def events_of(board: Board) -> tuple[list[protoduino.Event], threading.Event]:
@@ -27,19 +27,19 @@ def events_of(board: Board) -> tuple[list[protoduino.Event], threading.Event]:
     return seen, flag
 
 
-def test_handshake_and_info(fake: FakeDevice) -> None:
+def test_handshake_and_info(fake: PtyDevice) -> None:
     with Board.open(fake.port) as board:
-        assert board.info.board == "fake"
+        assert board.info.board == "virtual"
         assert board.info.num_pins == 20
         assert board.info.reserved_pins == (0, 1)
         assert board.stats.handshakes == 1
         assert board.stats.state == "active"
     assert fake.resets >= 1
-    assert fake.commands("get_info")
+    assert fake.arrivals("get_info")
 
 
 def test_version_mismatch_names_both_versions(tmp_path: Path) -> None:
-    with FakeDevice(tmp_path, version=7), pytest.raises(protoduino.VersionMismatchError) as info:
+    with PtyDevice(tmp_path, version=7), pytest.raises(protoduino.VersionMismatchError) as info:
         Board.open(str(tmp_path / "fake-tty"))
     assert info.value.host_version == protoduino.PROTOCOL_VERSION
     assert info.value.device_version == 7
@@ -49,7 +49,7 @@ def test_version_mismatch_names_both_versions(tmp_path: Path) -> None:
 
 def test_version_1_firmware_gets_the_clear_version_error(tmp_path: Path) -> None:
     """A version 1 device answers our RESET with its 6-byte RESET_ACK: the host names both."""
-    with FakeDevice(tmp_path, version=1), pytest.raises(protoduino.VersionMismatchError) as info:
+    with PtyDevice(tmp_path, version=1), pytest.raises(protoduino.VersionMismatchError) as info:
         Board.open(str(tmp_path / "fake-tty"))
     assert (info.value.host_version, info.value.device_version) == (protoduino.PROTOCOL_VERSION, 1)
     assert f"host speaks {protoduino.PROTOCOL_VERSION}, device speaks 1" in str(info.value)
@@ -57,7 +57,7 @@ def test_version_1_firmware_gets_the_clear_version_error(tmp_path: Path) -> None
 
 def test_schema_mismatch_names_both_fingerprints(tmp_path: Path) -> None:
     with (
-        FakeDevice(tmp_path, schema_id=0x12345678) as fake,
+        PtyDevice(tmp_path, schema_id=0x12345678) as fake,
         pytest.raises(protoduino.SchemaMismatchError) as info,
     ):
         Board.open(fake.port)
@@ -68,7 +68,7 @@ def test_schema_mismatch_names_both_fingerprints(tmp_path: Path) -> None:
 
 
 def test_silent_device_fails_handshake_in_time_after_retries(tmp_path: Path) -> None:
-    with FakeDevice(tmp_path, answer_reset=False) as fake:
+    with PtyDevice(tmp_path, answer_reset=False) as fake:
         # When it fails (exactly at handshake_timeout) is judged on an injected clock:
         # tests/unit/test_layers.py.
         with pytest.raises(protoduino.HandshakeError) as info:
@@ -83,7 +83,7 @@ def test_missing_port_is_a_transport_error(tmp_path: Path) -> None:
     assert "nothing-here" in str(info.value)
 
 
-def test_garbage_and_partial_frames_are_dropped_and_counted(fake: FakeDevice) -> None:
+def test_garbage_and_partial_frames_are_dropped_and_counted(fake: PtyDevice) -> None:
     with Board.open(fake.port, ping=False) as board:
 
         def noisy(msg: Any) -> list[Any]:
@@ -106,7 +106,7 @@ def test_garbage_and_partial_frames_are_dropped_and_counted(fake: FakeDevice) ->
         board.ping(b"again")
 
 
-def test_seq_gap_counts_lost_packets(fake: FakeDevice) -> None:
+def test_seq_gap_counts_lost_packets(fake: PtyDevice) -> None:
     with Board.open(fake.port, ping=False) as board:
 
         def skipping(msg: Any) -> list[Any]:
@@ -119,7 +119,7 @@ def test_seq_gap_counts_lost_packets(fake: FakeDevice) -> None:
         assert board.stats.seq_desyncs == 0
 
 
-def test_seq_desync_rehandshakes(fake: FakeDevice) -> None:
+def test_seq_desync_rehandshakes(fake: PtyDevice) -> None:
     with Board.open(fake.port, ping=False) as board:
         resets = fake.resets
         mid = board.rpc_state().next_id  # the next call's id
@@ -128,7 +128,7 @@ def test_seq_desync_rehandshakes(fake: FakeDevice) -> None:
         results: list[float] = []
         worker = threading.Thread(target=lambda: results.append(board.ping()))
         worker.start()
-        assert fake.wait_for(lambda: len(fake.commands("ping")) >= 1)
+        assert fake.wait_for(lambda: len(fake.arrivals("ping")) >= 1)
         fake.send_data(out, seq=(fake.tx_seq + 100) & 0xFF)  # a jump backward/forward
         assert fake.wait_for(lambda: fake.resets > resets)
         fake.handler = fake.default_reply
@@ -138,7 +138,7 @@ def test_seq_desync_rehandshakes(fake: FakeDevice) -> None:
         board.ping()
 
 
-def test_watchdog_rehandshakes_when_device_goes_silent(fake: FakeDevice) -> None:
+def test_watchdog_rehandshakes_when_device_goes_silent(fake: PtyDevice) -> None:
     # 1.5 s: longer than the 1 s between pings, which the device answers until it goes silent.
     with Board.open(fake.port, watchdog_timeout=1.5) as board:
         seen, _ = events_of(board)
@@ -157,7 +157,7 @@ def test_watchdog_rehandshakes_when_device_goes_silent(fake: FakeDevice) -> None
         )
 
 
-def test_device_events_reach_callbacks(fake: FakeDevice) -> None:
+def test_device_events_reach_callbacks(fake: PtyDevice) -> None:
     with Board.open(fake.port, ping=False) as board:
         seen, _ = events_of(board)
         fake.send_control(event_payload(EventCode.DESYNC))
@@ -175,7 +175,7 @@ def test_device_events_reach_callbacks(fake: FakeDevice) -> None:
         assert stats.dropped.get("direction") == 1
 
 
-def test_not_active_means_handshake_again_and_the_boot_id_tells(fake: FakeDevice) -> None:
+def test_not_active_means_handshake_again_and_the_boot_id_tells(fake: PtyDevice) -> None:
     with Board.open(fake.port, ping=False) as board:
         seen, _ = events_of(board)
         # A NOT_ACTIVE from a device that did not reboot (same boot id, session resumed):
@@ -193,7 +193,7 @@ def test_not_active_means_handshake_again_and_the_boot_id_tells(fake: FakeDevice
         assert [e.kind for e in list(seen)].count(EventKind.REBOOTED) == 1
 
 
-def test_board_close_stops_threads_and_is_idempotent(fake: FakeDevice) -> None:
+def test_board_close_stops_threads_and_is_idempotent(fake: PtyDevice) -> None:
     before = {t.name for t in threading.enumerate()}
     board = Board.open(fake.port)
     names = {t.name for t in threading.enumerate()} - before

@@ -1,4 +1,4 @@
-"""protoduino.aio's PWM outputs and inputs against the scripted fake device.
+"""protoduino.aio's PWM outputs and inputs against the pty fake (PtyDevice).
 
 Each test drives its own loop with asyncio.run. "Without blocking the loop" is judged
 by another task making progress while an input is awaited, not by time.
@@ -10,9 +10,9 @@ import asyncio
 from collections.abc import Callable
 
 import pytest
-from fakedevice import FakeDevice
 from protoduino import aio
 from protoduino.errors import BoardClosedError, InputTimeoutError
+from protoduino.testing import PtyDevice
 
 #: Bounds a failing test's wait only.
 BOUND = 30.0
@@ -25,7 +25,7 @@ async def until(condition: Callable[[], bool]) -> None:
             await asyncio.sleep(0.001)
 
 
-def test_pwm_and_pose(fake: FakeDevice) -> None:
+def test_pwm_and_pose(fake: PtyDevice) -> None:
     async def main() -> None:
         async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
             motor = await board.pwm_output(3, safe=0)
@@ -38,7 +38,7 @@ def test_pwm_and_pose(fake: FakeDevice) -> None:
     asyncio.run(main())
 
 
-def test_inputs_read_at_once_and_wait_without_blocking_the_loop(fake: FakeDevice) -> None:
+def test_inputs_read_at_once_and_wait_without_blocking_the_loop(fake: PtyDevice) -> None:
     async def main() -> None:
         async with await aio.open(fake.port, ack_timeout=0.1, ping=False) as board:
             button = await board.digital_input(2, pull_up=True)
@@ -66,7 +66,7 @@ def test_inputs_read_at_once_and_wait_without_blocking_the_loop(fake: FakeDevice
     asyncio.run(main())
 
 
-def test_changes_iterate_newest_wins_and_end_at_close(fake: FakeDevice) -> None:
+def test_changes_iterate_newest_wins_and_end_at_close(fake: PtyDevice) -> None:
     async def main() -> None:
         board = await aio.open(fake.port, ack_timeout=0.1, ping=False)
         pot = await board.analog_input(14)

@@ -1,4 +1,4 @@
-"""PWM outputs, inputs and interlocks through the Board API, against the scripted fake device.
+"""PWM outputs, inputs and interlocks through the Board API, against the pty fake (PtyDevice).
 
 The fake reports its inputs as the firmware does (the value right after an input's
 Init Ack, then on every change), so these tests judge the host alone: its checks
@@ -16,7 +16,6 @@ from typing import Any
 
 import protoduino
 import pytest
-from fakedevice import FakeDevice, ack, mask
 from protoduino import Board, EventKind
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.errors import (
@@ -28,17 +27,18 @@ from protoduino.errors import (
 )
 from protoduino.inputs import Reading
 from protoduino.messages import ArduinoOut, Status
+from protoduino.testing import PtyDevice, ack, mask
 from test_board_fake import Recorder
 
 
-def sent(fake: FakeDevice, kind: str) -> list[Any]:
-    return [r.msg for r in fake.commands(kind)]
+def sent(fake: PtyDevice, kind: str) -> list[Any]:
+    return [r.msg for r in fake.arrivals(kind)]
 
 
 # --- PWM -------------------------------------------------------------------------------
 
 
-def test_pwm_output_init_write_and_rounding(board: Board, fake: FakeDevice) -> None:
+def test_pwm_output_init_write_and_rounding(board: Board, fake: PtyDevice) -> None:
     motor = board.pwm_output(3, safe=10)
     (init,) = sent(fake, "pwm_init")
     assert (init.pwm_init.pin, init.pwm_init.safe_duty) == (3, 10)
@@ -58,14 +58,14 @@ def test_pwm_output_init_write_and_rounding(board: Board, fake: FakeDevice) -> N
 
 @pytest.mark.parametrize("duty", [256, -1, float("nan"), float("inf"), 255.6])
 def test_pwm_duty_out_of_range_is_refused_before_sending(
-    board: Board, fake: FakeDevice, duty: float
+    board: Board, fake: PtyDevice, duty: float
 ) -> None:
     motor = board.pwm_output(11)
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     with pytest.raises(protoduino.CommandRejectedError) as info:
         motor.write(duty)
     assert info.value.status == Status.STATUS_OUT_OF_RANGE and not info.value.sent
-    assert len(fake.commands()) == before
+    assert len(fake.arrivals()) == before
 
 
 def test_pwm_argument_types(board: Board) -> None:
@@ -78,7 +78,7 @@ def test_pwm_argument_types(board: Board) -> None:
     assert info.value.status == Status.STATUS_OUT_OF_RANGE
 
 
-def test_pwm_on_a_pin_without_pwm_is_not_supported(board: Board, fake: FakeDevice) -> None:
+def test_pwm_on_a_pin_without_pwm_is_not_supported(board: Board, fake: PtyDevice) -> None:
     with pytest.raises(NotSupportedError) as info:
         board.pwm_output(4)
     assert info.value.status == Status.STATUS_NOT_SUPPORTED and not info.value.sent
@@ -100,12 +100,12 @@ def test_pwm_on_a_pin_without_pwm_is_not_supported(board: Board, fake: FakeDevic
     ],
 )
 def test_a_mode_the_firmware_lacks_is_refused_naming_the_feature(
-    fake: FakeDevice, feature: str, configure: Any
+    fake: PtyDevice, feature: str, configure: Any
 ) -> None:
     fake.features &= ~(1 << pb.Feature.Value(f"FEATURE_{feature.upper()}"))
     with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
         assert feature not in board.info.features
-        before = len(fake.commands())
+        before = len(fake.arrivals())
         with pytest.raises(FeatureMissingError) as info:
             configure(board)
         assert info.value.feature == feature and not info.value.sent
@@ -113,7 +113,7 @@ def test_a_mode_the_firmware_lacks_is_refused_naming_the_feature(
         text = str(info.value)
         assert f"FEATURE_{feature.upper()}" in text and "FEATURES" in text
         assert f"PD_FEATURE_{feature.upper()}" in text
-        assert len(fake.commands()) == before  # nothing sent
+        assert len(fake.arrivals()) == before  # nothing sent
 
 
 def test_device_info_lists_features_and_pins(board: Board) -> None:
@@ -126,7 +126,7 @@ def test_device_info_lists_features_and_pins(board: Board) -> None:
     assert 2 in info.counter_pins
 
 
-def test_timer1_is_shared_by_servos_and_pwm_on_9_and_10(fake: FakeDevice) -> None:
+def test_timer1_is_shared_by_servos_and_pwm_on_9_and_10(fake: PtyDevice) -> None:
     fake.board_name = "uno"
     with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
         servo = board.servo(2)
@@ -145,7 +145,7 @@ def test_timer1_is_shared_by_servos_and_pwm_on_9_and_10(fake: FakeDevice) -> Non
         assert sorted(fake.pins) == [3, 10]
 
 
-def test_a_device_refusal_has_its_named_error(board: Board, fake: FakeDevice) -> None:
+def test_a_device_refusal_has_its_named_error(board: Board, fake: PtyDevice) -> None:
     motor = board.pwm_output(3)
 
     def refuse(msg: Any) -> list[Any]:
@@ -168,7 +168,7 @@ def test_a_device_refusal_has_its_named_error(board: Board, fake: FakeDevice) ->
     assert motor.value == 0  # a refused value is not the output's
 
 
-def test_pose_with_pwm_items(board: Board, fake: FakeDevice) -> None:
+def test_pose_with_pwm_items(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9)
     led = board.digital_output(13)
     motor = board.pwm_output(3)
@@ -184,7 +184,7 @@ def test_pose_with_pwm_items(board: Board, fake: FakeDevice) -> None:
     assert info.value.output is motor and not info.value.sent
 
 
-def test_read_outputs_decodes_pwm(board: Board, fake: FakeDevice) -> None:
+def test_read_outputs_decodes_pwm(board: Board, fake: PtyDevice) -> None:
     def outputs(msg: Any) -> list[Any]:
         if msg.WhichOneof("data") != "read_outputs":
             return fake.default_reply(msg)
@@ -204,7 +204,7 @@ def test_read_outputs_decodes_pwm(board: Board, fake: FakeDevice) -> None:
 
 
 def test_pwm_restore_last_replays_the_last_duty_but_never_one_before_a_failsafe(
-    fake: FakeDevice,
+    fake: PtyDevice,
 ) -> None:
     with Board.open(fake.port, ack_timeout=0.1, ping=False, restore="last") as board:
         rec = Recorder(board)
@@ -214,7 +214,7 @@ def test_pwm_restore_last_replays_the_last_duty_but_never_one_before_a_failsafe(
         rec.wait(EventKind.RESTORED)
         assert fake.pins == {3: "pwm"} and fake.values == {3: 180}
         assert sent(fake, "pwm_init")[-1].pwm_init.safe_duty == 5
-        fake.failsafe(pb.FAILSAFE_CAUSE_PING_TIMEOUT)
+        fake.expire_failsafe()
         rec.wait(EventKind.FAILSAFE)
         assert motor.value == 5
         fake.reboot()
@@ -226,7 +226,7 @@ def test_pwm_restore_last_replays_the_last_duty_but_never_one_before_a_failsafe(
 
 
 def test_digital_input_knows_its_level_at_once_and_follows_changes(
-    board: Board, fake: FakeDevice
+    board: Board, fake: PtyDevice
 ) -> None:
     fake.time_ms = 1234
     button = board.digital_input(2, pull_up=True, debounce_ms=20)
@@ -254,7 +254,7 @@ def test_digital_input_knows_its_level_at_once_and_follows_changes(
 
 
 def test_wait_for_returns_at_once_sees_short_pulses_and_times_out(
-    board: Board, fake: FakeDevice
+    board: Board, fake: PtyDevice
 ) -> None:
     button = board.digital_input(2)
     assert button.wait_for(True, timeout=0) is True  # already so
@@ -278,7 +278,7 @@ def test_wait_for_returns_at_once_sees_short_pulses_and_times_out(
     assert button.wait_for(lambda level: level, timeout=30) is True
 
 
-def test_analog_input_and_counter(board: Board, fake: FakeDevice) -> None:
+def test_analog_input_and_counter(board: Board, fake: PtyDevice) -> None:
     fake.analog[14] = 300
     pot = board.analog_input(14, rate_hz=250, threshold=4, heartbeat=2.0)
     (init,) = sent(fake, "analog_input_init")
@@ -292,7 +292,7 @@ def test_analog_input_and_counter(board: Board, fake: FakeDevice) -> None:
     c = init.counter_init
     assert (c.pin, c.edge, c.pull_up, c.interval_ms) == (3, pb.EDGE_BOTH, True, 10)
     assert wheel.read() == 0
-    fake.pulses(3, 100)
+    fake.pulses(3, 50)  # both edges: two a pulse
     assert wheel.wait_for(lambda n: n >= 100, timeout=30) == 100
     assert pot.read() == 1023  # a report without pin 14 leaves its value alone
 
@@ -319,16 +319,16 @@ INPUT_REJECTIONS: list[tuple[str, Any, int]] = [
     ("what", "call", "status"), INPUT_REJECTIONS, ids=[r[0] for r in INPUT_REJECTIONS]
 )
 def test_input_arguments_are_checked_before_sending(
-    board: Board, fake: FakeDevice, what: str, call: Any, status: int
+    board: Board, fake: PtyDevice, what: str, call: Any, status: int
 ) -> None:
-    before = len(fake.commands())
+    before = len(fake.arrivals())
     with pytest.raises(protoduino.CommandRejectedError) as info:
         call(board)
     assert info.value.status == status and not info.value.sent, what
-    assert len(fake.commands()) == before
+    assert len(fake.arrivals()) == before
 
 
-def test_input_pins_are_owned_like_outputs(board: Board, fake: FakeDevice) -> None:
+def test_input_pins_are_owned_like_outputs(board: Board, fake: PtyDevice) -> None:
     board.servo(9)
     with pytest.raises(protoduino.CommandRejectedError) as info:
         board.digital_input(9)
@@ -343,13 +343,13 @@ def test_input_pins_are_owned_like_outputs(board: Board, fake: FakeDevice) -> No
     board.digital_output(2)  # free for any mode
 
 
-def test_inputs_are_restored_after_a_reboot(board: Board, fake: FakeDevice) -> None:
+def test_inputs_are_restored_after_a_reboot(board: Board, fake: PtyDevice) -> None:
     rec = Recorder(board)
     button = board.digital_input(2, pull_up=True, interlock="low")
     board.analog_input(15)
     fake.reboot()
     rec.wait(EventKind.RESTORED)
-    replay = [r.kind for r in fake.commands()][-3:]
+    replay = [r.kind for r in fake.arrivals()][-3:]
     assert replay == ["configure_failsafe", "digital_input_init", "analog_input_init"]
     assert sent(fake, "digital_input_init")[-1].digital_input_init.interlock == pb.TRIP_LOW
     assert fake.pins == {2: "digital_input", 15: "analog_input"}
@@ -357,7 +357,7 @@ def test_inputs_are_restored_after_a_reboot(board: Board, fake: FakeDevice) -> N
     assert button.wait_for(False, timeout=30) is False
 
 
-def test_callbacks_are_newest_wins_and_stay_bounded(board: Board, fake: FakeDevice) -> None:
+def test_callbacks_are_newest_wins_and_stay_bounded(board: Board, fake: PtyDevice) -> None:
     """A callback stuck while 500 changes arrive is then called with the latest value,
     not 500 times: the event queue holds one job per input at most."""
     pot = board.analog_input(14)
@@ -389,7 +389,7 @@ def test_callbacks_are_newest_wins_and_stay_bounded(board: Board, fake: FakeDevi
 
 
 def test_device_coalescing_is_counted_and_a_malformed_report_is_dropped(
-    board: Board, fake: FakeDevice
+    board: Board, fake: PtyDevice
 ) -> None:
     pot = board.analog_input(14)
     fake.coalesced = 7
@@ -405,7 +405,7 @@ def test_device_coalescing_is_counted_and_a_malformed_report_is_dropped(
     assert board.stats.input_reports == 3  # the bad one is not counted as a report
 
 
-def test_close_ends_a_wait(fake: FakeDevice) -> None:
+def test_close_ends_a_wait(fake: PtyDevice) -> None:
     board = Board.open(fake.port, ack_timeout=0.1, ping=False)
     button = board.digital_input(2)
     errors: list[BaseException] = []
@@ -430,29 +430,29 @@ def test_close_ends_a_wait(fake: FakeDevice) -> None:
 # --- interlocks ------------------------------------------------------------------------
 
 
-def test_interlock_event_names_its_pin_and_forgets_values(board: Board, fake: FakeDevice) -> None:
+def test_interlock_event_names_its_pin_and_forgets_values(board: Board, fake: PtyDevice) -> None:
     rec = Recorder(board)
     motor = board.pwm_output(3)
     motor.write(200)
     bumper = board.digital_input(2, pull_up=True, interlock="low")
     assert bumper.interlock == "low"
     assert sent(fake, "digital_input_init")[0].digital_input_init.interlock == pb.TRIP_LOW
-    fake.failsafe(pb.FAILSAFE_CAUSE_INTERLOCK, pin=2)
+    fake.set_level(2, 0)  # the bumper closes: the device trips
     event = rec.wait(EventKind.FAILSAFE)
     assert event.details == {"active": True, "cause": "interlock", "epoch": 1, "pin": 2}
     assert "interlock on pin 2" in event.text
-    assert motor.value == 0  # the device drove it safe; the host knows
+    assert motor.value == 0 and fake.values == {}  # the device drove it safe; the host knows
+    fake.set_level(2, 1)
     board.clear_interlock()
     # It carries the epoch of the trip this host saw: a held-up one never clears a later trip.
     assert [m.clear_interlock.failsafe_epoch for m in sent(fake, "clear_interlock")] == [1]
-    fake.failsafe(pb.FAILSAFE_CAUSE_INTERLOCK, active=False)  # as the device, after the Ack
     cleared = rec.wait(EventKind.FAILSAFE, count=2)
     assert cleared.details == {"active": False, "cause": "none", "epoch": 1}
     board.submit_clear_interlock().result(30)
     assert len(sent(fake, "clear_interlock")) == 2
 
 
-def test_a_wait_survives_a_release_and_a_new_configuration(board: Board, fake: FakeDevice) -> None:
+def test_a_wait_survives_a_release_and_a_new_configuration(board: Board, fake: PtyDevice) -> None:
     """Releasing a pin drops its value, not who listens: a wait hears the pin configured anew."""
     pot = board.analog_input(14)
     result: list[int] = []

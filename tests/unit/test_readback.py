@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import protoduino
 import pytest
-from fakedevice import FakeDevice, ack
 from protoduino import Board
 from protoduino.messages import ArduinoOut, Status
+from protoduino.testing import PtyDevice, ack
 
 BOUND = 5.0
 
 
-def test_last_acknowledged_values(board: Board, fake: FakeDevice) -> None:
+def test_last_acknowledged_values(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9, safe=90, min_us=1000, max_us=2000)
     assert servo.value == 1500  # the safe width, from the Init
     servo.write(45)
@@ -32,7 +32,7 @@ def test_last_acknowledged_values(board: Board, fake: FakeDevice) -> None:
     assert (servo.value, narrow.value, led.value) == (1500, 1111, True)
 
 
-def test_refused_value_is_not_recorded(board: Board, fake: FakeDevice) -> None:
+def test_refused_value_is_not_recorded(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9)
     servo.write(10)
     before = servo.value
@@ -44,7 +44,7 @@ def test_refused_value_is_not_recorded(board: Board, fake: FakeDevice) -> None:
     assert servo.value == before
 
 
-def test_failsafe_makes_values_safe(board: Board, fake: FakeDevice) -> None:
+def test_failsafe_makes_values_safe(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9, safe=0)
     servo.write(90)
     led = board.digital_output(13)

@@ -6,7 +6,7 @@ messages go out first, and past DEDUPE_WINDOW - 1 of them a retransmission of th
 run again. As after a reboot (docs/api.md, *Sessions and the restore policy*), it fails with
 DeviceRebootedError and is not sent again.
 
-Against the scripted fake device, whose dedupe window is the firmware's
+Against the pty fake (PtyDevice), whose dedupe window is the firmware's
 (:class:`protoduino.testing.DedupeWindow`): what the device executes is counted per id,
 dedupe hits excluded, so a retransmission that fell out of its window shows as a second
 execution.
@@ -18,11 +18,11 @@ import collections
 from typing import Any
 
 import pytest
-from fakedevice import FakeDevice
 from protoduino import Board
 from protoduino.commands import command
 from protoduino.constants import DEDUPE_WINDOW
 from protoduino.errors import DeviceRebootedError
+from protoduino.testing import PtyDevice
 
 #: Outputs configured before the unseen restart: the restore sends a ConfigureFailsafe and
 #: one Init each, more than the DEDUPE_WINDOW - 1 ids the guard lets go out after a call.
@@ -30,7 +30,7 @@ PINS = [p for p in range(2, 19) if p != 9]
 X_PIN = 19  # configured while the device has already restarted
 
 
-def test_a_call_in_flight_when_the_session_is_lost_is_executed_once(fake: FakeDevice) -> None:
+def test_a_call_in_flight_when_the_session_is_lost_is_executed_once(fake: PtyDevice) -> None:
     executed: collections.Counter[int] = collections.Counter()
     dropped: list[int] = []
 
@@ -64,4 +64,4 @@ def test_a_call_in_flight_when_the_session_is_lost_is_executed_once(fake: FakeDe
     # Before the fix X went out again after the restore's 18 ids, 19 behind the device's
     # newest, and ran a second time.
     assert executed[x_id] == 1, f"X (id {x_id}) executed {executed[x_id]} times"
-    assert [r.msg.message_id for r in fake.commands("digital_init")].count(x_id) == 1
+    assert [r.msg.message_id for r in fake.arrivals("digital_init")].count(x_id) == 1

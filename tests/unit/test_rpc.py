@@ -1,4 +1,4 @@
-"""Request layer against the scripted fake device: ids, retransmission, timeouts, window."""
+"""Request layer against the pty fake (PtyDevice): ids, retransmission, timeouts, window."""
 
 from __future__ import annotations
 
@@ -9,13 +9,12 @@ from typing import Any
 
 import protoduino
 import pytest
-from fakedevice import FakeDevice, ack
 from protoduino import Board
 from protoduino.constants import PING_INTERVAL, PacketType
 from protoduino.framing import StreamDecoder, frame_size
-from protoduino.messages import ArduinoIn, Status, parse_in
+from protoduino.messages import ArduinoIn, Status
 from protoduino.packets import Packet, parse_control
-from protoduino.testing import VirtualDevice
+from protoduino.testing import PtyDevice, VirtualDevice, ack
 
 ACK_TIMEOUT = 0.1
 
@@ -25,7 +24,7 @@ def packets_in(raw: bytes | bytearray) -> list[Packet]:
 
 
 @pytest.fixture
-def board(fake: FakeDevice) -> Iterator[Board]:
+def board(fake: PtyDevice) -> Iterator[Board]:
     with Board.open(fake.port, ack_timeout=ACK_TIMEOUT, ping=False) as b:
         yield b
 
@@ -36,12 +35,12 @@ def ping_msg(payload: bytes = b"") -> Any:
     return msg
 
 
-def test_message_ids_increment(board: Board, fake: FakeDevice) -> None:
+def test_message_ids_increment(board: Board, fake: PtyDevice) -> None:
     # The wrap past 127 (to 1, never 0): tests/unit/test_layers.py, on a chosen first id.
     first = board.rpc_state().next_id
     for _ in range(3):
         board.ping()
-    ids = [r.msg.message_id for r in fake.commands("ping")]
+    ids = [r.msg.message_id for r in fake.arrivals("ping")]
     assert ids == [first, first % 127 + 1, (first % 127 + 1) % 127 + 1]
 
 
@@ -51,9 +50,9 @@ def test_message_ids_start_at_1_each_session(tmp_path: Path) -> None:
     for i in range(2):
         directory = tmp_path / str(i)
         directory.mkdir()
-        with FakeDevice(directory) as f, Board.open(f.port, ping=False):
+        with PtyDevice(directory) as f, Board.open(f.port, ping=False):
             pass
-        assert f.commands("get_info")[0].msg.message_id == 1
+        assert f.arrivals("get_info")[0].msg.message_id == 1
     resets = [
         parse_control(p.payload)
         for p in packets_in(f.raw_rx)
@@ -62,7 +61,7 @@ def test_message_ids_start_at_1_each_session(tmp_path: Path) -> None:
     assert resets and all(r.next_id == 1 for r in resets)
 
 
-def test_dropped_ack_is_retransmitted_with_the_same_id(board: Board, fake: FakeDevice) -> None:
+def test_dropped_ack_is_retransmitted_with_the_same_id(board: Board, fake: PtyDevice) -> None:
     dropped: list[int] = []
 
     def drop_first(msg: Any) -> list[Any]:
@@ -73,20 +72,20 @@ def test_dropped_ack_is_retransmitted_with_the_same_id(board: Board, fake: FakeD
 
     fake.handler = drop_first
     board.ping(b"x")
-    pings = fake.commands("ping")
+    pings = fake.arrivals("ping")
     assert len(pings) == 2
     assert pings[0].msg.message_id == pings[1].msg.message_id == dropped[0]
     assert pings[0].seq != pings[1].seq  # a new packet, a new SEQ
     assert board.stats.retransmits == 1
 
 
-def test_no_ack_times_out_after_every_retry(board: Board, fake: FakeDevice) -> None:
+def test_no_ack_times_out_after_every_retry(board: Board, fake: PtyDevice) -> None:
     fake.handler = lambda msg: []
     with pytest.raises(protoduino.AckTimeoutError) as info:
         board.ping()
     assert isinstance(info.value, TimeoutError)
     assert isinstance(info.value, protoduino.ProtoduinoError)
-    pings = fake.commands("ping")
+    pings = fake.arrivals("ping")
     assert len(pings) == 1 + protoduino.constants.MAX_RETRIES
     assert len({p.msg.message_id for p in pings}) == 1
     # When it fails (exactly call_timeout after the first transmission) is judged on an
@@ -96,7 +95,7 @@ def test_no_ack_times_out_after_every_retry(board: Board, fake: FakeDevice) -> N
     assert board.stats.timeouts == 1
 
 
-def test_duplicate_ack_is_counted_late_and_dropped(board: Board, fake: FakeDevice) -> None:
+def test_duplicate_ack_is_counted_late_and_dropped(board: Board, fake: PtyDevice) -> None:
     fake.handler = lambda msg: fake.default_reply(msg) * 2
     board.ping(b"a")
     board.ping(b"b")
@@ -104,7 +103,7 @@ def test_duplicate_ack_is_counted_late_and_dropped(board: Board, fake: FakeDevic
     assert board.stats.acks == 4  # get_info, configure_failsafe, two pings
 
 
-def test_late_ack_never_completes_the_wrong_call(board: Board, fake: FakeDevice) -> None:
+def test_late_ack_never_completes_the_wrong_call(board: Board, fake: PtyDevice) -> None:
     first: list[Any] = []
 
     def handler(msg: Any) -> list[Any]:
@@ -125,13 +124,13 @@ def test_late_ack_never_completes_the_wrong_call(board: Board, fake: FakeDevice)
     assert board.stats.late_acks >= 1
 
 
-def test_unknown_ack_is_counted_and_dropped(board: Board, fake: FakeDevice) -> None:
+def test_unknown_ack_is_counted_and_dropped(board: Board, fake: PtyDevice) -> None:
     fake.send_data(ack((board.rpc_state().next_id + 50) % 127 + 1))  # not given yet
     assert fake.wait_for(lambda: board.stats.unknown_acks == 1)
     board.ping()
 
 
-def test_rejection_carries_the_status(board: Board, fake: FakeDevice) -> None:
+def test_rejection_carries_the_status(board: Board, fake: PtyDevice) -> None:
     fake.handler = lambda msg: [ack(msg.message_id, Status.STATUS_OUT_OF_RANGE)]
     with pytest.raises(protoduino.CommandRejectedError) as info:
         board.ping()
@@ -141,7 +140,7 @@ def test_rejection_carries_the_status(board: Board, fake: FakeDevice) -> None:
     assert board.stats.rejected == 1
 
 
-def test_window_lets_several_calls_fly(fake: FakeDevice) -> None:
+def test_window_lets_several_calls_fly(fake: PtyDevice) -> None:
     held: list[Any] = []
 
     def answer_after_four(msg: Any) -> list[Any]:
@@ -157,16 +156,16 @@ def test_window_lets_several_calls_fly(fake: FakeDevice) -> None:
         futures = [board.submit_ping(bytes([i])) for i in range(4)]
         for future in futures:
             future.result(timeout=30)  # bounds a failure only
-        assert len({p.msg.message_id for p in fake.commands("ping")}) == 4
+        assert len({p.msg.message_id for p in fake.arrivals("ping")}) == 4
         assert board.stats.retransmits == 0
 
 
-def test_window_bounds_calls_in_flight(fake: FakeDevice) -> None:
+def test_window_bounds_calls_in_flight(fake: PtyDevice) -> None:
     with Board.open(fake.port, window=2, ping=False, ack_timeout=ACK_TIMEOUT) as board:
         fake.handler = lambda msg: []
         futures = [board.submit_ping(bytes([i])) for i in range(4)]
-        assert fake.wait_for(lambda: len(fake.commands("ping")) >= 4)  # with retransmissions
-        first = fake.commands("ping")[:4]
+        assert fake.wait_for(lambda: len(fake.arrivals("ping")) >= 4)  # with retransmissions
+        first = fake.arrivals("ping")[:4]
         assert len({p.msg.message_id for p in first}) == 2
         assert {p.msg.ping.payload for p in first} == {b"\x00", b"\x01"}  # the first two calls
         board.close()
@@ -175,7 +174,7 @@ def test_window_bounds_calls_in_flight(fake: FakeDevice) -> None:
                 future.result(timeout=30)
 
 
-def test_bytes_in_flight_stay_within_the_devices_receive_buffer(fake: FakeDevice) -> None:
+def test_bytes_in_flight_stay_within_the_devices_receive_buffer(fake: PtyDevice) -> None:
     """Flow control by bytes: at window 16, only as many frames fly as fit DeviceInfo.rx_buffer."""
     payload = bytes(10)
     longest = ping_msg(payload)
@@ -211,11 +210,7 @@ def test_bytes_in_flight_stay_within_the_devices_receive_buffer(fake: FakeDevice
 
 def _pings_sent(device: VirtualDevice) -> int:
     """The Pings the board sent (the device keeps them out of ``executed``)."""
-    return sum(
-        1
-        for kind, payload in device.received
-        if kind is PacketType.COMMAND and parse_in(payload).WhichOneof("data") == "ping"
-    )
+    return len(device.arrivals("ping"))
 
 
 def test_automatic_ping_and_pause() -> None:
@@ -239,7 +234,7 @@ def test_automatic_ping_and_pause() -> None:
         assert board.stats.rtt is not None
 
 
-def test_close_fails_waiting_calls(board: Board, fake: FakeDevice) -> None:
+def test_close_fails_waiting_calls(board: Board, fake: PtyDevice) -> None:
     fake.handler = lambda msg: []
     errors: list[BaseException] = []
 
@@ -251,7 +246,7 @@ def test_close_fails_waiting_calls(board: Board, fake: FakeDevice) -> None:
 
     worker = threading.Thread(target=call)
     worker.start()
-    assert fake.wait_for(lambda: len(fake.commands("ping")) >= 1)
+    assert fake.wait_for(lambda: len(fake.arrivals("ping")) >= 1)
     board.close()
     worker.join(5)
     assert not worker.is_alive()
@@ -259,7 +254,7 @@ def test_close_fails_waiting_calls(board: Board, fake: FakeDevice) -> None:
     assert isinstance(errors[0], protoduino.BoardClosedError | protoduino.AckTimeoutError)
 
 
-def test_calls_fail_in_time_while_the_port_is_gone(fake: FakeDevice) -> None:
+def test_calls_fail_in_time_while_the_port_is_gone(fake: PtyDevice) -> None:
     with Board.open(fake.port, ping=False, handshake_timeout=0.5) as board:
         fake.unplug()
         with pytest.raises(protoduino.TransportError) as info:
@@ -268,7 +263,7 @@ def test_calls_fail_in_time_while_the_port_is_gone(fake: FakeDevice) -> None:
         assert board.stats.state == "disconnected"
 
 
-def test_calls_wait_for_a_reconnect(fake: FakeDevice) -> None:
+def test_calls_wait_for_a_reconnect(fake: PtyDevice) -> None:
     with Board.open(fake.port, ping=False, handshake_timeout=3.0) as board:
         fake.unplug()
         assert fake.wait_for(lambda: not board.stats.connected)
@@ -278,7 +273,7 @@ def test_calls_wait_for_a_reconnect(fake: FakeDevice) -> None:
         assert board.stats.state == "active"
 
 
-def test_a_board_failed_for_good_fails_calls_at_once(fake: FakeDevice) -> None:
+def test_a_board_failed_for_good_fails_calls_at_once(fake: PtyDevice) -> None:
     # A reboot into firmware of another protocol version: the link cannot come back, so
     # a call in flight fails with the version error as soon as it is known, and so does
     # every later call, instead of waiting out a deadline (here 600 s, to tell them apart).
@@ -297,7 +292,7 @@ def test_a_board_failed_for_good_fails_calls_at_once(fake: FakeDevice) -> None:
 
         worker = threading.Thread(target=call)
         worker.start()
-        assert fake.wait_for(lambda: len(fake.commands("ping")) >= 1)
+        assert fake.wait_for(lambda: len(fake.arrivals("ping")) >= 1)
         fake.reboot()
         assert failed.wait(10)
         worker.join(10)  # bounds a failing test only: the call's deadline is 600 s away

@@ -1,4 +1,4 @@
-"""The user-service client layer (protoduino.services) on the scripted fake device.
+"""The user-service client layer (protoduino.services) on the pty fake (PtyDevice).
 
 A hand-written client stands in for a generated one (the same base class and calls, with
 protoduino's own Ping as request and reply message), so this tier needs no generator: the
@@ -15,11 +15,11 @@ from typing import Any, ClassVar
 
 import protoduino
 import pytest
-from fakedevice import FakeDevice, ack
 from protoduino import Board
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.errors import UserError
 from protoduino.services import Report, ServiceClient
+from protoduino.testing import PtyDevice, ack
 
 FINGERPRINT = 0x0BADCAFE
 
@@ -46,7 +46,7 @@ class Probe(ServiceClient):
         return self._latest(5, pb.Ping)
 
 
-def answer(fake: FakeDevice, msg: Any) -> list[Any]:
+def answer(fake: PtyDevice, msg: Any) -> list[Any]:
     """The fake's service: 1 echoes with a '!', 2 refuses with code 7, 3 answers without
     its reply (as a repeat from the dedupe window), 4 refuses with an undeclared code."""
     kind = msg.WhichOneof("data")
@@ -74,7 +74,7 @@ REFUSALS = {
 
 
 @pytest.fixture
-def board(fake: FakeDevice) -> Iterator[Board]:
+def board(fake: PtyDevice) -> Iterator[Board]:
     fake.user_fingerprint = FINGERPRINT
     fake.handler = lambda msg: answer(fake, msg)
     with Board.open(fake.port, ack_timeout=0.1, ping=False) as b:
@@ -120,16 +120,16 @@ def test_the_failsafes_and_an_interlocks_refusals_name_the_rpc_and_the_remedy(
     assert str(other.value) == "user_call rejected by the device: STATUS_NO_FREE_RESOURCE"
 
 
-def test_the_host_refuses_what_cannot_be_sent(board: Board, fake: FakeDevice) -> None:
+def test_the_host_refuses_what_cannot_be_sent(board: Board, fake: PtyDevice) -> None:
     probe = Probe(board)
-    sent = len(fake.commands("user_call"))
+    sent = len(fake.arrivals("user_call"))
     with pytest.raises(protoduino.ArgumentTypeError, match=r"takes a protoduino\.Ping"):
         probe.echo(pb.Stop())  # type: ignore[arg-type]
     with pytest.raises(protoduino.ArgumentError, match="more than 64"):
         probe.echo(pb.Ping(payload=bytes(63)))
     with pytest.raises(protoduino.ArgumentError, match=r"1\.\.255"):
         board.call_user(0, b"")
-    assert len(fake.commands("user_call")) == sent
+    assert len(fake.arrivals("user_call")) == sent
 
 
 def test_another_fingerprint_is_refused_by_name(board: Board) -> None:
@@ -142,7 +142,7 @@ def test_another_fingerprint_is_refused_by_name(board: Board) -> None:
     assert "0x12345678" in str(error.value) and f"0x{FINGERPRINT:08X}" in str(error.value)
 
 
-def test_reports_reach_their_callback_and_the_latest(board: Board, fake: FakeDevice) -> None:
+def test_reports_reach_their_callback_and_the_latest(board: Board, fake: PtyDevice) -> None:
     probe = Probe(board)
     got: list[bytes] = []
     done = threading.Event()
@@ -152,11 +152,7 @@ def test_reports_reach_their_callback_and_the_latest(board: Board, fake: FakeDev
         done.set()
 
     probe.on_level(on_level)
-    out = pb.ArduinoOut()
-    out.user_report.report = 5
-    out.user_report.body = pb.Ping(payload=b"level").SerializeToString()
-    out.user_report.coalesced = 3
-    fake.send_data(out)
+    fake.user_report(5, pb.Ping(payload=b"level").SerializeToString(), coalesced=3)
     assert done.wait(10)
     assert got == [b"level"]
     latest = probe.level()

@@ -11,8 +11,8 @@ import re
 from concurrent.futures import Future
 
 import protoduino
-from fakedevice import FakeDevice
 from protoduino import Board, aio
+from protoduino.testing import PtyDevice
 
 SENDS = re.compile(r"self\._send\(|self\._rpc\.call\(|self\._rpc\.wait\(")
 
@@ -49,7 +49,7 @@ def test_every_output_command_has_a_submit_and_an_awaitable_form() -> None:
             assert fn is not None
 
 
-def test_the_submit_forms_send_and_resolve(board: Board, fake: FakeDevice) -> None:
+def test_the_submit_forms_send_and_resolve(board: Board, fake: PtyDevice) -> None:
     servo = board.servo(9)
     board.digital_output(12)
     board.digital_output(13)
@@ -60,12 +60,12 @@ def test_the_submit_forms_send_and_resolve(board: Board, fake: FakeDevice) -> No
     ]
     for future in futures:
         assert future.result(timeout=30) is None
-    # The fake device does not model releases; the host forgot the outputs at the Acks.
-    assert servo.value is None
-    assert [r.msg.release.pin for r in fake.commands("release")] == [9, 12]
+    # The host forgot the outputs at the Acks; the device freed the pins.
+    assert servo.value is None and sorted(fake.pins) == [13]
+    assert [r.msg.release.pin for r in fake.arrivals("release")] == [9, 12]
     assert board.submit_release_all().result(timeout=30) is None
     msg = protoduino.messages.ArduinoIn()
     msg.ping.payload = b"hi"
     assert bytes(board.submit_request(msg).result(timeout=30).ping_echo) == b"hi"
-    kinds = [r.kind for r in fake.commands()]
+    kinds = [r.kind for r in fake.arrivals()]
     assert kinds[-5:] == ["heartbeat", "release", "release", "release_all", "ping"]

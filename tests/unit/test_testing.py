@@ -7,12 +7,13 @@ the device's clock, which moves only when a call waits or the test runs it.
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 
 import pytest
 from protoduino import Board, Event, EventKind
-from protoduino.constants import ACK_TIMEOUT, MAX_RETRIES, PING_INTERVAL, PacketType
+from protoduino._generated import protoduino_pb2 as pb
+from protoduino.constants import ACK_TIMEOUT, MAX_RETRIES, PING_INTERVAL
 from protoduino.errors import AckTimeoutError, CommandRejectedError
 from protoduino.messages import ArduinoIn, Status
 from protoduino.testing import DedupeWindow, VirtualDevice
@@ -24,8 +25,7 @@ def device() -> Iterator[VirtualDevice]:
 
 
 def sent(device: VirtualDevice, kind: str) -> int:
-    msgs = [ArduinoIn.FromString(p) for t, p in device.received if t is PacketType.COMMAND]
-    return sum(1 for m in msgs if m.WhichOneof("data") == kind)
+    return len(device.arrivals(kind))
 
 
 def test_a_board_opens_and_its_commands_reach_the_device(device: VirtualDevice) -> None:
@@ -200,3 +200,49 @@ def test_dedupe_window_lookup_changes_nothing_and_every_id_moves_n() -> None:
     assert window.newest == 40 and window.entries == {}  # 5 fell 35 behind: dropped
     window.done(40 + 64, Status.STATUS_OK)  # 64 ahead: behind, N stays
     assert window.newest == 40 and window.lookup(104) is None  # out of reach
+
+
+def test_read_outputs_reports_what_the_device_drives(device: VirtualDevice) -> None:
+    with device.open_board(ping=False) as board:
+        arm = board.servo(9, safe=90)  # 544..2400 us: 90 degrees is 544 + 928 us
+        arm.write(45)  # 544 + 45 * 1856 / 180 = 1008 us
+        board.servo(10, safe_us=1500, min_us=1000, max_us=2000)
+        board.digital_output(13, safe=True)
+        motor = board.pwm_output(3, safe=10)
+        motor.write(200)
+        found = {pin: (s.mode, s.value, s.target) for pin, s in board.read_outputs().items()}
+        assert found == {
+            3: ("pwm", 200, 200),
+            9: ("servo", 1008, 1008),
+            10: ("servo", 1500, 1500),
+            13: ("digital", 1, 1),
+        }
+        board.stop()  # every output at its safe value
+        safe = {pin: (s.mode, s.value) for pin, s in board.read_outputs().items()}
+        assert safe == {3: ("pwm", 10), 9: ("servo", 1472), 10: ("servo", 1500), 13: ("digital", 1)}
+
+
+def test_the_device_refuses_what_it_would_refuse_after_the_boards_checks(
+    device: VirtualDevice,
+) -> None:
+    """board.request sends a message as given (no host check): the device's own checks."""
+    device.features &= ~(1 << pb.FEATURE_COUNTER)  # a firmware built without counters
+    with device.open_board(ping=False) as board:
+        board.servo(9)
+
+        def refusal(fill: Callable[[ArduinoIn], object]) -> int:
+            msg = ArduinoIn()
+            fill(msg)
+            with pytest.raises(CommandRejectedError) as refused:
+                board.request(msg)
+            return refused.value.status
+
+        assert refusal(lambda m: m.counter_init.SetInParent()) == Status.STATUS_NOT_SUPPORTED
+        assert refusal(lambda m: setattr(m.pwm_init, "pin", 10)) == Status.STATUS_TIMER_IN_USE
+        assert refusal(lambda m: setattr(m.pwm_init, "pin", 5)) == Status.STATUS_TIMER_IN_USE
+        assert refusal(lambda m: setattr(m.pwm_init, "pin", 4)) == Status.STATUS_NOT_SUPPORTED
+        assert refusal(lambda m: setattr(m.digital_init, "pin", 9)) == Status.STATUS_PIN_IN_USE
+        assert refusal(lambda m: setattr(m.digital_init, "pin", 1)) == Status.STATUS_RESERVED_PIN
+        assert refusal(lambda m: setattr(m.digital_init, "pin", 20)) == Status.STATUS_INVALID_PIN
+        assert refusal(lambda m: setattr(m.pwm_control, "pin", 3)) == Status.STATUS_NOT_INITIALISED
+        assert refusal(lambda m: m.analog_input_init.SetInParent()) == Status.STATUS_RESERVED_PIN

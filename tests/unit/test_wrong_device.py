@@ -84,10 +84,10 @@ def test_descriptions() -> None:
 
 def test_a_device_that_answered_before_is_not_blamed_on_the_firmware(tmp_path: Path) -> None:
     """Issue 20, item 1: a re-handshake that times out says what is known, not "flash it"."""
-    from fakedevice import FakeDevice
     from protoduino import Event, EventKind
+    from protoduino.testing import PtyDevice
 
-    with FakeDevice(tmp_path) as fake:
+    with PtyDevice(tmp_path) as fake:
         board = Board.open(fake.port, ack_timeout=0.1, handshake_timeout=0.3, ping=False)
         with board:
             failed = threading.Event()
