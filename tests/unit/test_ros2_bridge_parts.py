@@ -172,6 +172,17 @@ def _with(**changes: Any) -> dict[str, Any]:
             "topic 'led' is both",
         ),
         ([1, 2], "must be a mapping"),
+        # One topic named twice, relative and absolute: one Bool would drive both pins.
+        (
+            _with(
+                digital_outputs=[{"pin": 13, "topic": "led"}, {"pin": 8, "topic": "/robot1/led"}]
+            ),
+            r"topic '/robot1/led' is both digital output 13 \(as 'led': both are /robot1/led\)",
+        ),
+        (
+            _with(diagnostics_topic="/robot1/battery"),
+            "topic 'battery' is both the diagnostics",
+        ),
     ],
 )
 def test_bad_configurations_are_refused_naming_the_key(data: Any, message: str) -> None:
