@@ -16,6 +16,7 @@ from /diagnostics samples; the waits are bounded by generous deadlines only.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import random
@@ -681,3 +682,74 @@ def test_a_hung_bridge_trips_the_failsafe_while_the_link_stays_up(
             release.set()
             loop.join(10)
         assert not loop.is_alive()
+
+
+# --- commands whose outcome is unknown, stale ones, restarts (issue 32) ------------------------
+
+
+@contextlib.contextmanager
+def _in_process_bridge(port: str, config: Any) -> Iterator[Any]:
+    """A bridge through the API (the test reaches its line and counters), its loop on a thread."""
+    import threading
+
+    from protoduino.ros2 import Bridge
+
+    with Bridge(port, config) as bridge:
+        loop = threading.Thread(target=bridge.run, name="bridge-loop")
+        loop.start()
+        try:
+            yield bridge
+        finally:
+            bridge.stop()
+            loop.join(10)
+    assert not loop.is_alive()
+
+
+def _config(text: str) -> Any:
+    import yaml
+    from protoduino.ros2 import parse_config
+
+    return parse_config({**yaml.safe_load(text), "domain_id": DOMAIN})
+
+
+def test_a_twist_whose_ack_was_lost_is_stopped_by_the_watchdog(
+    sim_board: SimBoard, graph: Graph, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Device-to-host bytes cut while a Twist is sent after the watchdog's stop: the device
+    runs it, the host gets no Ack. Its outcome unknown, it arms the watchdog as a done one
+    does: the motor is stopped a timeout later, not left running on the bridge's heartbeat."""
+    from protoduino.cli.options import load_url_handlers
+    from protoduino_dev import faults
+
+    sim = sim_board
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+    ns = _namespace(sim, "deaf")
+    failsafe = 5.0
+    name = f"ros2-deaf-{os.getpid()}-{sim.backend}"
+    port = f"faulty://{sim.port}?dir=rx&drop=1&paused=1&name={name}"
+    load_url_handlers(port)
+    with _in_process_bridge(port, _config(DRIVE.format(ns=ns, failsafe=failsafe))) as bridge:
+        cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+        cmd_vel(_twist(0.2, 0.0))  # 0.2 / 0.5 * 255 = 102
+        wait_for_pin(sim, 3, now_at(102))
+        wait_for_pin(sim, 3, now_at(0))  # no more Twists: the watchdog stopped it
+        _until(lambda: bridge.health.stale_stops == 1, "the stop's Ack")
+        line = faults.line(name)
+        assert line is not None
+        failed = bridge.health.refused
+        line.resume()  # from now on every byte from the device is lost
+        cmd_vel(_twist(0.3, 0.0))  # 153: run by the device, its Ack lost
+        wait_for_pin(sim, 3, now_at(153))
+        _until(lambda: bridge.health.refused > failed, "the Twist's AckTimeoutError")
+        line.heal()
+        wait_for_pin(sim, 3, now_at(0))
+        trace = [c for c in sim.trace() if c["pin"] == 3]
+        ran = [c["t"] for c in trace if c["value"] == 153][-1]
+        stopped = trace[-1]["t"]
+        # The bridge's stop, not the device's failsafe: heartbeats reached the device all
+        # along, and its last one before the Twist was at most a quarter timeout earlier.
+        assert stopped - ran < 0.75 * failsafe, (ran, stopped)
+        # (The device ran the stop at once; its Ack may have been lost too, and the stop
+        # sent again: counted once acknowledged.)
+        _until(lambda: bridge.health.stale_stops >= 2, "the watchdog's second stop")
+        assert bridge.health.failsafes == 0

@@ -16,6 +16,7 @@ pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing
 pytest.importorskip("rosbags", reason="rosbags is not installed")
 
 import numpy as np
+from protoduino.errors import AckTimeoutError
 from protoduino.events import Event, EventKind, Stats
 from protoduino.ros2 import msgs
 from protoduino.ros2.config import (
@@ -304,6 +305,84 @@ def test_after_a_device_stop_the_next_twist_sets_the_direction_again() -> None:
     log.clear()
     drive.command(0.25, 0.0)
     assert log == [("ldir", True), ("lpwm", 128), ("rdir", True), ("rpwm", 128)]
+
+
+class LostAck(Pin):
+    """A fake output whose writes of ``lost`` values run but raise (their Ack was lost)."""
+
+    def __init__(self, name: str, log: list[tuple[str, object]], lost: set[object]) -> None:
+        super().__init__(name, log)
+        self.lost = lost
+
+    def write(self, value: Any) -> None:
+        super().write(value)
+        if value in self.lost:
+            raise AckTimeoutError(f"no Ack for {value}")
+
+
+def test_a_twist_whose_outcome_is_unknown_arms_the_watchdog() -> None:
+    """Issue 32: a Twist whose Ack was lost ran on the device; the watchdog stops it."""
+    log: list[tuple[str, object]] = []
+    now = [100.0]
+    lost: set[object] = {153}
+    left = Motor(DRIVE.left, LostAck("lpwm", log, lost), Pin("ldir", log))
+    right = Motor(DRIVE.right, Pin("rpwm", log), Pin("rdir", log))
+    drive = DiffDrive(DRIVE, left, right, clock=lambda: now[0])
+    with pytest.raises(AckTimeoutError):
+        drive.command(0.3, 0.0)  # 153 on both wheels; the left one's Ack is lost
+    assert drive.deadline() == 100.5
+    lost.clear()
+    now[0] = 100.5
+    assert drive.check()
+    assert log[-2:] == [("lpwm", 0), ("rpwm", 0)] and drive.deadline() is None
+
+
+def test_a_motor_whose_duty_is_unknown_stops_before_it_turns() -> None:
+    log: list[tuple[str, object]] = []
+    motor = Motor(DRIVE.left, LostAck("lpwm", log, {200}), Pin("ldir", log))
+    with pytest.raises(AckTimeoutError):
+        motor.apply(WheelCommand(200, True))
+    motor.apply(WheelCommand(50, False))
+    assert log == [("ldir", True), ("lpwm", 200), ("lpwm", 0), ("ldir", False), ("lpwm", 50)]
+
+
+def test_a_stop_whose_outcome_is_unknown_is_tried_again() -> None:
+    log: list[tuple[str, object]] = []
+    now = [0.0]
+    lost: set[object] = set()
+    left = Motor(DRIVE.left, LostAck("lpwm", log, lost), Pin("ldir", log))
+    drive = DiffDrive(DRIVE, left, _motors(log)[1], clock=lambda: now[0])
+    drive.command(0.25, 0.0)
+    lost.add(0)
+    now[0] = 0.5
+    with pytest.raises(AckTimeoutError):
+        drive.check()
+    assert drive.deadline() == 1.0  # armed again: one timeout later
+    lost.clear()
+    log.clear()
+    now[0] = 1.0
+    assert drive.check() and log == [("lpwm", 0), ("rpwm", 0)]
+    assert drive.deadline() is None
+
+
+def test_a_stop_the_device_refuses_disarms_the_watchdog() -> None:
+    """A refusal means the device holds its outputs safe itself (failsafe, interlock)."""
+    from protoduino.errors import CommandRejectedError
+    from protoduino.messages import Status
+
+    class Refusing(Pin):
+        def write(self, value: Any) -> None:
+            raise CommandRejectedError(Status.STATUS_FAILSAFE_EXPIRED, "safe")
+
+    log: list[tuple[str, object]] = []
+    now = [0.0]
+    drive = DiffDrive(DRIVE, *_motors(log), clock=lambda: now[0])
+    drive.command(0.25, 0.0)
+    drive.left.pwm = Refusing("lpwm", log)
+    now[0] = 0.5
+    with pytest.raises(CommandRejectedError):
+        drive.check()
+    assert drive.deadline() is None
 
 
 # --- servos and joints ---------------------------------------------------------------

@@ -11,6 +11,11 @@ A Twist the drive cannot carry out as asked (a wheel faster than
 asked for. Only ``linear.x`` and ``angular.z`` mean anything to a
 differential drive; the other components are ignored, as ROS 2's
 diff_drive_controller does.
+
+A write whose outcome is unknown (no Ack after every retry, the link down:
+the device may have run it) counts as done for the watchdog's sake: a Twist
+that raised arms the watchdog as one that was acknowledged does, and the
+motor's duty or direction is unknown until a write of it is acknowledged.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
+from ..errors import CommandRejectedError
 from .config import DriveConfig, MotorConfig
 
 #: A PWM duty's range (analogWrite's).
@@ -94,26 +100,32 @@ class Motor:
         self.config = config
         self.pwm = pwm
         self.direction = direction
-        self.duty = 0
+        #: The duty and direction level the device acknowledged; None: unknown (a write
+        #: that raised may or may not have run, or the level was never set).
+        self.duty: int | None = 0
         self.level: bool | None = None
 
     def apply(self, command: WheelCommand) -> None:
         level = command.level(self.config)
         if level != self.level:
-            if self.duty:
-                # Never drive the old duty the other way round while the pin turns.
-                self.pwm.write(0)
-                self.duty = 0
+            if self.duty != 0:
+                # Never drive the old duty (or an unknown one) the other way round while
+                # the pin turns.
+                self._write_duty(0)
+            self.level = None  # unknown until acknowledged
             self.direction.write(level)
             self.level = level
         if command.duty != self.duty:
-            self.pwm.write(command.duty)
-            self.duty = command.duty
+            self._write_duty(command.duty)
 
     def stop(self) -> None:
         """Duty 0, the PWM output's safe value (the direction pin stays as it is)."""
-        self.pwm.write(0)
-        self.duty = 0
+        self._write_duty(0)
+
+    def _write_duty(self, duty: int) -> None:
+        self.duty = None  # unknown until acknowledged
+        self.pwm.write(duty)
+        self.duty = duty
 
     def forget(self) -> None:
         """The device drove this motor safe itself (Stop, failsafe): duty 0, direction unknown."""
@@ -127,7 +139,10 @@ class DiffDrive:
     :meth:`command` applies a Twist; :meth:`check` (called from the bridge's
     loop with the time) stops both motors once no Twist came for
     ``config.timeout`` seconds since the last one, once per silence.
-    ``clock`` is injected so that the watchdog is tested without waiting.
+    A Twist arms the watchdog whatever the outcome of its writes (one that
+    raised may have run); a stop whose outcome is unknown leaves it armed, to
+    try again a timeout later. ``clock`` is injected so that the watchdog is
+    tested without waiting.
     """
 
     def __init__(
@@ -145,10 +160,14 @@ class DiffDrive:
         self.apply(*twist_to_wheels(linear_x, angular_z, self.config))
 
     def apply(self, left: WheelCommand, right: WheelCommand) -> None:
-        """Apply a Twist already converted (:func:`twist_to_wheels`); feeds the watchdog."""
-        self.left.apply(left)
-        self.right.apply(right)
-        self.last = self.clock()
+        """Apply a Twist already converted (:func:`twist_to_wheels`); feeds the watchdog,
+        even when a write raised: its outcome is unknown (no Ack: the device may have run
+        it), or the other motor's write ran, so the motors may be running."""
+        try:
+            self.left.apply(left)
+            self.right.apply(right)
+        finally:
+            self.last = self.clock()
 
     def deadline(self) -> float | None:
         """When the watchdog fires if no Twist comes (None: the motors are stopped)."""
@@ -164,9 +183,17 @@ class DiffDrive:
         return True
 
     def stop(self) -> None:
+        """Both motors at duty 0; the watchdog disarmed once that is done, or refused (the
+        device refuses a value only while it holds every output safe itself). A write
+        whose outcome is unknown re-arms it: the stop is tried again a timeout later."""
+        self.last = self.clock()
+        try:
+            self.left.stop()
+            self.right.stop()
+        except CommandRejectedError:
+            self.last = None
+            raise
         self.last = None
-        self.left.stop()
-        self.right.stop()
 
     def forget(self) -> None:
         """The device drove the motors safe itself: nothing to stop until the next Twist."""
