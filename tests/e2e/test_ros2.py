@@ -257,7 +257,7 @@ def graph() -> Iterator[Graph]:
 
 
 class BridgeProcess:
-    def __init__(self, sim: SimBoard, config: str, tmp: Path) -> None:
+    def __init__(self, sim: SimBoard, config: str, tmp: Path, *, new_session: bool) -> None:
         path = tmp / "robot.yaml"
         path.write_text(config)
         env = dict(os.environ, CYCLONEDDS_URI=LOOPBACK)
@@ -265,7 +265,8 @@ class BridgeProcess:
         self.proc = subprocess.Popen(
             [
                 *(sys.executable, "-m", "protoduino.cli.main", "ros2", sim.port),
-                *("--config", str(path), "--domain-id", str(DOMAIN), "--new-session", "-v"),
+                *("--config", str(path), "--domain-id", str(DOMAIN), "-v"),
+                *(["--new-session"] if new_session else []),
             ],
             stdout=self.log.open("w"),
             stderr=subprocess.STDOUT,
@@ -292,11 +293,13 @@ class BridgeProcess:
 
 
 @pytest.fixture
-def run_bridge(sim_board: SimBoard, tmp_path: Path) -> Iterator[Callable[[str], BridgeProcess]]:
+def run_bridge(sim_board: SimBoard, tmp_path: Path) -> Iterator[Callable[..., BridgeProcess]]:
+    """``run_bridge(config)``: ``protoduino ros2 PORT --config`` started, by default with
+    ``--new-session`` (``new_session=False``: without, as a supervisor restarts it)."""
     started: list[BridgeProcess] = []
 
-    def start(config: str) -> BridgeProcess:
-        bridge = BridgeProcess(sim_board, config, tmp_path)
+    def start(config: str, *, new_session: bool = True) -> BridgeProcess:
+        bridge = BridgeProcess(sim_board, config, tmp_path, new_session=new_session)
         started.append(bridge)
         return bridge
 
@@ -355,7 +358,7 @@ def _wait_diag(
 
 
 def test_commands_bad_input_and_stop_at_the_pins(
-    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
 ) -> None:
     """Float64 -> servo width; JointState -> one pose; Bool -> level; bad input -> counted,
     nothing moves; STOP -> every output safe and the failsafe reported on /diagnostics."""
@@ -442,7 +445,7 @@ def test_commands_bad_input_and_stop_at_the_pins(
 
 
 def test_a_killed_bridge_trips_the_device_failsafe(
-    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
 ) -> None:
     """The outputs live as long as the bridge's heartbeat: SIGKILL -> safe at the pins."""
     sim = sim_board
@@ -499,7 +502,7 @@ def _twist(linear: float, angular: float) -> Any:
 
 
 def test_cmd_vel_drives_the_motors_and_a_stale_one_stops_them(
-    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
 ) -> None:
     sim = sim_board
     ns = _namespace(sim, "drive")
@@ -533,7 +536,7 @@ counters:
 
 
 def test_inputs_are_published(
-    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
 ) -> None:
     sim = sim_board
     ns = _namespace(sim, "inputs")
@@ -590,7 +593,7 @@ digital_inputs:
 
 
 def test_a_bumper_interlock_stops_the_motors_on_the_device_until_cleared(
-    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
 ) -> None:
     """The bumper trips both motors at the pins with no round trip through the bridge; Twists
     and a clear are refused while it is pressed; a clear on its topic once it is released lets
@@ -753,3 +756,58 @@ def test_a_twist_whose_ack_was_lost_is_stopped_by_the_watchdog(
         # sent again: counted once acknowledged.)
         _until(lambda: bridge.health.stale_stops >= 2, "the watchdog's second stop")
         assert bridge.health.failsafes == 0
+
+
+def test_new_session_releases_what_earlier_commands_configured(
+    sim_board: SimBoard, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """``protoduino ros2 PORT --new-session`` releases every output first, as the other
+    commands do: a pin an earlier command set goes free (its level off), and one it made a
+    digital output can be the bridge's servo (without the release: STATUS_PIN_IN_USE)."""
+    from protoduino.cli.main import main
+
+    sim = sim_board
+    assert main(["pin", sim.port, "8", "on"]) == 0
+    assert main(["pin", sim.port, "9", "on"]) == 0
+    wait_for_pin(sim, 9, now_at(1))
+    on = [c["t"] for c in sim.trace() if c["pin"] == 8 and c["value"] == 1][-1]
+    run_bridge(ARM.format(ns=_namespace(sim, "afresh"), failsafe=FAILSAFE_TIMEOUT))
+    wait_for_pin(sim, 9, now_at(SAFE_90_US))  # pin 9 is the bridge's servo now
+    wait_for_pin(sim, 8, now_at(0))
+    off = [c["t"] for c in sim.trace() if c["pin"] == 8][-1]
+    assert off - on < 10.0, (on, off)  # released, not the command line's failsafe (10 s)
+
+
+RESTART = """
+namespace: {ns}
+failsafe_timeout: 20.0
+drive:
+  wheel_base: 0.2
+  max_speed: 0.5
+  timeout: 10.0
+  left: {{pwm: 3, direction: 4}}
+  right: {{pwm: 11, direction: 12}}
+"""
+
+
+def test_a_restarted_bridge_does_not_keep_a_dead_ones_motion(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """SIGKILL the bridge while it drives, start it again at once with the same command line
+    (a supervisor's Restart=: it resumes the port's session), publish nothing: the motor the
+    dead bridge commanded stops at once, not kept running by the new bridge's heartbeat.
+
+    A long failsafe (20 s) and cmd_vel timeout (10 s) keep both out of the verdict: the stop
+    must come well before either could."""
+    sim = sim_board
+    ns = _namespace(sim, "restart")
+    first = run_bridge(RESTART.format(ns=ns), new_session=False)
+    cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+    cmd_vel(_twist(0.2, 0.0))  # 0.2 / 0.5 * 255 = 102
+    wait_for_pin(sim, 3, now_at(102))
+    ran = [c["t"] for c in sim.trace() if c["pin"] == 3][-1]
+    first.kill()
+    run_bridge(RESTART.format(ns=ns), new_session=False)
+    wait_for_pin(sim, 3, now_at(0))
+    stopped = [c["t"] for c in sim.trace() if c["pin"] == 3][-1]
+    assert stopped - ran < 5.0, (ran, stopped)

@@ -86,7 +86,9 @@ class Bridge(ClosedOnExit):
     :meth:`run` loops until :meth:`stop` (from another thread or a signal
     handler); :meth:`close` drives every output safe and releases everything.
     ``board_options`` go to :meth:`Board.open` (``liveness`` and
-    ``failsafe_timeout`` are the bridge's own).
+    ``failsafe_timeout`` are the bridge's own); ``on_open`` is called with the
+    board as soon as it is open, before anything else (the command line's
+    ``--new-session`` releases every output there).
     """
 
     def __init__(
@@ -96,8 +98,10 @@ class Bridge(ClosedOnExit):
         *,
         board_options: Mapping[str, Any] | None = None,
         clock: Callable[[], float] = time.monotonic,
+        on_open: Callable[[Board], None] | None = None,
     ) -> None:
         self.port = port
+        self._on_open = on_open
         self.config = config
         self.clock = clock
         self._board_options = dict(board_options or {})
@@ -142,6 +146,9 @@ class Bridge(ClosedOnExit):
                 failsafe_timeout=config.failsafe_timeout,
                 **self._board_options,
             )
+            if self._on_open is not None:
+                self._on_open(self.board)
+            _start_safe(self.board)
             self._participant = DomainParticipant(config.resolved_domain())
             self._waitset = WaitSet(self._participant)
             self._wake = GuardCondition(self._participant)
@@ -480,6 +487,26 @@ class Bridge(ClosedOnExit):
                 writer.write(self.health.report(board.stats))
             except Exception:  # DDS refused it; the next period tries again
                 log.exception("publishing /diagnostics failed")
+
+
+def _start_safe(board: Board) -> None:
+    """Start from a safe state the bridge knows: no output driven by anyone else.
+
+    Outputs the device already drives belong to a session this board resumed (the
+    command line's: a bridge killed less than a failsafe timeout ago, whose motors still
+    run, or an earlier ``protoduino pin``); nobody commands them now, and the bridge's
+    heartbeat would keep them alive for good. So they are driven safe by the device's
+    Stop before the bridge configures its own outputs (a new session has none: the
+    device released them).
+    """
+    inherited = board.read_outputs()
+    if inherited:
+        log.warning(
+            "the device already drives pin(s) %s (a resumed session): Stop, every output "
+            "safe, before the bridge commands anything",
+            ", ".join(str(pin) for pin in inherited),
+        )
+        board.stop()
 
 
 def _ros_type(kind: type[Any]) -> str:
