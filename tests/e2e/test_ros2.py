@@ -197,14 +197,16 @@ class Graph:
             self.topics[name] = Topic(self.dp, "rt" + name, peer_type(ros))
         return self.topics[name]
 
-    def publisher(self, name: str, ros: str) -> Callable[[Any], None]:
-        """Publish rosbags messages of type ``ros`` on ``name``, once the bridge listens."""
+    def publisher(self, name: str, ros: str) -> Callable[..., None]:
+        """Publish rosbags messages of type ``ros`` on ``name``, once the bridge listens
+        (``timestamp=`` ns: the DDS source timestamp, by default now)."""
         writer = DataWriter(self.dp, self._topic(name, ros), qos=RELIABLE)
         _until(lambda: _matched(writer.get_publication_matched_status) > 0, f"{name} match")
         peer = peer_type(ros)
 
-        def publish(message: Any) -> None:
-            writer.write(peer(Cdr(ros, bytes(TYPES.serialize_cdr(message, ros)))))
+        def publish(message: Any, timestamp: int | None = None) -> None:
+            cdr = Cdr(ros, bytes(TYPES.serialize_cdr(message, ros)))
+            writer.write(peer(cdr), timestamp=timestamp)
 
         publish.writer = writer  # type: ignore[attr-defined]  # kept alive with the function
         return publish
@@ -811,3 +813,31 @@ def test_a_restarted_bridge_does_not_keep_a_dead_ones_motion(
     wait_for_pin(sim, 3, now_at(0))
     stopped = [c["t"] for c in sim.trace() if c["pin"] == 3][-1]
     assert stopped - ran < 5.0, (ran, stopped)
+
+
+def test_a_twist_older_than_the_timeout_is_stale_on_arrival(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """A Twist whose DDS source timestamp is 5 s old (written before a freeze, delivered by
+    reliable DDS after it) drives nothing: counted as stale; the next fresh one drives."""
+    sim = sim_board
+    ns = _namespace(sim, "stale")
+    # A 2 s timeout: a fresh Twist is never taken for a stale one on a busy machine.
+    run_bridge(
+        DRIVE.format(ns=ns, failsafe=FAILSAFE_TIMEOUT).replace("timeout: 0.5", "timeout: 2.0")
+    )
+    diag = graph.subscriber("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+    cmd_vel(_twist(0.2, 0.0), timestamp=time.time_ns() - 5_000_000_000)  # 102, 5 s ago
+    box: list[Any] = []
+    stale = f"bad./{ns}/cmd_vel: stale"
+
+    def counted_or_driven() -> bool:
+        statuses = [_status(a, ns, "bridge") for a in _diagnostics(diag, box)]
+        return 102 in pin_values(sim.trace(), 3) or any(s and stale in s for s in statuses)
+
+    _until(counted_or_driven, "the stale Twist counted (or driving pin 3)")
+    assert 102 not in pin_values(sim.trace(), 3), "a stale Twist drove the motor"
+    cmd_vel(_twist(0.3, 0.0))  # fresh: 153
+    wait_for_pin(sim, 3, now_at(153))
+    assert 102 not in pin_values(sim.trace(), 3)

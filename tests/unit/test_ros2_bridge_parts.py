@@ -35,6 +35,7 @@ from protoduino.ros2.drive import (
     BadCommandError,
     DiffDrive,
     Motor,
+    StaleCommandError,
     WheelCommand,
     twist_to_wheels,
     wheel_command,
@@ -383,6 +384,43 @@ def test_a_stop_the_device_refuses_disarms_the_watchdog() -> None:
     with pytest.raises(CommandRejectedError):
         drive.check()
     assert drive.deadline() is None
+
+
+def test_a_twist_older_than_the_timeout_is_stale_on_arrival() -> None:
+    """Issue 32: Twists queued by reliable DDS through a freeze are refused, by their DDS
+    source timestamp against the bridge's wall clock (both injected here)."""
+    log: list[tuple[str, object]] = []
+    wall = [1_700_000_000.0]
+    drive = DiffDrive(DRIVE, *_motors(log), clock=lambda: 0.0, wall_clock=lambda: wall[0])
+    drive.check_fresh(wall[0] - 0.5)  # as old as the timeout: still fresh
+    drive.check_fresh(wall[0] + 3.0)  # a publisher's clock ahead: fresh
+    drive.check_fresh(None)  # no timestamp: fresh
+    with pytest.raises(StaleCommandError, match="stale on arrival"):
+        drive.check_fresh(wall[0] - 0.501)
+    assert log == [] and drive.deadline() is None
+
+
+def test_the_bridge_drops_a_stale_twist_and_counts_it() -> None:
+    from types import SimpleNamespace
+
+    from protoduino.ros2.bridge import Bridge, _Route
+
+    config = parse_config({"drive": FULL["drive"]})
+    bridge = Bridge("unused", config)
+    log: list[tuple[str, object]] = []
+    now = 1_700_000_000.0
+    bridge.drive = DiffDrive(DRIVE, *_motors(log), clock=lambda: 0.0, wall_clock=lambda: now)
+
+    def route(x: float, written: float) -> Any:
+        message = msgs.Twist(msgs.Vector3(x, 0.0, 0.0), msgs.Vector3(0.0, 0.0, 0.0))
+        info = SimpleNamespace(valid_data=True, source_timestamp=round(written * 1e9))
+        message.sample_info = info  # type: ignore[attr-defined]  # as cyclonedds sets it
+        return _Route("/cmd_vel", FakeReader([message]), bridge._on_twist)  # type: ignore[arg-type]
+
+    bridge._take(route(0.2, now - 4.0))
+    assert log == [] and dict(bridge.health.bad) == {"/cmd_vel: stale": 1}
+    bridge._take(route(0.2, now - 0.01))
+    assert ("lpwm", 102) in log and bridge.health.forwarded == 1
 
 
 # --- servos and joints ---------------------------------------------------------------

@@ -7,8 +7,8 @@ types and QoS: :mod:`.dds`, :mod:`.msgs`) and runs one loop
 
 * waits for commands on the subscribed topics and carries out the newest
   valid one of each (a servo's Float64, an arm's JointState as one pose, a
-  digital output's Bool, STOP, ``/cmd_vel``), refusing bad ones (logged,
-  counted on /diagnostics, nothing moves);
+  digital output's Bool, STOP, ``/cmd_vel``), refusing bad ones and Twists
+  stale on arrival (logged, counted on /diagnostics, nothing moves);
 * sends the device's heartbeat every ``failsafe_timeout / 4``: only this loop
   keeps the outputs alive, so a bridge that hangs or dies lets the device's
   failsafe drive them safe (the board's automatic Ping only keeps the link up);
@@ -17,7 +17,8 @@ types and QoS: :mod:`.dds`, :mod:`.msgs`) and runs one loop
   board's event thread when a failsafe, reboot or link change happens.
 
 Inputs are published from the board's event thread as they change
-(:mod:`.inputs`).
+(:mod:`.inputs`). The bridge starts from every output safe: what the device
+already drives when it starts (a resumed session) is stopped first.
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ from . import inputs
 from .config import BridgeConfig, ConfigError, ServoConfig
 from .dds import DEFAULT_QOS, SENSOR_QOS, dds_topic, ros_topic
 from .diagnostics import Health
-from .drive import BadCommandError, DiffDrive, Motor, twist_to_wheels
+from .drive import BadCommandError, DiffDrive, Motor, StaleCommandError, twist_to_wheels
 from .msgs import Bool, DiagnosticArray, Empty, Float32, Float64, Int32MultiArray, JointState, Twist
 from .servos import joint_pose, servo_degrees
 
@@ -368,6 +369,9 @@ class Bridge(ClosedOnExit):
                 continue  # an instance's state change, no data
             try:
                 prepared = route.prepare(sample)
+            except StaleCommandError as error:
+                self._bad(route.topic, "stale", error)
+                continue
             except BadCommandError as error:
                 self._bad(route.topic, "invalid", error)
                 continue
@@ -465,6 +469,7 @@ class Bridge(ClosedOnExit):
     def _on_twist(self, message: Twist) -> Action:
         assert self.drive is not None
         drive = self.drive
+        drive.check_fresh(_written(message))
         left, right = twist_to_wheels(message.linear.x, message.angular.z, drive.config)
         return lambda: drive.apply(left, right)
 
@@ -487,6 +492,13 @@ class Bridge(ClosedOnExit):
                 writer.write(self.health.report(board.stats))
             except Exception:  # DDS refused it; the next period tries again
                 log.exception("publishing /diagnostics failed")
+
+
+def _written(sample: Any) -> float | None:
+    """When a sample was written (Unix seconds): its DDS source timestamp, if it has one."""
+    info = getattr(sample, "sample_info", None)
+    stamp = getattr(info, "source_timestamp", None)
+    return stamp / 1e9 if isinstance(stamp, int) and stamp > 0 else None
 
 
 def _start_safe(board: Board) -> None:

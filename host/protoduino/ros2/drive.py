@@ -12,6 +12,12 @@ asked for. Only ``linear.x`` and ``angular.z`` mean anything to a
 differential drive; the other components are ignored, as ROS 2's
 diff_drive_controller does.
 
+A Twist that was already older than the drive's timeout when it arrived (its
+DDS source timestamp against the bridge's wall clock: queued by reliable DDS
+through a freeze of the bridge or of the network) is refused as stale with
+:class:`StaleCommandError`: the watchdog would have stopped the motors for
+want of it, and nobody gives that command any more.
+
 A write whose outcome is unknown (no Ack after every retry, the link down:
 the device may have run it) counts as done for the watchdog's sake: a Twist
 that raised arms the watchdog as one that was acknowledged does, and the
@@ -21,6 +27,7 @@ motor's duty or direction is unknown until a write of it is acknowledged.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
@@ -35,6 +42,11 @@ MAX_DUTY = 255
 class BadCommandError(ValueError):
     """A message the bridge refuses, a Twist here or a servo command (:mod:`.servos`):
     logged, counted on /diagnostics, nothing moves."""
+
+
+class StaleCommandError(BadCommandError):
+    """A Twist older than the drive's timeout on arrival (:meth:`DiffDrive.check_fresh`):
+    refused like a bad one, counted apart (``stale``)."""
 
 
 class PwmOutput(Protocol):
@@ -141,19 +153,43 @@ class DiffDrive:
     ``config.timeout`` seconds since the last one, once per silence.
     A Twist arms the watchdog whatever the outcome of its writes (one that
     raised may have run); a stop whose outcome is unknown leaves it armed, to
-    try again a timeout later. ``clock`` is injected so that the watchdog is
-    tested without waiting.
+    try again a timeout later. :meth:`check_fresh` refuses a Twist that was
+    older than the timeout when it arrived. ``clock`` (monotonic, for the
+    watchdog) and ``wall_clock`` (Unix seconds, what DDS source timestamps are
+    in) are injected so that both rules are tested without waiting.
     """
 
     def __init__(
-        self, config: DriveConfig, left: Motor, right: Motor, clock: Callable[[], float]
+        self,
+        config: DriveConfig,
+        left: Motor,
+        right: Motor,
+        clock: Callable[[], float],
+        wall_clock: Callable[[], float] = time.time,
     ) -> None:
         self.config = config
         self.left = left
         self.right = right
         self.clock = clock
+        self.wall_clock = wall_clock
         self.last: float | None = None  # when the last Twist was applied; None: stopped
         self.stale_stops = 0
+
+    def check_fresh(self, written: float | None) -> None:
+        """Refuse (:class:`StaleCommandError`) a Twist written at ``written`` (Unix seconds:
+        its DDS source timestamp; None: not known, taken as fresh) that is already older
+        than the timeout. The publisher's clock and the bridge's must agree well within
+        the timeout (NTP, as ROS 2 expects anyway); one that lags refuses every Twist,
+        which stops the robot rather than driving it on old commands."""
+        if written is None:
+            return
+        age = self.wall_clock() - written
+        if age > self.config.timeout:
+            raise StaleCommandError(
+                f"a Twist written {age:.3f} s ago, more than the {self.config.timeout:g} s "
+                "timeout: stale on arrival (queued through a freeze, or the publisher's "
+                "clock is behind the bridge's)"
+            )
 
     def command(self, linear_x: float, angular_z: float) -> None:
         """Apply one Twist; :class:`BadCommandError` leaves the motors as they were."""
