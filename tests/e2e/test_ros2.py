@@ -809,10 +809,13 @@ def test_a_restarted_bridge_does_not_keep_a_dead_ones_motion(
     wait_for_pin(sim, 3, now_at(102))
     ran = [c["t"] for c in sim.trace() if c["pin"] == 3][-1]
     first.kill()
+    diag = graph.subscriber("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
     run_bridge(RESTART.format(ns=ns), new_session=False)
     wait_for_pin(sim, 3, now_at(0))
     stopped = [c["t"] for c in sim.trace() if c["pin"] == 3][-1]
     assert stopped - ran < 5.0, (ran, stopped)
+    # The bridge's Stop, counted (the heartbeat that follows clears it at once).
+    _wait_diag(diag, ns, "failsafe", lambda s: int(s["failsafes"]) == 1)
 
 
 def test_a_twist_older_than_the_timeout_is_stale_on_arrival(

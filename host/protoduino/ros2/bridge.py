@@ -147,6 +147,8 @@ class Bridge(ClosedOnExit):
                 failsafe_timeout=config.failsafe_timeout,
                 **self._board_options,
             )
+            # Events from the start: the Stop of _start_safe is reported on /diagnostics.
+            self._undo.append(self.board.on_event(self._on_event))
             if self._on_open is not None:
                 self._on_open(self.board)
             _start_safe(self.board)
@@ -159,7 +161,6 @@ class Bridge(ClosedOnExit):
             )
             self._configure_outputs(self.board)
             self._configure_inputs(self.board)
-            self._undo.append(self.board.on_event(self._on_event))
         except BaseException:
             self.close()
             raise
