@@ -792,3 +792,27 @@ def test_a_clean_close_stops_the_outputs_before_closing_the_board() -> None:
         bridge.board = Board(fails)  # type: ignore[assignment]
         bridge.close()
         assert calls == ["stop", "close"]
+
+
+def test_a_bridge_stops_only_what_it_inherits() -> None:
+    """Outputs the device already drives at the start (a resumed session) are stopped; a
+    device that drives nothing gets no Stop."""
+    from protoduino.board import OutputState
+    from protoduino.ros2.bridge import _start_safe
+
+    class Board:
+        def __init__(self, outputs: dict[int, OutputState]) -> None:
+            self.outputs, self.stops = outputs, 0
+
+        def read_outputs(self) -> dict[int, OutputState]:
+            return self.outputs
+
+        def stop(self) -> None:
+            self.stops += 1
+
+    fresh = Board({})
+    _start_safe(fresh)  # type: ignore[arg-type]
+    assert fresh.stops == 0
+    resumed = Board({3: OutputState(3, "pwm", 102, 102)})
+    _start_safe(resumed)  # type: ignore[arg-type]
+    assert resumed.stops == 1
