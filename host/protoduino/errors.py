@@ -34,6 +34,7 @@
      +-- ExtraMissingError        a package of the ``ros2`` extra is missing; also an ImportError
      +-- BadCommandError          the ROS 2 bridge refuses a message (a Twist, a servo command);
                                   also a ValueError
+          +-- StaleCommandError     a Twist older than the drive's timeout on arrival
 
 A refusal the device would give too (a pin that does not exist, an angle outside
 0..180) is a :class:`CommandRejectedError` with ``sent=False``; ArgumentError and
@@ -301,3 +302,9 @@ class ExtraMissingError(ProtoduinoError, ImportError):
 class BadCommandError(ProtoduinoError, ValueError):
     """A message the ROS 2 bridge refuses, a Twist (:mod:`protoduino.ros2.drive`) or a servo
     command (:mod:`protoduino.ros2.servos`): logged, counted on /diagnostics, nothing moves."""
+
+
+class StaleCommandError(BadCommandError):
+    """A Twist older than the ROS 2 bridge drive's timeout on arrival
+    (:meth:`protoduino.ros2.drive.DiffDrive.check_fresh`): refused like a bad one, counted
+    apart (``stale``)."""

@@ -16,6 +16,7 @@ from /diagnostics samples; the waits are bounded by generous deadlines only.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import random
@@ -196,14 +197,16 @@ class Graph:
             self.topics[name] = Topic(self.dp, "rt" + name, peer_type(ros))
         return self.topics[name]
 
-    def publisher(self, name: str, ros: str) -> Callable[[Any], None]:
-        """Publish rosbags messages of type ``ros`` on ``name``, once the bridge listens."""
+    def publisher(self, name: str, ros: str) -> Callable[..., None]:
+        """Publish rosbags messages of type ``ros`` on ``name``, once the bridge listens
+        (``timestamp=`` ns: the DDS source timestamp, by default now)."""
         writer = DataWriter(self.dp, self._topic(name, ros), qos=RELIABLE)
         _until(lambda: _matched(writer.get_publication_matched_status) > 0, f"{name} match")
         peer = peer_type(ros)
 
-        def publish(message: Any) -> None:
-            writer.write(peer(Cdr(ros, bytes(TYPES.serialize_cdr(message, ros)))))
+        def publish(message: Any, timestamp: int | None = None) -> None:
+            cdr = Cdr(ros, bytes(TYPES.serialize_cdr(message, ros)))
+            writer.write(peer(cdr), timestamp=timestamp)
 
         publish.writer = writer  # type: ignore[attr-defined]  # kept alive with the function
         return publish
@@ -256,7 +259,7 @@ def graph() -> Iterator[Graph]:
 
 
 class BridgeProcess:
-    def __init__(self, sim: SimBoard, config: str, tmp: Path) -> None:
+    def __init__(self, sim: SimBoard, config: str, tmp: Path, *, new_session: bool) -> None:
         path = tmp / "robot.yaml"
         path.write_text(config)
         env = dict(os.environ, CYCLONEDDS_URI=LOOPBACK)
@@ -264,7 +267,8 @@ class BridgeProcess:
         self.proc = subprocess.Popen(
             [
                 *(sys.executable, "-m", "protoduino.cli.main", "ros2", sim.port),
-                *("--config", str(path), "--domain-id", str(DOMAIN), "--new-session", "-v"),
+                *("--config", str(path), "--domain-id", str(DOMAIN), "-v"),
+                *(["--new-session"] if new_session else []),
             ],
             stdout=self.log.open("w"),
             stderr=subprocess.STDOUT,
@@ -291,11 +295,13 @@ class BridgeProcess:
 
 
 @pytest.fixture
-def run_bridge(sim_board: SimBoard, tmp_path: Path) -> Iterator[Callable[[str], BridgeProcess]]:
+def run_bridge(sim_board: SimBoard, tmp_path: Path) -> Iterator[Callable[..., BridgeProcess]]:
+    """``run_bridge(config)``: ``protoduino ros2 PORT --config`` started, by default with
+    ``--new-session`` (``new_session=False``: without, as a supervisor restarts it)."""
     started: list[BridgeProcess] = []
 
-    def start(config: str) -> BridgeProcess:
-        bridge = BridgeProcess(sim_board, config, tmp_path)
+    def start(config: str, *, new_session: bool = True) -> BridgeProcess:
+        bridge = BridgeProcess(sim_board, config, tmp_path, new_session=new_session)
         started.append(bridge)
         return bridge
 
@@ -354,7 +360,7 @@ def _wait_diag(
 
 
 def test_commands_bad_input_and_stop_at_the_pins(
-    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
 ) -> None:
     """Float64 -> servo width; JointState -> one pose; Bool -> level; bad input -> counted,
     nothing moves; STOP -> every output safe and the failsafe reported on /diagnostics."""
@@ -441,7 +447,7 @@ def test_commands_bad_input_and_stop_at_the_pins(
 
 
 def test_a_killed_bridge_trips_the_device_failsafe(
-    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
 ) -> None:
     """The outputs live as long as the bridge's heartbeat: SIGKILL -> safe at the pins."""
     sim = sim_board
@@ -498,7 +504,7 @@ def _twist(linear: float, angular: float) -> Any:
 
 
 def test_cmd_vel_drives_the_motors_and_a_stale_one_stops_them(
-    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
 ) -> None:
     sim = sim_board
     ns = _namespace(sim, "drive")
@@ -532,7 +538,7 @@ counters:
 
 
 def test_inputs_are_published(
-    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
 ) -> None:
     sim = sim_board
     ns = _namespace(sim, "inputs")
@@ -589,7 +595,7 @@ digital_inputs:
 
 
 def test_a_bumper_interlock_stops_the_motors_on_the_device_until_cleared(
-    sim_board: SimBoard, graph: Graph, run_bridge: Callable[[str], BridgeProcess]
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
 ) -> None:
     """The bumper trips both motors at the pins with no round trip through the bridge; Twists
     and a clear are refused while it is pressed; a clear on its topic once it is released lets
@@ -681,3 +687,160 @@ def test_a_hung_bridge_trips_the_failsafe_while_the_link_stays_up(
             release.set()
             loop.join(10)
         assert not loop.is_alive()
+
+
+# --- commands whose outcome is unknown, stale ones, restarts (issue 32) ------------------------
+
+
+@contextlib.contextmanager
+def _in_process_bridge(port: str, config: Any) -> Iterator[Any]:
+    """A bridge through the API (the test reaches its line and counters), its loop on a thread."""
+    import threading
+
+    from protoduino.ros2 import Bridge
+
+    with Bridge(port, config) as bridge:
+        loop = threading.Thread(target=bridge.run, name="bridge-loop")
+        loop.start()
+        try:
+            yield bridge
+        finally:
+            bridge.stop()
+            loop.join(10)
+    assert not loop.is_alive()
+
+
+def _config(text: str) -> Any:
+    import yaml
+    from protoduino.ros2 import parse_config
+
+    return parse_config({**yaml.safe_load(text), "domain_id": DOMAIN})
+
+
+def test_a_twist_whose_ack_was_lost_is_stopped_by_the_watchdog(
+    sim_board: SimBoard, graph: Graph, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Device-to-host bytes cut while a Twist is sent after the watchdog's stop: the device
+    runs it, the host gets no Ack. Its outcome unknown, it arms the watchdog as a done one
+    does: the motor is stopped a timeout later, not left running on the bridge's heartbeat."""
+    from protoduino.cli.options import load_url_handlers
+    from protoduino_dev import faults
+
+    sim = sim_board
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+    ns = _namespace(sim, "deaf")
+    failsafe = 5.0
+    name = f"ros2-deaf-{os.getpid()}-{sim.backend}"
+    port = f"faulty://{sim.port}?dir=rx&drop=1&paused=1&name={name}"
+    load_url_handlers(port)
+    with _in_process_bridge(port, _config(DRIVE.format(ns=ns, failsafe=failsafe))) as bridge:
+        cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+        cmd_vel(_twist(0.2, 0.0))  # 0.2 / 0.5 * 255 = 102
+        wait_for_pin(sim, 3, now_at(102))
+        wait_for_pin(sim, 3, now_at(0))  # no more Twists: the watchdog stopped it
+        _until(lambda: bridge.health.stale_stops == 1, "the stop's Ack")
+        line = faults.line(name)
+        assert line is not None
+        failed = bridge.health.refused
+        line.resume()  # from now on every byte from the device is lost
+        cmd_vel(_twist(0.3, 0.0))  # 153: run by the device, its Ack lost
+        wait_for_pin(sim, 3, now_at(153))
+        _until(lambda: bridge.health.refused > failed, "the Twist's AckTimeoutError")
+        line.heal()
+        wait_for_pin(sim, 3, now_at(0))
+        trace = [c for c in sim.trace() if c["pin"] == 3]
+        ran = [c["t"] for c in trace if c["value"] == 153][-1]
+        stopped = trace[-1]["t"]
+        # The bridge's stop, not the device's failsafe: heartbeats reached the device all
+        # along, and its last one before the Twist was at most a quarter timeout earlier.
+        assert stopped - ran < 0.75 * failsafe, (ran, stopped)
+        # (The device ran the stop at once; its Ack may have been lost too, and the stop
+        # sent again: counted once acknowledged.)
+        _until(lambda: bridge.health.stale_stops >= 2, "the watchdog's second stop")
+        assert bridge.health.failsafes == 0
+
+
+def test_new_session_releases_what_earlier_commands_configured(
+    sim_board: SimBoard, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """``protoduino ros2 PORT --new-session`` releases every output first, as the other
+    commands do: a pin an earlier command set goes free (its level off), and one it made a
+    digital output can be the bridge's servo (without the release: STATUS_PIN_IN_USE)."""
+    from protoduino.cli.main import main
+
+    sim = sim_board
+    assert main(["pin", sim.port, "8", "on"]) == 0
+    assert main(["pin", sim.port, "9", "on"]) == 0
+    wait_for_pin(sim, 9, now_at(1))
+    on = [c["t"] for c in sim.trace() if c["pin"] == 8 and c["value"] == 1][-1]
+    run_bridge(ARM.format(ns=_namespace(sim, "afresh"), failsafe=FAILSAFE_TIMEOUT))
+    wait_for_pin(sim, 9, now_at(SAFE_90_US))  # pin 9 is the bridge's servo now
+    wait_for_pin(sim, 8, now_at(0))
+    off = [c["t"] for c in sim.trace() if c["pin"] == 8][-1]
+    assert off - on < 10.0, (on, off)  # released, not the command line's failsafe (10 s)
+
+
+RESTART = """
+namespace: {ns}
+failsafe_timeout: 20.0
+drive:
+  wheel_base: 0.2
+  max_speed: 0.5
+  timeout: 10.0
+  left: {{pwm: 3, direction: 4}}
+  right: {{pwm: 11, direction: 12}}
+"""
+
+
+def test_a_restarted_bridge_does_not_keep_a_dead_ones_motion(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """SIGKILL the bridge while it drives, start it again at once with the same command line
+    (a supervisor's Restart=: it resumes the port's session), publish nothing: the motor the
+    dead bridge commanded stops at once, not kept running by the new bridge's heartbeat.
+
+    A long failsafe (20 s) and cmd_vel timeout (10 s) keep both out of the verdict: the stop
+    must come well before either could."""
+    sim = sim_board
+    ns = _namespace(sim, "restart")
+    first = run_bridge(RESTART.format(ns=ns), new_session=False)
+    cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+    cmd_vel(_twist(0.2, 0.0))  # 0.2 / 0.5 * 255 = 102
+    wait_for_pin(sim, 3, now_at(102))
+    ran = [c["t"] for c in sim.trace() if c["pin"] == 3][-1]
+    first.kill()
+    diag = graph.subscriber("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    run_bridge(RESTART.format(ns=ns), new_session=False)
+    wait_for_pin(sim, 3, now_at(0))
+    stopped = [c["t"] for c in sim.trace() if c["pin"] == 3][-1]
+    assert stopped - ran < 5.0, (ran, stopped)
+    # The bridge's Stop, counted (the heartbeat that follows clears it at once).
+    _wait_diag(diag, ns, "failsafe", lambda s: int(s["failsafes"]) == 1)
+
+
+def test_a_twist_older_than_the_timeout_is_stale_on_arrival(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """A Twist whose DDS source timestamp is 5 s old (written before a freeze, delivered by
+    reliable DDS after it) drives nothing: counted as stale; the next fresh one drives."""
+    sim = sim_board
+    ns = _namespace(sim, "stale")
+    # A 2 s timeout: a fresh Twist is never taken for a stale one on a busy machine.
+    run_bridge(
+        DRIVE.format(ns=ns, failsafe=FAILSAFE_TIMEOUT).replace("timeout: 0.5", "timeout: 2.0")
+    )
+    diag = graph.subscriber("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+    cmd_vel(_twist(0.2, 0.0), timestamp=time.time_ns() - 5_000_000_000)  # 102, 5 s ago
+    box: list[Any] = []
+    stale = f"bad./{ns}/cmd_vel: stale"
+
+    def counted_or_driven() -> bool:
+        statuses = [_status(a, ns, "bridge") for a in _diagnostics(diag, box)]
+        return 102 in pin_values(sim.trace(), 3) or any(s and stale in s for s in statuses)
+
+    _until(counted_or_driven, "the stale Twist counted (or driving pin 3)")
+    assert 102 not in pin_values(sim.trace(), 3), "a stale Twist drove the motor"
+    cmd_vel(_twist(0.3, 0.0))  # fresh: 153
+    wait_for_pin(sim, 3, now_at(153))
+    assert 102 not in pin_values(sim.trace(), 3)

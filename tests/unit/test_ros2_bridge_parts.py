@@ -16,7 +16,7 @@ pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing
 pytest.importorskip("rosbags", reason="rosbags is not installed")
 
 import numpy as np
-from protoduino.errors import BadCommandError, ConfigError
+from protoduino.errors import AckTimeoutError, BadCommandError, ConfigError, StaleCommandError
 from protoduino.events import Event, EventKind, Stats
 from protoduino.ros2 import msgs
 from protoduino.ros2.config import (
@@ -171,6 +171,17 @@ def _with(**changes: Any) -> dict[str, Any]:
             "topic 'led' is both",
         ),
         ([1, 2], "must be a mapping"),
+        # One topic named twice, relative and absolute: one Bool would drive both pins.
+        (
+            _with(
+                digital_outputs=[{"pin": 13, "topic": "led"}, {"pin": 8, "topic": "/robot1/led"}]
+            ),
+            r"topic '/robot1/led' is both digital output 13 \(as 'led': both are /robot1/led\)",
+        ),
+        (
+            _with(diagnostics_topic="/robot1/battery"),
+            "topic 'battery' is both the diagnostics",
+        ),
     ],
 )
 def test_bad_configurations_are_refused_naming_the_key(data: Any, message: str) -> None:
@@ -292,6 +303,121 @@ def test_after_a_device_stop_the_next_twist_sets_the_direction_again() -> None:
     log.clear()
     drive.command(0.25, 0.0)
     assert log == [("ldir", True), ("lpwm", 128), ("rdir", True), ("rpwm", 128)]
+
+
+class LostAck(Pin):
+    """A fake output whose writes of ``lost`` values run but raise (their Ack was lost)."""
+
+    def __init__(self, name: str, log: list[tuple[str, object]], lost: set[object]) -> None:
+        super().__init__(name, log)
+        self.lost = lost
+
+    def write(self, value: Any) -> None:
+        super().write(value)
+        if value in self.lost:
+            raise AckTimeoutError(f"no Ack for {value}")
+
+
+def test_a_twist_whose_outcome_is_unknown_arms_the_watchdog() -> None:
+    """Issue 32: a Twist whose Ack was lost ran on the device; the watchdog stops it."""
+    log: list[tuple[str, object]] = []
+    now = [100.0]
+    lost: set[object] = {153}
+    left = Motor(DRIVE.left, LostAck("lpwm", log, lost), Pin("ldir", log))
+    right = Motor(DRIVE.right, Pin("rpwm", log), Pin("rdir", log))
+    drive = DiffDrive(DRIVE, left, right, clock=lambda: now[0])
+    with pytest.raises(AckTimeoutError):
+        drive.command(0.3, 0.0)  # 153 on both wheels; the left one's Ack is lost
+    assert drive.deadline() == 100.5
+    lost.clear()
+    now[0] = 100.5
+    assert drive.check()
+    assert log[-2:] == [("lpwm", 0), ("rpwm", 0)] and drive.deadline() is None
+
+
+def test_a_motor_whose_duty_is_unknown_stops_before_it_turns() -> None:
+    log: list[tuple[str, object]] = []
+    motor = Motor(DRIVE.left, LostAck("lpwm", log, {200}), Pin("ldir", log))
+    with pytest.raises(AckTimeoutError):
+        motor.apply(WheelCommand(200, True))
+    motor.apply(WheelCommand(50, False))
+    assert log == [("ldir", True), ("lpwm", 200), ("lpwm", 0), ("ldir", False), ("lpwm", 50)]
+
+
+def test_a_stop_whose_outcome_is_unknown_is_tried_again() -> None:
+    log: list[tuple[str, object]] = []
+    now = [0.0]
+    lost: set[object] = set()
+    left = Motor(DRIVE.left, LostAck("lpwm", log, lost), Pin("ldir", log))
+    drive = DiffDrive(DRIVE, left, _motors(log)[1], clock=lambda: now[0])
+    drive.command(0.25, 0.0)
+    lost.add(0)
+    now[0] = 0.5
+    with pytest.raises(AckTimeoutError):
+        drive.check()
+    assert drive.deadline() == 1.0  # armed again: one timeout later
+    lost.clear()
+    log.clear()
+    now[0] = 1.0
+    assert drive.check() and log == [("lpwm", 0), ("rpwm", 0)]
+    assert drive.deadline() is None
+
+
+def test_a_stop_the_device_refuses_disarms_the_watchdog() -> None:
+    """A refusal means the device holds its outputs safe itself (failsafe, interlock)."""
+    from protoduino.errors import CommandRejectedError
+    from protoduino.messages import Status
+
+    class Refusing(Pin):
+        def write(self, value: Any) -> None:
+            raise CommandRejectedError(Status.STATUS_FAILSAFE_EXPIRED, "safe")
+
+    log: list[tuple[str, object]] = []
+    now = [0.0]
+    drive = DiffDrive(DRIVE, *_motors(log), clock=lambda: now[0])
+    drive.command(0.25, 0.0)
+    drive.left.pwm = Refusing("lpwm", log)
+    now[0] = 0.5
+    with pytest.raises(CommandRejectedError):
+        drive.check()
+    assert drive.deadline() is None
+
+
+def test_a_twist_older_than_the_timeout_is_stale_on_arrival() -> None:
+    """Issue 32: Twists queued by reliable DDS through a freeze are refused, by their DDS
+    source timestamp against the bridge's wall clock (both injected here)."""
+    log: list[tuple[str, object]] = []
+    wall = [1_700_000_000.0]
+    drive = DiffDrive(DRIVE, *_motors(log), clock=lambda: 0.0, wall_clock=lambda: wall[0])
+    drive.check_fresh(wall[0] - 0.5)  # as old as the timeout: still fresh
+    drive.check_fresh(wall[0] + 3.0)  # a publisher's clock ahead: fresh
+    drive.check_fresh(None)  # no timestamp: fresh
+    with pytest.raises(StaleCommandError, match="stale on arrival"):
+        drive.check_fresh(wall[0] - 0.501)
+    assert log == [] and drive.deadline() is None
+
+
+def test_the_bridge_drops_a_stale_twist_and_counts_it() -> None:
+    from types import SimpleNamespace
+
+    from protoduino.ros2.bridge import Bridge, _Route
+
+    config = parse_config({"drive": FULL["drive"]})
+    bridge = Bridge("unused", config)
+    log: list[tuple[str, object]] = []
+    now = 1_700_000_000.0
+    bridge.drive = DiffDrive(DRIVE, *_motors(log), clock=lambda: 0.0, wall_clock=lambda: now)
+
+    def route(x: float, written: float) -> Any:
+        message = msgs.Twist(msgs.Vector3(x, 0.0, 0.0), msgs.Vector3(0.0, 0.0, 0.0))
+        info = SimpleNamespace(valid_data=True, source_timestamp=round(written * 1e9))
+        message.sample_info = info  # type: ignore[attr-defined]  # as cyclonedds sets it
+        return _Route("/cmd_vel", FakeReader([message]), bridge._on_twist)  # type: ignore[arg-type]
+
+    bridge._take(route(0.2, now - 4.0))
+    assert log == [] and dict(bridge.health.bad) == {"/cmd_vel: stale": 1}
+    bridge._take(route(0.2, now - 0.01))
+    assert ("lpwm", 102) in log and bridge.health.forwarded == 1
 
 
 # --- servos and joints ---------------------------------------------------------------
@@ -663,3 +789,27 @@ def test_a_clean_close_stops_the_outputs_before_closing_the_board() -> None:
         bridge.board = Board(fails)  # type: ignore[assignment]
         bridge.close()
         assert calls == ["stop", "close"]
+
+
+def test_a_bridge_stops_only_what_it_inherits() -> None:
+    """Outputs the device already drives at the start (a resumed session) are stopped; a
+    device that drives nothing gets no Stop."""
+    from protoduino.board import OutputState
+    from protoduino.ros2.bridge import _start_safe
+
+    class Board:
+        def __init__(self, outputs: dict[int, OutputState]) -> None:
+            self.outputs, self.stops = outputs, 0
+
+        def read_outputs(self) -> dict[int, OutputState]:
+            return self.outputs
+
+        def stop(self) -> None:
+            self.stops += 1
+
+    fresh = Board({})
+    _start_safe(fresh)  # type: ignore[arg-type]
+    assert fresh.stops == 0
+    resumed = Board({3: OutputState(3, "pwm", 102, 102)})
+    _start_safe(resumed)  # type: ignore[arg-type]
+    assert resumed.stops == 1

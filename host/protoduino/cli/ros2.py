@@ -20,7 +20,7 @@ from types import FrameType
 from ..errors import ProtoduinoError
 from ..simboard import BACKENDS
 from . import argtypes
-from .options import add_port, error, load_url_handlers, session_of
+from .options import add_port, error, load_url_handlers, session_of, start_afresh
 
 HELP = "run the ROS 2 bridge: the board's pins as ROS 2 topics on DDS (see docs/ros2.md)"
 
@@ -106,6 +106,7 @@ def _bridge(args: argparse.Namespace) -> int:
                 "capture": args.capture,
                 "session": session_of(args),
             },
+            on_open=lambda board: start_afresh(board, args),
         )
     except ProtoduinoError as exc:
         return error("ros2", exc)

@@ -7,8 +7,8 @@ types and QoS: :mod:`.dds`, :mod:`.msgs`) and runs one loop
 
 * waits for commands on the subscribed topics and carries out the newest
   valid one of each (a servo's Float64, an arm's JointState as one pose, a
-  digital output's Bool, STOP, ``/cmd_vel``), refusing bad ones (logged,
-  counted on /diagnostics, nothing moves);
+  digital output's Bool, STOP, ``/cmd_vel``), refusing bad ones and Twists
+  stale on arrival (logged, counted on /diagnostics, nothing moves);
 * sends the device's heartbeat every ``failsafe_timeout / 4``: only this loop
   keeps the outputs alive, so a bridge that hangs or dies lets the device's
   failsafe drive them safe (the board's automatic Ping only keeps the link up);
@@ -17,7 +17,8 @@ types and QoS: :mod:`.dds`, :mod:`.msgs`) and runs one loop
   board's event thread when a failsafe, reboot or link change happens.
 
 Inputs are published from the board's event thread as they change
-(:mod:`.inputs`).
+(:mod:`.inputs`). The bridge starts from every output safe: what the device
+already drives when it starts (a resumed session) is stopped first.
 """
 
 from __future__ import annotations
@@ -46,7 +47,13 @@ from cyclonedds.util import duration
 
 from ..board import Board, DigitalOutput, Servo
 from ..closing import ClosedOnExit
-from ..errors import BadCommandError, CommandRejectedError, ConfigError, ProtoduinoError
+from ..errors import (
+    BadCommandError,
+    CommandRejectedError,
+    ConfigError,
+    ProtoduinoError,
+    StaleCommandError,
+)
 from ..events import Event, EventKind
 from . import inputs
 from .config import BridgeConfig, ServoConfig
@@ -86,7 +93,9 @@ class Bridge(ClosedOnExit):
     :meth:`run` loops until :meth:`stop` (from another thread or a signal
     handler); :meth:`close` drives every output safe and releases everything.
     ``board_options`` go to :meth:`Board.open` (``liveness`` and
-    ``failsafe_timeout`` are the bridge's own).
+    ``failsafe_timeout`` are the bridge's own); ``on_open`` is called with the
+    board as soon as it is open, before anything else (the command line's
+    ``--new-session`` releases every output there).
     """
 
     def __init__(
@@ -96,8 +105,10 @@ class Bridge(ClosedOnExit):
         *,
         board_options: Mapping[str, Any] | None = None,
         clock: Callable[[], float] = time.monotonic,
+        on_open: Callable[[Board], None] | None = None,
     ) -> None:
         self.port = port
+        self._on_open = on_open
         self.config = config
         self.clock = clock
         self._board_options = dict(board_options or {})
@@ -142,6 +153,11 @@ class Bridge(ClosedOnExit):
                 failsafe_timeout=config.failsafe_timeout,
                 **self._board_options,
             )
+            # Events from the start: the Stop of _start_safe is reported on /diagnostics.
+            self._undo.append(self.board.on_event(self._on_event))
+            if self._on_open is not None:
+                self._on_open(self.board)
+            _start_safe(self.board)
             self._participant = DomainParticipant(config.resolved_domain())
             self._waitset = WaitSet(self._participant)
             self._wake = GuardCondition(self._participant)
@@ -151,7 +167,6 @@ class Bridge(ClosedOnExit):
             )
             self._configure_outputs(self.board)
             self._configure_inputs(self.board)
-            self._undo.append(self.board.on_event(self._on_event))
         except BaseException:
             self.close()
             raise
@@ -361,6 +376,9 @@ class Bridge(ClosedOnExit):
                 continue  # an instance's state change, no data
             try:
                 prepared = route.prepare(sample)
+            except StaleCommandError as error:
+                self._bad(route.topic, "stale", error)
+                continue
             except BadCommandError as error:
                 self._bad(route.topic, "invalid", error)
                 continue
@@ -458,6 +476,7 @@ class Bridge(ClosedOnExit):
     def _on_twist(self, message: Twist) -> Action:
         assert self.drive is not None
         drive = self.drive
+        drive.check_fresh(_written(message))
         left, right = twist_to_wheels(message.linear.x, message.angular.z, drive.config)
         return lambda: drive.apply(left, right)
 
@@ -480,6 +499,33 @@ class Bridge(ClosedOnExit):
                 writer.write(self.health.report(board.stats))
             except Exception:  # DDS refused it; the next period tries again
                 log.exception("publishing /diagnostics failed")
+
+
+def _written(sample: Any) -> float | None:
+    """When a sample was written (Unix seconds): its DDS source timestamp, if it has one."""
+    info = getattr(sample, "sample_info", None)
+    stamp = getattr(info, "source_timestamp", None)
+    return stamp / 1e9 if isinstance(stamp, int) and stamp > 0 else None
+
+
+def _start_safe(board: Board) -> None:
+    """Start from a safe state the bridge knows: no output driven by anyone else.
+
+    Outputs the device already drives belong to a session this board resumed (the
+    command line's: a bridge killed less than a failsafe timeout ago, whose motors still
+    run, or an earlier ``protoduino pin``); nobody commands them now, and the bridge's
+    heartbeat would keep them alive for good. So they are driven safe by the device's
+    Stop before the bridge configures its own outputs (a new session has none: the
+    device released them).
+    """
+    inherited = board.read_outputs()
+    if inherited:
+        log.warning(
+            "the device already drives pin(s) %s (a resumed session): Stop, every output "
+            "safe, before the bridge commands anything",
+            ", ".join(str(pin) for pin in inherited),
+        )
+        board.stop()
 
 
 def _ros_type(kind: type[Any]) -> str:

@@ -301,11 +301,15 @@ def _check_whole(config: BridgeConfig) -> None:
         for pin in counter.pins:
             claim(pin, f"a counter of {counter.topic}")
 
-    topics: dict[str, str] = {}
+    # Compared as ROS resolves them: "led" in namespace robot1 is "/robot1/led".
+    topics: dict[str, tuple[str, str]] = {}
     for topic, what in _topics(config):
-        if topic in topics:
-            raise ConfigError(f"topic {topic!r} is both {topics[topic]} and {what}")
-        topics[topic] = what
+        name = ros_topic(config.namespace, topic)
+        if name in topics:
+            first, first_what = topics[name]
+            same = "" if first == topic else f" (as {first!r}: both are {name})"
+            raise ConfigError(f"topic {topic!r} is both {first_what}{same} and {what}")
+        topics[name] = (topic, what)
 
     joints = [s.joint for s in config.servos if s.joint is not None]
     if len(set(joints)) != len(joints):
@@ -328,6 +332,14 @@ def _topics(config: BridgeConfig) -> list[tuple[str, str]]:
     found += [(i.topic, f"analog input {i.pin}") for i in config.analog_inputs]
     found += [(c.topic, f"counters {list(c.pins)}") for c in config.counters]
     return found
+
+
+def ros_topic(namespace: str, name: str) -> str:
+    """The ROS name of topic ``name`` in ``namespace``, as ``ros2 topic list`` shows it (an
+    absolute name ignores the namespace)."""
+    if name.startswith("/"):
+        return name
+    return f"/{namespace}/{name}" if namespace else f"/{name}"
 
 
 def _domain(where: str, value: int) -> int:

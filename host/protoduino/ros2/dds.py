@@ -14,6 +14,8 @@ from __future__ import annotations
 from cyclonedds.core import Policy, Qos
 from cyclonedds.util import duration
 
+from .config import ros_topic
+
 #: rmw_qos_profile_sensor_data.
 SENSOR_QOS = Qos(
     Policy.Reliability.BestEffort,
@@ -29,13 +31,9 @@ DEFAULT_QOS = Qos(
 )
 
 
+__all__ = ["DEFAULT_QOS", "SENSOR_QOS", "dds_topic", "ros_topic"]
+
+
 def dds_topic(namespace: str, name: str) -> str:
     """The DDS topic of ROS topic ``name`` in ``namespace`` (an absolute name ignores it)."""
-    if name.startswith("/"):
-        return "rt" + name
-    return f"rt/{namespace}/{name}" if namespace else f"rt/{name}"
-
-
-def ros_topic(namespace: str, name: str) -> str:
-    """The ROS name of the same topic, as ``ros2 topic list`` shows it."""
-    return dds_topic(namespace, name)[2:]
+    return "rt" + ros_topic(namespace, name)
