@@ -34,7 +34,7 @@ from protoduino.messages import ArduinoIn, Status, parse_out
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard, runner_command
 from protoduino_dev import build
-from simfixtures import wait_until
+from simfixtures import wait_for_pin, wait_until
 
 #: Bounds a failing test's wait only; the verdicts are the trace's.
 BOUND = 30.0
@@ -124,6 +124,45 @@ def test_pose_sets_pwm_with_the_others_and_the_failsafe_makes_it_safe(sim: SimBo
         assert event.details["active"] and event.details["cause"] == "ping_timeout"
         wait_pwm(sim, 11, lambda v: v[-1:] == [7], since=mark)
         assert motor.value == 7
+
+
+def _first(lines: list[dict[str, Any]], pin: int, ok: Callable[[dict[str, Any]], bool]) -> Any:
+    """When ``pin`` first took a value ``ok`` accepts in ``lines``: (board time, line), so
+    that changes at one instant keep the order the board wrote them in."""
+    return next((e["t"], i) for i, e in enumerate(lines) if e["pin"] == pin and ok(e))
+
+
+def test_a_pose_never_drives_a_motor_the_wrong_way(sim: SimBoard) -> None:
+    """Issue 32: an H-bridge's direction pin and its PWM in one pose, listed either way.
+    Started in the other direction, the direction pin changes before the duty leaves 0;
+    stopped with the direction flipped back, the duty is 0 before the direction pin
+    changes. Judged at the pins on the board's clock (the trace's t)."""
+    with Board.open(sim.port) as board:
+        motor = board.pwm_output(3, safe=0)
+        ahead = board.digital_output(4, safe=True)  # the direction pin: high, forward
+        wait_for_pin(sim, 4, lambda v: v[-1:] == [1])
+        for ahead_first in (False, True):
+            mark = len(sim.trace())
+            start: dict[protoduino.board.PoseOutput, int | bool] = (
+                {ahead: False, motor: 180} if ahead_first else {motor: 180, ahead: False}
+            )
+            board.pose(start)  # backwards
+            wait_pwm(sim, 3, lambda v: v[-1:] == [180], since=mark)
+            lines = sim.trace()[mark:]
+            turned = _first(lines, 4, lambda e: e["value"] == 0)
+            runs = _first(lines, 3, lambda e: e.get("mode") == "pwm" and e["value"] > 0)
+            assert turned <= runs, f"the duty left 0 at {runs}, the direction turned at {turned}"
+            mark = len(sim.trace())
+            stop: dict[protoduino.board.PoseOutput, int | bool] = (
+                {ahead: True, motor: 0} if ahead_first else {motor: 0, ahead: True}
+            )
+            board.pose(stop)  # stopped, facing forward again
+            wait_for_pin(sim, 4, lambda v: v[-1:] == [1])
+            wait_pwm(sim, 3, lambda v: v[-1:] == [0], since=mark)
+            lines = sim.trace()[mark:]
+            stopped = _first(lines, 3, lambda e: e.get("mode") == "pwm" and e["value"] == 0)
+            turned = _first(lines, 4, lambda e: e["value"] == 1)
+            assert stopped <= turned, f"the direction turned at {turned}, the duty 0 at {stopped}"
 
 
 def _request(board: Board, msg: ArduinoIn) -> int:
