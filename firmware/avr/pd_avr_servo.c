@@ -22,7 +22,9 @@
 
 #define TICKS_PER_US 2u         /* 16 MHz / 8 */
 #define FRAME_TICKS 40000u      /* 20 ms */
-#define MIN_GAP_TICKS 16u       /* 8 us: the soonest the next compare may be set */
+/* 40 us (640 cycles): the soonest the next compare may be set, beyond what the ISR's
+ * part with interrupts on takes with every other handler nested in it. */
+#define MIN_GAP_TICKS 80u
 /* The ISR makes an end edge 10 cycles before a start edge (-O s code,
  * avr-gcc 5.4): one tick (8 cycles) gives most of it back. */
 #define PULSE_TRIM_TICKS 1u
@@ -102,6 +104,16 @@ static int8_t next_attached(int8_t ch)
     return ch < (int8_t)PD_MAX_SERVOS ? ch : -1;
 }
 
+/*
+ * Only the edges and the next compare time are made with interrupts off; the rest (a
+ * frame's new widths, the next edges' ports) runs with them on and this interrupt
+ * masked, so that it cannot nest. The counters' INT0 and INT1 wait behind this handler
+ * alone: all of it held them off for up to 290 cycles, and behind a UART handler's
+ * first instructions and the other counter's that came to more than the 400 cycles
+ * between edges at 40,000 a second, now and then (issue 32: tools/avrsim --stats
+ * "extint", firmware/README.md). MIN_GAP_TICKS keeps the soonest compare it sets
+ * further away than the rest takes, nested interrupts included.
+ */
 ISR(TIMER1_COMPA_vect)
 {
     uint16_t at = OCR1A; /* when this compare was due */
@@ -111,30 +123,24 @@ ISR(TIMER1_COMPA_vect)
     *off_port &= (uint8_t)~off_mask;
     *on_port |= on_mask;
 
-    if (in_gap) {
+    bool starts = in_gap; /* this compare starts a frame */
+    if (starts) {
         frame_start = at;
         in_gap = false;
-        /* Every new width starts at a frame start, so that widths written
-         * together (a Pose, a speed step) reach the pins in the same frame.
-         * Before channel 0's width is read below. */
-        if (!held) {
-            for (uint8_t n = 0; n < PD_MAX_SERVOS; n++) {
-                channels[n].ticks = channels[n].next;
-            }
-        }
     }
+    /* Every new width starts at a frame start, so that widths written together (a
+     * Pose, a speed step) reach the pins in the same frame: the first channel's is
+     * the one written, and the others' are taken below, long before their turn. */
+    bool take = starts && !held;
     int8_t ch = on_channel; /* the channel now high, if any */
     if (ch >= 0) {
         /* The end edge is made a few cycles before the start edge in the
          * ISR: PULSE_TRIM_TICKS gives them back. */
-        OCR1A = (uint16_t)(at + channels[ch].ticks + PULSE_TRIM_TICKS);
-        off_port = channels[ch].port;
-        off_mask = channels[ch].mask;
-        ch = next_attached((int8_t)(ch + 1));
+        uint16_t ticks = take ? channels[ch].next : channels[ch].ticks;
+        OCR1A = (uint16_t)(at + ticks + PULSE_TRIM_TICKS);
     } else {
         /* End of the frame: wait out its 20 ms, or start the next at once when
          * eight 2.6 ms pulses have outlasted it. */
-        off_port = &no_pin;
         if ((uint16_t)(at - frame_start) > FRAME_TICKS - MIN_GAP_TICKS) {
             OCR1A = (uint16_t)(TCNT1 + MIN_GAP_TICKS);
         } else if (expedite) {
@@ -144,6 +150,21 @@ ISR(TIMER1_COMPA_vect)
         }
         expedite = false;
         in_gap = true;
+    }
+    TIMSK1 &= (uint8_t)~_BV(OCIE1A);
+    sei();
+
+    if (take) {
+        for (uint8_t n = 0; n < PD_MAX_SERVOS; n++) {
+            channels[n].ticks = channels[n].next;
+        }
+    }
+    if (ch >= 0) {
+        off_port = channels[ch].port;
+        off_mask = channels[ch].mask;
+        ch = next_attached((int8_t)(ch + 1));
+    } else {
+        off_port = &no_pin;
         ch = next_attached(0);
     }
     on_channel = ch;
@@ -153,6 +174,8 @@ ISR(TIMER1_COMPA_vect)
     } else {
         on_port = &no_pin;
     }
+    cli();
+    TIMSK1 |= _BV(OCIE1A);
 }
 
 /* A pin's PORT register and bit, not inlined: servo writes and digital pins

@@ -213,6 +213,7 @@ bool pd_core_open_session(pd_core_t *core, const uint8_t session[4], uint8_t nex
      * state it has at power-up, which the wiring must tolerate anyway. */
     pd_outputs_release_all(&core->outputs, core->hal);
     core->outputs.inputs.latched = 0; /* the interlocks it latched were released with their inputs */
+    core->outputs.inputs.notice = 0;
     pd_failsafe_init(&core->failsafe, pd_hal_millis(core->hal));
     memcpy(core->session, session, 4);
     return false;

@@ -107,17 +107,36 @@ protoduino_Status pd_inputs_digital_init(pd_core_t *core, const protoduino_Digit
     return protoduino_Status_STATUS_OK;
 }
 
-/* The interlock on `pin` reached its trip level: every output safe at once, latched, told.
- * Not inlined: its ArduinoOut would sit in the main loop's frame, under every
- * command's decode (the Uno's deepest stack), for good. */
-static __attribute__((noinline)) void trip(pd_core_t *core, uint8_t pin)
+/* The interlock on `pin` reached its trip level: every output safe at once and latched;
+ * the host hears of it once the report of the edge went out (send_notice). */
+static void trip(pd_core_t *core, uint8_t pin)
 {
     pd_inputs_t *in = &core->outputs.inputs;
     pd_outputs_all_safe(&core->outputs, core->hal);
-    /* A safe state of its own (a new failsafe epoch); the timer runs on. */
-    pd_failsafe_interlock(&core->failsafe, pin);
     in->latched = (uint8_t)(pin + 1u);
-    pd_out_send_failsafe(core); /* dropped while IDLE: no one to tell (a Ping's Ack will) */
+    in->notice = 1;
+}
+
+/*
+ * The latched trip becomes the device's failsafe state (a safe state of its own: a new
+ * epoch; the timer runs on) and the host is told, once the InputReport carrying the
+ * tripped level (poll_digital marks it with the trip) went out: until then the trip is
+ * in no message (pd_out_failsafe_state leaves an untold latch out of the state Acks
+ * carry), so a host's view of the input is never older than the FAILSAFE event it
+ * hears (issue 32). Called right behind that report (pd_inputs_sent), or by the next
+ * poll if the report slot was emptied otherwise. A notice dropped while IDLE or for want
+ * of room is told by a Ping's Ack. A latch a new session released is forgotten untold.
+ * Not inlined: its ArduinoOut would sit in the main loop's frame, under every command's
+ * decode (the Uno's deepest stack), for good.
+ */
+static __attribute__((noinline)) void send_notice(pd_core_t *core)
+{
+    pd_inputs_t *in = &core->outputs.inputs;
+    in->notice = 0;
+    if (in->latched != 0) {
+        pd_failsafe_interlock(&core->failsafe, (uint8_t)(in->latched - 1u));
+        pd_out_send_failsafe(core);
+    }
 }
 
 /* Whether an interlock input is at its trip level now (debounced). */
@@ -131,8 +150,9 @@ protoduino_Status pd_inputs_clear_interlock(pd_core_t *core, uint8_t epoch, bool
     pd_inputs_t *in = &core->outputs.inputs;
     *cleared = false;
     /* Still at its trip level, or a host that has not seen the latest safe state
-     * (a ClearInterlock written before a later trip and held up on the way). */
-    if (tripped(in) || (in->latched != 0 && epoch != core->failsafe.epoch)) {
+     * (a ClearInterlock written before a later trip and held up on the way, or a
+     * trip not told yet). */
+    if (tripped(in) || (in->latched != 0 && (in->notice || epoch != core->failsafe.epoch))) {
         return protoduino_Status_STATUS_INTERLOCK_ACTIVE;
     }
     *cleared = in->latched != 0;
@@ -408,6 +428,9 @@ __attribute__((noinline)) void pd_inputs_poll(pd_core_t *core, uint32_t now)
     bool tick = (uint8_t)now != in->tick; /* analog periods and counter intervals are in ms */
     in->tick = (uint8_t)now;
 #if PD_FEATURE_DIGITAL_INPUT
+    if (in->notice && !((core->report_pending >> PD_INPUTS_SLOT) & 1u)) {
+        send_notice(core); /* the report slot emptied without the report */
+    }
     if (in->dpins != 0) {
         poll_digital(core, now);
     }
@@ -484,4 +507,9 @@ void pd_inputs_sent(pd_core_t *core, const protoduino_ArduinoOut *msg)
     in->analog_dirty = 0;
     in->counter_dirty = 0;
     in->coalesced = 0;
+#if PD_FEATURE_DIGITAL_INPUT
+    if (in->notice) {
+        send_notice(core); /* right behind the report of its edge */
+    }
+#endif
 }

@@ -31,8 +31,10 @@ bool pd_out_send_spare(pd_core_t *core, const protoduino_ArduinoOut *msg, bool y
 void pd_out_failsafe_state(const pd_core_t *core, protoduino_Failsafe *fs)
 {
     /* An interlock's latch holds the safe state until ClearInterlock, whatever
-     * liveness messages came since. */
-    fs->active = core->failsafe.active || core->outputs.inputs.latched != 0;
+     * liveness messages came since; one not told yet is in no state sent
+     * (pd_inputs.c, send_notice: the report of its edge goes first). */
+    const pd_inputs_t *in = &core->outputs.inputs;
+    fs->active = core->failsafe.active || (in->latched != 0 && !in->notice);
     fs->cause = (protoduino_FailsafeCause)core->failsafe.cause;
     fs->epoch = core->failsafe.epoch;
     if (fs->cause == protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK) {

@@ -549,6 +549,24 @@ protoduino_Status pd_outputs_pwm_control(pd_outputs_t *out, void *hal,
     return pwm_control(out, hal, msg, true);
 }
 
+/*
+ * The apply pass of a Pose item (pd_outputs_pose): 1 a PWM duty of 0, 2 a digital level (the
+ * masks' too), 3 any other duty and the servos. A motor driven through a direction pin and a
+ * PWM pin (an H-bridge) is never driven the wrong way, whatever order the pose lists them
+ * in: stopped before its direction pin changes, started only after it changed (issue 32).
+ */
+#define PD_POSE_ZERO_DUTIES 1u
+#define PD_POSE_LEVELS 2u
+#define PD_POSE_LAST 3u
+
+static uint8_t pose_pass(const protoduino_PoseItem *item)
+{
+    if (item->which_output == protoduino_PoseItem_pwm_tag) {
+        return item->output.pwm.duty == 0 ? PD_POSE_ZERO_DUTIES : PD_POSE_LAST;
+    }
+    return item->which_output == protoduino_PoseItem_digital_tag ? PD_POSE_LEVELS : PD_POSE_LAST;
+}
+
 protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino_Pose *msg,
                                   uint8_t *bad)
 {
@@ -563,26 +581,31 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
         return protoduino_Status_STATUS_INVALID_ARGUMENT; /* a level for no pin: no output named */
     }
     /* Pass 0 checks every item, then every pin of the mask in ascending order (numbered
-     * after the items), pass 1 applies them all in the same order (servos held, so that
-     * their new widths start at the same frame). */
-    for (uint8_t pass = 0; pass < 2; pass++) {
+     * after the items); passes 1 to 3 apply them (pose_pass says which goes in which),
+     * each in that order, the servos held, so that their new widths start at the same
+     * frame. */
+    for (uint8_t pass = 0; pass <= PD_POSE_LAST; pass++) {
+        bool apply = pass != 0;
         uint8_t i = 0;
         for (; i < msg->items_count; i++) {
             const protoduino_PoseItem *item = &msg->items[i];
             protoduino_Status status = protoduino_Status_STATUS_INVALID_ARGUMENT;
             uint32_t pin = 0;
+            if (apply && pose_pass(item) != pass) {
+                continue;
+            }
             /* A mode the build left out: not supported, as its Control would be. */
             if (item->which_output == protoduino_PoseItem_servo_tag) {
-                status = PD_FEATURE_SERVO ? servo_control(out, hal, &item->output.servo, pass)
+                status = PD_FEATURE_SERVO ? servo_control(out, hal, &item->output.servo, apply)
                                           : protoduino_Status_STATUS_NOT_SUPPORTED;
                 pin = item->output.servo.pin;
             } else if (item->which_output == protoduino_PoseItem_digital_tag) {
                 status = PD_FEATURE_DIGITAL_OUTPUT
-                             ? digital_control(out, hal, &item->output.digital, pass)
+                             ? digital_control(out, hal, &item->output.digital, apply)
                              : protoduino_Status_STATUS_NOT_SUPPORTED;
                 pin = item->output.digital.pin;
             } else if (item->which_output == protoduino_PoseItem_pwm_tag) {
-                status = PD_FEATURE_PWM ? pwm_control(out, hal, &item->output.pwm, pass)
+                status = PD_FEATURE_PWM ? pwm_control(out, hal, &item->output.pwm, apply)
                                         : protoduino_Status_STATUS_NOT_SUPPORTED;
                 pin = item->output.pwm.pin;
             }
@@ -601,7 +624,7 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
         /* The masks, one pin a turn: each exactly as its DigitalControl. The masks
          * shift one place per pin (a variable 32-bit shift is a loop on the AVR);
          * at most 32 turns, and none past the highest pin set. */
-        uint32_t pins = msg->digital_pins;
+        uint32_t pins = pass == 0 || pass == PD_POSE_LEVELS ? msg->digital_pins : 0u;
         uint32_t levels = msg->digital_levels;
         uint32_t bit = 1;
         for (uint8_t pin = 0; pins != 0; pin++, pins >>= 1, levels >>= 1, bit <<= 1) {
@@ -610,7 +633,7 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
             }
             protoduino_DigitalControl control = {pin, (levels & 1u) != 0};
             protoduino_Status status = PD_FEATURE_DIGITAL_OUTPUT
-                                           ? digital_control(out, hal, &control, pass)
+                                           ? digital_control(out, hal, &control, apply)
                                            : protoduino_Status_STATUS_NOT_SUPPORTED;
             i++;
             if (pass == 0) {
@@ -623,7 +646,9 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
                 }
             }
         }
-        pd_hal_servo_hold(hal, pass == 0);
+        if (pass == 0 || pass == PD_POSE_LAST) {
+            pd_hal_servo_hold(hal, pass == 0);
+        }
     }
     return protoduino_Status_STATUS_OK;
 }

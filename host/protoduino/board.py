@@ -1044,7 +1044,11 @@ class Board(ClosedOnExit):
         and PWM outputs, and any number of digital outputs (they travel as two
         bit masks, a few bytes for all of them). The device checks every value
         before it applies any; the servos' new widths start at the same servo
-        frame (digital levels change at once, as the command runs). A refusal, on
+        frame (digital levels change at once, as the command runs). Whatever the
+        order given, the device sets the PWM duties of 0 first, then the digital
+        levels, then the other duties and the servos: a motor the pose stops stops
+        before its direction pin changes, one it starts starts after (never the
+        wrong way on an H-bridge; docs/protocol.md, *Pose*). A refusal, on
         the host or by the device, raises :class:`CommandRejectedError` whose
         ``output`` is the offending output.
         """

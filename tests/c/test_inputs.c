@@ -226,6 +226,63 @@ static void test_interlock_trips_latches_and_clears(void)
     CHECK_EQ(d.hal.pwm[3], 0);
 }
 
+static void test_interlock_is_told_after_the_report_of_its_edge(void)
+{
+    /* Issue 32: a host heard of the trip before the report of the press. The trip is in
+     * no message before the InputReport carrying the tripped level: not its notice, not
+     * the Ack of a Ping whose frame was arriving as it tripped (the report yields to it). */
+    tdev_t d;
+    t_active(&d);
+    uint32_t t = d.hal.now_ms + 500;
+    d.hal.level[2] = true;
+    protoduino_ArduinoIn in = m_din(1, 2, true, 0, protoduino_Trip_TRIP_LOW);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_stop(2); /* epoch 1: liveness Acks carry the failsafe state from now on */
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    const uint8_t echo[1] = {7};
+    in = m_ping(3, echo, sizeof(echo));
+    in.data.ping.failsafe_epoch = 1;
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    poll_at(&d, t);
+    fake_clear(&d.hal);
+
+    uint8_t wire[PD_MAX_ENCODED_FRAME + 1];
+    in = m_ping(4, echo, sizeof(echo));
+    in.data.ping.failsafe_epoch = 1;
+    size_t n = t_wire_in(&d, &in, wire);
+    t_feed(&d, wire, n - 1u); /* all but its delimiter: a command arriving */
+    d.hal.level[2] = false;
+    poll_at(&d, t + 1);
+    CHECK_EQ(fake_count(&d.hal), 0); /* tripped (latched), told nothing yet */
+    t_feed(&d, wire + n - 1u, 1);
+    protoduino_Ack ack;
+    CHECK_EQ(t_acks(&d, 4, &ack), 1);
+    CHECK(ack.has_failsafe);
+    CHECK(!ack.failsafe.active); /* the state before the trip */
+    CHECK_EQ(ack.failsafe.epoch, 1);
+    in = m_simple(5, protoduino_ArduinoIn_clear_interlock_tag);
+    in.data.clear_interlock.failsafe_epoch = 1;
+    d.hal.level[2] = true; /* even released at once: the host was not told of the trip */
+    fake_clear(&d.hal);
+    t_send_in(&d, &in);
+    CHECK_EQ(t_status(&d, 5), S(INTERLOCK_ACTIVE));
+    d.hal.level[2] = false;
+    fake_clear(&d.hal);
+    poll_at(&d, t + 1); /* the report, then right behind it the notice */
+    protoduino_ArduinoOut out;
+    CHECK_EQ(fake_count(&d.hal), 2);
+    CHECK(t_out(&d, 0, &out));
+    CHECK_EQ(out.which_data, protoduino_ArduinoOut_input_report_tag);
+    CHECK_EQ(out.data.input_report.digital_pins, 1u << 2);
+    CHECK_EQ(out.data.input_report.digital_levels, 0);
+    CHECK(t_out(&d, 1, &out));
+    CHECK_EQ(out.which_data, protoduino_ArduinoOut_failsafe_tag);
+    CHECK(out.data.failsafe.active);
+    CHECK_EQ(out.data.failsafe.cause, protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK);
+    CHECK_EQ(out.data.failsafe.epoch, 2);
+    CHECK_EQ(out.data.failsafe.pin, 2);
+}
+
 static void test_interlock_configured_while_tripped_trips_after_its_ack(void)
 {
     tdev_t d;
@@ -445,6 +502,7 @@ const pd_test_case_t pd_tests_inputs[] = {
     TEST_CASE(test_digital_input_level_reported_after_its_ack),
     TEST_CASE(test_digital_debounce),
     TEST_CASE(test_interlock_trips_latches_and_clears),
+    TEST_CASE(test_interlock_is_told_after_the_report_of_its_edge),
     TEST_CASE(test_interlock_configured_while_tripped_trips_after_its_ack),
     TEST_CASE(test_interlock_with_no_host_connected),
     TEST_CASE(test_analog_first_value_threshold_heartbeat),

@@ -139,9 +139,10 @@ static void arm_leds(tdev_t *d)
     }
 }
 
-/* The masks set every pin they name, after the items, in ascending pin order, in the
- * servos' one hold; pins outside digital_pins are untouched. */
-static void test_pose_masks_apply_after_the_items(void)
+/* The masks set every pin they name, in ascending pin order, in the servos' one hold,
+ * before the servos (levels before duties and widths); pins outside digital_pins are
+ * untouched. */
+static void test_pose_masks_apply_before_the_servos(void)
 {
     tdev_t d;
     arm_leds(&d);
@@ -160,12 +161,12 @@ static void test_pose_masks_apply_after_the_items(void)
     CHECK_EQ(d.hal.digital_writes[2], writes2); /* not in the mask */
     CHECK_EQ(d.hal.servo_holds, holds + 1);
     CHECK(!d.hal.servo_held);
-    /* The order: the items as listed, then the mask's pins upwards. */
-    CHECK(d.hal.written_at[6] < d.hal.written_at[3]);
-    CHECK(d.hal.written_at[3] < d.hal.written_at[4]);
+    /* The order: the mask's pins upwards, then the servo items as listed. */
     CHECK(d.hal.written_at[4] < d.hal.written_at[7]);
     CHECK(d.hal.written_at[7] < d.hal.written_at[8]);
     CHECK(d.hal.written_at[8] < d.hal.written_at[13]);
+    CHECK(d.hal.written_at[13] < d.hal.written_at[6]);
+    CHECK(d.hal.written_at[6] < d.hal.written_at[3]);
 
     /* A Pose of masks alone; a digital item beside them still counts as before. */
     in = m_pose_masks(2, NULL, 0, BIT(2) | BIT(13), BIT(2));
@@ -352,7 +353,7 @@ static void test_pose_with_speed_limits_steps_together(void)
 const pd_test_case_t pd_tests_motion[] = {
     TEST_CASE(test_pose_applies_every_item_held),
     TEST_CASE(test_pose_all_or_nothing),
-    TEST_CASE(test_pose_masks_apply_after_the_items),
+    TEST_CASE(test_pose_masks_apply_before_the_servos),
     TEST_CASE(test_pose_masks_all_or_nothing),
     TEST_CASE(test_read_outputs),
     TEST_CASE(test_speed_limit_steps_per_frame),

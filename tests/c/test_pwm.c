@@ -185,6 +185,48 @@ static void test_pwm_in_pose_and_read_outputs(void)
     CHECK_EQ(ack.result.outputs.digital_pins, 1u << 13);
 }
 
+/* Issue 32: an H-bridge's PWM and direction pins in one Pose, in any order: the duties of
+ * 0 first, then every level (the items', then the masks'), then the other duties, so that
+ * a motor stops before its direction pin changes and starts only after it changed. */
+static void test_pose_stops_then_sets_levels_then_drives(void)
+{
+    tdev_t d;
+    t_active(&d);
+    protoduino_ArduinoIn in = m_pwm_init(1, 3, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_pwm_init(2, 11, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_pwm(3, 11, 100);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_digital_init(4, 4, false);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_digital_init(5, 13, false);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    memset(&in, 0, sizeof(in));
+    in.message_id = 6;
+    in.which_data = protoduino_ArduinoIn_pose_tag;
+    in.data.pose.items_count = 3;
+    in.data.pose.items[0].which_output = protoduino_PoseItem_pwm_tag;
+    in.data.pose.items[0].output.pwm.pin = 3; /* starts */
+    in.data.pose.items[0].output.pwm.duty = 150;
+    in.data.pose.items[1].which_output = protoduino_PoseItem_digital_tag;
+    in.data.pose.items[1].output.digital.pin = 13;
+    in.data.pose.items[1].output.digital.level = true;
+    in.data.pose.items[2].which_output = protoduino_PoseItem_pwm_tag;
+    in.data.pose.items[2].output.pwm.pin = 11; /* stops */
+    in.data.pose.items[2].output.pwm.duty = 0;
+    in.data.pose.digital_pins = 1u << 4;
+    in.data.pose.digital_levels = 1u << 4;
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.pwm[3], 150);
+    CHECK_EQ(d.hal.pwm[11], 0);
+    CHECK_EQ(d.hal.digital[13], 1);
+    CHECK_EQ(d.hal.digital[4], 1);
+    CHECK(d.hal.written_at[11] < d.hal.written_at[13]);
+    CHECK(d.hal.written_at[13] < d.hal.written_at[4]);
+    CHECK(d.hal.written_at[4] < d.hal.written_at[3]);
+}
+
 static void test_device_info_lists_capabilities_and_features(void)
 {
     tdev_t d;
@@ -208,6 +250,7 @@ const pd_test_case_t pd_tests_pwm[] = {
     TEST_CASE(test_servo_timer_shared_with_pins_9_and_10),
     TEST_CASE(test_pwm_safe_duty_on_stop_and_failsafe),
     TEST_CASE(test_pwm_in_pose_and_read_outputs),
+    TEST_CASE(test_pose_stops_then_sets_levels_then_drives),
     TEST_CASE(test_device_info_lists_capabilities_and_features),
     {NULL, NULL},
 };

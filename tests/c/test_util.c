@@ -31,21 +31,27 @@ void t_feed(tdev_t *d, const uint8_t *bytes, size_t len)
     }
 }
 
-void t_send_packet(tdev_t *d, uint8_t type, uint8_t seq, const uint8_t *payload, size_t len)
+static size_t wire_packet(uint8_t type, uint8_t seq, const uint8_t *payload, size_t len,
+                          uint8_t wire[PD_MAX_ENCODED_FRAME + 1])
 {
     uint8_t raw[PD_MIN_PACKET + PD_MAX_PAYLOAD];
-    uint8_t wire[PD_MAX_ENCODED_FRAME + 1];
     size_t raw_len = 0;
 
     if (pd_packet_build(type, seq, payload, len, raw, sizeof(raw), &raw_len) != PD_PACKET_OK) {
         abort();
     }
-    size_t n = pd_cobs_encode(raw, raw_len, wire, sizeof(wire) - 1u);
+    size_t n = pd_cobs_encode(raw, raw_len, wire, PD_MAX_ENCODED_FRAME);
     if (n == 0) {
         abort();
     }
     wire[n++] = 0;
-    t_feed(d, wire, n);
+    return n;
+}
+
+void t_send_packet(tdev_t *d, uint8_t type, uint8_t seq, const uint8_t *payload, size_t len)
+{
+    uint8_t wire[PD_MAX_ENCODED_FRAME + 1];
+    t_feed(d, wire, wire_packet(type, seq, payload, len, wire));
 }
 
 void t_send_reset(tdev_t *d, uint8_t version)
@@ -81,14 +87,14 @@ void t_send_reset_next(tdev_t *d, uint32_t session, uint8_t next_id)
     d->host_seq = 1;
 }
 
-void t_send_in(tdev_t *d, const protoduino_ArduinoIn *in)
+size_t t_wire_in(tdev_t *d, const protoduino_ArduinoIn *in, uint8_t wire[PD_MAX_ENCODED_FRAME + 1])
 {
     uint8_t buf[PD_MAX_PAYLOAD];
     pb_ostream_t s = pb_ostream_from_buffer(buf, sizeof(buf));
     if (!pb_encode(&s, protoduino_ArduinoIn_fields, in)) {
         abort();
     }
-    t_send_packet(d, PD_PACKET_COMMAND, d->host_seq++, buf, s.bytes_written);
+    size_t n = wire_packet(PD_PACKET_COMMAND, d->host_seq++, buf, s.bytes_written, wire);
     if (in->message_id >= 1u && in->message_id <= PD_MAX_MESSAGE_ID) {
         uint32_t ahead = (in->message_id + PD_MAX_MESSAGE_ID - (d->last_id ? d->last_id : PD_MAX_MESSAGE_ID)) %
                          PD_MAX_MESSAGE_ID;
@@ -96,6 +102,13 @@ void t_send_in(tdev_t *d, const protoduino_ArduinoIn *in)
             d->last_id = (uint8_t)in->message_id;
         }
     }
+    return n;
+}
+
+void t_send_in(tdev_t *d, const protoduino_ArduinoIn *in)
+{
+    uint8_t wire[PD_MAX_ENCODED_FRAME + 1];
+    t_feed(d, wire, t_wire_in(d, in, wire));
 }
 
 bool t_out(const tdev_t *d, size_t i, protoduino_ArduinoOut *out)

@@ -39,6 +39,9 @@ void t_send_reset_session(tdev_t *d, uint32_t session);
 void t_send_reset_next(tdev_t *d, uint32_t session, uint8_t next_id);
 /* Encode and send one ArduinoIn as a COMMAND with the host's next SEQ. */
 void t_send_in(tdev_t *d, const protoduino_ArduinoIn *in);
+/* The same frame, delimiter last, into `wire` (the host's SEQ and ids move on as if
+ * sent): its length. For a test that feeds it in parts. */
+size_t t_wire_in(tdev_t *d, const protoduino_ArduinoIn *in, uint8_t wire[PD_MAX_ENCODED_FRAME + 1]);
 
 /* Decode frame i as an ArduinoOut; false if it is not a DATA frame that decodes. */
 bool t_out(const tdev_t *d, size_t i, protoduino_ArduinoOut *out);

@@ -34,6 +34,7 @@ from protoduino.messages import ArduinoIn, Status, parse_out
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard, runner_command
 from protoduino_dev import build
+from simfixtures import wait_for_pin, wait_until
 
 #: Bounds a failing test's wait only; the verdicts are the trace's.
 BOUND = 30.0
@@ -123,6 +124,45 @@ def test_pose_sets_pwm_with_the_others_and_the_failsafe_makes_it_safe(sim: SimBo
         assert event.details["active"] and event.details["cause"] == "ping_timeout"
         wait_pwm(sim, 11, lambda v: v[-1:] == [7], since=mark)
         assert motor.value == 7
+
+
+def _first(lines: list[dict[str, Any]], pin: int, ok: Callable[[dict[str, Any]], bool]) -> Any:
+    """When ``pin`` first took a value ``ok`` accepts in ``lines``: (board time, line), so
+    that changes at one instant keep the order the board wrote them in."""
+    return next((e["t"], i) for i, e in enumerate(lines) if e["pin"] == pin and ok(e))
+
+
+def test_a_pose_never_drives_a_motor_the_wrong_way(sim: SimBoard) -> None:
+    """Issue 32: an H-bridge's direction pin and its PWM in one pose, listed either way.
+    Started in the other direction, the direction pin changes before the duty leaves 0;
+    stopped with the direction flipped back, the duty is 0 before the direction pin
+    changes. Judged at the pins on the board's clock (the trace's t)."""
+    with Board.open(sim.port) as board:
+        motor = board.pwm_output(3, safe=0)
+        ahead = board.digital_output(4, safe=True)  # the direction pin: high, forward
+        wait_for_pin(sim, 4, lambda v: v[-1:] == [1])
+        for ahead_first in (False, True):
+            mark = len(sim.trace())
+            start: dict[protoduino.board.PoseOutput, int | bool] = (
+                {ahead: False, motor: 180} if ahead_first else {motor: 180, ahead: False}
+            )
+            board.pose(start)  # backwards
+            wait_pwm(sim, 3, lambda v: v[-1:] == [180], since=mark)
+            lines = sim.trace()[mark:]
+            turned = _first(lines, 4, lambda e: e["value"] == 0)
+            runs = _first(lines, 3, lambda e: e.get("mode") == "pwm" and e["value"] > 0)
+            assert turned <= runs, f"the duty left 0 at {runs}, the direction turned at {turned}"
+            mark = len(sim.trace())
+            stop: dict[protoduino.board.PoseOutput, int | bool] = (
+                {ahead: True, motor: 0} if ahead_first else {motor: 0, ahead: True}
+            )
+            board.pose(stop)  # stopped, facing forward again
+            wait_for_pin(sim, 4, lambda v: v[-1:] == [1])
+            wait_pwm(sim, 3, lambda v: v[-1:] == [0], since=mark)
+            lines = sim.trace()[mark:]
+            stopped = _first(lines, 3, lambda e: e.get("mode") == "pwm" and e["value"] == 0)
+            turned = _first(lines, 4, lambda e: e["value"] == 1)
+            assert stopped <= turned, f"the direction turned at {turned}, the duty 0 at {stopped}"
 
 
 def _request(board: Board, msg: ArduinoIn) -> int:
@@ -340,6 +380,39 @@ def test_the_bumper_stops_the_motor_within_1_ms_at_any_phase(sim: SimBoard) -> N
             _wait_trips(seen, trial + 1)
     slow = [f"{r * 1e6:.0f} us" for r in reactions if r > 0.001]
     assert not slow, f"{len(slow)} of {BUMPER_TRIALS} hits took over 1 ms: {slow}"
+
+
+#: Bumper trips per board in the event-order test (issue 32 saw 9 of 10 wrong on one board).
+EVENT_ORDER_TRIPS = 6
+
+
+def test_the_bumper_reads_pressed_when_its_failsafe_event_is_delivered(sim: SimBoard) -> None:
+    """Issue 32: the interlock's FAILSAFE event reached the host before the report of the
+    press, so at the event the bumper still read "released" and docs/api.md's recovery
+    (wait for the release, then clear_interlock) was refused. Judged by events: what the
+    board's view of the input says inside the event's own callback, trip after trip."""
+    with Board.open(sim.port) as board:
+        motor = board.pwm_output(3, safe=0)
+        sim.set_level(2, 1)
+        bumper = board.digital_input(2, pull_up=True, interlock="low")
+        at_event: list[bool | None] = []
+
+        def on_event(event: Event) -> None:
+            if event.kind is EventKind.FAILSAFE and event.details["cause"] == "interlock":
+                at_event.append(bumper.read())
+
+        def heard(trips: int) -> Callable[[], bool]:
+            return lambda: len(at_event) >= trips
+
+        board.on_event(on_event)
+        for trip in range(EVENT_ORDER_TRIPS):
+            motor.write(200)
+            sim.set_level(2, 0)  # pressed
+            assert wait_until(heard(trip + 1), BOUND), "no interlock event"
+            sim.set_level(2, 1)  # released: the pattern of docs/api.md
+            assert bumper.wait_for(True, timeout=BOUND) is True
+            board.clear_interlock()  # refused when the wait above saw the stale level
+        assert at_event == [False] * EVENT_ORDER_TRIPS
 
 
 def test_aio_inputs_without_blocking_the_loop(sim: SimBoard) -> None:

@@ -48,6 +48,8 @@
  * The stats line also states UART0's byte time and rate as the firmware set
  * them last (uart_byte_cycles, uart_baud: they follow a mid-run UBRR0 write,
  * the line rate's agreement), and the bytes --line-* options lost each way.
+ * extint counts the edges the control socket drives on INT0 and INT1, those
+ * lost, and the cycles each waited for its vector (pd_extint_t).
  *
  * --line-check, --line-max BAUD, --line-max-out BAUD (firmware/simcontrol/pd_linerate.h,
  * as the native board): a byte crosses the pty only if the host's termios rate is
@@ -119,6 +121,11 @@
 #define PD_STREAM_NS 1000000ULL
 #define PD_MCUSR_ADDR 0x54     /* ATmega328P MCUSR in data space */
 #define PD_MCUSR_EXTRF 0x02
+/* ATmega328P external interrupts in data space: EIFR, EIMSK, EICRA (ISCn1:ISCn0 per INTn). */
+#define PD_EIFR_ADDR 0x3C
+#define PD_EIMSK_ADDR 0x3D
+#define PD_EICRA_ADDR 0x69
+#define PD_EXTINTS 2 /* INT0 on D2, INT1 on D3: their vectors are 1 and 2 */
 /* The port is announced after this much emulated time: whatever the firmware
  * sends at power-up (EVENT BOOT) is then already in the pty and is flushed by
  * the client's open(), as with the native board, instead of being cut in half
@@ -170,6 +177,24 @@ typedef struct {
 } pd_fifo_t;
 
 #define PD_MAX_MARKS 8 /* --mark addresses */
+
+/*
+ * An external interrupt (INT0, INT1) as the inputs the control socket drives meet it (in
+ * --stats: "extint"): the edges that set its flag, those lost (one came while the flag of
+ * the one before was still set: its vector not reached yet, so the hardware merged them),
+ * and the cycles from an edge to its vector, the most of them with the flash byte address
+ * the MCU was at when that edge came (what held the interrupt off: map it with avr-nm).
+ */
+typedef struct {
+    uint64_t edges;
+    uint64_t lost;
+    uint64_t served;
+    uint64_t latency_sum;
+    uint64_t latency_max;
+    uint32_t latency_max_pc;
+    uint64_t raised_at; /* cycle of the edge waiting for its vector; 0: none */
+    uint32_t raised_pc;
+} pd_extint_t;
 
 typedef struct {
     avr_t *avr;
@@ -230,6 +255,7 @@ typedef struct {
     size_t profile_words;
     pd_control_t control;
     pd_input_t input[PD_PINS_COUNT];
+    pd_extint_t extint[PD_EXTINTS];
     uint8_t ext_mask[3]; /* per port: pins held by the control socket */
     uint8_t ext_value[3];
     int owner_fd; /* --owner-fd: the owner's pipe, or -1 */
@@ -361,6 +387,49 @@ static void pd_oc_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 
 /* --- inputs driven through the control socket -------------------------- */
 
+static uint8_t pd_pin_reads(pd_sim_t *sim, int pin);
+
+/* INTn's pin went from `was` to `level`: an edge its sense (EICRA) counts, if enabled. */
+static void pd_extint_edge(pd_sim_t *sim, int n, uint8_t was, uint8_t level)
+{
+    const uint8_t *data = sim->avr->data;
+    uint8_t bit = (uint8_t)(1U << n);
+    uint8_t sense = (uint8_t)((data[PD_EICRA_ADDR] >> (2 * n)) & 3U); /* 1 any, 2 fall, 3 rise */
+    if (!(data[PD_EIMSK_ADDR] & bit) || sense == 0 || was == level ||
+        (sense == 2 && level) || (sense == 3 && !level)) {
+        return;
+    }
+    pd_extint_t *x = &sim->extint[n];
+    if (x->raised_at && !(data[PD_EIFR_ADDR] & bit)) {
+        x->raised_at = 0; /* the firmware cleared the flag (EIFR): no vector to wait for */
+    }
+    x->edges++;
+    if (x->raised_at) {
+        x->lost++;
+        return;
+    }
+    x->raised_at = pd_cycles(sim);
+    x->raised_pc = sim->avr->pc;
+}
+
+/* The MCU is at `pc`: an INTn vector there serves its waiting edge. */
+static void pd_extint_check(pd_sim_t *sim, avr_flashaddr_t pc)
+{
+    for (int n = 0; n < PD_EXTINTS; n++) {
+        pd_extint_t *x = &sim->extint[n];
+        if (x->raised_at && pc == (avr_flashaddr_t)(n + 1) * sim->avr->vector_size) {
+            uint64_t latency = pd_cycles(sim) - x->raised_at;
+            x->served++;
+            x->latency_sum += latency;
+            if (latency > x->latency_max) {
+                x->latency_max = latency;
+                x->latency_max_pc = x->raised_pc;
+            }
+            x->raised_at = 0;
+        }
+    }
+}
+
 /* Hold `pin` at `level` as the outside world would. */
 static void pd_drive(pd_sim_t *sim, int pin, uint8_t level)
 {
@@ -377,9 +446,13 @@ static void pd_drive(pd_sim_t *sim, int pin, uint8_t level)
                                  .mask = sim->ext_mask[idx],
                                  .value = sim->ext_value[idx]};
     avr_ioctl(sim->avr, AVR_IOCTL_IOPORT_SET_EXTERNAL(port->name), &ext);
+    uint8_t was = pd_pin_reads(sim, pin);
     sim->input[pin].driven = 1;
     sim->input[pin].level = level;
     avr_raise_irq(avr_io_getirq(sim->avr, AVR_IOCTL_IOPORT_GETIRQ(port->name), bit), level);
+    if (pin == 2 || pin == 3) {
+        pd_extint_edge(sim, pin - 2, was, level);
+    }
 }
 
 /* The level the MCU reads on `pin` now (PIN register bit). */
@@ -616,7 +689,7 @@ static void pd_write_stats(pd_sim_t *sim)
             "\"rx_lag_max\": %llu, \"answers\": %llu, \"answer_cycles\": %llu, "
             "\"start_ns\": %llu, \"uart_byte_cycles\": %llu, \"uart_baud\": %u, "
             "\"line_lost_in\": %llu, \"line_lost_out\": %llu, \"marks\": %llu, "
-            "\"mark_cycles\": %llu}\n",
+            "\"mark_cycles\": %llu, \"extint\": [",
             (double)cycles / (double)sim->avr->frequency, (unsigned)sim->avr->frequency,
             (unsigned long long)cycles, (unsigned long long)sleep,
             (unsigned long long)(cycles - sleep), (unsigned long long)sim->uart_rx,
@@ -628,6 +701,16 @@ static void pd_write_stats(pd_sim_t *sim)
             (unsigned)pd_uart_baud(sim), (unsigned long long)sim->line.lost_in,
             (unsigned long long)sim->line.lost_out, (unsigned long long)sim->marks,
             (unsigned long long)sim->mark_cycles);
+    for (int n = 0; n < PD_EXTINTS; n++) {
+        const pd_extint_t *x = &sim->extint[n];
+        fprintf(sim->stats,
+                "%s{\"edges\": %llu, \"lost\": %llu, \"served\": %llu, \"latency_sum\": %llu, "
+                "\"latency_max\": %llu, \"latency_max_pc\": %lu}",
+                n ? ", " : "", (unsigned long long)x->edges, (unsigned long long)x->lost,
+                (unsigned long long)x->served, (unsigned long long)x->latency_sum,
+                (unsigned long long)x->latency_max, (unsigned long)x->latency_max_pc);
+    }
+    fprintf(sim->stats, "]}\n");
     fflush(sim->stats);
 }
 
@@ -766,6 +849,9 @@ static void pd_after_reset(pd_sim_t *sim)
 {
     sim->reset_seen = 0;
     pd_tame_extint(sim);
+    for (int n = 0; n < PD_EXTINTS; n++) {
+        sim->extint[n].raised_at = 0; /* a reset clears the flags */
+    }
     sim->rx_timer = 0; /* a reset cancels every cycle timer */
     sim->pace_at = 0;
     pd_start_rx(sim);
@@ -1217,6 +1303,7 @@ static void pd_run(pd_sim_t *sim)
                 } else if (sim->mark_from && pc == sim->mark_from) {
                     sim->mark_at = pd_cycles(sim);
                 }
+                pd_extint_check(sim, pc);
                 int state = pd_run_one(sim);
                 pd_track_sp(sim, pc);
                 if (sim->reset_seen) {
