@@ -17,8 +17,8 @@ failsafe_timeout: 1.0        # s, 0.1..60: the device's failsafe (below)
 diagnostics_period: 1.0      # s between /diagnostics reports
 min_publish_rate: 1.0        # Hz: each input is published at least this often, changed or not
 servos:                      # a std_msgs/Float64 topic in degrees, a joint name, or both
-  - {pin: 9, topic: servo/pan, joint: pan, safe: 90, max_speed: 120}   # degrees/s
-  - {pin: 10, joint: tilt, safe: 45, min_us: 544, max_us: 2400, zero: 90}
+  - {pin: 9, topic: servo/pan, joint: pan, safe: 90}
+  - {pin: 10, joint: tilt, safe: 45, min_us: 544, max_us: 2400, zero: 90, max_speed: 120}
 joint_topic: joint_commands  # the arm's sensor_msgs/JointState (every servo with a joint)
 digital_outputs:             # std_msgs/Bool
   - {pin: 13, topic: led, safe: false}
