@@ -15,7 +15,7 @@ namespace: robot1            # topics are /robot1/...; one namespace per board
 # domain_id: 0               # optional: else $ROS_DOMAIN_ID, else 0 (--domain-id overrides)
 failsafe_timeout: 1.0        # s, 0.1..60: the device's failsafe (below)
 diagnostics_period: 1.0      # s between /diagnostics reports
-min_publish_rate: 1.0        # Hz: each input is published at least this often, changed or not
+min_publish_rate: 1.0        # Hz, 0.01..100: each input published at least this often
 servos:                      # a std_msgs/Float64 topic in degrees, a joint name, or both
   - {pin: 9, topic: servo/pan, joint: pan, safe: 90}
   - {pin: 10, joint: tilt, safe: 45, min_us: 544, max_us: 2400, zero: 90, max_speed: 120}
