@@ -862,7 +862,7 @@ def test_stop_latches_until_resume() -> None:
         def stop(self) -> None:
             raise AckTimeoutError("no Ack")
 
-    bridge.board = DeafBoard()  # type: ignore[assignment]
+    bridge.board = DeafBoard()
     bridge._take(control(bridge._on_stop))  # its outcome unknown: latched all the same
     bridge._take(servo(50.0))
     assert done == [10, 40] and bridge.health.stop_latched
