@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import itertools
 import os
 import random
 import signal
@@ -169,6 +170,11 @@ def peer_type(ros: str) -> Any:
 
             @classmethod
             def deserialize(cls, data: bytes, **_: Any) -> Any:
+                return cls(Cdr(ros, bytes(data)))
+
+            @classmethod
+            def deserialize_key(cls, data: bytes, **_: Any) -> Any:
+                """An instance's state change (its writer gone): a key, no data."""
                 return cls(Cdr(ros, bytes(data)))
 
         _PEERS[ros] = Peer
@@ -328,8 +334,9 @@ stop: {{topic: stop, type: Empty}}
 
 
 def _diagnostics(reader: DataReader[Any], box: list[Any]) -> list[Any]:
-    """Every /diagnostics sample so far (decoded by rosbags), kept in ``box``."""
-    box += [s.cdr.decode() for s in reader.take(N=100)]
+    """Every /diagnostics sample so far (decoded by rosbags), kept in ``box``; a state change
+    without data (a bridge's writer gone) is none."""
+    box += [s.cdr.decode() for s in reader.take(N=100) if s.sample_info.valid_data]
     return box
 
 
@@ -844,3 +851,197 @@ def test_a_twist_older_than_the_timeout_is_stale_on_arrival(
     cmd_vel(_twist(0.3, 0.0))  # fresh: 153
     wait_for_pin(sim, 3, now_at(153))
     assert 102 not in pin_values(sim.trace(), 3)
+
+
+# --- issue 33: inputs never stale, STOP latches, servo speed, the last report, --control ----
+
+
+def test_a_lost_input_sample_is_repaired_at_the_minimum_rate(
+    sim_board: SimBoard, graph: Graph, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The battery's change to 7.0 V is lost on its way out (dropped on purpose, once, where
+    the bridge hands it to DDS), and the input stays constant: the bridge publishes it again
+    at min_publish_rate (1 Hz by default), so the subscriber gets 7.0 V with no change at the
+    input. Before, a lost best-effort sample was never repaired: the node kept the old value."""
+    import threading
+
+    sim = sim_board
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+    ns = _namespace(sim, "refresh")
+    with _in_process_bridge(sim.port, _config(INPUTS.format(ns=ns, failsafe=1.0))) as bridge:
+        battery = graph.subscriber(f"/{ns}/battery", "std_msgs/msg/Float32", BEST_EFFORT)
+        assert bridge._inputs is not None
+        last = bridge._inputs.topics["battery"]
+        send, dropped = last._publish, threading.Event()
+
+        def lossy(message: Any) -> None:
+            if not dropped.is_set() and abs(message.data - 7.0) < 1e-4:
+                dropped.set()  # the network lost it
+                return
+            send(message)
+
+        last._publish = lossy
+        sim.set_analog(14, 700)
+        _until(dropped.is_set, "the change's sample (dropped)")
+        values: list[float] = []
+
+        def repaired() -> bool:
+            values.extend(s.cdr.decode().data for s in battery.take(N=100))
+            return any(abs(v - 7.0) < 1e-4 for v in values)
+
+        _until(repaired, "7.0 V at the subscriber, published again")
+
+
+LATCH = """
+namespace: {ns}
+failsafe_timeout: 1.0
+diagnostics_period: 0.5
+drive:
+  wheel_base: 0.2
+  max_speed: 0.5
+  timeout: 30.0
+  left: {{pwm: 3, direction: 4}}
+  right: {{pwm: 11, direction: 12}}
+"""
+
+
+def test_stop_latches_until_resume(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """After a STOP, the next Twist (a 10 Hz node's, 100 ms later) drives nothing: held and
+    counted, the motors at 0 at the pins, until an Empty on resume; then a Twist drives."""
+    sim = sim_board
+    ns = _namespace(sim, "latch")
+    run_bridge(LATCH.format(ns=ns))
+    diag = graph.subscriber("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+    stop = graph.publisher(f"/{ns}/stop", "std_msgs/msg/Empty")
+    empty = ros("std_msgs/msg/Empty", structure_needs_at_least_one_member=0)
+    cmd_vel(_twist(0.2, 0.0))  # 102
+    wait_for_pin(sim, 3, now_at(102))
+    stop(empty)
+    wait_for_pin(sim, 3, now_at(0))
+    wait_for_pin(sim, 11, now_at(0))
+    stopped = len(pin_values(sim.trace(), 3))
+    cmd_vel(_twist(0.3, 0.0))  # 153, if it drove
+    box: list[Any] = []
+
+    def held_or_driven() -> bool:
+        statuses = [_status(a, ns, "bridge") for a in _diagnostics(diag, box)]
+        held = any(s and int(s.get("held_by_stop", "0")) >= 1 for s in statuses)
+        return held or 153 in pin_values(sim.trace(), 3)[stopped:]
+
+    _until(held_or_driven, "the Twist held (or driving pin 3)")
+    assert pin_values(sim.trace(), 3)[stopped:] == [], "a Twist after STOP drove the motor"
+    latched = _wait_diag(diag, ns, "bridge", lambda s: s["stop_latched"] == "true")
+    assert latched["_level"] == "1", latched  # WARN while latched
+    resume = graph.publisher(f"/{ns}/resume", "std_msgs/msg/Empty")
+    resume(empty)
+    _wait_diag(diag, ns, "bridge", lambda s: s["stop_latched"] == "false")
+    assert pin_values(sim.trace(), 3)[stopped:] == []  # a resume moves nothing by itself
+    cmd_vel(_twist(0.3, 0.0))
+    wait_for_pin(sim, 3, now_at(153))
+    wait_for_pin(sim, 11, now_at(153))
+
+
+SLOW_SERVO = """
+namespace: {ns}
+failsafe_timeout: 1.0
+servos:
+  - {{pin: 9, topic: pan, safe: 90, max_speed: 90}}
+"""
+
+
+def test_a_servo_max_speed_from_robot_yaml_moves_it_smoothly(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """``max_speed: 90`` (degrees/s) in robot.yaml: 90 -> 0 degrees from a Float64 takes the
+    device about a second of its clock, in steps of at most one frame's (19 us per 20 ms),
+    instead of one jump."""
+    sim = sim_board
+    ns = _namespace(sim, "smooth")
+    run_bridge(SLOW_SERVO.format(ns=ns))
+    pan = graph.publisher(f"/{ns}/pan", "std_msgs/msg/Float64")
+    wait_for_pin(sim, 9, now_at(SAFE_90_US))
+    start = len([c for c in sim.trace() if c["pin"] == 9])
+    pan(ros("std_msgs/msg/Float64", data=0.0))
+    wait_for_pin(sim, 9, now_at(to_us(0)))
+    moves = [c for c in sim.trace() if c["pin"] == 9][start:]
+    widths = [SAFE_90_US] + [int(c["value"]) for c in moves]
+    steps = [a - b for a, b in itertools.pairwise(widths)]
+    # 90 degrees/s over the 1856 us span: 928 us/s, kept as 19 us per 20 ms frame (950 us/s).
+    assert all(0 < step <= 19 for step in steps), steps
+    assert len(steps) >= (SAFE_90_US - to_us(0)) // 19, steps
+    assert moves[-1]["t"] - moves[0]["t"] >= 0.9, (moves[0], moves[-1])
+
+
+def test_a_clean_shutdown_publishes_a_last_diagnostics(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """SIGTERM: the last /diagnostics a node sees says the bridge shut down with the outputs
+    safe (bridge and link STALE), not "link active"."""
+    sim = sim_board
+    ns = _namespace(sim, "shutdown")
+    bridge = run_bridge(ARM.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    diag = graph.subscriber("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    box: list[Any] = []
+
+    def ours() -> list[Any]:
+        return [a for a in _diagnostics(diag, box) if _status(a, ns, "link") is not None]
+
+    _until(lambda: bool(ours()), "a /diagnostics report")
+    bridge.stop()
+    assert bridge.proc.returncode == 0, bridge.output()
+    # The bridge waited for this reader's acks before it exited: every sample is here.
+    last = {s.name.split(": ")[-1]: s for s in ours()[-1].status}
+    assert last["bridge"].level == 3, last["bridge"]
+    assert last["bridge"].message == "shut down: every output driven safe by the device's Stop"
+    assert last["link"].level == 3 and last["link"].message == "link closed", last["link"]
+
+
+@pytest.mark.parametrize("backend", ["native", "avr"])
+def test_ros2_sim_control_presses_the_example_robots_bumper(
+    backend: str, graph: Graph, tmp_path: Path
+) -> None:
+    """The one-command demo, ``protoduino ros2 --sim --control PATH``: the example robot
+    drives, its bumper pressed through the control socket stops both motors at the pins on
+    the device (its interlock), and /diagnostics says so."""
+    import shutil
+
+    from protoduino.simcontrol import SimControl
+    from simfixtures import _NEEDS
+
+    for tool in _NEEDS[backend]:
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} is not installed (needed to build the {backend} board)")
+    control, trace, log = tmp_path / "ctl.sock", tmp_path / "trace.jsonl", tmp_path / "out.log"
+    env = dict(os.environ, CYCLONEDDS_URI=LOOPBACK)
+    argv = [sys.executable, "-m", "protoduino.cli.main", "ros2", "--sim", backend]
+    argv += ["--control", str(control), "--trace", str(trace), "--domain-id", str(DOMAIN)]
+    with log.open("w") as out:
+        proc = subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, env=env)
+    try:
+        _until(lambda: "topics:" in log.read_text() or proc.poll() is not None, "the bridge")
+        assert proc.poll() is None, log.read_text()
+
+        def pin(number: int) -> list[int]:
+            import json
+
+            return pin_values([json.loads(x) for x in trace.read_text().splitlines()], number)
+
+        diag = graph.subscriber("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+        cmd_vel = graph.publisher("/robot1/cmd_vel", "geometry_msgs/msg/Twist")
+        cmd_vel(_twist(0.25, 0.0))
+        _until(lambda: pin(3)[-1:] == [128] and pin(11)[-1:] == [128], "the motors")
+        with SimControl(control) as sim:
+            sim.level(7, 0)  # the bumper hits something
+        _until(lambda: pin(3)[-1:] == [0] and pin(11)[-1:] == [0], "the motors stopped")
+        tripped = _wait_diag(diag, "robot1", "failsafe", lambda s: s["cause"] == "interlock")
+        assert tripped["active"] == "true", tripped
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()

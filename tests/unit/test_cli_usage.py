@@ -72,6 +72,7 @@ BAD: list[tuple[list[str], str]] = [
     (["ros2", P, "--sim"], "give a PORT or --sim"),
     (["ros2", "--sim", "foo"], "invalid choice: 'foo'"),
     (["ros2", P, "--config", "robot.yaml", "--trace", "t.jsonl"], "--trace is the simulated"),
+    (["ros2", P, "--config", "robot.yaml", "--control", "c.sock"], "--control is the simulated"),
     (["ros2", P, "--config", "robot.yaml", "--domain-id", "-1"], "-1 is out of range"),
     (["soak", "--backend", "foo"], "invalid choice: 'foo'"),
     (["soak", "--commands", "-1"], "-1 is out of range"),

@@ -29,7 +29,7 @@ from protoduino.ros2.config import (
     parse_config,
 )
 from protoduino.ros2.dds import dds_topic, ros_topic
-from protoduino.ros2.diagnostics import ERROR, OK, WARN, Health
+from protoduino.ros2.diagnostics import ERROR, OK, STALE, WARN, Health
 from protoduino.ros2.drive import (
     DiffDrive,
     Motor,
@@ -39,6 +39,7 @@ from protoduino.ros2.drive import (
     wheel_speeds,
 )
 from protoduino.ros2.inputs import (
+    LastPublished,
     analog_message,
     bool_message,
     counters_message,
@@ -100,6 +101,19 @@ def test_the_example_robot_is_the_one_docs_show() -> None:
     assert config.drive is not None and config.counters[0].pins == (2,)
     assert {s.pin for s in config.servos} == {9, 10}  # Timer1: no PWM on 9 and 10, so
     assert {config.drive.left.pwm, config.drive.right.pwm} == {3, 11}  # the drive is on Timer2
+    # A copied robot stops on its bumper, on the device (issue 33).
+    assert [(d.topic, d.interlock) for d in config.digital_inputs] == [("bumper", "low")]
+
+
+def test_servo_speed_limits_input_rate_and_resume_topic() -> None:
+    """robot.yaml takes a servo's max_speed (degrees/s, Board.servo's), the inputs' minimum
+    publish rate (1 Hz by default) and the topic that releases a STOP (issue 33)."""
+    config = parse_config(_with(servos=[{"pin": 9, "topic": "pan", "max_speed": 60}]))
+    assert config.servos[0].max_speed == 60.0
+    assert parse_config(FULL).servos[0].max_speed is None  # no limit unless given
+    assert config.min_publish_rate == 1.0 and config.stop.resume_topic == "resume"
+    config = parse_config(_with(min_publish_rate=5, stop={"resume_topic": "go"}))
+    assert config.min_publish_rate == 5.0 and config.stop.resume_topic == "go"
 
 
 def test_the_yaml_file(tmp_path: Path) -> None:
@@ -149,6 +163,10 @@ def _with(**changes: Any) -> dict[str, Any]:
         (_with(servos=[{"pin": 9, "joint": "j"}, {"pin": 8, "joint": "j"}]), "joint name"),
         (_with(servos=[{"pin": p, "joint": f"j{p}"} for p in range(20, 29)]), "at most 8"),
         (_with(stop={"type": "String"}), "one of Empty, Bool"),
+        (_with(servos=[{"pin": 9, "topic": "a", "max_speed": 0}]), "max_speed must be above 0"),
+        (_with(servos=[{"pin": 9, "topic": "a", "max_speed": "fast"}]), "must be a number"),
+        (_with(min_publish_rate=0), "min_publish_rate must be >= 0.01"),
+        (_with(stop={"resume_topic": "led"}), "topic 'led' is both"),
         (_with(drive={**FULL["drive"], "wheel_base": None}), "wheel_base is required"),
         (_with(namespace="a b"), "not a ROS 2 topic name"),
         (_with(drive={**FULL["drive"], "max_speed": 0}), "max_speed must be above 0"),
@@ -632,6 +650,61 @@ def test_inputs_are_wired_to_their_topics() -> None:
     assert len(sent["bumper"]) == 3
 
 
+class ManualClock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_an_unchanged_input_is_published_again_at_the_minimum_rate() -> None:
+    """A best-effort sample lost on the network (here: the first message of the change, dropped
+    on purpose) is repaired by the next refresh, one period after it went out (issue 33)."""
+    clock = ManualClock()
+    arrived: list[Any] = []
+    lost = [msgs.Float32(7.0)]  # the sample the network loses
+
+    def lossy(message: Any) -> None:
+        if lost and message == lost[0]:
+            lost.pop()
+        else:
+            arrived.append(message)
+
+    last = LastPublished(lossy, clock)
+    assert last.refresh(1.0) == 101.0 and arrived == []  # nothing to publish yet
+    last(msgs.Float32(5.0))
+    last(msgs.Float32(7.0))  # lost
+    assert arrived == [msgs.Float32(5.0)]
+    clock.now = 100.5
+    assert last.refresh(1.0) == 101.0 and arrived == [msgs.Float32(5.0)]  # not yet due
+    clock.now = 101.0
+    assert last.refresh(1.0) == 102.0  # due: repaired
+    assert arrived == [msgs.Float32(5.0), msgs.Float32(7.0)]
+    clock.now = 101.5
+    last.again()  # a new subscriber's copy counts as published: the next is a period later
+    assert last.refresh(1.0) == 102.5 and len(arrived) == 3
+
+
+def test_the_bridge_refreshes_every_input_at_its_configured_rate() -> None:
+    from protoduino.ros2.bridge import Bridge
+    from protoduino.ros2.inputs import Wiring
+
+    clock = ManualClock()
+    bridge = Bridge("unused", parse_config({"min_publish_rate": 4}), clock=clock)
+    sent: dict[str, list[Any]] = {"a": [], "b": []}
+    topics = {name: LastPublished(out.append, clock) for name, out in sent.items()}
+    bridge._inputs = Wiring([], topics)
+    topics["a"](msgs.Bool(True))
+    clock.now += 0.125
+    topics["b"](msgs.Bool(False))
+    assert bridge._refresh_inputs() == 100.25  # a's is due first
+    clock.now = 100.25
+    assert bridge._refresh_inputs() == 100.375 and len(sent["a"]) == 2 and len(sent["b"]) == 1
+    clock.now = 100.375
+    assert bridge._refresh_inputs() == 100.5 and len(sent["b"]) == 2
+
+
 # --- /diagnostics ---------------------------------------------------------------------
 
 
@@ -663,6 +736,8 @@ def test_diagnostics() -> None:
             "superseded": "0",
             "refused_by_device": "0",
             "stops": "0",
+            "stop_latched": "false",
+            "held_by_stop": "0",
             "cmd_vel_stale_stops": "0",
             "interlock_clears": "0",
         },
@@ -683,6 +758,21 @@ def test_diagnostics() -> None:
     assert _by_name(health.report(_stats()))["protoduino r1: bridge"][0] == OK
     health.event(Event(EventKind.FAILSAFE, "over", {"active": False, "cause": "none"}))
     assert _by_name(health.report(_stats()))["protoduino r1: failsafe"][0] == OK
+
+
+def test_a_latched_stop_and_a_shutdown_are_reported() -> None:
+    health = Health("protoduino r1", "/dev/ttyACM0")
+    health.latch(True)
+    health.count("held", 2)
+    level, bridge = _by_name(health.report(_stats()))["protoduino r1: bridge"]
+    assert level == WARN and bridge["stop_latched"] == "true" and bridge["held_by_stop"] == "2"
+    health.latch(False)
+    assert _by_name(health.report(_stats()))["protoduino r1: bridge"][0] == OK
+    health.shut_down(True)
+    report = {s.name: s for s in health.report(_stats(state="closed")).status}
+    assert report["protoduino r1: link"].level == STALE
+    assert report["protoduino r1: bridge"].level == STALE
+    assert report["protoduino r1: bridge"].message.startswith("shut down: every output")
 
 
 def test_the_report_is_stamped_with_the_wall_clock() -> None:
@@ -727,6 +817,55 @@ def test_the_newest_valid_command_of_a_topic_wins_and_bad_ones_are_counted() -> 
     assert dict(bridge.health.bad) == {"/pan: undecodable": 1, "/pan: invalid": 2}
     bridge._take(_Route("/pan", FakeReader([]), prepare))  # type: ignore[arg-type]
     assert done == [30]  # nothing waiting: nothing sent
+
+
+class StopBoard:
+    def __init__(self) -> None:
+        self.stops = 0
+
+    def stop(self) -> None:
+        self.stops += 1
+
+
+def test_stop_latches_until_resume() -> None:
+    """After a STOP every command is held (counted, nothing sent) until a resume; a resume
+    moves nothing itself (issue 33: a 10 Hz node's next Twist must not drive again)."""
+    from protoduino.ros2.bridge import Bridge, _Route
+
+    bridge = Bridge("unused", parse_config({}))
+    board = StopBoard()
+    bridge.board = board  # type: ignore[assignment]
+    done: list[float] = []
+
+    def servo(degrees: float) -> _Route:
+        def prepare(message: msgs.Float64) -> Callable[[], None]:
+            value = servo_degrees(message.data)
+            return lambda: done.append(value)
+
+        return _Route("/pan", FakeReader([msgs.Float64(degrees)]), prepare)  # type: ignore[arg-type]
+
+    def control(prepare: Any) -> _Route:
+        return _Route("/c", FakeReader([msgs.Empty()]), prepare, held=False)  # type: ignore[arg-type]
+
+    bridge._take(servo(10.0))
+    bridge._take(control(bridge._on_stop))
+    assert board.stops == 1 and done == [10]
+    bridge._take(servo(20.0))
+    bridge._take(servo(30.0))
+    assert done == [10] and bridge.health.held == 2 and bridge.health.stop_latched
+    bridge._take(control(bridge._on_resume))
+    assert done == [10] and board.stops == 1 and not bridge.health.stop_latched
+    bridge._take(servo(40.0))
+    assert done == [10, 40]
+
+    class DeafBoard(StopBoard):
+        def stop(self) -> None:
+            raise AckTimeoutError("no Ack")
+
+    bridge.board = DeafBoard()
+    bridge._take(control(bridge._on_stop))  # its outcome unknown: latched all the same
+    bridge._take(servo(50.0))
+    assert done == [10, 40] and bridge.health.stop_latched
 
 
 # --- the command line -----------------------------------------------------------------
@@ -783,12 +922,29 @@ def test_a_clean_close_stops_the_outputs_before_closing_the_board() -> None:
         def close(self) -> None:
             calls.append("close")
 
+        stats = _stats(state="closed")
+
+    class Writer:
+        def write(self, report: msgs.DiagnosticArray) -> None:
+            calls.append("report: " + report.status[2].message)
+
+        def wait_for_acks(self, timeout: int) -> bool:
+            calls.append("acked")
+            return True
+
+        def set_listener(self, listener: Any) -> None:
+            pass
+
     for fails in (False, True):  # a stop that fails still closes (the failsafe takes over)
         calls.clear()
         bridge = Bridge("unused", parse_config({}))
         bridge.board = Board(fails)  # type: ignore[assignment]
+        bridge._writers["/diagnostics"] = Writer()  # type: ignore[assignment]
         bridge.close()
-        assert calls == ["stop", "close"]
+        # The last word on /diagnostics says so (issue 33: it was "link active").
+        outcome = "the outputs left to the device's failsafe" if fails else "every output driven"
+        assert calls[:2] == ["stop", "close"] and calls[3] == "acked", calls
+        assert calls[2].startswith(f"report: shut down: {outcome}"), calls
 
 
 def test_a_bridge_stops_only_what_it_inherits() -> None:

@@ -6,7 +6,9 @@ SIGTERM end it cleanly (every output driven safe by the device's Stop, then the
 board closed); the exit status is then 130 after Ctrl-C, as every command's, and 0 after
 SIGTERM. ``--sim`` instead of PORT starts a simulated board owned by this
 process (stopped after the bridge) and, without ``--config``, bridges the
-example robot of docs/ros2.md: the README's one command. docs/ros2.md has the details.
+example robot of docs/ros2.md: the README's one command; its ``--control PATH`` drives that
+board's inputs (a bumper pressed), as ``protoduino sim --control`` does. docs/ros2.md has the
+details.
 """
 
 from __future__ import annotations
@@ -46,6 +48,13 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--trace", type=Path, metavar="FILE", help="with --sim: the board's pin trace"
     )
     parser.add_argument(
+        "--control",
+        type=Path,
+        metavar="PATH",
+        help="with --sim: a Unix socket driving the board's inputs, as protoduino sim's "
+        '(one JSON object per line, e.g. {"pin": 7, "level": 0})',
+    )
+    parser.add_argument(
         "--domain-id",
         type=argtypes.integer(0, 232, name="domain id"),
         metavar="N",
@@ -62,6 +71,8 @@ def check(args: argparse.Namespace) -> str | None:
         return "give a PORT or --sim (a simulated board), one of them"
     if args.trace is not None and args.sim is None:
         return "--trace is the simulated board's: it needs --sim"
+    if args.control is not None and args.sim is None:
+        return "--control is the simulated board's: it needs --sim"
     if args.config is None and args.sim is None:
         return "--config FILE is required with a PORT (docs/ros2.md shows one)"
     try:
@@ -82,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     from ..simboard import SimBoard
 
     try:
-        with SimBoard(args.sim, trace=args.trace) as sim:
+        with SimBoard(args.sim, trace=args.trace, control=args.control) as sim:
             args.port = sim.start()
             print(f"protoduino ros2: simulated board ({args.sim}) on {args.port}", flush=True)
             return _bridge(args)

@@ -7,14 +7,16 @@ types and QoS: :mod:`.dds`, :mod:`.msgs`) and runs one loop
 
 * waits for commands on the subscribed topics and carries out the newest
   valid one of each (a servo's Float64, an arm's JointState as one pose, a
-  digital output's Bool, STOP, ``/cmd_vel``), refusing bad ones and Twists
+  digital output's Bool, STOP, resume, ``/cmd_vel``), refusing bad ones and Twists
   stale on arrival (logged, counted on /diagnostics, nothing moves);
+* holds every command after a STOP until ``resume`` (counted as ``held_by_stop``);
 * sends the device's heartbeat every ``failsafe_timeout / 4``: only this loop
   keeps the outputs alive, so a bridge that hangs or dies lets the device's
   failsafe drive them safe (the board's automatic Ping only keeps the link up);
 * stops the motors when ``/cmd_vel`` went quiet for its timeout;
 * publishes /diagnostics every ``diagnostics_period``, and at once from the
-  board's event thread when a failsafe, reboot or link change happens.
+  board's event thread when a failsafe, reboot or link change happens;
+* publishes again each input that was quiet for ``1 / min_publish_rate``.
 
 Inputs are published from the board's event thread as they change
 (:mod:`.inputs`). The bridge starts from every output safe: what the device
@@ -67,6 +69,8 @@ log = logging.getLogger(__name__)
 
 #: Heartbeats per failsafe timeout: one or two lost to a slow moment must not trip it.
 BEATS_PER_TIMEOUT = 4
+#: At most this long (s) a clean shutdown waits for its last /diagnostics to be acknowledged.
+LAST_REPORT_WAIT = 1.0
 #: Samples taken from one topic per pass, so that a flood on one cannot starve the others.
 TAKE_PER_PASS = 64
 
@@ -83,6 +87,8 @@ class _Route:
     topic: str  # the ROS name, for logs and /diagnostics
     reader: DataReader[Any]
     prepare: Prepare
+    #: A command that moves something: held while a STOP is latched.
+    held: bool = True
 
 
 class Bridge(ClosedOnExit):
@@ -128,6 +134,8 @@ class Bridge(ClosedOnExit):
         self._stopping = threading.Event()
         #: Set from the event thread when the device drove its outputs safe on its own.
         self._device_safe = threading.Event()
+        #: A STOP holds every command until a resume (only the loop's thread changes it).
+        self._stop_latched = False
         self._diag_lock = threading.Lock()
         #: Input topics whose writer matched a new subscriber (Cyclone's thread adds them).
         self._joined: set[str] = set()
@@ -204,12 +212,15 @@ class Bridge(ClosedOnExit):
             undo()
         self._undo.clear()
         if self.board is not None:
+            stopped = False
             if not self.board.closed:
                 try:
                     self.board.stop()
+                    stopped = True
                 except ProtoduinoError as error:
                     log.warning("outputs not stopped on close (the failsafe will): %s", error)
             self.board.close()
+            self._last_diagnostics(stopped)
         self._routes.clear()
         # Cyclone calls a writer's listener on its own thread: detached first, no callback
         # runs into a bridge being torn down while the entities are deleted (the bench's
@@ -230,7 +241,9 @@ class Bridge(ClosedOnExit):
         topic = Topic(self._participant, dds_topic(self.config.namespace, name), kind, qos=qos)
         return DataWriter(self._participant, topic, qos=qos, listener=listener)
 
-    def _subscribe(self, name: str, kind: type[Any], prepare: Prepare) -> None:
+    def _subscribe(
+        self, name: str, kind: type[Any], prepare: Prepare, *, held: bool = True
+    ) -> None:
         assert self._participant is not None and self._waitset is not None
         topic = Topic(
             self._participant, dds_topic(self.config.namespace, name), kind, qos=DEFAULT_QOS
@@ -238,12 +251,15 @@ class Bridge(ClosedOnExit):
         reader: DataReader[Any] = DataReader(self._participant, topic, qos=DEFAULT_QOS)
         mask = SampleState.Any | ViewState.Any | InstanceState.Any
         self._waitset.attach(ReadCondition(reader, mask))
-        self._routes.append(_Route(ros_topic(self.config.namespace, name), reader, prepare))
+        route = _Route(ros_topic(self.config.namespace, name), reader, prepare, held)
+        self._routes.append(route)
 
     def _configure_outputs(self, board: Board) -> None:
         config = self.config
         for s in config.servos:
-            self._servos[s.pin] = board.servo(s.pin, safe=s.safe, min_us=s.min_us, max_us=s.max_us)
+            self._servos[s.pin] = board.servo(
+                s.pin, safe=s.safe, min_us=s.min_us, max_us=s.max_us, max_speed=s.max_speed
+            )
             if s.topic is not None:
                 self._subscribe(s.topic, Float64, self._servo_handler(s))
         if config.joints:
@@ -252,9 +268,13 @@ class Bridge(ClosedOnExit):
             out = board.digital_output(d.pin, safe=d.safe)
             self._subscribe(d.topic, Bool, self._digital_handler(out))
         stop_type = Empty if config.stop.type == "Empty" else Bool
-        self._subscribe(config.stop.topic, stop_type, self._on_stop)
+        # Neither a STOP, its resume nor a clear moves anything: never held.
+        self._subscribe(config.stop.topic, stop_type, self._on_stop, held=False)
+        self._subscribe(config.stop.resume_topic, Empty, self._on_resume, held=False)
         if config.interlocks:
-            self._subscribe(config.clear_interlock_topic, Empty, self._on_clear_interlock)
+            self._subscribe(
+                config.clear_interlock_topic, Empty, self._on_clear_interlock, held=False
+            )
         if config.drive is not None:
             drive = config.drive
             motors = [
@@ -281,7 +301,7 @@ class Bridge(ClosedOnExit):
             self._writers[topic] = self._writer(topic, kind, SENSOR_QOS, matched)
             publishers[topic] = self._writers[topic].write
         if publishers:
-            self._inputs = inputs.wire(board, config, publishers)
+            self._inputs = inputs.wire(board, config, publishers, self.clock)
             self._undo += self._inputs.undo
 
     def _subscriber_joined(self, topic: str) -> Callable[[Any, Any], None]:
@@ -308,6 +328,20 @@ class Bridge(ClosedOnExit):
             except Exception:  # DDS refused it; the next change publishes anyway
                 log.exception("%s: publishing the last value again failed", topic)
 
+    def _refresh_inputs(self) -> float:
+        """Publish again each input quiet for ``1 / min_publish_rate`` (a best-effort sample
+        lost on the network is repaired so); return when the next one is due."""
+        period = 1.0 / self.config.min_publish_rate
+        due = self.clock() + period
+        if self._inputs is None:
+            return due
+        for topic, last in self._inputs.topics.items():
+            try:
+                due = min(due, last.refresh(period))
+            except Exception:  # DDS refused it; tried again a period later
+                log.exception("%s: publishing the last value again failed", topic)
+        return due
+
     # --- the loop ------------------------------------------------------------------
 
     def run(self) -> None:
@@ -317,14 +351,16 @@ class Bridge(ClosedOnExit):
         # Locals: close() from another thread drops the attributes, not these.
         waitset, wake = self._waitset, self._wake
         self._next_beat = self.clock()
-        next_report = self.clock()
+        next_report = next_refresh = self.clock()
         while not self._stopping.is_set():
             self._beat_if_due()
             now = self.clock()
             if now >= next_report:
                 self.publish_diagnostics()
                 next_report = now + self.config.diagnostics_period
-            due = min(self._next_beat, next_report)
+            if now >= next_refresh:
+                next_refresh = self._refresh_inputs()
+            due = min(self._next_beat, next_report, next_refresh)
             if self.drive is not None and (stale := self.drive.deadline()) is not None:
                 due = min(due, stale)
             wait = max(0.0, due - self.clock())
@@ -387,8 +423,13 @@ class Bridge(ClosedOnExit):
                 valid += 1
         if valid > 1:
             self.health.count("superseded", valid - 1)
-        if action is not None:
-            self._carry_out(route, action)
+        if action is None:
+            return
+        if route.held and self._stop_latched:
+            self.health.count("held")
+            log.warning("%s: held: STOP is latched until a resume", route.topic)
+            return
+        self._carry_out(route, action)
 
     def _carry_out(self, route: _Route, action: Action) -> None:
         try:
@@ -455,12 +496,29 @@ class Bridge(ClosedOnExit):
         return self._stop
 
     def _stop(self) -> None:
+        """Every output safe, and held there: latched before the device's Stop is sent, so
+        that no command follows it even when its outcome is unknown."""
         assert self.board is not None
+        self._latch(True)
         self.board.stop()
         self.health.count("stops")
         if self.drive is not None:
             self.drive.forget()
-        log.warning("STOP: every output driven safe")
+        log.warning("STOP: every output driven safe, commands held until a resume")
+
+    def _on_resume(self, _message: Empty) -> Action:
+        return self._resume
+
+    def _resume(self) -> None:
+        """Release a latched STOP: nothing moves until the next command."""
+        if self._stop_latched:
+            self._latch(False)
+            log.warning("resumed: commands are carried out again")
+
+    def _latch(self, latched: bool) -> None:
+        self._stop_latched = latched
+        self.health.latch(latched)
+        self.publish_diagnostics()
 
     def _on_clear_interlock(self, _message: Empty) -> Action:
         return self._clear_interlock
@@ -499,6 +557,19 @@ class Bridge(ClosedOnExit):
                 writer.write(self.health.report(board.stats))
             except Exception:  # DDS refused it; the next period tries again
                 log.exception("publishing /diagnostics failed")
+
+    def _last_diagnostics(self, stopped: bool) -> None:
+        """The last report, once the board is closed: the bridge is gone (STALE), and whether
+        its Stop drove the outputs safe. Waits (bounded) until the reliable subscribers have
+        it, so that it is not lost with the process."""
+        self.health.shut_down(stopped)
+        self.publish_diagnostics()
+        writer = self._writers.get(self.config.diagnostics_topic)
+        if writer is not None:
+            try:
+                writer.wait_for_acks(duration(seconds=LAST_REPORT_WAIT))
+            except Exception:  # nobody to wait for, or DDS is going: nothing more to do
+                log.debug("the last /diagnostics may not have reached every subscriber")
 
 
 def _written(sample: Any) -> float | None:

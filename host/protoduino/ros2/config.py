@@ -27,6 +27,9 @@ CMD_VEL_TIMEOUT = 0.5
 DIAGNOSTICS_PERIOD = 1.0
 #: The device's failsafe under the bridge: short, since a robot is moving.
 FAILSAFE_TIMEOUT = 1.0
+#: An input that does not change is still published this often (Hz): a best-effort sample
+#: lost on the network is repaired within one period.
+MIN_PUBLISH_RATE = 1.0
 #: A Pose's most items (protoduino.options): one JointState is one pose.
 MAX_JOINTS = 8
 #: Uno analog pins by name (A0 is pin 14).
@@ -55,6 +58,8 @@ class ServoConfig:
     max_us: int = 2400
     #: The servo's angle (degrees) at joint position 0 rad.
     zero: float = 90.0
+    #: Its speed limit on the device (degrees/s, Board.servo's max_speed); None: none.
+    max_speed: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +96,8 @@ class DriveConfig:
 class StopConfig:
     topic: str = "stop"
     type: StopType = "Empty"
+    #: std_msgs/Empty that releases a STOP (until then every command is held).
+    resume_topic: str = "resume"
 
 
 @dataclass(frozen=True, slots=True)
@@ -130,6 +137,8 @@ class BridgeConfig:
     domain_id: int | None = None
     failsafe_timeout: float = FAILSAFE_TIMEOUT
     diagnostics_period: float = DIAGNOSTICS_PERIOD
+    #: Hz: each input topic is published at least this often, changed or not.
+    min_publish_rate: float = MIN_PUBLISH_RATE
     diagnostics_topic: str = "/diagnostics"
     joint_topic: str = "joint_commands"
     #: std_msgs/Empty that clears a tripped interlock (only with an interlock input).
@@ -194,6 +203,7 @@ def parse_config(data: object) -> BridgeConfig:
         domain_id=top.optional_int("domain_id", _domain),
         failsafe_timeout=top.number("failsafe_timeout", FAILSAFE_TIMEOUT, low=0.1, high=60.0),
         diagnostics_period=top.number("diagnostics_period", DIAGNOSTICS_PERIOD, low=0.05),
+        min_publish_rate=top.number("min_publish_rate", MIN_PUBLISH_RATE, low=0.01, high=100.0),
         diagnostics_topic=top.topic("diagnostics_topic", "/diagnostics"),
         joint_topic=top.topic("joint_topic", "joint_commands"),
         clear_interlock_topic=top.topic("clear_interlock_topic", "clear_interlock"),
@@ -248,6 +258,7 @@ def _servo(s: _Section) -> ServoConfig:
         min_us=s.integer("min_us", 544, 400, 2600),
         max_us=s.integer("max_us", 2400, 400, 2600),
         zero=s.number("zero", 90.0, low=0.0, high=180.0),
+        max_speed=s.optional_number("max_speed", low=0.0),
     )
     if servo.min_us >= servo.max_us:
         raise ConfigError(f"{s.where}: min_us {servo.min_us} must be below max_us {servo.max_us}")
@@ -258,7 +269,11 @@ def _servo(s: _Section) -> ServoConfig:
 
 def _stop(s: _Section) -> StopConfig:
     kind = s.choice("type", ("Empty", "Bool"), "Empty")
-    return StopConfig(s.topic("topic", "stop"), kind)  # type: ignore[arg-type]
+    return StopConfig(
+        s.topic("topic", "stop"),
+        kind,  # type: ignore[arg-type]
+        s.topic("resume_topic", "resume"),
+    )
 
 
 def _drive(s: _Section) -> DriveConfig:
@@ -320,6 +335,7 @@ def _check_whole(config: BridgeConfig) -> None:
 
 def _topics(config: BridgeConfig) -> list[tuple[str, str]]:
     found = [(config.diagnostics_topic, "the diagnostics"), (config.stop.topic, "the stop")]
+    found.append((config.stop.resume_topic, "the stop's resume"))
     found += [(s.topic, f"servo {s.pin}") for s in config.servos if s.topic is not None]
     if config.joints:
         found.append((config.joint_topic, "the joint commands"))
@@ -428,6 +444,13 @@ class _Section:
         if high is not None and number > high:
             raise ConfigError(f"{self._at(key)} must be <= {high:g}")
         return number
+
+    def optional_number(self, key: str, *, low: float) -> float | None:
+        """A number above ``low``, or None when the key is not given."""
+        if self.data.get(key) is None:
+            self.used.add(key)
+            return None
+        return self.number(key, None, low=low, low_open=True)
 
     def flag(self, key: str, default: bool) -> bool:
         value = self._get(key)

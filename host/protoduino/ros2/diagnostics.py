@@ -4,14 +4,16 @@ Three statuses per board, named after its namespace so that several boards
 share the one ``/diagnostics`` topic, as ROS 2's diagnostic aggregator expects:
 
 * ``<name>: link``: the link counters of ``board.stats``; OK while the link is
-  up, WARN while it handshakes, ERROR when it is down or failed;
+  up, WARN while it handshakes, ERROR when it is down or failed, STALE once the
+  bridge closed it;
 * ``<name>: failsafe``: whether the device holds its outputs safe and why
   (ping or heartbeat timeout, stop, interlock), reboots and lost sessions;
   ERROR while a failsafe is active;
 * ``<name>: bridge``: the messages it refused (by topic and reason), the
   commands the device refused, those a newer one of the same topic replaced
-  before they were sent, the stale ``cmd_vel`` stops; WARN when a
-  message was refused since the previous report.
+  before they were sent, those a latched STOP held, the stale ``cmd_vel`` stops;
+  WARN while a STOP is latched or when a message was refused since the previous
+  report; STALE in the last report of a clean shutdown.
 
 :class:`Health` collects the counts from both the bridge's loop and the
 board's event thread (hence its lock); :meth:`Health.report` turns them into
@@ -91,7 +93,12 @@ class Health:
         self.superseded = 0  # valid commands a newer one of the same topic replaced unsent
         self.stale_stops = 0
         self.stops = 0
+        self.held = 0  # commands a latched STOP held
+        self.stop_latched = False
         self.interlock_clears = 0
+        #: None while running; at a clean shutdown, whether the bridge's Stop drove the
+        #: outputs safe (else the device's failsafe will).
+        self.shut_down_stopped: bool | None = None
         self.failsafe_active = False
         self.failsafe_cause = "none"
         self.failsafes = 0
@@ -105,10 +112,20 @@ class Health:
             self.bad_total += 1
 
     def count(self, what: str, n: int = 1) -> None:
-        """Add to one of the plain counters (forwarded, refused, stale_stops, stops,
+        """Add to one of the plain counters (forwarded, refused, stale_stops, stops, held,
         interlock_clears)."""
         with self._lock:
             setattr(self, what, getattr(self, what) + n)
+
+    def latch(self, latched: bool) -> None:
+        """A STOP latched (True) or released by a resume (False)."""
+        with self._lock:
+            self.stop_latched = latched
+
+    def shut_down(self, stopped: bool) -> None:
+        """The bridge shut down cleanly: the next report is its last."""
+        with self._lock:
+            self.shut_down_stopped = stopped
 
     def event(self, event: Event) -> bool:
         """Take in a board event; True if it should be reported at once."""
@@ -147,7 +164,7 @@ class Health:
         )
 
     def _link_status(self, stats: Stats) -> DiagnosticStatus:
-        level = {"active": OK, "handshaking": WARN}.get(stats.state, ERROR)
+        level = {"active": OK, "handshaking": WARN, "closed": STALE}.get(stats.state, ERROR)
         return self._status("link", level, f"link {stats.state}", link_values(stats))
 
     def _failsafe_status(self) -> DiagnosticStatus:
@@ -169,12 +186,23 @@ class Health:
         fresh = self.bad_total - self._bad_reported
         level = WARN if fresh else OK
         message = f"{fresh} message(s) refused since the last report" if fresh else "running"
+        if self.stop_latched:
+            level, message = WARN, "STOP latched: commands held until a resume"
+        if self.shut_down_stopped is not None:
+            level = STALE
+            message = "shut down: " + (
+                "every output driven safe by the device's Stop"
+                if self.shut_down_stopped
+                else "the outputs left to the device's failsafe"
+            )
         values: dict[str, Any] = {
             "bad_messages": self.bad_total,
             "forwarded": self.forwarded,
             "superseded": self.superseded,
             "refused_by_device": self.refused,
             "stops": self.stops,
+            "stop_latched": self.stop_latched,
+            "held_by_stop": self.held,
             "cmd_vel_stale_stops": self.stale_stops,
             "interlock_clears": self.interlock_clears,
         }

@@ -6,15 +6,19 @@ The wiring configures each input on the board (``Board.digital_input``,
 event thread, newest value first (the board coalesces), and are published
 from there: a DDS writer may be used from any thread.
 
-A sensor topic is volatile (ROS 2's sensor-data QoS), so DDS keeps no value for a subscriber
-that joins later, and an input is published only when it changes: each topic keeps its last
-message (:class:`LastPublished`), which the bridge publishes again when a subscriber matches,
-so that ``ros2 topic echo`` shows a constant battery voltage at once.
+A sensor topic is best effort and volatile (ROS 2's sensor-data QoS): a sample lost on the
+network is never sent again, and DDS keeps no value for a subscriber that joins later. So each
+topic keeps its last message (:class:`LastPublished`), which the bridge publishes again when a
+subscriber matches (``ros2 topic echo`` shows a constant battery voltage at once) and whenever
+the topic was quiet for a period (:meth:`LastPublished.refresh`, ``min_publish_rate``): a value
+that stops changing is still published, and a lost sample is repaired within that period.
 """
 
 from __future__ import annotations
 
+import math
 import threading
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -60,29 +64,48 @@ def counters_message(counts: Sequence[int], config: CounterConfig) -> Int32Multi
 
 
 class LastPublished:
-    """Publishes on one topic and keeps the last message, to publish it :meth:`again`.
+    """Publishes on one topic and keeps the last message (and when it went out, on ``clock``),
+    to publish it :meth:`again` or :meth:`refresh` it.
 
     One lock around both, so that a message published again can never overtake a newer one
     published from the board's event thread meanwhile (the newest stays the last one out).
     """
 
-    def __init__(self, publish: Publish) -> None:
+    def __init__(self, publish: Publish, clock: Callable[[], float] = time.monotonic) -> None:
         self._publish = publish
+        self._clock = clock
         self._lock = threading.Lock()
         self.message: object | None = None
+        #: When a message last went out (``clock``'s time).
+        self.at = -math.inf
 
     def __call__(self, message: object) -> None:
         with self._lock:
             self.message = message
-            self._publish(message)
+            self._send()
+
+    def _send(self) -> None:
+        assert self.message is not None
+        self._publish(self.message)
+        self.at = self._clock()
 
     def again(self) -> bool:
         """Publish the last message again (False: nothing was published yet)."""
         with self._lock:
             if self.message is None:
                 return False
-            self._publish(self.message)
+            self._send()
             return True
+
+    def refresh(self, period: float) -> float:
+        """Publish the last message again if none went out for ``period``; return when the
+        next refresh is due (``clock``'s time)."""
+        with self._lock:
+            if self.message is None:
+                return self._clock() + period
+            if self._clock() - self.at >= period:
+                self._send()
+            return self.at + period
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,12 +116,18 @@ class Wiring:
     topics: dict[str, LastPublished]
 
 
-def wire(board: Any, config: BridgeConfig, publishers: dict[str, Publish]) -> Wiring:
+def wire(
+    board: Any,
+    config: BridgeConfig,
+    publishers: dict[str, Publish],
+    clock: Callable[[], float] = time.monotonic,
+) -> Wiring:
     """Subscribe to every configured input and publish its first value.
 
-    ``publishers`` maps each input topic to the function that publishes a message on it.
+    ``publishers`` maps each input topic to the function that publishes a message on it;
+    ``clock`` dates what each topic published (for :meth:`LastPublished.refresh`).
     """
-    last = {topic: LastPublished(publish) for topic, publish in publishers.items()}
+    last = {topic: LastPublished(publish, clock) for topic, publish in publishers.items()}
     undo: list[Callable[[], None]] = []
     for d in config.digital_inputs:
         undo.append(_digital(board, d, last[d.topic]))
