@@ -92,8 +92,8 @@ uint8_t deep_echo(pd_user_ctx_t *ctx, const Level{n} *request, Level{n} *reply)
     return 0;
 }}
 
-void deep_safe(void *hal, uint8_t pin) {{ (void)hal; (void)pin; }}
-void deep_release(void *hal, uint8_t pin) {{ (void)hal; (void)pin; }}
+void deep_safe(pd_user_ctx_t *ctx, uint8_t pin) {{ (void)ctx; (void)pin; }}
+void deep_release(pd_user_ctx_t *ctx, uint8_t pin) {{ (void)ctx; (void)pin; }}
 void deep_poll(pd_user_ctx_t *ctx, uint32_t now_ms) {{ (void)ctx; (void)now_ms; }}
 """
 
