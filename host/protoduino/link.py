@@ -355,6 +355,12 @@ class Link:
         self.state = LinkState.WAIT_ACK
         self._hs_next = float("inf")  # no RESET until the port is back
 
+    def transport_failed(self, error: Exception) -> None:
+        """The I/O thread is ending on a bug: the board fails for good, reported (ERROR)."""
+        if self.state in (LinkState.CLOSED, LinkState.FAILED):
+            return
+        self._fail(LinkError(f"{error}; close the board and open it again"))
+
     def transport_received(self, items: list[Packet | BadFrame]) -> None:
         for item in items:
             if self.state in (LinkState.CLOSED, LinkState.FAILED):
