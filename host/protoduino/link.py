@@ -299,7 +299,8 @@ class Link:
         self.reboots = 0
         self.sessions_lost = 0
         self.watchdog_resets = 0
-        #: Re-handshakes because the device fell silent at an agreed rate (it reset?).
+        #: Re-handshakes because the device fell silent at an agreed rate (it reset?);
+        #: counted in watchdog_resets too.
         self.silence_resets = 0
         self.device_events: Counter[str] = Counter()
 
@@ -441,6 +442,7 @@ class Link:
                 self.line_baudrate,
                 self.opening_baudrate,
             )
+            self.watchdog_resets += 1  # the watchdog's shorter bound at an agreed rate
             self.silence_resets += 1
             self._restart("silent at the agreed rate", now)
         due = self._listener.link_tick(now)
