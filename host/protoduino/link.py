@@ -478,10 +478,11 @@ class Link:
             # This device has answered this board before: it is protoduino firmware on the
             # right port at the right speed. Say what is known, not the first-open checklist.
             heard = max(0, self.transport.rx_since_open - self._hs_rx)
+            acks = f"{self._hs_reset_acks} RESET_ACKs" if self._hs_reset_acks else "no RESET_ACK"
             return (
                 f"the device on {self.transport.url} answered this board before, but not its "
                 f"RESET for {self.handshake_timeout:g} s (meanwhile received {heard} bytes, "
-                f"{self._hs_packets} frames, no RESET_ACK): the link stalled or the device "
+                f"{self._hs_packets} frames, {acks}): the link stalled or the device "
                 "stopped answering; still trying"
             )
         heard_text = describe_received(
@@ -496,7 +497,8 @@ class Link:
                 f"the device on {self.transport.url} answered RESET but the handshake did "
                 f"not finish within {self.handshake_timeout:g} s ({heard_text}; line rates "
                 f"that failed: {failed or 'none'}); if the line cannot carry the faster "
-                "rates, pin the opening rate (baudrate=115200, --baud 115200)"
+                f"rates, pin the opening rate (baudrate={self.opening_baudrate}, "
+                f"--baud {self.opening_baudrate})"
             )
         return (
             f"the device on {self.transport.url} did not answer RESET within "
