@@ -30,7 +30,10 @@ faults off, cuts cancelled), and held (``port.hold("tx"|"rx"|"both")``: every
 byte kept back until ``port.release()`` delivers them all, late and in order, as
 a stalled ser2net or Wi-Fi link does to a TCP connection). ``port.stats``
 counts what was injected. The *device reset* fault is not a line fault: the board harness
-(``SimBoard.reboot()``) provides it.
+(``SimBoard.reboot()``) provides it. The line rate the caller sets reaches the inner port,
+so a simulated board started with ``--line-check`` (as the soak's are) carries bytes only
+while both ends run at the same rate, as a UART does: a device that resets goes back to its
+opening rate, and the host hears nothing until it follows.
 
 The inner URL may not carry a query string of its own: the last ``?`` starts
 the fault parameters.

@@ -692,7 +692,9 @@ def run(
     wire = Wire(hide)
     result = SoakResult(scenario, call_bound=scenario.call_bound)
     t0 = time.monotonic()
-    with SimBoard(scenario.backend, trace=trace) as sim:
+    # --line-check: the board's line carries bytes only at matching rates, as a UART does
+    # (a reset device is back at the opening rate while the host runs at the agreed one).
+    with SimBoard(scenario.backend, trace=trace, options=("--line-check",)) as sim:
         port = sim.start()
         with Board.open(
             scenario.url(port, name),

@@ -384,6 +384,7 @@ class Board(ClosedOnExit):
             baudrate=baudrate,
             clock=wiring.clock,
             next_id=self._rpc.next_message_id,
+            silence_timeout=2 * ack_timeout,
         )
         self._rpc.attach(self._link)
         # Started only now: a constructor above that refuses its options leaves no thread.

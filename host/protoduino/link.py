@@ -21,7 +21,12 @@ but new firmware); CLOSED.
   device just cleared its link state: the next expected SEQ is 1.
 * EVENT BOOT or NOT_ACTIVE while ACTIVE, a reopened port, a SEQ jump of more
   than SEQ_DESYNC_THRESHOLD, or nothing valid received for WATCHDOG_TIMEOUT
-  while traffic is expected, or the request layer asking for it
+  while traffic is expected, or, at an agreed rate (not the opening one),
+  nothing valid received for ``silence_timeout`` (two Ack timeouts) after a
+  COMMAND went out (a device that reset is back at the opening rate: its
+  EVENT BOOT and everything after it are lost to this end's rate, so the
+  watchdog alone found it only after 5 s, its calls failed with
+  AckTimeoutError meanwhile), or the request layer asking for it
   (:meth:`request_handshake`: its ids would run 64 ahead of the device's newest):
   handshake again (the RESET_ACK then tells).
 * The line rate (docs/protocol.md 5, *Line rate*), unless the board pinned one:
@@ -31,7 +36,11 @@ but new firmware); CLOSED.
   with a RESET at the new rate, which confirms the switch to the device. A probe
   unanswered after BAUD_PROBE_TRIES x BAUD_PROBE_WAIT puts the port back at the
   opening rate, marks the rate failed (never sent at again) and handshakes there
-  (the device, unconfirmed, is back within BAUD_CONFIRM). Every other RESET retry
+  (the device, unconfirmed, is back within BAUD_CONFIRM: the next RESET goes then,
+  the retries after it from the first retry delay again). An agreement starts
+  only while the handshake's budget holds AGREEMENT_COST more (a bootloader may
+  have used most of it); otherwise the link comes up at the opening rate and a
+  later handshake tries the rates not yet failed. Every other RESET retry
   goes at the rate the link last ran at, the ones between cycle through the
   opening rate and the other rates not failed: a device that rebooted (at the
   opening rate) or that a previous host left at a fast one is found either way.
@@ -56,6 +65,8 @@ from typing import Protocol
 from ._generated.schema_id import SCHEMA_ID
 from .clock import Clock
 from .constants import (
+    ACK_TIMEOUT,
+    BAUD_CONFIRM,
     BAUD_PROBE_TRIES,
     BAUD_PROBE_WAIT,
     FAST_BAUDRATES,
@@ -90,6 +101,14 @@ log = logging.getLogger(__name__)
 #: First RESET retry delay and the largest one (seconds).
 RESET_FIRST_RETRY = 0.1
 RESET_MAX_RETRY = 1.0
+#: How long a rate that fails costs the handshake at most: the probes, the device's return
+#: to the opening rate and two RESETs there. An agreement starts only while the handshake's
+#: budget holds this much more; otherwise the link comes up at the opening rate (a real
+#: Uno's bootloader takes a second or two of the budget after the open's reset).
+AGREEMENT_COST = BAUD_PROBE_TRIES * BAUD_PROBE_WAIT + BAUD_CONFIRM + 2 * RESET_FIRST_RETRY
+#: After a failed switch, the first RESET at the opening rate waits for the device's own
+#: return there (BAUD_CONFIRM after its switch, on its clock) plus this margin.
+RETURN_MARGIN = 0.02
 
 
 class PacketPort(Protocol):
@@ -155,13 +174,16 @@ class LinkListener(Protocol):
 Notify = Callable[[Event], None]
 
 
-def describe_received(count: int, head: bytes, packets: int) -> str:
+def describe_received(count: int, head: bytes, packets: int, reset_acks: int = 0) -> str:
     """What a device that did not answer RESET sent instead, for the error message.
 
     A port full of text is a sketch (or another firmware) printing; silence is
     no firmware, a wrong port or a wrong baud rate; frames without a RESET_ACK
-    are a protoduino device stuck in some other state.
+    are a protoduino device stuck in some other state; RESET_ACKs are a device
+    that answered, on a handshake that did not finish (the line rate's agreement).
     """
+    if reset_acks:
+        return f"received {packets} protoduino frames, {reset_acks} of them RESET_ACKs"
     if packets:
         return f"received {packets} protoduino frames but no RESET_ACK"
     if count == 0:
@@ -193,6 +215,7 @@ class Link:
         session: int | None = None,
         baudrate: int | None = None,
         next_id: Callable[[], int] | None = None,
+        silence_timeout: float = 2 * ACK_TIMEOUT,
     ) -> None:
         self.transport = transport
         #: The message id the request layer transmits next, which every RESET carries
@@ -207,6 +230,10 @@ class Link:
         self._notify = notify
         self.handshake_timeout = handshake_timeout
         self.watchdog_timeout = watchdog_timeout
+        self.silence_timeout = silence_timeout
+        #: When a COMMAND went out with nothing valid received since (None: answered);
+        #: written by whichever thread sends, cleared by the I/O thread on any packet.
+        self._unanswered_since: float | None = None
         self.schema_id = schema_id
         self.version = version
         #: This host's session id (never 0: the device's "no session").
@@ -238,6 +265,7 @@ class Link:
         self._baud_tries = 0
         self._baud_due = 0.0
         self._baud_from: Control | None = None  # the RESET_ACK the agreement started from
+        self._baud_switched = 0.0  # when the host followed the device to the new rate
         #: The device's boot id at the last handshake (None before the first).
         self.boot_id: int | None = None
         #: Whether the first handshake found the session still on the device.
@@ -249,7 +277,8 @@ class Link:
         self._hs_next = 0.0
         self._hs_delay = RESET_FIRST_RETRY
         self._hs_reported = False
-        self._hs_packets = 0  # good packets received while handshaking (none a RESET_ACK)
+        self._hs_packets = 0  # good packets received while handshaking
+        self._hs_reset_acks = 0  # RESET_ACKs among them
         self._was_active = False
         self._opened = threading.Event()
         #: Held while open() starts the transport and while close() marks the link closed,
@@ -270,6 +299,9 @@ class Link:
         self.reboots = 0
         self.sessions_lost = 0
         self.watchdog_resets = 0
+        #: Re-handshakes because the device fell silent at an agreed rate (it reset?);
+        #: counted in watchdog_resets too.
+        self.silence_resets = 0
         self.device_events: Counter[str] = Counter()
 
     # --- called from user threads --------------------------------------------
@@ -333,6 +365,8 @@ class Link:
         """Queue one COMMAND; False (nothing queued) unless the link is ACTIVE."""
         if self.state is not LinkState.ACTIVE:
             return False
+        if self._unanswered_since is None:
+            self._unanswered_since = self._clock()
         self.transport.send(PacketType.COMMAND, payload)
         return True
 
@@ -354,6 +388,12 @@ class Link:
         self._go_down("port lost")
         self.state = LinkState.WAIT_ACK
         self._hs_next = float("inf")  # no RESET until the port is back
+
+    def transport_failed(self, error: Exception) -> None:
+        """The I/O thread is ending on a bug: the board fails for good, reported (ERROR)."""
+        if self.state in (LinkState.CLOSED, LinkState.FAILED):
+            return
+        self._fail(LinkError(f"{error}; close the board and open it again"))
 
     def transport_received(self, items: list[Packet | BadFrame]) -> None:
         for item in items:
@@ -393,6 +433,18 @@ class Link:
             )
             self.watchdog_resets += 1
             self._restart("watchdog", now)
+        elif self.state is LinkState.ACTIVE and self._silent_at_agreed_rate(now):
+            log.warning(
+                "%s: nothing received for %.2f s after a command at %d baud (a reset "
+                "device is back at %d); handshaking again",
+                self.transport.name,
+                self.silence_timeout,
+                self.line_baudrate,
+                self.opening_baudrate,
+            )
+            self.watchdog_resets += 1  # the watchdog's shorter bound at an agreed rate
+            self.silence_resets += 1
+            self._restart("silent at the agreed rate", now)
         due = self._listener.link_tick(now)
         if self._handshake_wanted:
             self._handshake_wanted = False
@@ -402,9 +454,22 @@ class Link:
             due = min(due, self._baud_due if self._baud_phase is not None else self._hs_next)
             if not self._hs_reported:
                 due = min(due, self._hs_started + self.handshake_timeout)
-        elif self.state is LinkState.ACTIVE and self._listener.expect_traffic():
-            due = min(due, self._last_rx + self.watchdog_timeout)
+        elif self.state is LinkState.ACTIVE:
+            if self._listener.expect_traffic():
+                due = min(due, self._last_rx + self.watchdog_timeout)
+            since = self._unanswered_since
+            if since is not None and self.line_baudrate != self.opening_baudrate:
+                due = min(due, since + self.silence_timeout)
         return due
+
+    def _silent_at_agreed_rate(self, now: float) -> bool:
+        """A COMMAND unanswered for silence_timeout at an agreed rate (module docstring)."""
+        since = self._unanswered_since
+        return (
+            since is not None
+            and self.line_baudrate != self.opening_baudrate
+            and now - since >= self.silence_timeout
+        )
 
     # --- internals (I/O thread) -----------------------------------------------
 
@@ -413,15 +478,28 @@ class Link:
             # This device has answered this board before: it is protoduino firmware on the
             # right port at the right speed. Say what is known, not the first-open checklist.
             heard = max(0, self.transport.rx_since_open - self._hs_rx)
+            acks = f"{self._hs_reset_acks} RESET_ACKs" if self._hs_reset_acks else "no RESET_ACK"
             return (
                 f"the device on {self.transport.url} answered this board before, but not its "
                 f"RESET for {self.handshake_timeout:g} s (meanwhile received {heard} bytes, "
-                f"{self._hs_packets} frames, no RESET_ACK): the link stalled or the device "
+                f"{self._hs_packets} frames, {acks}): the link stalled or the device "
                 "stopped answering; still trying"
             )
         heard_text = describe_received(
-            self.transport.rx_since_open, self.transport.rx_head, self._hs_packets
+            self.transport.rx_since_open,
+            self.transport.rx_head,
+            self._hs_packets,
+            self._hs_reset_acks,
         )
+        if self._hs_reset_acks:
+            failed = ", ".join(f"{rate}" for rate in sorted(self.failed_baudrates, reverse=True))
+            return (
+                f"the device on {self.transport.url} answered RESET but the handshake did "
+                f"not finish within {self.handshake_timeout:g} s ({heard_text}; line rates "
+                f"that failed: {failed or 'none'}); if the line cannot carry the faster "
+                f"rates, pin the opening rate (baudrate={self.opening_baudrate}, "
+                f"--baud {self.opening_baudrate})"
+            )
         return (
             f"the device on {self.transport.url} did not answer RESET within "
             f"{self.handshake_timeout:g} s ({heard_text}); check that the protoduino firmware is "
@@ -430,11 +508,13 @@ class Link:
 
     def _start_handshake(self, now: float) -> None:
         self.state = LinkState.WAIT_ACK
+        self._unanswered_since = None
         self._hs_started = now
         self._hs_next = now
         self._hs_delay = RESET_FIRST_RETRY
         self._hs_reported = False
         self._hs_packets = 0
+        self._hs_reset_acks = 0
         self._hs_attempt = 0
         self._baud_phase = None
         self._hs_rx = self.transport.rx_since_open
@@ -511,6 +591,9 @@ class Link:
 
     def _packet(self, packet: Packet) -> None:
         now = self._clock()
+        self._unanswered_since = None  # the device is heard at this end's rate
+        if self.state is not LinkState.ACTIVE:
+            self._hs_packets += 1  # what the handshake heard, for its error message
         if packet.type is PacketType.CONTROL:
             try:
                 ctl = parse_control(packet.payload)
@@ -541,7 +624,6 @@ class Link:
                     self._restart(f"device {EventCode(ctl.event).name}", now)
                 return
         if self.state is not LinkState.ACTIVE:
-            self._hs_packets += 1
             return  # stale traffic from before the handshake
         self.rx_packets += 1
         self._last_rx = now
@@ -595,6 +677,8 @@ class Link:
         self.device_version, self.device_schema_id = version, schema_id
         self._rx_expected = 1
         self._last_rx = now
+        if self.state is LinkState.WAIT_ACK:
+            self._hs_reset_acks += 1
         if self.state is not LinkState.WAIT_ACK or self._baud_phase is not None:
             return  # the twin of a resent RESET: SEQ re-synchronised, nothing else
         if version != self.version:
@@ -669,13 +753,22 @@ class Link:
     # --- the line rate (docs/protocol.md 5, *Line rate*) ------------------------
 
     def _start_agreement(self, ctl: Control, now: float) -> bool:
-        """After a RESET_ACK at the opening rate: propose the fastest rate offered, if any."""
+        """After a RESET_ACK at the opening rate: propose the fastest rate offered, if any,
+        and if the handshake's budget still holds a failed switch (AGREEMENT_COST)."""
         if ctl.baudrates:
             self.device_baudrates = ctl.baudrates
         if self.pinned_baudrate is not None or self.transport.baudrate != self.opening_baudrate:
             return False
         offered = [rate for rate in ctl.baudrates if rate not in self.failed_baudrates]
         if not offered:
+            return False
+        if now + AGREEMENT_COST > self._hs_started + self.handshake_timeout:
+            log.info(
+                "%s: no time left in the handshake to try %d baud; staying at %d",
+                self.transport.name,
+                offered[0],
+                self.opening_baudrate,
+            )
             return False
         self._baud_from = ctl
         self._baud_rate = offered[0]  # fastest first
@@ -700,6 +793,7 @@ class Link:
             return
         if self._baud_phase == "propose":
             # Acked at the opening rate; the device switches once the ack is out.
+            self._baud_switched = now
             self.transport.set_baudrate(self._baud_rate)
             self._baud_phase = "probe"
             self._baud_tries = 0
@@ -724,8 +818,17 @@ class Link:
         )
         self.failed_baudrates.add(self._baud_rate)
         self.baud_fallbacks += 1
+        switched = self._baud_phase == "probe"  # else the device never left the opening rate
         self._baud_phase = None
         self.line_baudrate = self.opening_baudrate
         self.transport.set_baudrate(self.opening_baudrate)
         self._hs_attempt = 0
-        self._send_reset(now)
+        # The RESETs start over from the first retry delay (the handshake's own backoff
+        # may have grown to its cap meanwhile, waiting out a bootloader: a RESET lost while
+        # the device was still at the failed rate then cost a whole second), the first
+        # one once the device is back at the opening rate too.
+        self._hs_delay = RESET_FIRST_RETRY
+        if switched:
+            self._hs_next = max(now, self._baud_switched + BAUD_CONFIRM + RETURN_MARGIN)
+        else:
+            self._send_reset(now)

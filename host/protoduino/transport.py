@@ -19,8 +19,12 @@ written by its descriptor, as pyserial does, less the second ``select`` its
 read and write each make (host CPU per command, issue 23).
 
 If the port disappears (USB unplugged, the simulated board's pseudo-terminal
-gone) the thread closes it, tells the listener, and keeps trying to reopen it
-with a bounded backoff until the transport is closed.
+gone), or fails in any way (a read, a write, a change of rate that a stalled
+``rfc2217://`` server never acknowledges), the thread closes it, tells the
+listener, and keeps trying to reopen it with a bounded backoff until the
+transport is closed. The thread never ends silently: any other exception (a
+bug) is logged and handed to the listener (``transport_failed``), which fails
+the board with an ERROR event, before the thread ends.
 
 The transmit SEQ counter lives here because docs/protocol.md section 6 ties it to
 the write itself: it advances only after the whole frame was written, and a
@@ -172,6 +176,10 @@ class TransportListener(Protocol):
 
     def transport_lost(self, error: Exception) -> None: ...
 
+    def transport_failed(self, error: Exception) -> None:
+        """The I/O thread failed other than by its port (a bug) and is ending: report it."""
+        ...
+
     def transport_received(self, items: list[Packet | BadFrame]) -> None: ...
 
     def transport_tick(self, now: float) -> float:
@@ -228,8 +236,9 @@ class Transport:
         #: Held around taking a packet, giving it its SEQ and writing it, and around
         #: opening, closing and re-rating the port (module docstring: a caller's own write).
         self._wlock = threading.Lock()
-        #: A caller's write that failed other than by a timeout: the I/O thread loses the port.
-        self._write_failure: Exception | None = None
+        #: A caller's write that failed other than by a timeout, or a re-rate that failed:
+        #: the I/O thread loses the port at its next pass.
+        self._port_failure: Exception | None = None
         #: Records of frames written (by any thread, under ``_wlock``), in that order,
         #: that the I/O thread has still to show to the monitors.
         self._unshown: collections.deque[FrameRecord] = collections.deque()
@@ -346,11 +355,19 @@ class Transport:
 
         It applies to the bytes written after it: the link changes it only between
         frames, once what it waited for has arrived. A port reopened later opens at it.
+        A port that refuses the change (a stalled rfc2217:// server does not acknowledge
+        it; a USB adapter unplugged meanwhile) is lost, as a failed write is: the I/O
+        thread closes it at its next pass and reopens it at ``rate``, and the link
+        handshakes again there (issue 32: the exception once ended the I/O thread).
         """
         with self._wlock:  # never in the middle of a caller's frame
             self.baudrate = rate
             if self._port is not None:
-                self._port.baudrate = rate
+                try:
+                    self._port.baudrate = rate
+                except (serial.SerialException, OSError) as error:
+                    log.warning("%s: setting %d baud failed: %s", self.name, rate, error)
+                    self._port_failure = error
 
     @property
     def tx_seq(self) -> int:
@@ -400,7 +417,7 @@ class Transport:
             port, self._port = self._port, None
             self._fd, self._raw = None, False
             self.connected = False
-            self._write_failure = None  # the port it was about is gone
+            self._port_failure = None  # the port it was about is gone
         if port is not None:
             with contextlib.suppress(Exception):
                 port.close()
@@ -438,51 +455,64 @@ class Transport:
                     self._stop.wait(min(TICK * 5, max(0.0, next_reopen - time.monotonic())))
                     continue
                 try:
-                    if self._write_failure is not None:  # a caller's write failed
-                        raise self._write_failure
-                    self._flush_writes()
-                    data = self._read()
-                    # A packet queued while select slept (its wake-up ended the
-                    # sleep) leaves now, not after the timer tick below: that
-                    # tick is on no request's critical path. The monitors see every
-                    # frame written so far (a caller's too) before what was just read.
-                    self._flush_writes()
+                    self._pass(listener)
                 except (serial.SerialException, OSError) as error:
+                    # The port's failure wherever it surfaced: a read, a write (the I/O
+                    # thread's or a caller's), or a re-rate the link asked for in a timer
+                    # (a stalled rfc2217:// server refuses it: issue 32).
                     self._lost(error)
                     next_reopen = time.monotonic() + REOPEN_FIRST
                     reopen_delay = REOPEN_FIRST * 2
-                    continue
-                items = None
-                if data:
-                    self.rx_bytes += len(data)
-                    if len(self.rx_head) < RX_HEAD:
-                        self.rx_head += data[: RX_HEAD - len(self.rx_head)]
-                    self.rx_since_open += len(data)
-                    items = self._decoder.feed(data)
-                    if items:
-                        # Dated and kept as read, shown to the monitors once the layers
-                        # above have them: a monitor (a capture writing its line) is not
-                        # on an Ack's way to its caller. What the listener has written in
-                        # answer is shown after them (the next pass), as it went out after.
-                        records = [self._record("rx", item) for item in items]
-                        listener.transport_received(items)
-                        for rec in records:
-                            self._show(rec)
-                now = time.monotonic()
-                # Bytes of a frame not complete yet (a slow line delivers an Ack in
-                # pieces) change nothing the timers depend on: their tick waits for the
-                # frame, a wake-up, a timeout or its due time, whichever comes first.
-                if items or not data or self._woken or now >= self._next_tick:
-                    self._next_tick = listener.transport_tick(now)
-        except Exception:  # pragma: no cover - a bug above must not die silently
-            log.exception("%s: I/O thread crashed", self.name)
-            self.last_error = TransportError(f"{self.name}: I/O thread crashed")
+        except Exception as error:  # a bug above: reported, never a silent death
+            log.exception("%s: I/O thread failed", self.name)
+            self.last_error = TransportError(f"{self.name}: I/O thread failed: {error!r}")
+            try:
+                listener.transport_failed(self.last_error)
+            except Exception:
+                log.exception("%s: reporting the I/O thread's failure failed", self.name)
         finally:
             self._close_port()
             if self._stop.is_set():
                 # Closed from this thread (a frame monitor, a listener): close()
                 # could not wait for the thread to end, so the thread cleans up.
                 self._close_wake_pipe()
+
+    def _pass(self, listener: TransportListener) -> None:
+        """One pass of the I/O thread with the port open: write, read, hand over, tick.
+
+        A failure of the port raises (SerialException, OSError): the caller loses it.
+        """
+        if self._port_failure is not None:  # a caller's write or a re-rate failed
+            raise self._port_failure
+        self._flush_writes()
+        data = self._read()
+        # A packet queued while select slept (its wake-up ended the sleep) leaves now,
+        # not after the timer tick below: that tick is on no request's critical path.
+        # The monitors see every frame written so far (a caller's too) before what was
+        # just read.
+        self._flush_writes()
+        items = None
+        if data:
+            self.rx_bytes += len(data)
+            if len(self.rx_head) < RX_HEAD:
+                self.rx_head += data[: RX_HEAD - len(self.rx_head)]
+            self.rx_since_open += len(data)
+            items = self._decoder.feed(data)
+            if items:
+                # Dated and kept as read, shown to the monitors once the layers above
+                # have them: a monitor (a capture writing its line) is not on an Ack's
+                # way to its caller. What the listener has written in answer is shown
+                # after them (the next pass), as it went out after.
+                records = [self._record("rx", item) for item in items]
+                listener.transport_received(items)
+                for rec in records:
+                    self._show(rec)
+        now = time.monotonic()
+        # Bytes of a frame not complete yet (a slow line delivers an Ack in pieces)
+        # change nothing the timers depend on: their tick waits for the frame, a
+        # wake-up, a timeout or its due time, whichever comes first.
+        if items or not data or self._woken or now >= self._next_tick:
+            self._next_tick = listener.transport_tick(now)
 
     def _lost(self, error: Exception) -> None:
         log.warning("%s: port lost: %s", self.name, error)
@@ -574,7 +604,7 @@ class Transport:
         except (serial.SerialException, OSError) as error:
             # Lost with the port, as the I/O thread's own failed write would be: it
             # loses the port (the link goes down there, on its thread), woken for it.
-            self._write_failure = error
+            self._port_failure = error
             self._wake()
             return
         self.direct_writes += 1

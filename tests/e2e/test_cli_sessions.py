@@ -123,3 +123,19 @@ def test_a_pin_or_timer_an_earlier_command_holds_is_said_as_the_api_says_it(
     err = capsys.readouterr().err
     assert "pin 10's PWM timer makes the servo pulses while a servo runs" in err
     assert "(STATUS_TIMER_IN_USE)" in err
+
+
+def test_the_same_port_under_another_name_is_the_same_session(
+    sim_board: SimBoard, capsys: pytest.CaptureFixture[str], tmp_path: Any
+) -> None:
+    # A /dev/serial/by-id link to the port: the same device, so the same session; a new
+    # one would release pin 13 (issue 32: the session id came from the port's string).
+    link = tmp_path / "usb-Arduino_Uno-if00"
+    link.symlink_to(sim_board.port)
+    assert main(["pin", sim_board.port, "13", "on"]) == 0
+    wait_for_pin(sim_board, 13, lambda v: v[-1:] == [1])
+    capsys.readouterr()
+    assert main(["outputs", str(link), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["outputs"] == [{"pin": 13, "mode": "digital", "value": 1, "target": 1}]
+    assert pin_values(sim_board.trace(), 13)[-1] == 1

@@ -20,8 +20,11 @@ from pathlib import Path
 
 import protoduino
 import pytest
+from boardprocess import BoardProcess, missing_tool
+from protoduino import programs
 from protoduino.board import PoseOutput, PoseValue
-from protoduino.simboard import SimBoard
+from protoduino.simboard import SimBoard, runner_command
+from protoduino_dev import build
 from protoduino_dev.runnerstats import snapshot
 from simfixtures import SIM_BACKENDS
 
@@ -173,3 +176,39 @@ def test_poses_beside_input_reports_are_never_retransmitted(start_board: StartBo
     assert stats.retransmits == before.retransmits, stats
     assert stats.device_rx_overflows == 0 and not stats.dropped, stats
     assert stats.input_reports > before.input_reports
+
+
+def test_a_real_style_uno_on_a_line_that_carries_only_115200_opens(tmp_path: Path) -> None:
+    """Issue 32: the emulated Uno with Optiboot in front of the firmware, reset by every open
+    (a real Uno's DTR), on a line that carries only 115200 (a bridge that cannot go faster).
+
+    The bootloader takes its share of the handshake's budget; each rate then fails its
+    probe, and the RESETs that follow a fallback must reach the device as soon as it is
+    back at the opening rate (they waited out the handshake's grown backoff: 5 s was not
+    enough, HandshakeError three opens out of three). Judged by the link's record: opened,
+    every offered rate failed or untried, at 115200, and a round trip works, three times.
+    """
+    missing = missing_tool("make", "cc", "avr-gcc", "avr-objcopy", simavr=True)
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed (needed to build the avr board and Optiboot)")
+    if not Path("/usr/share/arduino").exists():
+        pytest.skip("arduino-core-avr is not installed (Optiboot's sources)")
+    build.build_runner()
+    build.build_optiboot()
+    cmd = runner_command(
+        programs.locate(programs.FIRMWARE_ELF),
+        hex_files=[build.OPTIBOOT_HEX],
+        boot_address=build.OPTIBOOT_ADDRESS,
+        auto_reset=True,
+        link=tmp_path / "uno",
+    )
+    uno = BoardProcess([*cmd[:-1], "--line-max", "115200", cmd[-1]])
+    try:
+        for _ in range(3):
+            with protoduino.Board.open(uno.port) as board:
+                assert board.baudrate == 115_200
+                assert board._link.failed_baudrates <= set(OFFERED["avr"])
+                assert board._link.baud_switches == 0
+                _works(board)
+    finally:
+        uno.stop(timeout=5, strict=False)

@@ -12,11 +12,13 @@ from __future__ import annotations
 import os
 import queue
 import shutil
+import signal
 import socket
 import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from protoduino import Board, TransportError
@@ -161,3 +163,36 @@ def test_a_server_that_never_acknowledges_modem_control_is_a_transport_error(
 ) -> None:
     with pytest.raises(TransportError, match=r"add \?ign_set_control"):
         Board.open(server.url.removesuffix("?ign_set_control"))
+
+
+def test_a_stalled_server_during_a_re_handshake_is_a_reconnect(
+    sim_board: SimBoard, server: Ser2net
+) -> None:
+    """Issue 32: ser2net stopped (SIGSTOP) long enough for the watchdog's re-handshake to
+    change the line rate on the stalled port. pyserial's rfc2217 then raises (the server
+    does not acknowledge the change): that is a lost port, reopened once the server is
+    back, not an I/O thread that dies and leaves every later call to time out."""
+    events: queue.Queue[Event] = queue.Queue()
+    with Board.open(server.url) as board:
+        board.on_event(events.put)
+        transport: Any = board._link.transport
+        assert board.baudrate != 115_200  # the agreed rate: a re-handshake cycles rates
+        led = board.digital_output(13, safe=False)
+        led.on()
+        wait_for_pin(sim_board, 13, lambda v: v[-1:] == [1])
+        assert server.proc is not None
+        server.proc.send_signal(signal.SIGSTOP)
+        try:
+            _wait_event(events, EventKind.DISCONNECTED)  # the watchdog (pings unanswered)
+            # The re-handshake's first rate change on the stalled port has failed.
+            deadline = time.monotonic() + BOUND
+            while transport.last_error is None:
+                assert time.monotonic() < deadline, "no rate change failed"
+                time.sleep(0.02)
+        finally:
+            server.proc.send_signal(signal.SIGCONT)
+        assert "crashed" not in str(transport.last_error), transport.last_error
+        _wait_event(events, EventKind.CONNECTED)
+        led.off()
+        wait_for_pin(sim_board, 13, lambda v: v[-1:] == [0])
+        assert board.ping() > 0

@@ -85,6 +85,10 @@ class Serial(SerialBase):
         if self._inner is not None:
             self._inner.timeout = self._poll_interval()
             self._inner.write_timeout = self.write_timeout
+            # The rate reaches the wrapped port: a board that checks rates (--line-check)
+            # carries bytes only when both ends' agree, under the faults as without them.
+            if self._inner.baudrate != self.baudrate:
+                self._inner.baudrate = self.baudrate
 
     def _poll_interval(self) -> float:
         return POLL if self.timeout is None else min(self.timeout, POLL)

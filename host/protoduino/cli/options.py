@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import sys
 import time
+import urllib.parse
 import zlib
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -121,12 +123,33 @@ def capture_verdict(command: str, board: Board, rc: int) -> int:
 
 
 def cli_session(port: str) -> int:
-    """The host session every command on ``port`` shares (1..2**32-1, from the port's name).
+    """The host session every command on ``port`` shares (1..2**32-1, from the device's name).
 
     One-shot commands build on each other: the device keeps what the previous
     command configured, and an Init that repeats it changes nothing at the pin.
+    The id comes from :func:`device_identity`, so the same device under another
+    name (a ``/dev/serial/by-id`` link) is the same session, not a new one that
+    would release every output.
     """
-    return zlib.crc32(f"protoduino-cli {port}".encode()) or 1
+    return zlib.crc32(f"protoduino-cli {device_identity(port)}".encode()) or 1
+
+
+def device_identity(port: str) -> str:
+    """What names the device behind ``port``, whichever name it was given.
+
+    A local port (no URL scheme) is its resolved real path: ``/dev/ttyACM0`` and a
+    ``/dev/serial/by-id/...`` or ``/dev/arduino`` link to it are one device. A URL
+    (``rfc2217://pi:7000``, ``socket://...``) names a port on another machine, whose
+    links this host cannot resolve: it is the URL with its scheme and host in lower
+    case (both are case-insensitive) and without its ``?options`` (``ign_set_control``,
+    ``logging=...`` change how the port is driven, not which device it is). The host
+    name is not resolved (a DNS look-up per command, and an answer that can change):
+    ``rfc2217://pi:7000`` and ``rfc2217://192.168.1.5:7000`` are two sessions.
+    """
+    if "://" not in port:
+        return os.path.realpath(port)
+    parts = urllib.parse.urlsplit(port)
+    return f"{parts.scheme.lower()}://{parts.netloc.lower()}{parts.path}"
 
 
 def session_of(args: argparse.Namespace) -> int:
