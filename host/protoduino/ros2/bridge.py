@@ -39,7 +39,7 @@ from cyclonedds.core import (
     ViewState,
     WaitSet,
 )
-from cyclonedds.domain import DomainParticipant
+from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
@@ -55,7 +55,7 @@ from ..errors import (
     StaleCommandError,
 )
 from ..events import Event, EventKind
-from . import inputs
+from . import dds, inputs
 from .config import BridgeConfig, ServoConfig
 from .dds import DEFAULT_QOS, SENSOR_QOS, dds_topic, ros_topic
 from .diagnostics import Health
@@ -123,6 +123,7 @@ class Bridge(ClosedOnExit):
         self._routes: list[_Route] = []
         self._writers: dict[str, DataWriter[Any]] = {}
         self._participant: DomainParticipant | None = None
+        self._domain: Domain | None = None  # the participant's, configured by dds
         self._waitset: WaitSet | None = None
         self._wake: GuardCondition | None = None
         self._stopping = threading.Event()
@@ -158,7 +159,7 @@ class Bridge(ClosedOnExit):
             if self._on_open is not None:
                 self._on_open(self.board)
             _start_safe(self.board)
-            self._participant = DomainParticipant(config.resolved_domain())
+            self._participant, self._domain = dds.participant(config.resolved_domain())
             self._waitset = WaitSet(self._participant)
             self._wake = GuardCondition(self._participant)
             self._waitset.attach(self._wake)
@@ -220,6 +221,7 @@ class Bridge(ClosedOnExit):
         self._waitset = None
         self._wake = None
         self._participant = None
+        self._domain = None
 
     # --- setup ---------------------------------------------------------------------
 
