@@ -266,3 +266,37 @@ def test_a_real_rclpy_node_drives_and_reads_every_topic_type(
         ),
         "the failsafe's cause: stop",
     )
+
+
+def test_the_bridge_is_a_node_in_the_ros2_graph(
+    sim_board: SimBoard, ros_node: RosNode, bridge: Callable[[str], BridgeProcess]
+) -> None:
+    """rclpy's get_node_names_and_namespaces() (``ros2 node list``) has the bridge under its
+    namespace, and the per-node queries of ``ros2 node info`` list its subscriptions
+    (commands) and publishers (inputs, /diagnostics) with their ROS 2 types."""
+    sim, node = sim_board, ros_node
+    ns = f"graph_{sim.backend}"
+    bridge(ROBOT.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    found: list[dict[str, Any]] = []
+
+    def listed() -> bool:
+        found[:] = [n for n in node.request("graph") if n["namespace"] == f"/{ns}"]
+        return bool(found and found[0]["publishers"] and found[0]["subscriptions"])
+
+    _until(listed, f"a node in /{ns}")
+    assert [n["name"] for n in found] == ["protoduino"], found
+    subscriptions = {name: types for name, types in found[0]["subscriptions"]}
+    publishers = {name: types for name, types in found[0]["publishers"]}
+    assert subscriptions == {
+        f"/{ns}/servo/pan": ["std_msgs/msg/Float64"],
+        f"/{ns}/joint_commands": ["sensor_msgs/msg/JointState"],
+        f"/{ns}/led": ["std_msgs/msg/Bool"],
+        f"/{ns}/stop": ["std_msgs/msg/Empty"],
+        f"/{ns}/cmd_vel": ["geometry_msgs/msg/Twist"],
+    }
+    assert publishers == {
+        "/diagnostics": ["diagnostic_msgs/msg/DiagnosticArray"],
+        f"/{ns}/bumper": ["std_msgs/msg/Bool"],
+        f"/{ns}/battery": ["std_msgs/msg/Float32"],
+        f"/{ns}/sensors/encoders": ["std_msgs/msg/Int32MultiArray"],
+    }

@@ -55,7 +55,7 @@ from ..errors import (
     StaleCommandError,
 )
 from ..events import Event, EventKind
-from . import dds, inputs
+from . import dds, graph, inputs
 from .config import BridgeConfig, ServoConfig
 from .dds import DEFAULT_QOS, SENSOR_QOS, dds_topic, ros_topic
 from .diagnostics import Health
@@ -124,6 +124,7 @@ class Bridge(ClosedOnExit):
         self._writers: dict[str, DataWriter[Any]] = {}
         self._participant: DomainParticipant | None = None
         self._domain: Domain | None = None  # the participant's, configured by dds
+        self._node: DataWriter[Any] | None = None  # the node's entry in ROS 2's graph
         self._waitset: WaitSet | None = None
         self._wake: GuardCondition | None = None
         self._stopping = threading.Event()
@@ -168,6 +169,13 @@ class Bridge(ClosedOnExit):
             )
             self._configure_outputs(self.board)
             self._configure_inputs(self.board)
+            # In ROS 2's node graph (ros2 node list / info), with every endpoint above.
+            self._node = graph.announce(
+                self._participant,
+                config.namespace,
+                [route.reader for route in self._routes],
+                self._writers.values(),
+            )
         except BaseException:
             self.close()
             raise
@@ -220,6 +228,7 @@ class Bridge(ClosedOnExit):
         self._writers.clear()
         self._waitset = None
         self._wake = None
+        self._node = None
         self._participant = None
         self._domain = None
 
