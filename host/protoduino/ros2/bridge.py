@@ -39,7 +39,7 @@ from cyclonedds.core import (
     ViewState,
     WaitSet,
 )
-from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
@@ -123,7 +123,6 @@ class Bridge(ClosedOnExit):
         self._routes: list[_Route] = []
         self._writers: dict[str, DataWriter[Any]] = {}
         self._participant: DomainParticipant | None = None
-        self._domain: Domain | None = None  # the participant's, configured by dds
         self._node: DataWriter[Any] | None = None  # the node's entry in ROS 2's graph
         self._waitset: WaitSet | None = None
         self._wake: GuardCondition | None = None
@@ -160,7 +159,7 @@ class Bridge(ClosedOnExit):
             if self._on_open is not None:
                 self._on_open(self.board)
             _start_safe(self.board)
-            self._participant, self._domain = dds.participant(config.resolved_domain())
+            self._participant = dds.participant(config.resolved_domain())
             self._waitset = WaitSet(self._participant)
             self._wake = GuardCondition(self._participant)
             self._waitset.attach(self._wake)
@@ -230,7 +229,6 @@ class Bridge(ClosedOnExit):
         self._wake = None
         self._node = None
         self._participant = None
-        self._domain = None
 
     # --- setup ---------------------------------------------------------------------
 

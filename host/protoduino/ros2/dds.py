@@ -82,18 +82,22 @@ def domain_config(user: str | None = None) -> str:
     return f"{user},{TYPE_NAME_MATCHING}" if user else TYPE_NAME_MATCHING
 
 
-def participant(domain_id: int) -> tuple[DomainParticipant, Domain | None]:
-    """A participant in ``domain_id`` configured by :func:`domain_config`, and its domain
-    (keep it as long as the participant; None: the process had created the domain before,
-    with the configuration it was given then, which is used as it is)."""
-    try:
-        domain: Domain | None = Domain(domain_id, domain_config())
-    except DDSException:
-        # Created earlier in this process (e.g. by a test's own participant): one
-        # configuration per domain and process.
-        log.info("DDS domain %d exists in this process: its configuration is kept", domain_id)
-        domain = None
-    return DomainParticipant(domain_id), domain
+#: The domains this process configured, kept for its lifetime: deleting one would delete
+#: every participant in it, other code's too.
+_DOMAINS: dict[int, Domain] = {}
+
+
+def participant(domain_id: int) -> DomainParticipant:
+    """A participant in ``domain_id``, whose domain :func:`domain_config` configures (unless
+    this process created it before, with the configuration it was given then, kept)."""
+    if domain_id not in _DOMAINS:
+        try:
+            _DOMAINS[domain_id] = Domain(domain_id, domain_config())
+        except DDSException:
+            # Created earlier in this process (e.g. by a participant of its own): one
+            # configuration per domain and process.
+            log.info("DDS domain %d exists in this process: its configuration stays", domain_id)
+    return DomainParticipant(domain_id)
 
 
 def dds_topic(namespace: str, name: str) -> str:
