@@ -172,6 +172,9 @@ def main() -> None:
         except Exception as error:  # reported to the test, which fails on it
             answer = {"error": f"{type(error).__name__}: {error}"}
         print(json.dumps(answer), flush=True)
+    node.executor.shutdown()
+    node.node.destroy_node()
+    rclpy.shutdown()
 
 
 if __name__ == "__main__":

@@ -217,8 +217,25 @@ def test_a_real_rclpy_node_drives_and_reads_every_topic_type(
     pub("servo/pan", "std_msgs/msg/Float64", {"data": 45.0}, (9, to_us(45)))
     # pan 0.5 rad -> 90 + 28.6 -> 119 degrees; tilt -0.3 rad -> 90 - 17.2 -> 73 degrees.
     joints = {"name": ["pan", "tilt"], "position": [0.5, -0.3]}
-    pub("joint_commands", "sensor_msgs/msg/JointState", joints, (9, to_us(119)), (10, to_us(73)))
+    joints_type = "sensor_msgs/msg/JointState"
+    pub("joint_commands", joints_type, joints, (9, to_us(119)), (10, to_us(73)))
+    # Bad input from the node: counted on /diagnostics, nothing moves (the publisher
+    # delivered before, so this one arrives too).
+    before = {pin: len(pin_values(sim.trace(), pin)) for pin in (9, 10)}
+    elbow = {"name": ["pan", "elbow"], "position": [0.0, 0.0]}
+    node.request("pub", topic=f"/{ns}/joint_commands", type=joints_type, msg=elbow)
+    _until_seen(
+        node,
+        "/diagnostics",
+        lambda s: any(
+            st["name"] == f"protoduino {ns}: bridge"
+            and {"key": f"bad./{ns}/joint_commands: invalid", "value": "1"} in st["values"]
+            for st in s["status"]
+        ),
+        "the bad JointState counted",
+    )
     pub("led", "std_msgs/msg/Bool", {"data": True}, (13, 1))
+    assert {pin: len(pin_values(sim.trace(), pin)) for pin in (9, 10)} == before
     twist = {"linear": {"x": 0.25}, "angular": {"z": 0.0}}
     pub("cmd_vel", "geometry_msgs/msg/Twist", twist, (3, 128), (11, 128))
     assert pin_values(sim.trace(), 4)[-1] == 1 and pin_values(sim.trace(), 12)[-1] == 0
