@@ -11,8 +11,10 @@
 # which builds the board from the checkout), and the nanopb C runtime from Debian's source
 # package (.deps/nanopb). The full one (setup) adds what the suite needs beyond that: the
 # other Debian packages (the Uno's toolchain, simavr, clang, ...), the pinned dev extras,
-# the bench's peers, and StandardFirmata's Uno hex from the npm registry for the bench's race
-# (.deps/firmata).
+# the bench's peers, StandardFirmata's Uno hex from the npm registry for the bench's race
+# (.deps/firmata), and a real ROS 2 node's client library in a venv of its own
+# (.deps/ros2-venv: ROS 2's rclpy and rmw_fastrtps_cpp wheels, pinned in constraints.txt, for
+# tests/e2e/test_ros2_real.py).
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -102,6 +104,27 @@ setup_venv() {
     echo "$want" >"$full_stamp"
 }
 
+#: The ROS 2 wheels of the real node (tests/e2e/test_ros2_real.py); versions in constraints.txt.
+ROS2_PACKAGES=(
+    ros-rclpy ros-rmw-fastrtps-cpp                                   # ROS 2's client, its default RMW
+    ros-std-msgs ros-geometry-msgs ros-sensor-msgs ros-diagnostic-msgs ros-std-srvs  # the bridge's types
+)
+
+# setup_ros2_venv: ROS 2's Python client on Fast DDS in .deps/ros2-venv, apart from .venv (its
+# wheels bring their own rosidl/numpy stack and about 260 MB). Reinstalled when the pins change.
+setup_ros2_venv() {
+    local ros2_venv="$root/.deps/ros2-venv" want
+    want=$(printf '%s\n' "${ROS2_PACKAGES[@]}" | cat - constraints.txt | sha256sum | cut -d' ' -f1)
+    if [ "$(cat "$ros2_venv/.protoduino-deps" 2>/dev/null)" = "$want" ]; then
+        return
+    fi
+    log "installing ROS 2's rclpy and rmw_fastrtps_cpp into $ros2_venv"
+    [ -x "$ros2_venv/bin/python" ] || python3 -m venv "$ros2_venv"
+    "$ros2_venv/bin/python" -m pip install -q --disable-pip-version-check -c constraints.txt \
+        "${ROS2_PACKAGES[@]}"
+    echo "$want" >"$ros2_venv/.protoduino-deps"
+}
+
 # What the demo needs, and no more: the native simulated board and the package.
 setup_demo() {
     setup_apt "${DEMO_APT_PACKAGES[@]}"
@@ -115,6 +138,7 @@ setup() {
     setup_venv full
     "$root/tools/fetch_nanopb.sh"
     "$root/tools/fetch_firmata.sh"  # the bench race's peer (bench/race.py), from npm, pinned
+    setup_ros2_venv
 }
 
 cmd=${1:-}

@@ -39,6 +39,7 @@ def _run(tmp_path: Path, command: str) -> list[str]:
         _stand_in(root / "tools" / script)
     for program in ("python", "protoduino"):
         _stand_in(root / ".venv" / "bin" / program)
+    _stand_in(root / ".deps" / "ros2-venv" / "bin" / "python")  # the real ROS 2 node's venv
     shims = tmp_path / "bin"
     _stand_in(shims / "dpkg-query", INSTALLED)
     for program in ("apt-get", "sudo"):
@@ -66,7 +67,9 @@ def test_the_demo_sets_up_only_what_the_demo_needs(tmp_path: Path) -> None:
     steps = _run(tmp_path, "demo")
     assert "fetch_nanopb.sh " in steps  # the native board is built against nanopb's runtime
     assert steps[-1] == "protoduino demo"
-    assert not [s for s in steps if "firmata" in s or "bench" in s or "npm" in s], steps
+    assert not [s for s in steps if "firmata" in s or "bench" in s or "npm" in s or "ros-" in s], (
+        steps
+    )
     installs = [s for s in steps if s.startswith("python -m pip install")]
     assert installs and installs[-1].endswith(" -e . -e ./dev"), installs
     assert {"build-essential", "libjansson-dev"} <= _queried(steps)
@@ -79,4 +82,6 @@ def test_the_test_path_still_sets_up_everything(tmp_path: Path) -> None:
     assert "bench_setup.sh " in steps
     installs = [s for s in steps if s.startswith("python -m pip install")]
     assert any(s.endswith(" -e .[dev] -e ./dev") for s in installs), installs
+    # ROS 2's rclpy on Fast DDS, pinned, for tests/e2e/test_ros2_real.py.
+    assert any(" -c constraints.txt " in s and " ros-rclpy " in s for s in installs), installs
     assert {"build-essential", "gcc-avr", "simavr", "clang", "libjansson-dev"} <= _queried(steps)

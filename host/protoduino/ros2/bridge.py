@@ -57,7 +57,7 @@ from ..errors import (
     StaleCommandError,
 )
 from ..events import Event, EventKind
-from . import inputs
+from . import dds, graph, inputs
 from .config import BridgeConfig, ServoConfig
 from .dds import DEFAULT_QOS, SENSOR_QOS, dds_topic, ros_topic
 from .diagnostics import Health
@@ -129,6 +129,7 @@ class Bridge(ClosedOnExit):
         self._routes: list[_Route] = []
         self._writers: dict[str, DataWriter[Any]] = {}
         self._participant: DomainParticipant | None = None
+        self._node: DataWriter[Any] | None = None  # the node's entry in ROS 2's graph
         self._waitset: WaitSet | None = None
         self._wake: GuardCondition | None = None
         self._stopping = threading.Event()
@@ -166,7 +167,7 @@ class Bridge(ClosedOnExit):
             if self._on_open is not None:
                 self._on_open(self.board)
             _start_safe(self.board)
-            self._participant = DomainParticipant(config.resolved_domain())
+            self._participant = dds.participant(config.resolved_domain())
             self._waitset = WaitSet(self._participant)
             self._wake = GuardCondition(self._participant)
             self._waitset.attach(self._wake)
@@ -175,6 +176,13 @@ class Bridge(ClosedOnExit):
             )
             self._configure_outputs(self.board)
             self._configure_inputs(self.board)
+            # In ROS 2's node graph (ros2 node list / info), with every endpoint above.
+            self._node = graph.announce(
+                self._participant,
+                config.namespace,
+                [route.reader for route in self._routes],
+                self._writers.values(),
+            )
         except BaseException:
             self.close()
             raise
@@ -230,6 +238,7 @@ class Bridge(ClosedOnExit):
         self._writers.clear()
         self._waitset = None
         self._wake = None
+        self._node = None
         self._participant = None
 
     # --- setup ---------------------------------------------------------------------

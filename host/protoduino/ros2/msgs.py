@@ -15,7 +15,17 @@ this module, which it cannot do for the subscripted ``sequence[...]`` forms.
 from dataclasses import dataclass, field
 
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import byte, float32, float64, int32, sequence, uint8, uint32
+from cyclonedds.idl.types import (
+    array,
+    bounded_str,
+    byte,
+    float32,
+    float64,
+    int32,
+    sequence,
+    uint8,
+    uint32,
+)
 
 
 @dataclass
@@ -112,3 +122,30 @@ class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs::msg::dds_::Diagnost
 class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticArray_"):
     header: Header = field(default_factory=Header)
     status: sequence[DiagnosticStatus] = field(default_factory=list)
+
+
+# ROS 2's node graph (rmw_dds_common, as in Jazzy and Kilted): what every rmw publishes on
+# the DDS topic ros_discovery_info, so that the nodes of a participant and their endpoints
+# appear in `ros2 node list` / `ros2 node info` (issue 33).
+
+
+@dataclass
+class Gid(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
+    # The .msg's char[16]: an endpoint's DDS GUID (prefix and entity id).
+    data: array[uint8, 16] = field(default_factory=lambda: [0] * 16)
+
+
+@dataclass
+class NodeEntitiesInfo(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
+    node_namespace: bounded_str[256] = ""
+    node_name: bounded_str[256] = ""
+    reader_gid_seq: sequence[Gid] = field(default_factory=list)
+    writer_gid_seq: sequence[Gid] = field(default_factory=list)
+
+
+@dataclass
+class ParticipantEntitiesInfo(
+    IdlStruct, typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"
+):
+    gid: Gid = field(default_factory=Gid)
+    node_entities_info_seq: sequence[NodeEntitiesInfo] = field(default_factory=list)

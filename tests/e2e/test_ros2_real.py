@@ -1,0 +1,324 @@
+"""The ROS 2 bridge against a real ROS 2 node: rclpy on Fast DDS (issue 33).
+
+The node is ROS 2's own Python client library, rclpy 9.1.2 (Kilted), on its
+default middleware rmw_fastrtps_cpp (Fast DDS 3.2), from the pinned wheels that
+``tools/dev.sh setup`` installs into ``.deps/ros2-venv``; it runs there as
+``tests/ros2_node.py``, a subprocess this test drives through JSON lines. The
+bridge runs as ``protoduino ros2 PORT --config`` (tests/e2e/test_ros2.py's
+``BridgeProcess``, Cyclone DDS on loopback), on both boards. Every topic type and
+QoS of the bridge is judged at the pin (commands) or at the node (samples); the
+rosbags peer of test_ros2.py stays the second, independent peer.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from protoduino.simboard import SimBoard
+from simfixtures import pin_values, wait_for_pin, wait_until
+
+pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing")
+
+from test_ros2 import (
+    DOMAIN,
+    FAILSAFE_TIMEOUT,
+    SAFE_90_US,
+    WAIT,
+    BridgeProcess,
+    _until,
+    now_at,
+    to_us,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+#: The ROS 2 venv of tools/dev.sh setup.
+ROS2_PYTHON = ROOT / ".deps" / "ros2-venv" / "bin" / "python"
+NODE_SCRIPT = ROOT / "tests" / "ros2_node.py"
+
+if not ROS2_PYTHON.exists():
+    pytest.skip(
+        f"rclpy is not installed ({ROS2_PYTHON}: ./tools/dev.sh setup installs it)",
+        allow_module_level=True,
+    )
+
+
+class RosNode:
+    """The rclpy node in its subprocess; :meth:`request` is one JSON line each way."""
+
+    def __init__(self, log: Path) -> None:
+        env = dict(
+            os.environ,
+            ROS_DOMAIN_ID=str(DOMAIN),
+            RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
+            # Discovery on this machine only (Fast DDS: loopback unicast, no multicast).
+            ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        )
+        env.pop("CYCLONEDDS_URI", None)
+        self.stderr = log.open("w")
+        self.proc = subprocess.Popen(
+            [str(ROS2_PYTHON), str(NODE_SCRIPT)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self.stderr,
+            env=env,
+            text=True,
+        )
+        self.log = log
+        assert self._answer() == "ready"
+
+    def _answer(self) -> Any:
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()
+        if not line:
+            raise AssertionError(f"the rclpy node died: {self.log.read_text()}")
+        answer = json.loads(line)
+        if "error" in answer:
+            raise AssertionError(f"the rclpy node: {answer['error']}")
+        return answer["ok"]
+
+    def request(self, op: str, **args: Any) -> Any:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(json.dumps({"op": op, **args}) + "\n")
+        self.proc.stdin.flush()
+        return self._answer()
+
+    def close(self) -> None:
+        if self.proc.stdin is not None:
+            self.proc.stdin.close()
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.stderr.close()
+
+
+@pytest.fixture(scope="module")
+def ros_node(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RosNode]:
+    node = RosNode(tmp_path_factory.mktemp("rclpy") / "node.log")
+    try:
+        yield node
+    finally:
+        node.close()
+
+
+@pytest.fixture
+def bridge(sim_board: SimBoard, tmp_path: Path) -> Iterator[Callable[[str], BridgeProcess]]:
+    started: list[BridgeProcess] = []
+
+    def start(config: str) -> BridgeProcess:
+        started.append(BridgeProcess(sim_board, config, tmp_path, new_session=True))
+        return started[-1]
+
+    yield start
+    for process in started:
+        process.stop()
+
+
+#: Every topic type and QoS the bridge has, on pins an Uno drives all at once.
+ROBOT = """
+namespace: {ns}
+failsafe_timeout: {failsafe}
+diagnostics_period: 0.5
+servos:
+  - {{pin: 9, topic: servo/pan, joint: pan, safe: 90}}
+  - {{pin: 10, joint: tilt, safe: 45}}
+digital_outputs:
+  - {{pin: 13, topic: led}}
+stop: {{topic: stop, type: Empty}}
+drive:
+  wheel_base: 0.2
+  max_speed: 0.5
+  timeout: 30.0
+  left: {{pwm: 3, direction: 4}}
+  right: {{pwm: 11, direction: 12, invert: true}}
+digital_inputs:
+  - {{pin: 7, topic: bumper, pull_up: true}}
+analog_inputs:
+  - {{pin: A0, topic: battery, scale: 0.01, threshold: 2}}
+counters:
+  - {{pins: [2], topic: sensors/encoders}}
+"""
+
+
+def _seen(node: RosNode, topic: str, ok: Callable[[Any], bool], box: list[Any]) -> bool:
+    box += node.request("take", topic=topic)
+    return any(ok(sample) for sample in box)
+
+
+def _until_seen(node: RosNode, topic: str, ok: Callable[[Any], bool], what: str) -> None:
+    box: list[Any] = []
+    _until(lambda: _seen(node, topic, ok, box), f"{topic}: {what} at the rclpy node")
+
+
+def _until_fed(
+    node: RosNode, topic: str, feed: Callable[[int], Any], ok: Callable[[Any, int], bool]
+) -> None:
+    """Feed the board (``feed(i)``, i = 1, 2, ...) until the node saw, after a feed, the
+    sample ``ok`` says that feed makes: a best-effort sample written before the bridge's
+    writer matched the node's reader is lost by design (the QoS), a later one is not."""
+    deadline = time.monotonic() + WAIT
+    fed = 0
+    while True:
+        fed += 1
+        node.request("take", topic=topic)  # what came before this feed does not count
+        box: list[Any] = []
+        feed(fed)
+
+        def made(sample: Any, i: int = fed) -> bool:
+            return ok(sample, i)
+
+        if wait_until(lambda: _seen(node, topic, made, box), timeout=2.0):  # noqa: B023
+            return
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{topic}: nothing that {fed} feeds make at the rclpy node")
+
+
+def test_a_real_rclpy_node_drives_and_reads_every_topic_type(
+    sim_board: SimBoard, ros_node: RosNode, bridge: Callable[[str], BridgeProcess]
+) -> None:
+    """rclpy on Fast DDS: Float64, JointState, Bool, Twist, Empty to the pins (reliable);
+    Bool, Float32, Int32MultiArray (sensor QoS) and /diagnostics' DiagnosticArray
+    (reliable) at the node. JointState, Int32MultiArray and DiagnosticArray carry strings
+    or sequences of structs: the types Cyclone refused Fast DDS's type objects for."""
+    sim, node = sim_board, ros_node
+    ns = f"real_{sim.backend}"
+    sim.set_level(7, 1)  # the bumper released: the pull-up's level
+    node.request("sub", topic=f"/{ns}/bumper", type="std_msgs/msg/Bool", qos="sensor")
+    node.request("sub", topic=f"/{ns}/battery", type="std_msgs/msg/Float32", qos="sensor")
+    encoders = f"/{ns}/sensors/encoders"
+    node.request("sub", topic=encoders, type="std_msgs/msg/Int32MultiArray", qos="sensor")
+    node.request("sub", topic="/diagnostics", type="diagnostic_msgs/msg/DiagnosticArray")
+    bridge(ROBOT.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    wait_for_pin(sim, 9, now_at(SAFE_90_US))
+
+    # To the board, reliable. A publisher that matched the bridge's subscription may still
+    # be unknown to it for a moment (discovery is not symmetric), and a volatile reader
+    # takes only what comes after it knows the writer: so a command (a state: the same
+    # again changes nothing) is published again until the pins show it.
+    def pub(topic: str, kind: str, msg: dict[str, Any], *done: tuple[int, int]) -> None:
+        def at_pins() -> bool:
+            return all(pin_values(sim.trace(), pin)[-1:] == [value] for pin, value in done)
+
+        deadline = time.monotonic() + WAIT
+        while True:
+            assert node.request("pub", topic=f"/{ns}/{topic}", type=kind, msg=msg) == 1
+            if wait_until(at_pins, timeout=2.0):
+                return
+            if time.monotonic() > deadline:
+                raise AssertionError(f"{topic}: the pins show no {done}")
+
+    pub("servo/pan", "std_msgs/msg/Float64", {"data": 45.0}, (9, to_us(45)))
+    # pan 0.5 rad -> 90 + 28.6 -> 119 degrees; tilt -0.3 rad -> 90 - 17.2 -> 73 degrees.
+    joints = {"name": ["pan", "tilt"], "position": [0.5, -0.3]}
+    joints_type = "sensor_msgs/msg/JointState"
+    pub("joint_commands", joints_type, joints, (9, to_us(119)), (10, to_us(73)))
+    # Bad input from the node: counted on /diagnostics, nothing moves (the publisher
+    # delivered before, so this one arrives too).
+    before = {pin: len(pin_values(sim.trace(), pin)) for pin in (9, 10)}
+    elbow = {"name": ["pan", "elbow"], "position": [0.0, 0.0]}
+    node.request("pub", topic=f"/{ns}/joint_commands", type=joints_type, msg=elbow)
+    _until_seen(
+        node,
+        "/diagnostics",
+        lambda s: any(
+            st["name"] == f"protoduino {ns}: bridge"
+            and {"key": f"bad./{ns}/joint_commands: invalid", "value": "1"} in st["values"]
+            for st in s["status"]
+        ),
+        "the bad JointState counted",
+    )
+    pub("led", "std_msgs/msg/Bool", {"data": True}, (13, 1))
+    assert {pin: len(pin_values(sim.trace(), pin)) for pin in (9, 10)} == before
+    twist = {"linear": {"x": 0.25}, "angular": {"z": 0.0}}
+    pub("cmd_vel", "geometry_msgs/msg/Twist", twist, (3, 128), (11, 128))
+    assert pin_values(sim.trace(), 4)[-1] == 1 and pin_values(sim.trace(), 12)[-1] == 0
+
+    # From the board, best effort (sensor QoS), judged at the node.
+    def to_level(level: bool) -> Callable[[int], None]:
+        def feed(_: int) -> None:  # each feed makes ``level`` anew: the other one, then it
+            sim.set_level(7, int(not level))
+            sim.set_level(7, int(level))
+
+        return feed
+
+    bumper = f"/{ns}/bumper"
+    _until_fed(node, bumper, to_level(False), lambda s, _: s["data"] is False)  # pressed
+    _until_fed(node, bumper, to_level(True), lambda s, _: s["data"] is True)  # released
+    _until_fed(
+        node,
+        f"/{ns}/battery",
+        lambda i: sim.set_analog(14, 100 + 10 * i),
+        lambda s, i: abs(s["data"] - (1.0 + 0.1 * i)) < 1e-5,
+    )
+    _until_fed(
+        node,
+        encoders,
+        lambda i: sim.pulses(2, 5, 1000),
+        lambda s, i: s["data"] == [5 * i],
+    )
+    # /diagnostics, reliable: the bridge's three statuses for this board.
+    _until_seen(
+        node,
+        "/diagnostics",
+        lambda s: any(
+            st["name"] == f"protoduino {ns}: link"
+            and {"key": "state", "value": "active"} in st["values"]
+            for st in s["status"]
+        ),
+        "the link's status",
+    )
+
+    safe = ((9, SAFE_90_US), (10, to_us(45)), (13, 0), (3, 0), (11, 0))
+    pub("stop", "std_msgs/msg/Empty", {}, *safe)
+    _until_seen(
+        node,
+        "/diagnostics",
+        lambda s: any(
+            st["name"] == f"protoduino {ns}: failsafe"
+            and {"key": "cause", "value": "stop"} in st["values"]
+            for st in s["status"]
+        ),
+        "the failsafe's cause: stop",
+    )
+
+
+def test_the_bridge_is_a_node_in_the_ros2_graph(
+    sim_board: SimBoard, ros_node: RosNode, bridge: Callable[[str], BridgeProcess]
+) -> None:
+    """rclpy's get_node_names_and_namespaces() (``ros2 node list``) has the bridge under its
+    namespace, and the per-node queries of ``ros2 node info`` list its subscriptions
+    (commands) and publishers (inputs, /diagnostics) with their ROS 2 types."""
+    sim, node = sim_board, ros_node
+    ns = f"graph_{sim.backend}"
+    bridge(ROBOT.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    found: list[dict[str, Any]] = []
+
+    def listed() -> bool:
+        found[:] = [n for n in node.request("graph") if n["namespace"] == f"/{ns}"]
+        return bool(found and found[0]["publishers"] and found[0]["subscriptions"])
+
+    _until(listed, f"a node in /{ns}")
+    assert [n["name"] for n in found] == ["protoduino"], found
+    subscriptions = {name: types for name, types in found[0]["subscriptions"]}
+    publishers = {name: types for name, types in found[0]["publishers"]}
+    assert subscriptions == {
+        f"/{ns}/servo/pan": ["std_msgs/msg/Float64"],
+        f"/{ns}/joint_commands": ["sensor_msgs/msg/JointState"],
+        f"/{ns}/led": ["std_msgs/msg/Bool"],
+        f"/{ns}/stop": ["std_msgs/msg/Empty"],
+        f"/{ns}/cmd_vel": ["geometry_msgs/msg/Twist"],
+    }
+    assert publishers == {
+        "/diagnostics": ["diagnostic_msgs/msg/DiagnosticArray"],
+        f"/{ns}/bumper": ["std_msgs/msg/Bool"],
+        f"/{ns}/battery": ["std_msgs/msg/Float32"],
+        f"/{ns}/sensors/encoders": ["std_msgs/msg/Int32MultiArray"],
+    }
