@@ -314,6 +314,7 @@ def test_the_bridge_is_a_node_in_the_ros2_graph(
         f"/{ns}/joint_commands": ["sensor_msgs/msg/JointState"],
         f"/{ns}/led": ["std_msgs/msg/Bool"],
         f"/{ns}/stop": ["std_msgs/msg/Empty"],
+        f"/{ns}/resume": ["std_msgs/msg/Empty"],  # releases a latched STOP
         f"/{ns}/cmd_vel": ["geometry_msgs/msg/Twist"],
     }
     assert publishers == {
