@@ -9,7 +9,8 @@
 # virtual environment in .venv with the package, its pinned dev extras and the
 # development tools (dev/, the protoduino_dev package),
 # the nanopb C runtime from Debian's source package (.deps/nanopb), and StandardFirmata's
-# Uno hex from the npm registry for the bench's race (.deps/firmata).
+# Uno hex from the npm registry for the bench's race (.deps/firmata), and uPlot from the npm
+# registry for the live console's plots (.deps/uplot).
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -27,6 +28,7 @@ APT_PACKAGES=(
     avrdude                                # flashing
     clang libclang-rt-14-dev               # libFuzzer + sanitizers for the C core
     ser2net                                # the RFC 2217 server of the remote-board test
+    chromium chromium-driver               # the live console's browser tests (Selenium)
 )
 #: Debian packages wanted for one command each, as package:command: missing only when the
 #: command is too (NodeSource's nodejs, for one, ships its own npm and conflicts with Debian's).
@@ -82,6 +84,7 @@ setup() {
     setup_venv
     "$root/tools/fetch_nanopb.sh"
     "$root/tools/fetch_firmata.sh"  # the bench race's peer (bench/race.py), from npm, pinned
+    "$root/tools/fetch_uplot.sh"    # the live console's plots (protoduino console), from npm, pinned
 }
 
 cmd=${1:-}

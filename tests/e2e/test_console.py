@@ -1,0 +1,283 @@
+"""The live console in a real browser: headless Chromium (Debian's chromium and chromium-driver,
+driven by Selenium) clicks, drags and presses STOP on the page, judged at the pins by the
+simulated board's and the emulated Uno's trace; the plots, the failsafe on the page's
+liveness, the two pages and the token (docs/console.md).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import shutil
+import tempfile
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+from protoduino import Board
+from protoduino.console import ConsoleServer, LiveBoard, PinSpec
+from protoduino.simboard import SimBoard
+from simfixtures import pin_values, wait_for_pin, wait_until
+
+webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
+from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
+from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.common.keys import Keys  # noqa: E402
+
+CHROMIUM = shutil.which("chromium")
+CHROMEDRIVER = shutil.which("chromedriver")
+
+#: The failsafe timeout of these tests' boards: the page's heartbeat comes every T/4.
+T = 1.0
+SAFE_90_US = 1472  # 90 degrees on the default 544..2400 us
+PINS = (
+    PinSpec(9, "servo", safe=90, name="pan"),
+    PinSpec(13, "digital", safe=0, name="led"),
+    PinSpec(3, "pwm", safe=0, name="motor"),
+    PinSpec(14, "analog", name="battery"),
+)
+
+
+@dataclass
+class Console:
+    sim: SimBoard
+    board: Board
+    live: LiveBoard
+    server: ConsoleServer
+
+
+@pytest.fixture
+def console(sim_board: SimBoard) -> Iterator[Console]:
+    """The console on the simulated board (either backend), serving PINS on a free port."""
+    with Board.open(sim_board.port, liveness="heartbeat", failsafe_timeout=T) as board:
+        live = LiveBoard(board, window=10.0)
+        live.configure_all(PINS)
+        with ConsoleServer(live) as server:
+            yield Console(sim_board, board, live, server)
+        live.close()
+
+
+Browser = Callable[[str], Any]
+
+
+@pytest.fixture
+def browser() -> Iterator[Browser]:
+    """Opens a page in a new headless Chromium each call; every one is quit at the end."""
+    if CHROMIUM is None or CHROMEDRIVER is None:
+        pytest.skip("chromium or chromedriver is not installed (Debian: chromium chromium-driver)")
+    from selenium.webdriver.chrome.options import Options
+    from selenium.webdriver.chrome.service import Service
+
+    opened: list[Any] = []
+    profiles: list[str] = []
+
+    def open_page(url: str) -> Any:
+        options = Options()
+        options.binary_location = CHROMIUM
+        profile = tempfile.mkdtemp(prefix="protoduino-chromium-")
+        profiles.append(profile)
+        for flag in (
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--disable-dev-shm-usage",
+            "--window-size=1500,1000",
+            f"--user-data-dir={profile}",
+        ):
+            options.add_argument(flag)
+        driver = webdriver.Chrome(options=options, service=Service(CHROMEDRIVER))
+        opened.append(driver)
+        driver.get(url)
+        return driver
+
+    try:
+        yield open_page
+    finally:
+        for driver in opened:
+            with contextlib.suppress(Exception):  # a page the test closed itself
+                driver.quit()
+        for profile in profiles:
+            shutil.rmtree(profile, ignore_errors=True)
+
+
+def text_of(page: Any, element_id: str) -> str:
+    return str(page.find_element(By.ID, element_id).text)
+
+
+def until(predicate: Callable[[], bool], what: str, timeout: float = 30.0) -> None:
+    """Until ``predicate`` holds; the timeout only bounds a failure."""
+    assert wait_until(predicate, timeout), f"timed out waiting for {what}"
+
+
+def driving(page: Any) -> None:
+    until(lambda: text_of(page, "role") == "driving", "the page to drive")
+
+
+def now_at(value: int) -> Callable[[list[int]], bool]:
+    return lambda values: values[-1:] == [value]
+
+
+def test_the_page_drives_every_output_kind_and_stop_makes_them_safe(
+    console: Console, browser: Browser, tmp_path: Path
+) -> None:
+    """A toggle clicked, a servo and a PWM slider dragged, STOP pressed: at the pins."""
+    sim = console.sim
+    page = browser(console.server.url)
+    driving(page)
+
+    page.find_element(By.ID, "toggle-13").click()
+    wait_for_pin(sim, 13, now_at(1))
+    until(lambda: text_of(page, "readback-13") == "on", "the readback of pin 13")
+    until(lambda: "Outputs live" in text_of(page, "failsafe"), "the outputs live")
+
+    servo = page.find_element(By.ID, "servo-9")
+    ActionChains(page).drag_and_drop_by_offset(servo, -60, 0).perform()
+    moved = wait_for_pin(sim, 9, lambda v: bool(v) and v[-1] < SAFE_90_US - 100)
+    until(
+        lambda: text_of(page, "readback-9").startswith(f"{moved[-1]}"),
+        "the readback of pin 9",
+    )
+
+    motor = page.find_element(By.ID, "pwm-3")
+    ActionChains(page).drag_and_drop_by_offset(motor, 50, 0).perform()
+    wait_for_pin(sim, 3, lambda v: bool(v) and v[-1] > 128)
+
+    page.save_screenshot(str(tmp_path / "console.png"))
+    page.find_element(By.ID, "stop").click()
+    wait_for_pin(sim, 9, now_at(SAFE_90_US))
+    wait_for_pin(sim, 13, now_at(0))
+    wait_for_pin(sim, 3, now_at(0))
+    until(lambda: "SAFE after stop" in text_of(page, "failsafe"), "the page's STOP state")
+
+
+def test_a_plot_shows_the_analog_input_the_control_socket_moves(
+    console: Console, browser: Browser
+) -> None:
+    page = browser(console.server.url)
+    driving(page)
+    for counts in (700, 300):
+        console.sim.set_analog(14, counts)
+
+        def shown(counts: int = counts) -> bool:
+            return text_of(page, "value-14") == str(counts)
+
+        def plotted(counts: int = counts) -> bool:
+            return counts in page.execute_script("return protoduinoConsole.plots[14].data[1];")
+
+        until(shown, f"A0 at {counts} on the page")
+        until(plotted, f"{counts} in A0's plot")
+    # The plot holds both values, in order, with their times in the window.
+    xs, ys = page.execute_script("return protoduinoConsole.plots[14].data;")
+    assert ys.index(700) < len(ys) - 1 - ys[::-1].index(300), ys
+    assert all(-10.0 <= x <= 0 for x in xs), xs
+    assert "s old" in text_of(page, "age-14")
+
+
+def test_closing_the_page_trips_the_failsafe_on_time(console: Console, browser: Browser) -> None:
+    """While the page lives its heartbeat holds the outputs (2 T of the board's clock); once
+    it is closed the device drives them safe T after its last beat."""
+    sim = console.sim
+    page = browser(console.server.url)
+    driving(page)
+    servo = page.find_element(By.ID, "servo-us-9")
+    servo.click()  # focused, the page no longer shows the readback there
+    servo.send_keys(Keys.CONTROL, "a")
+    servo.send_keys("1000", Keys.ENTER)
+    wait_for_pin(sim, 9, now_at(1000))
+    commanded = [c for c in sim.trace() if c["pin"] == 9][-1]["t"]
+    t = commanded
+    toggle = page.find_element(By.ID, "toggle-13")
+    level = 0
+    while t - commanded < 2 * T:  # the led's edges date the board's clock
+        toggle.click()
+        level ^= 1
+        wait_for_pin(sim, 13, now_at(level))
+        t = [c for c in sim.trace() if c["pin"] == 13][-1]["t"]
+        time.sleep(0.2)
+    assert pin_values(sim.trace(), 9)[-1] == 1000, "the failsafe fired with the page alive"
+
+    page.close()  # the tab closes: no more beats
+    wait_for_pin(sim, 9, now_at(SAFE_90_US))
+    changes = [c for c in sim.trace() if c["pin"] == 9]
+    tripped = changes[-1]["t"]
+    # The last beat came at most T/4 before the last edge, and the close follows that edge
+    # by what Selenium takes to close a tab (well under a second).
+    assert 0.75 * T - 0.05 <= tripped - t <= T + 1.0, (tripped, t)
+
+
+def test_two_pages_one_drives_the_other_watches(console: Console, browser: Browser) -> None:
+    sim = console.sim
+    first = browser(console.server.url)
+    driving(first)
+    second = browser(console.server.url)
+    until(lambda: text_of(second, "role") == "watching", "the second page to watch")
+    assert not second.find_element(By.ID, "take").is_displayed()
+
+    second.find_element(By.ID, "toggle-13").click()
+    until(lambda: "this page watches" in text_of(second, "error"), "the watcher's refusal")
+    assert 1 not in pin_values(sim.trace(), 13)
+
+    first.find_element(By.ID, "toggle-13").click()
+    wait_for_pin(sim, 13, now_at(1))
+    second.find_element(By.ID, "stop").click()  # STOP works from any page
+    wait_for_pin(sim, 13, now_at(0))
+
+    first.close()  # the driver goes: nobody drives until the watcher takes over
+    take = second.find_element(By.ID, "take")
+    until(take.is_displayed, "the watcher's Take control")
+    take.click()
+    driving(second)
+    second.find_element(By.ID, "toggle-13").click()
+    wait_for_pin(sim, 13, now_at(1))
+
+
+def _status(url: str, headers: dict[str, str] | None = None) -> int:
+    try:
+        with urllib.request.urlopen(urllib.request.Request(url, headers=headers or {})) as r:
+            return int(r.status)
+    except urllib.error.HTTPError as error:
+        return int(error.code)
+
+
+@pytest.mark.parametrize("sim_board", ["native"], indirect=True)
+def test_every_request_without_the_token_is_refused(sim_board: SimBoard, browser: Browser) -> None:
+    """Off loopback a token is made; without it the page, its assets and the WebSocket are
+    refused (403), with it the page works; another site's page cannot open the WebSocket."""
+    with Board.open(sim_board.port, liveness="heartbeat", failsafe_timeout=T) as board:
+        live = LiveBoard(board)
+        live.configure_all(PINS[:2])
+        assert ConsoleServer(live, host="0.0.0.0").token is not None
+        assert ConsoleServer(live).token is None  # 127.0.0.1: none unless asked for
+        with ConsoleServer(live, token="sesame") as server:
+            base = server.url.split("?")[0]
+            assert server.url == f"{base}?token=sesame"
+            for path in ("", "static/console.js", "vendor/uPlot.iife.min.js", "ws"):
+                assert _status(base + path) == 403, path
+                assert _status(f"{base}{path}?token=wrong") == 403, path
+            assert _status(base + "static/console.js?token=sesame") == 200
+            page = browser(base)
+            assert "needs the access token" in page.find_element(By.TAG_NAME, "body").text
+            page.get(server.url)  # the printed URL: its token, then the cookie
+            driving(page)
+            page.find_element(By.ID, "toggle-13").click()
+            wait_for_pin(sim_board, 13, now_at(1))
+            # Another site's page in the same browser: its WebSocket is refused.
+            headers = {
+                "Cookie": "protoduino_console_token=sesame",
+                "Origin": "http://evil.example",
+                "Connection": "Upgrade",
+                "Upgrade": "websocket",
+                "Sec-WebSocket-Version": "13",
+                "Sec-WebSocket-Key": "dGhlIHNhbXBsZSBub25jZQ==",
+            }
+            assert _status(base + "ws", headers) == 403
+        live.close()
