@@ -182,6 +182,22 @@ def test_a_plot_shows_the_analog_input_the_control_socket_moves(
     assert "s old" in text_of(page, "age-14")
 
 
+def test_the_page_goes_on_through_a_reboot_and_says_so(console: Console, browser: Browser) -> None:
+    sim = console.sim
+    page = browser(console.server.url)
+    driving(page)
+    page.find_element(By.ID, "toggle-13").click()
+    wait_for_pin(sim, 13, now_at(1))
+    sim.reboot()  # a power cycle: the board restores every output at its safe value
+    wait_for_pin(sim, 13, now_at(0))
+    until(lambda: "rebooted" in text_of(page, "events"), "the reboot on the page")
+    until(lambda: "restored" in text_of(page, "events"), "the restore on the page")
+    until(lambda: text_of(page, "toggle-13") == "OFF", "the led shown safe")
+    until(lambda: "Board connected" in text_of(page, "banner"), "the link shown up")
+    page.find_element(By.ID, "toggle-13").click()  # the page drives on
+    wait_for_pin(sim, 13, now_at(1))
+
+
 def test_closing_the_page_trips_the_failsafe_on_time(console: Console, browser: Browser) -> None:
     """While the page lives its heartbeat holds the outputs (2 T of the board's clock); once
     it is closed the device drives them safe T after its last beat."""

@@ -112,9 +112,10 @@ function layout(s) {
       ` <span class="age" id="age-${i.pin}"></span></div><div id="plot-${i.pin}"></div>`;
     inputs.appendChild(div);
     C.plots[i.pin] = new uPlot({
-      width: 460, height: 120,
+      width: 460, height: 150,
+      legend: { show: false },
       scales: { x: { time: false } },
-      axes: [{ label: "s ago" }, {}],
+      axes: [{ label: "s ago", size: 40 }, { size: 50 }],
       series: [{}, { label: i.name, stroke: "#1565c0", width: 2, paths: uPlot.paths.stepped({ align: 1 }) }],
     }, [[], []], div.lastChild);
   }
