@@ -4,13 +4,15 @@ It opens the board with ``liveness="heartbeat"`` (the page's heartbeat is the on
 life: docs/console.md), configures the example robot with ``--example`` (the default with
 ``--sim``, which starts a simulated board owned by this process, as ``protoduino ros2
 --sim`` does), prints the page's URL (with its access token when it listens on another
-address than 127.0.0.1) and serves until Ctrl-C or SIGTERM, which stop the board's outputs
-(the device's Stop) before it closes.
+address than 127.0.0.1), with ``--foxglove`` also the board's live channels for Foxglove
+(:mod:`protoduino.console.foxglovelive`), and serves until Ctrl-C or SIGTERM, which stop the
+board's outputs (the device's Stop) before it closes.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
 import threading
@@ -70,6 +72,15 @@ def register(parser: argparse.ArgumentParser) -> None:
         "output safe (default 2)",
     )
     parser.add_argument(
+        "--foxglove",
+        nargs="?",
+        const=8765,
+        type=argtypes.integer(0, 65535, name="port"),
+        metavar="N",
+        help="also serve the board's live channels to Foxglove on ws://127.0.0.1:N (default "
+        "8765): the MCAP export's channels, read-only (pip install 'protoduino[foxglove]')",
+    )
+    parser.add_argument(
         "--window",
         type=argtypes.number(1.0, 600.0, name="window"),
         default=30.0,
@@ -121,13 +132,20 @@ def _serve(args: argparse.Namespace, *, example: bool) -> int:
             server = ConsoleServer(live, host=args.host, port=args.http_port, token=args.token)
             signal.signal(signal.SIGTERM, stop)
             signal.signal(signal.SIGINT, stop)
-            with server:
+            with server, contextlib.ExitStack() as stack:
                 print(f"protoduino console: open {server.url}", flush=True)
+                if args.foxglove is not None:
+                    from ..console.foxglovelive import FoxgloveLive
+
+                    live_channels = stack.enter_context(FoxgloveLive(board, port=args.foxglove))
+                    print(f"protoduino console: Foxglove on {live_channels.url}", flush=True)
                 done.wait()
             board.stop()
     except ProtoduinoError as exc:
         return error("console", exc)
     except OSError as exc:  # the HTTP port is taken
         return error("console", exc)
+    except ImportError as exc:  # --foxglove without the foxglove extra
+        return error("console", f"{exc}: pip install 'protoduino[foxglove]'")
     print("protoduino console: stopped", file=sys.stderr)
     return 0
