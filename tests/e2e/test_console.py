@@ -29,6 +29,7 @@ webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not in
 from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.common.keys import Keys  # noqa: E402
+from selenium.webdriver.support.select import Select  # noqa: E402
 
 CHROMIUM = shutil.which("chromium")
 CHROMEDRIVER = shutil.which("chromedriver")
@@ -41,6 +42,8 @@ PINS = (
     PinSpec(13, "digital", safe=0, name="led"),
     PinSpec(3, "pwm", safe=0, name="motor"),
     PinSpec(14, "analog", name="battery"),
+    PinSpec(7, "input", pull_up=True, name="bumper"),
+    PinSpec(2, "counter", name="encoder"),
 )
 
 
@@ -161,27 +164,61 @@ def test_the_page_drives_every_output_kind_and_stop_makes_them_safe(
     until(lambda: "SAFE after stop" in text_of(page, "failsafe"), "the page's STOP state")
 
 
-def test_a_plot_shows_the_analog_input_the_control_socket_moves(
+def test_the_plots_show_every_input_kind_the_control_socket_moves(
     console: Console, browser: Browser
 ) -> None:
+    """An analog input, a digital input and a counter, moved by the simulated board's
+    control socket: each value on the page and in its plot, in order, within the window."""
+    sim = console.sim
     page = browser(console.server.url)
     driving(page)
+
+    def plot(pin: int) -> list[list[float]]:
+        data: list[list[float]] = page.execute_script(
+            f"return protoduinoConsole.plots[{pin}].data;"
+        )
+        return data
+
+    def shows(pin: int, value: int) -> Callable[[], bool]:
+        return lambda: text_of(page, f"value-{pin}") == str(value) and value in plot(pin)[1]
+
     for counts in (700, 300):
-        console.sim.set_analog(14, counts)
-
-        def shown(counts: int = counts) -> bool:
-            return text_of(page, "value-14") == str(counts)
-
-        def plotted(counts: int = counts) -> bool:
-            return counts in page.execute_script("return protoduinoConsole.plots[14].data[1];")
-
-        until(shown, f"A0 at {counts} on the page")
-        until(plotted, f"{counts} in A0's plot")
-    # The plot holds both values, in order, with their times in the window.
-    xs, ys = page.execute_script("return protoduinoConsole.plots[14].data;")
+        sim.set_analog(14, counts)
+        until(shows(14, counts), f"A0 at {counts} on the page and in its plot")
+    xs, ys = plot(14)
     assert ys.index(700) < len(ys) - 1 - ys[::-1].index(300), ys
     assert all(-10.0 <= x <= 0 for x in xs), xs
     assert "s old" in text_of(page, "age-14")
+
+    until(shows(7, 1), "the bumper released (pull-up)")
+    sim.set_level(7, 0)
+    until(shows(7, 0), "the bumper pressed")
+    assert plot(7)[1][-2:] == [1, 0] or plot(7)[1][-3:-1] == [1, 0], plot(7)
+
+    sim.pulses(2, 25, 500)
+    until(shows(2, 25), "25 edges counted")
+    assert 0 in plot(2)[1], plot(2)
+
+
+def test_a_pin_configured_on_the_page_is_driven(console: Console, browser: Browser) -> None:
+    sim = console.sim
+    page = browser(console.server.url)
+    driving(page)
+    Select(page.find_element(By.ID, "cfg-pin")).select_by_value("12")
+    Select(page.find_element(By.ID, "cfg-mode")).select_by_value("digital")
+    page.find_element(By.ID, "cfg-safe").send_keys("0")
+    page.find_element(By.ID, "cfg-name").send_keys("horn")
+    page.find_element(By.CSS_SELECTOR, "#configure button").click()
+    until(lambda: bool(page.find_elements(By.ID, "toggle-12")), "pin 12 on the page")
+    assert "horn" in text_of(page, "out-12")
+    page.find_element(By.ID, "toggle-12").click()
+    wait_for_pin(sim, 12, now_at(1))
+    # A mode the pin cannot do is refused, with the board's reason on the page.
+    Select(page.find_element(By.ID, "cfg-pin")).select_by_value("4")
+    Select(page.find_element(By.ID, "cfg-mode")).select_by_value("pwm")
+    page.find_element(By.CSS_SELECTOR, "#configure button").click()
+    until(lambda: "pin 4 cannot be a pwm pin" in text_of(page, "error"), "the refusal of pin 4")
+    assert not page.find_elements(By.ID, "pwm-4")
 
 
 def test_the_page_goes_on_through_a_reboot_and_says_so(console: Console, browser: Browser) -> None:
