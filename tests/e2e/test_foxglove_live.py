@@ -24,10 +24,15 @@ import aiohttp
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from protoduino.console.foxglovelive import FoxgloveLive
 from protoduino.mcapexport import channel_specs
+from userbuilds import client as user_client
+from userbuilds import need, program
 
 ROOT = Path(__file__).resolve().parents[2]
 LAYOUT = ROOT / "docs" / "foxglove-layout.json"
 SAFE_90_US = 1472
+#: examples/presses.proto's report rpc Changes: the third rpc (UserReport.report numbers the
+#: rpcs in declaration order).
+CHANGES = 3
 #: An upper bound on how long a failing test waits; nothing is judged by it.
 WAIT = 30.0
 
@@ -101,15 +106,23 @@ def _servo_us(message: dict[str, Any], pin: int) -> int | None:
     return next((s["us"] for s in message["servos"] if s["pin"] == pin), None)
 
 
+def seen(c: Client) -> bool:
+    """Subscribed: the channels advertised and a first message (the counters) in."""
+    return bool(c.channels) and "/protoduino/stats" in c.received
+
+
+@pytest.fixture(params=["native", "avr"])
+def backend(request: pytest.FixtureRequest) -> str:
+    name: str = request.param
+    return name
+
+
 def test_live_channels_carry_outputs_inputs_counters_and_events(sim_board: SimBoard) -> None:
     sim = sim_board
     with Board.open(sim.port) as board, FoxgloveLive(board, port=0) as live:
         servo = board.servo(9, safe=90)
         pot = board.analog_input(14)
         client = Client()
-
-        def seen(c: Client) -> bool:
-            return bool(c.channels) and "/protoduino/stats" in c.received
 
         def act() -> None:
             servo.write(30)
@@ -144,6 +157,37 @@ def test_live_channels_carry_outputs_inputs_counters_and_events(sim_board: SimBo
             (c["topic"], c["encoding"], c["schemaName"]) for c in client.channels.values()
         }
         assert advertised == {(s.topic, s.message_encoding, s.schema_name) for s in channel_specs()}
+
+
+def test_a_user_services_reports_go_live_in_their_own_schema(
+    backend: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """examples/presses' Changes reports on /presses/changes, decoded as presses.Press with the
+    schema the server advertised (not the test's own module)."""
+    need(backend)
+    mod = user_client("presses", monkeypatch)
+    sim = SimBoard(backend, trace=tmp_path / "trace.jsonl", firmware=program("presses", backend))
+    with sim:
+        sim.start()
+        with Board.open(sim.port) as board:
+            presses = mod.Presses(board)
+            reports = {"/presses/changes": (CHANGES, mod.pb.Press)}
+            with FoxgloveLive(board, port=0, reports=reports) as live:
+                received = Client()
+
+                def act() -> None:
+                    presses.watch_button(mod.pb.Watch(pin=2, debounce_ms=5))
+                    sim.set_level(2, 0)
+
+                def done(c: Client) -> bool:
+                    return any(p.count >= 1 for p in c.received.get("/presses/changes", []))
+
+                asyncio.run(received.run(live.url, seen, act, done))
+    channel = next(c for c in received.channels.values() if c["topic"] == "/presses/changes")
+    assert channel["schemaName"] == "presses.Press"
+    press = received.received["/presses/changes"][-1]
+    assert type(press).__module__ != mod.pb.__name__  # decoded from the advertised schema
+    assert press.count >= 1 and not press.level
 
 
 def test_the_shipped_layout_reads_channels_both_the_export_and_the_live_server_have() -> None:
