@@ -88,6 +88,8 @@ class _Pin:
     spec: PinSpec
     handle: Output | Input
     history: deque[tuple[float, int]]
+    #: Removes an input's on_change callback (outputs: nothing to remove).
+    unsubscribe: Callable[[], None] = lambda: None
 
 
 class LiveBoard:
@@ -121,7 +123,9 @@ class LiveBoard:
         if spec.pin in self._pins:
             self.board.release(spec.pin)
             with self._lock:
-                self._pins.pop(spec.pin, None)
+                old = self._pins.pop(spec.pin, None)
+            if old is not None:
+                old.unsubscribe()
         future: Future[Any]
         if spec.mode == "servo":
             future = board.submit_servo(spec.pin, spec.safe if spec.safe is not None else "detach")
@@ -151,7 +155,7 @@ class LiveBoard:
         with self._lock:
             self._pins[spec.pin] = pin
         if spec.mode in INPUT_MODES:
-            handle.on_change(lambda reading: self._on_reading(pin, reading))
+            pin.unsubscribe = handle.on_change(lambda reading: self._on_reading(pin, reading))
             reading = handle.reading()
             if reading is not None:
                 self._on_reading(pin, reading)

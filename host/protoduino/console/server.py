@@ -42,7 +42,7 @@ from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 
-from ..errors import ProtoduinoError
+from ..errors import ArgumentError, ProtoduinoError
 from .live import LiveBoard, spec_from_json
 
 log = logging.getLogger(__name__)
@@ -115,6 +115,7 @@ class ConsoleServer:
         self._thread: threading.Thread | None = None
         self._ready: Future[str] = Future()
         self._stopping: asyncio.Event | None = None
+        self._tasks: set[asyncio.Task[None]] = set()
 
     # --- lifetime ------------------------------------------------------------------------
 
@@ -162,9 +163,7 @@ class ConsoleServer:
         await runner.setup()
         site = web.TCPSite(runner, self.host, self.port)
         await site.start()
-        server = site._server
-        assert isinstance(server, asyncio.base_events.Server)
-        port = server.sockets[0].getsockname()[1]
+        port = runner.addresses[0][1]
         host = f"[{self.host}]" if ":" in self.host else self.host
         query = "" if self.token is None else f"?token={self.token}"
         self._ready.set_result(f"http://{host}:{port}/{query}")
@@ -225,9 +224,14 @@ class ConsoleServer:
                     continue
                 try:
                     data = json.loads(message.data)
-                    await self._handle(ws, data)
+                    future = await self._handle(ws, data)
                 except (ProtoduinoError, ValueError, TypeError, KeyError) as error:
-                    await ws.send_json({"type": "error", "text": str(error)})
+                    await self._say(ws, error)
+                    continue
+                if future is not None:  # its outcome is awaited beside: a STOP never waits
+                    task = asyncio.create_task(self._outcome(ws, future, data.get("op")))
+                    self._tasks.add(task)
+                    task.add_done_callback(self._tasks.discard)
         finally:
             del self._pages[ws]
             if self._driver is ws:
@@ -235,31 +239,45 @@ class ConsoleServer:
                 log.info("the driving page went away: the failsafe takes over")
         return ws
 
-    async def _handle(self, ws: web.WebSocketResponse, data: dict[str, Any]) -> None:
+    async def _handle(self, ws: web.WebSocketResponse, data: dict[str, Any]) -> Future[Any] | None:
+        """Carry out one message of a page: the board's future of what it sent (submitted
+        in the order the page's messages came), or None."""
         op = data.get("op")
         live = self.live
         if op == "stop":  # any page may stop the board
-            await asyncio.wrap_future(live.stop())
-            return
+            return live.stop()
         if op == "take":
             if self._driver is not None and self._driver is not ws:
-                raise ValueError("another page drives this board: it must close first")
+                raise ProtoduinoError("another page drives this board: it must close first")
             self._driver = ws
             await self._send(ws)
-            return
+            return None
         if ws is not self._driver:
-            raise ValueError("this page watches: another page drives the board")
+            raise ProtoduinoError("this page watches: another page drives the board")
         if op == "beat":
-            await asyncio.wrap_future(live.beat())
-        elif op == "write":
+            return live.beat()
+        if op == "write":
             unit = str(data.get("unit", ""))
-            await asyncio.wrap_future(live.write(int(data["pin"]), float(data["value"]), unit=unit))
-        elif op == "configure":
+            return live.write(int(data["pin"]), float(data["value"]), unit=unit)
+        if op == "configure":
             spec = spec_from_json(data)
-            future = await asyncio.to_thread(live.configure, spec)
+            return await asyncio.to_thread(live.configure, spec)
+        raise ArgumentError(f"unknown op {op!r}")
+
+    async def _outcome(self, ws: web.WebSocketResponse, future: Future[Any], op: object) -> None:
+        """Tell the page when what it asked for failed (a lost heartbeat only goes to the log:
+        the failsafe state on the page says what it did)."""
+        try:
             await asyncio.wrap_future(future)
-        else:
-            raise ValueError(f"unknown op {op!r}")
+        except ProtoduinoError as error:
+            if op == "beat":
+                log.debug("a heartbeat failed: %s", error)
+            else:
+                await self._say(ws, error)
+
+    async def _say(self, ws: web.WebSocketResponse, error: Exception) -> None:
+        with contextlib.suppress(ConnectionError, RuntimeError):
+            await ws.send_json({"type": "error", "text": str(error)})
 
     def _picture(self, ws: web.WebSocketResponse) -> dict[str, Any]:
         picture = self.live.snapshot()
