@@ -268,6 +268,15 @@ def test_closing_the_page_trips_the_failsafe_on_time(console: Console, browser: 
     # by what Selenium takes to close a tab (well under a second).
     assert 0.75 * T - 0.05 <= tripped - t <= T + 1.0, (tripped, t)
 
+    # A new page drives on through the failsafe: it says what happened, and its heartbeat
+    # re-arms the device.
+    page = browser(console.server.url)
+    driving(page)
+    until(lambda: "heartbeat_timeout" in text_of(page, "failsafe"), "the failsafe on the page")
+    page.find_element(By.ID, "toggle-13").click()
+    wait_for_pin(sim, 13, now_at(1))  # the failsafe left it off (safe), the toggle turns it on
+    until(lambda: "Outputs live" in text_of(page, "failsafe"), "the outputs live again")
+
 
 def test_two_pages_one_drives_the_other_watches(console: Console, browser: Browser) -> None:
     sim = console.sim
@@ -328,6 +337,14 @@ def test_every_request_without_the_token_is_refused(sim_board: SimBoard, browser
         live.configure_all(PINS[:2])
         assert ConsoleServer(live, host="0.0.0.0").token is not None
         assert ConsoleServer(live).token is None  # 127.0.0.1: none unless asked for
+        with ConsoleServer(live) as open_server:
+            url = open_server.url
+            assert _status(url) == 200
+            # DNS rebinding: another name resolved to 127.0.0.1 is not this machine's page.
+            assert _status(url, {"Host": "rebound.example"}) == 403
+            assert (
+                _status(url, {"Host": url.split("/")[2].replace("127.0.0.1", "localhost")}) == 200
+            )
         with ConsoleServer(live, token="sesame") as server:
             base = server.url.split("?")[0]
             assert server.url == f"{base}?token=sesame"

@@ -12,7 +12,10 @@ The rules (docs/console.md):
   is refused (403): the page's URL carries it (``?token=``), which sets a cookie for the
   assets and the WebSocket. A token may be asked for on 127.0.0.1 too.
 * **Whose page it is.** A WebSocket whose ``Origin`` is not this server is refused (403),
-  token or not: another web site open in the same browser must not drive the robot.
+  token or not: another web site open in the same browser must not drive the robot. Without
+  a token, a request whose ``Host`` is not a loopback name or address is refused too (a
+  site's name made to resolve to 127.0.0.1, DNS rebinding, would otherwise be this server's
+  own origin).
 * **Liveness is the page's.** The board runs with ``liveness="heartbeat"``, and only the
   driving page's ``beat`` messages (every ``failsafe_timeout / 4``) send the device's
   heartbeat: a page that goes away (tab closed, laptop asleep, network gone) stops them,
@@ -181,7 +184,10 @@ class ConsoleServer:
 
     def _authorised(self, request: web.Request) -> bool:
         if self.token is None:
-            return True
+            # No token (127.0.0.1): only a request addressed to this machine by name or
+            # address, so that a web site whose name was made to resolve to 127.0.0.1 (DNS
+            # rebinding) is not let in as if it were the console's own page.
+            return is_loopback(urlsplit(f"//{request.host}").hostname or "")
         given = request.query.get("token") or request.cookies.get(COOKIE) or ""
         return hmac.compare_digest(given.encode(), self.token.encode())
 
