@@ -8,7 +8,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import shutil
+import signal
+import subprocess
+import sys
 import tempfile
 import time
 import urllib.error
@@ -363,3 +367,69 @@ def test_every_request_without_the_token_is_refused(sim_board: SimBoard, browser
             assert _websocket(base, "http://evil.example") == 403
             assert _websocket(base, base.rstrip("/")) == 101
         live.close()
+
+
+@pytest.mark.parametrize("backend", ["native", "avr"])
+def test_the_command_serves_the_example_robot_and_stops_it(backend: str, tmp_path: Path) -> None:
+    """``protoduino console --sim``: the example robot on the page, a write at the pin, the
+    token asked for, SIGTERM -> the outputs stopped and exit status 0."""
+    if shutil.which("avr-gcc" if backend == "avr" else "gcc") is None:
+        pytest.skip(f"no compiler to build the {backend} board")
+    trace = tmp_path / "trace.jsonl"
+    program = Path(sys.executable).parent / "protoduino"
+    cmd = [str(program), "console", "--sim", backend, "--trace", str(trace)]
+    cmd += ["--http-port", "0", "--token", "tok"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        lines: list[str] = []
+        while not any("open http" in line for line in lines):
+            line = proc.stdout.readline()  # bounded by the test's timeout
+            assert line, f"exited: {lines}"
+            lines.append(line)
+        url = lines[-1].split("open ", 1)[1].strip()
+        assert url.endswith("/?token=tok"), url
+        base = url.split("?")[0]
+        assert _status(base) == 403
+        assert _status(url) == 200
+
+        def led() -> list[int]:
+            changes = [json.loads(line) for line in trace.read_text().splitlines()]
+            return [c["value"] for c in changes if c["pin"] == 13]
+
+        async def drive() -> dict[str, Any]:
+            import aiohttp
+
+            async with (
+                aiohttp.ClientSession() as session,
+                session.ws_connect(base + "ws?token=tok") as ws,
+            ):
+                state: dict[str, Any] = await ws.receive_json()
+                await ws.send_json({"op": "beat"})
+                await ws.send_json({"op": "write", "pin": 13, "value": 1})
+                await asyncio.to_thread(until, lambda: led()[-1:] == [1], "the led on")
+                # Still beating (so no failsafe), the command is told to end.
+                proc.send_signal(signal.SIGTERM)
+                while not ws.closed:
+                    await ws.send_json({"op": "beat"})
+                    with contextlib.suppress(asyncio.TimeoutError):
+                        await ws.receive(timeout=0.2)
+                return state
+
+        state = asyncio.run(drive())
+        assert [o["name"] for o in state["outputs"]] == [
+            "left motor",
+            "pan",
+            "tilt",
+            "right motor",
+            "led",
+        ]
+        assert [i["mode"] for i in state["inputs"]] == ["counter", "input", "analog"]
+        assert state["role"] == "driver"
+        assert proc.wait(30) == 0
+        assert proc.stderr is not None and "stopped" in proc.stderr.read()
+        assert led()[-1] == 0  # the console's Stop before it closed
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
