@@ -282,6 +282,26 @@ def test_closing_the_page_trips_the_failsafe_on_time(console: Console, browser: 
     until(lambda: "Outputs live" in text_of(page, "failsafe"), "the outputs live again")
 
 
+def test_a_page_that_stops_talking_trips_the_failsafe_and_is_told(
+    console: Console, browser: Browser
+) -> None:
+    """A laptop asleep or a network gone: the WebSocket stays open, nothing comes from the
+    page. Its socket still open, the device drives the outputs safe, and the page (which still
+    hears the console) says so."""
+    sim = console.sim
+    page = browser(console.server.url)
+    driving(page)
+    page.find_element(By.ID, "toggle-13").click()
+    wait_for_pin(sim, 13, now_at(1))
+    page.execute_script("protoduinoConsole.ws.send = () => {};")  # the page falls silent
+    wait_for_pin(sim, 13, now_at(0))
+    until(
+        lambda: "FAILSAFE ACTIVE (heartbeat_timeout)" in text_of(page, "failsafe"),
+        "the failsafe on the silent page",
+    )
+    assert text_of(page, "role") == "driving"  # still connected: only its beats stopped
+
+
 def test_two_pages_one_drives_the_other_watches(console: Console, browser: Browser) -> None:
     sim = console.sim
     first = browser(console.server.url)
