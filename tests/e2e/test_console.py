@@ -128,7 +128,11 @@ def until(predicate: Callable[[], bool], what: str, timeout: float = 30.0) -> No
 
 
 def driving(page: Any) -> None:
+    """Until the page drives, and a failsafe that fired while no page drove (the fixture's
+    board waits for a page with a failsafe timeout of T) is cleared by its heartbeat: a
+    command the page sends before that is refused (STATUS_FAILSAFE_EXPIRED), as it should."""
     until(lambda: text_of(page, "role") == "driving", "the page to drive")
+    until(lambda: "ACTIVE" not in text_of(page, "failsafe"), "the page's heartbeat to re-arm")
 
 
 def now_at(value: int) -> Callable[[list[int]], bool]:
