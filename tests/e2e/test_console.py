@@ -395,23 +395,25 @@ def test_every_request_without_the_token_is_refused(sim_board: SimBoard, browser
 
 @pytest.mark.parametrize("backend", ["native", "avr"])
 def test_the_command_serves_the_example_robot_and_stops_it(backend: str, tmp_path: Path) -> None:
-    """``protoduino console --sim``: the example robot on the page, a write at the pin, the
-    token asked for, SIGTERM -> the outputs stopped and exit status 0."""
+    """``protoduino console --sim --foxglove``: the example robot on the page, a write at the
+    pin, the token asked for, the Foxglove server beside, SIGTERM -> the outputs stopped and
+    exit status 0."""
     if shutil.which("avr-gcc" if backend == "avr" else "gcc") is None:
         pytest.skip(f"no compiler to build the {backend} board")
     trace = tmp_path / "trace.jsonl"
     program = Path(sys.executable).parent / "protoduino"
     cmd = [str(program), "console", "--sim", backend, "--trace", str(trace)]
-    cmd += ["--http-port", "0", "--token", "tok"]
+    cmd += ["--http-port", "0", "--token", "tok", "--foxglove", "0"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert proc.stdout is not None
         lines: list[str] = []
-        while not any("open http" in line for line in lines):
+        while not any("Foxglove on ws://" in line for line in lines):
             line = proc.stdout.readline()  # bounded by the test's timeout
             assert line, f"exited: {lines}"
             lines.append(line)
-        url = lines[-1].split("open ", 1)[1].strip()
+        url = next(line for line in lines if "open http" in line).split("open ", 1)[1].strip()
+        foxglove_url = lines[-1].split("Foxglove on ", 1)[1].strip()
         assert url.endswith("/?token=tok"), url
         base = url.split("?")[0]
         assert _status(base) == 403
@@ -432,6 +434,10 @@ def test_the_command_serves_the_example_robot_and_stops_it(backend: str, tmp_pat
                 await ws.send_json({"op": "beat"})
                 await ws.send_json({"op": "write", "pin": 13, "value": 1})
                 await asyncio.to_thread(until, lambda: led()[-1:] == [1], "the led on")
+                # --foxglove: the live channels are served beside (test_foxglove_live.py).
+                async with session.ws_connect(foxglove_url, protocols=("foxglove.sdk.v1",)) as fox:
+                    hello = await fox.receive_json()
+                    assert hello["op"] == "serverInfo", hello
                 # Still beating (so no failsafe), the command is told to end.
                 proc.send_signal(signal.SIGTERM)
                 while not ws.closed:
