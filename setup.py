@@ -101,13 +101,34 @@ def build_programs(build_dir: Path, out_dir: Path, root: Path = ROOT) -> list[Pa
     return copied
 
 
+#: The live console's plotting library (``protoduino console``), fetched from npm by
+#: tools/fetch_uplot.sh into .deps/uplot (an sdist carries it: MANIFEST.in); the wheel serves
+#: it from its package data. An editable install serves it from .deps/uplot itself.
+VENDOR_FILES = ("uPlot.iife.min.js", "uPlot.min.css", "LICENSE")
+
+
+def copy_vendor_assets(out_dir: Path, root: Path = ROOT) -> None:
+    """Copy uPlot's files from ``.deps/uplot`` into ``out_dir``; a missing one fails the build."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name in VENDOR_FILES:
+        source = root / ".deps" / "uplot" / name
+        if not source.is_file():
+            raise SystemExit(
+                f"building protoduino's wheel needs {source} (the live console's plots): "
+                "run ./tools/fetch_uplot.sh (./tools/dev.sh setup does)"
+            )
+        shutil.copy2(source, out_dir / name)
+
+
 class BuildPyWithPrograms(build_py):
-    """build_py, plus the programs in protoduino/_programs/ (not for an editable install)."""
+    """build_py, plus the programs in protoduino/_programs/ and the console's vendored
+    assets (not for an editable install)."""
 
     def run(self) -> None:
         super().run()
         if self.editable_mode:
             return
+        copy_vendor_assets(Path(self.build_lib) / "protoduino" / "console" / "static" / "vendor")
         with tempfile.TemporaryDirectory(prefix="protoduino-programs-") as tmp:
             build_programs(Path(tmp), Path(self.build_lib) / "protoduino" / "_programs")
 

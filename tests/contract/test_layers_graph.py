@@ -84,6 +84,8 @@ PYTHON_LAYERS: Sequence[tuple[str, Sequence[str]]] = (
             "protoduino.cli.*",
             "protoduino.ros2",
             "protoduino.ros2.*",
+            "protoduino.console",
+            "protoduino.console.*",
             "protoduino.servicegen",
         ),
     ),

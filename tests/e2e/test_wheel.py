@@ -130,6 +130,8 @@ def test_the_wheel_carries_the_runtime_and_its_programs_only(installed: Installe
     assert os.access(found["programs"]["avrsim"], os.X_OK)
     hex_lines = Path(found["programs"]["protoduino.hex"]).read_text().splitlines()
     assert hex_lines[0].startswith(":") and hex_lines[-1] == ":00000001FF"  # Intel hex, EOF
+    # The live console works offline: its plotting library is package data (setup.py).
+    assert (package / "console" / "static" / "vendor" / "uPlot.iife.min.js").is_file()
 
 
 def test_dev_commands_say_they_need_the_checkout(installed: Installed) -> None:

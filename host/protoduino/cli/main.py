@@ -62,6 +62,7 @@ COMMANDS: dict[str, str] = {
     "sim": f"{__package__}.sim",
     "demo": f"{__package__}.demo",
     "ros2": f"{__package__}.ros2",
+    "console": f"{__package__}.console",
     "gen": f"{__package__}.gen",  # a user service's code; protoduino's own by entry point
     **{name: plugins.COMMANDS for name in DEV_COMMANDS},
 }
