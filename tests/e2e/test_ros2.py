@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import itertools
+import math
 import os
 import random
 import signal
@@ -1045,3 +1046,93 @@ def test_ros2_sim_control_presses_the_example_robots_bumper(
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+ODOMETRY = """
+namespace: {ns}
+failsafe_timeout: {failsafe}
+drive:
+  wheel_base: 0.2
+  max_speed: 0.5
+  timeout: 60.0
+  left: {{pwm: 9, direction: 4, encoder: 2}}
+  right: {{pwm: 11, direction: 12, invert: true, encoder: 3}}
+odometry:
+  ticks_per_metre: 1000
+  rate_hz: 50
+"""
+
+
+def _yaw(orientation: Any) -> float:
+    return 2 * math.atan2(orientation.z, orientation.w)
+
+
+def test_odometry_from_two_encoders_and_the_direction_pins(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """Issue 33 item 5: pulses fed on the encoders' pins (2 and 3) while the bridge drives the
+    direction pins: ahead 400 ticks, a quarter turn in place (the left wheel backwards, its pin
+    low; the right wheel's pin inverted), ahead 300 ticks. The last Odometry on ``odom`` and
+    the ``odom -> base_link`` transform on /tf are the fed path within 1 %, and the ticks
+    topic has them signed as (left, right)."""
+    sim = sim_board
+    ns = _namespace(sim, "odom")
+    bridge = run_bridge(ODOMETRY.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    for topic, kind in (
+        (f"/{ns}/odom", "nav_msgs/msg/Odometry"),
+        ("/tf", "tf2_msgs/msg/TFMessage"),
+        (f"/{ns}/sensors/encoders", "std_msgs/msg/Int32MultiArray"),
+    ):
+        assert f"{topic}  {kind}" in bridge.output()  # listed at the start
+    odom = graph.subscriber(f"/{ns}/odom", "nav_msgs/msg/Odometry")
+    tf = graph.subscriber("/tf", "tf2_msgs/msg/TFMessage")
+    ticks = graph.subscriber(f"/{ns}/sensors/encoders", "std_msgs/msg/Int32MultiArray", BEST_EFFORT)
+    cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+
+    def fed(left: int, right: int, count: int) -> None:
+        """``count`` pulses on both encoders; returns once the bridge published the ticks."""
+        sim.pulses(2, count, 1000)
+        sim.pulses(3, count, 1000)
+        _until(
+            lambda: any(list(s.cdr.decode().data) == [left, right] for s in ticks.take(N=100)),
+            f"ticks {left}, {right}",
+        )
+
+    cmd_vel(_twist(0.25, 0.0))  # ahead: left pin high, right pin low (inverted)
+    wait_for_pin(sim, 4, now_at(1))
+    wait_for_pin(sim, 12, now_at(0))
+    fed(400, 400, 400)
+    cmd_vel(_twist(0.0, 2.5))  # in place to the left: the left wheel backwards
+    wait_for_pin(sim, 4, now_at(0))
+    fed(243, 557, 157)
+    cmd_vel(_twist(0.25, 0.0))
+    wait_for_pin(sim, 4, now_at(1))
+    fed(543, 857, 300)
+
+    # Odometry and /tf go out with the ticks, each period: the next ones carry that pose.
+    odom.take(N=100)
+    tf.take(N=100)
+    last_odom: list[Any] = []
+    last_tf: list[Any] = []
+
+    def newest() -> bool:
+        last_odom.extend(s.cdr.decode() for s in odom.take(N=100) if s.sample_info.valid_data)
+        for s in tf.take(N=100):
+            if s.sample_info.valid_data:
+                last_tf.extend(t for t in s.cdr.decode().transforms if t.header.frame_id == "odom")
+        return bool(last_odom) and bool(last_tf)
+
+    _until(newest, "odometry after the last ticks")
+    turn = (0.157 + 0.157) / 0.2
+    expected = (0.4 + 0.3 * math.cos(turn), 0.3 * math.sin(turn))
+    path = 0.4 + 0.3  # metres the body travelled (the turn was in place)
+    sample = last_odom[-1]
+    assert (sample.header.frame_id, sample.child_frame_id) == ("odom", "base_link")
+    position = sample.pose.pose.position
+    assert math.dist((position.x, position.y), expected) <= 0.01 * path, (position, expected)
+    assert abs(_yaw(sample.pose.pose.orientation) - turn) <= 0.01 * turn
+    transform = last_tf[-1]
+    assert transform.child_frame_id == "base_link"
+    moved = transform.transform.translation
+    assert math.dist((moved.x, moved.y), expected) <= 0.01 * path, (moved, expected)
+    assert abs(_yaw(transform.transform.rotation) - turn) <= 0.01 * turn

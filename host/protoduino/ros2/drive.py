@@ -107,6 +107,11 @@ class Motor:
         self.duty: int | None = 0
         self.level: bool | None = None
 
+    @property
+    def forward(self) -> bool | None:
+        """The way the direction pin drives the wheel (True: forward); None: not known."""
+        return None if self.level is None else self.level != self.config.invert
+
     def apply(self, command: WheelCommand) -> None:
         level = command.level(self.config)
         if level != self.level:
