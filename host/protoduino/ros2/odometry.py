@@ -38,6 +38,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from .config import OdometryConfig
+from .diagnostics import stamp
 from .inputs import int32
 from .msgs import (
     Header,
@@ -50,7 +51,6 @@ from .msgs import (
     PoseWithCovariance,
     Quaternion,
     TFMessage,
-    Time,
     Transform,
     TransformStamped,
     Twist,
@@ -115,12 +115,6 @@ def yaw_quaternion(theta: float) -> Quaternion:
     return Quaternion(x=0.0, y=0.0, z=math.sin(theta / 2), w=math.cos(theta / 2))
 
 
-def stamp(seconds: float) -> Time:
-    """Unix seconds as a builtin_interfaces/Time."""
-    nanoseconds = round(seconds * 1e9)
-    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
-
-
 @dataclass(frozen=True, slots=True)
 class Sample:
     """One odometry sample: the pose, the body's velocity over the last interval (m/s
@@ -132,11 +126,16 @@ class Sample:
     ticks: tuple[int, int]
 
 
+def _header(config: OdometryConfig, at: float) -> Header:
+    """Stamped ``at`` (Unix seconds: ROS time), in the odometry's frame."""
+    return Header(stamp=stamp(at).stamp, frame_id=config.frame_id)
+
+
 def odometry_message(sample: Sample, config: OdometryConfig, at: float) -> Odometry:
     """nav_msgs/Odometry: the pose in ``frame_id``, the velocity in ``child_frame_id``."""
     pose = sample.pose
     return Odometry(
-        header=Header(stamp=stamp(at), frame_id=config.frame_id),
+        header=_header(config, at),
         child_frame_id=config.child_frame_id,
         pose=PoseWithCovariance(
             pose=Pose(position=Point(pose.x, pose.y, 0.0), orientation=yaw_quaternion(pose.theta))
@@ -151,7 +150,7 @@ def tf_message(sample: Sample, config: OdometryConfig, at: float) -> TFMessage:
     """tf2_msgs/TFMessage with the one transform ``frame_id -> child_frame_id``."""
     pose = sample.pose
     transform = TransformStamped(
-        header=Header(stamp=stamp(at), frame_id=config.frame_id),
+        header=_header(config, at),
         child_frame_id=config.child_frame_id,
         transform=Transform(
             translation=Vector3(pose.x, pose.y, 0.0), rotation=yaw_quaternion(pose.theta)
