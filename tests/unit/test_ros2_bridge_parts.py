@@ -1244,3 +1244,16 @@ def test_the_bridge_publishes_odometry_each_period() -> None:
     assert sent["sensors/encoders"][0].data == [40, 40]
     clock.now = 100.5  # late: the next is a period from now
     assert bridge._publish_odometry(100.04) == pytest.approx(100.54)
+
+
+def test_the_odometry_example_in_the_docs_is_valid() -> None:
+    """docs/ros2.md's odometry robot.yaml is what the configuration reads."""
+    import yaml
+
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "ros2.md").read_text()
+    section = docs.split("**Odometry** (issue 33)", 1)[1]
+    snippet = section.split("```yaml\n", 1)[1].split("```", 1)[0]
+    config = parse_config(yaml.safe_load(snippet))
+    assert config.odometry is not None and config.drive is not None
+    assert config.odometry.ticks_per_metre == 1000 and config.odometry.rate_hz == 50
+    assert (config.drive.left.encoder, config.drive.right.encoder) == (2, 3)
