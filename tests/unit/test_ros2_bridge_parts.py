@@ -1257,3 +1257,45 @@ def test_the_odometry_example_in_the_docs_is_valid() -> None:
     assert config.odometry is not None and config.drive is not None
     assert config.odometry.ticks_per_metre == 1000 and config.odometry.rate_hz == 50
     assert (config.drive.left.encoder, config.drive.right.encoder) == (2, 3)
+
+
+def test_ticks_reported_before_a_reversal_count_the_old_way() -> None:
+    """The drive calls the odometry's update once the duty is 0, just before the direction pin
+    turns: the ticks reported until then count the way the wheel was going."""
+    from protoduino.ros2.odometry import Tracker, Wheel
+
+    clock = ManualClock()
+    config = _odometry_config().odometry
+    assert config is not None
+    log: list[tuple[str, object]] = []
+    left, right = _motors(log)
+    counts = [0, 0]
+    tracker = Tracker(
+        config,
+        0.2,
+        Wheel(lambda: counts[0], lambda: left.forward),
+        Wheel(lambda: counts[1], lambda: right.forward),
+        clock,
+    )
+    for motor in (left, right):
+        motor.before_turn = tracker.update
+    left.apply(WheelCommand(100, True))
+    right.apply(WheelCommand(100, True))
+    tracker.sample()
+    counts[:] = [50, 50]  # reported while both go ahead
+    log.clear()
+
+    def turning() -> None:
+        log.append(("turn", tracker.ticks[0]))
+        tracker.update()
+
+    left.before_turn = turning
+    left.apply(WheelCommand(100, False))  # the left wheel reverses
+    assert log == [("lpwm", 0), ("turn", 0), ("ldir", False), ("lpwm", 100)]
+    assert tracker.ticks == [50, 50]  # counted ahead, before the pin turned
+    counts[:] = [70, 70]
+    clock.now += 0.02
+    sample = tracker.sample()
+    assert sample.ticks == (30, 70)
+    # The velocity is over the whole period, both updates in it.
+    assert sample.linear == pytest.approx((0.03 + 0.07) / 2 / 0.02)

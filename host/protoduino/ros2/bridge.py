@@ -329,9 +329,11 @@ class Bridge(ClosedOnExit):
             assert motor.config.encoder is not None  # checked too
             counter = board.counter(motor.config.encoder, rate_hz=config.rate_hz)
             wheels.append(odometry.Wheel(counter.read, lambda m=motor: m.forward))  # type: ignore[misc]
-        self._odometry = odometry.Tracker(
+        tracker = odometry.Tracker(
             config, self.drive.config.wheel_base, wheels[0], wheels[1], self.clock
         )
+        self.drive.left.before_turn = self.drive.right.before_turn = tracker.update
+        self._odometry = tracker
         for name, kind, qos in (
             (config.topic, Odometry, DEFAULT_QOS),
             (config.tf_topic, TFMessage, DEFAULT_QOS),

@@ -20,11 +20,13 @@ since the start as std_msgs/Int32MultiArray in the design notes' form
 (left, right). The covariances are zero: the bridge has no model of the
 wheels' slip.
 
-The ticks of one sample get the direction the pin has when it is taken; the
-device reports a count at most ``rate_hz`` times a second, so ticks made
-just before a reversal can be counted the new way. The drive sets a motor's
-duty to 0 before it turns the pin (:class:`.drive.Motor`), so those are the
-few ticks of a wheel slowing down.
+The ticks of one sample get the direction the pin has when it is taken, and
+the bridge takes one more just before it turns a direction pin (after the
+drive set that motor's duty to 0: :class:`.drive.Motor`), so the ticks
+reported until then count the old way. The device reports a count at most
+``rate_hz`` times a second, so ticks made in the last moments before a
+reversal and reported after it count the new way: the few ticks of a wheel
+slowing down.
 
 Everything but :class:`Tracker`'s inputs (a count and a direction per wheel,
 and a clock) is a pure function, tested on a manual clock.
@@ -167,7 +169,12 @@ def ticks_message(ticks: Sequence[int]) -> Int32MultiArray:
 
 
 class Tracker:
-    """The pose, integrated from both wheels' counts each time :meth:`sample` is called.
+    """The pose, integrated from both wheels' counts each time :meth:`update` or
+    :meth:`sample` is called.
+
+    The bridge calls :meth:`update` also just before the drive turns a direction pin
+    (:attr:`.drive.Motor.before_turn`), so that the ticks already reported are counted the
+    way the wheel was going.
 
     ``clock`` (monotonic seconds) times the velocity; it is injected so that the tracker is
     tested on a manual clock.
@@ -192,15 +199,24 @@ class Tracker:
         self._counts = [0, 0]
         self._forward = [True, True]
         self._at: float | None = None
+        #: Metres each wheel travelled (signed) since the last sample: its velocity.
+        self._travel = [0.0, 0.0]
 
-    def sample(self) -> Sample:
-        """Take both counts, integrate what the wheels travelled since the last sample."""
-        now = self.clock()
+    def update(self) -> None:
+        """Take both counts, integrate what the wheels travelled since the last update."""
         step = [self._signed_ticks(i) for i in range(2)]
         for i in range(2):
             self.ticks[i] += step[i]
         left, right = (t / self.config.ticks_per_metre for t in step)
+        self._travel = [self._travel[0] + left, self._travel[1] + right]
         self.pose = integrate(self.pose, left, right, self.wheel_base)
+
+    def sample(self) -> Sample:
+        """:meth:`update`, then the pose, the velocity since the last sample and the ticks."""
+        self.update()
+        now = self.clock()
+        left, right = self._travel
+        self._travel = [0.0, 0.0]
         linear = angular = 0.0
         if self._at is not None and now > self._at:
             dt = now - self._at
