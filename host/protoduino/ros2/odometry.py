@@ -26,7 +26,10 @@ drive set that motor's duty to 0: :class:`.drive.Motor`), so the ticks
 reported until then count the old way. The device reports a count at most
 ``rate_hz`` times a second, so ticks made in the last moments before a
 reversal and reported after it count the new way: the few ticks of a wheel
-slowing down.
+slowing down. The two counters are reported independently, so a sample may
+hold one wheel's newest report and not yet the other's: the heading catches
+up at the next sample, the position keeps a small offset (docs/ros2.md has
+the measured cost); the heading and the ticks stay exact.
 
 Everything but :class:`Tracker`'s inputs (a count and a direction per wheel,
 and a clock) is a pure function, tested on a manual clock.
