@@ -16,9 +16,11 @@ from /diagnostics samples; the waits are bounded by generous deadlines only.
 
 from __future__ import annotations
 
+import cmath
 import contextlib
 import dataclasses
 import itertools
+import math
 import os
 import random
 import signal
@@ -1045,3 +1047,132 @@ def test_ros2_sim_control_presses_the_example_robots_bumper(
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+ODOMETRY = """
+namespace: {ns}
+failsafe_timeout: {failsafe}
+drive:
+  wheel_base: 0.2
+  max_speed: 0.5
+  timeout: 60.0
+  left: {{pwm: 9, direction: 4, encoder: 2}}
+  right: {{pwm: 11, direction: 12, invert: true, encoder: 3}}
+odometry:
+  ticks_per_metre: 1000
+  rate_hz: 50
+"""
+
+
+def _yaw(orientation: Any) -> float:
+    return 2 * math.atan2(orientation.z, orientation.w)
+
+
+#: The odometry test's geometry (ODOMETRY's), and its pulse rate: wheels at 0.1 m/s, a turn
+#: in place at 1 rad/s, 2 ticks per 20 ms sample (the speeds of a small indoor robot).
+TICK_M, WHEEL_BASE, PULSE_HZ = 1 / 1000, 0.2, 100
+
+
+def _fed_path(ticks: list[tuple[float, int, int]]) -> tuple[float, float, float]:
+    """The pose (x, y, heading) the fed pulses describe: ``(board time, wheel 0 left or 1
+    right, +1 ahead or -1 back)`` for each tick, applied in the board's time order, each one
+    wheel's step turning the body about the other wheel. Independent of the bridge's
+    integration (the two trains of one step start a few ms apart: the path is theirs)."""
+    centre, heading = 0j, 0.0
+    for _, wheel, sign in sorted(ticks):
+        side = cmath.exp(1j * (heading + math.pi / 2)) * WHEEL_BASE / 2  # centre to left wheel
+        angle = sign * TICK_M / WHEEL_BASE * (1 if wheel else -1)
+        pivot = centre + side if wheel else centre - side  # the wheel that stays
+        centre = pivot + (centre - pivot) * cmath.exp(1j * angle)
+        heading += angle
+    return centre.real, centre.imag, heading
+
+
+def test_odometry_from_two_encoders_and_the_direction_pins(
+    sim_board: SimBoard, graph: Graph, run_bridge: Callable[..., BridgeProcess]
+) -> None:
+    """Issue 33 item 5: pulses fed on the encoders' pins (2 and 3) while the bridge drives the
+    direction pins: ahead 400 ticks, a quarter turn in place (the left wheel backwards, its pin
+    low; the right wheel's pin inverted), ahead 300 ticks. The ticks topic has them signed as
+    (left, right), and the Odometry on ``odom`` and the ``odom -> base_link`` transform on /tf
+    after the last ticks are within 1 % of the path the pulses describe (:func:`_fed_path`,
+    from each tick's board time)."""
+    sim = sim_board
+    ns = _namespace(sim, "odom")
+    bridge = run_bridge(ODOMETRY.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    for topic, kind in (
+        (f"/{ns}/odom", "nav_msgs/msg/Odometry"),
+        ("/tf", "tf2_msgs/msg/TFMessage"),
+        (f"/{ns}/sensors/encoders", "std_msgs/msg/Int32MultiArray"),
+    ):
+        assert f"{topic}  {kind}" in bridge.output()  # listed at the start
+    odom = graph.subscriber(f"/{ns}/odom", "nav_msgs/msg/Odometry")
+    tf = graph.subscriber("/tf", "tf2_msgs/msg/TFMessage")
+    ticks = graph.subscriber(f"/{ns}/sensors/encoders", "std_msgs/msg/Int32MultiArray", BEST_EFFORT)
+    cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+
+    fed_ticks: list[tuple[float, int, int]] = []
+
+    def fed(left: int, right: int, count: int, signs: tuple[int, int]) -> int:
+        """``count`` pulses on both encoders (each tick noted with its board time); once the
+        bridge published the ticks, returns when it wrote them (the sample's DDS source
+        timestamp, ns of the bridge's clock)."""
+        for wheel, pin in enumerate((2, 3)):
+            start = sim.pulses(pin, count, PULSE_HZ)
+            fed_ticks.extend((start + k / PULSE_HZ, wheel, signs[wheel]) for k in range(count))
+        written: list[int] = []
+
+        def published() -> bool:
+            for s in ticks.take(N=100):
+                if s.sample_info.valid_data and list(s.cdr.decode().data) == [left, right]:
+                    written.append(s.sample_info.source_timestamp)
+            return bool(written)
+
+        _until(published, f"ticks {left}, {right}")
+        return written[0]
+
+    cmd_vel(_twist(0.25, 0.0))  # ahead: left pin high, right pin low (inverted)
+    wait_for_pin(sim, 4, now_at(1))
+    wait_for_pin(sim, 12, now_at(0))
+    fed(400, 400, 400, (1, 1))
+    cmd_vel(_twist(0.0, 2.5))  # in place to the left: the left wheel backwards
+    wait_for_pin(sim, 4, now_at(0))
+    fed(243, 557, 157, (-1, 1))
+    cmd_vel(_twist(0.25, 0.0))
+    wait_for_pin(sim, 4, now_at(1))
+    last_ticks = fed(543, 857, 300, (1, 1))
+
+    # Odometry and /tf go out with the ticks, from the same sample, stamped just before
+    # they are written: one stamped after those ticks were written comes from a later
+    # sample (reliable samples may arrive late, retransmitted), so it has every tick.
+    def after_last_ticks(header: Any) -> bool:
+        return bool(header.stamp.sec * 1_000_000_000 + header.stamp.nanosec >= last_ticks)
+
+    last_odom: list[Any] = []
+    last_tf: list[Any] = []
+
+    def newest() -> bool:
+        for s in odom.take(N=100):
+            if s.sample_info.valid_data and after_last_ticks((o := s.cdr.decode()).header):
+                last_odom.append(o)
+        for s in tf.take(N=100):
+            if s.sample_info.valid_data:
+                transforms = s.cdr.decode().transforms
+                last_tf.extend(t for t in transforms if after_last_ticks(t.header))
+        return bool(last_odom) and bool(last_tf)
+
+    _until(newest, "odometry after the last ticks")
+    *expected, turn = _fed_path(fed_ticks)
+    # About the ideal path's pose: (0.4 + 0.3 cos 1.57, 0.3 sin 1.57), heading 1.57 rad.
+    assert math.dist(expected, (0.4, 0.3)) < 0.1 and abs(turn - 1.57) < 0.1
+    path = 0.4 + 0.3  # metres the body travelled (the turn was in place)
+    sample = last_odom[0]
+    assert (sample.header.frame_id, sample.child_frame_id) == ("odom", "base_link")
+    position = sample.pose.pose.position
+    assert math.dist((position.x, position.y), expected) <= 0.01 * path, (position, expected)
+    assert abs(_yaw(sample.pose.pose.orientation) - turn) <= 0.01 * turn
+    transform = last_tf[0]
+    assert (transform.header.frame_id, transform.child_frame_id) == ("odom", "base_link")
+    moved = transform.transform.translation
+    assert math.dist((moved.x, moved.y), expected) <= 0.01 * path, (moved, expected)
+    assert abs(_yaw(transform.transform.rotation) - turn) <= 0.01 * turn

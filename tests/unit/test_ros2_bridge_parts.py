@@ -969,3 +969,333 @@ def test_a_bridge_stops_only_what_it_inherits() -> None:
     resumed = Board({3: OutputState(3, "pwm", 102, 102)})
     _start_safe(resumed)  # type: ignore[arg-type]
     assert resumed.stops == 1
+
+
+# --- odometry (issue 33 item 5) ---------------------------------------------------------
+
+ODOM_DRIVE: dict[str, Any] = {
+    "wheel_base": 0.2,
+    "max_speed": 0.5,
+    "left": {"pwm": 9, "direction": 4, "encoder": 2},
+    "right": {"pwm": 11, "direction": 12, "invert": True, "encoder": 3},
+}
+
+
+def _odometry_config(**odometry: Any) -> BridgeConfig:
+    return parse_config({"drive": ODOM_DRIVE, "odometry": {"ticks_per_metre": 1000, **odometry}})
+
+
+def test_odometry_configuration() -> None:
+    """Each wheel's encoder is a key of its motor; the geometry and rate of the odometry's."""
+    from protoduino.ros2.config import OdometryConfig
+
+    config = _odometry_config()
+    assert config.drive is not None
+    assert (config.drive.left.encoder, config.drive.right.encoder) == (2, 3)
+    assert config.odometry == OdometryConfig(1000.0)
+    odometry = config.odometry
+    assert (odometry.rate_hz, odometry.topic, odometry.tf_topic) == (50.0, "odom", "/tf")
+    assert odometry.ticks_topic == "sensors/encoders"  # the design notes' topic
+    assert (odometry.frame_id, odometry.child_frame_id) == ("odom", "base_link")
+    custom = _odometry_config(rate_hz=20, topic="wheel_odom", frame_id="odom2").odometry
+    assert custom is not None and (custom.rate_hz, custom.topic) == (20.0, "wheel_odom")
+    assert parse_config(FULL).odometry is None and parse_config(FULL).drive.left.encoder is None  # type: ignore[union-attr]
+
+
+def _no_encoder(side: str) -> dict[str, Any]:
+    return {**ODOM_DRIVE, side: {k: v for k, v in ODOM_DRIVE[side].items() if k != "encoder"}}
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"odometry": {"ticks_per_metre": 1000}}, "odometry: needs a drive with an encoder"),
+        (
+            {"drive": _no_encoder("right"), "odometry": {"ticks_per_metre": 1000}},
+            "needs a drive with an encoder on each wheel",
+        ),
+        ({"drive": ODOM_DRIVE}, "an encoder is given without odometry"),
+        ({"drive": ODOM_DRIVE, "odometry": {}}, "ticks_per_metre is required"),
+        ({"drive": ODOM_DRIVE, "odometry": {"ticks_per_metre": 0}}, "must be above 0"),
+        (
+            {"drive": ODOM_DRIVE, "odometry": {"ticks_per_metre": 1, "rate_hz": 0}},
+            "rate_hz must be >= 0.1",
+        ),
+        (
+            {"drive": ODOM_DRIVE, "odometry": {"ticks_per_metre": 1, "wheel_base": 1}},
+            "unknown key",  # the drive's wheel base is the one
+        ),
+        (
+            {
+                "drive": ODOM_DRIVE,
+                "odometry": {"ticks_per_metre": 1},
+                "counters": [{"pins": [3], "topic": "c"}],
+            },
+            "pin 3 is both the drive's right encoder and a counter",
+        ),
+        (
+            {
+                "drive": ODOM_DRIVE,
+                "odometry": {"ticks_per_metre": 1},
+                "counters": [{"pins": [5]}],
+            },
+            "topic 'sensors/encoders' is both the odometry's ticks",
+        ),
+        (
+            {"drive": ODOM_DRIVE, "odometry": {"ticks_per_metre": 1, "child_frame_id": "odom"}},
+            "frame_id and child_frame_id are both",
+        ),
+        (
+            {"drive": ODOM_DRIVE, "odometry": {"ticks_per_metre": 1, "frame_id": "a b"}},
+            "frame id",
+        ),
+    ],
+)
+def test_bad_odometry_configurations_are_refused(data: Any, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        parse_config(data)
+
+
+def test_the_pose_is_the_exact_arc_of_a_differential_drive() -> None:
+    from protoduino.ros2.odometry import Pose2D, integrate
+
+    start = Pose2D()
+    assert integrate(start, 0.5, 0.5, 0.2) == Pose2D(0.5, 0.0, 0.0)
+    turned = integrate(start, -0.1 * math.pi / 2, 0.1 * math.pi / 2, 0.2)  # in place, 90 deg
+    assert turned.x == pytest.approx(0.0, abs=1e-12) and turned.y == pytest.approx(0.0, abs=1e-12)
+    assert turned.theta == pytest.approx(math.pi / 2)
+    ahead = integrate(turned, 0.3, 0.3, 0.2)  # now along +y
+    assert (ahead.x, ahead.y) == pytest.approx((0.0, 0.3), abs=1e-12)
+    # A quarter circle of radius 1 m to the left (left wheel on radius 0.9, right on 1.1).
+    quarter = integrate(start, 0.9 * math.pi / 2, 1.1 * math.pi / 2, 0.2)
+    assert (quarter.x, quarter.y, quarter.theta) == pytest.approx((1.0, 1.0, math.pi / 2))
+    # Exact: the same arc in 1000 samples ends where one sample does.
+    pose = start
+    for _ in range(1000):
+        pose = integrate(pose, 0.9 * math.pi / 2000, 1.1 * math.pi / 2000, 0.2)
+    assert (pose.x, pose.y, pose.theta) == pytest.approx((quarter.x, quarter.y, quarter.theta))
+    # Backwards, and the heading stays in (-pi, pi].
+    assert integrate(start, -0.2, -0.2, 0.2) == Pose2D(-0.2, 0.0, 0.0)
+    around = integrate(Pose2D(theta=3.0), -0.05, 0.05, 0.2)  # +0.5 rad past pi
+    assert around.theta == pytest.approx(3.5 - 2 * math.pi)
+
+
+def test_tick_increments_wrap_with_the_counter() -> None:
+    from protoduino.ros2.odometry import tick_increment
+
+    assert tick_increment(25, 20) == 5
+    assert tick_increment(3, 2**32 - 2) == 5  # across the device's wrap
+
+
+class FakeWheel:
+    """A wheel whose count and direction the test sets."""
+
+    def __init__(self) -> None:
+        self.count: int | None = None
+        self.forward: bool | None = None
+
+    def wheel(self) -> Any:
+        from protoduino.ros2.odometry import Wheel
+
+        return Wheel(lambda: self.count, lambda: self.forward)
+
+
+def test_the_tracker_signs_ticks_by_the_direction_pins_on_a_manual_clock() -> None:
+    from protoduino.ros2.odometry import Tracker
+
+    clock = ManualClock()
+    config = _odometry_config().odometry
+    assert config is not None
+    left, right = FakeWheel(), FakeWheel()
+    tracker = Tracker(config, 0.2, left.wheel(), right.wheel(), clock)
+    first = tracker.sample()  # no count yet: at the origin, still
+    assert (first.pose.x, first.linear, first.ticks) == (0.0, 0.0, (0, 0))
+    # Unknown direction at the start: forward (the counter counts up).
+    left.count = right.count = 100
+    clock.now += 0.02
+    sample = tracker.sample()
+    assert sample.ticks == (100, 100) and sample.pose.x == pytest.approx(0.1)
+    assert sample.linear == pytest.approx(0.1 / 0.02) and sample.angular == 0.0
+    # The left pin backwards: its ticks count down; a turn to the left in place.
+    left.forward, right.forward = False, True
+    left.count, right.count = 150, 150
+    clock.now += 0.02
+    sample = tracker.sample()
+    assert sample.ticks == (50, 150)
+    assert sample.pose.theta == pytest.approx(0.1 / 0.2)
+    assert sample.linear == pytest.approx(0.0) and sample.angular == pytest.approx(0.5 / 0.02)
+    # Direction unknown again (the device drove the motors safe): the last one holds.
+    left.forward = right.forward = None
+    left.count, right.count = 160, 160
+    clock.now += 0.02
+    assert tracker.sample().ticks == (40, 160)
+    # No new ticks: the pose stays, the velocity is 0.
+    clock.now += 0.02
+    still = tracker.sample()
+    assert still.pose == tracker.pose and still.linear == 0.0 and still.angular == 0.0
+
+
+def test_odometry_messages() -> None:
+    from protoduino.ros2.odometry import (
+        Pose2D,
+        Sample,
+        odometry_message,
+        tf_message,
+        ticks_message,
+    )
+
+    config = _odometry_config().odometry
+    assert config is not None
+    sample = Sample(Pose2D(1.0, 2.0, math.pi / 2), 0.3, -0.4, (-5, 2**32 + 7))
+    odom = odometry_message(sample, config, 1700000000.25)
+    assert odom.header == msgs.Header(msgs.Time(1700000000, 250000000), "odom")
+    assert odom.child_frame_id == "base_link"
+    assert odom.pose.pose.position == msgs.Point(1.0, 2.0, 0.0)
+    q = odom.pose.pose.orientation
+    assert (q.z, q.w) == pytest.approx((math.sqrt(0.5), math.sqrt(0.5)))
+    assert (odom.twist.twist.linear.x, odom.twist.twist.angular.z) == (0.3, -0.4)
+    (transform,) = tf_message(sample, config, 1700000000.25).transforms
+    assert transform.header == odom.header and transform.child_frame_id == "base_link"
+    assert transform.transform.translation == msgs.Vector3(1.0, 2.0, 0.0)
+    assert transform.transform.rotation == q
+    assert ticks_message(sample.ticks).data == [-5, 7]  # int32, wrapping
+
+
+def _odometry_cases() -> list[tuple[Any, str, dict[str, Any]]]:
+    from protoduino.ros2.odometry import Pose2D, Sample, odometry_message, tf_message
+
+    t = TYPES.types
+    config = _odometry_config().odometry
+    assert config is not None
+    sample = Sample(Pose2D(1.0, -2.0, 0.5), 0.25, -0.5, (1, 2))
+    quaternion = t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(0.25), w=math.cos(0.25))
+    header = _header(5, 250000000, "odom")
+    zeros = np.zeros(36, dtype=np.float64)
+    vector = t["geometry_msgs/msg/Vector3"]
+    return [
+        (
+            odometry_message(sample, config, 5.25),
+            "nav_msgs/msg/Odometry",
+            {
+                "header": header,
+                "child_frame_id": "base_link",
+                "pose": t["geometry_msgs/msg/PoseWithCovariance"](
+                    pose=t["geometry_msgs/msg/Pose"](
+                        position=t["geometry_msgs/msg/Point"](x=1.0, y=-2.0, z=0.0),
+                        orientation=quaternion,
+                    ),
+                    covariance=zeros,
+                ),
+                "twist": t["geometry_msgs/msg/TwistWithCovariance"](
+                    twist=t["geometry_msgs/msg/Twist"](
+                        linear=vector(x=0.25, y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=-0.5)
+                    ),
+                    covariance=zeros,
+                ),
+            },
+        ),
+        (
+            tf_message(sample, config, 5.25),
+            "tf2_msgs/msg/TFMessage",
+            {
+                "transforms": [
+                    t["geometry_msgs/msg/TransformStamped"](
+                        header=header,
+                        child_frame_id="base_link",
+                        transform=t["geometry_msgs/msg/Transform"](
+                            translation=vector(x=1.0, y=-2.0, z=0.0), rotation=quaternion
+                        ),
+                    )
+                ]
+            },
+        ),
+    ]
+
+
+@pytest.mark.parametrize(("ours", "name", "fields"), _odometry_cases(), ids=["odom", "tf"])
+def test_the_odometry_cdr_is_rosbags_cdr(ours: Any, name: str, fields: dict[str, Any]) -> None:
+    """Byte for byte what rosbags' Humble nav_msgs/Odometry and tf2_msgs/TFMessage are."""
+    test_the_bridges_cdr_is_rosbags_cdr(ours, name, fields)
+
+
+def test_the_bridge_publishes_odometry_each_period() -> None:
+    """Odometry, /tf and the ticks go out together, every 1 / rate_hz of the bridge's clock
+    (a late sample is not followed by a burst)."""
+    from protoduino.ros2.bridge import Bridge
+    from protoduino.ros2.odometry import Tracker
+
+    clock = ManualClock()
+    config = _odometry_config(rate_hz=25)
+    assert config.odometry is not None
+    bridge = Bridge("unused", config, clock=clock)
+    left, right = FakeWheel(), FakeWheel()
+    bridge._odometry = Tracker(config.odometry, 0.2, left.wheel(), right.wheel(), clock)
+    sent: dict[str, list[Any]] = {"odom": [], "/tf": [], "sensors/encoders": []}
+
+    class Writer:
+        def __init__(self, out: list[Any]) -> None:
+            self.write = out.append
+
+    bridge._writers.update({name: Writer(out) for name, out in sent.items()})  # type: ignore[misc]
+    left.count = right.count = 40
+    assert bridge._publish_odometry(100.0) == 100.04
+    assert [len(out) for out in sent.values()] == [1, 1, 1]
+    assert sent["odom"][0].pose.pose.position.x == pytest.approx(0.04)
+    assert sent["sensors/encoders"][0].data == [40, 40]
+    clock.now = 100.5  # late: the next is a period from now
+    assert bridge._publish_odometry(100.04) == pytest.approx(100.54)
+
+
+def test_the_odometry_example_in_the_docs_is_valid() -> None:
+    """docs/ros2.md's odometry robot.yaml is what the configuration reads."""
+    import yaml
+
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "ros2.md").read_text()
+    section = docs.split("**Odometry** (issue 33)", 1)[1]
+    snippet = section.split("```yaml\n", 1)[1].split("```", 1)[0]
+    config = parse_config(yaml.safe_load(snippet))
+    assert config.odometry is not None and config.drive is not None
+    assert config.odometry.ticks_per_metre == 1000 and config.odometry.rate_hz == 50
+    assert (config.drive.left.encoder, config.drive.right.encoder) == (2, 3)
+
+
+def test_ticks_reported_before_a_reversal_count_the_old_way() -> None:
+    """The drive calls the odometry's update once the duty is 0, just before the direction pin
+    turns: the ticks reported until then count the way the wheel was going."""
+    from protoduino.ros2.odometry import Tracker, Wheel
+
+    clock = ManualClock()
+    config = _odometry_config().odometry
+    assert config is not None
+    log: list[tuple[str, object]] = []
+    left, right = _motors(log)
+    counts = [0, 0]
+    tracker = Tracker(
+        config,
+        0.2,
+        Wheel(lambda: counts[0], lambda: left.forward),
+        Wheel(lambda: counts[1], lambda: right.forward),
+        clock,
+    )
+    for motor in (left, right):
+        motor.before_turn = tracker.update
+    left.apply(WheelCommand(100, True))
+    right.apply(WheelCommand(100, True))
+    tracker.sample()
+    counts[:] = [50, 50]  # reported while both go ahead
+    log.clear()
+
+    def turning() -> None:
+        log.append(("turn", tracker.ticks[0]))
+        tracker.update()
+
+    left.before_turn = turning
+    left.apply(WheelCommand(100, False))  # the left wheel reverses
+    assert log == [("lpwm", 0), ("turn", 0), ("ldir", False), ("lpwm", 100)]
+    assert tracker.ticks == [50, 50]  # counted ahead, before the pin turned
+    counts[:] = [70, 70]
+    clock.now += 0.02
+    sample = tracker.sample()
+    assert sample.ticks == (30, 70)
+    # The velocity is over the whole period, both updates in it.
+    assert sample.linear == pytest.approx((0.03 + 0.07) / 2 / 0.02)

@@ -11,9 +11,9 @@ It needs the ``ros2`` extra (``pip install protoduino[ros2]``: Cyclone DDS and
 PyYAML). Modules: :mod:`.config` (robot.yaml), :mod:`.msgs` (the ROS 2 types
 on DDS), :mod:`.dds` (names, QoS, the domain's configuration), :mod:`.drive`
 (``/cmd_vel`` kinematics), :mod:`.servos` (servo commands), :mod:`.inputs`
-(inputs to topics), :mod:`.diagnostics`, :mod:`.graph` (the node in ROS 2's
-graph), :mod:`.bridge` (the loop). docs/ros2.md says how to run it next to a
-ROS 2 installation.
+(inputs to topics), :mod:`.odometry` (two encoders to Odometry and /tf),
+:mod:`.diagnostics`, :mod:`.graph` (the node in ROS 2's graph), :mod:`.bridge`
+(the loop). docs/ros2.md says how to run it next to a ROS 2 installation.
 """
 
 from __future__ import annotations

@@ -16,7 +16,9 @@ types and QoS: :mod:`.dds`, :mod:`.msgs`) and runs one loop
 * stops the motors when ``/cmd_vel`` went quiet for its timeout;
 * publishes /diagnostics every ``diagnostics_period``, and at once from the
   board's event thread when a failsafe, reboot or link change happens;
-* publishes again each input that was quiet for ``1 / min_publish_rate``.
+* publishes again each input that was quiet for ``1 / min_publish_rate``;
+* publishes the wheel odometry (Odometry, /tf, ticks) every ``1 / odometry.rate_hz``
+  (:mod:`.odometry`).
 
 Inputs are published from the board's event thread as they change
 (:mod:`.inputs`). The bridge starts from every output safe: what the device
@@ -57,12 +59,23 @@ from ..errors import (
     StaleCommandError,
 )
 from ..events import Event, EventKind
-from . import dds, graph, inputs
+from . import dds, graph, inputs, odometry
 from .config import BridgeConfig, ServoConfig
 from .dds import DEFAULT_QOS, SENSOR_QOS, dds_topic, ros_topic
 from .diagnostics import Health
 from .drive import DiffDrive, Motor, twist_to_wheels
-from .msgs import Bool, DiagnosticArray, Empty, Float32, Float64, Int32MultiArray, JointState, Twist
+from .msgs import (
+    Bool,
+    DiagnosticArray,
+    Empty,
+    Float32,
+    Float64,
+    Int32MultiArray,
+    JointState,
+    Odometry,
+    TFMessage,
+    Twist,
+)
 from .servos import joint_pose, servo_degrees
 
 log = logging.getLogger(__name__)
@@ -142,6 +155,7 @@ class Bridge(ClosedOnExit):
         self._joined: set[str] = set()
         self._joined_lock = threading.Lock()
         self._inputs: inputs.Wiring | None = None
+        self._odometry: odometry.Tracker | None = None
         self._next_beat = 0.0
         self._undo: list[Callable[[], None]] = []
 
@@ -176,6 +190,7 @@ class Bridge(ClosedOnExit):
             )
             self._configure_outputs(self.board)
             self._configure_inputs(self.board)
+            self._configure_odometry(self.board)
             # In ROS 2's node graph (ros2 node list / info), with every endpoint above.
             self._node = graph.announce(
                 self._participant,
@@ -313,6 +328,45 @@ class Bridge(ClosedOnExit):
             self._inputs = inputs.wire(board, config, publishers, self.clock)
             self._undo += self._inputs.undo
 
+    def _configure_odometry(self, board: Board) -> None:
+        config = self.config.odometry
+        if config is None:
+            return
+        assert self.drive is not None  # the configuration checked it has one
+        wheels = []
+        for motor in (self.drive.left, self.drive.right):
+            assert motor.config.encoder is not None  # checked too
+            counter = board.counter(motor.config.encoder, rate_hz=config.rate_hz)
+            wheels.append(odometry.Wheel(counter.read, lambda m=motor: m.forward))  # type: ignore[misc]
+        tracker = odometry.Tracker(
+            config, self.drive.config.wheel_base, wheels[0], wheels[1], self.clock
+        )
+        self.drive.left.before_turn = self.drive.right.before_turn = tracker.update
+        self._odometry = tracker
+        for name, kind, qos in (
+            (config.topic, Odometry, DEFAULT_QOS),
+            (config.tf_topic, TFMessage, DEFAULT_QOS),
+            (config.ticks_topic, Int32MultiArray, SENSOR_QOS),
+        ):
+            self._writers[name] = self._writer(name, kind, qos)
+
+    def _publish_odometry(self, due: float) -> float:
+        """Sample the wheels, publish Odometry, /tf and the ticks (this sample was ``due``);
+        return when the next one is due: a period later, or a period from now when late."""
+        assert self._odometry is not None
+        config = self._odometry.config
+        sample = self._odometry.sample()
+        at = time.time()  # ROS stamps are wall-clock time
+        try:
+            self._writers[config.topic].write(odometry.odometry_message(sample, config, at))
+            self._writers[config.tf_topic].write(odometry.tf_message(sample, config, at))
+            self._writers[config.ticks_topic].write(odometry.ticks_message(sample.ticks))
+        except Exception:  # DDS refused it; the next sample carries the pose anyway
+            log.exception("publishing the odometry failed")
+        period = 1.0 / config.rate_hz
+        now = self.clock()
+        return due + period if due + period > now else now + period
+
     def _subscriber_joined(self, topic: str) -> Callable[[Any, Any], None]:
         """A writer's publication-matched listener (Cyclone's thread): a new subscriber gets
         the topic's last value from the loop (volatile QoS kept none for it)."""
@@ -360,7 +414,7 @@ class Bridge(ClosedOnExit):
         # Locals: close() from another thread drops the attributes, not these.
         waitset, wake = self._waitset, self._wake
         self._next_beat = self.clock()
-        next_report = next_refresh = self.clock()
+        next_report = next_refresh = next_odometry = self.clock()
         while not self._stopping.is_set():
             self._beat_if_due()
             now = self.clock()
@@ -369,7 +423,11 @@ class Bridge(ClosedOnExit):
                 next_report = now + self.config.diagnostics_period
             if now >= next_refresh:
                 next_refresh = self._refresh_inputs()
+            if self._odometry is not None and now >= next_odometry:
+                next_odometry = self._publish_odometry(next_odometry)
             due = min(self._next_beat, next_report, next_refresh)
+            if self._odometry is not None:
+                due = min(due, next_odometry)
             if self.drive is not None and (stale := self.drive.deadline()) is not None:
                 due = min(due, stale)
             wait = max(0.0, due - self.clock())

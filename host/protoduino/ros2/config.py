@@ -30,6 +30,8 @@ FAILSAFE_TIMEOUT = 1.0
 #: An input that does not change is still published this often (Hz): a best-effort sample
 #: lost on the network is repaired within one period.
 MIN_PUBLISH_RATE = 1.0
+#: The design notes' encoder rate (Hz): odometry is published this often by default.
+ODOMETRY_RATE = 50.0
 #: A Pose's most items (protoduino.options): one JointState is one pose.
 MAX_JOINTS = 8
 #: Uno analog pins by name (A0 is pin 14).
@@ -76,6 +78,8 @@ class MotorConfig:
     direction: int
     #: Swap the direction pin's meaning (a motor wired the other way round).
     invert: bool = False
+    #: The counter pin of this wheel's encoder (for odometry); None: no encoder.
+    encoder: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,6 +94,28 @@ class DriveConfig:
     topic: str = "cmd_vel"
     #: No Twist for this long (s) stops the motors.
     timeout: float = CMD_VEL_TIMEOUT
+
+
+@dataclass(frozen=True, slots=True)
+class OdometryConfig:
+    """Odometry from the drive's two wheel encoders (each motor's ``encoder``).
+
+    The wheel base is the drive's; a wheel's direction is the one its direction pin gives
+    (an encoder counts edges, not direction).
+    """
+
+    #: Encoder ticks per metre a wheel travels.
+    ticks_per_metre: float
+    #: Hz: Odometry, the transform and the ticks are published this often.
+    rate_hz: float = ODOMETRY_RATE
+    #: nav_msgs/Odometry.
+    topic: str = "odom"
+    #: tf2_msgs/TFMessage with the frame_id -> child_frame_id transform.
+    tf_topic: str = "/tf"
+    #: std_msgs/Int32MultiArray: the signed ticks (left, right) since the start.
+    ticks_topic: str = "sensors/encoders"
+    frame_id: str = "odom"
+    child_frame_id: str = "base_link"
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,6 +173,7 @@ class BridgeConfig:
     digital_outputs: tuple[DigitalOutputConfig, ...] = ()
     stop: StopConfig = field(default_factory=StopConfig)
     drive: DriveConfig | None = None
+    odometry: OdometryConfig | None = None
     digital_inputs: tuple[DigitalInputConfig, ...] = ()
     analog_inputs: tuple[AnalogInputConfig, ...] = ()
     counters: tuple[CounterConfig, ...] = ()
@@ -211,6 +238,7 @@ def parse_config(data: object) -> BridgeConfig:
         digital_outputs=top.each("digital_outputs", _digital_output),
         stop=top.optional("stop", _stop) or StopConfig(),
         drive=top.optional("drive", _drive),
+        odometry=top.optional("odometry", _odometry),
         digital_inputs=top.each("digital_inputs", _digital_input),
         analog_inputs=top.each("analog_inputs", _analog_input),
         counters=top.each("counters", _counter),
@@ -288,7 +316,21 @@ def _drive(s: _Section) -> DriveConfig:
 
 
 def _motor(s: _Section) -> MotorConfig:
-    return MotorConfig(s.pin("pwm"), s.pin("direction"), s.flag("invert", False))
+    return MotorConfig(
+        s.pin("pwm"), s.pin("direction"), s.flag("invert", False), s.optional_pin("encoder")
+    )
+
+
+def _odometry(s: _Section) -> OdometryConfig:
+    return OdometryConfig(
+        ticks_per_metre=s.number("ticks_per_metre", None, low=0.0, low_open=True),
+        rate_hz=s.number("rate_hz", ODOMETRY_RATE, low=0.1, high=200.0),
+        topic=s.topic("topic", "odom"),
+        tf_topic=s.topic("tf_topic", "/tf"),
+        ticks_topic=s.topic("ticks_topic", "sensors/encoders"),
+        frame_id=s.frame("frame_id", "odom"),
+        child_frame_id=s.frame("child_frame_id", "base_link"),
+    )
 
 
 def _check_whole(config: BridgeConfig) -> None:
@@ -308,6 +350,8 @@ def _check_whole(config: BridgeConfig) -> None:
         for side, motor in (("left", config.drive.left), ("right", config.drive.right)):
             claim(motor.pwm, f"the drive's {side} PWM pin")
             claim(motor.direction, f"the drive's {side} direction pin")
+            if motor.encoder is not None:
+                claim(motor.encoder, f"the drive's {side} encoder")
     for din in config.digital_inputs:
         claim(din.pin, f"digital input {din.topic}")
     for ain in config.analog_inputs:
@@ -326,11 +370,29 @@ def _check_whole(config: BridgeConfig) -> None:
             raise ConfigError(f"topic {topic!r} is both {first_what}{same} and {what}")
         topics[name] = (topic, what)
 
+    _check_odometry(config)
     joints = [s.joint for s in config.servos if s.joint is not None]
     if len(set(joints)) != len(joints):
         raise ConfigError(f"a joint name is given twice: {joints}")
     if len(joints) > MAX_JOINTS:
         raise ConfigError(f"{len(joints)} joints: one JointState is one pose of at most 8")
+
+
+def _check_odometry(config: BridgeConfig) -> None:
+    """Odometry needs the drive (its wheel base, its direction pins) and both encoders."""
+    odometry, drive = config.odometry, config.drive
+    encoders = drive is not None and (drive.left.encoder, drive.right.encoder) != (None, None)
+    if odometry is None:
+        if encoders:
+            raise ConfigError("drive: an encoder is given without odometry: (ticks_per_metre)")
+        return
+    if drive is None or drive.left.encoder is None or drive.right.encoder is None:
+        raise ConfigError(
+            "odometry: needs a drive with an encoder on each wheel (drive: left: {encoder: PIN}"
+            " and right: {encoder: PIN})"
+        )
+    if odometry.frame_id == odometry.child_frame_id:
+        raise ConfigError(f"odometry: frame_id and child_frame_id are both {odometry.frame_id!r}")
 
 
 def _topics(config: BridgeConfig) -> list[tuple[str, str]]:
@@ -342,6 +404,10 @@ def _topics(config: BridgeConfig) -> list[tuple[str, str]]:
     found += [(o.topic, f"digital output {o.pin}") for o in config.digital_outputs]
     if config.drive is not None:
         found.append((config.drive.topic, "the drive"))
+    if config.odometry is not None:
+        found.append((config.odometry.topic, "the odometry"))
+        found.append((config.odometry.tf_topic, "the odometry's transform"))
+        found.append((config.odometry.ticks_topic, "the odometry's ticks"))
     found += [(i.topic, f"digital input {i.pin}") for i in config.digital_inputs]
     if config.interlocks:
         found.append((config.clear_interlock_topic, "the interlock's clear"))
@@ -482,6 +548,18 @@ class _Section:
             return ANALOG_NAMES[value.upper()]
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 255:
             raise ConfigError(f"{self._at(key)} must be a pin number (or A0..A7), not {value!r}")
+        return value
+
+    def optional_pin(self, key: str) -> int | None:
+        return None if self._get(key) is None else self.pin(key)
+
+    def frame(self, key: str, default: str) -> str:
+        """A tf frame id: a ROS name token (``odom``, ``base_link``)."""
+        value = self._get(key)
+        if value is None:
+            return default
+        if not isinstance(value, str) or not _TOKEN.fullmatch(value):
+            raise ConfigError(f"{self._at(key)} must be a frame id like base_link, not {value!r}")
         return value
 
     def pins(self, key: str) -> tuple[int, ...]:

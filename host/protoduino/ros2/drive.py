@@ -106,6 +106,14 @@ class Motor:
         #: that raised may or may not have run, or the level was never set).
         self.duty: int | None = 0
         self.level: bool | None = None
+        #: Called once the duty is 0, just before the direction pin turns (the odometry
+        #: counts the wheel's ticks so far the old way).
+        self.before_turn: Callable[[], None] | None = None
+
+    @property
+    def forward(self) -> bool | None:
+        """The way the direction pin drives the wheel (True: forward); None: not known."""
+        return None if self.level is None else self.level != self.config.invert
 
     def apply(self, command: WheelCommand) -> None:
         level = command.level(self.config)
@@ -114,6 +122,8 @@ class Motor:
                 # Never drive the old duty (or an unknown one) the other way round while
                 # the pin turns.
                 self._write_duty(0)
+            if self.before_turn is not None:
+                self.before_turn()
             self.level = None  # unknown until acknowledged
             self.direction.write(level)
             self.level = level
