@@ -25,6 +25,7 @@ from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard, runner_command
 from protoduino.simcontrol import SimControl
 from protoduino_dev import build
+from simfixtures import pin_values, wait_for_pin
 
 pytestmark = pytest.mark.avr
 
@@ -81,7 +82,7 @@ def test_a_build_without_servo_refuses_servos(tools: None) -> None:
             info = board.request(_info()).info
             assert not (info.features >> 1) & 1  # FEATURE_SERVO
             assert (info.features >> 5) & 1  # FEATURE_PWM
-            assert info.pwm_pins == (1 << 3) | (1 << 9) | (1 << 10) | (1 << 11)
+            assert info.pwm_pins == sum(1 << pin for pin in (3, 5, 6, 9, 10, 11))
             with pytest.raises(CommandRejectedError) as refused:
                 board.request(_servo_init(9))
             assert refused.value.status == Status.STATUS_NOT_SUPPORTED
@@ -110,7 +111,7 @@ def _is_pwm(pin: int, duty: int) -> Callable[[dict[str, Any]], bool]:
     return match
 
 
-@pytest.mark.parametrize("pin", [3, 9, 10, 11])
+@pytest.mark.parametrize("pin", [3, 5, 6, 9, 10, 11])
 def test_pwm_duty_measured_at_the_pin(tools: None, tmp_path: Path, pin: int) -> None:
     elf = build.build_firmware()
     trace = tmp_path / "trace.jsonl"
@@ -142,9 +143,7 @@ def test_pwm_on_9_refused_while_a_servo_runs(tools: None) -> None:
             with pytest.raises(CommandRejectedError) as refused:
                 board.request(_pwm_init(9, 0))
             assert refused.value.status == Status.STATUS_TIMER_IN_USE
-            with pytest.raises(CommandRejectedError) as refused:
-                board.request(_pwm_init(5, 0))
-            assert refused.value.status == Status.STATUS_TIMER_IN_USE
+            board.request(_pwm_init(5, 0))  # Timer0's PWM is the servos' neighbour
     finally:
         runner.stop(strict=False)
 
@@ -278,3 +277,42 @@ def test_pwm_on_timer1_in_a_build_without_servos(tools: None, tmp_path: Path) ->
             _wait_for(trace, _is_pwm(9, 100))
     finally:
         runner.stop(strict=False)
+
+
+#: The failsafe timeout the clock is judged by: a millisecond counted per 1,024 us
+#: overflow of Timer0 (without wiring.c's fraction) would make it 72 ms late.
+CLOCK_TIMEOUT_S = 3.0
+#: The clock's own resolution, and the loop pass that notices the timeout.
+CLOCK_SLACK_S = 0.002
+
+
+def test_pwm_on_timer0_beside_the_clock_on_both_boards(sim_board: SimBoard) -> None:
+    """Issue 33 item 6: PWM on pins 5 and 6 (the Uno's Timer0, 976 Hz, as the Arduino core
+    does it), measured at the pins on both boards, while the millisecond clock the same
+    timer keeps still keeps time: one Ping starts the failsafe's timeout, which ends on the
+    board's clock (the trace's t) exactly that long after the Ping, dated between two
+    level changes made just before and just after it."""
+    with Board.open(sim_board.port, failsafe_timeout=CLOCK_TIMEOUT_S, ping=False) as board:
+        board.ping()  # the failsafe waits for none of the set-up
+        motors = board.pwm_output(5), board.pwm_output(6)
+        motors[0].write(64)
+        motors[1].write(191)
+        wait_for_pin(sim_board, 5, lambda v: v[-1:] == [64], timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 6, lambda v: v[-1:] == [191], timeout=TRACE_TIMEOUT)
+        before, after = board.digital_output(12), board.digital_output(13)
+        before.write(True)
+        board.ping()
+        after.write(True)
+        wait_for_pin(sim_board, 13, lambda v: v[-2:] == [1, 0], timeout=TRACE_TIMEOUT * 2)
+    trace = sim_board.trace()
+    rows = [(e["pin"], e["value"], float(e["t"])) for e in trace]
+    t_before = next(t for pin, value, t in rows if pin == 12 and value == 1)
+    t_after = next(t for pin, value, t in rows if pin == 13 and value == 1)
+    t_trip = next(t for pin, value, t in rows if pin == 13 and value == 0 and t > t_after)
+    assert (
+        t_before + CLOCK_TIMEOUT_S - CLOCK_SLACK_S
+        <= t_trip
+        <= t_after + CLOCK_TIMEOUT_S + CLOCK_SLACK_S
+    ), (t_before, t_after, t_trip)
+    for pin in (5, 6):  # the failsafe made the motors safe too
+        assert pin_values(trace, pin)[-1] == 0, pin
