@@ -25,7 +25,7 @@ from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard, runner_command
 from protoduino.simcontrol import SimControl
 from protoduino_dev import build
-from simfixtures import pin_values, wait_for_pin
+from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
 
 pytestmark = pytest.mark.avr
 
@@ -316,3 +316,48 @@ def test_pwm_on_timer0_beside_the_clock_on_both_boards(sim_board: SimBoard) -> N
     ), (t_before, t_after, t_trip)
     for pin in (5, 6):  # the failsafe made the motors safe too
         assert pin_values(trace, pin)[-1] == 0, pin
+
+
+def _near(want: int) -> Callable[[list[int]], bool]:
+    return lambda values: bool(values) and abs(values[-1] - want) <= PULSE_TOLERANCE_US
+
+
+def test_the_notes_robot_on_one_uno_on_both_boards(sim_board: SimBoard) -> None:
+    """Issue 33 item 6: the design notes' robot configured all at once on one Uno's pins (and
+    the simulated board's, which offers the same): two PWM motors on Timer0's 5 and 6 with
+    their direction pins, two encoders on 2 and 3, two servos on Timer1's 9 and 10, a bumper
+    interlock, a battery on A0 and an LED. Judged at the pins (the trace) and by the counts
+    and the battery value the device reports; the bumper, pressed, stops the motors on the
+    device itself."""
+    with Board.open(sim_board.port) as board:
+        sim_board.set_level(4, 1)  # the bumper released (its switch pulls to ground)
+        motors = board.pwm_output(5), board.pwm_output(6)
+        directions = board.digital_output(7), board.digital_output(8)
+        encoders = board.counter(2, rate_hz=50), board.counter(3, rate_hz=50)
+        board.servo(9, safe_us=1200)
+        board.servo(10, safe_us=1800)
+        board.digital_input(4, pull_up=True, interlock="low")
+        battery = board.analog_input(14)
+        led = board.digital_output(13)
+        motors[0].write(100)
+        motors[1].write(150)
+        directions[1].write(True)
+        led.write(True)
+        wait_for_pin(sim_board, 5, lambda v: v[-1:] == [100], timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 6, lambda v: v[-1:] == [150], timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 8, lambda v: v[-1:] == [1], timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 13, lambda v: v[-1:] == [1], timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 9, _near(1200), timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 10, _near(1800), timeout=TRACE_TIMEOUT)
+        sim_board.pulses(2, 200, 2_000)
+        sim_board.pulses(3, 300, 3_000)
+        assert encoders[0].wait_for(lambda n: n >= 200, timeout=TRACE_TIMEOUT) == 200
+        assert encoders[1].wait_for(lambda n: n >= 300, timeout=TRACE_TIMEOUT) == 300
+        sim_board.set_analog(14, 700)
+        assert battery.wait_for(lambda v: v == 700, timeout=TRACE_TIMEOUT) == 700
+        sim_board.set_level(4, 0)  # the bumper pressed: every output safe, on the device
+        for pin in (5, 6, 8, 13):
+            wait_for_pin(sim_board, pin, lambda v: v[-1:] == [0], timeout=TRACE_TIMEOUT)
+        # The servos held their safe widths throughout (they are at them already).
+        for pin, us in ((9, 1200), (10, 1800)):
+            assert _near(us)(pin_values(sim_board.trace(), pin)), pin
