@@ -30,7 +30,7 @@ static const pd_board_info_t uno = {
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
     .pwm_pins = (1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11),
     .analog_pins = 0x3FUL << 14,              /* A0..A5 */
-    .counter_pins = (1UL << 2) | (1UL << 3),  /* INT0, INT1 */
+    .counter_pins = 0x3FFCUL, /* 2..13: INT0, INT1, pin-change interrupts */
     .servo_timer_pins = (1UL << 9) | (1UL << 10),
 };
 

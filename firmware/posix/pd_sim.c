@@ -94,7 +94,7 @@ static const pd_board_info_t sim_board = {
      * meets the same refusals on the board. */
     .pwm_pins = (1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11),
     .analog_pins = 0x3FUL << 14,
-    .counter_pins = (1UL << 2) | (1UL << 3),
+    .counter_pins = 0x3FFCUL, /* 2..13, as the Uno */
     .servo_timer_pins = (1UL << 9) | (1UL << 10),
 };
 

@@ -823,7 +823,7 @@ class Board(ClosedOnExit):
         """Count ``edge`` edges on ``pin`` (``info.counter_pins``) in an interrupt.
 
         The count (since this Init; wraps at 2**32) is reported when it changed,
-        at most ``rate_hz`` times a second. At most 4 counters run at once.
+        at most ``rate_hz`` times a second (the Uno: pins 2..13, two counters at once).
         Returns once its first count (0) is known.
         """
         msg, on_ok, make = self._counter_init(pin, edge, pull_up, rate_hz)

@@ -310,7 +310,7 @@ class VirtualDevice:
         self.features = ALL_FEATURES
         self.pwm_pins = [3, 5, 6, 9, 10, 11]
         self.analog_pins = list(range(14, 20))
-        self.counter_pins = [2, 3]
+        self.counter_pins = list(range(2, 14))
         self.servo_timer_pins = [9, 10]
         #: DeviceInfo.rx_buffer (0: not stated) and user_fingerprint (0: no user service).
         self.rx_buffer = 0
