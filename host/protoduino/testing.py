@@ -128,8 +128,6 @@ __all__ = [
 
 #: DeviceInfo.features with every pin mode built in.
 ALL_FEATURES = sum(mode.feature_bit for mode in PIN_MODES)
-#: At most this many counters at once (the Uno's firmware: PD_MAX_COUNTERS).
-MAX_COUNTERS = 4
 #: The schema's FailsafeCause values.
 PING_TIMEOUT = pb.FAILSAFE_CAUSE_PING_TIMEOUT
 STOP = pb.FAILSAFE_CAUSE_STOP
