@@ -3,8 +3,8 @@
  *
  * The main loop offers every received byte to the core, lets it check the
  * failsafe, and sleeps (idle mode) until the next interrupt: a received byte,
- * a transmitted one or the 1 kHz clock tick, so the failsafe is checked at
- * least every 1 ms. It never waits for the UART: frames go into a transmit
+ * a transmitted one or the clock tick (Timer0's overflow, every 1,024 us), so
+ * the failsafe is checked at least that often. It never waits for the UART: frames go into a transmit
  * ring that an interrupt drains.
  */
 #include <avr/eeprom.h>
