@@ -190,9 +190,10 @@ static volatile uint8_t pc_mode[2];
  * A pin change in group `g` (PCINT0..2: PORTB, PORTC, PORTD), its port read from
  * `pins`: each counter there counts its edge (PD_PC_SLOT), in five registers (7 B
  * of stack where the compiler's handler took 22: every byte of an interrupt's
- * frame can land on the deepest stack, test_stack_margin). A change of no
- * counter's pin wakes the loop (a digital input's); a counter's edge does not
- * (the loop reads counts once per report interval).
+ * frame can land on the deepest stack, test_stack_margin). A run in which no
+ * counter's pin changed wakes the loop (a digital input's change); a counter's
+ * edge does not (the loop reads counts once per report interval), so an input
+ * that changed in the same run is seen at the next clock tick.
  */
 #define PD_PC_ISR(vector, g, pins)                                                       \
     ISR(vector, ISR_NAKED)                                                               \
