@@ -133,10 +133,12 @@ volatile uint32_t pd_avr_counts[2];
  * (bits 2-3) and the pin's last level (bit 7). */
 static volatile uint8_t pc_mask[2];
 static volatile uint8_t pc_mode[2];
+/* Each port's pins as its pin-change handler last read them (PINB, PINC, PIND). */
+static volatile uint8_t pc_last[3];
 
 /*
- * One counter slot in a pin-change handler (r23: the port's pins now, r22: set
- * when a counter's pin changed). If slot `s` counts a pin of this group whose
+ * One counter slot in a pin-change handler (r23: the port's pins now, r22: the
+ * port's counting pins, gathered). If slot `s` counts a pin of this group whose
  * level is not its last one: the new level becomes the last, and the edge counts
  * when the counter's Edge asks for it: rising (Edge bit 2 clear) at a high level,
  * falling (set) at a low one, both (bit 3) always. count += 1 as the INT
@@ -153,6 +155,7 @@ static volatile uint8_t pc_mode[2];
     "lds r24, %[mask" #s "]\n\t"                                                         \
     "tst r24\n\t"                                                                        \
     "breq 3f\n\t"                                                                        \
+    "or r22, r24\n\t" /* a counting pin of this port */                                 \
     "and r24, r23\n\t"                                                                   \
     "breq 1f\n\t"                                                                        \
     "ldi r24, 0x80\n\t"                                                                  \
@@ -162,7 +165,6 @@ static volatile uint8_t pc_mode[2];
     "rjmp 3f\n\t"                                                                        \
     "subi r25, 0x80\n\t" /* the new level is the last one */                             \
     "sts %[mode" #s "], r25\n\t"                                                         \
-    "ldi r22, 1\n\t"                                                                     \
     "sbrc r25, 3\n\t"                                                                    \
     "rjmp 2f\n\t"                                                                        \
     "mov r24, r25\n\t"                                                                   \
@@ -190,10 +192,10 @@ static volatile uint8_t pc_mode[2];
  * A pin change in group `g` (PCINT0..2: PORTB, PORTC, PORTD), its port read from
  * `pins`: each counter there counts its edge (PD_PC_SLOT), in five registers (7 B
  * of stack where the compiler's handler took 22: every byte of an interrupt's
- * frame can land on the deepest stack, test_stack_margin). A run in which no
- * counter's pin changed wakes the loop (a digital input's change); a counter's
- * edge does not (the loop reads counts once per report interval), so an input
- * that changed in the same run is seen at the next clock tick.
+ * frame can land on the deepest stack, test_stack_margin). A change of a pin
+ * that counts nothing (a digital input's: the port's pins against pc_last)
+ * wakes the loop; a counter's edge does not (the loop reads counts once per
+ * report interval).
  */
 #define PD_PC_ISR(vector, g, pins)                                                       \
     ISR(vector, ISR_NAKED)                                                               \
@@ -206,8 +208,12 @@ static volatile uint8_t pc_mode[2];
                          "push r22\n\t"                                                  \
                          "in r23, %[port]\n\t"                                           \
                          "clr r22\n\t" PD_PC_SLOT(0) PD_PC_SLOT(1)                       \
-                         "tst r22\n\t"                                                   \
-                         "brne 4f\n\t"                                                   \
+                         "lds r24, %[last]\n\t"                                          \
+                         "sts %[last], r23\n\t"                                          \
+                         "eor r24, r23\n\t" /* the port's pins that changed */           \
+                         "com r22\n\t"                                                   \
+                         "and r24, r22\n\t" /* ... and count nothing */                  \
+                         "breq 4f\n\t"                                                   \
                          "ldi r24, 1\n\t"                                                \
                          "sts %[wake], r24\n\t"                                          \
                          "4:\n\t"                                                        \
@@ -220,6 +226,7 @@ static volatile uint8_t pc_mode[2];
                          "reti\n\t"                                                      \
                          :                                                               \
                          : [port] "I"(_SFR_IO_ADDR(pins)), [group] "M"(g),               \
+                           [last] "i"(&pc_last[g]),                                      \
                            [wake] "i"(&pd_avr_wake), [mode0] "i"(&pc_mode[0]),           \
                            [mode1] "i"(&pc_mode[1]), [mask0] "i"(&pc_mask[0]),           \
                            [mask1] "i"(&pc_mask[1]),                                     \
