@@ -160,13 +160,14 @@ typedef struct {
     char timer_name;
     int comp;
     avr_timer_t *timer;
-    uint8_t oc_level; /* the compare output's last level */
+    uint8_t oc_level;  /* the compare output's last level */
+    uint8_t connected; /* its compare output was connected since the pin last was an input */
 } pd_pwm_pin_t;
 
 static pd_pwm_pin_t g_pwm_pins[] = {
-    {6, '0', AVR_TIMER_COMPA, NULL, 0},  {5, '0', AVR_TIMER_COMPB, NULL, 0},
-    {9, '1', AVR_TIMER_COMPA, NULL, 0},  {10, '1', AVR_TIMER_COMPB, NULL, 0},
-    {11, '2', AVR_TIMER_COMPA, NULL, 0}, {3, '2', AVR_TIMER_COMPB, NULL, 0},
+    {6, '0', AVR_TIMER_COMPA, NULL, 0, 0},  {5, '0', AVR_TIMER_COMPB, NULL, 0, 0},
+    {9, '1', AVR_TIMER_COMPA, NULL, 0, 0},  {10, '1', AVR_TIMER_COMPB, NULL, 0, 0},
+    {11, '2', AVR_TIMER_COMPA, NULL, 0, 0}, {3, '2', AVR_TIMER_COMPB, NULL, 0, 0},
 };
 #define PD_PWM_PINS (sizeof g_pwm_pins / sizeof g_pwm_pins[0])
 
@@ -354,14 +355,21 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
         uint32_t pwm_tick = 0;
         pd_pwm_pin_t *w = pd_pwm_pin(pin);
         if (w && w->timer) {
-            int kind = w->timer->wgm_op_mode_kind;
-            if (kind == avr_timer_wgm_pwm || kind == avr_timer_wgm_fast_pwm ||
-                kind == avr_timer_wgm_fc_pwm) {
-                pwm_tick = w->timer->cs_div_value ? w->timer->cs_div_value : 1U; /* prescaler */
+            if (!((ddr >> b) & 1)) {
+                w->connected = 0; /* an input: whatever the pin did has ended */
             }
             /* A connected compare output overrides the PORT bit. */
             if (avr_regbit_get(sim->avr, w->timer->comp[w->comp].com)) {
                 level = w->oc_level;
+                w->connected = 1;
+            }
+            /* PWM once its compare output drove it (duties 0 and 255 disconnect it and
+             * drive the level): Timer0 runs in fast PWM for the clock from power-up,
+             * and a servo or a digital output on 5 or 6 is no PWM. */
+            int kind = w->timer->wgm_op_mode_kind;
+            if (w->connected && (kind == avr_timer_wgm_pwm || kind == avr_timer_wgm_fast_pwm ||
+                                 kind == avr_timer_wgm_fc_pwm)) {
+                pwm_tick = w->timer->cs_div_value ? w->timer->cs_div_value : 1U; /* prescaler */
             }
         }
         pd_pins_sample(&sim->pins, pin, (ddr >> b) & 1, level, pwm_tick, now);
