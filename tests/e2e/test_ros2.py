@@ -702,13 +702,15 @@ def test_a_hung_bridge_trips_the_failsafe_while_the_link_stays_up(
 
 
 @contextlib.contextmanager
-def _in_process_bridge(port: str, config: Any) -> Iterator[Any]:
+def _in_process_bridge(
+    port: str, config: Any, board_options: dict[str, Any] | None = None
+) -> Iterator[Any]:
     """A bridge through the API (the test reaches its line and counters), its loop on a thread."""
     import threading
 
     from protoduino.ros2 import Bridge
 
-    with Bridge(port, config) as bridge:
+    with Bridge(port, config, board_options=board_options) as bridge:
         loop = threading.Thread(target=bridge.run, name="bridge-loop")
         loop.start()
         try:
@@ -742,7 +744,12 @@ def test_a_twist_whose_ack_was_lost_is_stopped_by_the_watchdog(
     name = f"ros2-deaf-{os.getpid()}-{sim.backend}"
     port = f"faulty://{sim.port}?dir=rx&drop=1&paused=1&name={name}"
     load_url_handlers(port)
-    with _in_process_bridge(port, _config(DRIVE.format(ns=ns, failsafe=failsafe))) as bridge:
+    # The line pinned at 115200: at an agreed rate a device gone silent is taken for one that
+    # reset (docs/protocol.md, "A reset at the agreed rate"), the link handshakes again and its
+    # heartbeats pause, so the device's failsafe stops the motor, which is safe but not the
+    # bridge's watchdog this test judges.
+    config = _config(DRIVE.format(ns=ns, failsafe=failsafe))
+    with _in_process_bridge(port, config, {"baudrate": 115200}) as bridge:
         cmd_vel = graph.publisher(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
         cmd_vel(_twist(0.2, 0.0))  # 0.2 / 0.5 * 255 = 102
         wait_for_pin(sim, 3, now_at(102))

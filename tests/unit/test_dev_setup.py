@@ -35,7 +35,7 @@ def _run(tmp_path: Path, command: str) -> list[str]:
             (root / entry.name).symlink_to(entry)
     (root / "tools").mkdir()
     shutil.copy(ROOT / "tools" / "dev.sh", root / "tools" / "dev.sh")
-    for script in ("fetch_nanopb.sh", "fetch_firmata.sh", "bench_setup.sh"):
+    for script in ("fetch_nanopb.sh", "fetch_firmata.sh", "fetch_uplot.sh", "bench_setup.sh"):
         _stand_in(root / "tools" / script)
     for program in ("python", "protoduino"):
         _stand_in(root / ".venv" / "bin" / program)
@@ -67,9 +67,11 @@ def test_the_demo_sets_up_only_what_the_demo_needs(tmp_path: Path) -> None:
     steps = _run(tmp_path, "demo")
     assert "fetch_nanopb.sh " in steps  # the native board is built against nanopb's runtime
     assert steps[-1] == "protoduino demo"
-    assert not [s for s in steps if "firmata" in s or "bench" in s or "npm" in s or "ros-" in s], (
-        steps
-    )
+    assert not [
+        s
+        for s in steps
+        if "firmata" in s or "bench" in s or "npm" in s or "ros-" in s or "uplot" in s
+    ], steps
     installs = [s for s in steps if s.startswith("python -m pip install")]
     assert installs and installs[-1].endswith(" -e . -e ./dev"), installs
     assert {"build-essential", "libjansson-dev"} <= _queried(steps)
@@ -80,8 +82,10 @@ def test_the_test_path_still_sets_up_everything(tmp_path: Path) -> None:
     steps = _run(tmp_path, "setup")
     assert "fetch_nanopb.sh " in steps and "fetch_firmata.sh " in steps
     assert "bench_setup.sh " in steps
+    assert "fetch_uplot.sh " in steps  # the live console's plots, for its browser tests
     installs = [s for s in steps if s.startswith("python -m pip install")]
     assert any(s.endswith(" -e .[dev] -e ./dev") for s in installs), installs
     # ROS 2's rclpy on Fast DDS, pinned, for tests/e2e/test_ros2_real.py.
     assert any(" -c constraints.txt " in s and " ros-rclpy " in s for s in installs), installs
     assert {"build-essential", "gcc-avr", "simavr", "clang", "libjansson-dev"} <= _queried(steps)
+    assert {"chromium", "chromium-driver"} <= _queried(steps)
