@@ -3,10 +3,10 @@
 ``protoduino._speedups`` (optional C accelerator, on Python's limited API of 3.11: one build
 serves every CPython from 3.11 on, so a wheel is cp311-abi3): where there is no C compiler or
 no Python headers, ``pip install`` still succeeds, and ``protoduino.framing`` logs one warning
-and uses the pure-Python decoder. ``tests/unit/test_framing_props.py`` fails when a compiler and the headers
-are present but the module was not built (a build broken by a warning must not pass as a
-skip). It compiles the firmware's own COBS and CRC (``firmware/core``), so both ends of the
-link check frames with the same code. Source paths are relative, as setuptools requires.
+and uses the pure-Python decoder. ``tests/unit/test_framing_props.py`` fails when a compiler
+and the headers are present but the module was not built (a build broken by a warning must not
+pass as a skip). It compiles the firmware's own COBS and CRC (``firmware/core``), so both ends
+of the link check frames with the same code. Source paths are relative, as setuptools requires.
 
 The programs (``protoduino/_programs/``, see ``protoduino.programs``): a wheel carries the
 Uno firmware as a ready hex (and its ELF, which the emulated Uno runs), the simulated board

@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
-# An arm64 Debian 12 tree like Raspberry Pi OS (bookworm, Python 3.11), from Debian's registry:
+# An arm64 Debian tree like Raspberry Pi OS, from Debian's registry:
 #
-#   tools/arm64_tree.sh run     .deps/arm64/run-<key>: Python 3.11 and venv, nothing else
-#                               (what tests/e2e/test_pi.py installs a wheel into, under qemu)
-#   tools/arm64_tree.sh build   .deps/arm64/build-<key>: the headers and libraries the wheel's
-#                               native parts link, the sysroot of tools/build_wheels.sh
+#   tools/arm64_tree.sh run [SUITE]   .deps/arm64/run-SUITE-<key>: Python and venv, nothing
+#                                     else (what tests/e2e/test_pi.py installs a wheel into,
+#                                     under qemu); SUITE bookworm (Debian 12, Raspberry Pi OS
+#                                     12, Python 3.11; the default) or trixie (13, Python 3.13)
+#   tools/arm64_tree.sh build         .deps/arm64/build-bookworm-<key>: the headers and
+#                                     libraries the wheel's native parts link, the sysroot of
+#                                     tools/build_wheels.sh
 #
 # Prints the tree's path. debootstrap --foreign fetches the packages and their dependencies;
 # they are unpacked with dpkg -x, never configured (no maintainer script runs, no root needed
@@ -13,19 +16,21 @@
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
-kind=${1:?usage: $0 run|build}
+kind=${1:?usage: $0 run|build [SUITE]}
+SUITE=${2:-bookworm}
 MIRROR=${DEBIAN_MIRROR:-http://deb.debian.org/debian}
-SUITE=bookworm
 
 case "$kind" in
     run) PACKAGES=(python3 python3-venv) ;;
-    build) PACKAGES=(libc6-dev libpython3.11-dev libjansson-dev libsimavr-dev libelf-dev zlib1g-dev) ;;
-    *) echo "usage: $0 run|build" >&2; exit 2 ;;
+    build)
+        [ "$SUITE" = bookworm ] || { echo "$0: the build tree is bookworm's (Python 3.11, glibc 2.36)" >&2; exit 2; }
+        PACKAGES=(libc6-dev libpython3.11-dev libjansson-dev libsimavr-dev libelf-dev zlib1g-dev) ;;
+    *) echo "usage: $0 run|build [SUITE]" >&2; exit 2 ;;
 esac
 
 key=$(printf '%s\n' "$SUITE" "$MIRROR" "${PACKAGES[@]}" | sha256sum | cut -c1-12)
 base="$root/.deps/arm64"
-tree="$base/$kind-$key"
+tree="$base/$kind-$SUITE-$key"
 if [ -f "$tree/.complete" ]; then
     echo "$tree"
     exit 0
@@ -34,11 +39,11 @@ for tool in debootstrap dpkg; do
     command -v "$tool" >/dev/null || { echo "$0: needs $tool (Debian package $tool)" >&2; exit 1; }
 done
 mkdir -p "$base"
-rm -rf "$base/$kind"-* "$tree.tmp"
+rm -rf "$base/$kind-$SUITE"-* "$tree.tmp"
 include=$(IFS=,; echo "${PACKAGES[*]}")
 debootstrap --arch=arm64 --foreign --variant=minbase --include="$include" \
-    "$SUITE" "$tree.tmp" "$MIRROR" >"$base/$kind.log" 2>&1 ||
-    { tail -20 "$base/$kind.log" >&2; exit 1; }
+    "$SUITE" "$tree.tmp" "$MIRROR" >"$base/$kind-$SUITE.log" 2>&1 ||
+    { tail -20 "$base/$kind-$SUITE.log" >&2; exit 1; }
 for deb in "$tree.tmp"/var/cache/apt/archives/*.deb; do
     dpkg -x "$deb" "$tree.tmp"
 done

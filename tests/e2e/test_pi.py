@@ -1,12 +1,15 @@
 """The Raspberry Pi's wheel in the suite (issue 38): aarch64, installed and driven under qemu.
 
-``tools/build_wheels.sh`` cross-builds the manylinux aarch64 wheel. It is installed with pip
+``tools/build_wheels.sh`` builds the release wheels (cp311-abi3, manylinux, x86_64 and
+aarch64), and each must carry what its native parts link. The aarch64 one is installed with pip
 into a venv inside a fresh arm64 Debian 12 tree (``tools/arm64_tree.sh run``: Python 3.11 and
-nothing else, as on Raspberry Pi OS bookworm; no libjansson, no simavr), whose programs run
-under qemu-user with a Pi 4's CPU (``QEMU_CPU=cortex-a72``) through binfmt_misc. There, arm64
+nothing else, as on Raspberry Pi OS bookworm; no libjansson, no simavr); what it installed also
+runs on trixie's Python 3.13 (Debian 13, Raspberry Pi OS trixie). Its programs run under
+qemu-user with a Pi 4's CPU (``QEMU_CPU=cortex-a72``) through binfmt_misc. There, arm64
 Python drives both boards the wheel carries, through the API and through the CLI, and each is
 judged at the pin by the board's trace. Every command runs in the tree (chroot) in a private
-mount namespace holding /dev and /proc, so nothing is left mounted however the test ends.
+mount namespace holding /dev and /proc (``tools/arm64_run.sh``), so nothing is left mounted
+however the test ends.
 pip fetches the wheel's declared dependencies from PyPI (the versions of constraints.txt).
 """
 
@@ -18,6 +21,7 @@ import platform
 import shutil
 import subprocess
 import time
+import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +37,9 @@ BUILD_TIMEOUT = 900.0
 COMMAND_TIMEOUT = 300.0
 BINFMT = Path("/proc/sys/fs/binfmt_misc")
 VENV = "/opt/protoduino"
+#: What a wheel's programs may link without carrying it: glibc's and zlib (Debian's
+#: Priority: required, in every system), the manylinux policy's own list minus the rest.
+SYSTEM_LIBRARIES = {"libc.so.6", "libm.so.6", "libz.so.1", "ld-linux-aarch64.so.1"}
 
 
 def _binfmt_problem() -> str | None:
@@ -72,17 +79,18 @@ def _skip_reason() -> str | None:
 
 @dataclass(frozen=True)
 class Pi:
-    """A fresh arm64 tree with the wheel installed in its venv ``VENV``."""
+    """A fresh arm64 tree with the wheel installed in its venv ``VENV``.
+
+    ``pip_cache`` (below .deps/, per Debian release) is the tree's pip cache: the downloads and
+    the wheel pip builds from cobs' sdist are kept between runs, as on a Pi installed twice.
+    """
 
     tree: Path
+    pip_cache: Path
 
     def wrap(self, *args: str) -> list[str]:
-        """``args`` run in the tree, exec'd all the way (a signal reaches the program)."""
-        script = (
-            'mount --rbind /dev "$0/dev" && mount -t proc proc "$0/proc" && '
-            'exec chroot "$0" /usr/bin/env -i PATH=' + VENV + '/bin:/usr/bin:/bin HOME=/root "$@"'
-        )
-        return ["unshare", "--mount", "sh", "-c", script, str(self.tree), *args]
+        """``args`` run in the tree (tools/arm64_run.sh: a signal reaches the program)."""
+        return [str(ROOT / "tools" / "arm64_run.sh"), str(self.tree), str(self.pip_cache), *args]
 
     def run(self, *args: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run(
@@ -101,20 +109,64 @@ class Pi:
 
 
 @pytest.fixture(scope="module")
-def pi(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pi]:
+def wheels(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Machine -> its release wheel, as tools/build_wheels.sh makes them."""
     reason = _skip_reason()
     if reason is not None:
         pytest.skip(reason)
-    tmp = tmp_path_factory.mktemp("pi")
-    subprocess.run(
-        [str(ROOT / "tools" / "build_wheels.sh"), str(tmp / "dist"), "aarch64"],
-        check=True,
+    dist = tmp_path_factory.mktemp("dist")
+    result = subprocess.run(
+        [str(ROOT / "tools" / "build_wheels.sh"), str(dist)],
         capture_output=True,
+        text=True,
         timeout=BUILD_TIMEOUT,
+        check=False,
     )
-    (wheel,) = (tmp / "dist").glob("protoduino-*-manylinux_*_aarch64.whl")
+    assert result.returncode == 0, result.stdout + result.stderr
+    found = {
+        arch: list(dist.glob(f"protoduino-*-cp311-abi3-manylinux_*_{arch}.whl"))
+        for arch in ("x86_64", "aarch64")
+    }
+    assert all(len(paths) == 1 for paths in found.values()), sorted(dist.iterdir())
+    return {arch: paths[0] for arch, paths in found.items()}
+
+
+@pytest.mark.parametrize("arch", ["x86_64", "aarch64"])
+def test_each_wheel_carries_what_its_native_parts_link(
+    wheels: dict[str, Path], arch: str, tmp_path: Path
+) -> None:
+    from elftools.elf.dynamic import DynamicSection
+    from elftools.elf.elffile import ELFFile
+
+    with zipfile.ZipFile(wheels[arch]) as archive:
+        archive.extractall(tmp_path)
+    carried = {p.name for p in (tmp_path / "protoduino.libs").iterdir()}
+    native = [
+        path
+        for path in tmp_path.rglob("*")
+        if path.is_file() and path.read_bytes()[:4] == b"\x7fELF" and path.suffix != ".elf"
+    ]
+    # The two programs, the extension and what they carry (libjansson, libsimavr, libelf).
+    assert {"pd_sim", "avrsim"} <= {p.name for p in native}, native
+    assert any(p.name.startswith("_speedups.abi3") for p in native), native
+    assert any(name.startswith("libjansson") for name in carried), carried
+    for path in native:
+        with path.open("rb") as stream:
+            elf = ELFFile(stream)
+            assert elf["e_machine"] == {"x86_64": "EM_X86_64", "aarch64": "EM_AARCH64"}[arch]
+            needed = {
+                tag.needed  # type: ignore[attr-defined]  # set per tag kind by pyelftools
+                for section in elf.iter_sections()
+                if isinstance(section, DynamicSection)
+                for tag in section.iter_tags("DT_NEEDED")
+            }
+        assert needed - carried <= SYSTEM_LIBRARIES | {"ld-linux-x86-64.so.2"}, (path, needed)
+
+
+def _fresh_tree(suite: str, tmp: Path) -> Path:
+    """A copy of the cached arm64 tree of ``suite``, with the host's DNS and CA bundle."""
     cached = subprocess.run(
-        [str(ROOT / "tools" / "arm64_tree.sh"), "run"],
+        [str(ROOT / "tools" / "arm64_tree.sh"), "run", suite],
         check=True,
         capture_output=True,
         text=True,
@@ -126,10 +178,24 @@ def pi(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pi]:
     shutil.copy("/etc/resolv.conf", tree / "etc" / "resolv.conf")
     (tree / "etc" / "ssl" / "certs").mkdir(parents=True, exist_ok=True)
     shutil.copy("/etc/ssl/certs/ca-certificates.crt", tree / "etc/ssl/certs/ca-certificates.crt")
+    (tree / "work").mkdir()
+    return tree
+
+
+def _pip_cache(suite: str) -> Path:
+    path = ROOT / ".deps" / "arm64" / f"pip-cache-{suite}"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+@pytest.fixture(scope="module")
+def pi(wheels: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pi]:
+    """Raspberry Pi OS bookworm's Python 3.11 with the wheel pip-installed in a venv."""
+    tree = _fresh_tree("bookworm", tmp_path_factory.mktemp("pi"))
+    wheel = wheels["aarch64"]
     shutil.copy(wheel, tree / "tmp" / wheel.name)
     shutil.copy(ROOT / "constraints.txt", tree / "tmp" / "constraints.txt")
-    (tree / "work").mkdir()
-    installed = Pi(tree)
+    installed = Pi(tree, _pip_cache("bookworm"))
     for step in (
         ("/usr/bin/python3", "-m", "venv", VENV),
         (
@@ -150,9 +216,20 @@ def pi(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pi]:
     shutil.rmtree(tree, ignore_errors=True)  # 250 MB
 
 
-def test_the_tree_is_a_bare_arm64_python(pi: Pi) -> None:
-    result = pi.run("python3", "-c", "import platform; print(platform.machine())")
-    assert result.stdout.strip() == "aarch64", result.stdout + result.stderr
+def test_the_tree_is_a_bare_arm64_python_with_the_c_decoder(pi: Pi) -> None:
+    result = pi.run(
+        f"{VENV}/bin/python",
+        "-c",
+        "import json, platform, sys\n"
+        "from protoduino import framing\n"
+        "print(json.dumps([platform.machine(), sys.version_info[:2], "
+        "framing.StreamDecoder.__module__]))",
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    machine, version, decoder = json.loads(result.stdout)
+    assert machine == "aarch64"
+    assert tuple(version) == (3, 11)
+    assert decoder == "protoduino._speedups"  # the wheel's C accelerator loads on this Python
     # What the wheel's programs link is theirs: the tree has none of it.
     libs = pi.inside("/usr/lib/aarch64-linux-gnu")
     assert not [p.name for p in libs.glob("lib*") if p.name.startswith(("libjansson", "libsimavr"))]
@@ -222,3 +299,47 @@ def test_the_cli_drives_the_boards_the_wheel_carries(
     result = pi.run("protoduino", "servo", process.port, "9", "2000", "--us")
     assert result.returncode == 0, result.stdout + result.stderr
     _wait_for(trace, 9, 2000, tolerance=3)
+
+
+def test_the_installed_wheel_runs_on_trixies_python_3_13(
+    pi: Pi, wheels: dict[str, Path], tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    """Raspberry Pi OS trixie (Debian 13) ships Python 3.13: the cp311-abi3 wheel serves it.
+
+    pip's own acceptance is its tag rule (checked with packaging, as pip does). What the wheel
+    installed runs there: the bookworm venv's packages (the wheel and its dependencies, all
+    pure Python or abi3) on trixie's Python 3.13, without pip (creating a venv and installing
+    under qemu takes trixie's Python several minutes, too long for the suite); the C decoder
+    loads, and the simulated board is driven through the API, judged at its pin.
+    """
+    from packaging.tags import cpython_tags
+    from packaging.utils import parse_wheel_filename
+
+    # Debian 13's glibc is 2.41: every manylinux_2_x up to it.
+    platforms = [f"manylinux_2_{minor}_aarch64" for minor in range(41, 16, -1)]
+    supported = set(cpython_tags(python_version=(3, 13), abis=["cp313"], platforms=platforms))
+    assert parse_wheel_filename(wheels["aarch64"].name)[3] & supported
+
+    tree = _fresh_tree("trixie", tmp_path_factory.mktemp("trixie"))
+    try:
+        shutil.copytree(
+            pi.inside(f"{VENV}/lib/python3.11/site-packages"), tree / "opt" / "site", symlinks=True
+        )
+        trixie = Pi(tree, _pip_cache("trixie"))
+        trace = "/work/api-native.jsonl"
+        check = (
+            "import json, sys\n"
+            "from protoduino import framing\n"
+            "print(json.dumps([sys.version_info[:2], framing.StreamDecoder.__module__]))\n"
+        )
+        result = trixie.run("env", "PYTHONPATH=/opt/site", "python3", "-c", check)
+        assert result.returncode == 0, result.stdout + result.stderr
+        version, decoder = json.loads(result.stdout)
+        assert tuple(version) == (3, 13) and decoder == "protoduino._speedups"
+        result = trixie.run(
+            "env", "PYTHONPATH=/opt/site", "python3", "-c", API_SCRIPT, "native", trace
+        )
+        assert result.returncode == 0, result.stdout + result.stderr
+        _wait_for(trixie.inside(trace), 9, 2000, tolerance=0, timeout=1.0)  # already written
+    finally:
+        shutil.rmtree(tree, ignore_errors=True)
