@@ -9,6 +9,9 @@
 #                                     libraries the wheel's native parts link, the sysroot of
 #                                     tools/build_wheels.sh
 #
+# ARCH=armhf in the environment makes the 32-bit tree (Raspberry Pi OS 32-bit) instead,
+# as .deps/arm64/armhf-...; tools/build_wheels.sh uses its build tree for the armv7l wheel.
+#
 # Prints the tree's path. debootstrap --foreign fetches the packages and their dependencies;
 # they are unpacked with dpkg -x, never configured (no maintainer script runs, no root needed
 # beyond debootstrap's own), which takes about half a minute. A tree is cached under .deps/,
@@ -18,6 +21,7 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 kind=${1:?usage: $0 run|build [SUITE]}
 SUITE=${2:-bookworm}
+ARCH=${ARCH:-arm64}
 MIRROR=${DEBIAN_MIRROR:-http://deb.debian.org/debian}
 
 case "$kind" in
@@ -28,9 +32,11 @@ case "$kind" in
     *) echo "usage: $0 run|build [SUITE]" >&2; exit 2 ;;
 esac
 
-key=$(printf '%s\n' "$SUITE" "$MIRROR" "${PACKAGES[@]}" | sha256sum | cut -c1-12)
+key=$(printf '%s\n' "$ARCH" "$SUITE" "$MIRROR" "${PACKAGES[@]}" | sha256sum | cut -c1-12)
 base="$root/.deps/arm64"
-tree="$base/$kind-$SUITE-$key"
+name=$kind-$SUITE
+[ "$ARCH" = arm64 ] || name=$ARCH-$name
+tree="$base/$name-$key"
 if [ -f "$tree/.complete" ]; then
     echo "$tree"
     exit 0
@@ -39,11 +45,11 @@ for tool in debootstrap dpkg; do
     command -v "$tool" >/dev/null || { echo "$0: needs $tool (Debian package $tool)" >&2; exit 1; }
 done
 mkdir -p "$base"
-rm -rf "$base/$kind-$SUITE"-* "$tree.tmp"
+rm -rf "$base/$name"-* "$tree.tmp"
 include=$(IFS=,; echo "${PACKAGES[*]}")
-debootstrap --arch=arm64 --foreign --variant=minbase --include="$include" \
-    "$SUITE" "$tree.tmp" "$MIRROR" >"$base/$kind-$SUITE.log" 2>&1 ||
-    { tail -20 "$base/$kind-$SUITE.log" >&2; exit 1; }
+debootstrap --arch="$ARCH" --foreign --variant=minbase --include="$include" \
+    "$SUITE" "$tree.tmp" "$MIRROR" >"$base/$name.log" 2>&1 ||
+    { tail -20 "$base/$name.log" >&2; exit 1; }
 for deb in "$tree.tmp"/var/cache/apt/archives/*.deb; do
     dpkg -x "$deb" "$tree.tmp"
 done

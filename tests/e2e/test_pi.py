@@ -1,7 +1,7 @@
 """The Raspberry Pi's wheel in the suite (issue 38): aarch64, installed and driven under qemu.
 
-``tools/build_wheels.sh`` builds the release wheels (cp311-abi3, manylinux, x86_64 and
-aarch64), and each must carry what its native parts link. The aarch64 one is installed with pip
+``tools/build_wheels.sh`` builds the release wheels (cp311-abi3, manylinux, x86_64, aarch64
+and armv7l), and each must carry what its native parts link. The aarch64 one is installed with pip
 into a venv inside a fresh arm64 Debian 12 tree (``tools/arm64_tree.sh run``: Python 3.11 and
 nothing else, as on Raspberry Pi OS bookworm; no libjansson, no simavr); what it installed also
 runs on trixie's Python 3.13 (Debian 13, Raspberry Pi OS trixie). Its programs run under
@@ -39,7 +39,9 @@ BINFMT = Path("/proc/sys/fs/binfmt_misc")
 VENV = "/opt/protoduino"
 #: What a wheel's programs may link without carrying it: glibc's and zlib (Debian's
 #: Priority: required, in every system), the manylinux policy's own list minus the rest.
-SYSTEM_LIBRARIES = {"libc.so.6", "libm.so.6", "libz.so.1", "ld-linux-aarch64.so.1"}
+SYSTEM_LIBRARIES = {"libc.so.6", "libm.so.6", "libz.so.1"}
+#: Each wheel's machine: its ELF machine type.
+MACHINES = {"x86_64": "EM_X86_64", "aarch64": "EM_AARCH64", "armv7l": "EM_ARM"}
 
 
 def _binfmt_problem() -> str | None:
@@ -68,7 +70,12 @@ def _skip_reason() -> str | None:
     if os.geteuid() != 0:
         return "root (chroot into the arm64 tree, binfmt_misc)"
     missing = missing_tool(
-        "debootstrap", "aarch64-linux-gnu-gcc", "qemu-aarch64-static", "unshare", "avr-gcc"
+        "debootstrap",
+        "aarch64-linux-gnu-gcc",
+        "arm-linux-gnueabihf-gcc",
+        "qemu-aarch64-static",
+        "unshare",
+        "avr-gcc",
     )
     if missing is not None:
         return f"{missing} is not installed"
@@ -87,6 +94,8 @@ class Pi:
 
     tree: Path
     pip_cache: Path
+    #: The CPU qemu emulates: a Pi 4's by default; qemu-arm (32-bit) has no cortex-a72.
+    cpu: str = "cortex-a72"
 
     def wrap(self, *args: str) -> list[str]:
         """``args`` run in the tree (tools/arm64_run.sh: a signal reaches the program)."""
@@ -100,7 +109,7 @@ class Pi:
             timeout=COMMAND_TIMEOUT,
             check=False,
             stdin=subprocess.DEVNULL,
-            env={**os.environ, "QEMU_CPU": "cortex-a72"},
+            env={**os.environ, "QEMU_CPU": self.cpu},
         )
 
     def inside(self, path: str) -> Path:
@@ -125,13 +134,13 @@ def wheels(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     assert result.returncode == 0, result.stdout + result.stderr
     found = {
         arch: list(dist.glob(f"protoduino-*-cp311-abi3-manylinux_*_{arch}.whl"))
-        for arch in ("x86_64", "aarch64")
+        for arch in MACHINES
     }
     assert all(len(paths) == 1 for paths in found.values()), sorted(dist.iterdir())
     return {arch: paths[0] for arch, paths in found.items()}
 
 
-@pytest.mark.parametrize("arch", ["x86_64", "aarch64"])
+@pytest.mark.parametrize("arch", sorted(MACHINES))
 def test_each_wheel_carries_what_its_native_parts_link(
     wheels: dict[str, Path], arch: str, tmp_path: Path
 ) -> None:
@@ -153,24 +162,28 @@ def test_each_wheel_carries_what_its_native_parts_link(
     for path in native:
         with path.open("rb") as stream:
             elf = ELFFile(stream)
-            assert elf["e_machine"] == {"x86_64": "EM_X86_64", "aarch64": "EM_AARCH64"}[arch]
+            assert elf["e_machine"] == MACHINES[arch]
             needed = {
                 tag.needed  # type: ignore[attr-defined]  # set per tag kind by pyelftools
                 for section in elf.iter_sections()
                 if isinstance(section, DynamicSection)
                 for tag in section.iter_tags("DT_NEEDED")
             }
-        assert needed - carried <= SYSTEM_LIBRARIES | {"ld-linux-x86-64.so.2"}, (path, needed)
+        assert {n for n in needed - carried if not n.startswith("ld-linux")} <= SYSTEM_LIBRARIES, (
+            path,
+            needed,
+        )
 
 
-def _fresh_tree(suite: str, tmp: Path) -> Path:
-    """A copy of the cached arm64 tree of ``suite``, with the host's DNS and CA bundle."""
+def _fresh_tree(suite: str, tmp: Path, arch: str = "arm64") -> Path:
+    """A copy of the cached tree of ``suite`` (Debian ``arch``), with the host's DNS and CAs."""
     cached = subprocess.run(
         [str(ROOT / "tools" / "arm64_tree.sh"), "run", suite],
         check=True,
         capture_output=True,
         text=True,
         timeout=BUILD_TIMEOUT,
+        env={**os.environ, "ARCH": arch},
     ).stdout.strip()
     tree = tmp / "tree"
     subprocess.run(["cp", "-a", cached, str(tree)], check=True, timeout=BUILD_TIMEOUT)
@@ -182,20 +195,17 @@ def _fresh_tree(suite: str, tmp: Path) -> Path:
     return tree
 
 
-def _pip_cache(suite: str) -> Path:
-    path = ROOT / ".deps" / "arm64" / f"pip-cache-{suite}"
+def _pip_cache(name: str) -> Path:
+    path = ROOT / ".deps" / "arm64" / f"pip-cache-{name}"
     path.mkdir(parents=True, exist_ok=True)
     return path
 
 
-@pytest.fixture(scope="module")
-def pi(wheels: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pi]:
-    """Raspberry Pi OS bookworm's Python 3.11 with the wheel pip-installed in a venv."""
-    tree = _fresh_tree("bookworm", tmp_path_factory.mktemp("pi"))
-    wheel = wheels["aarch64"]
+def _install(tree: Path, wheel: Path, pip_cache: Path, cpu: str = "cortex-a72") -> Pi:
+    """``wheel`` pip-installed with its declared dependencies in a new venv in ``tree``."""
     shutil.copy(wheel, tree / "tmp" / wheel.name)
     shutil.copy(ROOT / "constraints.txt", tree / "tmp" / "constraints.txt")
-    installed = Pi(tree, _pip_cache("bookworm"))
+    installed = Pi(tree, pip_cache, cpu)
     for step in (
         ("/usr/bin/python3", "-m", "venv", VENV),
         (
@@ -212,7 +222,14 @@ def pi(wheels: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> Ite
     ):
         result = installed.run(*step)
         assert result.returncode == 0, result.stdout + result.stderr
-    yield installed
+    return installed
+
+
+@pytest.fixture(scope="module")
+def pi(wheels: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pi]:
+    """Raspberry Pi OS bookworm's Python 3.11 with the wheel pip-installed in a venv."""
+    tree = _fresh_tree("bookworm", tmp_path_factory.mktemp("pi"))
+    yield _install(tree, wheels["aarch64"], _pip_cache("bookworm"))
     shutil.rmtree(tree, ignore_errors=True)  # 250 MB
 
 
@@ -341,5 +358,33 @@ def test_the_installed_wheel_runs_on_trixies_python_3_13(
         )
         assert result.returncode == 0, result.stdout + result.stderr
         _wait_for(trixie.inside(trace), 9, 2000, tolerance=0, timeout=1.0)  # already written
+    finally:
+        shutil.rmtree(tree, ignore_errors=True)
+
+
+def test_the_armv7l_wheel_drives_both_boards_on_32_bit_pi_os(
+    wheels: dict[str, Path], tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    """32-bit Raspberry Pi OS (armhf, bookworm): the armv7l wheel installed and driven alike."""
+    if not (BINFMT / "qemu-arm").exists():
+        subprocess.run(["update-binfmts", "--enable", "qemu-arm"], capture_output=True, check=False)
+    if not (BINFMT / "qemu-arm").exists():
+        pytest.skip("qemu-arm is not registered in binfmt_misc (update-binfmts failed)")
+    tree = _fresh_tree("bookworm", tmp_path_factory.mktemp("armhf"), arch="armhf")
+    try:
+        # A Pi 2's CPU (a Pi 3 or 4 runs 32-bit Raspberry Pi OS in its 32-bit mode alike).
+        armhf = _install(tree, wheels["armv7l"], _pip_cache("armhf-bookworm"), "cortex-a7")
+        result = armhf.run(
+            "python",
+            "-c",
+            "import platform; from protoduino import framing; "
+            "print(platform.machine(), framing.StreamDecoder.__module__)",
+        )
+        assert result.stdout.split() == ["armv7l", "protoduino._speedups"], result.stderr
+        for backend in ("native", "avr"):
+            trace = f"/work/api-{backend}.jsonl"
+            result = armhf.run("python", "-c", API_SCRIPT, backend, trace)
+            assert result.returncode == 0, result.stdout + result.stderr
+            _wait_for(armhf.inside(trace), 9, 2000, tolerance=3, timeout=1.0)  # already written
     finally:
         shutil.rmtree(tree, ignore_errors=True)
