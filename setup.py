@@ -1,11 +1,12 @@
 """The build steps pyproject.toml cannot declare: the C accelerator and the bundled programs.
 
-``protoduino._speedups`` (optional C accelerator): where there is no C compiler or no Python
-headers, ``pip install`` still succeeds, and ``protoduino.framing`` logs one warning and uses
-the pure-Python decoder. ``tests/unit/test_framing_props.py`` fails when a compiler and the headers
-are present but the module was not built (a build broken by a warning must not pass as a
-skip). It compiles the firmware's own COBS and CRC (``firmware/core``), so both ends of the
-link check frames with the same code. Source paths are relative, as setuptools requires.
+``protoduino._speedups`` (optional C accelerator, on Python's limited API of 3.11: one build
+serves every CPython from 3.11 on, so a wheel is cp311-abi3): where there is no C compiler or
+no Python headers, ``pip install`` still succeeds, and ``protoduino.framing`` logs one warning
+and uses the pure-Python decoder. ``tests/unit/test_framing_props.py`` fails when a compiler
+and the headers are present but the module was not built (a build broken by a warning must not
+pass as a skip). It compiles the firmware's own COBS and CRC (``firmware/core``), so both ends
+of the link check frames with the same code. Source paths are relative, as setuptools requires.
 
 The programs (``protoduino/_programs/``, see ``protoduino.programs``): a wheel carries the
 Uno firmware as a ready hex (and its ELF, which the emulated Uno runs), the simulated board
@@ -58,6 +59,10 @@ class StrictBuildExt(build_ext):
             for ext in self.extensions:
                 ext.extra_compile_args += ["-std=c99", "-Wall", "-Wextra", "-Werror"]
         super().build_extensions()
+        # A checkout's older in-place build per Python version (_speedups.cpython-311-*.so)
+        # would be imported before the abi3 one: remove it.
+        for stale in (ROOT / "host" / "protoduino").glob("_speedups.cpython-*.so"):
+            stale.unlink()
 
 
 #: What a wheel's protoduino/_programs/ holds: name -> (make directory, make arguments, the
@@ -144,7 +149,10 @@ if __name__ == "__main__":
                 include_dirs=["firmware/core", "firmware/generated"],
                 define_macros=[("PD_SPEEDUPS_DIGEST", f'"{source_digest()}"')],
                 optional=True,
+                py_limited_api=True,  # _speedups.abi3.so: the C defines Py_LIMITED_API 3.11
             )
         ],
         cmdclass={"build_ext": StrictBuildExt, "build_py": BuildPyWithPrograms},
+        # One wheel per machine kind for every CPython from 3.11 (cp311-abi3).
+        options={"bdist_wheel": {"py_limited_api": "cp311"}},
     )

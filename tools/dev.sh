@@ -38,6 +38,9 @@ APT_PACKAGES=(
     clang libclang-rt-14-dev               # libFuzzer + sanitizers for the C core
     ser2net                                # the RFC 2217 server of the remote-board test
     chromium chromium-driver               # the live console's browser tests (Selenium)
+    gcc-aarch64-linux-gnu debootstrap      # the aarch64 wheel (tools/build_wheels.sh) and its
+    qemu-user-static binfmt-support        # arm64 tree, run under qemu (tests/e2e/test_pi.py)
+    gcc-arm-linux-gnueabihf                # the armv7l wheel (32-bit Raspberry Pi OS)
 )
 #: Debian packages wanted for one command each, as package:command: missing only when the
 #: command is too (NodeSource's nodejs, for one, ships its own npm and conflicts with Debian's).

@@ -22,8 +22,12 @@
  * more than PD_MAX_ENCODED_FRAME bytes is an overflow, reported once with its
  * first PD_MAX_ENCODED_FRAME + 1 bytes, then skipped up to the next 0x00.
  *
- * Static type and module globals (single-phase init): the module is loaded
- * once per process by framing.py and holds nothing but immutable references.
+ * Python's limited API of 3.11 (the stable ABI, abi3): one build serves every
+ * CPython from 3.11 on (Debian 12's 3.11, Debian 13's and Raspberry Pi OS's
+ * 3.13), so a wheel is per machine kind, not per Python version (setup.py).
+ * The type is made from a spec at import; module globals (single-phase init):
+ * the module is loaded once per process by framing.py and holds nothing but
+ * immutable references.
  *
  * Under AddressSanitizer, by hand (Python itself is not instrumented, hence
  * the preload and the system allocator so that ASan sees object memory):
@@ -36,6 +40,7 @@
  *       python -m pytest tests/unit/test_framing_props.py
  */
 #define PY_SSIZE_T_CLEAN
+#define Py_LIMITED_API 0x030B0000
 #include <Python.h>
 #include <structmember.h>
 
@@ -94,6 +99,8 @@ static uint16_t pd_crc16_fast(const uint8_t *data, size_t len)
 /* References taken at import and held for the life of the process. */
 static PyTypeObject *pd_packet_cls;      /* protoduino.packets.Packet */
 static PyTypeObject *pd_badframe_cls;    /* protoduino.packets.BadFrame */
+static allocfunc pd_packet_alloc;        /* their tp_alloc slots */
+static allocfunc pd_badframe_alloc;
 static PyObject *pd_reason_str[PD_R_COUNT];
 static PyObject *pd_packet_types[256];   /* PacketType member by TYPE byte, or NULL */
 
@@ -133,7 +140,8 @@ static void pd_tally_add(pd_tally *t, int reason, Py_ssize_t k)
  */
 static PyObject *pd_new_tuple(PyTypeObject *cls, PyObject **items, Py_ssize_t n)
 {
-    PyObject *obj = cls->tp_alloc(cls, n);
+    allocfunc alloc = cls == pd_packet_cls ? pd_packet_alloc : pd_badframe_alloc;
+    PyObject *obj = alloc(cls, n);
     if (obj == NULL) {
         for (Py_ssize_t i = 0; i < n; i++) {
             Py_XDECREF(items[i]);
@@ -141,7 +149,8 @@ static PyObject *pd_new_tuple(PyTypeObject *cls, PyObject **items, Py_ssize_t n)
         return NULL;
     }
     for (Py_ssize_t i = 0; i < n; i++) {
-        PyTuple_SET_ITEM(obj, i, items[i]);
+        /* A fresh tuple (refcount 1): cannot fail, and steals items[i]. */
+        (void)PyTuple_SetItem(obj, i, items[i]);
     }
     return obj;
 }
@@ -349,7 +358,7 @@ static PyObject *pd_decoder_feed(pd_decoder *self, PyObject *data)
             return NULL;
         }
         PyErr_Clear();
-        copy = PyObject_CallOneArg((PyObject *)&PyBytes_Type, data);
+        copy = PyBytes_FromObject(data);
         if (copy == NULL) {
             return NULL;
         }
@@ -383,7 +392,7 @@ static PyObject *pd_decoder_feed_all(pd_decoder *self, PyObject *chunks)
         PyObject *items = pd_decoder_feed(self, chunk);
         Py_DECREF(chunk);
         if (items == NULL ||
-            PyList_SetSlice(out, PyList_GET_SIZE(out), PyList_GET_SIZE(out), items) < 0) {
+            PyList_SetSlice(out, PyList_Size(out), PyList_Size(out), items) < 0) {
             Py_XDECREF(items);
             Py_DECREF(out);
             Py_DECREF(it);
@@ -407,6 +416,7 @@ static PyObject *pd_decoder_reset(pd_decoder *self, PyObject *Py_UNUSED(ignored)
 }
 
 static PyObject *pd_counter_cls; /* collections.Counter */
+static PyObject *pd_decoder_type; /* StreamDecoder, made from pd_decoder_spec at import */
 
 static int pd_decoder_init(pd_decoder *self, PyObject *args, PyObject *kwargs)
 {
@@ -422,13 +432,15 @@ static int pd_decoder_init(pd_decoder *self, PyObject *args, PyObject *kwargs)
     }
     self->buf_len = 0;
     self->skipping = 0;
-    Py_XSETREF(self->counts, counts);
+    Py_XDECREF(self->counts);
+    self->counts = counts;
     return 0;
 }
 
 static int pd_decoder_traverse(pd_decoder *self, visitproc visit, void *arg)
 {
-    /* A static type: a Python subclass's subtype_traverse visits its own type. */
+    /* An instance of a heap type holds a reference to its type (Python >= 3.9). */
+    Py_VISIT(Py_TYPE((PyObject *)self));
     Py_VISIT(self->counts);
     return 0;
 }
@@ -439,12 +451,16 @@ static int pd_decoder_clear(pd_decoder *self)
     return 0;
 }
 
-/* A Python subclass's subtype_dealloc drops the reference to its type, not this. */
+/* The instance's reference to its heap type is dropped here, after the memory is freed. */
 static void pd_decoder_dealloc(pd_decoder *self)
 {
+    PyTypeObject *type = Py_TYPE((PyObject *)self);
+    freefunc tp_free = (freefunc)PyType_GetSlot(type, Py_tp_free);
+
     PyObject_GC_UnTrack(self);
     pd_decoder_clear(self);
-    Py_TYPE(self)->tp_free((PyObject *)self);
+    tp_free(self);
+    Py_DECREF(type);
 }
 
 static PyMethodDef pd_decoder_methods[] = {
@@ -463,19 +479,23 @@ static PyMemberDef pd_decoder_members[] = {
     {NULL, 0, 0, 0, NULL},
 };
 
-static PyTypeObject pd_decoder_type = {
-    PyVarObject_HEAD_INIT(NULL, 0)
-    .tp_name = "protoduino._speedups.StreamDecoder",
-    .tp_basicsize = sizeof(pd_decoder),
-    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE | Py_TPFLAGS_HAVE_GC,
-    .tp_doc = "Incremental COBS stream decoder in C, equivalent to framing.PyStreamDecoder.",
-    .tp_new = PyType_GenericNew,
-    .tp_init = (initproc)pd_decoder_init,
-    .tp_dealloc = (destructor)pd_decoder_dealloc,
-    .tp_traverse = (traverseproc)pd_decoder_traverse,
-    .tp_clear = (inquiry)pd_decoder_clear,
-    .tp_methods = pd_decoder_methods,
-    .tp_members = pd_decoder_members,
+static PyType_Slot pd_decoder_slots[] = {
+    {Py_tp_doc, "Incremental COBS stream decoder in C, equivalent to framing.PyStreamDecoder."},
+    {Py_tp_new, PyType_GenericNew},
+    {Py_tp_init, pd_decoder_init},
+    {Py_tp_dealloc, pd_decoder_dealloc},
+    {Py_tp_traverse, pd_decoder_traverse},
+    {Py_tp_clear, pd_decoder_clear},
+    {Py_tp_methods, pd_decoder_methods},
+    {Py_tp_members, pd_decoder_members},
+    {0, NULL},
+};
+
+static PyType_Spec pd_decoder_spec = {
+    .name = "protoduino._speedups.StreamDecoder",
+    .basicsize = sizeof(pd_decoder),
+    .flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE | Py_TPFLAGS_HAVE_GC,
+    .slots = pd_decoder_slots,
 };
 
 /* module.attr as a new reference, or NULL with an exception set. */
@@ -490,6 +510,18 @@ static PyObject *pd_import_attr(const char *module, const char *attr)
     obj = PyObject_GetAttrString(mod, attr);
     Py_DECREF(mod);
     return obj;
+}
+
+/* 1 when type.attr (an int) equals tuple's, 0 when not, -1 with an exception set. */
+static int pd_same_as_tuple(PyObject *type, const char *attr)
+{
+    PyObject *mine = PyObject_GetAttrString(type, attr);
+    PyObject *tuples = mine == NULL ? NULL : PyObject_GetAttrString((PyObject *)&PyTuple_Type, attr);
+    int same = tuples == NULL ? -1 : PyObject_RichCompareBool(mine, tuples, Py_EQ);
+
+    Py_XDECREF(mine);
+    Py_XDECREF(tuples);
+    return same;
 }
 
 /*
@@ -514,9 +546,14 @@ static PyTypeObject *pd_tuple_class(const char *name, PyObject *fields)
         return NULL;
     }
     type = (PyTypeObject *)cls;
-    if (!PyType_Check(cls) || !PyType_IsSubtype(type, &PyTuple_Type) ||
-        type->tp_basicsize != PyTuple_Type.tp_basicsize ||
-        type->tp_itemsize != PyTuple_Type.tp_itemsize || type->tp_dictoffset != 0) {
+    same = PyType_Check(cls) && PyType_IsSubtype(type, &PyTuple_Type);
+    for (size_t i = 0; same == 1 && i < 3; i++) {
+        static const char *const layout[] = {"__basicsize__", "__itemsize__", "__dictoffset__"};
+        same = pd_same_as_tuple(cls, layout[i]);
+    }
+    if (same == -1) {
+        /* the exception of an attribute's lookup */
+    } else if (same == 0) {
         PyErr_Format(PyExc_ImportError,
                      "protoduino.packets.%s is not a plain NamedTuple; "
                      "the C decoder cannot build it",
@@ -587,7 +624,8 @@ static int pd_load_packet_types(void)
             Py_DECREF(member);
             break;
         }
-        Py_XSETREF(pd_packet_types[value], member); /* steals member */
+        Py_XDECREF(pd_packet_types[value]);
+        pd_packet_types[value] = member; /* takes member's reference */
     }
     Py_DECREF(it);
     return PyErr_Occurred() ? -1 : 0;
@@ -643,14 +681,26 @@ PyMODINIT_FUNC PyInit__speedups(void)
             }
         }
     }
-    if (pd_load_packet_types() < 0 || PyType_Ready(&pd_decoder_type) < 0) {
+    pd_packet_alloc = (allocfunc)PyType_GetSlot(pd_packet_cls, Py_tp_alloc);
+    pd_badframe_alloc = (allocfunc)PyType_GetSlot(pd_badframe_cls, Py_tp_alloc);
+    if (pd_packet_alloc == NULL || pd_badframe_alloc == NULL) {
+        PyErr_SetString(PyExc_ImportError, "Packet or BadFrame has no tp_alloc");
         return NULL;
+    }
+    if (pd_load_packet_types() < 0) {
+        return NULL;
+    }
+    if (pd_decoder_type == NULL) {
+        pd_decoder_type = PyType_FromSpec(&pd_decoder_spec);
+        if (pd_decoder_type == NULL) {
+            return NULL;
+        }
     }
     mod = PyModule_Create(&pd_module);
     if (mod == NULL) {
         return NULL;
     }
-    if (PyModule_AddObjectRef(mod, "StreamDecoder", (PyObject *)&pd_decoder_type) < 0 ||
+    if (PyModule_AddObjectRef(mod, "StreamDecoder", pd_decoder_type) < 0 ||
         PyModule_AddStringConstant(mod, "SOURCE_DIGEST", PD_SPEEDUPS_DIGEST) < 0 ||
         PyModule_AddIntConstant(mod, "MAX_ENCODED_FRAME", PD_MAX_ENCODED_FRAME) < 0) {
         Py_DECREF(mod);

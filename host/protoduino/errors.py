@@ -22,7 +22,8 @@
      +-- ReentrantCallError       a blocking board call from the I/O thread (a frame monitor)
      +-- DeviceRebootedError      the device lost its outputs (rebooted, taken over) mid-call
      |    +-- RebootLoopError       it did so too often: the board stopped restoring
-     +-- BuildError               a build step (make, avr-objcopy) failed
+     +-- BuildError               a build step (make, avr-objcopy) failed, or a program it runs
+     |                            lacks a shared library here (named, with its Debian package)
      +-- FlashError               avrdude could not upload the firmware
      +-- SimControlError          a simulated board refused an input command (also a ValueError)
      +-- CaptureError             a capture file cannot be written or read
@@ -259,7 +260,9 @@ class ReentrantCallError(ProtoduinoError, RuntimeError):
 
 
 class BuildError(ProtoduinoError):
-    """A build step (make, avr-objcopy) failed; the message carries its output."""
+    """A build step (make, avr-objcopy) failed; the message carries its output. Also: a
+    program protoduino runs cannot run here (a simulated board's program lacks a shared
+    library: the message names it and its Debian package)."""
 
 
 class FlashError(ProtoduinoError):

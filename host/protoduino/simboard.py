@@ -52,10 +52,10 @@ Typical use, in tests and in ``protoduino demo``::
 
 from __future__ import annotations
 
-import ctypes.util
 import json
 import logging
 import os
+import platform
 import select
 import shutil
 import signal
@@ -89,7 +89,75 @@ class Backend:
 
 
 def _build_native() -> Path:
-    return programs.locate(programs.NATIVE_SIM)
+    return check_loadable(programs.locate(programs.NATIVE_SIM), "the simulated board")
+
+
+#: The shared libraries the boards' programs link beyond the C library, with the Debian
+#: package (also Ubuntu's and Raspberry Pi OS's) that installs each. A released wheel carries
+#: them (tools/build_wheels.sh); a wheel built without auditwheel or a checkout's build does not.
+LIBRARY_PACKAGES = {
+    "libjansson.so.4": "libjansson4",
+    "libsimavr.so.2": "libsimavr2",
+    "libsimavrparts.so.1": "libsimavrparts1",
+    "libelf.so.1": "libelf1",
+    "libz.so.1": "zlib1g",
+}
+
+#: Programs whose libraries all resolved: (path, modification time).
+_loadable: set[tuple[str, int]] = set()
+
+
+def missing_libraries(program: Path) -> list[str]:
+    """The shared libraries that ``program`` needs and the dynamic loader cannot find.
+
+    The loader answers itself (glibc's ``LD_TRACE_LOADED_OBJECTS``, what ``ldd`` uses), so the
+    program's own RUNPATH (a wheel's bundled copies) counts, and the program does not run.
+    Elsewhere than glibc the variable would run the program instead: nothing is checked.
+    """
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return []
+    env = {**os.environ, "LD_TRACE_LOADED_OBJECTS": "1"}
+    try:
+        result = subprocess.run(
+            [str(program)], env=env, capture_output=True, text=True, timeout=60, check=False
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return []  # starting it will report what is wrong, with its own words
+    return [
+        line.split("=>", 1)[0].strip()
+        for line in result.stdout.splitlines()
+        if line.rstrip().endswith("not found") and "=>" in line
+    ]
+
+
+def check_loadable(program: Path, what: str) -> Path:
+    """``program``, or :class:`BuildError` naming each library it lacks and its package.
+
+    Checked before any board starts, so that a missing library is not reported as the
+    loader's bare exit code 127.
+    """
+    try:
+        key = (str(program), program.stat().st_mtime_ns)
+    except OSError:
+        return program  # starting it reports that it is missing
+    if key in _loadable:
+        return program
+    missing = missing_libraries(program)
+    if not missing:
+        _loadable.add(key)
+        return program
+    known = [LIBRARY_PACKAGES[name] for name in missing if name in LIBRARY_PACKAGES]
+    unknown = [name for name in missing if name not in LIBRARY_PACKAGES]
+    how = []
+    if known:
+        how.append(f"sudo apt install {' '.join(known)} (Debian, Ubuntu, Raspberry Pi OS)")
+    if unknown:
+        how.append(f"install the package that has {', '.join(unknown)}")
+    raise BuildError(
+        f"{what} cannot start: its program {program} needs the shared "
+        f"{'library' if len(missing) == 1 else 'libraries'} {', '.join(missing)}, "
+        f"not installed here: {'; '.join(how)}"
+    )
 
 
 def _native_command(
@@ -106,15 +174,9 @@ def _native_command(
 
 
 def _build_avr() -> Path:
-    # The emulated Uno: the simavr runner and the real firmware ELF. The runner links
-    # simavr's shared library, which a wheel cannot carry: say so before the loader would.
-    if ctypes.util.find_library("simavr") is None:
-        raise BuildError(
-            "the emulated Uno (backend avr) needs simavr's library: "
-            "sudo apt install libsimavr2 (Debian, Ubuntu, Raspberry Pi OS)"
-        )
+    # The emulated Uno: the simavr runner and the real firmware ELF.
     programs.locate(programs.FIRMWARE_ELF)
-    return programs.locate(programs.RUNNER)
+    return check_loadable(programs.locate(programs.RUNNER), "the emulated Uno (backend avr)")
 
 
 def _avr_command(
@@ -186,9 +248,12 @@ def _command(
     firmware: Path | None,
 ) -> list[str]:
     if firmware is None:
-        return _backend(backend).command(trace, link, control)
-    _backend(backend)  # the name's check
-    return _FIRMWARE_COMMANDS[backend](trace, link, control, firmware)
+        cmd = _backend(backend).command(trace, link, control)
+    else:
+        _backend(backend)  # the name's check
+        cmd = _FIRMWARE_COMMANDS[backend](trace, link, control, firmware)
+    check_loadable(Path(cmd[0]), f"the {backend} board")
+    return cmd
 
 
 def _backend(name: str) -> Backend:
@@ -214,7 +279,8 @@ def command(
     firmware: Path | None = None,
 ) -> list[str]:
     """The command line that runs an already built board (``firmware``: another build
-    of its program, as :class:`SimBoard` takes it)."""
+    of its program, as :class:`SimBoard` takes it); :class:`BuildError` if its program
+    lacks a shared library (:func:`check_loadable`)."""
     return _command(backend, trace, link, control, firmware)
 
 
@@ -313,13 +379,9 @@ class SimBoard(ClosedOnExit):
             self._control_dir = Path(tempfile.mkdtemp(prefix="protoduino-"))
             self._control_path = self._control_dir / "control"
         self._control = SimControl(self._control_path)
-        if self.firmware is None:  # this board's backend (a subclass may bring its own)
-            cmd = self._backend.command(self.trace_path, self.link, self._control_path)
-        else:
-            cmd = _FIRMWARE_COMMANDS[self.backend](
-                self.trace_path, self.link, self._control_path, self.firmware
-            )
-        cmd = owned(cmd)
+        cmd = owned(
+            _command(self.backend, self.trace_path, self.link, self._control_path, self.firmware)
+        )
         cmd += self.options
         logger.debug("starting %s", " ".join(cmd))
         # stderr is inherited: the board writes there only when something is wrong.

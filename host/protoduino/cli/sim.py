@@ -102,15 +102,15 @@ def run(args: argparse.Namespace) -> int:
         return stop(args.stop)
     try:
         build(args.backend)
+        cmd = command(
+            args.backend,
+            trace=args.trace,
+            link=args.link,
+            control=args.control,
+            firmware=args.firmware,
+        )
     except ProtoduinoError as exc:
         return error("sim", exc)
-    cmd = command(
-        args.backend,
-        trace=args.trace,
-        link=args.link,
-        control=args.control,
-        firmware=args.firmware,
-    )
     if args.detach:
         return detach(cmd, args)
     try:
