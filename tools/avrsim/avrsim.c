@@ -14,7 +14,9 @@
  * MCU while keeping the pty,
  * and --trace writes one JSON line per output change, measured at the pins
  * (servo pulse widths, digital levels, and the duty of the timers' PWM, read
- * from their compare-output IRQs: PWM never goes through the PORT register).
+ * from their compare-output IRQs: PWM never goes through the PORT register),
+ * each pin in the mode the firmware configured (its timer's mode, the servo
+ * driver's channel table in RAM: PD_SERVO_TABLE).
  *
  * --control PATH (firmware/simcontrol) drives the MCU's inputs the way the
  * outside world would, so the firmware's own input code is what runs: a level
@@ -179,6 +181,19 @@ typedef struct {
 #define PD_MAX_MARKS 8 /* --mark addresses */
 
 /*
+ * protoduino's servo channel table (firmware/avr/pd_avr_servo.c, which asserts this
+ * layout), found by its ELF symbol (LTO may add a ".lto_priv.N" suffix): per channel the
+ * data address of the pin's PORT register (2 bytes, little-endian), then the pin's bit
+ * (0: detached), in PD_SERVO_CHANNEL_BYTES. A pin carries a servo while a channel names
+ * its port and bit: the trace's mode is that, not a guess from the waveform. Its size is
+ * the distance to the next symbol.
+ */
+#define PD_SERVO_TABLE "pd_avr_servos"
+#define PD_SERVO_CHANNEL_BYTES 7U
+#define PD_SERVO_CHANNELS_MAX 64U
+#define PD_ELF_DATA 0x800000U /* avr-ld's data space in the ELF's addresses */
+
+/*
  * An external interrupt (INT0, INT1) as the inputs the control socket drives meet it (in
  * --stats: "extint"): the edges that set its flag, those lost (one came while the flag of
  * the one before was still set: its vector not reached yet, so the hardware merged them),
@@ -202,6 +217,8 @@ typedef struct {
     pd_port_t ports[3];
     pd_pins_t pins;
     FILE *trace;
+    uint16_t servo_table;    /* data address of the firmware's servo channels; 0: none */
+    uint16_t servo_channels; /* their count */
     int master;
     int slave;
     int inotify;
@@ -338,6 +355,57 @@ static pd_pwm_pin_t *pd_pwm_pin(int pin)
     return NULL;
 }
 
+/* 1 while a channel of the firmware's servo table drives bit b of the port, 0 while none
+ * does, -1 for a program without the table. */
+static int pd_servo_drives(const pd_sim_t *sim, const pd_port_t *port, int b)
+{
+    if (!sim->servo_table) {
+        return -1;
+    }
+    const uint8_t *data = sim->avr->data;
+    for (uint16_t ch = 0; ch < sim->servo_channels; ch++) {
+        const uint8_t *c = data + sim->servo_table + ch * PD_SERVO_CHANNEL_BYTES;
+        uint16_t port_addr = (uint16_t)(c[0] | (c[1] << 8));
+        if (port_addr == port->io->r_port && (c[2] >> b) & 1U) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Finds the firmware's servo table (PD_SERVO_TABLE) among the ELF's symbols. */
+static void pd_find_servo_table(pd_sim_t *sim, const elf_firmware_t *fw)
+{
+    const size_t len = strlen(PD_SERVO_TABLE);
+    uint32_t at = 0;
+    for (uint32_t i = 0; i < fw->symbolcount; i++) {
+        const char *name = fw->symbol[i]->symbol;
+        if (strncmp(name, PD_SERVO_TABLE, len) == 0 && (name[len] == '\0' || name[len] == '.') &&
+            fw->symbol[i]->addr > PD_ELF_DATA) {
+            at = fw->symbol[i]->addr;
+        }
+    }
+    if (!at) {
+        return;
+    }
+    uint32_t end = UINT32_MAX;
+    for (uint32_t i = 0; i < fw->symbolcount; i++) {
+        uint32_t addr = fw->symbol[i]->addr;
+        if (addr > at && addr < end) {
+            end = addr;
+        }
+    }
+    uint32_t channels = (end - at) / PD_SERVO_CHANNEL_BYTES;
+    if (channels > PD_SERVO_CHANNELS_MAX) {
+        channels = PD_SERVO_CHANNELS_MAX;
+    }
+    if (at - PD_ELF_DATA + channels * PD_SERVO_CHANNEL_BYTES > (uint32_t)sim->avr->ramend + 1U) {
+        return; /* not a table that fits the RAM: none */
+    }
+    sim->servo_table = (uint16_t)(at - PD_ELF_DATA);
+    sim->servo_channels = (uint16_t)channels;
+}
+
 static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
 {
     if (!port->io) {
@@ -364,7 +432,8 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
                 level = w->oc_level;
             }
         }
-        pd_pins_sample(&sim->pins, pin, (ddr >> b) & 1, level, pwm_tick, now);
+        pd_pins_sample(&sim->pins, pin, (ddr >> b) & 1, level, pwm_tick,
+                       pd_servo_drives(sim, port, b), now);
     }
 }
 
@@ -1546,6 +1615,7 @@ int main(int argc, char **argv)
     sim->avr->log = LOG_ERROR; /* simavr warnings are about its own model, not the firmware */
     if (elf) {
         avr_load_firmware(sim->avr, &fw);
+        pd_find_servo_table(sim, &fw);
     }
     sim->avr->frequency = freq;
     for (int i = 0; i < hex_count; i++) {

@@ -1,5 +1,5 @@
 /*
- * pd_pins.c: classify pin activity into servo pulses and digital levels.
+ * pd_pins.c: turn pin activity into servo pulse widths, digital levels and PWM duties.
  *
  * The rules, all in emulated time (the numbers are pd_pins.h's PD_PINS_*_US):
  * - A level is the pin's output state (DDR and PORT bits both set). The
@@ -7,6 +7,18 @@
  *   level is ignored. This is what makes the measurement immune to
  *   simavr 1.6 re-raising every output pin of a port whenever any bit of
  *   that port is written: a re-raise never changes the level.
+ * - The mode is what the firmware configured (the runner reads it): an output
+ *   that no servo channel drives and whose timer makes no PWM is digital, and
+ *   every change of its level is a line at the cycle it happened (a 1 kHz
+ *   square wave shows every edge), as the native board writes every
+ *   digital write. A pin a servo channel drives gets the servo rules below,
+ *   with no guess: its first pulse's width is reported after the next pulse,
+ *   and a channel detached (none drives the pin any more) is a value-0 line,
+ *   dated to the end of its last pulse, as soon as the runner sees it.
+ * - The rest of this list up to PWM is how a servo's width is measured, and
+ *   for a program with no servo table the runner can read (servo = -1: the
+ *   runner's test program, StandardFirmata), the guess that tells a servo from
+ *   a digital pin by its waveform:
  * - A high that ends within max_pulse (3 ms) is a pulse; one that lasts
  *   longer is a digital 1, reported at the time it rose.
  * - Pulses whose rising edges are at most max_period (50 ms) apart make a
@@ -214,8 +226,45 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
     }
 }
 
+/*
+ * The firmware's servo table says whether a channel drives the pin (servo 0 or 1):
+ * true when the sample is done here, as a digital pin's is, false when a servo's
+ * pulses go on to be measured. A pulse under way when its channel was detached
+ * ends as that servo's (its channel started it).
+ */
+static int pd_configured_sample(pd_pins_t *pins, int n, uint8_t output, uint8_t level, int servo,
+                                uint64_t cycle)
+{
+    pd_pin_t *p = &pins->pin[n];
+    if (servo && !p->servo) {
+        /* Attached: its lines come with its pulses; whatever it reported before is
+         * no width of this servo's. */
+        p->servo = 1;
+        p->cand = 0;
+        p->servo_us = -1.0;
+        p->last_rise = cycle;
+        p->last_fall = cycle;
+    } else if (!servo && p->servo && !p->high_pending) {
+        p->servo = 0;
+        p->cand = 0;
+        if (p->emitted_mode == PD_PIN_MODE_SERVO) {
+            pd_emit(pins, n, p->last_fall, PD_PIN_MODE_SERVO, 0);
+        }
+    }
+    p->low_out_pending = 0;
+    if (p->servo) {
+        return 0;
+    }
+    p->output = output;
+    p->level = level;
+    if (output) {
+        pd_emit(pins, n, cycle, PD_PIN_MODE_DIGITAL, level);
+    }
+    return 1;
+}
+
 void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint32_t pwm_tick,
-                    uint64_t cycle)
+                    int servo, uint64_t cycle)
 {
     if (n < 0 || n >= PD_PINS_COUNT) {
         return;
@@ -255,6 +304,9 @@ void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint32_
         /* The timer left its PWM mode: the pin is an ordinary output again. */
         p->pwm = 0;
         p->low_out_pending = 0;
+    }
+    if (servo >= 0 && pd_configured_sample(pins, n, output, level, servo, cycle)) {
+        return;
     }
     if (output && !p->output && !level) {
         p->low_out_pending = 1;

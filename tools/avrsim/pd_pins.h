@@ -2,6 +2,13 @@
  * pd_pins.h: turns the level history of the Uno's output pins into the
  * protoduino trace (servo pulse widths and digital levels).
  *
+ * A pin's mode is what the firmware configured, which the runner reads from
+ * the MCU and passes with each sample: PWM while the pin's timer runs in a PWM
+ * mode, servo while a channel of the firmware's servo table drives it, digital
+ * otherwise (every level change a line). Only for a program without a servo
+ * table the runner can read (not protoduino's firmware) is a servo told from
+ * the shape of the pin's waveform (pd_pins.c states that rule).
+ *
  * It knows nothing about simavr: the runner feeds it (pin, is_output, level,
  * cycle) samples whenever a port or direction register may have changed, and
  * calls pd_pins_poll() regularly so that deadlines (a high level that lasted
@@ -83,9 +90,11 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
 /* A possible change of one pin: is_output = DDR bit, level = the level driven
  * (the PORT bit, or the timer's compare output while it is connected),
  * pwm_tick = 0, or the cycles per tick of the pin's timer when that timer
- * runs in a PWM mode. */
+ * runs in a PWM mode; servo = 1 while a channel of the firmware's servo table
+ * drives the pin, 0 while none does, -1 when the program has no servo table
+ * the runner can read (its waveform decides). */
 void pd_pins_sample(pd_pins_t *pins, int pin, int is_output, int port_bit, uint32_t pwm_tick,
-                    uint64_t cycle);
+                    int servo, uint64_t cycle);
 
 /* Resolves the deadlines that have passed at `cycle`. */
 void pd_pins_poll(pd_pins_t *pins, uint64_t cycle);

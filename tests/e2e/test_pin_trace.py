@@ -1,0 +1,63 @@
+"""The trace says what the pin did (issue 36, item 6), on both boards.
+
+A pin's mode in the trace is what the firmware configured (on the emulated Uno the runner
+reads it from the MCU: the timers' modes, the servo driver's channel table), not a guess
+from the waveform's shape, and no level change is dropped: the same lines on the native
+board and on the emulated Uno for the same writes. The writes come from a test service
+(tests/e2e/toggler) that toggles a pin 1 to 3 ms apart on the board's own clock, faster
+than a host could and as fast as a servo's pulses come.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import protoduino
+import pytest
+from protoduino.simboard import SimBoard
+from simfixtures import wait_for_pin
+from userbuilds import client, need, program
+
+BACKENDS = ["native", "avr"]
+PIN = 12
+#: Level changes the service makes: 1, 0, 1, ... ending low.
+EDGES = 30
+#: The service's gaps after its second edge, in the board's milliseconds (toggler.c).
+GAPS_MS = (3, 1, 2)
+#: How late the service's poll may run after the millisecond tick that wakes the emulated
+#: MCU (a frame being decoded meanwhile), in emulated seconds.
+POLL_SLACK_S = 0.0005
+
+
+@pytest.fixture(params=BACKENDS)
+def toggler_sim(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[SimBoard]:
+    backend: str = request.param
+    need(backend)
+    sim = SimBoard(backend, trace=tmp_path / "trace.jsonl", firmware=program("toggler", backend))
+    sim.start()
+    try:
+        yield sim
+    finally:
+        sim.stop()
+
+
+def test_a_pin_toggled_every_few_milliseconds_shows_every_edge_as_digital(
+    toggler_sim: SimBoard, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Today's emulated Uno took highs of 1-3 ms for servo pulses: `servo` lines, edges
+    dropped. Every level change is a digital line, at its time on the emulated clock."""
+    mod = client("toggler", monkeypatch)
+    pbu: Any = mod.pb
+    with protoduino.Board.open(toggler_sim.port) as board:
+        assert mod.Toggler(board).start(pbu.Run(pin=PIN, edges=EDGES)).pin == PIN
+        wait_for_pin(toggler_sim, PIN, lambda v: len(v) >= EDGES)
+    rows = [e for e in toggler_sim.trace() if e["pin"] == PIN]
+    assert [(e["mode"], e["value"]) for e in rows] == [("digital", n % 2 ^ 1) for n in range(EDGES)]
+    if toggler_sim.backend == "avr":  # the emulated clock: each edge at its millisecond tick
+        gaps = [b["t"] - a["t"] for a, b in itertools.pairwise(rows)]
+        assert 0 < gaps[0] <= 0.001 + POLL_SLACK_S, gaps
+        for n, gap in enumerate(gaps[1:]):
+            assert abs(gap - GAPS_MS[n % 3] / 1000) <= POLL_SLACK_S, (n, gaps)
