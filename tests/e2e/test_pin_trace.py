@@ -18,7 +18,7 @@ from typing import Any
 import protoduino
 import pytest
 from protoduino.simboard import SimBoard
-from simfixtures import wait_for_pin
+from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 from userbuilds import client, need, program
 
 BACKENDS = ["native", "avr"]
@@ -61,3 +61,24 @@ def test_a_pin_toggled_every_few_milliseconds_shows_every_edge_as_digital(
         assert 0 < gaps[0] <= 0.001 + POLL_SLACK_S, gaps
         for n, gap in enumerate(gaps[1:]):
             assert abs(gap - GAPS_MS[n % 3] / 1000) <= POLL_SLACK_S, (n, gaps)
+
+
+def test_a_servo_released_then_a_digital_output_on_its_pin_gives_the_same_lines_on_both_boards(
+    sim_board: SimBoard,
+) -> None:
+    """The emulated Uno reads the servo driver's table: attached, the pin is a servo from its
+    first pulse (no digital line before it); detached, a value-0 servo line; then a digital
+    output there is digital at its first edge, with no line the native board does not write."""
+    with protoduino.Board.open(sim_board.port) as board:
+        board.servo(9, safe_us=1500)
+        wait_for_pin(sim_board, 9, lambda v: len(v) > 0 and abs(v[-1] - 1500) <= PULSE_TOLERANCE_US)
+        board.release(9)
+        wait_for_pin(sim_board, 9, lambda v: v[-1:] == [0])
+        output = board.digital_output(9, safe=True)
+        wait_for_pin(sim_board, 9, lambda v: v[-1:] == [1])
+        output.write(False)
+        wait_for_pin(sim_board, 9, lambda v: v[-2:] == [1, 0])
+    rows = [(e["mode"], e["value"]) for e in sim_board.trace() if e["pin"] == 9]
+    assert [mode for mode, _ in rows] == ["servo", "servo", "digital", "digital"], rows
+    assert abs(rows[0][1] - 1500) <= PULSE_TOLERANCE_US, rows
+    assert [value for _, value in rows[1:]] == [0, 1, 0], rows

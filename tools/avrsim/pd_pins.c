@@ -255,11 +255,13 @@ static int pd_configured_sample(pd_pins_t *pins, int n, uint8_t output, uint8_t 
     if (p->servo) {
         return 0;
     }
-    p->output = output;
-    p->level = level;
-    if (output) {
+    /* What shows at the pin: a level change, or the pin turning output. A servo's pin
+     * stays an output low when its channel is detached: its value-0 line says so. */
+    if (output && (!p->output || level != p->level || p->emitted_mode < 0)) {
         pd_emit(pins, n, cycle, PD_PIN_MODE_DIGITAL, level);
     }
+    p->output = output;
+    p->level = level;
     return 1;
 }
 
