@@ -257,8 +257,8 @@ class SimBoard(ClosedOnExit):
 
     The native board's trace (:meth:`trace`) writes every output change it is told, at once.
     The emulated Uno's (``backend="avr"``) is measured at the emulated pins, in the mode the
-    firmware configured there (the runner reads it from the MCU: a timer in a PWM mode, a
-    channel of the servo driver's table, else a digital output), so the two boards write the
+    firmware configured there (the runner reads it from the MCU: a pin its PWM driver runs,
+    one a channel of its servo driver drives, else a digital output), so the two boards write the
     same lines for the same writes, within a logic analyser's limits; every line is dated to
     the change on the board's clock, but some are written later, and a change shorter than
     these does not show at all:
@@ -267,8 +267,7 @@ class SimBoard(ClosedOnExit):
       shows every edge).
     * PWM: a duty of 0 or 255 is a steady level, which shows once the pin has had no edge
       for 5 ms (a duty of 0 held for less does not show); any other duty shows once two
-      periods in a row agree (about 2 ms at the Uno's 976 Hz). A digital output on the other
-      pin of a timer that makes PWM shows as PWM 0 or 255.
+      periods in a row agree (about 2 ms at the Uno's 976 Hz).
     * Servos: a width shows once the next pulse has it too (a single pulse off the width is
       taken for interrupt latency), and a change smaller than 0.75 us does not show. A
       detached servo shows value 0 at once, dated to the end of its last pulse; an attached

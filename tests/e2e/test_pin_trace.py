@@ -82,3 +82,29 @@ def test_a_servo_released_then_a_digital_output_on_its_pin_gives_the_same_lines_
     assert [mode for mode, _ in rows] == ["servo", "servo", "digital", "digital"], rows
     assert abs(rows[0][1] - 1500) <= PULSE_TOLERANCE_US, rows
     assert [value for _, value in rows[1:]] == [0, 1, 0], rows
+
+
+def test_a_digital_output_beside_a_pwm_pin_of_its_timer_is_digital_on_both_boards(
+    sim_board: SimBoard,
+) -> None:
+    """Pins 3 and 11 share Timer2. With 3 making PWM, the emulated Uno took 11, a digital
+    output, for PWM (its timer's mode said so): `pwm` 0 and 255 once steady, never `digital`.
+    The runner reads which pins the firmware's PWM driver runs: 11 is digital, every edge,
+    and 3 is PWM at any duty, 255 (a steady level) included."""
+    with protoduino.Board.open(sim_board.port) as board:
+        motor = board.pwm_output(3)
+        motor.write(100)
+        wait_for_pin(sim_board, 3, lambda v: v[-1:] == [100])
+        lamp = board.digital_output(11)
+        lamp.write(True)
+        wait_for_pin(sim_board, 11, lambda v: v[-1:] == [1])
+        lamp.write(False)
+        wait_for_pin(sim_board, 11, lambda v: v[-2:] == [1, 0])
+        motor.write(255)
+        wait_for_pin(sim_board, 3, lambda v: v[-1:] == [255])
+    trace = sim_board.trace()
+    lamp_rows = [(e["mode"], e["value"]) for e in trace if e["pin"] == 11]
+    assert lamp_rows == [("digital", 0), ("digital", 1), ("digital", 0)], lamp_rows
+    motor_rows = [(e["mode"], e["value"]) for e in trace if e["pin"] == 3]
+    assert {mode for mode, _ in motor_rows} == {"pwm"}, motor_rows
+    assert [value for _, value in motor_rows][-2:] == [100, 255], motor_rows

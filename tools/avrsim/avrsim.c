@@ -189,6 +189,9 @@ typedef struct {
  * the distance to the next symbol.
  */
 #define PD_SERVO_TABLE "pd_avr_servos"
+/* protoduino's PWM pins (firmware/avr/pd_avr_pwm.c): pin n is bit n % 8 of byte n / 8 while
+ * the PWM driver runs it, duties 0 and 255 included (its timer disconnected then). */
+#define PD_PWM_TABLE "pd_avr_pwm_pins"
 #define PD_SERVO_CHANNEL_BYTES 7U
 #define PD_SERVO_CHANNELS_MAX 64U
 #define PD_ELF_DATA 0x800000U /* avr-ld's data space in the ELF's addresses */
@@ -219,6 +222,7 @@ typedef struct {
     FILE *trace;
     uint16_t servo_table;    /* data address of the firmware's servo channels; 0: none */
     uint16_t servo_channels; /* their count */
+    uint16_t pwm_table;      /* data address of the firmware's PWM pins; 0: none */
     int master;
     int slave;
     int inotify;
@@ -373,18 +377,30 @@ static int pd_servo_drives(const pd_sim_t *sim, const pd_port_t *port, int b)
     return 0;
 }
 
-/* Finds the firmware's servo table (PD_SERVO_TABLE) among the ELF's symbols. */
-static void pd_find_servo_table(pd_sim_t *sim, const elf_firmware_t *fw)
+/* The ELF address of a variable in RAM named `table` (LTO may add a ".lto_priv.N"
+ * suffix), or 0. */
+static uint32_t pd_find_data(const elf_firmware_t *fw, const char *table)
 {
-    const size_t len = strlen(PD_SERVO_TABLE);
-    uint32_t at = 0;
+    const size_t len = strlen(table);
     for (uint32_t i = 0; i < fw->symbolcount; i++) {
         const char *name = fw->symbol[i]->symbol;
-        if (strncmp(name, PD_SERVO_TABLE, len) == 0 && (name[len] == '\0' || name[len] == '.') &&
+        if (strncmp(name, table, len) == 0 && (name[len] == '\0' || name[len] == '.') &&
             fw->symbol[i]->addr > PD_ELF_DATA) {
-            at = fw->symbol[i]->addr;
+            return fw->symbol[i]->addr;
         }
     }
+    return 0;
+}
+
+/* Finds the firmware's servo table (PD_SERVO_TABLE) and PWM pins (PD_PWM_TABLE) among
+ * the ELF's symbols. */
+static void pd_find_tables(pd_sim_t *sim, const elf_firmware_t *fw)
+{
+    uint32_t pwm = pd_find_data(fw, PD_PWM_TABLE);
+    if (pwm && pwm - PD_ELF_DATA + (PD_PINS_COUNT + 7U) / 8U <= (uint32_t)sim->avr->ramend + 1U) {
+        sim->pwm_table = (uint16_t)(pwm - PD_ELF_DATA);
+    }
+    uint32_t at = pd_find_data(fw, PD_SERVO_TABLE);
     if (!at) {
         return;
     }
@@ -423,8 +439,14 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
         pd_pwm_pin_t *w = pd_pwm_pin(pin);
         if (w && w->timer) {
             int kind = w->timer->wgm_op_mode_kind;
-            if (kind == avr_timer_wgm_pwm || kind == avr_timer_wgm_fast_pwm ||
-                kind == avr_timer_wgm_fc_pwm) {
+            int pwm = kind == avr_timer_wgm_pwm || kind == avr_timer_wgm_fast_pwm ||
+                      kind == avr_timer_wgm_fc_pwm;
+            if (sim->pwm_table) {
+                /* The firmware says which pins it runs as PWM: a digital output on the
+                 * other pin of a timer that makes PWM (or keeps the clock) is digital. */
+                pwm = (sim->avr->data[sim->pwm_table + pin / 8] >> (pin % 8)) & 1U;
+            }
+            if (pwm) {
                 pwm_tick = w->timer->cs_div_value ? w->timer->cs_div_value : 1U; /* prescaler */
             }
             /* A connected compare output overrides the PORT bit. */
@@ -1615,7 +1637,7 @@ int main(int argc, char **argv)
     sim->avr->log = LOG_ERROR; /* simavr warnings are about its own model, not the firmware */
     if (elf) {
         avr_load_firmware(sim->avr, &fw);
-        pd_find_servo_table(sim, &fw);
+        pd_find_tables(sim, &fw);
     }
     sim->avr->frequency = freq;
     for (int i = 0; i < hex_count; i++) {

@@ -37,8 +37,9 @@
  *   low_wait (50 ms) is a digital 0. A Servo-library style driver starts a
  *   newly attached channel at the frame after next, up to two 20 ms frames
  *   after the pin became an output.
- * - PWM: an output whose timer runs in a PWM mode (the runner tells) is a PWM
- *   pin. Its value is the duty 0..255 = round(255 * high / period), measured
+ * - PWM: an output the firmware's PWM driver runs (the runner reads it; for a
+ *   program that does not say, an output whose timer runs in a PWM mode) is a
+ *   PWM pin. Its value is the duty 0..255 = round(255 * high / period), measured
  *   from rising edge to rising edge in whole ticks of the timer (the
  *   waveform's own resolution: simavr's compare events land a few cycles
  *   either side of the tick, and a duty such as 129/256 = 128.496/255 would
@@ -47,9 +48,7 @@
  *   them. A PWM pin with no edge for pwm_steady (5 ms) is at duty 0 or 255:
  *   like Arduino's analogWrite, firmware disconnects the timer from the pin
  *   for those two values (the hardware cannot make them in fast PWM) and
- *   drives the level, and a steady level is all a pin can show of them. So
- *   a plain digital output on the other pin of a timer that makes PWM also
- *   reads as PWM 0 or 255 here; protoduino's firmware has no such pin.
+ *   drives the level, and a steady level is all a pin can show of them.
  */
 #include "pd_pins.h"
 

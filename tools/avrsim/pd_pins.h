@@ -3,8 +3,8 @@
  * protoduino trace (servo pulse widths and digital levels).
  *
  * A pin's mode is what the firmware configured, which the runner reads from
- * the MCU and passes with each sample: PWM while the pin's timer runs in a PWM
- * mode, servo while a channel of the firmware's servo table drives it, digital
+ * the MCU and passes with each sample: PWM while the firmware's PWM driver runs
+ * the pin, servo while a channel of the firmware's servo table drives it, digital
  * otherwise (every level change a line). Only for a program without a servo
  * table the runner can read (not protoduino's firmware) is a servo told from
  * the shape of the pin's waveform (pd_pins.c states that rule).
@@ -89,8 +89,9 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
 
 /* A possible change of one pin: is_output = DDR bit, level = the level driven
  * (the PORT bit, or the timer's compare output while it is connected),
- * pwm_tick = 0, or the cycles per tick of the pin's timer when that timer
- * runs in a PWM mode; servo = 1 while a channel of the firmware's servo table
+ * pwm_tick = 0, or the cycles per tick of the pin's timer while the pin makes
+ * PWM (the firmware's PWM driver runs it; for a program that does not say,
+ * while its timer runs in a PWM mode); servo = 1 while a channel of the firmware's servo table
  * drives the pin, 0 while none does, -1 when the program has no servo table
  * the runner can read (its waveform decides). */
 void pd_pins_sample(pd_pins_t *pins, int pin, int is_output, int port_bit, uint32_t pwm_tick,
