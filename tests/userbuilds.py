@@ -1,6 +1,6 @@
-"""The user-service examples (examples/, docs/services.md) and the C tests' probe service
-(tests/c/user) built for both boards, and their generated clients, for the tiers that run
-them (e2e, reliability)."""
+"""The user-service examples (examples/, docs/services.md), the C tests' probe service
+(tests/c/user) and the trace tests' toggler (tests/e2e/toggler) built for both boards, and
+their generated clients, for the tiers that run them (e2e, reliability)."""
 
 from __future__ import annotations
 

@@ -8,13 +8,14 @@
  *   simavr 1.6 re-raising every output pin of a port whenever any bit of
  *   that port is written: a re-raise never changes the level.
  * - The mode is what the firmware configured (the runner reads it): an output
- *   that no servo channel drives and whose timer makes no PWM is digital, and
- *   every change of its level is a line at the cycle it happened (a 1 kHz
- *   square wave shows every edge), as the native board writes every
- *   digital write. A pin a servo channel drives gets the servo rules below,
- *   with no guess: its first pulse's width is reported after the next pulse,
- *   and a channel detached (none drives the pin any more) is a value-0 line,
- *   dated to the end of its last pulse, as soon as the runner sees it.
+ *   that no servo channel drives and the PWM driver does not run is digital,
+ *   and every change of its level, or its turning output, is a line at the
+ *   cycle it happened (a 1 kHz square wave shows every edge), as the native
+ *   board writes every digital write. A pin a servo channel drives gets the
+ *   servo rules below, with no guess: its first pulse's width is reported
+ *   after the next pulse, and a channel detached (none drives the pin any
+ *   more) is a value-0 line, dated to the end of its last pulse, as soon as
+ *   the runner sees it (the pin, left an output low, adds no digital line).
  * - The rest of this list up to PWM is how a servo's width is measured, and
  *   for a program with no servo table the runner can read (servo = -1: the
  *   runner's test program, StandardFirmata), the guess that tells a servo from
