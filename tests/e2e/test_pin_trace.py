@@ -108,3 +108,21 @@ def test_a_digital_output_beside_a_pwm_pin_of_its_timer_is_digital_on_both_board
     motor_rows = [(e["mode"], e["value"]) for e in trace if e["pin"] == 3]
     assert {mode for mode, _ in motor_rows} == {"pwm"}, motor_rows
     assert [value for _, value in motor_rows][-2:] == [100, 255], motor_rows
+
+
+def test_a_pwm_duty_of_0_held_for_a_moment_shows_on_both_boards(sim_board: SimBoard) -> None:
+    """Duty 0 disconnects the timer and holds the pin low. The emulated Uno showed it only
+    after 5 ms without an edge, so a 0 written between two other duties (two commands in
+    one burst, a millisecond or two apart on the board) was dropped. The runner reads that
+    the PWM driver holds the level: the 0 is a line at once, as on the native board."""
+    with protoduino.Board.open(sim_board.port) as board:
+        motor = board.pwm_output(3)
+        wait_for_pin(sim_board, 3, lambda v: v == [0])
+        motor.write(100)
+        wait_for_pin(sim_board, 3, lambda v: v[-1:] == [100])
+        brief = motor.submit(0)
+        motor.write(100)
+        brief.result(timeout=10)
+        wait_for_pin(sim_board, 3, lambda v: len(v) >= 4)
+    rows = [(e["mode"], e["value"]) for e in sim_board.trace() if e["pin"] == 3]
+    assert rows == [("pwm", 0), ("pwm", 100), ("pwm", 0), ("pwm", 100)], rows

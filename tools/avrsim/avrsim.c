@@ -441,6 +441,7 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
             int kind = w->timer->wgm_op_mode_kind;
             int pwm = kind == avr_timer_wgm_pwm || kind == avr_timer_wgm_fast_pwm ||
                       kind == avr_timer_wgm_fc_pwm;
+            int connected = avr_regbit_get(sim->avr, w->timer->comp[w->comp].com) != 0;
             if (sim->pwm_table) {
                 /* The firmware says which pins it runs as PWM: a digital output on the
                  * other pin of a timer that makes PWM (or keeps the clock) is digital. */
@@ -448,9 +449,12 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
             }
             if (pwm) {
                 pwm_tick = w->timer->cs_div_value ? w->timer->cs_div_value : 1U; /* prescaler */
+                if (sim->pwm_table && !connected) {
+                    pwm_tick = PD_PINS_PWM_LEVEL; /* duty 0 or 255: the port drives it */
+                }
             }
             /* A connected compare output overrides the PORT bit. */
-            if (avr_regbit_get(sim->avr, w->timer->comp[w->comp].com)) {
+            if (connected) {
                 level = w->oc_level;
             }
         }

@@ -50,6 +50,9 @@
  *   like Arduino's analogWrite, firmware disconnects the timer from the pin
  *   for those two values (the hardware cannot make them in fast PWM) and
  *   drives the level, and a steady level is all a pin can show of them.
+ *   When the firmware says it drives such a level (its PWM driver runs the
+ *   pin, and the timer is disconnected from it: pwm_tick PD_PINS_PWM_LEVEL),
+ *   that duty is a line at once, however briefly it is held.
  */
 #include "pd_pins.h"
 
@@ -294,6 +297,17 @@ void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint32_
                 pd_emit(pins, n, cycle, (enum pd_pin_mode)p->emitted_mode, 0);
             }
         }
+        return;
+    }
+    if (output && pwm_tick == PD_PINS_PWM_LEVEL) {
+        /* The PWM driver holds a steady level (duty 0 or 255): that duty, at once. */
+        if (!p->pwm) {
+            pd_pwm_sample(pins, n, level, cycle);
+        }
+        p->output = 1;
+        p->level = level;
+        pd_pwm_restart(p, cycle);
+        pd_emit(pins, n, cycle, PD_PIN_MODE_PWM, level ? 255U : 0U);
         return;
     }
     if (output && pwm_tick) {

@@ -34,6 +34,10 @@
 #define PD_PINS_PWM_STEADY_US 5000UL  /* a PWM pin without an edge this long: duty 0 or 255 */
 #define PD_PINS_HYST_US 0.75          /* a smaller change of a servo's width is no change */
 
+/* pwm_tick for a PWM pin whose timer is disconnected from it while the firmware drives a
+ * steady level, as for duty 0 or 255: that duty at once. */
+#define PD_PINS_PWM_LEVEL UINT32_MAX
+
 enum pd_pin_mode {
     PD_PIN_MODE_NONE = 0,
     PD_PIN_MODE_DIGITAL,
@@ -91,7 +95,7 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
  * (the PORT bit, or the timer's compare output while it is connected),
  * pwm_tick = 0, or the cycles per tick of the pin's timer while the pin makes
  * PWM (the firmware's PWM driver runs it; for a program that does not say,
- * while its timer runs in a PWM mode); servo = 1 while a channel of the firmware's servo table
+ * while its timer runs in a PWM mode), or PD_PINS_PWM_LEVEL; servo = 1 while a channel of the firmware's servo table
  * drives the pin, 0 while none does, -1 when the program has no servo table
  * the runner can read (its waveform decides). */
 void pd_pins_sample(pd_pins_t *pins, int pin, int is_output, int port_bit, uint32_t pwm_tick,
