@@ -15,8 +15,9 @@
  * and --trace writes one JSON line per output change, measured at the pins
  * (servo pulse widths, digital levels, and the duty of the timers' PWM, read
  * from their compare-output IRQs: PWM never goes through the PORT register),
- * each pin in the mode the firmware configured (its timer's mode, the servo
- * driver's channel table in RAM: PD_SERVO_TABLE).
+ * each pin in the mode the firmware configured, as its RAM records it (the
+ * PWM driver's pins, PD_PWM_TABLE; the servo driver's channels, PD_SERVO_TABLE;
+ * a program without these: its timers' modes and its waveforms).
  *
  * --control PATH (firmware/simcontrol) drives the MCU's inputs the way the
  * outside world would, so the firmware's own input code is what runs: a level
