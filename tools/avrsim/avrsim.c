@@ -360,22 +360,18 @@ static pd_pwm_pin_t *pd_pwm_pin(int pin)
     return NULL;
 }
 
-/* 1 while a channel of the firmware's servo table drives bit b of the port, 0 while none
- * does, -1 for a program without the table. */
-static int pd_servo_drives(const pd_sim_t *sim, const pd_port_t *port, int b)
+/* The port's bits a channel of the firmware's servo table drives (none: 0). */
+static uint8_t pd_servo_bits(const pd_sim_t *sim, const pd_port_t *port)
 {
-    if (!sim->servo_table) {
-        return -1;
-    }
     const uint8_t *data = sim->avr->data;
+    uint8_t bits = 0;
     for (uint16_t ch = 0; ch < sim->servo_channels; ch++) {
         const uint8_t *c = data + sim->servo_table + ch * PD_SERVO_CHANNEL_BYTES;
-        uint16_t port_addr = (uint16_t)(c[0] | (c[1] << 8));
-        if (port_addr == port->io->r_port && (c[2] >> b) & 1U) {
-            return 1;
+        if ((uint16_t)(c[0] | (c[1] << 8)) == port->io->r_port) {
+            bits |= c[2];
         }
     }
-    return 0;
+    return bits;
 }
 
 /* The ELF address of a variable in RAM named `table` (LTO may add a ".lto_priv.N"
@@ -429,6 +425,7 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
         return;
     }
     uint8_t out = sim->avr->data[port->io->r_port];
+    uint8_t servo_bits = sim->servo_table ? pd_servo_bits(sim, port) : 0;
     uint64_t now = pd_cycles(sim);
     for (int b = 0; b < port->bits; b++) {
         int pin = port->first_pin + b;
@@ -459,8 +456,9 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
                 level = w->oc_level;
             }
         }
-        pd_pins_sample(&sim->pins, pin, (ddr >> b) & 1, level, pwm_tick,
-                       pd_servo_drives(sim, port, b), now);
+        /* 1 while a servo channel drives the pin, 0 while none does, -1: no table. */
+        int servo = sim->servo_table ? (servo_bits >> b) & 1 : -1;
+        pd_pins_sample(&sim->pins, pin, (ddr >> b) & 1, level, pwm_tick, servo, now);
     }
 }
 
@@ -746,6 +744,8 @@ static void pd_uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 /* Wraps the core's reset so that every reset (ours, the watchdog's) is seen. */
 static void pd_core_reset(struct avr_t *avr)
 {
+    /* Before simavr clears the registers (and the cycle count): every pin is released. */
+    pd_pins_reset(&g_sim.pins, pd_cycles(&g_sim));
     if (g_sim.core_reset) {
         g_sim.core_reset(avr);
     }

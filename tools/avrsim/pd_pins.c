@@ -33,7 +33,9 @@
  * - A servo whose pulses stop for more than max_period gets a value-0 line,
  *   dated to the end of its last pulse (as the native board writes 0 when
  *   its pulses stop on a reboot).
- * - A pin that stops being an output (a reset) reports value 0 at once.
+ * - A pin that stops being an output (a release) reports value 0 at once. A
+ *   reset (pd_pins_reset) gives every pin with a line a value-0 line, and no
+ *   mode until its next one, as the native board's reboot does.
  * - A pin that becomes an output at level 0 and shows no pulse within
  *   low_wait (50 ms) is a digital 0. A Servo-library style driver starts a
  *   newly attached channel at the frame after next, up to two 20 ms frames
@@ -347,6 +349,21 @@ void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint32_
             pd_long_high(pins, n);
         }
         pd_emit(pins, n, cycle, PD_PIN_MODE_DIGITAL, 0);
+    }
+}
+
+void pd_pins_reset(pd_pins_t *pins, uint64_t cycle)
+{
+    if (!pins->emit) {
+        return; /* not initialised yet */
+    }
+    for (int n = 0; n < PD_PINS_COUNT; n++) {
+        pd_pin_t *p = &pins->pin[n];
+        if (p->emitted_mode >= 0) {
+            pins->emit(pins->ctx, cycle, n, (enum pd_pin_mode)p->emitted_mode, 0);
+        }
+        memset(p, 0, sizeof *p);
+        p->emitted_mode = -1;
     }
 }
 

@@ -101,6 +101,11 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
 void pd_pins_sample(pd_pins_t *pins, int pin, int is_output, int port_bit, uint32_t pwm_tick,
                     int servo, uint64_t cycle);
 
+/* The MCU resets at `cycle` (every pin becomes an input): each pin that has a line gets a
+ * value-0 line in its mode, even if its value was 0 already, and then has no mode, as
+ * the native board releases its pins on a reboot; its next line starts afresh. */
+void pd_pins_reset(pd_pins_t *pins, uint64_t cycle);
+
 /* Resolves the deadlines that have passed at `cycle`. */
 void pd_pins_poll(pd_pins_t *pins, uint64_t cycle);
 
