@@ -1,11 +1,11 @@
 """The trace says what the pin did (issue 36, item 6), on both boards.
 
 A pin's mode in the trace is what the firmware configured (on the emulated Uno the runner
-reads it from the MCU: the timers' modes, the servo driver's channel table), not a guess
-from the waveform's shape, and no level change is dropped: the same lines on the native
-board and on the emulated Uno for the same writes. The writes come from a test service
-(tests/e2e/toggler) that toggles a pin 1 to 3 ms apart on the board's own clock, faster
-than a host could and as fast as a servo's pulses come.
+reads it from the MCU's RAM: the PWM driver's pins, the servo driver's channel table), not
+a guess from the waveform's shape, and no level change is dropped: the same lines on the
+native board and on the emulated Uno for the same writes. The fastest writes come from a
+test service (tests/e2e/toggler) that toggles a pin 1 to 3 ms apart on the board's own
+clock, faster than a host could and as fast as a servo's pulses come.
 """
 
 from __future__ import annotations
