@@ -286,13 +286,15 @@ def _flat_out(
     """``calls`` calls as fast as the host makes them, call i setting every pin of ``pins`` to
     level i % 2 == 0 (they start low, ``calls`` is even: they end low).
 
-    The trace does not list every edge of a fast toggle (highs under 3 ms read as pulses, a
-    train of them as a servo: tools/avrsim/pd_pins.c), but it dates the last fall of each pin
-    exactly, as a digital 0 or as the end of a pulse train: the time the last call took
-    effect. Changes per second are those of all the calls over the time from the first call
-    to that moment. ``finish`` waits for the calls' Acks where there are any (``acked``);
-    ``last_write`` says when the host wrote its last frame to the line, where a library holds
-    calls back (protoduino's window); otherwise that is when the last call returned."""
+    The trace lists every edge of a digital output on both boards (the emulated Uno's runner
+    reads which pins the firmware drives as servos or PWM: tools/avrsim/pd_pins.c; a program
+    that does not say, such as StandardFirmata, has its fast highs read as pulses, whose
+    train ends in a value-0 line dated to its last fall), so the last fall of each pin is
+    dated exactly: the time the last call took effect. Changes per second are those of all
+    the calls over the time from the first call to that moment. ``finish`` waits for the
+    calls' Acks where there are any (``acked``); ``last_write`` says when the host wrote its
+    last frame to the line, where a library holds calls back (protoduino's window); otherwise
+    that is when the last call returned."""
     if calls % 2:
         raise ValueError("an even number of calls, so that the pins end low")
     mark = len(trace.update())

@@ -1,6 +1,6 @@
-"""The user-service examples (examples/, docs/services.md) and the C tests' probe service
-(tests/c/user) built for both boards, and their generated clients, for the tiers that run
-them (e2e, reliability)."""
+"""The user-service examples (examples/, docs/services.md), the C tests' probe service
+(tests/c/user) and the trace tests' toggler (tests/e2e/toggler) built for both boards, and
+their generated clients, for the tiers that run them (e2e, reliability)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 #: Services that are not in examples/: their folder (NAME.proto and NAME.c in it).
-FOLDERS = {"probe": ROOT / "tests" / "c" / "user"}
+FOLDERS = {"probe": ROOT / "tests" / "c" / "user", "toggler": ROOT / "tests" / "e2e" / "toggler"}
 #: Where `make ... USER_PROTO=examples/NAME/NAME.proto` puts a user build, per backend.
 PROGRAMS = {"native": "sim/pd_sim", "avr": "avr/protoduino.elf"}
 #: Tools each backend's build needs; a missing one skips the test.

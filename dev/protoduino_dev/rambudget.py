@@ -300,7 +300,7 @@ def static_ram(elf: Path, sizes: Path) -> StaticRam:
         descriptors=sum(descriptors.values()),
         tx_ring=symbols["tx_buf"][1],
         rx_ring=symbols["rx_buf"][1],
-        channels=symbols["channels"][1],
+        channels=symbols["pd_avr_servos"][1],
     )
 
 

@@ -27,6 +27,14 @@
 
 #if PD_FEATURE_PWM
 
+/*
+ * The pins this driver runs, one bit per pin number: tools/avrsim reads it from the MCU's
+ * RAM (by its symbol) to trace them as PWM, duties 0 and 255 included (the timer is
+ * disconnected for those, and the pin looks like any digital output). Keep its name and
+ * its layout, or change the runner with it.
+ */
+static volatile uint8_t pd_avr_pwm_pins[3]; /* pin n: bit n % 8 of byte n / 8 */
+
 /* The pin's output-compare register and its compare-output bit (COMxy1) in *com. */
 static volatile uint8_t *pwm_ocr(uint8_t pin, volatile uint8_t **tccra, uint8_t *com)
 {
@@ -70,6 +78,7 @@ void pd_avr_pwm_write(uint8_t pin, uint8_t duty)
     }
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
+        pd_avr_pwm_pins[pin >> 3] |= (uint8_t)(1u << (pin & 7u)); /* before the pin turns output */
         if (tccra == &TCCR1A && !(TCCR1A & _BV(WGM10))) {
             /* Timer1 leaves the servos (none is configured: the core checked), or
              * starts from its power-up state in a build without servos. */
@@ -111,6 +120,7 @@ void pd_avr_pwm_release(uint8_t pin)
     {
         *tccra &= (uint8_t)~com;
         pd_avr_pin_set(pin, false, false);
+        pd_avr_pwm_pins[pin >> 3] &= (uint8_t)~(1u << (pin & 7u)); /* once an input */
         if (tccra == &TCCR1A && !(TCCR1A & (_BV(COM1A1) | _BV(COM1B1)))) {
             /* The last PWM pin of Timer1: the servos may have it back. */
             pd_avr_servo_init();

@@ -42,7 +42,14 @@ typedef struct servo_channel {
     uint16_t next;  /* the width written, taken into `ticks` at the next frame start */
 } servo_channel_t;
 
-static servo_channel_t channels[PD_MAX_SERVOS];
+/*
+ * The channels. tools/avrsim reads this table from the MCU's RAM (by its symbol) to know
+ * which pins carry a servo, for its trace: keep its name, and the port and the mask as
+ * the first three bytes of a 7-byte entry (asserted below), or change the runner with it.
+ */
+static servo_channel_t pd_avr_servos[PD_MAX_SERVOS];
+typedef char pd_assert_servo_layout[offsetof(servo_channel_t, mask) == 2u &&
+                                            sizeof(servo_channel_t) == 7u ? 1 : -1];
 /*
  * The edges the next compare makes, prepared by the previous one. With no
  * edge to make they point at `no_pin`, so that the ISR runs the same
@@ -85,7 +92,7 @@ void pd_avr_servo_init(void)
 
 static int8_t next_attached(int8_t ch)
 {
-    while (ch < (int8_t)PD_MAX_SERVOS && channels[ch].port == NULL) {
+    while (ch < (int8_t)PD_MAX_SERVOS && pd_avr_servos[ch].port == NULL) {
         ch++;
     }
     return ch < (int8_t)PD_MAX_SERVOS ? ch : -1;
@@ -123,7 +130,7 @@ ISR(TIMER1_COMPA_vect)
     if (ch >= 0) {
         /* The end edge is made a few cycles before the start edge in the
          * ISR: PULSE_TRIM_TICKS gives them back. */
-        uint16_t ticks = take ? channels[ch].next : channels[ch].ticks;
+        uint16_t ticks = take ? pd_avr_servos[ch].next : pd_avr_servos[ch].ticks;
         OCR1A = (uint16_t)(at + ticks + PULSE_TRIM_TICKS);
     } else {
         /* End of the frame: wait out its 20 ms, or start the next at once when
@@ -143,12 +150,12 @@ ISR(TIMER1_COMPA_vect)
 
     if (take) {
         for (uint8_t n = 0; n < PD_MAX_SERVOS; n++) {
-            channels[n].ticks = channels[n].next;
+            pd_avr_servos[n].ticks = pd_avr_servos[n].next;
         }
     }
     if (ch >= 0) {
-        off_port = channels[ch].port;
-        off_mask = channels[ch].mask;
+        off_port = pd_avr_servos[ch].port;
+        off_mask = pd_avr_servos[ch].mask;
         ch = next_attached((int8_t)(ch + 1));
     } else {
         off_port = &no_pin;
@@ -156,8 +163,8 @@ ISR(TIMER1_COMPA_vect)
     }
     on_channel = ch;
     if (ch >= 0) {
-        on_port = channels[ch].port;
-        on_mask = channels[ch].mask;
+        on_port = pd_avr_servos[ch].port;
+        on_mask = pd_avr_servos[ch].mask;
     } else {
         on_port = &no_pin;
     }
@@ -182,18 +189,18 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
     volatile uint8_t *port = pin_port(pin, &mask);
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
-        servo_channel_t *c = &channels[channel];
+        servo_channel_t *c = &pd_avr_servos[channel];
         if (c->port != port || c->mask != mask) {
             /* Attach (first use, after a detach, or another pin): output, low,
              * joins the sequence at the channel's next turn. A pulse still under
              * way on this pin (detached a moment ago) ends by its own edge. */
+            c->mask = mask; /* first: the table says servo when the pin turns output */
+            c->port = port;
+            c->ticks = ticks; /* valid for the next frame, held or not */
             if (off_port != port || !(off_mask & mask)) {
                 *port &= (uint8_t)~mask;
             }
             *pd_avr_ddr(port) |= mask;
-            c->mask = mask;
-            c->port = port;
-            c->ticks = ticks; /* valid for the next frame, held or not */
         }
         c->next = ticks;
     }
@@ -217,7 +224,7 @@ void pd_avr_servo_detach(uint8_t channel)
     }
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
-        channels[channel].mask = 0;
+        pd_avr_servos[channel].mask = 0;
         if (on_channel == (int8_t)channel) {
             on_mask = 0;
         }

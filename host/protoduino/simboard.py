@@ -322,21 +322,30 @@ class SimBoard(ClosedOnExit):
     108 bytes, which test directories often exceed).
 
     The native board's trace (:meth:`trace`) writes every output change it is told, at once.
-    The emulated Uno's (``backend="avr"``) is measured at the emulated pins, so it has a logic
-    analyser's limits; every line is dated to the change on the board's clock, but some are
-    written later, and a change shorter than these does not show at all:
+    The emulated Uno's (``backend="avr"``) is measured at the emulated pins, in the mode the
+    firmware configured there (the runner reads it from the MCU: a pin its PWM driver runs,
+    one a channel of its servo driver drives, else a digital output), so the two boards write the
+    same lines for the same writes, within a logic analyser's limits; every line is dated to
+    the change on the board's clock, but some are written later, and a change shorter than
+    these does not show at all:
 
-    * PWM: a duty of 0 or 255 is a steady level, which shows once the pin has had no edge
-      for 5 ms (a duty of 0 held for less does not show); any other duty shows once two
-      periods in a row agree (about 2 ms at the Uno's 976 Hz).
-    * Pulses: a high of at most 3 ms is a pulse; a longer one is a digital 1.
-    * Servos: pulses at most 50 ms apart are a servo; a servo's pulses that stop show as
-      value 0 once 50 ms passed without one. A new width shows once the next pulse has it
-      too (a single pulse off the width is taken for interrupt latency), and a change smaller
-      than 0.75 us does not show.
-    * Digital outputs: a pin that becomes an output low shows 0 once 50 ms passed without a
-      pulse (a servo's first frame may still come); a lone pulse shows as 1 then 0 once 50 ms
-      passed without another.
+    * Digital outputs: every level change shows at once (a pin toggled every millisecond
+      shows every edge).
+    * PWM: a duty of 0 or 255 (a steady level: the timer is disconnected from the pin)
+      shows at once; any other duty shows once two periods in a row agree (about 2 ms at
+      the Uno's 976 Hz).
+    * Servos: a width shows once the next pulse has it too (a single pulse off the width is
+      taken for interrupt latency), and a change smaller than 0.75 us does not show. A
+      detached servo shows value 0 at once, dated to the end of its last pulse; an attached
+      one whose pulses stop shows value 0 once 50 ms passed without one.
+    * A program that does not record its servos and PWM pins as protoduino's firmware does
+      (a hex flashed through the bootloader, StandardFirmata) is judged by its waveform: an
+      output whose timer runs in a PWM mode is PWM, and shows a duty of 0 or 255 once it has
+      had no edge for 5 ms (a duty of 0 held for less does not show); a high of at most 3 ms
+      is a pulse, a longer one a digital 1; pulses at most 50 ms apart are a servo; a pin
+      that becomes an output low shows 0 once 50 ms passed without a pulse (a servo's first
+      frame may still come); a lone pulse shows as 1 then 0 once 50 ms passed without
+      another.
     """
 
     def __init__(

@@ -70,17 +70,13 @@ def expect_pin(
     digital: bool = False,
     timeout: float = 30.0,
 ) -> None:
-    """Wait until the trace (from line ``since``) shows ``expected`` for ``pin``."""
-    exact = sim.backend == "native"
-    tol = 0 if digital or exact else PULSE_TOLERANCE_US
+    """Wait until the trace (from line ``since``) shows ``expected`` for ``pin``: a digital
+    pin's every level on both boards (the emulated Uno's trace shows every edge of one)."""
+    exact = sim.backend == "native" or digital
+    tol = 0 if exact else PULSE_TOLERANCE_US
 
     def values() -> list[int]:
-        found = pin_values(sim.trace()[since:], pin)
-        if not digital:
-            return found
-        # The emulated Uno's trace states a high shorter than 3 ms as its width (a servo
-        # pulse): for a digital output that is a rise and a fall, fast toggles at a fast line.
-        return [level for value in found for level in ((1, 0) if value > 1 else (value,))]
+        return pin_values(sim.trace()[since:], pin)
 
     def ok() -> bool:
         return fits(values(), expected, tol, exact)
@@ -612,8 +608,7 @@ def test_detach_safe_state_and_release_at_the_pins(board: Board, sim: SimBoard) 
     assert limp.value == 0
     limp.write(30)
     # At the pins before the next step: on a fast line (docs/protocol.md 5, *Line rate*)
-    # the Stop would come before the first pulse, and the release within the emulated
-    # Uno's 3 ms that tell a digital high from a pulse (tools/avrsim/pd_pins.c).
+    # the Stop would come before the first pulse.
     expect_pin(sim, 9, [0, us(30)])
     board.stop()  # its safe state: pulses stop
     expect_pin(sim, 9, [0, us(30), 0])

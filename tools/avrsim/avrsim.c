@@ -14,7 +14,10 @@
  * MCU while keeping the pty,
  * and --trace writes one JSON line per output change, measured at the pins
  * (servo pulse widths, digital levels, and the duty of the timers' PWM, read
- * from their compare-output IRQs: PWM never goes through the PORT register).
+ * from their compare-output IRQs: PWM never goes through the PORT register),
+ * each pin in the mode the firmware configured, as its RAM records it (the
+ * PWM driver's pins, PD_PWM_TABLE; the servo driver's channels, PD_SERVO_TABLE;
+ * a program without these: its timers' modes and its waveforms).
  *
  * --control PATH (firmware/simcontrol) drives the MCU's inputs the way the
  * outside world would, so the firmware's own input code is what runs: a level
@@ -180,6 +183,22 @@ typedef struct {
 #define PD_MAX_MARKS 8 /* --mark addresses */
 
 /*
+ * protoduino's servo channel table (firmware/avr/pd_avr_servo.c, which asserts this
+ * layout), found by its ELF symbol (LTO may add a ".lto_priv.N" suffix): per channel the
+ * data address of the pin's PORT register (2 bytes, little-endian), then the pin's bit
+ * (0: detached), in PD_SERVO_CHANNEL_BYTES. A pin carries a servo while a channel names
+ * its port and bit: the trace's mode is that, not a guess from the waveform. Its size is
+ * the distance to the next symbol.
+ */
+#define PD_SERVO_TABLE "pd_avr_servos"
+/* protoduino's PWM pins (firmware/avr/pd_avr_pwm.c): pin n is bit n % 8 of byte n / 8 while
+ * the PWM driver runs it, duties 0 and 255 included (its timer disconnected then). */
+#define PD_PWM_TABLE "pd_avr_pwm_pins"
+#define PD_SERVO_CHANNEL_BYTES 7U
+#define PD_SERVO_CHANNELS_MAX 64U
+#define PD_ELF_DATA 0x800000U /* avr-ld's data space in the ELF's addresses */
+
+/*
  * An external interrupt (INT0, INT1) as the inputs the control socket drives meet it (in
  * --stats: "extint"): the edges that set its flag, those lost (one came while the flag of
  * the one before was still set: its vector not reached yet, so the hardware merged them),
@@ -203,6 +222,9 @@ typedef struct {
     pd_port_t ports[3];
     pd_pins_t pins;
     FILE *trace;
+    uint16_t servo_table;    /* data address of the firmware's servo channels; 0: none */
+    uint16_t servo_channels; /* their count */
+    uint16_t pwm_table;      /* data address of the firmware's PWM pins; 0: none */
     int master;
     int slave;
     int inotify;
@@ -339,12 +361,72 @@ static pd_pwm_pin_t *pd_pwm_pin(int pin)
     return NULL;
 }
 
+/* The port's bits a channel of the firmware's servo table drives (none: 0). */
+static uint8_t pd_servo_bits(const pd_sim_t *sim, const pd_port_t *port)
+{
+    const uint8_t *data = sim->avr->data;
+    uint8_t bits = 0;
+    for (uint16_t ch = 0; ch < sim->servo_channels; ch++) {
+        const uint8_t *c = data + sim->servo_table + ch * PD_SERVO_CHANNEL_BYTES;
+        if ((uint16_t)(c[0] | (c[1] << 8)) == port->io->r_port) {
+            bits |= c[2];
+        }
+    }
+    return bits;
+}
+
+/* The ELF address of a variable in RAM named `table` (LTO may add a ".lto_priv.N"
+ * suffix), or 0. */
+static uint32_t pd_find_data(const elf_firmware_t *fw, const char *table)
+{
+    const size_t len = strlen(table);
+    for (uint32_t i = 0; i < fw->symbolcount; i++) {
+        const char *name = fw->symbol[i]->symbol;
+        if (strncmp(name, table, len) == 0 && (name[len] == '\0' || name[len] == '.') &&
+            fw->symbol[i]->addr > PD_ELF_DATA) {
+            return fw->symbol[i]->addr;
+        }
+    }
+    return 0;
+}
+
+/* Finds the firmware's servo table (PD_SERVO_TABLE) and PWM pins (PD_PWM_TABLE) among
+ * the ELF's symbols. */
+static void pd_find_tables(pd_sim_t *sim, const elf_firmware_t *fw)
+{
+    uint32_t pwm = pd_find_data(fw, PD_PWM_TABLE);
+    if (pwm && pwm - PD_ELF_DATA + (PD_PINS_COUNT + 7U) / 8U <= (uint32_t)sim->avr->ramend + 1U) {
+        sim->pwm_table = (uint16_t)(pwm - PD_ELF_DATA);
+    }
+    uint32_t at = pd_find_data(fw, PD_SERVO_TABLE);
+    if (!at) {
+        return;
+    }
+    uint32_t end = UINT32_MAX;
+    for (uint32_t i = 0; i < fw->symbolcount; i++) {
+        uint32_t addr = fw->symbol[i]->addr;
+        if (addr > at && addr < end) {
+            end = addr;
+        }
+    }
+    uint32_t channels = (end - at) / PD_SERVO_CHANNEL_BYTES;
+    if (channels > PD_SERVO_CHANNELS_MAX) {
+        channels = PD_SERVO_CHANNELS_MAX;
+    }
+    if (at - PD_ELF_DATA + channels * PD_SERVO_CHANNEL_BYTES > (uint32_t)sim->avr->ramend + 1U) {
+        return; /* not a table that fits the RAM: none */
+    }
+    sim->servo_table = (uint16_t)(at - PD_ELF_DATA);
+    sim->servo_channels = (uint16_t)channels;
+}
+
 static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
 {
     if (!port->io) {
         return;
     }
     uint8_t out = sim->avr->data[port->io->r_port];
+    uint8_t servo_bits = sim->servo_table ? pd_servo_bits(sim, port) : 0;
     uint64_t now = pd_cycles(sim);
     for (int b = 0; b < port->bits; b++) {
         int pin = port->first_pin + b;
@@ -358,21 +440,36 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
             if (!((ddr >> b) & 1)) {
                 w->connected = 0; /* an input: whatever the pin did has ended */
             }
+            int kind = w->timer->wgm_op_mode_kind;
+            int pwm_mode = kind == avr_timer_wgm_pwm || kind == avr_timer_wgm_fast_pwm ||
+                           kind == avr_timer_wgm_fc_pwm;
+            int connected = avr_regbit_get(sim->avr, w->timer->comp[w->comp].com) != 0;
             /* A connected compare output overrides the PORT bit. */
-            if (avr_regbit_get(sim->avr, w->timer->comp[w->comp].com)) {
+            if (connected) {
                 level = w->oc_level;
                 w->connected = 1;
             }
-            /* PWM once its compare output drove it (duties 0 and 255 disconnect it and
-             * drive the level): Timer0 runs in fast PWM for the clock from power-up,
-             * and a servo or a digital output on 5 or 6 is no PWM. */
-            int kind = w->timer->wgm_op_mode_kind;
-            if (w->connected && (kind == avr_timer_wgm_pwm || kind == avr_timer_wgm_fast_pwm ||
-                                 kind == avr_timer_wgm_fc_pwm)) {
+            int pwm;
+            if (sim->pwm_table) {
+                /* The firmware says which pins it runs as PWM: a digital output on the
+                 * other pin of a timer that makes PWM (or keeps the clock) is digital. */
+                pwm = (sim->avr->data[sim->pwm_table + pin / 8] >> (pin % 8)) & 1U;
+            } else {
+                /* A program without that record: PWM once its compare output drove the
+                 * pin (duties 0 and 255 disconnect it and drive the level), since Timer0
+                 * runs fast PWM for the clock from power-up. */
+                pwm = w->connected && pwm_mode;
+            }
+            if (pwm) {
                 pwm_tick = w->timer->cs_div_value ? w->timer->cs_div_value : 1U; /* prescaler */
+                if (sim->pwm_table && !connected) {
+                    pwm_tick = PD_PINS_PWM_LEVEL; /* duty 0 or 255: the port drives it */
+                }
             }
         }
-        pd_pins_sample(&sim->pins, pin, (ddr >> b) & 1, level, pwm_tick, now);
+        /* 1 while a servo channel drives the pin, 0 while none does, -1: no table. */
+        int servo = sim->servo_table ? (servo_bits >> b) & 1 : -1;
+        pd_pins_sample(&sim->pins, pin, (ddr >> b) & 1, level, pwm_tick, servo, now);
     }
 }
 
@@ -658,6 +755,8 @@ static void pd_uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 /* Wraps the core's reset so that every reset (ours, the watchdog's) is seen. */
 static void pd_core_reset(struct avr_t *avr)
 {
+    /* Before simavr clears the registers (and the cycle count): every pin is released. */
+    pd_pins_reset(&g_sim.pins, pd_cycles(&g_sim));
     if (g_sim.core_reset) {
         g_sim.core_reset(avr);
     }
@@ -1554,6 +1653,7 @@ int main(int argc, char **argv)
     sim->avr->log = LOG_ERROR; /* simavr warnings are about its own model, not the firmware */
     if (elf) {
         avr_load_firmware(sim->avr, &fw);
+        pd_find_tables(sim, &fw);
     }
     sim->avr->frequency = freq;
     for (int i = 0; i < hex_count; i++) {

@@ -1,5 +1,5 @@
 /*
- * pd_pins.c: classify pin activity into servo pulses and digital levels.
+ * pd_pins.c: turn pin activity into servo pulse widths, digital levels and PWM duties.
  *
  * The rules, all in emulated time (the numbers are pd_pins.h's PD_PINS_*_US):
  * - A level is the pin's output state (DDR and PORT bits both set). The
@@ -7,6 +7,19 @@
  *   level is ignored. This is what makes the measurement immune to
  *   simavr 1.6 re-raising every output pin of a port whenever any bit of
  *   that port is written: a re-raise never changes the level.
+ * - The mode is what the firmware configured (the runner reads it): an output
+ *   that no servo channel drives and the PWM driver does not run is digital,
+ *   and every change of its level, or its turning output, is a line at the
+ *   cycle it happened (a 1 kHz square wave shows every edge), as the native
+ *   board writes every digital write. A pin a servo channel drives gets the
+ *   servo rules below, with no guess: its first pulse's width is reported
+ *   after the next pulse, and a channel detached (none drives the pin any
+ *   more) is a value-0 line, dated to the end of its last pulse, as soon as
+ *   the runner sees it (the pin, left an output low, adds no digital line).
+ * - The rest of this list up to PWM is how a servo's width is measured, and
+ *   for a program with no servo table the runner can read (servo = -1: the
+ *   runner's test program, StandardFirmata), the guess that tells a servo from
+ *   a digital pin by its waveform:
  * - A high that ends within max_pulse (3 ms) is a pulse; one that lasts
  *   longer is a digital 1, reported at the time it rose.
  * - Pulses whose rising edges are at most max_period (50 ms) apart make a
@@ -20,13 +33,16 @@
  * - A servo whose pulses stop for more than max_period gets a value-0 line,
  *   dated to the end of its last pulse (as the native board writes 0 when
  *   its pulses stop on a reboot).
- * - A pin that stops being an output (a reset) reports value 0 at once.
+ * - A pin that stops being an output (a release) reports value 0 at once. A
+ *   reset (pd_pins_reset) gives every pin with a line a value-0 line, and no
+ *   mode until its next one, as the native board's reboot does.
  * - A pin that becomes an output at level 0 and shows no pulse within
  *   low_wait (50 ms) is a digital 0. A Servo-library style driver starts a
  *   newly attached channel at the frame after next, up to two 20 ms frames
  *   after the pin became an output.
- * - PWM: an output whose timer runs in a PWM mode (the runner tells) is a PWM
- *   pin. Its value is the duty 0..255 = round(255 * high / period), measured
+ * - PWM: an output the firmware's PWM driver runs (the runner reads it; for a
+ *   program that does not say, an output whose timer runs in a PWM mode) is a
+ *   PWM pin. Its value is the duty 0..255 = round(255 * high / period), measured
  *   from rising edge to rising edge in whole ticks of the timer (the
  *   waveform's own resolution: simavr's compare events land a few cycles
  *   either side of the tick, and a duty such as 129/256 = 128.496/255 would
@@ -35,9 +51,10 @@
  *   them. A PWM pin with no edge for pwm_steady (5 ms) is at duty 0 or 255:
  *   like Arduino's analogWrite, firmware disconnects the timer from the pin
  *   for those two values (the hardware cannot make them in fast PWM) and
- *   drives the level, and a steady level is all a pin can show of them. So
- *   a plain digital output on the other pin of a timer that makes PWM also
- *   reads as PWM 0 or 255 here; protoduino's firmware has no such pin.
+ *   drives the level, and a steady level is all a pin can show of them.
+ *   When the firmware says it drives such a level (its PWM driver runs the
+ *   pin, and the timer is disconnected from it: pwm_tick PD_PINS_PWM_LEVEL),
+ *   that duty is a line at once, however briefly it is held.
  */
 #include "pd_pins.h"
 
@@ -214,8 +231,47 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
     }
 }
 
+/*
+ * The firmware's servo table says whether a channel drives the pin (servo 0 or 1):
+ * true when the sample is done here, as a digital pin's is, false when a servo's
+ * pulses go on to be measured. A pulse under way when its channel was detached
+ * ends as that servo's (its channel started it).
+ */
+static int pd_configured_sample(pd_pins_t *pins, int n, uint8_t output, uint8_t level, int servo,
+                                uint64_t cycle)
+{
+    pd_pin_t *p = &pins->pin[n];
+    if (servo && !p->servo) {
+        /* Attached: its lines come with its pulses; whatever it reported before is
+         * no width of this servo's. */
+        p->servo = 1;
+        p->cand = 0;
+        p->servo_us = -1.0;
+        p->last_rise = cycle;
+        p->last_fall = cycle;
+    } else if (!servo && p->servo && !p->high_pending) {
+        p->servo = 0;
+        p->cand = 0;
+        if (p->emitted_mode == PD_PIN_MODE_SERVO) {
+            pd_emit(pins, n, p->last_fall, PD_PIN_MODE_SERVO, 0);
+        }
+    }
+    p->low_out_pending = 0;
+    if (p->servo) {
+        return 0;
+    }
+    /* What shows at the pin: a level change, or the pin turning output. A servo's pin
+     * stays an output low when its channel is detached: its value-0 line says so. */
+    if (output && (!p->output || level != p->level || p->emitted_mode < 0)) {
+        pd_emit(pins, n, cycle, PD_PIN_MODE_DIGITAL, level);
+    }
+    p->output = output;
+    p->level = level;
+    return 1;
+}
+
 void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint32_t pwm_tick,
-                    uint64_t cycle)
+                    int servo, uint64_t cycle)
 {
     if (n < 0 || n >= PD_PINS_COUNT) {
         return;
@@ -245,6 +301,17 @@ void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint32_
         }
         return;
     }
+    if (output && pwm_tick == PD_PINS_PWM_LEVEL) {
+        /* The PWM driver holds a steady level (duty 0 or 255): that duty, at once. */
+        if (!p->pwm) {
+            pd_pwm_sample(pins, n, level, cycle);
+        }
+        p->output = 1;
+        p->level = level;
+        pd_pwm_restart(p, cycle);
+        pd_emit(pins, n, cycle, PD_PIN_MODE_PWM, level ? 255U : 0U);
+        return;
+    }
     if (output && pwm_tick) {
         p->output = 1;
         p->pwm_tick = pwm_tick;
@@ -255,6 +322,9 @@ void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint32_
         /* The timer left its PWM mode: the pin is an ordinary output again. */
         p->pwm = 0;
         p->low_out_pending = 0;
+    }
+    if (servo >= 0 && pd_configured_sample(pins, n, output, level, servo, cycle)) {
+        return;
     }
     if (output && !p->output && !level) {
         p->low_out_pending = 1;
@@ -279,6 +349,21 @@ void pd_pins_sample(pd_pins_t *pins, int n, int is_output, int port_bit, uint32_
             pd_long_high(pins, n);
         }
         pd_emit(pins, n, cycle, PD_PIN_MODE_DIGITAL, 0);
+    }
+}
+
+void pd_pins_reset(pd_pins_t *pins, uint64_t cycle)
+{
+    if (!pins->emit) {
+        return; /* not initialised yet */
+    }
+    for (int n = 0; n < PD_PINS_COUNT; n++) {
+        pd_pin_t *p = &pins->pin[n];
+        if (p->emitted_mode >= 0) {
+            pins->emit(pins->ctx, cycle, n, (enum pd_pin_mode)p->emitted_mode, 0);
+        }
+        memset(p, 0, sizeof *p);
+        p->emitted_mode = -1;
     }
 }
 

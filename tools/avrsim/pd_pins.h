@@ -2,6 +2,13 @@
  * pd_pins.h: turns the level history of the Uno's output pins into the
  * protoduino trace (servo pulse widths and digital levels).
  *
+ * A pin's mode is what the firmware configured, which the runner reads from
+ * the MCU and passes with each sample: PWM while the firmware's PWM driver runs
+ * the pin, servo while a channel of the firmware's servo table drives it, digital
+ * otherwise (every level change a line). Only for a program without a servo
+ * table the runner can read (not protoduino's firmware) is a servo told from
+ * the shape of the pin's waveform (pd_pins.c states that rule).
+ *
  * It knows nothing about simavr: the runner feeds it (pin, is_output, level,
  * cycle) samples whenever a port or direction register may have changed, and
  * calls pd_pins_poll() regularly so that deadlines (a high level that lasted
@@ -26,6 +33,10 @@
 #define PD_PINS_LOW_WAIT_US 50000UL   /* how long an output low waits for a first pulse */
 #define PD_PINS_PWM_STEADY_US 5000UL  /* a PWM pin without an edge this long: duty 0 or 255 */
 #define PD_PINS_HYST_US 0.75          /* a smaller change of a servo's width is no change */
+
+/* pwm_tick for a PWM pin whose timer is disconnected from it while the firmware drives a
+ * steady level, as for duty 0 or 255: that duty at once. */
+#define PD_PINS_PWM_LEVEL UINT32_MAX
 
 enum pd_pin_mode {
     PD_PIN_MODE_NONE = 0,
@@ -82,10 +93,18 @@ void pd_pins_init(pd_pins_t *pins, uint32_t frequency, pd_pins_emit_fn emit, voi
 
 /* A possible change of one pin: is_output = DDR bit, level = the level driven
  * (the PORT bit, or the timer's compare output while it is connected),
- * pwm_tick = 0, or the cycles per tick of the pin's timer when that timer
- * runs in a PWM mode. */
+ * pwm_tick = 0, or the cycles per tick of the pin's timer while the pin makes
+ * PWM (the firmware's PWM driver runs it; for a program that does not say,
+ * while its timer runs in a PWM mode), or PD_PINS_PWM_LEVEL; servo = 1 while a channel of the firmware's servo table
+ * drives the pin, 0 while none does, -1 when the program has no servo table
+ * the runner can read (its waveform decides). */
 void pd_pins_sample(pd_pins_t *pins, int pin, int is_output, int port_bit, uint32_t pwm_tick,
-                    uint64_t cycle);
+                    int servo, uint64_t cycle);
+
+/* The MCU resets at `cycle` (every pin becomes an input): each pin that has a line gets a
+ * value-0 line in its mode, even if its value was 0 already, and then has no mode, as
+ * the native board releases its pins on a reboot; its next line starts afresh. */
+void pd_pins_reset(pd_pins_t *pins, uint64_t cycle);
 
 /* Resolves the deadlines that have passed at `cycle`. */
 void pd_pins_poll(pd_pins_t *pins, uint64_t cycle);
