@@ -197,7 +197,9 @@ def test_counters_lose_no_edge_at_the_documented_rate(tools: None, tmp_path: Pat
                 board.pose({s: (step * 7 + i) % 180 for i, s in enumerate(servos)})
                 step += 1
             assert step >= 10  # commands flowed while the pulses came
-            assert board.stats.input_reports - reports >= step  # and analog reports
+            # And analog reports flowed (the load this test is about). Not one per step: how
+            # many steps fit in an emulated millisecond depends on the host's speed.
+            assert board.stats.input_reports - reports >= 10
             # Every edge, and not one more (the counts settle at the trains' totals).
             assert both.wait_for(lambda n: n >= expected[0], timeout=TRACE_TIMEOUT) == expected[0]
             assert rising.wait_for(lambda n: n >= expected[1], timeout=TRACE_TIMEOUT) == expected[1]
