@@ -388,9 +388,14 @@ class SimBoard(ClosedOnExit):
             self._control_dir = Path(tempfile.mkdtemp(prefix="protoduino-"))
             self._control_path = self._control_dir / "control"
         self._control = SimControl(self._control_path)
-        cmd = owned(
-            _command(self.backend, self.trace_path, self.link, self._control_path, self.firmware)
-        )
+        if self.firmware is None:  # this board's backend (a subclass may bring its own)
+            cmd = self._backend.command(self.trace_path, self.link, self._control_path)
+        else:
+            cmd = _FIRMWARE_COMMANDS[self.backend](
+                self.trace_path, self.link, self._control_path, self.firmware
+            )
+        check_loadable(Path(cmd[0]), f"the {self.backend} board")
+        cmd = owned(cmd)
         cmd += self.options
         logger.debug("starting %s", " ".join(cmd))
         # stderr is inherited: the board writes there only when something is wrong.

@@ -162,15 +162,17 @@ def test_the_real_uno_examples(
 def test_the_install_examples(
     blank_uno: tuple[UnoProcess, Path], workdir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """flash (on an Uno holding only Optiboot), sim (its port answers), demo (passes)."""
+    """flash (on an Uno holding only Optiboot), info (the flashed firmware answers), sim (its
+    port answers), demo (passes)."""
     uno, _trace = blank_uno
     lines = block("install")
-    assert [shlex.split(x)[1] for x in lines] == ["flash", "sim", "demo"]
+    assert [shlex.split(x)[1] for x in lines] == ["flash", "info", "sim", "demo"]
     assert run(lines[0], {UNO_PORT: uno.port}) == 0
+    assert run(lines[1], {UNO_PORT: uno.port}) == 0
     with Board.open(uno.port) as board:  # the flashed firmware answers
         assert board.info.num_pins == 20
     sim = subprocess.Popen(
-        [sys.executable, "-m", "protoduino.cli.main", *shlex.split(lines[1])[1:]],
+        [sys.executable, "-m", "protoduino.cli.main", *shlex.split(lines[2])[1:]],
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,
@@ -185,7 +187,7 @@ def test_the_install_examples(
         sim.wait(10)
         assert sim.stdout is not None
         sim.stdout.close()
-    assert run(lines[2], {}) == 0
+    assert run(lines[3], {}) == 0
     assert "demo done" in capsys.readouterr().out
 
 
