@@ -196,7 +196,7 @@ def test_a_real_rclpy_node_drives_and_reads_every_topic_type(
     encoders = f"/{ns}/sensors/encoders"
     node.request("sub", topic=encoders, type="std_msgs/msg/Int32MultiArray", qos="sensor")
     node.request("sub", topic="/diagnostics", type="diagnostic_msgs/msg/DiagnosticArray")
-    bridge(ROBOT.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
+    process = bridge(ROBOT.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
     wait_for_pin(sim, 9, now_at(SAFE_90_US))
 
     # To the board, reliable. A publisher that matched the bridge's subscription may still
@@ -213,7 +213,11 @@ def test_a_real_rclpy_node_drives_and_reads_every_topic_type(
             if wait_until(at_pins, timeout=2.0):
                 return
             if time.monotonic() > deadline:
-                raise AssertionError(f"{topic}: the pins show no {done}")
+                shown = {pin: pin_values(sim.trace(), pin)[-3:] for pin, _ in done}
+                raise AssertionError(
+                    f"{topic}: the pins show no {done} but {shown}; the bridge printed:\n"
+                    + process.output()[-4000:]
+                )
 
     pub("servo/pan", "std_msgs/msg/Float64", {"data": 45.0}, (9, to_us(45)))
     # pan 0.5 rad -> 90 + 28.6 -> 119 degrees; tilt -0.3 rad -> 90 - 17.2 -> 73 degrees.
