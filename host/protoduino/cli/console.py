@@ -16,30 +16,18 @@ import contextlib
 import signal
 import sys
 import threading
-from pathlib import Path
 from types import FrameType
 
 from ..errors import ProtoduinoError
-from ..simboard import BACKENDS
 from . import argtypes
-from .options import add_port, board_options, error, load_url_handlers
+from .options import add_port, add_sim, board_options, error, load_url_handlers, sim_check
 
 HELP = "a live web page that shows the board and drives it (see docs/console.md)"
 
 
 def register(parser: argparse.ArgumentParser) -> None:
     add_port(parser, required=False)
-    parser.add_argument(
-        "--sim",
-        nargs="?",
-        const="native",
-        choices=sorted(BACKENDS),
-        help="instead of PORT: start a simulated board, native (the default) or avr (the "
-        "emulated Uno), with the example robot; it stops with the console",
-    )
-    parser.add_argument(
-        "--trace", type=Path, metavar="FILE", help="with --sim: the board's pin trace"
-    )
+    add_sim(parser, what="with the example robot; it stops with the console")
     parser.add_argument(
         "--example",
         action="store_true",
@@ -90,11 +78,7 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def check(args: argparse.Namespace) -> str | None:
-    if (args.port is None) == (args.sim is None):
-        return "give a PORT or --sim (a simulated board), one of them"
-    if args.trace is not None and args.sim is None:
-        return "--trace is the simulated board's: it needs --sim"
-    return None
+    return sim_check(args)
 
 
 def run(args: argparse.Namespace) -> int:

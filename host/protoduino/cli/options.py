@@ -74,6 +74,36 @@ def add_port(parser: argparse.ArgumentParser, *, required: bool = True) -> None:
     add_capture(parser)
 
 
+def add_sim(parser: argparse.ArgumentParser, *, what: str) -> None:
+    """``--sim [native|avr]`` instead of PORT, and ``--trace`` with it: a simulated board
+    this command starts and owns; ``what`` says what the command does with it."""
+    from ..simboard import BACKENDS
+
+    parser.add_argument(
+        "--sim",
+        nargs="?",
+        const="native",
+        choices=sorted(BACKENDS),
+        help="instead of PORT: start a simulated board, native (the default) or avr (the "
+        f"emulated Uno), {what}",
+    )
+    parser.add_argument(
+        "--trace", type=Path, metavar="FILE", help="with --sim: the board's pin trace"
+    )
+
+
+def sim_check(args: argparse.Namespace, *sim_only: str) -> str | None:
+    """A PORT or ``--sim``, one of them; ``--trace`` and each option named in ``sim_only``
+    (by its attribute) only with ``--sim``."""
+    if (args.port is None) == (args.sim is None):
+        return "give a PORT or --sim (a simulated board), one of them"
+    if args.sim is None:
+        for name in ("trace", *sim_only):
+            if getattr(args, name) is not None:
+                return f"--{name} is the simulated board's: it needs --sim"
+    return None
+
+
 def add_capture(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--capture",

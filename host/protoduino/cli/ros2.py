@@ -20,9 +20,16 @@ from pathlib import Path
 from types import FrameType
 
 from ..errors import ProtoduinoError
-from ..simboard import BACKENDS
 from . import argtypes
-from .options import add_port, error, load_url_handlers, session_of, start_afresh
+from .options import (
+    add_port,
+    add_sim,
+    error,
+    load_url_handlers,
+    session_of,
+    sim_check,
+    start_afresh,
+)
 
 HELP = "run the ROS 2 bridge: the board's pins as ROS 2 topics on DDS (see docs/ros2.md)"
 
@@ -36,17 +43,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="robot.yaml: the namespace and which pins are which topics (required with a "
         "PORT; with --sim the default is the example robot of docs/ros2.md)",
     )
-    parser.add_argument(
-        "--sim",
-        nargs="?",
-        const="native",
-        choices=sorted(BACKENDS),
-        help="instead of PORT: start a simulated board, native (the default) or avr (the "
-        "emulated Uno), and bridge it; it stops with the bridge",
-    )
-    parser.add_argument(
-        "--trace", type=Path, metavar="FILE", help="with --sim: the board's pin trace"
-    )
+    add_sim(parser, what="and bridge it; it stops with the bridge")
     parser.add_argument(
         "--control",
         type=Path,
@@ -67,12 +64,8 @@ def check(args: argparse.Namespace) -> str | None:
     from ..ros2.config import load_config
     from ..ros2.example import example_config
 
-    if (args.port is None) == (args.sim is None):
-        return "give a PORT or --sim (a simulated board), one of them"
-    if args.trace is not None and args.sim is None:
-        return "--trace is the simulated board's: it needs --sim"
-    if args.control is not None and args.sim is None:
-        return "--control is the simulated board's: it needs --sim"
+    if (problem := sim_check(args, "control")) is not None:
+        return problem
     if args.config is None and args.sim is None:
         return "--config FILE is required with a PORT (docs/ros2.md shows one)"
     try:
