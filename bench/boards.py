@@ -39,7 +39,6 @@ from protoduino.errors import ProtoduinoError
 from protoduino.framing import DELIMITER, StreamDecoder, frame_packet
 from protoduino.messages import ArduinoIn, parse_out
 from protoduino.packets import Packet, parse_control, reset_payload
-from protoduino.simboard import BACKENDS as BACKEND_TABLE
 from protoduino.simboard import Backend, SimBoard
 from protoduino_dev import runnerstats
 
@@ -141,12 +140,18 @@ def on_each_board(
 
 
 class _RunnerBoard(SimBoard):
-    """The simavr runner with a command line of the bench's own (SimBoard has no option for
-    --stats, --profile or another program); everything else is SimBoard's."""
+    """The simavr runner with a program of the bench's own (another project's hex, the
+    runner's echo), which SimBoard's backends do not run; everything else is SimBoard's."""
 
     def __init__(self, backend: Backend, trace: Path | None = None) -> None:
         super().__init__("avr", trace=trace)
         self._backend = backend
+
+
+def _only_its_own(program: Path | None) -> None:
+    """A backend that runs one fixed program refuses another build."""
+    if program is not None:
+        raise ValueError(f"this bench board runs its own program, not {program}")
 
 
 def _hex_backend(hex_file: Path, stats: Path) -> Backend:
@@ -154,25 +159,14 @@ def _hex_backend(hex_file: Path, stats: Path) -> Backend:
     from protoduino.simboard import runner_command
     from protoduino_dev import build as builds
 
-    def command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
+    def command(
+        trace: Path | None, link: Path | None, control: Path | None, program: Path | None
+    ) -> list[str]:
+        _only_its_own(program)
         cmd = runner_command(trace=trace, link=link, control=control, hex_files=[hex_file])
         return [*cmd, "--stats", str(stats)]
 
     return Backend(build=builds.build_runner, command=command)
-
-
-def _stats_backend(stats: Path, profile: Path | None) -> Backend:
-    """The avr backend with ``--stats FILE`` (and ``--profile FILE``) before the firmware."""
-    base = BACKEND_TABLE["avr"]
-    extra = ["--stats", str(stats)]
-    if profile is not None:
-        extra += ["--profile", str(profile)]
-
-    def command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
-        cmd = base.command(trace, link, control)
-        return [*cmd[:-1], *extra, cmd[-1]]
-
-    return Backend(build=base.build, command=command)
 
 
 def _echo_backend() -> Backend:
@@ -184,7 +178,10 @@ def _echo_backend() -> Backend:
         builds.build_test_program()
         return builds.build_runner()
 
-    def command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
+    def command(
+        trace: Path | None, link: Path | None, control: Path | None, program: Path | None
+    ) -> list[str]:
+        _only_its_own(program)
         return runner_command(builds.TEST_PROGRAM, trace=trace, link=link, control=control)
 
     return Backend(build=build, command=command)
@@ -210,12 +207,12 @@ def started(
         raise ValueError("cycle statistics exist only on the emulated Uno (avr)")
     if profile is not None and stats is None:
         raise ValueError("a profile is written with the statistics: give stats= too")
-    sim = (
-        _RunnerBoard(_stats_backend(stats, profile), trace)
-        if stats is not None
-        else SimBoard(backend, trace=trace)
-    )
-    yield from _run(sim)
+    options: list[str] = []
+    if stats is not None:
+        options += ["--stats", str(stats)]
+    if profile is not None:
+        options += ["--profile", str(profile)]
+    yield from _run(SimBoard(backend, trace=trace, options=options))
 
 
 @contextlib.contextmanager

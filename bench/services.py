@@ -29,7 +29,7 @@ from tempfile import TemporaryDirectory
 
 from protoduino import Board
 from protoduino._generated import protoduino_pb2 as pb
-from protoduino.simboard import Backend, SimBoard, runner_command
+from protoduino.simboard import SimBoard
 from protoduino_dev import build as builds
 
 from .boards import (
@@ -37,7 +37,6 @@ from .boards import (
     BoardUnavailableError,
     CycleCounter,
     Percentiles,
-    _RunnerBoard,
     missing_tool,
 )
 from .core import Context, Section, SectionResult, Target, md_table
@@ -95,12 +94,7 @@ def builtin_command() -> bytes:
 
 def _stats_board(elf: Path, stats: Path) -> SimBoard:
     """The emulated Uno running ``elf`` with the runner's --stats counters."""
-
-    def command(trace: Path | None, link: Path | None, control: Path | None) -> list[str]:
-        cmd = runner_command(elf, trace=trace, link=link, control=control)
-        return [*cmd[:-1], "--stats", str(stats), cmd[-1]]
-
-    return _RunnerBoard(Backend(build=lambda: elf, command=command))
+    return SimBoard("avr", firmware=elf, options=("--stats", str(stats)))
 
 
 def round_trips(

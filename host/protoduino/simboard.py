@@ -84,8 +84,9 @@ class Backend:
 
     #: Builds everything the board needs and returns the program to run.
     build: Callable[[], Path]
-    #: The full command line for the built program, given --trace, --link and --control.
-    command: Callable[[Path | None, Path | None, Path | None], list[str]]
+    #: The full command line for the built program, given --trace, --link, --control and
+    #: another build of the board's program (a user service's; None: the backend's own).
+    command: Callable[[Path | None, Path | None, Path | None, Path | None], list[str]]
 
 
 def _build_native() -> Path:
@@ -231,28 +232,18 @@ BACKENDS: dict[str, Backend] = {
 }
 
 
-#: Backend name -> its command line for another build of its program (a user service's).
-_FIRMWARE_COMMANDS: dict[
-    str, Callable[[Path | None, Path | None, Path | None, Path], list[str]]
-] = {
-    "native": _native_command,
-    "avr": _avr_command,
-}
-
-
 def _command(
-    backend: str,
+    backend: Backend,
+    name: str,
+    *,
     trace: Path | None,
     link: Path | None,
     control: Path | None,
     firmware: Path | None,
 ) -> list[str]:
-    if firmware is None:
-        cmd = _backend(backend).command(trace, link, control)
-    else:
-        _backend(backend)  # the name's check
-        cmd = _FIRMWARE_COMMANDS[backend](trace, link, control, firmware)
-    check_loadable(Path(cmd[0]), f"the {backend} board")
+    """``backend``'s command line, its program checked for its shared libraries."""
+    cmd = backend.command(trace, link, control, firmware)
+    check_loadable(Path(cmd[0]), f"the {name} board")
     return cmd
 
 
@@ -281,7 +272,9 @@ def command(
     """The command line that runs an already built board (``firmware``: another build
     of its program, as :class:`SimBoard` takes it); :class:`BuildError` if its program
     lacks a shared library (:func:`check_loadable`)."""
-    return _command(backend, trace, link, control, firmware)
+    return _command(
+        _backend(backend), backend, trace=trace, link=link, control=control, firmware=firmware
+    )
 
 
 #: The option that makes a board owned: its stdin is the owner's pipe.
@@ -388,13 +381,15 @@ class SimBoard(ClosedOnExit):
             self._control_dir = Path(tempfile.mkdtemp(prefix="protoduino-"))
             self._control_path = self._control_dir / "control"
         self._control = SimControl(self._control_path)
-        if self.firmware is None:  # this board's backend (a subclass may bring its own)
-            cmd = self._backend.command(self.trace_path, self.link, self._control_path)
-        else:
-            cmd = _FIRMWARE_COMMANDS[self.backend](
-                self.trace_path, self.link, self._control_path, self.firmware
-            )
-        check_loadable(Path(cmd[0]), f"the {self.backend} board")
+        # This board's backend: a subclass may bring its own.
+        cmd = _command(
+            self._backend,
+            self.backend,
+            trace=self.trace_path,
+            link=self.link,
+            control=self._control_path,
+            firmware=self.firmware,
+        )
         cmd = owned(cmd)
         cmd += self.options
         logger.debug("starting %s", " ".join(cmd))
