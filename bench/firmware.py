@@ -680,9 +680,9 @@ def write_build_quotes() -> list[Path]:
     documents that quote them, without running the rest of the bench: after a firmware
     change, which tests/c/test_footprint.py otherwise reports. Returns the files changed."""
     from . import report
-    from .runner import QUOTING
 
-    return report.quote(QUOTING, build_quotes(footprint(builds.FIRMWARE_ELF), build_static_ram()))
+    quotes = build_quotes(footprint(builds.FIRMWARE_ELF), build_static_ram())
+    return report.quote(report.QUOTING, quotes)
 
 
 if __name__ == "__main__":  # python -m bench.firmware

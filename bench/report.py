@@ -8,6 +8,10 @@ from pathlib import Path
 
 from .core import Context, Section, SectionResult, md_table
 
+ROOT = Path(__file__).resolve().parents[1]
+#: Documents that quote figures of the full run (:func:`quote`).
+QUOTING = (ROOT / "README.md", ROOT / "firmware" / "README.md", ROOT / "docs" / "ros2.md")
+
 
 def _verdict(met: bool | None) -> str:
     if met is None:

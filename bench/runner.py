@@ -21,8 +21,6 @@ log = logging.getLogger(__name__)
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 PARTIAL = ROOT / "build" / "bench"
-#: Documents that quote figures of the full run (bench.report.quote).
-QUOTING = (ROOT / "README.md", ROOT / "firmware" / "README.md", DOCS / "ros2.md")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -138,6 +136,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         quotes: dict[str, str] = {}
         for _section, result in results:
             quotes.update(result.quotes)
-        for path in report.quote(QUOTING, quotes):
+        for path in report.quote(report.QUOTING, quotes):
             log.info("quoted this run's figures in %s", path)
     return 0
