@@ -609,7 +609,9 @@ def _host_cpu_table(cpu: dict[str, list[HostCpuRun]]) -> str:
     for backend, runs in cpu.items():
         done = [r for r in runs if r.error is None]
         baud = f", {done[0].baud:,} baud" if done else ""
-        count = f"{len(done)} of {len(runs)} runs" if len(done) < len(runs) else f"{len(runs)} runs"
+        count = f"{len(runs)} run{'s' if len(runs) > 1 else ''}"
+        if len(done) < len(runs):
+            count = f"{len(done)} of {count}"
         header.append(f"{BOARD_LABELS.get(backend, backend).split(' (')[0]} ({count}{baud})")
         columns.append(_cpu_medians(runs))
     rows: list[list[str]] = []
