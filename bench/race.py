@@ -107,7 +107,13 @@ HOST_CPU_RUNS = 5
 HOST_CPU_BOARDS = ("native", "avr")
 HOST_CPU_GOAL = 60e-6
 #: Its call kinds, in the report's order: the blocking ones, then the flat-out ones.
-HOST_CPU_KINDS = ("digital write", "servo write", "pose (6 outputs)", "digital flat out")
+HOST_CPU_KINDS = (
+    "digital write",
+    "servo write",
+    "servo write, no pause",
+    "pose (6 outputs)",
+    "digital flat out",
+)
 
 LABELS = ("protoduino", "StandardFirmata")
 #: The rate protoduino's Board agrees on with the Uno firmware (docs/protocol.md 5, *Line rate*).
@@ -554,8 +560,9 @@ def _cpu_flat_out(calls: int, issue: Callable[[int], Future[None]]) -> float:
 def host_cpu_run(backend: str, samples: int, commands: int, seed: int) -> HostCpuRun:
     """Host CPU per acked command of every call kind on a fresh ``backend`` board at the rate
     its Board agrees on, window WINDOW, the automatic Ping on: ``samples`` digital writes and
-    a quarter as many servo writes, one at a time after the race's random pauses, then
-    ``commands`` digital writes and a third as many poses of six outputs flat out."""
+    a quarter as many servo writes, one at a time after the race's random pauses, the servo
+    writes again back to back, then ``commands`` digital writes and a third as many poses of
+    six outputs flat out."""
     run = HostCpuRun(backend)
     rng = random.Random(seed)
     with started(backend) as sim, Board.open(sim.port, window=WINDOW, baudrate=None) as board:
@@ -569,6 +576,10 @@ def host_cpu_run(backend: str, samples: int, commands: int, seed: int) -> HostCp
         )
         run.cpu["servo write"] = _cpu_per_call(
             len(angles), lambda i: servo.write(angles[i][0]), SERVO_GAP, rng
+        )
+        # The same calls back to back: what a pause before each call adds to its CPU.
+        run.cpu["servo write, no pause"] = _cpu_per_call(
+            len(angles), lambda i: servo.write(angles[i][0]), 0.0, rng
         )
         run.cpu["pose (6 outputs)"] = _cpu_flat_out(
             _poses(commands), lambda i: board.submit_pose(dict.fromkeys(outs, i % 2 == 0))
@@ -1163,7 +1174,9 @@ def run(ctx: Context) -> SectionResult:
         f"window {WINDOW}, the automatic Ping on: {samples} `DigitalOutput.write` and "
         f"{_servo_samples(samples)} `Servo.write` calls one at a time after the race's random "
         f"pauses (up to {DIGITAL_GAP * 1e3:g} and {SERVO_GAP * 1e3:g} ms), a run's figure the "
-        "median of `time.process_time` around each call; then "
+        "median of `time.process_time` around each call, and the same servo writes again "
+        "back to back (no pause: what a pause before a call adds to its CPU on this "
+        "machine); then "
         f"{_poses(ctx.commands)} `submit_pose` of {len(POSE_PINS)} digital outputs and "
         f"{ctx.commands // 2 * 2} `DigitalOutput.submit` flat out, a run's figure the "
         "process CPU from the first call to the last Ack over the calls. Every thread of "
