@@ -2,7 +2,8 @@
 
 The thread opens the port, reads in bulk and feeds the incremental
 :class:`~protoduino.framing.StreamDecoder`, writes the queued packets
-(CONTROL ahead of COMMAND), and calls its listener's ``transport_tick`` at
+(CONTROL ahead of COMMAND; on a plain POSIX port every packet queued in one
+write, issue 35), and calls its listener's ``transport_tick`` at
 least every ``TICK`` seconds so that the layers above can run their timers
 (handshake backoff, watchdog, retransmission, ping) on the same thread,
 without locks around the port and without threads of their own. The tick
@@ -37,9 +38,9 @@ pass of the I/O thread per command (issue 23). One lock (``_wlock``) is held
 around taking a packet, giving it its SEQ and writing it, by whichever thread
 writes, and around opening, closing and re-rating the port: frames leave
 whole, in the order they were sent, their SEQs in order on the wire. The
-write is the same (:meth:`_write_item`): a timeout drops the packet and keeps
-its SEQ; any other failure is handed to the I/O thread, which loses the port
-as if its own write had failed. Reading, the timers, the frame monitors and
+write is the same (:meth:`_write_items`): a timeout drops the packet and its
+SEQ goes to the next; any other failure is handed to the I/O thread, which
+loses the port as if its own write had failed. Reading, the timers, the frame monitors and
 losing the port stay the I/O thread's: a frame written by a caller is shown to
 the monitors by the I/O thread, before anything it reads after it (the record
 is queued under the lock that the write holds, and the I/O thread takes that
@@ -561,28 +562,39 @@ class Transport:
             return bytes(self._port.read(READ_CHUNK))
         return b""
 
-    def _take(self) -> _Outgoing | None:
-        """The next packet to write, out of its queue (CONTROL first).
+    def _take(self) -> list[_Outgoing]:
+        """The packets to write next, out of their queues (CONTROL first): every one queued
+        on a plain POSIX port (they leave in one write: :meth:`_write_items`), else one.
 
-        Taken before it is written: a write that times out drops it, and any other
-        failure loses the port, whose queues are then cleared (:meth:`_lost`).
+        Taken before they are written: a write that times out drops the packet it cut,
+        and any other failure loses the port, whose queues are then cleared (:meth:`_lost`).
         """
         with self._qlock:
+            if self._raw:
+                items = [*self._control, *self._data]
+                self._control.clear()
+                self._data.clear()
+                return items
             if self._control:
-                return self._control.popleft()
+                return [self._control.popleft()]
             if self._data:
-                return self._data.popleft()
-            return None
+                return [self._data.popleft()]
+            return []
+
+    def _put_back(self, items: list[_Outgoing]) -> None:
+        """Return packets taken and not written to the front of their queues, in order."""
+        with self._qlock:
+            for item in reversed(items):
+                (self._control if item.ptype is PacketType.CONTROL else self._data).appendleft(item)
 
     def _flush_writes(self) -> None:
         # The deques are looked at without the lock first (their length is atomic): most
         # passes of the loop have nothing to write.
         while self._control or self._data:
             with self._wlock:  # taken and written as one: a caller's write goes after it
-                item = self._take()
-                rec = None if item is None else self._write_item(item)
-            if rec is None:
-                break
+                items = self._take()
+                if not items or not self._write_items(items):
+                    break  # a write timed out: what is left goes at the next pass
         self._show_written()
 
     def _show_written(self) -> None:
@@ -600,7 +612,7 @@ class Transport:
     def _direct_write(self, item: _Outgoing) -> None:
         """Write a caller's COMMAND on its own thread (``_wlock`` held; module docstring)."""
         try:
-            self._write_item(item)  # the I/O thread shows it to the monitors
+            self._write_items([item])  # the I/O thread shows it to the monitors
         except (serial.SerialException, OSError) as error:
             # Lost with the port, as the I/O thread's own failed write would be: it
             # loses the port (the link goes down there, on its thread), woken for it.
@@ -609,48 +621,83 @@ class Transport:
             return
         self.direct_writes += 1
 
-    def _write_item(self, item: _Outgoing) -> FrameRecord | None:
-        """Give ``item`` its SEQ, write it and keep its record (``_wlock`` held: the
-        recent frames in the order written); None if the write timed out.
+    def _write_items(self, items: list[_Outgoing]) -> bool:
+        """Give each of ``items`` its SEQ and write them as one (``_wlock`` held), keeping
+        their records in the order written; False if the write timed out.
 
-        A write that times out drops the packet (the layers above retransmit) and
-        keeps its SEQ for the next one, as docs/protocol.md 6 asks; any other failure
-        raises.
+        Packets queued together leave in one write (issue 35: each write is a system call
+        that also wakes the reader; flat out at window 4 on the simulated board the I/O
+        thread made about one write per pass, 1,422 for 3,000 commands, not one per
+        command; the host CPU per command moved less than the runs' spread). On a plain
+        POSIX port,
+        ``os.write`` says how many bytes the driver took: the frames it took whole are
+        written; the one it cut is finished through pyserial, which waits for room and
+        gives up after WRITE_TIMEOUT; the rest go back to the front of their queues, for
+        the next write. Any other port takes one packet at a time (:meth:`_take`).
+
+        A write that times out drops the packet it cut (the layers above retransmit) and
+        that packet's SEQ goes to the next one, as docs/protocol.md 6 asks; any other
+        failure raises.
         """
-        seq = 0 if item.reset_seq else self._tx_seq
-        frame = frame_packet(item.ptype, seq, item.payload)
-        if item.reset_seq:
-            frame = DELIMITER + frame  # flush the device's receiver before a reset
+        seq = self._tx_seq
+        seqs: list[int] = []
+        frames: list[bytes] = []
+        for item in items:
+            sent = 0 if item.reset_seq else seq
+            frame = frame_packet(item.ptype, sent, item.payload)
+            # A RESET flushes the device's receiver first.
+            frames.append(DELIMITER + frame if item.reset_seq else frame)
+            seqs.append(sent)
+            seq = 1 if item.reset_seq else (sent + 1) & 0xFF
+        taken = self._write_some(frames[0] if len(frames) == 1 else b"".join(frames))
+        whole = end = 0  # frames the driver took whole, and their bytes
+        for frame in frames:
+            if end + len(frame) > taken:
+                break
+            end += len(frame)
+            whole += 1
+        timed_out = False
+        if whole < len(frames):
+            try:
+                self._port.write(frames[whole][taken - end :])
+            except serial.SerialTimeoutException:
+                self.write_errors += 1
+                log.warning("%s: write timed out; packet dropped", self.name)
+                timed_out = True
+            else:
+                taken = end = end + len(frames[whole])
+                whole += 1
+            self._put_back(items[whole + timed_out :])
+        self.tx_bytes += taken
+        for item, sent in zip(items[:whole], seqs, strict=False):
+            self._tx_seq = 1 if item.reset_seq else (sent + 1) & 0xFF
+            self.tx_packets += 1
+            rec = FrameRecord(time.monotonic(), "tx", Packet(item.ptype, sent, item.payload))
+            self._recent.append(rec)
+            if self._monitors:
+                self._unshown.append(rec)
+        return not timed_out
+
+    def _write_some(self, data: bytes) -> int:
+        """One ``os.write`` of ``data`` to a plain POSIX port: the bytes the driver took (0
+        when it has no room); on any other port nothing is written (0): pyserial writes all."""
+        fd = self._fd
+        if not self._raw or fd is None:
+            return 0
         try:
-            self._write_raw(frame)
-        except serial.SerialTimeoutException:
-            self.write_errors += 1
-            log.warning("%s: write timed out; packet dropped", self.name)
-            return None
-        self._tx_seq = 1 if item.reset_seq else (seq + 1) & 0xFF
-        self.tx_packets += 1
-        rec = FrameRecord(time.monotonic(), "tx", Packet(item.ptype, seq, item.payload))
-        self._recent.append(rec)
-        if self._monitors:
-            self._unshown.append(rec)
-        return rec
+            return os.write(fd, data)
+        except OSError as error:
+            if error.errno not in _RETRY_ERRNOS:
+                raise serial.SerialException(f"write failed: {error}") from error
+            return 0
 
     def _write_raw(self, data: bytes) -> None:
-        fd = self._fd
-        if self._raw and fd is not None:
-            # What pyserial's write does first, without its select for room afterwards
-            # (one syscall, not two): the rest, if the driver took only part, goes
-            # through pyserial, which waits for room and gives up after WRITE_TIMEOUT.
-            try:
-                n = os.write(fd, data)
-            except OSError as error:
-                if error.errno not in _RETRY_ERRNOS:
-                    raise serial.SerialException(f"write failed: {error}") from error
-                n = 0
-            if n < len(data):
-                self._port.write(data[n:])
-        else:
-            self._port.write(data)
+        # What pyserial's write does first, without its select for room afterwards (one
+        # syscall, not two): the rest, if the driver took only part, goes through pyserial,
+        # which waits for room and gives up after WRITE_TIMEOUT.
+        taken = self._write_some(data)
+        if taken < len(data):
+            self._port.write(data[taken:])
         self.tx_bytes += len(data)
 
     def _record(self, direction: str, item: Packet | BadFrame) -> FrameRecord:

@@ -216,3 +216,113 @@ def test_a_packet_queued_on_the_io_thread_is_written_without_a_wake_up(
             assert _packets(master, decoder) == [Packet(PacketType.COMMAND, n, bytes([n + 1]))]
     finally:
         transport.close()
+
+
+class _PortWrites:
+    """``os.write`` as the transport calls it, counting the writes to one descriptor; each
+    of them takes at most ``room.pop(0)`` bytes while ``room`` lists any (a full driver)."""
+
+    def __init__(self, fd: int, room: list[int] | None = None) -> None:
+        self.fd = fd
+        self.room = room or []
+        self.calls: list[int] = []  # the length of each write asked for
+        self._write = os.write
+
+    def __call__(self, fd: int, data: bytes) -> int:
+        if fd != self.fd:
+            return self._write(fd, data)
+        self.calls.append(len(data))
+        if self.room:
+            return self._write(fd, bytes(data)[: self.room.pop(0)])
+        return self._write(fd, data)
+
+
+def _queued(path: str, payloads: list[bytes]) -> Transport:
+    """A transport on the pty at ``path``, its port open, ``payloads`` queued as COMMANDs (no
+    I/O thread: the test flushes them as the thread's pass does)."""
+    transport = Transport(path)
+    transport._open()
+    for payload in payloads:
+        transport.send(PacketType.COMMAND, payload)
+    return transport
+
+
+def _read_all(master: int, decoder: StreamDecoder) -> list[object]:
+    """Every frame the transport wrote so far (it wrote before this is called)."""
+    got: list[object] = []
+    while select.select([master], [], [], 0)[0]:
+        got += decoder.feed(os.read(master, 4096))
+    return got
+
+
+def test_packets_queued_together_leave_in_one_write(
+    pty: tuple[int, str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 35: the I/O thread writes every packet queued (a window's next calls, sent as
+    a batch of Acks came in) in one write to a plain POSIX port, their SEQs in order."""
+    master, path = pty
+    payloads = [b"\x08\x01", b"\x08\x02\x10\x01", b"\x08\x03"]
+    transport = _queued(path, payloads)
+    try:
+        assert transport._fd is not None
+        writes = _PortWrites(transport._fd)
+        monkeypatch.setattr(os, "write", writes)
+        transport._flush_writes()
+        monkeypatch.undo()
+        assert len(writes.calls) == 1
+        got = _read_all(master, StreamDecoder())
+        assert got == [Packet(PacketType.COMMAND, n, p) for n, p in enumerate(payloads)]
+        assert (transport.tx_packets, transport.tx_seq) == (3, 3)
+        assert [r.item for r in transport._recent] == got  # recorded in the order written
+    finally:
+        transport._close_port()
+
+
+def test_a_write_the_driver_cuts_finishes_its_frame_and_sends_the_rest_after(
+    pty: tuple[int, str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A driver with room for part of the batch: the frame it cut is finished (pyserial waits
+    for room), the frames after it go in the next write; nothing is lost or reordered."""
+    master, path = pty
+    payloads = [b"\x08\x01\x10\x01", b"\x08\x02\x10\x01", b"\x08\x03\x10\x01"]
+    transport = _queued(path, payloads)
+    try:
+        assert transport._fd is not None
+        first = len(frame_packet(PacketType.COMMAND, 0, payloads[0]))
+        writes = _PortWrites(transport._fd, room=[first + 2])  # the second frame is cut
+        monkeypatch.setattr(os, "write", writes)
+        transport._flush_writes()
+        monkeypatch.undo()
+        assert writes.calls[0] == 3 * first  # the three asked for in one write
+        got = _read_all(master, StreamDecoder())
+        assert got == [Packet(PacketType.COMMAND, n, p) for n, p in enumerate(payloads)]
+        assert (transport.tx_packets, transport.tx_seq, transport.write_errors) == (3, 3, 0)
+    finally:
+        transport._close_port()
+
+
+def test_a_write_that_times_out_drops_the_packet_it_cut_and_its_seq_goes_to_the_next(
+    pty: tuple[int, str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """docs/protocol.md 6: a frame that failed to write keeps its SEQ for the next one; the
+    packets queued behind it stay queued (the next pass writes them)."""
+    master, path = pty
+    payloads = [b"\x08\x01", b"\x08\x02", b"\x08\x03"]
+    transport = _queued(path, payloads)
+    try:
+        assert transport._fd is not None
+        monkeypatch.setattr(os, "write", _PortWrites(transport._fd, room=[0]))  # no room
+
+        def stuck(data: bytes) -> int:
+            raise serial.SerialTimeoutException("Write timeout")
+
+        monkeypatch.setattr(transport._port, "write", stuck)
+        transport._flush_writes()
+        monkeypatch.undo()
+        assert (transport.tx_packets, transport.tx_seq, transport.write_errors) == (0, 0, 1)
+        assert [item.payload for item in transport._data] == payloads[1:]
+        transport._flush_writes()
+        got = _read_all(master, StreamDecoder())
+        assert got == [Packet(PacketType.COMMAND, n, p) for n, p in enumerate(payloads[1:])]
+    finally:
+        transport._close_port()
