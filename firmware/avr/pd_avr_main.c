@@ -33,6 +33,8 @@ static const pd_board_info_t uno = {
     .counter_pins = (1UL << 2) | (1UL << 3),  /* INT0, INT1 */
     .servo_timer_pins = (1UL << 9) | (1UL << 10),
     .clock_timer_pins = (1UL << 5) | (1UL << 6),
+    .servo_timer = 1,
+    .clock_timer = 0,
 };
 
 uint16_t pd_hal_tx_room(void *hal)

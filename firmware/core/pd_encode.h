@@ -21,7 +21,26 @@
 #include <stdint.h>
 
 #include "pd_features.h"
+#include "pd_hal.h"
 #include "protoduino.pb.h"
+
+/*
+ * DeviceInfo's pin table (pins, timers: protocol version 7), written from the
+ * board's table (pd_hal_board_info) of the HAL in DeviceInfo.pins.arg (the
+ * core's opaque HAL pointer: pd_dispatch.c) for a DeviceInfo of num_pins > 0:
+ * never copied into the message's struct, so it costs the Uno's RAM nothing
+ * but the callbacks' pointers. Their bounds are the schema's max_size
+ * (protoduino.options), which nanopb's DeviceInfo size counts.
+ */
+#define PD_INFO_PINS_MAX 20u
+#define PD_INFO_TIMERS_MAX 3u
+/* Pin `pin`'s byte of DeviceInfo.pins: its PinBit flags and, in bits 5-7, 1 +
+ * the number of the timer the device holds that its PWM output needs. */
+uint8_t pd_encode_pin(const pd_board_info_t *board, uint8_t pin);
+/* How many bytes DeviceInfo.timers has (up to the highest timer held), and
+ * Timer `timer`'s (a TimerUse). */
+uint8_t pd_encode_timer_count(const pd_board_info_t *board);
+uint8_t pd_encode_timer(const pd_board_info_t *board, uint8_t timer);
 
 /*
  * The largest ArduinoOut the device can send, tighter than nanopb's

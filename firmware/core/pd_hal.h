@@ -34,7 +34,17 @@ typedef struct pd_board_info {
     /* Pins with a timer output whose timer runs the millisecond clock (the
      * Uno's Timer0: 5, 6): refused with STATUS_TIMER_IN_USE, never in pwm_pins. */
     uint32_t clock_timer_pins;
+    /* The numbers of those two timers (the Uno's 1 and 0), at most
+     * PD_INFO_TIMERS_MAX - 1: DeviceInfo.timers names them to the host. */
+    uint8_t servo_timer;
+    uint8_t clock_timer;
 } pd_board_info_t;
+/*
+ * This table is the board's one declaration of its pins: the core checks every
+ * command against it, and DeviceInfo's pin table (pins, timers: pd_encode.h,
+ * pd_encode_pin) is written from it, so the host refuses what the device would
+ * from what the device says.
+ */
 
 /*
  * Transmit is a queue the platform drains on its own (the Uno: the UART's
