@@ -20,6 +20,7 @@ from typing import Any
 import pytest
 from boardprocess import BoardProcess, missing_tool
 from protoduino import Board, CommandRejectedError
+from protoduino._generated import protoduino_pb2 as pb
 from protoduino.board import Edge
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard, runner_command
@@ -81,7 +82,7 @@ def test_a_build_without_servo_refuses_servos(tools: None) -> None:
             info = board.request(_info()).info
             assert not (info.features >> 1) & 1  # FEATURE_SERVO
             assert (info.features >> 5) & 1  # FEATURE_PWM
-            assert info.pwm_pins == (1 << 3) | (1 << 9) | (1 << 10) | (1 << 11)
+            assert [p for p, byte in enumerate(info.pins) if byte & pb.PIN_PWM] == [3, 9, 10, 11]
             with pytest.raises(CommandRejectedError) as refused:
                 board.request(_servo_init(9))
             assert refused.value.status == Status.STATUS_NOT_SUPPORTED
