@@ -20,7 +20,7 @@
 
 /* What the board is; reported in DeviceInfo and used to validate pins. */
 typedef struct pd_board_info {
-    const char *board;            /* "uno", "sim"; at most 15 characters */
+    const char *board;            /* "uno", "sim"; at most 11 characters */
     uint8_t num_pins;             /* pins are 0 .. num_pins - 1, at most PD_MAX_PINS */
     uint8_t max_servos;           /* at most PD_MAX_SERVOS */
     uint32_t reserved_pins;       /* bit N set: pin N is reserved (the Uno's UART: 0, 1) */

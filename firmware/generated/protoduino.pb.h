@@ -314,7 +314,7 @@ typedef struct _protoduino_DeviceInfo {
     char firmware_version[16];
     uint8_t protocol_version;
     uint32_t schema_id;
-    char board[16];
+    char board[12];
     uint8_t num_pins; /* pins are numbered 0 .. num_pins - 1 */
     uint8_t max_servos;
     pb_size_t reserved_pins_count;
@@ -1028,9 +1028,9 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_DeviceInfo_size               100 /* callbacks at their max_size */
-#define protoduino_Ack_size                      129 /* callbacks at their max_size */
-#define protoduino_ArduinoOut_size               132 /* callbacks at their max_size */
+#define protoduino_DeviceInfo_size               96 /* callbacks at their max_size */
+#define protoduino_Ack_size                      125 /* callbacks at their max_size */
+#define protoduino_ArduinoOut_size               127 /* callbacks at their max_size */
 #define protoduino_AnalogInputInit_size          19
 #define protoduino_ArduinoIn_size                108
 #define protoduino_ClearInterlock_size           3

@@ -112,7 +112,7 @@ static void test_encode_ack_info(void)
     CHECK_EQ(compare(&out), 0);
     /* Longest strings, every field at its largest. */
     strcpy(info->firmware_version, "123456789012345");
-    strcpy(info->board, "abcdefghijklmno");
+    strcpy(info->board, "abcdefghijk"); /* 11: the longest (protoduino.options) */
     /* (at their widths on the device: protoduino.options) */
     info->protocol_version = UINT8_MAX;
     info->schema_id = 0xFFFFFFFFu;
