@@ -148,7 +148,7 @@ static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
     }
     const pd_board_info_t *board = pd_hal_board_info(info->pins.arg);
     uint8_t timers = pd_encode_timer_count(board);
-    if (n > PD_INFO_PINS_MAX || timers > PD_INFO_TIMERS_MAX) {
+    if (n > PD_MAX_PINS || timers > PD_INFO_TIMERS_MAX) {
         w->ok = false;
         return;
     }
@@ -172,7 +172,7 @@ uint8_t pd_encode_pin(const pd_board_info_t *board, uint8_t pin)
         return 0;
     }
     uint32_t bit = 1UL << pin;
-    uint8_t v = protoduino_PinBit_PIN_DIGITAL;
+    uint8_t v = (board->analog_only_pins & bit) ? 0u : protoduino_PinBit_PIN_DIGITAL;
     if (board->pwm_pins & bit) {
         v |= protoduino_PinBit_PIN_PWM;
     }

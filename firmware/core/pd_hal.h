@@ -18,6 +18,12 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+/* The most pins a board of this build has (its num_pins): the pin registry's size, and
+ * DeviceInfo's pin table's (pd_encode.h). The Nano's profile has 22 (firmware/Makefile). */
+#ifndef PD_MAX_PINS
+#define PD_MAX_PINS 20
+#endif
+
 /* What the board is; reported in DeviceInfo and used to validate pins. */
 typedef struct pd_board_info {
     const char *board;            /* "uno", "sim"; at most 11 characters */
@@ -28,6 +34,9 @@ typedef struct pd_board_info {
     uint32_t pwm_pins;            /* bit N: pin N can do PWM (DeviceInfo.pwm_pins) */
     uint32_t analog_pins;         /* bit N: pin N is an analog input */
     uint32_t counter_pins;        /* bit N: pin N can count pulses */
+    /* Analog inputs and nothing else (the Nano's A6, A7: the ADC's inputs, no port
+     * behind them): every other mode is refused with STATUS_NOT_SUPPORTED. */
+    uint32_t analog_only_pins;
     /* PWM pins whose timer drives the servos (the Uno's Timer1: 9, 10): no PWM
      * there while a servo runs, no servo while one of them does PWM. */
     uint32_t servo_timer_pins;

@@ -226,6 +226,20 @@ class _Output:
         self.value = self.safe
 
 
+def incapable(info: DeviceInfo, pin: int, mode: PinMode) -> CommandRejectedError | None:
+    """Why ``pin`` cannot do ``mode`` on this board, as the device's pin table says
+    (``info.can``: no PWM, ADC or interrupt there, or no digital I/O at all, as the
+    Nano's A6 and A7); None if it can."""
+    if info.can(pin, mode):
+        return None
+    capable = info.pins_for(mode)
+    return refused(
+        Status.STATUS_NOT_SUPPORTED,
+        f"pin {pin} cannot be {mode.a_pin} on this "
+        f"{info.board} (those are {', '.join(map(str, capable)) or 'none'})",
+    )
+
+
 def conflict(
     info: DeviceInfo, pin: int, mode: PinMode, held: Mapping[int, PinMode]
 ) -> CommandRejectedError | None:
@@ -234,8 +248,9 @@ def conflict(
     None if nothing rules it out. The same mode again is a new configuration, not a conflict.
 
     A servo while a pin does PWM on the servos' timer (the timer would have to do both),
-    then the pin itself held by another mode, then PWM on the servos' timer while a servo
-    runs: the timers as the device's pin table says (``info``). The board checks what it
+    then a pin that cannot do the mode (:func:`incapable`), then the pin itself held by
+    another mode, then PWM on the servos' timer while a servo runs: the pins and timers as
+    the device's pin table says (``info``). The board checks what it
     configured with it; ``protoduino``'s commands, which resume a session an earlier
     command configured, explain the device's own refusal with it from what the device says
     it drives (``read_outputs``).
@@ -248,6 +263,9 @@ def conflict(
                 f"pin {pwm[0]} does PWM on Timer{info.timer(pwm[0])}, the timer the servos "
                 "need (release it first)",
             )
+    cannot = incapable(info, pin, mode)
+    if cannot is not None:
+        return cannot
     current = held.get(pin)
     if current is not None and current is not mode:
         return refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is {current.a_pin}")
@@ -764,6 +782,7 @@ class Board(ClosedOnExit):
                 f"interlock must be None, 'low' or 'high', not {interlock!r}",
             )
         pin = self._check_pin(pin)
+        self._check_capable(pin, DIGITAL_INPUT)
         msg = ArduinoIn()
         init = msg.digital_input_init
         init.pin, init.pull_up, init.debounce_ms = pin, pull_up, debounce
@@ -1333,14 +1352,10 @@ class Board(ClosedOnExit):
             )
 
     def _check_capable(self, pin: int, mode: PinMode) -> None:
-        """``pin`` can do ``mode``, as the device's pin table says (``info.can``)."""
-        if not self.info.can(pin, mode):
-            capable = self.info.pins_for(mode)
-            raise refused(
-                Status.STATUS_NOT_SUPPORTED,
-                f"pin {pin} cannot be {mode.a_pin} on this "
-                f"{self.info.board} (those are {', '.join(map(str, capable)) or 'none'})",
-            )
+        """``pin`` can do ``mode``, as the device's pin table says (:func:`incapable`)."""
+        cannot = incapable(self.info, pin, mode)
+        if cannot is not None:
+            raise cannot
 
     def _check_free(self, pin: int, mode: PinMode) -> None:
         """Refuse what the pins this board configured rule out (lock held): :func:`conflict`."""

@@ -312,6 +312,8 @@ class VirtualDevice:
         self.pwm_pins = [3, 9, 10, 11]
         self.analog_pins = list(range(14, 20))
         self.counter_pins = [2, 3]
+        #: Analog inputs and nothing else (a Nano's A6 and A7: 20, 21): no digital I/O.
+        self.analog_only_pins: list[int] = []
         self.servo_timer_pins = [9, 10]
         self.clock_timer_pins = [5, 6]
         #: The numbers of those pins' timers (the Uno's Timer1 and Timer0).
@@ -749,7 +751,7 @@ class VirtualDevice:
         if pin in self.reserved_pins:
             return 0
         flags = {
-            pb.PIN_DIGITAL: True,
+            pb.PIN_DIGITAL: pin not in self.analog_only_pins,
             pb.PIN_PWM: pin in self.pwm_pins,
             pb.PIN_ANALOG: pin in self.analog_pins,
             pb.PIN_COUNTER: pin in self.counter_pins,

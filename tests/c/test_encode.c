@@ -116,7 +116,7 @@ static void test_encode_ack_info(void)
     /* (at their widths on the device: protoduino.options) */
     info->protocol_version = UINT8_MAX;
     info->schema_id = 0xFFFFFFFFu;
-    info->num_pins = PD_INFO_PINS_MAX; /* the table's bound */
+    info->num_pins = PD_MAX_PINS; /* the table's bound */
     info->max_servos = UINT8_MAX;
     info->reserved_pins_count = 4;
     for (int i = 0; i < 4; i++) {
@@ -145,9 +145,9 @@ static void test_encode_ack_info(void)
     info->num_pins = 0; /* no pins: no table */
     CHECK_EQ(compare(&out), 0);
     uint8_t big[200];
-    info->num_pins = PD_INFO_PINS_MAX + 1u; /* past the bounds: refused */
+    info->num_pins = PD_MAX_PINS + 1u; /* past the bounds: refused */
     CHECK_EQ(pd_encode_out(&out, big, sizeof(big)), 0);
-    info->num_pins = PD_INFO_PINS_MAX;
+    info->num_pins = PD_MAX_PINS;
     board->servo_timer_pins = 1u << 9;
     board->servo_timer = PD_INFO_TIMERS_MAX;
     CHECK_EQ(pd_encode_out(&out, big, sizeof(big)), 0);

@@ -198,6 +198,32 @@ def test_a_board_with_another_pin_table_is_served_with_no_host_edit(fake: PtyDev
         assert sorted(fake.pins) == [9, 12, 18, 23]
 
 
+def test_a_nano_s_a6_and_a7_are_analog_inputs_only(fake: PtyDevice) -> None:
+    """The Nano's profile (two more ADC inputs, A6 and A7, with no port behind them): from
+    its pin table alone, "A7" is pin 21 and an analog input, and every other mode there is
+    refused before sending, as the device refuses it."""
+    fake.board_name = "nano"
+    fake.num_pins = 22
+    fake.analog_pins = list(range(14, 22))
+    fake.analog_only_pins = [20, 21]
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
+        assert board.info.analog_pins == tuple(range(14, 22))
+        assert board.pin_number("A7") == 21
+        before = len(fake.arrivals())
+        for configure, what in (
+            (lambda: board.digital_output(20), "a digital pin"),
+            (lambda: board.servo("A7"), "a servo pin"),
+            (lambda: board.digital_input("A6"), "a digital input pin"),
+            (lambda: board.pwm_output(21), "a pwm pin"),
+        ):
+            with pytest.raises(NotSupportedError, match=f"cannot be {what} on this nano"):
+                configure()
+        assert len(fake.arrivals()) == before  # refused by the host, nothing sent
+        board.analog_input("A7")
+        board.digital_output("A5")  # 19 has its port: digital as on the Uno
+        assert sorted(fake.pins) == [19, 21]
+
+
 def test_a_device_refusal_has_its_named_error(board: Board, fake: PtyDevice) -> None:
     motor = board.pwm_output(3)
 
