@@ -7,7 +7,9 @@ One function, :func:`generate`, writes:
   ``mypy-protobuf``);
 * ``host/protoduino/_generated/schema_id.py`` with ``SCHEMA_ID``;
 * ``firmware/generated/protoduino.pb.[ch]`` (nanopb 0.4.7, the version of the C
-  runtime the firmware is built against) and ``firmware/generated/pd_schema.h``
+  runtime the firmware is built against; the sizes nanopb leaves out for messages
+  with a callback field, DeviceInfo's pin table, as if it were static at its
+  ``max_size``: :func:`sized_callbacks`) and ``firmware/generated/pd_schema.h``
   with ``PD_SCHEMA_ID``;
 * ``firmware/generated/pd_protocol.h``: the protocol constants and enumerations the
   firmware uses, from ``host/protoduino/constants.py`` (the one place they are written),
