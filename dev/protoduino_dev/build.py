@@ -132,6 +132,13 @@ def build_firmware_features(features: Iterable[str]) -> Path:
     return BUILD / ("avr-" + "-".join(chosen)) / "protoduino.elf"
 
 
+def build_firmware_board(board: str) -> Path:
+    """Build the firmware for a board profile of the ATmega328P build (``make avr
+    BOARD=...``: "uno", "nano"); its ELF."""
+    make(FIRMWARE_DIR, "avr", f"BOARD={board}")
+    return BUILD / ("avr" if board == "uno" else f"avr-{board}") / "protoduino.elf"
+
+
 def build_firmware_hex() -> Path:
     """Build the firmware's Uno target and return its flashable hex."""
     make(FIRMWARE_DIR, "avr")

@@ -94,7 +94,7 @@ def read_tables(descriptor_set: bytes) -> Tables:
     arduino_in = schema.message_types_by_name["ArduinoIn"]
     members = arduino_in.oneofs_by_name["data"].fields
     results = {f.name for f in schema.message_types_by_name["Ack"].oneofs_by_name["result"].fields}
-    masks = set(schema.message_types_by_name["DeviceInfo"].fields_by_name)
+    pin_bits = set(schema.enum_types_by_name["PinBit"].values_by_name) - {"PIN_NONE"}
     feature_enum = schema.enum_types_by_name["Feature"]
     feature_names = {v.name for v in feature_enum.values}
     schema_proto = next(f for f in fds.file if f.name == SCHEMA_PROTO)
@@ -126,8 +126,8 @@ def read_tables(descriptor_set: bytes) -> Tables:
             raise TableError(f"{where}: name {mode.name!r} is not a lower-case identifier")
         if any(m.name == mode.name for m in modes):
             raise TableError(f"{where}: a second pin mode named {mode.name!r}")
-        if mode.pins and mode.pins not in masks:
-            raise TableError(f"{where}: pins {mode.pins!r} is not a DeviceInfo field")
+        if mode.pins and mode.pins not in pin_bits:
+            raise TableError(f"{where}: pins {mode.pins!r} is not a PinBit flag")
         for kind in (mode.init, mode.control):
             if kind is None:
                 continue

@@ -21,9 +21,10 @@
 #define PD_AVR_RX_SIZE 96u
 #endif
 /* UART transmit ring: the most one received frame can make the device send
- * (PD_TX_RESERVE: pd_avr_uart.c checks it fits); a report goes only into an empty
- * ring (pd_link_send_spare), so it needs no room of its own. */
-#define PD_AVR_TX_SIZE 117u
+ * (PD_TX_RESERVE, pd_link.h: 116 B on the Uno, a ring keeps one byte free), and no
+ * more; a report goes only into an empty ring (pd_link_send_spare), so it needs no
+ * room of its own. */
+#define PD_AVR_TX_SIZE (PD_TX_RESERVE + 1u)
 
 void pd_avr_uart_init(uint32_t baud);
 /* Switch to `baud` once every queued byte went out (waits for them). */

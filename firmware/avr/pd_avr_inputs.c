@@ -52,6 +52,11 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
 {
     uint8_t bit;
     uint8_t group;
+#if PD_BOARD_NANO
+    if (pin >= 20u) {
+        return; /* A6, A7: the ADC's inputs only, no port behind them */
+    }
+#endif
     volatile uint8_t *mask = pcmsk(pin, &bit, &group);
     pd_avr_pin_set(pin, false, pull_up); /* an input; PORT's bit is the pull-up */
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
@@ -98,8 +103,11 @@ PD_WAKE_ISR(PCINT2_vect)
 
 void pd_avr_analog_start(uint8_t pin)
 {
-    ADMUX = (uint8_t)(_BV(REFS0) | ((pin - 14u) & 0x07u)); /* AVCC, channel A0..A5 */
-    DIDR0 |= (uint8_t)_BV((pin - 14u) & 0x07u);             /* no digital input buffer there */
+    ADMUX = (uint8_t)(_BV(REFS0) | ((pin - 14u) & 0x07u)); /* AVCC, channel A0..A5 (A7) */
+#if PD_BOARD_NANO
+    if (pin < 20u) /* A6, A7 have no digital input buffer (DIDR0's bits 6, 7 are reserved) */
+#endif
+        DIDR0 |= (uint8_t)_BV((pin - 14u) & 0x07u); /* no digital input buffer there */
     ADCSRA = _BV(ADEN) | _BV(ADSC) | _BV(ADIE) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0);
 }
 

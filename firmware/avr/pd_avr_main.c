@@ -22,17 +22,32 @@
 
 static pd_core_t core;
 
+/* The board's pins (pd_hal.h: its one declaration). The Nano (make avr BOARD=nano) is the
+ * Uno's ATmega328P in another package, with two more ADC inputs and nothing else behind
+ * them: A6 and A7, pins 20 and 21, analog inputs only. */
+#if PD_BOARD_NANO
+typedef char pd_assert_nano_pins[PD_MAX_PINS >= 22 ? 1 : -1];
+#endif
 static const pd_board_info_t uno = {
+#if PD_BOARD_NANO
+    .board = "nano",
+    .num_pins = 22,
+    .analog_pins = 0xFFUL << 14,              /* A0..A7 */
+    .analog_only_pins = 0x3UL << 20,          /* A6, A7 */
+#else
     .board = "uno",
     .num_pins = 20,
+    .analog_pins = 0x3FUL << 14,              /* A0..A5 */
+#endif
     .max_servos = 8,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* RX, TX: the link itself */
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
     .pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11),
-    .analog_pins = 0x3FUL << 14,              /* A0..A5 */
     .counter_pins = (1UL << 2) | (1UL << 3),  /* INT0, INT1 */
     .servo_timer_pins = (1UL << 9) | (1UL << 10),
     .clock_timer_pins = (1UL << 5) | (1UL << 6),
+    .servo_timer = 1,
+    .clock_timer = 0,
 };
 
 uint16_t pd_hal_tx_room(void *hal)

@@ -40,9 +40,8 @@ static void fill_info(pd_core_t *core, protoduino_DeviceInfo *info)
     info->max_servos = PD_FEATURE_SERVO ? board->max_servos : 0u;
     info->rx_buffer = board->rx_buffer;
     info->features = PD_FEATURES;
-    info->pwm_pins = PD_FEATURE_PWM ? board->pwm_pins : 0u;
-    info->analog_pins = PD_FEATURE_ANALOG_INPUT ? board->analog_pins : 0u;
-    info->counter_pins = PD_FEATURE_COUNTER ? board->counter_pins : 0u;
+    /* The pin table: the encoder writes it from the board's own (pd_encode.h). */
+    info->pins.arg = core->hal;
 #if PD_FEATURE_USER
     info->user_fingerprint = pd_user_service.fingerprint;
 #endif

@@ -136,12 +136,81 @@ static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
     }
     put_uint(w, protoduino_DeviceInfo_rx_buffer_tag, info->rx_buffer);
     put_uint(w, protoduino_DeviceInfo_features_tag, info->features);
-    put_fixed32(w, protoduino_DeviceInfo_pwm_pins_tag, info->pwm_pins);
-    put_fixed32(w, protoduino_DeviceInfo_analog_pins_tag, info->analog_pins);
-    put_fixed32(w, protoduino_DeviceInfo_counter_pins_tag, info->counter_pins);
 #if PD_FEATURE_USER
     put_fixed32(w, protoduino_DeviceInfo_user_fingerprint_tag, info->user_fingerprint);
 #endif
+    /* The board's own table, read through the HAL (in pins.arg: pd_dispatch.c) so
+     * that on the Uno its fields stay constants the compiler folds into the code,
+     * not a struct in RAM. A DeviceInfo of no pins has no table. */
+    uint8_t n = info->num_pins;
+    if (n == 0) {
+        return;
+    }
+    const pd_board_info_t *board = pd_hal_board_info(info->pins.arg);
+    uint8_t timers = pd_encode_timer_count(board);
+    if (n > PD_MAX_PINS || timers > PD_INFO_TIMERS_MAX) {
+        w->ok = false;
+        return;
+    }
+    uint8_t *at = open_msg(w, protoduino_DeviceInfo_pins_tag);
+    for (uint8_t pin = 0; pin < n; pin++) {
+        put(w, pd_encode_pin(board, pin));
+    }
+    close_msg(w, at);
+    if (timers > 0) {
+        at = open_msg(w, protoduino_DeviceInfo_timers_tag);
+        for (uint8_t timer = 0; timer < timers; timer++) {
+            put(w, pd_encode_timer(board, timer));
+        }
+        close_msg(w, at);
+    }
+}
+
+uint8_t pd_encode_pin(const pd_board_info_t *board, uint8_t pin)
+{
+    if (pin >= 32u || pin >= board->num_pins || ((board->reserved_pins >> pin) & 1u)) {
+        return 0;
+    }
+    uint32_t bit = 1UL << pin;
+    uint8_t v = (board->analog_only_pins & bit) ? 0u : protoduino_PinBit_PIN_DIGITAL;
+    if (board->pwm_pins & bit) {
+        v |= protoduino_PinBit_PIN_PWM;
+    }
+    if (board->analog_pins & bit) {
+        v |= protoduino_PinBit_PIN_ANALOG;
+    }
+    if (board->counter_pins & bit) {
+        v |= protoduino_PinBit_PIN_COUNTER;
+    }
+    if (board->servo_timer_pins & bit) {
+        v |= (uint8_t)((board->servo_timer + 1u) << 5);
+    } else if (board->clock_timer_pins & bit) {
+        v |= (uint8_t)((board->clock_timer + 1u) << 5);
+    }
+    return v;
+}
+
+uint8_t pd_encode_timer_count(const pd_board_info_t *board)
+{
+    uint8_t n = 0;
+    if (board->servo_timer_pins != 0) {
+        n = (uint8_t)(board->servo_timer + 1u);
+    }
+    if (board->clock_timer_pins != 0 && board->clock_timer + 1u > n) {
+        n = (uint8_t)(board->clock_timer + 1u);
+    }
+    return n;
+}
+
+uint8_t pd_encode_timer(const pd_board_info_t *board, uint8_t timer)
+{
+    if (board->servo_timer_pins != 0 && timer == board->servo_timer) {
+        return protoduino_TimerUse_TIMER_SERVOS;
+    }
+    if (board->clock_timer_pins != 0 && timer == board->clock_timer) {
+        return protoduino_TimerUse_TIMER_CLOCK;
+    }
+    return protoduino_TimerUse_TIMER_FREE;
 }
 
 /* A packed repeated varint field; omitted when empty, as pb_encode does. */

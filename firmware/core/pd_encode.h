@@ -21,7 +21,29 @@
 #include <stdint.h>
 
 #include "pd_features.h"
+#include "pd_hal.h"
 #include "protoduino.pb.h"
+
+/*
+ * DeviceInfo's pin table (pins, timers: protocol version 7), written from the
+ * board's table (pd_hal_board_info) of the HAL in DeviceInfo.pins.arg (the
+ * core's opaque HAL pointer: pd_dispatch.c) for a DeviceInfo of num_pins > 0:
+ * never copied into the message's struct, so it costs the Uno's RAM nothing
+ * but the callbacks' pointers. The schema bounds them (max_size in
+ * protoduino.options, which nanopb's DeviceInfo size counts: PD_INFO_PINS_MAX,
+ * PD_INFO_TIMERS_MAX); a build's own bound is its PD_MAX_PINS (20 on the Uno,
+ * whose DeviceInfo is sized by it: PD_ENCODE_INFO_MAX).
+ */
+#define PD_INFO_PINS_MAX 22u
+#define PD_INFO_TIMERS_MAX 3u
+typedef char pd_assert_info_pins[(PD_MAX_PINS <= PD_INFO_PINS_MAX) ? 1 : -1];
+/* Pin `pin`'s byte of DeviceInfo.pins: its PinBit flags and, in bits 5-7, 1 +
+ * the number of the timer the device holds that its PWM output needs. */
+uint8_t pd_encode_pin(const pd_board_info_t *board, uint8_t pin);
+/* How many bytes DeviceInfo.timers has (up to the highest timer held), and
+ * Timer `timer`'s (a TimerUse). */
+uint8_t pd_encode_timer_count(const pd_board_info_t *board);
+uint8_t pd_encode_timer(const pd_board_info_t *board, uint8_t timer);
 
 /*
  * The largest ArduinoOut the device can send, tighter than nanopb's
@@ -35,8 +57,10 @@
 #define PD_ENCODE_MAX2(a, b) ((a) > (b) ? (a) : (b))
 /* DeviceInfo as the device sends it: user_fingerprint (a fixed32, 5 B) only
  * from a firmware with a user service (PD_FEATURE_USER), so that the field
- * costs the default build no transmit buffer. */
-#define PD_ENCODE_INFO_MAX (protoduino_DeviceInfo_size - (PD_FEATURE_USER ? 0u : 5u))
+ * costs the default build no transmit buffer, and a pin table of this build's
+ * PD_MAX_PINS bytes at most. */
+#define PD_ENCODE_INFO_MAX                                                   \
+    (protoduino_DeviceInfo_size - (PD_FEATURE_USER ? 0u : 5u) - (PD_INFO_PINS_MAX - PD_MAX_PINS))
 /* A UserCall's Ack: its reply (or none) and its handler's code. */
 #define PD_ENCODE_USER_ACK_MAX (2u + 64u + 2u)
 #define PD_ENCODE_ACK_MAX                                                    \

@@ -18,9 +18,15 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+/* The most pins a board of this build has (its num_pins): the pin registry's size, and
+ * DeviceInfo's pin table's (pd_encode.h). The Nano's profile has 22 (firmware/Makefile). */
+#ifndef PD_MAX_PINS
+#define PD_MAX_PINS 20
+#endif
+
 /* What the board is; reported in DeviceInfo and used to validate pins. */
 typedef struct pd_board_info {
-    const char *board;            /* "uno", "sim"; at most 15 characters */
+    const char *board;            /* "uno", "sim"; at most 11 characters */
     uint8_t num_pins;             /* pins are 0 .. num_pins - 1, at most PD_MAX_PINS */
     uint8_t max_servos;           /* at most PD_MAX_SERVOS */
     uint32_t reserved_pins;       /* bit N set: pin N is reserved (the Uno's UART: 0, 1) */
@@ -28,13 +34,26 @@ typedef struct pd_board_info {
     uint32_t pwm_pins;            /* bit N: pin N can do PWM (DeviceInfo.pwm_pins) */
     uint32_t analog_pins;         /* bit N: pin N is an analog input */
     uint32_t counter_pins;        /* bit N: pin N can count pulses */
+    /* Analog inputs and nothing else (the Nano's A6, A7: the ADC's inputs, no port
+     * behind them): every other mode is refused with STATUS_NOT_SUPPORTED. */
+    uint32_t analog_only_pins;
     /* PWM pins whose timer drives the servos (the Uno's Timer1: 9, 10): no PWM
      * there while a servo runs, no servo while one of them does PWM. */
     uint32_t servo_timer_pins;
     /* Pins with a timer output whose timer runs the millisecond clock (the
      * Uno's Timer0: 5, 6): refused with STATUS_TIMER_IN_USE, never in pwm_pins. */
     uint32_t clock_timer_pins;
+    /* The numbers of those two timers (the Uno's 1 and 0), at most
+     * PD_INFO_TIMERS_MAX - 1: DeviceInfo.timers names them to the host. */
+    uint8_t servo_timer;
+    uint8_t clock_timer;
 } pd_board_info_t;
+/*
+ * This table is the board's one declaration of its pins: the core checks every
+ * command against it, and DeviceInfo's pin table (pins, timers: pd_encode.h,
+ * pd_encode_pin) is written from it, so the host refuses what the device would
+ * from what the device says.
+ */
 
 /*
  * Transmit is a queue the platform drains on its own (the Uno: the UART's

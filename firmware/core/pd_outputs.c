@@ -274,6 +274,9 @@ protoduino_Status pd_pins_claim(pd_outputs_t *out, void *hal, uint32_t pin, uint
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
+    if (mode != PD_MODE_ANALOG_INPUT && (pd_hal_board_info(hal)->analog_only_pins >> pin) & 1u) {
+        return protoduino_Status_STATUS_NOT_SUPPORTED; /* no digital I/O at the pin */
+    }
     uint8_t owner = out->owner[pin];
     if (owner != 0) {
         if (PD_OWNER_MODE(owner) != mode) {

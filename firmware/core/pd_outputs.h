@@ -50,10 +50,8 @@
 #include "pd_tables.h"
 #include "protoduino.pb.h"
 
-/* Compile-time capacity; a board reports its real figures in pd_board_info_t. */
-#ifndef PD_MAX_PINS
-#define PD_MAX_PINS 20
-#endif
+/* Compile-time capacity; a board reports its real figures in pd_board_info_t
+ * (PD_MAX_PINS: pd_hal.h). */
 #ifndef PD_MAX_SERVOS
 #define PD_MAX_SERVOS 8
 #endif

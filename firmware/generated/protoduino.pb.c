@@ -103,3 +103,5 @@ PB_BIND(protoduino_ArduinoOut, protoduino_ArduinoOut, AUTO)
 
 
 
+
+

@@ -76,6 +76,23 @@ typedef enum _protoduino_Liveness {
     protoduino_Liveness_LIVENESS_HEARTBEAT = 1 /* only the application's Heartbeat */
 } protoduino_Liveness;
 
+/* A pin's capabilities, flags in its byte of DeviceInfo.pins. */
+typedef enum _protoduino_PinBit {
+    protoduino_PinBit_PIN_NONE = 0,
+    protoduino_PinBit_PIN_DIGITAL = 1, /* a digital output, a digital input, a servo */
+    protoduino_PinBit_PIN_PWM = 2, /* a PWM output */
+    protoduino_PinBit_PIN_ANALOG = 4, /* an analog input */
+    protoduino_PinBit_PIN_COUNTER = 8, /* a pulse counter */
+    protoduino_PinBit_PIN_PIN_CHANGE = 16 /* its counter counts on a pin-change interrupt (not an external one) */
+} protoduino_PinBit;
+
+/* What a timer does for the device (a byte of DeviceInfo.timers). */
+typedef enum _protoduino_TimerUse {
+    protoduino_TimerUse_TIMER_FREE = 0, /* nothing: its pins' PWM may use it */
+    protoduino_TimerUse_TIMER_CLOCK = 1, /* the millisecond clock, always: never PWM on its pins */
+    protoduino_TimerUse_TIMER_SERVOS = 2 /* the servo pulses, while a servo runs: no PWM on its pins then, no servo while one does PWM */
+} protoduino_TimerUse;
+
 typedef enum _protoduino_FailsafeCause {
     protoduino_FailsafeCause_FAILSAFE_CAUSE_NONE = 0,
     protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT = 1,
@@ -297,7 +314,7 @@ typedef struct _protoduino_DeviceInfo {
     char firmware_version[16];
     uint8_t protocol_version;
     uint32_t schema_id;
-    char board[16];
+    char board[12];
     uint8_t num_pins; /* pins are numbered 0 .. num_pins - 1 */
     uint8_t max_servos;
     pb_size_t reserved_pins_count;
@@ -306,12 +323,19 @@ typedef struct _protoduino_DeviceInfo {
  receive ring): the host keeps the command frames in flight within it. */
     uint16_t rx_buffer;
     uint16_t features; /* bit N: Feature N is built in */
-    uint32_t pwm_pins; /* bit N: pin N can do PWM */
-    uint32_t analog_pins; /* bit N: pin N is an analog input */
-    uint32_t counter_pins; /* bit N: pin N can count pulses */
     /* The user service built in (FEATURE_USER): the CRC-32 of its schema's
  FileDescriptorSet (as SCHEMA_ID is of this one); 0: none. */
     uint32_t user_fingerprint;
+    /* The pin table (protocol version 7): byte P is pin P's (num_pins bytes), its
+ PinBit flags and, in bits 5-7, 1 + the number of the timer its PWM output
+ needs when the device holds that timer for something else (timers); 0 in
+ bits 5-7: it needs none of those. A reserved pin's byte is 0. A mode's pins are
+ those with its flag, of the modes built in (features): the host refuses a pin
+ from this table alone, with no table of its own per board. */
+    pb_callback_t pins;
+    /* The timers the device holds (protocol version 7): byte T is Timer T's
+ TimerUse, for T = 0 up to the highest timer held. */
+    pb_callback_t timers;
 } protoduino_DeviceInfo;
 
 typedef PB_BYTES_ARRAY_T(40) protoduino_OutputStates_servos_t;
@@ -435,6 +459,14 @@ extern "C" {
 #define _protoduino_Liveness_MAX protoduino_Liveness_LIVENESS_HEARTBEAT
 #define _protoduino_Liveness_ARRAYSIZE ((protoduino_Liveness)(protoduino_Liveness_LIVENESS_HEARTBEAT+1))
 
+#define _protoduino_PinBit_MIN protoduino_PinBit_PIN_NONE
+#define _protoduino_PinBit_MAX protoduino_PinBit_PIN_PIN_CHANGE
+#define _protoduino_PinBit_ARRAYSIZE ((protoduino_PinBit)(protoduino_PinBit_PIN_PIN_CHANGE+1))
+
+#define _protoduino_TimerUse_MIN protoduino_TimerUse_TIMER_FREE
+#define _protoduino_TimerUse_MAX protoduino_TimerUse_TIMER_SERVOS
+#define _protoduino_TimerUse_ARRAYSIZE ((protoduino_TimerUse)(protoduino_TimerUse_TIMER_SERVOS+1))
+
 #define _protoduino_FailsafeCause_MIN protoduino_FailsafeCause_FAILSAFE_CAUSE_NONE
 #define _protoduino_FailsafeCause_MAX protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK
 #define _protoduino_FailsafeCause_ARRAYSIZE ((protoduino_FailsafeCause)(protoduino_FailsafeCause_FAILSAFE_CAUSE_INTERLOCK+1))
@@ -498,7 +530,7 @@ extern "C" {
 #define protoduino_ReleaseAll_init_default       {0}
 #define protoduino_UserCall_init_default         {{0, {0}}, 0}
 #define protoduino_ArduinoIn_init_default        {0, 0, {protoduino_Ping_init_default}}
-#define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, 0, 0, 0}
+#define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, {{NULL}, NULL}, {{NULL}, NULL}}
 #define protoduino_OutputStates_init_default     {{0, {0}}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
 #define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_default, 0, 0}
 #define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN, 0, 0}
@@ -528,7 +560,7 @@ extern "C" {
 #define protoduino_ReleaseAll_init_zero          {0}
 #define protoduino_UserCall_init_zero            {{0, {0}}, 0}
 #define protoduino_ArduinoIn_init_zero           {0, 0, {protoduino_Ping_init_zero}}
-#define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, 0, 0, 0}
+#define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, {{NULL}, NULL}, {{NULL}, NULL}}
 #define protoduino_OutputStates_init_zero        {{0, {0}}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
 #define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_zero, 0, 0}
 #define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN, 0, 0}
@@ -613,10 +645,9 @@ extern "C" {
 #define protoduino_DeviceInfo_reserved_pins_tag  7
 #define protoduino_DeviceInfo_rx_buffer_tag      8
 #define protoduino_DeviceInfo_features_tag       9
-#define protoduino_DeviceInfo_pwm_pins_tag       10
-#define protoduino_DeviceInfo_analog_pins_tag    11
-#define protoduino_DeviceInfo_counter_pins_tag   12
 #define protoduino_DeviceInfo_user_fingerprint_tag 13
+#define protoduino_DeviceInfo_pins_tag           14
+#define protoduino_DeviceInfo_timers_tag         15
 #define protoduino_OutputStates_servos_tag       1
 #define protoduino_OutputStates_digital_pins_tag 2
 #define protoduino_OutputStates_digital_levels_tag 3
@@ -855,11 +886,10 @@ X(a, STATIC,   SINGULAR, UINT32,   max_servos,        6) \
 X(a, STATIC,   REPEATED, UINT32,   reserved_pins,     7) \
 X(a, STATIC,   SINGULAR, UINT32,   rx_buffer,         8) \
 X(a, STATIC,   SINGULAR, UINT32,   features,          9) \
-X(a, STATIC,   SINGULAR, FIXED32,  pwm_pins,         10) \
-X(a, STATIC,   SINGULAR, FIXED32,  analog_pins,      11) \
-X(a, STATIC,   SINGULAR, FIXED32,  counter_pins,     12) \
-X(a, STATIC,   SINGULAR, FIXED32,  user_fingerprint,  13)
-#define protoduino_DeviceInfo_CALLBACK NULL
+X(a, STATIC,   SINGULAR, FIXED32,  user_fingerprint,  13) \
+X(a, CALLBACK, SINGULAR, BYTES,    pins,             14) \
+X(a, CALLBACK, SINGULAR, BYTES,    timers,           15)
+#define protoduino_DeviceInfo_CALLBACK pb_default_field_callback
 #define protoduino_DeviceInfo_DEFAULT NULL
 
 #define protoduino_OutputStates_FIELDLIST(X, a) \
@@ -998,15 +1028,15 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_Ack_size                      117
+#define protoduino_DeviceInfo_size               98 /* callbacks at their max_size */
+#define protoduino_Ack_size                      127 /* callbacks at their max_size */
+#define protoduino_ArduinoOut_size               129 /* callbacks at their max_size */
 #define protoduino_AnalogInputInit_size          19
 #define protoduino_ArduinoIn_size                108
-#define protoduino_ArduinoOut_size               119
 #define protoduino_ClearInterlock_size           3
 #define protoduino_ConfigureFailsafe_size        8
 #define protoduino_CounterInit_size              13
 #define protoduino_DecodeError_size              6
-#define protoduino_DeviceInfo_size               88
 #define protoduino_DigitalControl_size           5
 #define protoduino_DigitalInit_size              5
 #define protoduino_DigitalInputInit_size         11

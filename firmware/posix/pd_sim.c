@@ -97,6 +97,8 @@ static const pd_board_info_t sim_board = {
     .counter_pins = (1UL << 2) | (1UL << 3),
     .servo_timer_pins = (1UL << 9) | (1UL << 10),
     .clock_timer_pins = (1UL << 5) | (1UL << 6),
+    .servo_timer = 1,
+    .clock_timer = 0,
 };
 
 static volatile sig_atomic_t sim_stop; /* the signal that stopped it, 0 while running */

@@ -226,52 +226,58 @@ class _Output:
         self.value = self.safe
 
 
-#: Timers shared with PWM pins, by DeviceInfo.board (the simulated board keeps the
-#: Uno's rules). The device refuses the same with STATUS_TIMER_IN_USE:
-#: Timer1 makes the servo pulses (as Arduino's Servo library does), so pins 9 and 10
-#: cannot do PWM while a servo runs, nor a servo start while they do;
-TIMER1_PWM_PINS: dict[str, frozenset[int]] = {
-    "uno": frozenset({9, 10}),
-    "sim": frozenset({9, 10}),
-}
-#: Timer0 runs the device's millisecond clock (failsafe, debounce, reports), which
-#: PWM on pins 5 and 6 would have to share: never PWM there (docs/protocol.md).
-TIMER0_PWM_PINS: dict[str, frozenset[int]] = {
-    "uno": frozenset({5, 6}),
-    "sim": frozenset({5, 6}),
-}
+def incapable(info: DeviceInfo, pin: int, mode: PinMode) -> CommandRejectedError | None:
+    """Why ``pin`` cannot do ``mode`` on this board, as the device's pin table says
+    (``info.can``: no PWM, ADC or interrupt there, or no digital I/O at all, as the
+    Nano's A6 and A7); None if it can."""
+    if info.can(pin, mode):
+        return None
+    capable = info.pins_for(mode)
+    return refused(
+        Status.STATUS_NOT_SUPPORTED,
+        f"pin {pin} cannot be {mode.a_pin} on this "
+        f"{info.board} (those are {', '.join(map(str, capable)) or 'none'})",
+    )
 
 
 def conflict(
-    board: str, pin: int, mode: PinMode, held: Mapping[int, PinMode]
+    info: DeviceInfo, pin: int, mode: PinMode, held: Mapping[int, PinMode]
 ) -> CommandRejectedError | None:
     """Why configuring ``pin`` as ``mode`` is refused while the pins of ``held`` are
     configured (pin -> mode), in the device's order (docs/protocol.md section 7, rule 13);
     None if nothing rules it out. The same mode again is a new configuration, not a conflict.
 
-    A servo while a Timer1 pin does PWM (the timer would have to do both), then the pin
-    itself held by another mode, then PWM on a Timer1 pin while a servo runs. The board
-    checks what it configured with it; ``protoduino``'s commands, which resume a session an
-    earlier command configured, explain the device's own refusal with it from what the
-    device says it drives (``read_outputs``).
+    A servo while a pin does PWM on the servos' timer (the timer would have to do both),
+    then a pin that cannot do the mode (:func:`incapable`), then the pin itself held by
+    another mode, then PWM on the servos' timer while a servo runs: the pins and timers as
+    the device's pin table says (``info``). The board checks what it
+    configured with it; ``protoduino``'s commands, which resume a session an earlier
+    command configured, explain the device's own refusal with it from what the device says
+    it drives (``read_outputs``).
     """
-    timer1 = TIMER1_PWM_PINS.get(board, frozenset())
     if mode is SERVO:
-        pwm = sorted(p for p in timer1 if held.get(p) is PWM)
+        pwm = [p for p in info.timer_pins("servos") if held.get(p) is PWM]
         if pwm:  # checked before the pin itself, as the device does
             return refused(
                 Status.STATUS_TIMER_IN_USE,
-                f"pin {pwm[0]} does PWM on the timer the servos need (release it first)",
+                f"pin {pwm[0]} does PWM on Timer{info.timer(pwm[0])}, the timer the servos "
+                "need (release it first)",
             )
+    cannot = incapable(info, pin, mode)
+    if cannot is not None:
+        return cannot
     current = held.get(pin)
     if current is not None and current is not mode:
         return refused(Status.STATUS_PIN_IN_USE, f"pin {pin} is {current.a_pin}")
-    if mode is PWM and pin in timer1 and SERVO in held.values():
-        return refused(
-            Status.STATUS_TIMER_IN_USE,
-            f"pin {pin}'s PWM timer makes the servo pulses while a servo runs "
-            "(release the servos first, or use another PWM pin)",
-        )
+    timer = info.timer(pin)
+    if mode is PWM and timer is not None and info.timer_use(timer) == "servos":
+        servo = min((p for p, m in held.items() if m is SERVO), default=None)
+        if servo is not None:
+            return refused(
+                Status.STATUS_TIMER_IN_USE,
+                f"pin {pin}'s PWM needs Timer{timer}, which makes the servo pulses while a "
+                f"servo runs (pin {servo}; release the servos first, or use another PWM pin)",
+            )
     return None
 
 
@@ -695,10 +701,13 @@ class Board(ClosedOnExit):
     def _pwm_init(self, pin: Pin, safe: object) -> tuple[ArduinoIn, Callable[[], None], PwmOutput]:
         # The device's order (docs/protocol.md section 7, rule 13).
         pin = self._check_pin(pin, PWM)
-        if pin in TIMER0_PWM_PINS.get(self.info.board, ()):
+        timer = self.info.timer(pin)
+        use = "free" if timer is None else self.info.timer_use(timer)
+        if use not in ("free", "servos"):  # the servos' timer: conflict(), by what runs
+            held = "runs the device's millisecond clock" if use == "clock" else f"is the {use}'"
             raise refused(
                 Status.STATUS_TIMER_IN_USE,
-                f"pin {pin}'s PWM timer (Timer0) runs the device's millisecond clock "
+                f"pin {pin}'s PWM needs Timer{timer}, which {held} "
                 f"(PWM pins: {', '.join(map(str, self.info.pwm_pins))})",
             )
         self._check_capable(pin, PWM)
@@ -773,6 +782,7 @@ class Board(ClosedOnExit):
                 f"interlock must be None, 'low' or 'high', not {interlock!r}",
             )
         pin = self._check_pin(pin)
+        self._check_capable(pin, DIGITAL_INPUT)
         msg = ArduinoIn()
         init = msg.digital_input_init
         init.pin, init.pull_up, init.debounce_ms = pin, pull_up, debounce
@@ -1342,20 +1352,15 @@ class Board(ClosedOnExit):
             )
 
     def _check_capable(self, pin: int, mode: PinMode) -> None:
-        """``pin`` is in the DeviceInfo mask of the pins that can do ``mode``."""
-        if mode.pins:
-            capable: tuple[int, ...] = getattr(self.info, mode.pins)
-            if pin not in capable:
-                raise refused(
-                    Status.STATUS_NOT_SUPPORTED,
-                    f"pin {pin} cannot be {mode.a_pin} on this "
-                    f"{self.info.board} (those are {', '.join(map(str, capable)) or 'none'})",
-                )
+        """``pin`` can do ``mode``, as the device's pin table says (:func:`incapable`)."""
+        cannot = incapable(self.info, pin, mode)
+        if cannot is not None:
+            raise cannot
 
     def _check_free(self, pin: int, mode: PinMode) -> None:
         """Refuse what the pins this board configured rule out (lock held): :func:`conflict`."""
         held = {p: out.mode for p, out in self._outputs.items()}
-        refusal = conflict(self.info.board, pin, mode, held)
+        refusal = conflict(self.info, pin, mode, held)
         if refusal is not None:
             raise refusal
 

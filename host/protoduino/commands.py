@@ -48,8 +48,8 @@ class PinMode:
     #: schema, a bit of DeviceInfo.features. A firmware built without it refuses the
     #: mode (STATUS_NOT_SUPPORTED), and so does the host, before sending.
     feature: str = ""
-    #: The DeviceInfo mask of the pins that can do this mode ("pwm_pins", ...); empty:
-    #: any pin that is not reserved.
+    #: The PinBit flag of the pins that can do this mode in the device's pin table
+    #: ("PIN_PWM", ...: DeviceInfo.can); empty: PIN_DIGITAL.
     pins: str = ""
 
     @property

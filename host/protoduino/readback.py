@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ._generated import protoduino_pb2 as pb
-from .commands import PIN_MODES
+from .commands import ANALOG_INPUT, COUNTER, PIN_MODES, PWM, PinMode
 from .errors import ProtocolError
 
 
@@ -53,9 +53,18 @@ def decode_output_states(states: Any) -> dict[int, OutputState]:
     return dict(sorted(found.items()))
 
 
+#: DeviceInfo.pins: a pin's byte holds its PinBit flags below this bit, and 1 + the number
+#: of the timer it needs that the device holds from it up (docs/protocol.md section 7).
+_TIMER_SHIFT = 5
+
+
 @dataclass(frozen=True, slots=True)
 class DeviceInfo:
-    """What the device says about itself (GetInfo), read once at open."""
+    """What the device says about itself (GetInfo), read once at open.
+
+    Its pin table (:attr:`pins`, :attr:`timers`) is the one place the host learns what a
+    pin can do: :meth:`can`, :meth:`pins_for`, :meth:`timer` and :meth:`timer_use` answer
+    from it, for any board, with no table of the host's own."""
 
     firmware_version: str
     protocol_version: int
@@ -69,16 +78,65 @@ class DeviceInfo:
     rx_buffer: int = 0
     #: The pin modes built into the firmware, by feature name ("servo", "pwm", ...).
     features: frozenset[str] = frozenset()
-    #: The pins that can do PWM, that are analog inputs, that can count pulses.
-    pwm_pins: tuple[int, ...] = ()
-    analog_pins: tuple[int, ...] = ()
-    counter_pins: tuple[int, ...] = ()
     #: The user service built in: its schema's fingerprint (docs/services.md); 0: none.
     user_fingerprint: int = 0
+    #: DeviceInfo.pins: byte P is pin P's PinBit flags and (bits 5-7) 1 + the number of
+    #: the timer its PWM needs that the device holds (0: none it holds).
+    pins: bytes = b""
+    #: DeviceInfo.timers: byte T is what the device holds Timer T for (a TimerUse).
+    timers: bytes = b""
 
+    def can(self, pin: int, mode: PinMode) -> bool:
+        """Pin ``pin`` can do ``mode`` on this board (its flag in the pin table); whether
+        the firmware has the mode is :attr:`features`."""
+        flag = pb.PinBit.Value(mode.pins or "PIN_DIGITAL")
+        return 0 <= pin < len(self.pins) and bool(self.pins[pin] & flag)
 
-def _mask_pins(mask: int) -> tuple[int, ...]:
-    return tuple(pin for pin in range(32) if mask >> pin & 1)
+    def pins_for(self, mode: PinMode) -> tuple[int, ...]:
+        """The pins that can do ``mode``, lowest first; none if the firmware lacks it."""
+        if mode.feature not in self.features:
+            return ()
+        return tuple(pin for pin in range(len(self.pins)) if self.can(pin, mode))
+
+    @property
+    def pwm_pins(self) -> tuple[int, ...]:
+        """The pins that can do PWM."""
+        return self.pins_for(PWM)
+
+    @property
+    def analog_pins(self) -> tuple[int, ...]:
+        """The analog inputs, A0 first."""
+        return self.pins_for(ANALOG_INPUT)
+
+    @property
+    def counter_pins(self) -> tuple[int, ...]:
+        """The pins that can count pulses."""
+        return self.pins_for(COUNTER)
+
+    def timer(self, pin: int) -> int | None:
+        """The number of the timer ``pin``'s PWM needs that the device holds for something
+        else (:meth:`timer_use`), or None."""
+        if not 0 <= pin < len(self.pins):
+            return None
+        timer = self.pins[pin] >> _TIMER_SHIFT
+        return timer - 1 if timer else None
+
+    def timer_use(self, timer: int) -> str:
+        """What the device holds Timer ``timer`` for: "clock" (always), "servos" (while a
+        servo runs) or "free"."""
+        use = self.timers[timer] if 0 <= timer < len(self.timers) else pb.TIMER_FREE
+        try:
+            return pb.TimerUse.Name(use).removeprefix("TIMER_").lower()  # type: ignore[arg-type]
+        except ValueError:  # a use this host does not know: it holds the timer all the same
+            return f"use {use}"
+
+    def timer_pins(self, use: str) -> tuple[int, ...]:
+        """The pins whose PWM needs a timer the device holds for ``use`` ("servos", ...)."""
+        return tuple(
+            pin
+            for pin in range(len(self.pins))
+            if (timer := self.timer(pin)) is not None and self.timer_use(timer) == use
+        )
 
 
 def decode_device_info(info: Any) -> DeviceInfo:
@@ -93,10 +151,9 @@ def decode_device_info(info: Any) -> DeviceInfo:
         reserved_pins=tuple(info.reserved_pins),
         rx_buffer=info.rx_buffer,
         features=frozenset(mode.feature for mode in PIN_MODES if info.features & mode.feature_bit),
-        pwm_pins=_mask_pins(info.pwm_pins),
-        analog_pins=_mask_pins(info.analog_pins),
-        counter_pins=_mask_pins(info.counter_pins),
         user_fingerprint=info.user_fingerprint,
+        pins=bytes(info.pins),
+        timers=bytes(info.timers),
     )
 
 

@@ -301,7 +301,8 @@ class VirtualDevice:
         #: Answer a RESET at all (False: a device that never completes a handshake).
         self.answer_reset = True
         #: What DeviceInfo states (the Uno's pins and timers; a test may change them before a
-        #: board opens). ``board_name`` "uno" also makes the host check Timer1's pins itself.
+        #: board opens): its pin table (DeviceInfo.pins, timers) is written from these, as
+        #: the firmware's from its board's table, and the host knows no other.
         self.board_name = "virtual"
         self.firmware_version = "virtual"
         self.num_pins = 20
@@ -311,8 +312,13 @@ class VirtualDevice:
         self.pwm_pins = [3, 9, 10, 11]
         self.analog_pins = list(range(14, 20))
         self.counter_pins = [2, 3]
+        #: Analog inputs and nothing else (a Nano's A6 and A7: 20, 21): no digital I/O.
+        self.analog_only_pins: list[int] = []
         self.servo_timer_pins = [9, 10]
         self.clock_timer_pins = [5, 6]
+        #: The numbers of those pins' timers (the Uno's Timer1 and Timer0).
+        self.servo_timer = 1
+        self.clock_timer = 0
         #: DeviceInfo.rx_buffer (0: not stated) and user_fingerprint (0: no user service).
         self.rx_buffer = 0
         self.user_fingerprint = 0
@@ -733,10 +739,29 @@ class VirtualDevice:
         info.reserved_pins.extend(self.reserved_pins)
         info.rx_buffer = self.rx_buffer
         info.features = self.features
-        info.pwm_pins = mask(self.pwm_pins)
-        info.analog_pins = mask(self.analog_pins)
-        info.counter_pins = mask(self.counter_pins)
         info.user_fingerprint = self.user_fingerprint
+        info.pins = bytes(self._pin_byte(pin) for pin in range(self.num_pins))
+        held = {self.servo_timer: pb.TIMER_SERVOS} if self.servo_timer_pins else {}
+        if self.clock_timer_pins:
+            held[self.clock_timer] = pb.TIMER_CLOCK
+        info.timers = bytes(held.get(t, pb.TIMER_FREE) for t in range(max(held, default=-1) + 1))
+
+    def _pin_byte(self, pin: int) -> int:
+        """Pin ``pin``'s byte of DeviceInfo.pins (docs/protocol.md section 7)."""
+        if pin in self.reserved_pins:
+            return 0
+        flags = {
+            pb.PIN_DIGITAL: pin not in self.analog_only_pins,
+            pb.PIN_PWM: pin in self.pwm_pins,
+            pb.PIN_ANALOG: pin in self.analog_pins,
+            pb.PIN_COUNTER: pin in self.counter_pins,
+        }
+        byte: int = sum(flag for flag, has in flags.items() if has)
+        if pin in self.servo_timer_pins:
+            byte |= (self.servo_timer + 1) << 5
+        elif pin in self.clock_timer_pins:
+            byte |= (self.clock_timer + 1) << 5
+        return byte
 
     def _execute(
         self, declared: Command, msg: ArduinoIn, out: ArduinoOut
@@ -803,7 +828,8 @@ class VirtualDevice:
         init = getattr(msg, declared.kind)
         pin: int = init.pin
         status = self._check_pin(pin)
-        capable = getattr(self, mode.pins) if mode.pins else None
+        flag = pb.PinBit.Value(mode.pins or "PIN_DIGITAL")
+        capable = [p for p in range(self.num_pins) if self._pin_byte(p) & flag]
         if status == Status.STATUS_OK and mode.name == "pwm":
             if pin in self.clock_timer_pins:
                 status = Status.STATUS_TIMER_IN_USE  # its timer runs the clock
@@ -813,7 +839,7 @@ class VirtualDevice:
                 status = Status.STATUS_PIN_IN_USE
             elif pin in self.servo_timer_pins and "servo" in self.pins.values():
                 status = Status.STATUS_TIMER_IN_USE  # its timer makes the servo pulses
-        elif status == Status.STATUS_OK and capable is not None and pin not in capable:
+        elif status == Status.STATUS_OK and pin not in capable:
             status = Status.STATUS_NOT_SUPPORTED
         elif (
             status == Status.STATUS_OK

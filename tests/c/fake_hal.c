@@ -9,6 +9,7 @@
 #include <pb_encode.h>
 
 #include "pd_cobs.h"
+#include "pd_encode.h"
 #include "pd_packet.h"
 
 static void fake_abort(const char *why)
@@ -38,6 +39,8 @@ void fake_init(fake_hal_t *hal)
     hal->info.analog_pins = 0x3FUL << 14;
     hal->info.servo_timer_pins = (1UL << 9) | (1UL << 10);
     hal->info.clock_timer_pins = (1UL << 5) | (1UL << 6);
+    hal->info.servo_timer = 1;
+    hal->info.clock_timer = 0;
     hal->info.counter_pins = (1UL << 2) | (1UL << 3);
     hal->info.num_pins = 20;
     hal->info.max_servos = 8;
@@ -111,7 +114,13 @@ bool pd_hal_write(void *ctx, const uint8_t *data, uint16_t len)
         uint8_t canon[PD_MAX_PAYLOAD];
         pb_istream_t is = pb_istream_from_buffer(pkt.payload, pkt.len);
         pb_ostream_t os = pb_ostream_from_buffer(canon, sizeof(canon));
-        if (!pb_decode(&is, protoduino_ArduinoOut_fields, &out) ||
+        bool decoded = pb_decode(&is, protoduino_ArduinoOut_fields, &out);
+        if (decoded && out.which_data == protoduino_ArduinoOut_ack_tag &&
+            out.data.ack.which_result == protoduino_Ack_info_tag) {
+            /* The pin table is skipped by the decoder (callbacks): the board's. */
+            fake_info_callbacks(&out.data.ack.result.info, hal);
+        }
+        if (!decoded ||
             !pb_encode(&os, protoduino_ArduinoOut_fields, &out) || os.bytes_written != pkt.len ||
             memcmp(canon, pkt.payload, pkt.len) != 0) {
             fake_abort("DATA payload is not nanopb's canonical ArduinoOut");
@@ -346,4 +355,38 @@ void pd_hal_outputs_safe(void *ctx)
 const pd_board_info_t *pd_hal_board_info(void *ctx)
 {
     return &((fake_hal_t *)ctx)->info;
+}
+
+/* field->message: the DeviceInfo (its num_pins: the table's length, its pins.arg: the HAL). */
+static bool encode_pins(pb_ostream_t *s, const pb_field_t *field, void *const *arg)
+{
+    (void)arg;
+    const protoduino_DeviceInfo *info = field->message;
+    const pd_board_info_t *board = pd_hal_board_info(info->pins.arg);
+    uint8_t bytes[256];
+    for (uint8_t pin = 0; pin < info->num_pins; pin++) {
+        bytes[pin] = pd_encode_pin(board, pin);
+    }
+    return info->num_pins == 0 ||
+           (pb_encode_tag_for_field(s, field) && pb_encode_string(s, bytes, info->num_pins));
+}
+
+static bool encode_timers(pb_ostream_t *s, const pb_field_t *field, void *const *arg)
+{
+    (void)arg;
+    const protoduino_DeviceInfo *info = field->message;
+    const pd_board_info_t *board = pd_hal_board_info(info->pins.arg);
+    uint8_t bytes[256];
+    uint8_t n = info->num_pins == 0 ? 0 : pd_encode_timer_count(board);
+    for (uint8_t timer = 0; timer < n; timer++) {
+        bytes[timer] = pd_encode_timer(board, timer);
+    }
+    return n == 0 || (pb_encode_tag_for_field(s, field) && pb_encode_string(s, bytes, n));
+}
+
+void fake_info_callbacks(protoduino_DeviceInfo *info, fake_hal_t *hal)
+{
+    info->pins.arg = hal;
+    info->pins.funcs.encode = encode_pins;
+    info->timers.funcs.encode = encode_timers;
 }

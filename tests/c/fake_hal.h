@@ -13,6 +13,7 @@
 #include <stdint.h>
 
 #include "pd_core.h"
+#include "protoduino.pb.h"
 
 #define FAKE_MAX_FRAMES 64
 
@@ -65,5 +66,10 @@ void fake_clear(fake_hal_t *hal);
 /* Frame i (0 = oldest kept) of those sent since the last clear, or NULL. */
 const fake_frame_t *fake_frame(const fake_hal_t *hal, size_t i);
 size_t fake_count(const fake_hal_t *hal);
+
+/* pb_encode's callbacks for DeviceInfo's pin table (pins, timers), written from
+ * `hal`'s board as the device's encoder writes them (pd_encode_pin) for a
+ * DeviceInfo of num_pins > 0: for comparing the two encoders on a DeviceInfo. */
+void fake_info_callbacks(protoduino_DeviceInfo *info, fake_hal_t *hal);
 
 #endif /* FAKE_HAL_H */

@@ -4,6 +4,7 @@
 #include <pb_encode.h>
 
 #include "pd_dispatch.h"
+#include "pd_encode.h"
 #include "pd_schema.h"
 #include "pd_test.h"
 #include "test_util.h"
@@ -402,6 +403,41 @@ static void test_board_limits_from_hal(void)
     CHECK_EQ(t_cmd(&d, &in), S(OK));
     in = m_servo_init_deg(4, 4, 0, 0, 0);
     CHECK_EQ(t_cmd(&d, &in), S(NO_FREE_RESOURCE));
+}
+
+/* An analog-only pin (the Nano's A6, A7): an analog input and nothing else, refused every
+ * other mode (STATUS_NOT_SUPPORTED), and its byte of DeviceInfo.pins says so (no
+ * PIN_DIGITAL). */
+static void test_an_analog_only_pin_is_an_analog_input_and_nothing_else(void)
+{
+    tdev_t d;
+    t_boot(&d);
+    d.hal.info.analog_only_pins = 1UL << 19;
+    t_send_reset(&d, PD_PROTOCOL_VERSION);
+    CHECK_EQ(pd_encode_pin(&d.hal.info, 19), protoduino_PinBit_PIN_ANALOG);
+    CHECK_EQ(pd_encode_pin(&d.hal.info, 18), protoduino_PinBit_PIN_DIGITAL | protoduino_PinBit_PIN_ANALOG);
+    protoduino_ArduinoIn in = m_digital_init(1, 19, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_SUPPORTED));
+    in = m_servo_init_deg(2, 19, 0, 0, 0);
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_SUPPORTED));
+    CHECK_EQ(d.hal.digital[19], -1); /* nothing at the pin */
+    CHECK_EQ(d.hal.servo_us[19], -1);
+#if PD_FEATURE_DIGITAL_INPUT
+    in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
+    in.message_id = 3;
+    in.which_data = protoduino_ArduinoIn_digital_input_init_tag;
+    in.data.digital_input_init.pin = 19;
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_SUPPORTED));
+#endif
+#if PD_FEATURE_ANALOG_INPUT
+    in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
+    in.message_id = 4;
+    in.which_data = protoduino_ArduinoIn_analog_input_init_tag;
+    in.data.analog_input_init.pin = 19;
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+#endif
+    in = m_digital_init(5, 18, 0); /* its neighbour, a port pin, is digital as ever */
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
 }
 
 static void test_one_ack_per_message(void)
@@ -931,6 +967,7 @@ const pd_test_case_t pd_tests_dispatch[] = {
     TEST_CASE(test_ping_echo_every_byte),
     TEST_CASE(test_get_info),
     TEST_CASE(test_board_limits_from_hal),
+    TEST_CASE(test_an_analog_only_pin_is_an_analog_input_and_nothing_else),
     TEST_CASE(test_one_ack_per_message),
     TEST_CASE(test_dedupe_repeat_not_executed),
     TEST_CASE(test_short_ack_when_only_id_and_ok),

@@ -4,6 +4,7 @@
 #include <pb_decode.h>
 #include <pb_encode.h>
 
+#include "fake_hal.h"
 #include "pd_encode.h"
 #include "pd_protocol.h"
 #include "pd_test.h"
@@ -94,6 +95,11 @@ static void test_encode_ack_info(void)
     protoduino_DeviceInfo *info = &out.data.ack.result.info;
     out.data.ack.which_result = protoduino_Ack_info_tag;
     CHECK_EQ(compare(&out), 0); /* all defaults: an empty nested message */
+    /* Its pin table: the fake board's (the Uno's pins), then others below. */
+    fake_hal_t hal;
+    fake_init(&hal);
+    pd_board_info_t *board = &hal.info;
+    fake_info_callbacks(info, &hal);
     strcpy(info->firmware_version, PD_FIRMWARE_VERSION);
     strcpy(info->board, "uno");
     info->protocol_version = 1;
@@ -106,11 +112,11 @@ static void test_encode_ack_info(void)
     CHECK_EQ(compare(&out), 0);
     /* Longest strings, every field at its largest. */
     strcpy(info->firmware_version, "123456789012345");
-    strcpy(info->board, "abcdefghijklmno");
+    strcpy(info->board, "abcdefghijk"); /* 11: the longest (protoduino.options) */
     /* (at their widths on the device: protoduino.options) */
     info->protocol_version = UINT8_MAX;
     info->schema_id = 0xFFFFFFFFu;
-    info->num_pins = UINT8_MAX;
+    info->num_pins = PD_MAX_PINS; /* the table's bound */
     info->max_servos = UINT8_MAX;
     info->reserved_pins_count = 4;
     for (int i = 0; i < 4; i++) {
@@ -125,10 +131,27 @@ static void test_encode_ack_info(void)
         CHECK_EQ(compare(&out), 0);
     }
     info->features = UINT16_MAX;
-    info->pwm_pins = 0xFFFFFFFFu;
-    info->analog_pins = 0x000FC000u;
-    info->counter_pins = 0x0000000Cu;
     CHECK_EQ(compare(&out), 0);
+    /* Another board's table, at its largest (every pin and timer). */
+    board->pwm_pins = 0xFFFFFu;
+    board->reserved_pins = 0;
+    board->servo_timer = PD_INFO_TIMERS_MAX - 1u;
+    CHECK_EQ(compare(&out), 0);
+    info->num_pins = 1;
+    CHECK_EQ(compare(&out), 0);
+    board->servo_timer_pins = 0; /* no timer held: no timers */
+    board->clock_timer_pins = 0;
+    CHECK_EQ(compare(&out), 0);
+    info->num_pins = 0; /* no pins: no table */
+    CHECK_EQ(compare(&out), 0);
+    uint8_t big[200];
+    info->num_pins = PD_MAX_PINS + 1u; /* past the bounds: refused */
+    CHECK_EQ(pd_encode_out(&out, big, sizeof(big)), 0);
+    info->num_pins = PD_MAX_PINS;
+    board->servo_timer_pins = 1u << 9;
+    board->servo_timer = PD_INFO_TIMERS_MAX;
+    CHECK_EQ(pd_encode_out(&out, big, sizeof(big)), 0);
+    board->servo_timer = 1;
     uint8_t buf[200];
     info->reserved_pins_count = 5;
     CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);

@@ -91,3 +91,33 @@ def test_the_readmes_quote_the_builds_figures() -> None:
     assert _quoted(ROOT / "firmware/README.md", "static_ram") == static.describe(), rerun
     # The parts are read, not guessed: each exists in this build, and they fit in the total.
     assert static.rest >= 0 and min(static.core.values()) > 0
+
+
+def test_nano_profile_within_the_budgets(capsys: pytest.CaptureFixture[str]) -> None:
+    """The Nano's profile of the build (``make avr BOARD=nano``: A6 and A7 as pins 20 and 21)
+    fits the same flash budget, and its static RAM is the Uno's and its two more pins' bytes
+    of the pin registry (PD_MAX_PINS 22), nothing else: the stack margin the Uno's stack test
+    measures holds for it with 2 B less."""
+    for tool in ("make", "avr-gcc", "avr-size"):
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} is not installed (Debian packages gcc-avr, binutils-avr)")
+    sizes = {}
+    for board, elf in (("uno", ELF), ("nano", ROOT / "build" / "avr-nano" / "protoduino.elf")):
+        build = subprocess.run(
+            ["make", "-s", "-C", str(ROOT / "firmware"), "avr", f"BOARD={board}"],
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=300,
+        )
+        assert build.returncode == 0, (build.stdout + build.stderr)[-4000:]
+        sections = rambudget.sections(elf)
+        sizes[board] = (
+            sections[".text"] + sections.get(".data", 0),
+            sections.get(".data", 0) + sections.get(".bss", 0) + sections.get(".noinit", 0),
+        )
+    (flash, ram), (_, uno_ram) = sizes["nano"], sizes["uno"]
+    with capsys.disabled():
+        sys.stdout.write(f"\nNano firmware: flash {flash} B, static RAM {ram} B\n")
+    assert flash <= FLASH_BUDGET
+    assert ram == uno_ram + 2

@@ -2,6 +2,7 @@
  * pin capabilities and features. The fake board has the Uno's masks (fake_hal.c). */
 #include <string.h>
 
+#include "pd_encode.h"
 #include "pd_test.h"
 #include "test_util.h"
 
@@ -239,9 +240,28 @@ static void test_device_info_lists_capabilities_and_features(void)
     CHECK_EQ(info->features, PD_FEATURES);
     CHECK((info->features >> protoduino_Feature_FEATURE_PWM) & 1u);
     CHECK((info->features >> protoduino_Feature_FEATURE_SERVO) & 1u);
-    CHECK_EQ(info->pwm_pins, (1u << 3) | (1u << 9) | (1u << 10) | (1u << 11));
-    /* A mode the firmware does not have lists no pins. */
-    CHECK_EQ(info->analog_pins, PD_FEATURE_ANALOG_INPUT ? 0x3Fu << 14 : 0u);
+    /* The pin table (DeviceInfo.pins, timers), from the board's (fake_hal.c: the
+     * Uno's): UART 0, 1 nothing; counters on 2, 3; PWM on 3, 11 (a free timer) and
+     * 9, 10 (Timer1, the servos'); 5, 6 on Timer0 (the clock's), without PWM;
+     * A0..A5 analog. Then the timers: Timer0 the clock's, Timer1 the servos'. */
+    const fake_frame_t *f = &d.hal.frames[(d.hal.n_frames - 1u) % FAKE_MAX_FRAMES];
+    const uint8_t table[] = {
+        0x72, 20, 0x00, 0x00, 0x09, 0x0B, 0x01, 0x21, 0x21, 0x01, 0x01, 0x43, 0x43, 0x03,
+        0x01, 0x01, 0x05, 0x05, 0x05, 0x05, 0x05, 0x05, 0x7A, 2, 0x01, 0x02};
+    CHECK(f->len >= sizeof(table));
+    CHECK(memcmp(f->payload + f->len - sizeof(table), table, sizeof(table)) == 0);
+    /* A board with other pins says so, from its table alone. */
+    d.hal.info.pwm_pins = 1u << 4;
+    d.hal.info.servo_timer_pins = 0;
+    d.hal.info.clock_timer_pins = 1u << 4;
+    d.hal.info.clock_timer = 2;
+    CHECK_EQ(pd_encode_pin(&d.hal.info, 4), 0x01 | 0x02 | (3u << 5));
+    CHECK_EQ(pd_encode_pin(&d.hal.info, 9), 0x01);
+    CHECK_EQ(pd_encode_timer_count(&d.hal.info), 3);
+    CHECK_EQ(pd_encode_timer(&d.hal.info, 0), protoduino_TimerUse_TIMER_FREE);
+    CHECK_EQ(pd_encode_timer(&d.hal.info, 2), protoduino_TimerUse_TIMER_CLOCK);
+    in = m_info(2);
+    CHECK_EQ(t_cmd(&d, &in), S(OK)); /* fake_hal checks it against pb_encode's */
 }
 
 const pd_test_case_t pd_tests_pwm[] = {

@@ -80,7 +80,7 @@ def test_pin_modes_and_their_commands() -> None:
         assert commands.COMMANDS[mode.init].is_init
         assert commands.COMMANDS[mode.init].needs_init is None
         if mode.pins:
-            assert mode.pins in pb.DeviceInfo.DESCRIPTOR.fields_by_name
+            assert mode.pins in pb.PinBit.DESCRIPTOR.values_by_name
         kinds = [mode.init]
         if mode.control is not None:
             assert commands.COMMANDS[mode.control].needs_init == mode.init
@@ -138,8 +138,8 @@ def _tables_of(tmp_path: Path, edit: tuple[str, str]) -> cmdtables.Tables:
             "not a Feature value",
         ),
         (
-            ('pins: "pwm_pins"', 'pins: "pmw_pins"'),
-            "not a DeviceInfo field",
+            ('pins: "PIN_PWM"', 'pins: "PIN_PMW"'),
+            "not a PinBit flag",
         ),
         (
             ("Pose pose = 6 [(command).sets_output = true];", "Pose pose = 6;"),
@@ -169,7 +169,7 @@ def test_the_generator_checks_the_declarations(
 def test_a_feature_off_by_default(tmp_path: Path) -> None:
     """A Feature declared off by default is 0 unless the build defines it, still has its
     DeviceInfo.features bit, and is not among make's FEATURES (nor the host's list of them)."""
-    counter = '[(pin_mode) = {name: "counter" init: "counter_init" pins: "counter_pins"}];\n'
+    counter = '[(pin_mode) = {name: "counter" init: "counter_init" pins: "PIN_COUNTER"}];\n'
     extra = "  FEATURE_EXTRA = 8 [(feature).off_by_default = true];\n"  # 7 is FEATURE_USER
     tables = _tables_of(tmp_path, (counter, counter + extra))
     assert ("extra", 8, False) in tables.features

@@ -20,6 +20,7 @@ from typing import Any
 import pytest
 from boardprocess import BoardProcess, missing_tool
 from protoduino import Board, CommandRejectedError
+from protoduino._generated import protoduino_pb2 as pb
 from protoduino.board import Edge
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard, runner_command
@@ -81,7 +82,7 @@ def test_a_build_without_servo_refuses_servos(tools: None) -> None:
             info = board.request(_info()).info
             assert not (info.features >> 1) & 1  # FEATURE_SERVO
             assert (info.features >> 5) & 1  # FEATURE_PWM
-            assert info.pwm_pins == (1 << 3) | (1 << 9) | (1 << 10) | (1 << 11)
+            assert [p for p, byte in enumerate(info.pins) if byte & pb.PIN_PWM] == [3, 9, 10, 11]
             with pytest.raises(CommandRejectedError) as refused:
                 board.request(_servo_init(9))
             assert refused.value.status == Status.STATUS_NOT_SUPPORTED
@@ -280,3 +281,46 @@ def test_pwm_on_timer1_in_a_build_without_servos(tools: None, tmp_path: Path) ->
             _wait_for(trace, _is_pwm(9, 100))
     finally:
         runner.stop(strict=False)
+
+
+def test_the_nano_profile_states_a6_and_a7_analog_only(tools: None, tmp_path: Path) -> None:
+    """The Nano (``make avr BOARD=nano``: the Uno's ATmega328P with ADC6 and ADC7 as A6 and A7,
+    pins 20 and 21) on the emulated ATmega328P: it states its pins in its DeviceInfo, the host
+    serves it from that table alone (no edit for it), a digital mode on A6 or A7 is refused by
+    the host before sending and by the device with the same status, and A7 reads the ADC7
+    value the control socket puts on it."""
+    elf = build.build_firmware_board("nano")
+    sim = SimBoard("avr", firmware=elf, trace=tmp_path / "trace.jsonl")
+    sim.start()
+    try:
+        with Board.open(sim.port) as board:
+            info = board.info
+            assert (info.board, info.num_pins) == ("nano", 22)
+            assert info.analog_pins == tuple(range(14, 22))
+            assert info.pins[20:] == bytes([pb.PIN_ANALOG, pb.PIN_ANALOG])
+            assert info.pins[14:20] == bytes([pb.PIN_DIGITAL | pb.PIN_ANALOG] * 6)
+            assert board.pin_number("A7") == 21
+            for pin in (20, 21):
+                with pytest.raises(
+                    CommandRejectedError, match=f"pin {pin} cannot be a digital pin"
+                ) as refused:
+                    board.digital_output(pin)
+                assert (
+                    refused.value.status == Status.STATUS_NOT_SUPPORTED and not refused.value.sent
+                )
+                msg = ArduinoIn()
+                msg.digital_init.pin = pin
+                with pytest.raises(CommandRejectedError) as device:
+                    board.request(msg)  # no host check on the way: the device's own answer
+                assert device.value.status == Status.STATUS_NOT_SUPPORTED
+            sim.control.analog(21, 700)
+            a7 = board.analog_input("A7")
+            deadline = time.monotonic() + TRACE_TIMEOUT  # bounds a failing wait only
+            while a7.read() != 700 and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert a7.read() == 700
+            sim.control.analog(20, 300)
+            assert board.analog_input("A6").read() == 300
+            board.digital_output("A5", True)  # pin 19 has its port, as on the Uno
+    finally:
+        sim.stop()

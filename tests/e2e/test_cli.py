@@ -52,6 +52,7 @@ def test_info(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     assert "board             virtual" in out
     assert "pwm_pins          [3, 9, 10, 11]" in out
+    assert "timers            ['clock', 'servos']" in out
     # The link counters, as README and --help promise.
     assert "link counters" in out
     counters = dict(line.split(maxsplit=1) for line in out.splitlines() if " " in line)

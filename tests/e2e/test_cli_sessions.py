@@ -111,7 +111,7 @@ def test_a_pin_or_timer_an_earlier_command_holds_is_said_as_the_api_says_it(
     assert main(["pwm", port, "10", "100"]) == 0
     capsys.readouterr()
     cases = [
-        (["servo", port, "9", "45"], "pin 10 does PWM on the timer the servos need"),
+        (["servo", port, "9", "45"], "pin 10 does PWM on Timer1, the timer the servos need"),
         (["pin", port, "10", "on"], "pin 10 is a pwm pin (STATUS_PIN_IN_USE)"),
         (["read", port, "10"], "pin 10 is a pwm pin (STATUS_PIN_IN_USE)"),
     ]
@@ -121,7 +121,7 @@ def test_a_pin_or_timer_an_earlier_command_holds_is_said_as_the_api_says_it(
     assert main(["servo", port, "9", "45", "--new-session"]) == 0
     assert main(["pwm", port, "10", "100"]) == 1
     err = capsys.readouterr().err
-    assert "pin 10's PWM timer makes the servo pulses while a servo runs" in err
+    assert "pin 10's PWM needs Timer1, which makes the servo pulses while a servo runs" in err
     assert "(STATUS_TIMER_IN_USE)" in err
 
 

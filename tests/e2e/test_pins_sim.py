@@ -22,6 +22,7 @@ import protoduino
 import pytest
 from boardprocess import BoardProcess, missing_tool
 from protoduino import Board, Event, EventKind, aio
+from protoduino._generated import protoduino_pb2 as pb
 from protoduino.constants import PacketType
 from protoduino.errors import (
     FeatureMissingError,
@@ -174,19 +175,40 @@ def _request(board: Board, msg: ArduinoIn) -> int:
     return Status.STATUS_OK
 
 
+#: The Uno's pin table as its DeviceInfo states it (docs/protocol.md section 7, *The pin table*).
+UNO_PINS = bytes([0, 0, 0x09, 0x0B, 0x01, 0x21, 0x21, 0x01, 0x01, 0x43, 0x43, 0x03, 1, 1] + [5] * 6)
+
+
+def test_the_board_states_its_pin_table(board: Board) -> None:
+    """Both boards state the Uno's pins and timers (DeviceInfo.pins, timers): what the host
+    knows of the board's pins it has from there."""
+    info = board.info
+    assert (info.pins, info.timers) == (UNO_PINS, bytes([pb.TIMER_CLOCK, pb.TIMER_SERVOS]))
+    assert (info.pwm_pins, info.analog_pins, info.counter_pins) == (
+        (3, 9, 10, 11),
+        (14, 15, 16, 17, 18, 19),
+        (2, 3),
+    )
+    assert [info.timer(p) for p in (3, 5, 9)] == [None, 0, 1]
+
+
 def test_host_refusals_are_the_devices(board: Board) -> None:
-    """Each PWM refusal the host makes before sending is the one the device makes."""
-    cases: list[tuple[int, type[protoduino.CommandRejectedError], int]] = [
-        (5, TimerInUseError, Status.STATUS_TIMER_IN_USE),  # Timer0: the clock
-        (6, TimerInUseError, Status.STATUS_TIMER_IN_USE),
-        (4, NotSupportedError, Status.STATUS_NOT_SUPPORTED),  # no PWM there
+    """Each PWM refusal the host makes before sending is the one the device makes, and says
+    which pin, what it cannot do and why, from the device's pin table."""
+    clock = "PWM needs Timer0, which runs the device's millisecond clock"
+    cases: list[tuple[int, type[protoduino.CommandRejectedError], int, str]] = [
+        (5, TimerInUseError, Status.STATUS_TIMER_IN_USE, f"pin 5's {clock}"),
+        (6, TimerInUseError, Status.STATUS_TIMER_IN_USE, f"pin 6's {clock}"),
+        (4, NotSupportedError, Status.STATUS_NOT_SUPPORTED, "pin 4 cannot be a pwm pin on this"),
     ]
     board.servo(2)
-    cases.append((9, TimerInUseError, Status.STATUS_TIMER_IN_USE))  # Timer1 makes the pulses
-    for pin, error, status in cases:
+    servos = "PWM needs Timer1, which makes the servo pulses while a servo runs (pin 2;"
+    cases.append((9, TimerInUseError, Status.STATUS_TIMER_IN_USE, f"pin 9's {servos}"))
+    for pin, error, status, why in cases:
         with pytest.raises(error) as refused:
             board.pwm_output(pin)
         assert refused.value.status == status and not refused.value.sent
+        assert why in str(refused.value)
         msg = ArduinoIn()
         msg.pwm_init.pin = pin
         assert _request(board, msg) == status, pin

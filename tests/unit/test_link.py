@@ -39,12 +39,23 @@ def test_handshake_and_info(fake: PtyDevice) -> None:
 
 
 def test_version_mismatch_names_both_versions(tmp_path: Path) -> None:
-    with PtyDevice(tmp_path, version=7), pytest.raises(protoduino.VersionMismatchError) as info:
+    newer = protoduino.PROTOCOL_VERSION + 1
+    with PtyDevice(tmp_path, version=newer), pytest.raises(protoduino.VersionMismatchError) as info:
         Board.open(str(tmp_path / "fake-tty"))
     assert info.value.host_version == protoduino.PROTOCOL_VERSION
-    assert info.value.device_version == 7
-    assert str(protoduino.PROTOCOL_VERSION) in str(info.value) and "7" in str(info.value)
+    assert info.value.device_version == newer
+    assert f"host speaks {protoduino.PROTOCOL_VERSION}, device speaks {newer}" in str(info.value)
     assert isinstance(info.value, protoduino.LinkError)
+
+
+def test_version_6_firmware_without_the_pin_table_is_refused_clearly(tmp_path: Path) -> None:
+    """A version 6 device states its pins in masks the host no longer reads (DeviceInfo.pins
+    came with version 7): the handshake refuses it, naming both versions."""
+    assert protoduino.PROTOCOL_VERSION == 7
+    with PtyDevice(tmp_path, version=6), pytest.raises(protoduino.VersionMismatchError) as info:
+        Board.open(str(tmp_path / "fake-tty"))
+    assert (info.value.host_version, info.value.device_version) == (7, 6)
+    assert "host speaks 7, device speaks 6" in str(info.value)
 
 
 def test_version_1_firmware_gets_the_clear_version_error(tmp_path: Path) -> None:

@@ -127,7 +127,6 @@ def test_device_info_lists_features_and_pins(board: Board) -> None:
 
 
 def test_timer1_is_shared_by_servos_and_pwm_on_9_and_10(fake: PtyDevice) -> None:
-    fake.board_name = "uno"
     with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
         servo = board.servo(2)
         for pin in (9, 10):
@@ -143,6 +142,86 @@ def test_timer1_is_shared_by_servos_and_pwm_on_9_and_10(fake: PtyDevice) -> None
         with pytest.raises(TimerInUseError):
             board.servo(4)
         assert sorted(fake.pins) == [3, 10]
+
+
+def test_a_board_with_another_pin_table_is_served_with_no_host_edit(fake: PtyDevice) -> None:
+    """A board the host has never heard of: its pins and timers come from its DeviceInfo
+    (pins, timers) alone, and the host refuses before sending as the device would, naming
+    the pin, what it cannot do and why."""
+    fake.board_name = "other"
+    fake.num_pins = 24
+    fake.reserved_pins = [0, 1]
+    fake.pwm_pins = [4, 7, 12]
+    fake.analog_pins = [20, 21, 22, 23]
+    fake.counter_pins = [18]
+    fake.servo_timer_pins, fake.servo_timer = [4, 7], 3
+    fake.clock_timer_pins, fake.clock_timer = [8], 2
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
+        info = board.info
+        assert (info.pwm_pins, info.analog_pins, info.counter_pins) == (
+            (4, 7, 12),
+            (20, 21, 22, 23),
+            (18,),
+        )
+        assert (info.timer(4), info.timer(8), info.timer(12)) == (3, 2, None)
+        assert (info.timer_use(2), info.timer_use(3), info.timer_use(0)) == (
+            "clock",
+            "servos",
+            "free",
+        )
+        assert board.pin_number("A1") == 21
+        before = len(fake.arrivals())
+        with pytest.raises(
+            NotSupportedError,
+            match=r"pin 3 cannot be a pwm pin on this other \(those are 4, 7, 12\)",
+        ):
+            board.pwm_output(3)
+        with pytest.raises(
+            TimerInUseError,
+            match=r"pin 8's PWM needs Timer2, which runs the device's millisecond clock",
+        ):
+            board.pwm_output(8)
+        with pytest.raises(NotSupportedError, match="pin 14 cannot be an analog input pin"):
+            board.analog_input(14)
+        assert len(fake.arrivals()) == before  # refused by the host, nothing sent
+        board.pwm_output(12)  # a timer the device does not hold
+        board.servo(9)
+        with pytest.raises(
+            TimerInUseError,
+            match=r"pin 7's PWM needs Timer3, which makes the servo pulses while a servo runs "
+            r"\(pin 9;",
+        ) as refused:
+            board.pwm_output(7)
+        assert not refused.value.sent
+        board.analog_input("A3")
+        board.counter(18)
+        assert sorted(fake.pins) == [9, 12, 18, 23]
+
+
+def test_a_nano_s_a6_and_a7_are_analog_inputs_only(fake: PtyDevice) -> None:
+    """The Nano's profile (two more ADC inputs, A6 and A7, with no port behind them): from
+    its pin table alone, "A7" is pin 21 and an analog input, and every other mode there is
+    refused before sending, as the device refuses it."""
+    fake.board_name = "nano"
+    fake.num_pins = 22
+    fake.analog_pins = list(range(14, 22))
+    fake.analog_only_pins = [20, 21]
+    with Board.open(fake.port, ack_timeout=0.1, ping=False) as board:
+        assert board.info.analog_pins == tuple(range(14, 22))
+        assert board.pin_number("A7") == 21
+        before = len(fake.arrivals())
+        for configure, what in (
+            (lambda: board.digital_output(20), "a digital pin"),
+            (lambda: board.servo("A7"), "a servo pin"),
+            (lambda: board.digital_input("A6"), "a digital input pin"),
+            (lambda: board.pwm_output(21), "a pwm pin"),
+        ):
+            with pytest.raises(NotSupportedError, match=f"cannot be {what} on this nano"):
+                configure()
+        assert len(fake.arrivals()) == before  # refused by the host, nothing sent
+        board.analog_input("A7")
+        board.digital_output("A5")  # 19 has its port: digital as on the Uno
+        assert sorted(fake.pins) == [19, 21]
 
 
 def test_a_device_refusal_has_its_named_error(board: Board, fake: PtyDevice) -> None:

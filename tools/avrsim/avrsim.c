@@ -136,6 +136,9 @@
 #define PD_ANNOUNCE_MS 50U
 #define PD_VCC_MV 5000U /* VCC, AVCC and AREF of the emulated Uno */
 #define PD_FIRST_ANALOG 14 /* A0 */
+/* The ATmega328P's ADC6 and ADC7, a Nano's A6 and A7 (pins 20, 21): inputs of the ADC with
+ * no port behind them, so they take analog values and nothing else. */
+#define PD_ADC_ONLY_PINS 2
 
 /* Uno pin numbering: D0..D7 = PD0..7, D8..D13 = PB0..5, A0..A5 = PC0..5. */
 typedef struct {
@@ -618,8 +621,14 @@ static void pd_set_analog(pd_sim_t *sim, int pin, unsigned counts)
 static const char *pd_control_apply(void *ctx, const pd_control_cmd_t *cmd, double *t)
 {
     pd_sim_t *sim = ctx;
+    if (cmd->pin >= PD_PINS_COUNT && cmd->pin < PD_PINS_COUNT + PD_ADC_ONLY_PINS &&
+        cmd->kind == PD_CONTROL_ANALOG) {
+        pd_set_analog(sim, cmd->pin, (unsigned)cmd->value); /* ADC6, ADC7 */
+        *t = (double)pd_cycles(sim) / (double)sim->avr->frequency;
+        return NULL;
+    }
     if (cmd->pin >= PD_PINS_COUNT) {
-        return "no such pin on this board (pins 2..19)";
+        return "no such pin on this board (pins 2..19; 20 and 21, A6 and A7, take only analog values)";
     }
     if (cmd->pin < 2) {
         return "pins 0 and 1 carry the serial link";

@@ -96,8 +96,8 @@ class PinMode(_message.Message):
     come in InputReports). Both carry the pin in a field named `pin`.
     """
     pins: _builtins.str
-    """The DeviceInfo mask of the pins that can do this mode ("pwm_pins");
-    empty: any pin that is not reserved.
+    """The PinBit flag of the pins that can do this mode ("PIN_PWM"), in their
+    bytes of DeviceInfo.pins; empty: PIN_DIGITAL.
     """
     def __init__(
         self,

@@ -42,9 +42,9 @@ PIN_MODES: tuple[PinModeRow, ...] = (
     PinModeRow('servo', 'servo_init', 'servo_control', 'servo', ''),
     PinModeRow('digital', 'digital_init', 'digital_control', 'digital_output', ''),
     PinModeRow('digital_input', 'digital_input_init', None, 'digital_input', ''),
-    PinModeRow('analog_input', 'analog_input_init', None, 'analog_input', 'analog_pins'),
-    PinModeRow('pwm', 'pwm_init', 'pwm_control', 'pwm', 'pwm_pins'),
-    PinModeRow('counter', 'counter_init', None, 'counter', 'counter_pins'),
+    PinModeRow('analog_input', 'analog_input_init', None, 'analog_input', 'PIN_ANALOG'),
+    PinModeRow('pwm', 'pwm_init', 'pwm_control', 'pwm', 'PIN_PWM'),
+    PinModeRow('counter', 'counter_init', None, 'counter', 'PIN_COUNTER'),
 )
 
 #: Every ArduinoIn.data member, in the schema's order.

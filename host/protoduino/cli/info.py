@@ -35,6 +35,9 @@ def run(args: argparse.Namespace) -> int:
         info["features"] = sorted(board.info.features)  # the pin modes built in
         for mask in ("pwm_pins", "analog_pins", "counter_pins"):
             info[mask] = list(getattr(board.info, mask))
+        # The pin table as the device states it: a byte per pin, what each timer is held for.
+        info["pins"] = list(board.info.pins)
+        info["timers"] = [board.info.timer_use(t) for t in range(len(board.info.timers))]
         if args.json:
             print(
                 json.dumps(

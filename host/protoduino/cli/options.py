@@ -308,7 +308,7 @@ def configuring(board: Board, pin: Pin, mode: PinMode) -> Iterator[None]:
             held = {p: _MODES[out.mode] for p, out in board.read_outputs().items()}
         except ProtoduinoError:
             raise exc from None
-        why = conflict(board.info.board, board.pin_number(pin), mode, held)
+        why = conflict(board.info, board.pin_number(pin), mode, held)
         if why is None or why.status != exc.status:
             raise
         raise rejection(exc.status, str(why)) from exc
