@@ -383,6 +383,8 @@ def test_stop_resume_and_clear_interlock_as_trigger_services(
     sim.set_level(7, 1)  # the bumper released: the pull-up's level
     node.request("sub", topic="/diagnostics", type="diagnostic_msgs/msg/DiagnosticArray")
     process = bridge(SERVICE_ROBOT.format(ns=ns, failsafe=FAILSAFE_TIMEOUT, python=ROS2_PYTHON))
+    printed = [f"  /{ns}/{name}  {TRIGGER}\n" for name in ("stop", "resume", "clear_interlock")]
+    _until(lambda: all(line in process.output() for line in printed), "the services printed")
 
     def call(service: str) -> dict[str, Any]:
         answer: dict[str, Any] = node.request("call", service=f"/{ns}/{service}", type=TRIGGER)

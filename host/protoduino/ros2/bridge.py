@@ -221,6 +221,13 @@ class Bridge(ClosedOnExit):
             found[ros_topic(self.config.namespace, name)] = _ros_type(writer.topic.data_type)
         return found
 
+    def services(self) -> dict[str, str]:
+        """Every ROS service of the bridge -> its ROS 2 type (answered once its rclpy node is
+        up: :mod:`.services`)."""
+        if self._services is None:
+            return {}
+        return {name: services.TRIGGER for name in self._services.names.values()}
+
     def stop(self) -> None:
         """Make :meth:`run` return (thread-safe; callable from a signal handler)."""
         self._stopping.set()

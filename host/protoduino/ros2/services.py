@@ -38,6 +38,8 @@ from .graph import node_namespace
 SCRIPT = Path(__file__).with_name("services_node.py")
 #: The node's name, in the bridge's namespace (beside the bridge's own ``protoduino``).
 NODE_NAME = "protoduino_services"
+#: The services' ROS 2 type.
+TRIGGER = "std_srvs/srv/Trigger"
 #: How long (s) the node waits for the bridge's answer before it answers a failure.
 ANSWER_TIMEOUT = 10.0
 #: How long (s) closing waits for the node to exit before it is killed.
@@ -45,7 +47,7 @@ CLOSE_WAIT = 3.0
 
 log = logging.getLogger(__name__)
 
-__all__ = ["NODE_NAME", "Call", "Services"]
+__all__ = ["NODE_NAME", "TRIGGER", "Call", "Services"]
 
 
 @dataclass(frozen=True, slots=True)
