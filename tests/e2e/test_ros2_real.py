@@ -431,7 +431,9 @@ def test_stop_resume_and_clear_interlock_as_trigger_services(
     assert early["message"].endswith("rejected by the device: STATUS_INTERLOCK_ACTIVE"), early
     # Released, but not cleared: the device still refuses a Twist (counted), nothing moves.
     sim.set_level(7, 1)
-    _until(lambda: refused() >= 0, "a /diagnostics report of the bridge")
+    # The refused clear is the first refusal of this bridge: once a report counts it, the
+    # next count is the Twist's.
+    _until(lambda: refused() >= 1, "the refused clear counted on /diagnostics")
     before = refused()
     twist = {"linear": {"x": 0.25}, "angular": {"z": 0.0}}
     assert node.request("pub", topic=f"/{ns}/cmd_vel", type="geometry_msgs/msg/Twist", msg=twist)
