@@ -43,7 +43,10 @@ class NodeUnavailableError(RuntimeError):
 
 class RclpyNode:
     """The node in its subprocess, on DDS domain ``domain``, discovering over loopback only;
-    its stderr goes to ``log``."""
+    its stderr goes to ``log``. tests/e2e/test_ros2_real.py drives it too."""
+
+    #: The interpreter that runs it.
+    python = PYTHON
 
     def __init__(self, domain: int, log: Path) -> None:
         if not PYTHON.exists():

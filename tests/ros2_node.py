@@ -1,10 +1,10 @@
 """A real ROS 2 node for the tests: rclpy on Fast DDS, driven through JSON lines.
 
 Run by the ROS 2 venv's interpreter (``.deps/ros2-venv``, installed by
-``tools/dev.sh setup``), never imported by the suite's: ``tests/e2e/test_ros2_real.py``
-and the bench's part 8 (``bench/ros2_rclpy.py``) start it as a subprocess and send one
-JSON request per line on its stdin;
-each gets one JSON line on stdout, ``{"ok": ...}`` or ``{"error": "..."}``.
+``tools/dev.sh setup``), never imported by the suite's: ``bench/ros2_rclpy.py``'s
+``RclpyNode`` (which tests/e2e/test_ros2_real.py and the bench's part 8 use) starts it as a
+subprocess and sends one JSON request per line on its stdin; each gets one JSON line on
+stdout, ``{"ok": ...}`` or ``{"error": "..."}``.
 Requests (``type`` is a ROS 2 name, ``std_msgs/msg/Bool``; ``qos`` is ``sensor``
 for rclpy's ``qos_profile_sensor_data``, else the default profile, reliable, keep
 last 10):

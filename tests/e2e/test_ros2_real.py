@@ -12,9 +12,7 @@ rosbags peer of test_ros2.py stays the second, independent peer.
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -24,9 +22,15 @@ import pytest
 from protoduino.simboard import SimBoard
 from simfixtures import pin_values, wait_for_pin, wait_until
 
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:  # bench/ is a top-level folder of the checkout, not installed
+    sys.path.insert(0, str(ROOT))
+
+from bench.ros2_rclpy import RclpyNode  # noqa: E402  (the node bench part 8 drives too)
+
 pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing")
 
-from test_ros2 import (
+from test_ros2 import (  # noqa: E402
     DOMAIN,
     FAILSAFE_TIMEOUT,
     SAFE_90_US,
@@ -37,10 +41,8 @@ from test_ros2 import (
     to_us,
 )
 
-ROOT = Path(__file__).resolve().parents[2]
-#: The ROS 2 venv of tools/dev.sh setup.
-ROS2_PYTHON = ROOT / ".deps" / "ros2-venv" / "bin" / "python"
-NODE_SCRIPT = ROOT / "tests" / "ros2_node.py"
+#: The ROS 2 venv's interpreter (tools/dev.sh setup).
+ROS2_PYTHON = RclpyNode.python
 
 if not ROS2_PYTHON.exists():
     pytest.skip(
@@ -48,61 +50,13 @@ if not ROS2_PYTHON.exists():
         allow_module_level=True,
     )
 
-
-class RosNode:
-    """The rclpy node in its subprocess; :meth:`request` is one JSON line each way."""
-
-    def __init__(self, log: Path) -> None:
-        env = dict(
-            os.environ,
-            ROS_DOMAIN_ID=str(DOMAIN),
-            RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
-            # Discovery on this machine only (Fast DDS: loopback unicast, no multicast).
-            ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-        )
-        env.pop("CYCLONEDDS_URI", None)
-        self.stderr = log.open("w")
-        self.proc = subprocess.Popen(
-            [str(ROS2_PYTHON), str(NODE_SCRIPT)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=self.stderr,
-            env=env,
-            text=True,
-        )
-        self.log = log
-        assert self._answer() == "ready"
-
-    def _answer(self) -> Any:
-        assert self.proc.stdout is not None
-        line = self.proc.stdout.readline()
-        if not line:
-            raise AssertionError(f"the rclpy node died: {self.log.read_text()}")
-        answer = json.loads(line)
-        if "error" in answer:
-            raise AssertionError(f"the rclpy node: {answer['error']}")
-        return answer["ok"]
-
-    def request(self, op: str, **args: Any) -> Any:
-        assert self.proc.stdin is not None
-        self.proc.stdin.write(json.dumps({"op": op, **args}) + "\n")
-        self.proc.stdin.flush()
-        return self._answer()
-
-    def close(self) -> None:
-        if self.proc.stdin is not None:
-            self.proc.stdin.close()
-        try:
-            self.proc.wait(10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        self.stderr.close()
+#: The node tests/ros2_node.py in its subprocess (bench part 8 drives the same one).
+RosNode = RclpyNode
 
 
 @pytest.fixture(scope="module")
 def ros_node(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RosNode]:
-    node = RosNode(tmp_path_factory.mktemp("rclpy") / "node.log")
+    node = RosNode(DOMAIN, tmp_path_factory.mktemp("rclpy") / "node.log")
     try:
         yield node
     finally:
