@@ -1,17 +1,22 @@
 """A real ROS 2 node for the tests: rclpy on Fast DDS, driven through JSON lines.
 
 Run by the ROS 2 venv's interpreter (``.deps/ros2-venv``, installed by
-``tools/dev.sh setup``), never imported by the suite's: ``tests/ros2real.py``
-starts it as a subprocess and sends one JSON request per line on its stdin;
-each gets one JSON line on stdout, ``{"ok": ...}`` or ``{"error": "..."}``.
+``tools/dev.sh setup``), never imported by the suite's: ``bench/ros2_rclpy.py``'s
+``RclpyNode`` (which tests/e2e/test_ros2_real.py and the bench's part 8 use) starts it as a
+subprocess and sends one JSON request per line on its stdin; each gets one JSON line on
+stdout, ``{"ok": ...}`` or ``{"error": "..."}``.
 Requests (``type`` is a ROS 2 name, ``std_msgs/msg/Bool``; ``qos`` is ``sensor``
 for rclpy's ``qos_profile_sensor_data``, else the default profile, reliable, keep
 last 10):
 
 * ``{"op": "sub", "topic", "type", "qos"}``: subscribe; samples are kept;
 * ``{"op": "take", "topic"}``: the samples received since the last take (dicts);
+  ``"stamped": true``: each as ``[t, dict]``, ``t`` the ``time.monotonic()`` at which the
+  subscription's callback began (CLOCK_MONOTONIC: one clock for every process here);
 * ``{"op": "pub", "topic", "type", "msg": {...}}``: publish (a publisher is made on
-  first use and waits until it matched a subscription, up to ``timeout`` s);
+  first use and waits until it matched a subscription, up to ``timeout`` s); answers
+  how many subscriptions it matched, or with ``"stamped": true`` ``[matched, t]``, ``t``
+  the ``time.monotonic()`` just before the message was handed to rclpy;
 * ``{"op": "publishers", "topic"}``: how many publishers the graph has on it;
 * ``{"op": "graph"}``: every node (name, namespace) with its publishers, subscriptions
   and services, as ``ros2 node list`` / ``ros2 node info`` show them;
@@ -79,7 +84,8 @@ class Node:
         rclpy.init()
         self.node = rclpy.create_node("ros2real_probe")
         self.lock = threading.Lock()
-        self.samples: dict[str, list[Any]] = {}
+        #: topic -> (callback time, sample as a dict) since the last take.
+        self.samples: dict[str, list[tuple[float, Any]]] = {}
         self.subscriptions: dict[str, Any] = {}
         self.publishers: dict[str, Any] = {}
         self.executor = executors.SingleThreadedExecutor()
@@ -92,8 +98,10 @@ class Node:
 
     def sub(self, topic: str, type: str, qos: str | None = None) -> bool:
         def received(message: Any) -> None:
+            now = time.monotonic()
+            sample = to_dict(message)
             with self.lock:
-                self.samples[topic].append(to_dict(message))
+                self.samples[topic].append((now, sample))
 
         self.samples.setdefault(topic, [])
         self.subscriptions[topic] = self.node.create_subscription(
@@ -101,20 +109,30 @@ class Node:
         )
         return True
 
-    def take(self, topic: str) -> list[Any]:
+    def take(self, topic: str, stamped: bool = False) -> list[Any]:
         with self.lock:
             taken, self.samples[topic] = self.samples[topic], []
-        return taken
+        return [[t, s] for t, s in taken] if stamped else [s for _, s in taken]
 
-    def pub(self, topic: str, type: str, msg: dict[str, Any], timeout: float = 30.0) -> int:
+    def pub(
+        self,
+        topic: str,
+        type: str,
+        msg: dict[str, Any],
+        timeout: float = 30.0,
+        stamped: bool = False,
+    ) -> Any:
         if topic not in self.publishers:
             self.publishers[topic] = self.node.create_publisher(ros_class(type), topic, 10)
         publisher = self.publishers[topic]
         deadline = time.monotonic() + timeout
         while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
             time.sleep(0.02)
-        publisher.publish(fill(ros_class(type)(), msg))
-        return int(publisher.get_subscription_count())
+        message = fill(ros_class(type)(), msg)
+        now = time.monotonic()
+        publisher.publish(message)
+        matched = int(publisher.get_subscription_count())
+        return [matched, now] if stamped else matched
 
     def count_publishers(self, topic: str) -> int:
         return int(self.node.count_publishers(topic))

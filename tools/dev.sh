@@ -113,6 +113,7 @@ setup_venv() {
 ROS2_PACKAGES=(
     ros-rclpy ros-rmw-fastrtps-cpp                                   # ROS 2's client, its default RMW
     ros-std-msgs ros-geometry-msgs ros-sensor-msgs ros-diagnostic-msgs ros-std-srvs  # the bridge's types
+    ros-nav-msgs                                                     # its odometry (bench part 8)
 )
 
 # setup_ros2_venv: ROS 2's Python client on Fast DDS in .deps/ros2-venv, apart from .venv (its

@@ -328,9 +328,11 @@ class SimBoard(ClosedOnExit):
       shows at once; any other duty shows once two periods in a row agree (about 2 ms at
       the Uno's 976 Hz).
     * Servos: a width shows once the next pulse has it too (a single pulse off the width is
-      taken for interrupt latency), and a change smaller than 0.75 us does not show. A
-      detached servo shows value 0 at once, dated to the end of its last pulse; an attached
-      one whose pulses stop shows value 0 once 50 ms passed without one.
+      taken for interrupt latency), and a change smaller than 0.75 us does not show unless
+      two pulses in a row round to another whole microsecond (so a width first read from a
+      pulse that latency stretched is corrected by the next ones). A detached servo shows
+      value 0 at once, dated to the end of its last pulse; an attached one whose pulses
+      stop shows value 0 once 50 ms passed without one.
     * A program that does not record its servos and PWM pins as protoduino's firmware does
       (a hex flashed through the bootloader, StandardFirmata) is judged by its waveform: an
       output whose timer runs in a PWM mode is PWM, and shows a duty of 0 or 255 once it has

@@ -533,7 +533,7 @@ def test_ros2_section_on_the_emulated_uno() -> None:
     _need("avr")
     pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing")
     pytest.importorskip("yaml", reason="PyYAML (the ros2 extra) is missing")
-    from bench import ros2
+    from bench import ros2, ros2_rclpy
 
     result = ros2.collect(trials=4, seconds=0.5)
     assert result.error is None, result.error
@@ -550,6 +550,41 @@ def test_ros2_section_on_the_emulated_uno() -> None:
     assert sorted(result.streaming.device_rates) == list(ros2.ANALOG_PINS)
     assert all(rate > 0 for rate in result.streaming.topic_rates.values())
     assert len(result.streaming.topic_rates) == len(ros2.ANALOG_PINS)
+    # The real ROS 2 node (rclpy on Fast DDS): every Twist at both motor pins, every edge at
+    # its callback, every encoder pulse in an Odometry at its callback.
+    if not ros2_rclpy.PYTHON.exists():
+        pytest.skip(f"rclpy is not installed ({ros2_rclpy.PYTHON}: ./tools/dev.sh setup)")
+    real = result.rclpy
+    assert real is not None, result.rclpy_error
+    assert real.drive_lost == 0 and len(real.drive) == 4
+    assert all(t.to_right > t.to_left > 0 for t in real.drive)
+    assert all(t.to_sent is not None for t in real.drive)
+    assert real.inputs_lost == 0 and len(real.inputs) == 4 and min(real.inputs) > 0
+    assert real.odometry_lost == 0 and len(real.odometry) == 4 and min(real.odometry) > 0
+    assert result.rclpy_versions.startswith("rclpy 9.1.2 on rmw_fastrtps_cpp")
+
+
+def test_the_ros2_part_imports_one_way() -> None:
+    """Part 8's helpers are leaves: bench.ros2 uses them, they use nothing of the bench (issue
+    36 found bench/ros2.py and bench/ros2_peer.py importing each other)."""
+    import ast
+
+    for name in ("ros2_peer", "ros2_rclpy"):
+        tree = ast.parse((ROOT / "bench" / f"{name}.py").read_text())
+        used = [
+            "." * node.level + (node.module or "")
+            for node in ast.walk(tree)
+            if isinstance(node, ast.ImportFrom)
+            and (node.level > 0 or (node.module or "").split(".")[0] == "bench")
+        ]
+        used += [
+            alias.name
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Import)
+            for alias in node.names
+            if alias.name.split(".")[0] == "bench"
+        ]
+        assert used == [], f"bench/{name}.py imports {used}"
 
 
 def test_report_quote_replaces_only_between_markers(tmp_path: Path) -> None:

@@ -27,7 +27,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -267,10 +267,18 @@ def graph() -> Iterator[Graph]:
 
 
 class BridgeProcess:
-    def __init__(self, sim: SimBoard, config: str, tmp: Path, *, new_session: bool) -> None:
+    def __init__(
+        self,
+        sim: SimBoard,
+        config: str,
+        tmp: Path,
+        *,
+        new_session: bool,
+        env: Mapping[str, str] | None = None,
+    ) -> None:
         path = tmp / "robot.yaml"
         path.write_text(config)
-        env = dict(os.environ, CYCLONEDDS_URI=LOOPBACK)
+        env = dict(os.environ, CYCLONEDDS_URI=LOOPBACK, **(env or {}))
         self.log = tmp / "bridge.log"
         self.proc = subprocess.Popen(
             [

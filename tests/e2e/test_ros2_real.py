@@ -12,9 +12,7 @@ rosbags peer of test_ros2.py stays the second, independent peer.
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -24,9 +22,15 @@ import pytest
 from protoduino.simboard import SimBoard
 from simfixtures import pin_values, wait_for_pin, wait_until
 
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:  # bench/ is a top-level folder of the checkout, not installed
+    sys.path.insert(0, str(ROOT))
+
+from bench.ros2_rclpy import RclpyNode  # noqa: E402  (the node bench part 8 drives too)
+
 pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing")
 
-from test_ros2 import (
+from test_ros2 import (  # noqa: E402
     DOMAIN,
     FAILSAFE_TIMEOUT,
     SAFE_90_US,
@@ -37,10 +41,8 @@ from test_ros2 import (
     to_us,
 )
 
-ROOT = Path(__file__).resolve().parents[2]
-#: The ROS 2 venv of tools/dev.sh setup.
-ROS2_PYTHON = ROOT / ".deps" / "ros2-venv" / "bin" / "python"
-NODE_SCRIPT = ROOT / "tests" / "ros2_node.py"
+#: The ROS 2 venv's interpreter (tools/dev.sh setup).
+ROS2_PYTHON = RclpyNode.python
 
 if not ROS2_PYTHON.exists():
     pytest.skip(
@@ -48,61 +50,13 @@ if not ROS2_PYTHON.exists():
         allow_module_level=True,
     )
 
-
-class RosNode:
-    """The rclpy node in its subprocess; :meth:`request` is one JSON line each way."""
-
-    def __init__(self, log: Path) -> None:
-        env = dict(
-            os.environ,
-            ROS_DOMAIN_ID=str(DOMAIN),
-            RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
-            # Discovery on this machine only (Fast DDS: loopback unicast, no multicast).
-            ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-        )
-        env.pop("CYCLONEDDS_URI", None)
-        self.stderr = log.open("w")
-        self.proc = subprocess.Popen(
-            [str(ROS2_PYTHON), str(NODE_SCRIPT)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=self.stderr,
-            env=env,
-            text=True,
-        )
-        self.log = log
-        assert self._answer() == "ready"
-
-    def _answer(self) -> Any:
-        assert self.proc.stdout is not None
-        line = self.proc.stdout.readline()
-        if not line:
-            raise AssertionError(f"the rclpy node died: {self.log.read_text()}")
-        answer = json.loads(line)
-        if "error" in answer:
-            raise AssertionError(f"the rclpy node: {answer['error']}")
-        return answer["ok"]
-
-    def request(self, op: str, **args: Any) -> Any:
-        assert self.proc.stdin is not None
-        self.proc.stdin.write(json.dumps({"op": op, **args}) + "\n")
-        self.proc.stdin.flush()
-        return self._answer()
-
-    def close(self) -> None:
-        if self.proc.stdin is not None:
-            self.proc.stdin.close()
-        try:
-            self.proc.wait(10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        self.stderr.close()
+#: The node tests/ros2_node.py in its subprocess (bench part 8 drives the same one).
+RosNode = RclpyNode
 
 
 @pytest.fixture(scope="module")
 def ros_node(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RosNode]:
-    node = RosNode(tmp_path_factory.mktemp("rclpy") / "node.log")
+    node = RosNode(DOMAIN, tmp_path_factory.mktemp("rclpy") / "node.log")
     try:
         yield node
     finally:
@@ -114,7 +68,9 @@ def bridge(sim_board: SimBoard, tmp_path: Path) -> Iterator[Callable[[str], Brid
     started: list[BridgeProcess] = []
 
     def start(config: str) -> BridgeProcess:
-        started.append(BridgeProcess(sim_board, config, tmp_path, new_session=True))
+        # The services' rclpy node discovers as the test's node does (loopback only).
+        env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+        started.append(BridgeProcess(sim_board, config, tmp_path, new_session=True, env=env))
         return started[-1]
 
     yield start
@@ -181,6 +137,38 @@ def _until_fed(
             raise AssertionError(f"{topic}: nothing that {fed} feeds make at the rclpy node")
 
 
+def _publish_until(
+    sim: SimBoard,
+    node: RosNode,
+    process: BridgeProcess,
+    *done: tuple[int, int],
+    topic: str,
+    kind: str,
+    msg: dict[str, Any],
+) -> None:
+    """Publish ``msg`` on ``topic`` (absolute) until the pins show ``done`` ((pin, value)...).
+
+    A publisher that matched the bridge's subscription may still be unknown to it for a
+    moment (discovery is not symmetric), and a volatile reader takes only what comes after
+    it knows the writer: so a command (a state: the same again changes nothing) is
+    published again until the pins show it."""
+
+    def at_pins() -> bool:
+        return all(pin_values(sim.trace(), pin)[-1:] == [value] for pin, value in done)
+
+    deadline = time.monotonic() + WAIT
+    while True:
+        assert node.request("pub", topic=topic, type=kind, msg=msg) == 1
+        if wait_until(at_pins, timeout=2.0):
+            return
+        if time.monotonic() > deadline:
+            shown = {pin: pin_values(sim.trace(), pin)[-3:] for pin, _ in done}
+            raise AssertionError(
+                f"{topic}: the pins show no {done} but {shown}; the bridge printed:\n"
+                + process.output()[-4000:]
+            )
+
+
 def test_a_real_rclpy_node_drives_and_reads_every_topic_type(
     sim_board: SimBoard, ros_node: RosNode, bridge: Callable[[str], BridgeProcess]
 ) -> None:
@@ -199,25 +187,9 @@ def test_a_real_rclpy_node_drives_and_reads_every_topic_type(
     process = bridge(ROBOT.format(ns=ns, failsafe=FAILSAFE_TIMEOUT))
     wait_for_pin(sim, 9, now_at(SAFE_90_US))
 
-    # To the board, reliable. A publisher that matched the bridge's subscription may still
-    # be unknown to it for a moment (discovery is not symmetric), and a volatile reader
-    # takes only what comes after it knows the writer: so a command (a state: the same
-    # again changes nothing) is published again until the pins show it.
+    # To the board, reliable, each command published until the pins show it.
     def pub(topic: str, kind: str, msg: dict[str, Any], *done: tuple[int, int]) -> None:
-        def at_pins() -> bool:
-            return all(pin_values(sim.trace(), pin)[-1:] == [value] for pin, value in done)
-
-        deadline = time.monotonic() + WAIT
-        while True:
-            assert node.request("pub", topic=f"/{ns}/{topic}", type=kind, msg=msg) == 1
-            if wait_until(at_pins, timeout=2.0):
-                return
-            if time.monotonic() > deadline:
-                shown = {pin: pin_values(sim.trace(), pin)[-3:] for pin, _ in done}
-                raise AssertionError(
-                    f"{topic}: the pins show no {done} but {shown}; the bridge printed:\n"
-                    + process.output()[-4000:]
-                )
+        _publish_until(sim, node, process, *done, topic=f"/{ns}/{topic}", kind=kind, msg=msg)
 
     pub("servo/pan", "std_msgs/msg/Float64", {"data": 45.0}, (9, to_us(45)))
     # pan 0.5 rad -> 90 + 28.6 -> 119 degrees; tilt -0.3 rad -> 90 - 17.2 -> 73 degrees.
@@ -327,3 +299,118 @@ def test_the_bridge_is_a_node_in_the_ros2_graph(
         f"/{ns}/battery": ["std_msgs/msg/Float32"],
         f"/{ns}/sensors/encoders": ["std_msgs/msg/Int32MultiArray"],
     }
+
+
+#: A drive, an LED and a bumper interlock, with the Trigger services (issue 33, item 4)
+#: answered by an rclpy node run by the ROS 2 venv's interpreter.
+SERVICE_ROBOT = """
+namespace: {ns}
+failsafe_timeout: {failsafe}
+diagnostics_period: 0.5
+digital_outputs:
+  - {{pin: 13, topic: led}}
+drive:
+  wheel_base: 0.2
+  max_speed: 0.5
+  timeout: 30.0
+  left: {{pwm: 3, direction: 4}}
+  right: {{pwm: 11, direction: 12, invert: true}}
+digital_inputs:
+  - {{pin: 7, topic: bumper, pull_up: true, interlock: low}}
+services: {{python: {python}}}
+"""
+
+TRIGGER = "std_srvs/srv/Trigger"
+
+
+def test_stop_resume_and_clear_interlock_as_trigger_services(
+    sim_board: SimBoard, ros_node: RosNode, bridge: Callable[[str], BridgeProcess]
+) -> None:
+    """rclpy's client calls ``stop``, ``resume`` and ``clear_interlock`` (std_srvs/Trigger)
+    on Fast DDS: STOP takes the motors and the LED safe at the pins and answers success;
+    a clear while the bumper is still pressed answers success false with the device's
+    reason, and the device then still refuses a Twist; once the bumper is released a clear
+    succeeds and a Twist drives. A SIGKILLed bridge takes its services' node with it and
+    the device's failsafe takes the motors safe."""
+    sim, node = sim_board, ros_node
+    ns = f"svc_{sim.backend}"
+    sim.set_level(7, 1)  # the bumper released: the pull-up's level
+    node.request("sub", topic="/diagnostics", type="diagnostic_msgs/msg/DiagnosticArray")
+    process = bridge(SERVICE_ROBOT.format(ns=ns, failsafe=FAILSAFE_TIMEOUT, python=ROS2_PYTHON))
+    printed = [f"  /{ns}/{name}  {TRIGGER}\n" for name in ("stop", "resume", "clear_interlock")]
+    _until(lambda: all(line in process.output() for line in printed), "the services printed")
+
+    def call(service: str) -> dict[str, Any]:
+        answer: dict[str, Any] = node.request("call", service=f"/{ns}/{service}", type=TRIGGER)
+        return answer
+
+    def drive() -> None:
+        twist = {"linear": {"x": 0.25}, "angular": {"z": 0.0}}
+        kind = "geometry_msgs/msg/Twist"
+        _publish_until(
+            sim, node, process, (3, 128), (11, 128), topic=f"/{ns}/cmd_vel", kind=kind, msg=twist
+        )
+
+    seen: list[int] = []
+
+    def refused() -> int:
+        """The bridge's count of commands the device refused, in its latest report (-1:
+        none yet)."""
+        for array in node.request("take", topic="/diagnostics"):
+            for status in array["status"]:
+                if status["name"] == f"protoduino {ns}: bridge":
+                    values = {kv["key"]: kv["value"] for kv in status["values"]}
+                    seen.append(int(values["refused_by_device"]))
+        return seen[-1] if seen else -1
+
+    drive()
+    led = f"/{ns}/led"
+    _publish_until(
+        sim, node, process, (13, 1), topic=led, kind="std_msgs/msg/Bool", msg={"data": True}
+    )
+
+    stopped = call("stop")
+    assert stopped["success"] is True, stopped
+    for pin in (3, 11, 13):
+        wait_for_pin(sim, pin, now_at(0))
+    resumed = call("resume")
+    assert resumed["success"] is True, resumed
+    drive()  # released: a Twist drives again
+
+    sim.set_level(7, 0)  # the bumper pressed: the device's interlock stops the motors
+    for pin in (3, 11):
+        wait_for_pin(sim, pin, now_at(0))
+    early = call("clear_interlock")
+    assert early["success"] is False, early
+    assert early["message"].endswith("rejected by the device: STATUS_INTERLOCK_ACTIVE"), early
+    # Released, but not cleared: the device still refuses a Twist (counted), nothing moves.
+    sim.set_level(7, 1)
+    # The refused clear is the first refusal of this bridge: once a report counts it, the
+    # next count is the Twist's.
+    _until(lambda: refused() >= 1, "the refused clear counted on /diagnostics")
+    before = refused()
+    twist = {"linear": {"x": 0.25}, "angular": {"z": 0.0}}
+    assert node.request("pub", topic=f"/{ns}/cmd_vel", type="geometry_msgs/msg/Twist", msg=twist)
+    _until(lambda: refused() > before, "the Twist refused by the device")
+    assert pin_values(sim.trace(), 3)[-1] == 0 and pin_values(sim.trace(), 11)[-1] == 0
+    cleared = call("clear_interlock")
+    assert cleared["success"] is True, cleared
+    drive()
+
+    # The services' node is in the graph; a killed bridge takes it along, and the device's
+    # failsafe (not the bridge) takes the motors safe.
+    def services_node() -> list[dict[str, Any]]:
+        return [
+            n
+            for n in node.request("graph")
+            if (n["name"], n["namespace"]) == ("protoduino_services", f"/{ns}")
+        ]
+
+    listed = services_node()
+    assert len(listed) == 1, listed
+    triggers = sorted(name for name, types in listed[0]["services"] if types == [TRIGGER])
+    assert triggers == [f"/{ns}/{s}" for s in ("clear_interlock", "resume", "stop")]
+    process.kill()
+    for pin in (3, 11):
+        wait_for_pin(sim, pin, now_at(0))
+    _until(lambda: not services_node(), "the services' node gone with the bridge")

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -24,9 +26,11 @@ from protoduino.ros2.config import (
     DigitalInputConfig,
     DriveConfig,
     MotorConfig,
+    ServicesConfig,
     ServoConfig,
     load_config,
     parse_config,
+    service_names,
 )
 from protoduino.ros2.dds import dds_topic, ros_topic
 from protoduino.ros2.diagnostics import ERROR, OK, STALE, WARN, Health
@@ -46,6 +50,7 @@ from protoduino.ros2.inputs import (
     int32,
     wire,
 )
+from protoduino.ros2.services import Services
 from protoduino.ros2.servos import joint_pose, servo_degrees
 from rosbags.typesys import Stores, get_typestore
 
@@ -114,6 +119,50 @@ def test_servo_speed_limits_input_rate_and_resume_topic() -> None:
     assert config.min_publish_rate == 1.0 and config.stop.resume_topic == "resume"
     config = parse_config(_with(min_publish_rate=5, stop={"resume_topic": "go"}))
     assert config.min_publish_rate == 5.0 and config.stop.resume_topic == "go"
+
+
+def test_trigger_services_are_asked_for_by_services() -> None:
+    """``services:`` asks for STOP and resume as std_srvs/Trigger services, and the
+    interlock's clear with an interlock input; names resolve in the namespace, one each."""
+    assert parse_config(FULL).services is None and service_names(parse_config(FULL)) == {}
+    config = parse_config(_with(services={"python": "/opt/ros/venv/bin/python"}))
+    assert config.services == ServicesConfig(python="/opt/ros/venv/bin/python")
+    assert service_names(config) == {"stop": "stop", "resume": "resume"}  # no interlock
+    bumper = {"pin": 7, "topic": "bumper", "interlock": "low"}
+    config = parse_config(_with(services={"stop": "halt"}, digital_inputs=[bumper]))
+    assert config.services is not None and config.services.python == "python3"
+    assert service_names(config) == {
+        "stop": "halt",
+        "resume": "resume",
+        "clear_interlock": "clear_interlock",
+    }
+    with pytest.raises(ConfigError, match="services: unknown key"):
+        parse_config(_with(services={"pyhton": "python3"}))
+    with pytest.raises(ConfigError, match="services: resume and stop are both /robot1/halt"):
+        parse_config(_with(services={"stop": "halt", "resume": "/robot1/halt"}))
+    # docs/ros2.md's services: block is what the configuration reads.
+    import yaml
+
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "ros2.md").read_text()
+    snippet = docs.split("## Services", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
+    shown = parse_config(yaml.safe_load(snippet)).services
+    assert shown is not None and shown.python == "/usr/bin/python3"
+
+
+def test_services_need_an_interpreter_that_imports_rclpy(tmp_path: Path) -> None:
+    """The services' node is run by the configured interpreter; one without rclpy (this
+    venv's) or none at all leaves the bridge without services, saying why."""
+    missing = str(tmp_path / "no-python")
+    for python, why in ((sys.executable, "cannot import rclpy"), (missing, "cannot run")):
+        config = parse_config({"services": {"python": python}})
+        services = Services(config, 0, lambda: None)
+        services.start()
+        deadline = time.monotonic() + 30.0  # bounds a failing run only
+        while services.state == "starting" and time.monotonic() < deadline:
+            time.sleep(0.01)
+        state = services.state
+        services.close()
+        assert state.startswith("unavailable") and why in state, state
 
 
 def test_the_yaml_file(tmp_path: Path) -> None:

@@ -25,11 +25,15 @@
  * - Pulses whose rising edges are at most max_period (50 ms) apart make a
  *   servo signal. An isolated pulse is reported as a digital 1 then 0.
  * - A servo's value is the width of its pulses in microseconds. A pulse that
- *   differs from the reported width by HYST_US or more becomes a candidate:
- *   if the next pulse is back at the reported width, the candidate was an
- *   interrupt-latency outlier and is dropped; otherwise it is reported, with
- *   the time of its own rising edge (so a change is dated to its first pulse
- *   even though the line is written one frame later).
+ *   differs from the reported width by HYST_US or more, or rounds to another
+ *   whole microsecond, becomes a candidate: if the next pulse is back at the
+ *   reported width, the candidate was an interrupt-latency outlier and is
+ *   dropped; otherwise it is reported, with the time of its own rising edge
+ *   (so a change is dated to its first pulse even though the line is written
+ *   one frame later). The rounding counts too because a change is reported
+ *   from its first pulse: when interrupt latency stretched that one by less
+ *   than HYST_US across a whole microsecond, the true pulses after it (two in
+ *   a row) correct the value, which would otherwise stay 1 us off for good.
  * - A servo whose pulses stop for more than max_period gets a value-0 line,
  *   dated to the end of its last pulse (as the native board writes 0 when
  *   its pulses stop on a reboot).
@@ -84,6 +88,12 @@ static void pd_emit_servo(pd_pins_t *pins, int n, uint64_t cycle, double us)
     pd_emit(pins, n, cycle, PD_PIN_MODE_SERVO, (unsigned)lround(us));
 }
 
+/* A pulse of width `us` is not the reported width (see the servo rules above). */
+static int pd_servo_differs(const pd_pin_t *p, double us)
+{
+    return fabs(us - p->servo_us) >= PD_PINS_HYST_US || lround(us) != lround(p->servo_us);
+}
+
 static void pd_set_cand(pd_pin_t *p, uint64_t rise, uint64_t fall, double us)
 {
     p->cand = 1;
@@ -120,7 +130,7 @@ static void pd_pulse(pd_pins_t *pins, int n, uint64_t rise, uint64_t fall)
             p->servo = 1;
             p->cand = 0;
             pd_emit_servo(pins, n, p->cand_rise, p->cand_us);
-            if (fabs(us - p->servo_us) >= PD_PINS_HYST_US) {
+            if (pd_servo_differs(p, us)) {
                 pd_set_cand(p, rise, fall, us);
             }
         } else {
@@ -130,17 +140,16 @@ static void pd_pulse(pd_pins_t *pins, int n, uint64_t rise, uint64_t fall)
             pd_set_cand(p, rise, fall, us);
         }
     } else if (p->cand) {
-        if (fabs(us - p->servo_us) < PD_PINS_HYST_US) {
+        if (!pd_servo_differs(p, us)) {
             p->cand = 0; /* the candidate was an outlier */
         } else {
-            double cand_us = p->cand_us;
             p->cand = 0;
-            pd_emit_servo(pins, n, p->cand_rise, cand_us);
-            if (fabs(us - cand_us) >= PD_PINS_HYST_US) {
+            pd_emit_servo(pins, n, p->cand_rise, p->cand_us);
+            if (pd_servo_differs(p, us)) {
                 pd_set_cand(p, rise, fall, us);
             }
         }
-    } else if (fabs(us - p->servo_us) >= PD_PINS_HYST_US) {
+    } else if (pd_servo_differs(p, us)) {
         pd_set_cand(p, rise, fall, us);
     }
     p->last_rise = rise;

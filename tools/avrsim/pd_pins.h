@@ -32,7 +32,8 @@
 #define PD_PINS_MAX_PERIOD_US 50000UL /* pulses further apart are not one servo signal */
 #define PD_PINS_LOW_WAIT_US 50000UL   /* how long an output low waits for a first pulse */
 #define PD_PINS_PWM_STEADY_US 5000UL  /* a PWM pin without an edge this long: duty 0 or 255 */
-#define PD_PINS_HYST_US 0.75          /* a smaller change of a servo's width is no change */
+#define PD_PINS_HYST_US 0.75          /* a smaller change of a servo's width is no change,
+                                         unless it rounds to another whole microsecond */
 
 /* pwm_tick for a PWM pin whose timer is disconnected from it while the firmware drives a
  * steady level, as for duty 0 or 255: that duty at once. */

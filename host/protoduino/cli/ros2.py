@@ -134,6 +134,11 @@ def _bridge(args: argparse.Namespace) -> int:
             )
             for name, kind in sorted(topics.items()):
                 print(f"  {name}  {kind}", flush=True)
+            services = bridge.services()
+            if services:  # docs/ros2.md, Services: its rclpy node says when they are up
+                print(f"protoduino ros2: {len(services)} services:", flush=True)
+                for name, kind in sorted(services.items()):
+                    print(f"  {name}  {kind}", flush=True)
             bridge.run()
     except ProtoduinoError as exc:
         return error("ros2", exc)

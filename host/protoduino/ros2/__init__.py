@@ -12,7 +12,8 @@ PyYAML). Modules: :mod:`.config` (robot.yaml), :mod:`.msgs` (the ROS 2 types
 on DDS), :mod:`.dds` (names, QoS, the domain's configuration), :mod:`.drive`
 (``/cmd_vel`` kinematics), :mod:`.servos` (servo commands), :mod:`.inputs`
 (inputs to topics), :mod:`.odometry` (two encoders to Odometry and /tf),
-:mod:`.diagnostics`, :mod:`.graph` (the node in ROS 2's graph), :mod:`.bridge`
+:mod:`.diagnostics`, :mod:`.graph` (the node in ROS 2's graph), :mod:`.services`
+(the Trigger services, answered by an rclpy node beside the bridge), :mod:`.bridge`
 (the loop). docs/ros2.md says how to run it next to a ROS 2 installation.
 """
 

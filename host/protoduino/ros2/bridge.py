@@ -10,6 +10,8 @@ types and QoS: :mod:`.dds`, :mod:`.msgs`) and runs one loop
   digital output's Bool, STOP, resume, ``/cmd_vel``), refusing bad ones and Twists
   stale on arrival (logged, counted on /diagnostics, nothing moves);
 * holds every command after a STOP until ``resume`` (counted as ``held_by_stop``);
+* carries out the calls of the Trigger services (STOP, resume, clear_interlock) that
+  its rclpy node relays (:mod:`.services`), and answers each with the outcome;
 * sends the device's heartbeat every ``failsafe_timeout / 4``: only this loop
   keeps the outputs alive, so a bridge that hangs or dies lets the device's
   failsafe drive them safe (the board's automatic Ping only keeps the link up);
@@ -59,8 +61,8 @@ from ..errors import (
     StaleCommandError,
 )
 from ..events import Event, EventKind
-from . import dds, graph, inputs, odometry
-from .config import BridgeConfig, ServoConfig
+from . import dds, graph, inputs, odometry, services
+from .config import BridgeConfig, ServoConfig, service_names
 from .dds import DEFAULT_QOS, SENSOR_QOS, dds_topic, ros_topic
 from .diagnostics import Health
 from .drive import DiffDrive, Motor, twist_to_wheels
@@ -156,6 +158,7 @@ class Bridge(ClosedOnExit):
         self._joined_lock = threading.Lock()
         self._inputs: inputs.Wiring | None = None
         self._odometry: odometry.Tracker | None = None
+        self._services: services.Services | None = None
         self._next_beat = 0.0
         self._undo: list[Callable[[], None]] = []
 
@@ -198,6 +201,7 @@ class Bridge(ClosedOnExit):
                 [route.reader for route in self._routes],
                 self._writers.values(),
             )
+            self._start_services()
         except BaseException:
             self.close()
             raise
@@ -217,6 +221,13 @@ class Bridge(ClosedOnExit):
             found[ros_topic(self.config.namespace, name)] = _ros_type(writer.topic.data_type)
         return found
 
+    def services(self) -> dict[str, str]:
+        """Every ROS service of the bridge -> its ROS 2 type (answered once its rclpy node is
+        up: :mod:`.services`)."""
+        if self._services is None:
+            return {}
+        return {name: services.TRIGGER for name in self._services.names.values()}
+
     def stop(self) -> None:
         """Make :meth:`run` return (thread-safe; callable from a signal handler)."""
         self._stopping.set()
@@ -231,6 +242,10 @@ class Bridge(ClosedOnExit):
         DDS entities go with the object.
         """
         self.stop()
+        if self._services is not None:  # first: no call reaches a board being closed
+            self._services.close()
+            self.health.services = self._services.state
+            self._services = None
         for undo in self._undo:
             undo()
         self._undo.clear()
@@ -350,6 +365,18 @@ class Bridge(ClosedOnExit):
         ):
             self._writers[name] = self._writer(name, kind, qos)
 
+    def _start_services(self) -> None:
+        """The Trigger services' rclpy node, when robot.yaml asks for services."""
+        if not service_names(self.config):
+            return
+        wake = self._wake
+        assert wake is not None
+        self._services = services.Services(
+            self.config, self.config.resolved_domain(), lambda: wake.set(True)
+        )
+        self._services.start()
+        self.health.services = self._services.state
+
     def _publish_odometry(self, due: float) -> float:
         """Sample the wheels, publish Odometry, /tf and the ticks (this sample was ``due``);
         return when the next one is due: a period later, or a period from now when late."""
@@ -434,6 +461,7 @@ class Bridge(ClosedOnExit):
             waitset.wait(duration(seconds=wait) if wait > 0 else 0)
             wake.set(False)
             self._publish_again_for_new_subscribers()
+            self._serve_calls()
             if self._device_safe.is_set():
                 self._device_safe.clear()
                 if self.drive is not None:
@@ -496,21 +524,50 @@ class Bridge(ClosedOnExit):
             self.health.count("held")
             log.warning("%s: held: STOP is latched until a resume", route.topic)
             return
-        self._carry_out(route, action)
+        self._carry_out(route.topic, action)
 
-    def _carry_out(self, route: _Route, action: Action) -> None:
+    def _carry_out(self, topic: str, action: Action) -> str | None:
+        """Carry out one command of ``topic`` (a topic or a service); None when it was, else
+        why not (the device's refusal, the link's error), logged and counted."""
         try:
             action()
         except BadCommandError as error:
-            self._bad(route.topic, "invalid", error)
+            self._bad(topic, "invalid", error)
+            return str(error)
         except CommandRejectedError as error:
             self.health.count("refused")
-            log.warning("%s: the device refused it: %s", route.topic, error)
+            log.warning("%s: the device refused it: %s", topic, error)
+            return str(error)  # "... rejected by the device: STATUS_..."
         except ProtoduinoError as error:
             self.health.count("refused")
-            log.warning("%s: not carried out: %s", route.topic, error)
-        else:
-            self.health.count("forwarded")
+            log.warning("%s: not carried out: %s", topic, error)
+            return f"not carried out: {error}"
+        self.health.count("forwarded")
+        return None
+
+    def _serve_calls(self) -> None:
+        """Carry out the service calls waiting, as their topics' messages are (never held by
+        a STOP: none moves anything), and answer each: success, or why not."""
+        if self._services is None:
+            return
+        self.health.services = self._services.state
+        for call in self._services.take():
+            latched = self._stop_latched
+            action, done = {
+                "stop": (self._stop, "every output driven safe; commands held until a resume"),
+                "resume": (
+                    self._resume,
+                    "resumed: the outputs stay safe until the next command"
+                    if latched
+                    else "no STOP was latched",
+                ),
+                "clear_interlock": (
+                    self._clear_interlock,
+                    "interlock cleared: the outputs stay safe until commanded again",
+                ),
+            }[call.kind]
+            failed = self._carry_out(call.name, action)
+            self._services.answer(call, failed is None, done if failed is None else failed)
 
     def _bad(self, topic: str, reason: str, error: BaseException) -> None:
         first = not self.health.bad[f"{topic}: {reason}"]

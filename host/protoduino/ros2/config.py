@@ -127,6 +127,23 @@ class StopConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class ServicesConfig:
+    """STOP, resume and the interlock's clear as ``std_srvs/srv/Trigger`` services.
+
+    They are answered by a small rclpy node the bridge starts beside itself
+    (:mod:`.services`), run by ``python``: an interpreter of a ROS 2 installation
+    (one that imports rclpy and std_srvs). Service names resolve in the namespace,
+    as topics do.
+    """
+
+    python: str = "python3"
+    stop: str = "stop"
+    resume: str = "resume"
+    #: Only with an interlock input.
+    clear_interlock: str = "clear_interlock"
+
+
+@dataclass(frozen=True, slots=True)
 class DigitalInputConfig:
     pin: int
     topic: str
@@ -177,6 +194,8 @@ class BridgeConfig:
     digital_inputs: tuple[DigitalInputConfig, ...] = ()
     analog_inputs: tuple[AnalogInputConfig, ...] = ()
     counters: tuple[CounterConfig, ...] = ()
+    #: Trigger services beside the topics; None: none.
+    services: ServicesConfig | None = None
 
     @property
     def interlocks(self) -> tuple[DigitalInputConfig, ...]:
@@ -242,6 +261,7 @@ def parse_config(data: object) -> BridgeConfig:
         digital_inputs=top.each("digital_inputs", _digital_input),
         analog_inputs=top.each("analog_inputs", _analog_input),
         counters=top.each("counters", _counter),
+        services=top.optional("services", _services),
     )
     top.done()
     _check_whole(config)
@@ -301,6 +321,15 @@ def _stop(s: _Section) -> StopConfig:
         s.topic("topic", "stop"),
         kind,  # type: ignore[arg-type]
         s.topic("resume_topic", "resume"),
+    )
+
+
+def _services(s: _Section) -> ServicesConfig:
+    return ServicesConfig(
+        s.optional_token("python") or "python3",
+        s.topic("stop", "stop"),
+        s.topic("resume", "resume"),
+        s.topic("clear_interlock", "clear_interlock"),
     )
 
 
@@ -370,12 +399,36 @@ def _check_whole(config: BridgeConfig) -> None:
             raise ConfigError(f"topic {topic!r} is both {first_what}{same} and {what}")
         topics[name] = (topic, what)
 
+    _check_services(config)
     _check_odometry(config)
     joints = [s.joint for s in config.servos if s.joint is not None]
     if len(set(joints)) != len(joints):
         raise ConfigError(f"a joint name is given twice: {joints}")
     if len(joints) > MAX_JOINTS:
         raise ConfigError(f"{len(joints)} joints: one JointState is one pose of at most 8")
+
+
+def _check_services(config: BridgeConfig) -> None:
+    """Each service a name of its own (a service may share its name with a topic, as ROS 2
+    allows: they are apart on DDS)."""
+    names: dict[str, str] = {}
+    for key, name in service_names(config).items():
+        resolved = ros_topic(config.namespace, name)
+        if resolved in names:
+            raise ConfigError(f"services: {key} and {names[resolved]} are both {resolved}")
+        names[resolved] = key
+
+
+def service_names(config: BridgeConfig) -> dict[str, str]:
+    """The Trigger services the configuration asks for: what each does -> its name as given
+    (clear_interlock only with an interlock input); none without ``services:``."""
+    services = config.services
+    if services is None:
+        return {}
+    names = {"stop": services.stop, "resume": services.resume}
+    if config.interlocks:
+        names["clear_interlock"] = services.clear_interlock
+    return names
 
 
 def _check_odometry(config: BridgeConfig) -> None:

@@ -11,7 +11,8 @@ share the one ``/diagnostics`` topic, as ROS 2's diagnostic aggregator expects:
   ERROR while a failsafe is active;
 * ``<name>: bridge``: the messages it refused (by topic and reason), the
   commands the device refused, those a newer one of the same topic replaced
-  before they were sent, those a latched STOP held, the stale ``cmd_vel`` stops;
+  before they were sent, those a latched STOP held, the stale ``cmd_vel`` stops, and with
+  ``services:`` whether its Trigger services are up (:mod:`.services`);
   WARN while a STOP is latched or when a message was refused since the previous
   report; STALE in the last report of a clean shutdown.
 
@@ -96,6 +97,8 @@ class Health:
         self.held = 0  # commands a latched STOP held
         self.stop_latched = False
         self.interlock_clears = 0
+        #: The Trigger services' state (.services); None: robot.yaml asks for none.
+        self.services: str | None = None
         #: None while running; at a clean shutdown, whether the bridge's Stop drove the
         #: outputs safe (else the device's failsafe will).
         self.shut_down_stopped: bool | None = None
@@ -206,5 +209,7 @@ class Health:
             "cmd_vel_stale_stops": self.stale_stops,
             "interlock_clears": self.interlock_clears,
         }
+        if self.services is not None:
+            values["services"] = self.services
         values.update({f"bad.{k}": v for k, v in sorted(self.bad.items())})
         return self._status("bridge", level, message, values)
