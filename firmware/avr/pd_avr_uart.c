@@ -121,6 +121,11 @@ bool pd_avr_uart_rx_empty(void)
     return rx_tail == rx_head;
 }
 
+bool pd_avr_uart_tx_empty(void)
+{
+    return tx_head == tx_tail;
+}
+
 uint8_t pd_avr_uart_tx_room(void)
 {
     uint8_t head = tx_head;
