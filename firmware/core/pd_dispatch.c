@@ -440,49 +440,45 @@ typedef uint32_t pd_varint_t;
 typedef uint64_t pd_varint_t;
 #endif
 
-static bool fast_varint(pb_istream_t *s, pd_varint_t *v)
+/* The next byte, when it is a whole varint (below 0x80): taken, else left (-1) for
+ * nanopb's reader. A buffer stream's state is its next byte. */
+static int16_t fast_byte(pb_istream_t *s)
 {
     const pb_byte_t *p = (const pb_byte_t *)s->state;
-    if (s->bytes_left != 0 && *p < 0x80u) {
-        *v = *p;
-        s->state = (void *)(p + 1);
-        s->bytes_left--;
-        return true;
+    if (s->bytes_left == 0 || *p >= 0x80u) {
+        return -1;
     }
-    return pb_decode_varint(s, v);
+    s->state = (void *)(p + 1);
+    s->bytes_left--;
+    return *p;
 }
 
-static bool fast_varint32(pb_istream_t *s, uint32_t *v)
+/* The next tag in one byte, 0 when refused (a field number 0 is, as by nanopb): field
+ * numbers up to 30 as they are (the generator keeps the decoders' fields there), any
+ * larger one as 31, which no decoder knows; the wire type kept for the skip. */
+static uint8_t fast_tag(pb_istream_t *s)
 {
-    const pb_byte_t *p = (const pb_byte_t *)s->state;
-    if (s->bytes_left != 0 && *p < 0x80u) {
-        *v = *p;
-        s->state = (void *)(p + 1);
-        s->bytes_left--;
-        return true;
+    int16_t b = fast_byte(s);
+    uint32_t t = (uint32_t)b;
+    if (b < 0 && !pb_decode_varint32(s, &t)) {
+        return 0;
     }
-    return pb_decode_varint32(s, v);
-}
-
-/* A tag in one byte: field numbers up to 30 as they are (the generator keeps the
- * decoders' fields there), any larger one as 31, which no decoder knows; the wire
- * type kept for the skip. */
-static bool fast_tag(pb_istream_t *s, uint8_t *tag)
-{
-    uint32_t t;
-    if (!fast_varint32(s, &t) || (t >> 3) == 0u) {
-        return false;
+    if ((t >> 3) == 0u) {
+        return 0;
     }
-    *tag = (uint8_t)((t >> 3) < 31u ? t : ((31u << 3) | (t & 7u)));
-    return true;
+    return (uint8_t)((t >> 3) < 31u ? t : ((31u << 3) | (t & 7u)));
 }
 
 /* A uint32 field stored in `size` bytes (the int_size nanopb gave it): stored, then
  * refused if it did not fit, as pb_dec_varint does. */
 static bool fast_uint(pb_istream_t *s, uint8_t tag, void *field, size_t size)
 {
-    pd_varint_t v;
-    if ((tag & 7u) != PB_WT_VARINT || !fast_varint(s, &v)) {
+    if ((tag & 7u) != PB_WT_VARINT) {
+        return false;
+    }
+    int16_t b = fast_byte(s);
+    pd_varint_t v = (pd_varint_t)b;
+    if (b < 0 && !pb_decode_varint(s, &v)) {
         return false;
     }
     pd_varint_t clamped;
@@ -496,21 +492,26 @@ static bool fast_uint(pb_istream_t *s, uint8_t tag, void *field, size_t size)
     return clamped == v;
 }
 
+/* A bool field, as pb_dec_bool: any value but 0 is true. */
+static bool fast_bool(pb_istream_t *s, uint8_t tag, bool *field)
+{
+    if ((tag & 7u) != PB_WT_VARINT) {
+        return false;
+    }
+    int16_t b = fast_byte(s);
+    uint32_t v = (uint32_t)b;
+    if (b < 0 && !pb_decode_varint32(s, &v)) {
+        return false;
+    }
+    *field = v != 0u;
+    return true;
+}
+
 /* An unknown field, skipped by nanopb. Out of line: LTO copied pb_skip_field into every
  * decoder (about 100 B of the Uno's flash each). */
 static __attribute__((noinline)) bool fast_skip(pb_istream_t *s, uint8_t tag)
 {
     return pb_skip_field(s, (pb_wire_type_t)(tag & 7u));
-}
-
-static bool fast_bool(pb_istream_t *s, uint8_t tag, bool *b)
-{
-    uint32_t v;
-    if ((tag & 7u) != PB_WT_VARINT || !fast_varint32(s, &v)) {
-        return false;
-    }
-    *b = v != 0u;
-    return true;
 }
 
 /*
@@ -548,9 +549,9 @@ static bool fast_bool(pb_istream_t *s, uint8_t tag, bool *b)
 #define FAST_DECODER(member, message)                                            \
     static bool fast_##member(pb_istream_t *s, protoduino_##message *m)          \
     {                                                                            \
-        uint8_t tag;                                                             \
         while (s->bytes_left != 0) {                                             \
-            if (!fast_tag(s, &tag)) {                                            \
+            uint8_t tag = fast_tag(s);                                           \
+            if (tag == 0) {                                                      \
                 return false;                                                    \
             }                                                                    \
             switch (tag >> 3) {                                                  \

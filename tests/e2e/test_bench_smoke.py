@@ -370,6 +370,7 @@ def test_profile_names_and_groups() -> None:
     assert firmware.clean_name("main") == "main"
     assert firmware.group_of("load_descriptor_values").startswith("nanopb")
     assert firmware.group_of("pb_decode_tag").startswith("nanopb")
+    assert firmware.group_of("fast_uint").startswith("generated decoders")
     assert firmware.group_of("pd_crc16_update").startswith("CRC")
     assert firmware.group_of("__vector_18") == "interrupt handlers"
     assert firmware.group_of("pd_link_send").startswith("frame transmit")
