@@ -270,9 +270,18 @@ void pd_avr_setup(void)
     if (PD_FEATURE_SERVO) {
         pd_avr_servo_init();
     }
+    /* Idle sleep, set once here rather than on every pass (the sketch's own code may set
+     * another between two passes in the Arduino IDE's build: pd_avr_loop sets it there). */
+    set_sleep_mode(SLEEP_MODE_IDLE);
     sei();
     pd_core_init(&core, NULL);
 }
+
+/* The loop's two bytes of state in general-purpose I/O registers, not in the
+ * RAM the stack needs (firmware/README.md, the RAM budget): millis8() at the
+ * last poll, and whether the transmit ring was empty at the end of the last pass. */
+#define POLLED_MS GPIOR1
+#define WAS_EMPTY GPIOR2
 
 /* The clock's low byte: a tick since the last poll when it differs. */
 static uint8_t millis8(void)
@@ -296,12 +305,6 @@ static uint8_t millis8(void)
  * a user service built in, every pass polls: its poll hook may work in slices,
  * one a pass (docs/services.md).
  */
-/* The loop's two bytes of state in general-purpose I/O registers, not in the
- * RAM the stack needs (firmware/README.md, the RAM budget): millis8() at the
- * last poll, and whether the transmit ring was empty at the end of the last pass. */
-#define POLLED_MS GPIOR1
-#define WAS_EMPTY GPIOR2
-
 void pd_avr_loop(void)
 {
     int16_t byte;
@@ -325,7 +328,9 @@ void pd_avr_loop(void)
      * byte the core left (byte >= 0: its replies need transmit room) waits for
      * the transmit interrupt, which wakes us as the queue drains. An input's
      * interrupt since the pass began (pd_avr_wake) means one more pass first. */
+#ifdef ARDUINO
     set_sleep_mode(SLEEP_MODE_IDLE);
+#endif
     cli();
     if (!pd_avr_wake && (byte >= 0 || pd_avr_uart_rx_empty())) {
         sleep_enable();
