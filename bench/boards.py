@@ -154,17 +154,22 @@ def _only_its_own(program: Path | None) -> None:
         raise ValueError(f"this bench board runs its own program, not {program}")
 
 
-def _hex_backend(hex_file: Path, stats: Path) -> Backend:
-    """The runner with a program of another project, loaded from Intel hex, and --stats."""
+def _hex_backend(hex_file: Path, stats: Path, profile: Path | None = None) -> Backend:
+    """The runner with a program of another project, loaded from Intel hex, and --stats
+    (and --profile)."""
     from protoduino.simboard import runner_command
     from protoduino_dev import build as builds
+
+    extra = ["--stats", str(stats)]
+    if profile is not None:
+        extra += ["--profile", str(profile)]
 
     def command(
         trace: Path | None, link: Path | None, control: Path | None, program: Path | None
     ) -> list[str]:
         _only_its_own(program)
         cmd = runner_command(trace=trace, link=link, control=control, hex_files=[hex_file])
-        return [*cmd, "--stats", str(stats)]
+        return [*cmd, *extra]
 
     return Backend(build=builds.build_runner, command=command)
 
@@ -216,13 +221,16 @@ def started(
 
 
 @contextlib.contextmanager
-def started_hex(hex_file: Path, *, stats: Path, trace: Path | None = None) -> Iterator[SimBoard]:
+def started_hex(
+    hex_file: Path, *, stats: Path, trace: Path | None = None, profile: Path | None = None
+) -> Iterator[SimBoard]:
     """The emulated Uno running another project's firmware from ``hex_file``, unmodified
-    (the bench's race runs StandardFirmata so), with the runner's --stats file."""
+    (the bench's race runs StandardFirmata so), with the runner's --stats file (and its
+    --profile file)."""
     tool = missing_tool("avr")
     if tool is not None:
         raise BoardUnavailableError(f"`{tool}` is not installed")
-    yield from _run(_RunnerBoard(_hex_backend(hex_file, stats), trace))
+    yield from _run(_RunnerBoard(_hex_backend(hex_file, stats, profile), trace))
 
 
 @contextlib.contextmanager

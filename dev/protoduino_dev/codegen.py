@@ -16,7 +16,9 @@ One function, :func:`generate`, writes:
   and the firmware's version, the package's (``host/protoduino/_version.py``);
 * the built-in command and pin-mode tables from the schema's options
   (:mod:`protoduino_dev.cmdtables`): ``firmware/generated/pd_tables.h``,
-  ``firmware/generated/pd_features.mk`` and ``host/protoduino/_generated/tables.py``.
+  ``firmware/generated/pd_features.mk`` and ``host/protoduino/_generated/tables.py``;
+* ``firmware/generated/pd_fastdec.h``: specialised decoders of the pin modes' Controls
+  (:mod:`protoduino_dev.fastdec`), held to nanopb's decode by the firmware's tests.
 
 SCHEMA_ID (docs/protocol.md section 5) is the CRC-32 of the deterministic
 serialisation of the schema's ``FileDescriptorSet`` (protoduino.proto and
@@ -43,7 +45,7 @@ from enum import IntEnum
 from pathlib import Path
 from types import ModuleType
 
-from . import cmdtables
+from . import cmdtables, fastdec
 
 PROTO_NAME = "protoduino.proto"
 #: The custom options' declarations, imported by PROTO_NAME (no wire messages).
@@ -63,6 +65,7 @@ GENERATED_FILES = (
     "firmware/generated/pd_schema.h",
     "firmware/generated/pd_protocol.h",
     "firmware/generated/pd_tables.h",
+    "firmware/generated/pd_fastdec.h",
     "firmware/generated/pd_features.mk",
 )
 #: The constants' one source, relative to the repository root.
@@ -152,6 +155,8 @@ def generate(out_root: Path | None = None, proto_dir: Path | None = None) -> Res
         )
         schema_id = schema_id_of(desc_path.read_bytes())
         tables = cmdtables.read_tables(desc_path.read_bytes())
+        hot = {mode.control for mode in tables.pin_modes if mode.control is not None}
+        fast = fastdec.fast_members(desc_path.read_bytes(), hot)
 
         _protoc(
             [
@@ -195,6 +200,7 @@ def generate(out_root: Path | None = None, proto_dir: Path | None = None) -> Res
         protocol_header(root / CONSTANTS_SOURCE, root / VERSION_SOURCE)
     )
     (c_out / "pd_tables.h").write_text(cmdtables.c_header(tables))
+    (c_out / "pd_fastdec.h").write_text(fastdec.c_header(fast))
     (c_out / "pd_features.mk").write_text(cmdtables.make_fragment(tables))
     (py_out / "tables.py").write_text(cmdtables.python_module(tables))
     return Result(schema_id, tuple(out_root / p for p in GENERATED_FILES))

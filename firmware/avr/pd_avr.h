@@ -34,6 +34,8 @@ int16_t pd_avr_uart_peek(void);
 /* Remove the oldest received byte (after a successful peek). */
 void pd_avr_uart_drop(void);
 bool pd_avr_uart_rx_empty(void);
+/* Whether every queued byte has gone to the UART. */
+bool pd_avr_uart_tx_empty(void);
 /* Bytes the transmit ring can take now. */
 uint8_t pd_avr_uart_tx_room(void);
 /* Queue `len` bytes for transmission, all or none (false: no room); never waits. */
@@ -44,6 +46,8 @@ bool pd_avr_uart_write(const uint8_t *data, uint16_t len);
 #define PD_AVR_T0_TOP ((uint8_t)(F_CPU / 64u / 1000u - 1u)) /* 249: 1 kHz */
 void pd_avr_clock_init(void);
 uint32_t pd_avr_millis(void);
+/* The clock's low byte: one load, no interrupt lock (the main loop's tick test). */
+uint8_t pd_avr_millis8(void);
 
 void pd_avr_servo_init(void);
 /* Start or update pulses on `pin` for `channel`; first call attaches the pin. */

@@ -33,4 +33,9 @@ uint32_t pd_avr_millis(void)
     return now;
 }
 
+uint8_t pd_avr_millis8(void)
+{
+    return (uint8_t)ms; /* one byte: read whole, whatever the interrupt does */
+}
+
 #endif

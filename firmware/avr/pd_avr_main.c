@@ -285,25 +285,67 @@ void pd_avr_setup(void)
     if (PD_FEATURE_SERVO) {
         pd_avr_servo_init();
     }
+    /* Idle sleep, set once here rather than on every pass (the sketch's own code may set
+     * another between two passes in the Arduino IDE's build: pd_avr_loop sets it there). */
+    set_sleep_mode(SLEEP_MODE_IDLE);
     sei();
     pd_core_init(&core, NULL);
 }
 
+/* The loop's two bytes of state in general-purpose I/O registers, not in the
+ * RAM the stack needs (firmware/README.md, the RAM budget): millis8() at the
+ * last poll, and whether the transmit ring was empty at the end of the last pass. */
+#define POLLED_MS GPIOR1
+#define WAS_EMPTY GPIOR2
+
+/* The clock's low byte: a tick since the last poll when it differs. */
+static uint8_t millis8(void)
+{
+#ifdef ARDUINO
+    return (uint8_t)millis();
+#else
+    return pd_avr_millis8();
+#endif
+}
+
+/*
+ * One pass: the received bytes into the core, then pd_core_poll when the pass
+ * has news for it: a clock tick, an input's interrupt (pd_avr_wake), a frame's
+ * delimiter (a command ran, a session opened, a Ping fed the failsafe), or the
+ * transmit ring just emptied (a report waits for that). Every received or sent
+ * byte wakes the loop, and a poll (the failsafe's, the servo steps' and the
+ * inputs' clock tests, the report slots) was about 150 cycles of every such
+ * pass: 1,450 of a digital write's 11,300 awake cycles (bench part 5). What the
+ * poll reads changes only with those news, so a pass without any skips it. With
+ * a user service built in, every pass polls: its poll hook may work in slices,
+ * one a pass (docs/services.md).
+ */
 void pd_avr_loop(void)
 {
     int16_t byte;
+    bool news = pd_avr_wake != 0;
     pd_avr_wake = 0; /* the inputs are read below: a change from now on sets it again */
     while ((byte = pd_avr_uart_peek()) >= 0 && pd_core_rx_byte(&core, (uint8_t)byte)) {
+        news |= byte == 0;
         pd_avr_uart_drop();
     }
-    pd_core_poll(&core);
+    uint8_t ms = millis8();
+    bool empty = pd_avr_uart_tx_empty();
+    if (PD_FEATURE_USER || news || ms != POLLED_MS || (empty && !WAS_EMPTY)) {
+        POLLED_MS = ms;
+        pd_core_poll(&core);
+        empty = pd_avr_uart_tx_empty(); /* a report it sent: the next poll when that is out */
+    }
+    WAS_EMPTY = empty;
 
     /* Sleep unless a byte slipped in; `sei; sleep` cannot miss the wake-up,
      * because the instruction after sei always runs before any interrupt. A
      * byte the core left (byte >= 0: its replies need transmit room) waits for
      * the transmit interrupt, which wakes us as the queue drains. An input's
      * interrupt since the pass began (pd_avr_wake) means one more pass first. */
+#ifdef ARDUINO
     set_sleep_mode(SLEEP_MODE_IDLE);
+#endif
     cli();
     if (!pd_avr_wake && (byte >= 0 || pd_avr_uart_rx_empty())) {
         sleep_enable();

@@ -89,17 +89,53 @@ void pd_avr_uart_init(uint32_t baud)
  * away. Now a nested handler claims the next slot. The main loop cannot see a
  * claimed slot before its byte is in: it runs only once every handler returned.
  */
-ISR(USART_RX_vect)
+/*
+ * In assembly, as the transmit handler below: the compiler's version saved eight
+ * registers (r0, r1 and SREG among them) where four and SREG do, and this handler
+ * runs for every byte received: about 11 cycles a byte less (bench part 5), and 3 B
+ * less of the stack it lands on (the RAM budget). The same steps as before, in C:
+ *
+ *     byte = UDR0; head = rx_head; next = head + 1 == PD_AVR_RX_SIZE ? 0 : head + 1;
+ *     if (next == rx_tail) return;   (lost: its frame fails its CRC; the host retries)
+ *     rx_head = next; sei(); rx_buf[head] = byte;
+ */
+ISR(USART_RX_vect, ISR_NAKED)
 {
-    uint8_t byte = UDR0;
-    uint8_t head = rx_head;
-    uint8_t next = (uint8_t)(head + 1u == PD_AVR_RX_SIZE ? 0u : head + 1u);
-    if (next == rx_tail) {
-        return; /* lost: the frame it belonged to fails its CRC; the host retries */
-    }
-    rx_head = next;
-    sei();
-    rx_buf[head] = byte;
+    __asm__ volatile(
+        "push r24\n\t"
+        "in r24, __SREG__\n\t"
+        "push r24\n\t"
+        "push r25\n\t"
+        "push r30\n\t"
+        "push r31\n\t"
+        "lds r25, %[udr]\n\t"  /* the byte; reading it clears the interrupt's cause */
+        "lds r30, %[head]\n\t" /* its slot */
+        "mov r24, r30\n\t"
+        "subi r24, 0xFF\n\t"   /* next = head + 1 */
+        "cpi r24, %[size]\n\t"
+        "brne 1f\n\t"
+        "ldi r24, 0\n\t"
+        "1:\n\t"
+        "lds r31, %[tail]\n\t"
+        "cp r24, r31\n\t"
+        "breq 2f\n\t"           /* full: the byte is lost */
+        "sts %[head], r24\n\t"  /* the slot claimed before interrupts go back on */
+        "sei\n\t"
+        "ldi r31, 0\n\t"
+        "subi r30, lo8(-(%[buf]))\n\t"
+        "sbci r31, hi8(-(%[buf]))\n\t"
+        "st Z, r25\n\t"
+        "2:\n\t"
+        "pop r31\n\t"
+        "pop r30\n\t"
+        "pop r25\n\t"
+        "pop r24\n\t"
+        "out __SREG__, r24\n\t"
+        "pop r24\n\t"
+        "reti\n\t"
+        :
+        : [udr] "n"(_SFR_MEM_ADDR(UDR0)), [head] "i"(&rx_head), [tail] "i"(&rx_tail),
+          [buf] "i"(rx_buf), [size] "M"(PD_AVR_RX_SIZE));
 }
 
 int16_t pd_avr_uart_peek(void)
@@ -119,6 +155,11 @@ void pd_avr_uart_drop(void)
 bool pd_avr_uart_rx_empty(void)
 {
     return rx_tail == rx_head;
+}
+
+bool pd_avr_uart_tx_empty(void)
+{
+    return tx_head == tx_tail;
 }
 
 uint8_t pd_avr_uart_tx_room(void)

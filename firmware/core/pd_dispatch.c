@@ -6,6 +6,7 @@
 #include <pb_decode.h>
 
 #include "pd_dedupe.h"
+#include "pd_fastdec.h"
 #include "pd_inputs.h"
 #include "pd_out.h"
 #include "pd_rom.h"
@@ -421,12 +422,179 @@ static unsigned int decode_flags(const pb_msgdesc_t *desc)
     return PB_DECODE_NOINIT;
 }
 
+/*
+ * The steps of the generated decoders (generated/pd_fastdec.h, `protoduino gen`):
+ * a member whose fields are all uint32 or bool is decoded by a switch on the field
+ * number rather than nanopb's field iterator (about 1,500 of the Uno's cycles a
+ * digital write). Each step keeps nanopb's rule: a one-byte varint is read here
+ * (a buffer stream's state is its next byte), a longer one, a missing one and an
+ * unknown field are nanopb's own (pb_decode_varint's overflow and padding rules,
+ * pb_skip_field); a known field takes wire type 0 only, and a field number 0
+ * is refused.
+ */
+/* What pb_decode_varint reads a uint32 field's value into (as pb_dec_varint does). */
+#ifdef PB_WITHOUT_64BIT
+typedef uint32_t pd_varint_t;
+#else
+typedef uint64_t pd_varint_t;
+#endif
+
+/* The next byte, when it is a whole varint (below 0x80): taken, else left (-1) for
+ * nanopb's reader. A buffer stream's state is its next byte. */
+static int16_t fast_byte(pb_istream_t *s)
+{
+    const pb_byte_t *p = (const pb_byte_t *)s->state;
+    if (s->bytes_left == 0 || *p >= 0x80u) {
+        return -1;
+    }
+    s->state = (void *)(p + 1);
+    s->bytes_left--;
+    return *p;
+}
+
+/* The next tag in one byte, 0 when refused (a field number 0 is, as by nanopb): field
+ * numbers up to 30 as they are (the generator keeps the decoders' fields there), any
+ * larger one as 31, which no decoder knows; the wire type kept for the skip. */
+static uint8_t fast_tag(pb_istream_t *s)
+{
+    int16_t b = fast_byte(s);
+    uint32_t t = (uint32_t)b;
+    if (b < 0 && !pb_decode_varint32(s, &t)) {
+        return 0;
+    }
+    if ((t >> 3) == 0u) {
+        return 0;
+    }
+    return (uint8_t)((t >> 3) < 31u ? t : ((31u << 3) | (t & 7u)));
+}
+
+/* A uint32 field stored in `size` bytes (the int_size nanopb gave it): stored, then
+ * refused if it did not fit, as pb_dec_varint does. */
+static bool fast_uint(pb_istream_t *s, uint8_t tag, void *field, size_t size)
+{
+    if ((tag & 7u) != PB_WT_VARINT) {
+        return false;
+    }
+    int16_t b = fast_byte(s);
+    pd_varint_t v = (pd_varint_t)b;
+    if (b < 0 && !pb_decode_varint(s, &v)) {
+        return false;
+    }
+    pd_varint_t clamped;
+    if (size == sizeof(uint8_t)) {
+        clamped = *(uint8_t *)field = (uint8_t)v;
+    } else if (size == sizeof(uint16_t)) {
+        clamped = *(uint16_t *)field = (uint16_t)v;
+    } else {
+        clamped = *(uint32_t *)field = (uint32_t)v;
+    }
+    return clamped == v;
+}
+
+/* A bool field, as pb_dec_bool: any value but 0 is true. */
+static bool fast_bool(pb_istream_t *s, uint8_t tag, bool *field)
+{
+    if ((tag & 7u) != PB_WT_VARINT) {
+        return false;
+    }
+    int16_t b = fast_byte(s);
+    uint32_t v = (uint32_t)b;
+    if (b < 0 && !pb_decode_varint32(s, &v)) {
+        return false;
+    }
+    *field = v != 0u;
+    return true;
+}
+
+/* An unknown field, skipped by nanopb. Out of line: LTO copied pb_skip_field into every
+ * decoder (about 100 B of the Uno's flash each). */
+static __attribute__((noinline)) bool fast_skip(pb_istream_t *s, uint8_t tag)
+{
+    return pb_skip_field(s, (pb_wire_type_t)(tag & 7u));
+}
+
+/*
+ * The decoders, one per member of PD_FAST_DECODERS (generated/pd_fastdec.h): a loop
+ * over the tags with a case per field of PD_FAST_FIELDS_<member>, an unknown field
+ * skipped. A oneof's member is named before its value is read, refused or not, as
+ * nanopb's decode_static_field does.
+ */
+#define FAST_U(n, f)                                                  \
+    case n:                                                           \
+        if (!fast_uint(s, tag, &m->f, sizeof(m->f))) {                \
+            return false;                                             \
+        }                                                             \
+        break;
+#define FAST_B(n, f)                                                  \
+    case n:                                                           \
+        if (!fast_bool(s, tag, &m->f)) {                              \
+            return false;                                             \
+        }                                                             \
+        break;
+#define FAST_OU(n, o, f)                                              \
+    case n:                                                           \
+        m->which_##o = n;                                             \
+        if (!fast_uint(s, tag, &m->o.f, sizeof(m->o.f))) {            \
+            return false;                                             \
+        }                                                             \
+        break;
+#define FAST_OB(n, o, f)                                              \
+    case n:                                                           \
+        m->which_##o = n;                                             \
+        if (!fast_bool(s, tag, &m->o.f)) {                            \
+            return false;                                             \
+        }                                                             \
+        break;
+#define FAST_DECODER(member, message)                                            \
+    static bool fast_##member(pb_istream_t *s, protoduino_##message *m)          \
+    {                                                                            \
+        while (s->bytes_left != 0) {                                             \
+            uint8_t tag = fast_tag(s);                                           \
+            if (tag == 0) {                                                      \
+                return false;                                                    \
+            }                                                                    \
+            switch (tag >> 3) {                                                  \
+                PD_FAST_FIELDS_##member(FAST_U, FAST_B, FAST_OU, FAST_OB)        \
+            default:                                                             \
+                if (!fast_skip(s, tag)) {                                        \
+                    return false;                                                \
+                }                                                                \
+            }                                                                    \
+        }                                                                        \
+        return true;                                                             \
+    }
+PD_FAST_DECODERS(FAST_DECODER)
+#undef FAST_DECODER
+#undef FAST_OB
+#undef FAST_OU
+#undef FAST_B
+#undef FAST_U
+
+/* The member plan_short chose, by its generated decoder: 1 decoded, 0 refused, -1
+ * none (nanopb decodes it). */
+static __attribute__((noinline)) int fast_decode(protoduino_ArduinoIn *in, pb_istream_t *stream)
+{
+    switch (in->which_data) {
+#define PD_FAST_CASE(member, message)                          \
+    case protoduino_ArduinoIn_##member##_tag:                  \
+        return fast_##member(stream, &in->data.member) ? 1 : 0;
+        PD_FAST_DECODERS(PD_FAST_CASE)
+#undef PD_FAST_CASE
+    default:
+        return -1;
+    }
+}
+
 int pd_dispatch_decode_short(protoduino_ArduinoIn *in, const uint8_t *payload, size_t len)
 {
     pb_istream_t stream;
     const pb_msgdesc_t *desc = plan_short(&stream, in, payload, len);
     if (desc == NULL) {
         return -1;
+    }
+    int fast = fast_decode(in, &stream);
+    if (fast >= 0) {
+        return fast;
     }
     return pb_decode_ex(&stream, desc, &in->data, decode_flags(desc)) ? 1 : 0;
 }
@@ -448,6 +616,11 @@ bool pd_dispatch_decode(pd_core_t *core, const uint8_t *payload, size_t len)
     if (desc == NULL) {
         desc = plan_full(&stream, &core->in, payload, len);
         dest = &core->in;
+    } else {
+        int fast = fast_decode(&core->in, &stream);
+        if (fast >= 0) {
+            return fast == 1;
+        }
     }
     return pb_decode_ex(&stream, desc, dest, decode_flags(desc));
 }

@@ -45,7 +45,8 @@ bool pd_dispatch_decode(struct pd_core *core, const uint8_t *payload, size_t len
 /*
  * pd_dispatch_decode's two ways, into `in`. _short takes a payload of the usual
  * shape (the message id, then one command, each tag and length one byte) and
- * has nanopb decode the command alone with its own descriptor: 1 decoded, 0 not,
+ * decodes the command alone, a pin mode's Control by its generated decoder
+ * (generated/pd_fastdec.h), any other by nanopb with its own descriptor: 1 decoded, 0 not,
  * -1 another shape. _full is nanopb's decode of the whole ArduinoIn, for every
  * other payload. Where _short takes a payload, both leave `in` and the answer
  * the same (the unit tests and fuzz_dispatch.c compare them).

@@ -130,7 +130,7 @@ void pd_hal_pwm_release(void *hal, uint8_t pin);
  * pull-up if asked, and (where the board can) lets a change of it wake the
  * main loop; pd_hal_input_release: an input without pull-up, as at power-up.
  * pd_hal_digital_read_all: the level at every pin now, bit N for pin N (one
- * read per pass of the loop, whatever the number of inputs: the Uno reads its
+ * read per poll (pd_core_poll), whatever the number of inputs: the Uno reads its
  * three PIN registers).
  */
 void pd_hal_input_config(void *hal, uint8_t pin, bool pull_up);

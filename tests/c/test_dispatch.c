@@ -1,4 +1,5 @@
 /* Dispatch: one Ack per message, every status, the device semantics, the dedupe window. */
+#include <stdlib.h>
 #include <string.h>
 
 #include <pb_encode.h>
@@ -819,7 +820,27 @@ static size_t short_bases(protoduino_ArduinoIn *ins, size_t cap)
     in.data.configure_failsafe.timeout_ms = 60000;
     in.data.configure_failsafe.liveness = protoduino_Liveness_LIVENESS_HEARTBEAT;
     ins[n++] = in;
-    (void)cap;
+    /* The Inits and Release of one-byte tags (the Controls above have generated decoders). */
+    in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
+    in.message_id = 13;
+    in.which_data = protoduino_ArduinoIn_digital_init_tag;
+    in.data.digital_init.pin = 13;
+    in.data.digital_init.safe_level = true;
+    ins[n++] = in;
+    in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
+    in.message_id = 14;
+    in.which_data = protoduino_ArduinoIn_pwm_init_tag;
+    in.data.pwm_init.pin = 11;
+    in.data.pwm_init.safe_duty = 200;
+    ins[n++] = in;
+    in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
+    in.message_id = 15;
+    in.which_data = protoduino_ArduinoIn_release_tag;
+    in.data.release.pin = 9;
+    ins[n++] = in;
+    if (n > cap) {
+        abort(); /* the caller's array is too short */
+    }
     return n;
 }
 
@@ -832,7 +853,7 @@ static size_t short_bases(protoduino_ArduinoIn *ins, size_t cap)
  */
 static void test_short_decode_matches_full(void)
 {
-    protoduino_ArduinoIn ins[16];
+    protoduino_ArduinoIn ins[24];
     size_t count = short_bases(ins, sizeof(ins) / sizeof(ins[0]));
     size_t taken = 0, refused = 0, full = 0;
     for (size_t k = 0; k < count; k++) {

@@ -17,6 +17,7 @@ import shutil
 import subprocess
 import sys
 import time
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -369,10 +370,16 @@ def test_profile_names_and_groups() -> None:
     assert firmware.clean_name("main") == "main"
     assert firmware.group_of("load_descriptor_values").startswith("nanopb")
     assert firmware.group_of("pb_decode_tag").startswith("nanopb")
+    assert firmware.group_of("fast_uint").startswith("generated decoders")
     assert firmware.group_of("pd_crc16_update").startswith("CRC")
     assert firmware.group_of("__vector_18") == "interrupt handlers"
     assert firmware.group_of("pd_link_send").startswith("frame transmit")
     assert firmware.group_of("something_new") == "everything else"
+    # The cycles a block added: its profile less the idle one scaled to the same time,
+    # the displaced idle cycles (negative differences) not counted.
+    idle = Counter({0x100: 1_000, 0x200: 500})
+    busy = Counter({0x100: 1_500, 0x200: 900, 0x300: 700})
+    assert firmware.added_cycles(idle, 10_000, busy, 20_000) == 700
 
 
 def test_stats_only_on_the_emulated_uno(tmp_path: Path) -> None:
@@ -471,6 +478,9 @@ def test_runner_writes_the_board_sections(tmp_path: Path) -> None:
     assert "echoes one byte in" in text  # the emulator's own share, measured
     assert "### Profile of a servo write on the Uno" in text
     assert "`pd_link_send`" in text
+    # Issue 35: the same write's cycles beside StandardFirmata's, on the same runner.
+    firmata = text.split("### The same write on StandardFirmata")[1]
+    assert "| digital write |" in firmata and "| servo write |" in firmata
     assert "not measured" not in text  # every target of parts 2, 3 and 5 has a verdict
     for chart in ("roundtrip_avr", "roundtrip_native", "throughput_avr", "throughput_native"):
         link = f"perf/{chart}.png"
