@@ -27,6 +27,7 @@
 #include "pd_avr.h"
 #include "pd_avr_pins.h"
 #include "pd_features.h"
+#include "pd_hal.h"
 
 volatile uint8_t pd_avr_wake;
 
@@ -36,6 +37,25 @@ volatile uint8_t pd_avr_wake;
 static volatile uint8_t *pcmsk(uint8_t pin, uint8_t *bit, uint8_t *group)
 {
     volatile uint8_t *port = pd_avr_port(pin, bit);
+#if PD_BOARD_MEGA
+    /* The Mega's pin changes: port B (PCINT0..7: pins 10-13, 50-53) and K (PCINT16..23:
+     * A8-A15); of the rest only PE0 and PJ0..6 (PCINT8..15, pins 0, 15, 14), and pin 0
+     * is the link. A pin without one is read at the next 1 ms clock tick: no wake-up. */
+    if (port == &PORTJ) {
+        *bit = (uint8_t)(*bit << 1);
+        *group = _BV(PCIE1);
+        return &PCMSK1;
+    }
+    if (port == &PORTK) {
+        *group = _BV(PCIE2);
+        return &PCMSK2;
+    }
+    if (port != &PORTB) {
+        static uint8_t none; /* a mask no interrupt reads */
+        *group = 0;
+        return &none;
+    }
+#endif
     if (port == &PORTB) {
         *group = _BV(PCIE0);
         return &PCMSK0;
@@ -61,7 +81,7 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
     pd_avr_pin_set(pin, false, pull_up); /* an input; PORT's bit is the pull-up */
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
-        if (pin >= 14u) {
+        if (pin >= PD_AVR_FIRST_ANALOG) {
             /* Its digital input buffer back on (an analog input's conversions turn it off). */
             DIDR0 &= (uint8_t)~bit;
         }
@@ -74,11 +94,28 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
     }
 }
 
+#if PD_BOARD_MEGA
+uint32_t pd_avr_pins_read(void)
+{
+    /* The Mega's pins are spread over eight ports: each read at its PIN register (its
+     * PORT's address less 2, pd_avr_pins.h). */
+    uint32_t levels = 0;
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        uint8_t bit;
+        volatile uint8_t *port = pd_avr_port(pin, &bit);
+        if (*(port - 2) & bit) {
+            levels |= 1UL << pin;
+        }
+    }
+    return levels;
+}
+#else
 uint32_t pd_avr_pins_read(void)
 {
     /* Uno pins: D0..D7 = PIND, D8..D13 = PINB0..5, A0..A5 (14..19) = PINC0..5. */
     return (uint32_t)PIND | (uint32_t)(PINB & 0x3Fu) << 8 | (uint32_t)(PINC & 0x3Fu) << 14;
 }
+#endif
 
 /* pd_avr_wake = 1, touching no flag of SREG: 4 B of stack, 9 cycles. */
 #define PD_WAKE_ISR(vector)                                                  \
