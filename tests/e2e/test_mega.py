@@ -1,0 +1,157 @@
+"""The Mega 2560 (issue 36 items 1 and 2): the firmware's ``make avr BOARD=mega`` build on the
+emulated ATmega2560 (``SimBoard("avr", board="mega")``), judged at its pins through the trace.
+
+The build serves pins 0..31 (firmware/README.md, The Mega 2560): the Mega's own ports A and C
+(pins 22..31) carry digital outputs and servos (Timer1's interrupt writes the pulses through
+the port), Timer2 makes PWM on pins 9 and 10 and Timer1 on 11 and 12 while no servo runs,
+Timer0 keeps the clock (pins 4 and 13 refused). The host has no table of the Mega's: every
+refusal here comes from the pin table of the Mega's DeviceInfo.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from boardprocess import missing_tool
+from protoduino import Board, EventKind
+from protoduino._generated import protoduino_pb2 as pb
+from protoduino.errors import NotSupportedError, TimerInUseError
+from protoduino.messages import ArduinoIn, Status
+from protoduino.simboard import SimBoard
+from simfixtures import PULSE_TOLERANCE_US, wait_for_pin, wait_until
+
+pytestmark = pytest.mark.avr
+
+#: Bounds a failing test's wait only; the verdicts are the trace's.
+BOUND = 30.0
+
+
+@pytest.fixture
+def mega(tmp_path: Path) -> Iterator[SimBoard]:
+    missing = missing_tool("make", "cc", "avr-gcc", simavr=True)
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+    sim = SimBoard("avr", board="mega", trace=tmp_path / "trace.jsonl")
+    sim.start()
+    try:
+        yield sim
+    finally:
+        sim.stop()
+
+
+def _values(sim: SimBoard, pin: int, mode: str) -> list[int]:
+    return [int(e["value"]) for e in sim.trace() if e["pin"] == pin and e["mode"] == mode]
+
+
+def _wait(sim: SimBoard, pin: int, mode: str, ok: Callable[[list[int]], bool]) -> list[int]:
+    assert wait_until(lambda: ok(_values(sim, pin, mode)), BOUND), _values(sim, pin, mode)
+    return _values(sim, pin, mode)
+
+
+def _last(value: int) -> Callable[[list[int]], bool]:
+    """The pin's last value is ``value``."""
+    return lambda values: values[-1:] == [value]
+
+
+def test_the_mega_states_its_pins_and_the_host_refuses_from_them(mega: SimBoard) -> None:
+    """Its DeviceInfo names the board and its pin table; the host, which has no Mega table,
+    refuses from that table what the device would refuse, for the table's reason."""
+    with Board.open(mega.port) as board:
+        info = board.info
+        assert (info.board, info.num_pins, info.max_servos) == ("mega", 32, 8)
+        assert info.pwm_pins == (9, 10, 11, 12)
+        assert info.analog_pins == () and info.counter_pins == ()
+        pins = info.pins
+        assert pins[0] == pins[1] == 0  # the link: UART0
+        assert pins[22:32] == bytes([pb.PIN_DIGITAL] * 10)
+        assert all(pins[p] & pb.PIN_PWM for p in (9, 10, 11, 12))
+        assert not pins[2] & pb.PIN_PWM  # Timer3's OC3B: no driver runs Timer3
+        with pytest.raises(TimerInUseError) as clock:
+            board.pwm_output(13)  # OC0A: Timer0 is the clock
+        assert not clock.value.sent
+        with pytest.raises(NotSupportedError) as no_pwm:
+            board.pwm_output(2)
+        assert not no_pwm.value.sent
+        msg = ArduinoIn()
+        msg.pwm_init.pin = 13
+        with pytest.raises(TimerInUseError) as device:
+            board.request(msg)  # no host check on the way: the device's own answer
+        assert device.value.status == Status.STATUS_TIMER_IN_USE
+        board.servo(30)
+        with pytest.raises(TimerInUseError):
+            board.pwm_output(11)  # OC1A: Timer1 makes the servo pulses now
+
+
+def test_digital_outputs_on_the_mega_ports_at_the_pins(mega: SimBoard) -> None:
+    """Pins 22..31 (ports A and C) in one pose: each pin shows its level in the trace."""
+    with Board.open(mega.port) as board:
+        outs = {pin: board.digital_output(pin) for pin in range(22, 32)}
+        board.pose({out: pin % 2 == 1 for pin, out in outs.items()})
+        for pin in range(22, 32):
+            wait_for_pin(mega, pin, _last(pin % 2), BOUND)
+        board.pose({out: pin % 2 == 0 for pin, out in outs.items()})
+        for pin in range(22, 32):
+            wait_for_pin(mega, pin, _last(1 - pin % 2), BOUND)
+
+
+def test_eight_servos_on_ports_a_and_c_in_one_pose(mega: SimBoard) -> None:
+    """Eight servos on pins 24..31 (PA2..PA7, PC7, PC6): the widths of one pose at the pins."""
+    with Board.open(mega.port) as board:
+        servos = {pin: board.servo(pin) for pin in range(24, 32)}
+        degrees = {pin: 20 * (pin - 24) + 10 for pin in servos}  # 10..150
+        widths = {pin: servos[pin].to_us(deg) for pin, deg in degrees.items()}
+        board.pose({servos[pin]: deg for pin, deg in degrees.items()})
+
+        def at(pin: int) -> Callable[[list[int]], bool]:
+            return lambda v: bool(v) and abs(v[-1] - widths[pin]) <= PULSE_TOLERANCE_US
+
+        for pin in servos:
+            _wait(mega, pin, "servo", at(pin))
+
+
+def test_pwm_on_timer2_and_timer1_pins(mega: SimBoard) -> None:
+    """Pins 9 and 10 (Timer2's OC2B, OC2A) and 11, 12 (Timer1's OC1A, OC1B): the duty
+    measured at each pin is the one written."""
+    duties = {9: 60, 10: 200, 11: 128, 12: 30}
+    with Board.open(mega.port) as board:
+        for pin, duty in duties.items():
+            board.pwm_output(pin).write(duty)
+        for pin, duty in duties.items():
+            _wait(mega, pin, "pwm", _last(duty))
+
+
+def test_digital_inputs_on_the_mega(mega: SimBoard) -> None:
+    """Pin 10 (PB4, a pin-change interrupt) and pin 30 (PC7, none: read at the clock tick)
+    read the levels the control socket holds there."""
+    with Board.open(mega.port) as board:
+        for pin in (10, 30):
+            mega.control.level(pin, 1)
+            switch = board.digital_input(pin)
+            assert switch.wait_for(True, timeout=BOUND) is True  # the bound only ends a failure
+            mega.control.level(pin, 0)
+            assert switch.wait_for(False, timeout=BOUND) is False
+            assert switch.read() is False
+
+
+def test_the_failsafe_drives_the_mega_outputs_safe(mega: SimBoard) -> None:
+    """A Ping-fed failsafe timing out: the digital output, the PWM output and the servo go
+    to their safe values at the pins."""
+    with Board.open(mega.port, failsafe_timeout=0.3) as board:
+        seen: list[Any] = []
+        board.on_event(seen.append)
+        lamp = board.digital_output(25, safe=False)
+        motor = board.pwm_output(9, safe=7)
+        arm = board.servo(31, safe_us=1500)
+        board.pose({lamp: True, motor: 200, arm: 160})
+        wait_for_pin(mega, 25, lambda v: v[-1:] == [1], BOUND)
+        _wait(mega, 9, "pwm", lambda v: v[-1:] == [200])
+        moved = arm.to_us(160)
+        _wait(mega, 31, "servo", lambda v: bool(v) and abs(v[-1] - moved) <= PULSE_TOLERANCE_US)
+        board.pinging = False  # the device hears nothing more: its failsafe fires
+        assert wait_until(lambda: any(e.kind == EventKind.FAILSAFE for e in seen), BOUND)
+        wait_for_pin(mega, 25, lambda v: v[-1:] == [0], BOUND)
+        _wait(mega, 9, "pwm", lambda v: v[-1:] == [7])
+        _wait(mega, 31, "servo", lambda v: abs(v[-1] - 1500) <= PULSE_TOLERANCE_US)
