@@ -19,6 +19,9 @@
 #define PD_AVR_PIN_OC2A 11u
 #define PD_AVR_PIN_OC1A 9u
 #define PD_AVR_PIN_OC1B 10u
+/* The counters' external interrupts: INT0 on pin 2, INT1 on pin 3 (pd_avr_inputs.c). */
+#define PD_AVR_COUNTERS 2u
+#define PD_AVR_INT_OF(pin) ((pin) == 3u ? 1u : 0u)
 #endif
 
 /* UART receive ring: 8 ms of line time at 115200 baud, five servo commands

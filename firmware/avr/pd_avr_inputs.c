@@ -163,7 +163,7 @@ PD_WAKE_ISR(ADC_vect)
 
 #if PD_FEATURE_COUNTER
 
-volatile uint32_t pd_avr_counts[2]; /* INT0 (pin 2), INT1 (pin 3) */
+volatile uint32_t pd_avr_counts[PD_AVR_COUNTERS]; /* per INTn (PD_AVR_INT_OF: pd_avr.h) */
 #define counts pd_avr_counts
 
 /*
@@ -205,21 +205,35 @@ volatile uint32_t pd_avr_counts[2]; /* INT0 (pin 2), INT1 (pin 3) */
 
 PD_COUNT_ISR(INT0_vect, 0)
 PD_COUNT_ISR(INT1_vect, 1)
+#if PD_BOARD_MEGA
+PD_COUNT_ISR(INT2_vect, 2)
+PD_COUNT_ISR(INT3_vect, 3)
+PD_COUNT_ISR(INT4_vect, 4)
+PD_COUNT_ISR(INT5_vect, 5)
+#endif
 
 /* EICRA's ISCn1:ISCn0 for an Edge (protoduino.proto): rising 11, falling 10, both 01. */
 static const uint8_t sense[3] = {3u, 2u, 1u};
 
 void pd_avr_counter_start(uint8_t pin, uint8_t edge)
 {
-    uint8_t n = pin == 3u ? 1u : 0u;
+    uint8_t n = PD_AVR_INT_OF(pin);
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
         /* No wake-up per edge (pd_avr_input_config gave it one): the loop reads the
          * count once per report interval, and at 40,000 edges a second a loop pass
          * per edge would take the whole CPU. PD2, PD3 are PCINT18, PCINT19. */
+#if PD_BOARD_MEGA
+        /* The Mega's INTn pins have no pin-change interrupt; INT4..INT7 sense in EICRB. */
+        volatile uint8_t *eicr = n < 4u ? &EICRA : &EICRB;
+        uint8_t at = (uint8_t)(2u * (n & 3u));
+        EIMSK &= (uint8_t)~_BV(n);
+        *eicr = (uint8_t)((*eicr & ~(3u << at)) | (sense[edge < 3u ? edge : 2u] << at));
+#else
         PCMSK2 &= (uint8_t)~_BV(pin);
         EIMSK &= (uint8_t)~_BV(n);
         EICRA = (uint8_t)((EICRA & ~(3u << (2u * n))) | (sense[edge < 3u ? edge : 2u] << (2u * n)));
+#endif
         EIFR = _BV(n); /* an edge from before does not count */
         counts[n] = 0;
         EIMSK |= _BV(n);
@@ -231,14 +245,14 @@ uint32_t pd_avr_counter_read(uint8_t pin)
     uint32_t n;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
-        n = counts[pin == 3u ? 1u : 0u];
+        n = counts[PD_AVR_INT_OF(pin)];
     }
     return n;
 }
 
 void pd_avr_counter_stop(uint8_t pin)
 {
-    EIMSK &= (uint8_t)~_BV(pin == 3u ? 1u : 0u);
+    EIMSK &= (uint8_t)~_BV(PD_AVR_INT_OF(pin));
 }
 
 #endif

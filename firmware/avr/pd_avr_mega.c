@@ -33,8 +33,9 @@ volatile uint8_t *const pd_avr_mega_ports[11] = {
  *   5-8, 44-46) are digital pins here: no driver runs those timers yet.
  * - Servos: Timer1's compare interrupt writes the pulses through the port, on any
  *   digital pin; 8 of them (PD_MAX_SERVOS, the Uno's).
- * - No analog input (A0..A15 are pins 54..69) and no counter (INT0..INT5 are pins 21,
- *   20, 19, 18, 2, 3; the driver counts on the Uno's INT0/INT1 pins) yet.
+ * - Counters on the six external interrupts: pins 21, 20, 19, 18 (INT0..INT3), 2 and 3
+ *   (INT4, INT5).
+ * - No analog input yet: A0..A15 are pins 54..69.
  */
 const pd_board_info_t pd_avr_mega_info = {
     .board = "mega",
@@ -44,7 +45,7 @@ const pd_board_info_t pd_avr_mega_info = {
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
     .pwm_pins = (1UL << 9) | (1UL << 10) | (1UL << 11) | (1UL << 12),
     .analog_pins = 0,
-    .counter_pins = 0,
+    .counter_pins = (1UL << 2) | (1UL << 3) | (0xFUL << 18), /* INT4, INT5; INT3..INT0 */
     .servo_timer_pins = (1UL << 11) | (1UL << 12),
     .clock_timer_pins = (1UL << 4) | (1UL << 13),
     .servo_timer = 1,

@@ -36,6 +36,11 @@ extern volatile uint8_t *const pd_avr_mega_ports[11];
 #define PD_AVR_PIN_OC1A 11u
 #define PD_AVR_PIN_OC1B 12u
 
+/* The counters' external interrupts (pd_avr_inputs.c): INT0..INT3 on pins 21..18, INT4 and
+ * INT5 on pins 2 and 3 (INT6, INT7 have no pin on the Mega). */
+#define PD_AVR_COUNTERS 6u
+#define PD_AVR_INT_OF(pin) ((pin) >= 18u ? (uint8_t)(21u - (pin)) : (uint8_t)((pin) + 2u))
+
 /* The ATmega2560 has four USARTs: the link is USART0 (pins 0, 1, the USB bridge). */
 #define USART_RX_vect USART0_RX_vect
 #define USART_UDRE_vect USART0_UDRE_vect

@@ -4,8 +4,8 @@ emulated ATmega2560 (``SimBoard("avr", board="mega")``), judged at its pins thro
 The build serves pins 0..31 (firmware/README.md, The Mega 2560): the Mega's own ports A and C
 (pins 22..31) carry digital outputs and servos (Timer1's interrupt writes the pulses through
 the port), Timer2 makes PWM on pins 9 and 10 and Timer1 on 11 and 12 while no servo runs,
-Timer0 keeps the clock (pins 4 and 13 refused). The host has no table of the Mega's: every
-refusal here comes from the pin table of the Mega's DeviceInfo.
+Timer0 keeps the clock (pins 4 and 13 refused), the six external interrupts count. The host
+has no table of the Mega's: every refusal here comes from the pin table of its DeviceInfo.
 """
 
 from __future__ import annotations
@@ -56,6 +56,10 @@ def _last(value: int) -> Callable[[list[int]], bool]:
     return lambda values: values[-1:] == [value]
 
 
+def _equals(value: int) -> Callable[[int], bool]:
+    return lambda count: count == value
+
+
 def test_the_mega_states_its_pins_and_the_host_refuses_from_them(mega: SimBoard) -> None:
     """Its DeviceInfo names the board and its pin table; the host, which has no Mega table,
     refuses from that table what the device would refuse, for the table's reason."""
@@ -63,7 +67,7 @@ def test_the_mega_states_its_pins_and_the_host_refuses_from_them(mega: SimBoard)
         info = board.info
         assert (info.board, info.num_pins, info.max_servos) == ("mega", 32, 8)
         assert info.pwm_pins == (9, 10, 11, 12)
-        assert info.analog_pins == () and info.counter_pins == ()
+        assert info.analog_pins == () and info.counter_pins == (2, 3, 18, 19, 20, 21)
         pins = info.pins
         assert pins[0] == pins[1] == 0  # the link: UART0
         assert pins[22:32] == bytes([pb.PIN_DIGITAL] * 10)
@@ -134,6 +138,20 @@ def test_digital_inputs_on_the_mega(mega: SimBoard) -> None:
             mega.control.level(pin, 0)
             assert switch.wait_for(False, timeout=BOUND) is False
             assert switch.read() is False
+
+
+def test_counters_on_the_six_external_interrupts(mega: SimBoard) -> None:
+    """Pins 2, 3 (INT4, INT5: senses in EICRB) and 18..21 (INT3..INT0: EICRA), two at a
+    time (the core's counter slots): each counts the pulses the control socket makes on it."""
+    with Board.open(mega.port) as board:
+        for pins in ((2, 3), (18, 19), (20, 21)):
+            counters = {pin: board.counter(pin) for pin in pins}
+            for pin in pins:
+                mega.control.pulses(pin, pin + 10, 2000)
+            for pin, counter in counters.items():
+                assert counter.wait_for(_equals(pin + 10), timeout=BOUND) == pin + 10
+            for pin in pins:
+                board.release(pin)
 
 
 def test_the_failsafe_drives_the_mega_outputs_safe(mega: SimBoard) -> None:
