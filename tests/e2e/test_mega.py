@@ -10,6 +10,9 @@ has no table of the Mega's: every refusal here comes from the pin table of its D
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -29,11 +32,15 @@ pytestmark = pytest.mark.avr
 BOUND = 30.0
 
 
-@pytest.fixture
-def mega(tmp_path: Path) -> Iterator[SimBoard]:
+def _need_tools() -> None:
     missing = missing_tool("make", "cc", "avr-gcc", simavr=True)
     if missing is not None:
         pytest.skip(f"{missing} is not installed")
+
+
+@pytest.fixture
+def mega(tmp_path: Path) -> Iterator[SimBoard]:
+    _need_tools()
     sim = SimBoard("avr", board="mega", trace=tmp_path / "trace.jsonl")
     sim.start()
     try:
@@ -173,3 +180,46 @@ def test_the_failsafe_drives_the_mega_outputs_safe(mega: SimBoard) -> None:
         wait_for_pin(mega, 25, lambda v: v[-1:] == [0], BOUND)
         _wait(mega, 9, "pwm", lambda v: v[-1:] == [7])
         _wait(mega, 31, "servo", lambda v: abs(v[-1] - 1500) <= PULSE_TOLERANCE_US)
+
+
+def test_protoduino_sim_starts_the_emulated_mega(tmp_path: Path) -> None:
+    """`protoduino sim --backend avr --board mega` (the one documented option) runs the Mega:
+    `protoduino info` reads its board and pins; a Mega with the native backend is refused."""
+    _need_tools()
+    cli = [sys.executable, "-m", "protoduino.cli.main"]
+    refused = subprocess.run(
+        [*cli, "sim", "--board", "mega"], capture_output=True, text=True, check=False, timeout=60
+    )
+    assert refused.returncode != 0 and "--board mega goes with --backend avr" in refused.stderr
+    pid_file = tmp_path / "sim.pid"
+    started = subprocess.run(
+        [
+            *cli,
+            "sim",
+            "--backend",
+            "avr",
+            "--board",
+            "mega",
+            "--detach",
+            "--pid-file",
+            str(pid_file),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=60,
+    )
+    assert started.returncode == 0, started.stderr
+    try:
+        info = subprocess.run(
+            [*cli, "info", started.stdout.strip(), "--json", "--new-session"],
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=60,
+        )
+        assert info.returncode == 0, info.stderr
+        stated = json.loads(info.stdout)["info"]
+        assert (stated["board"], stated["num_pins"]) == ("mega", 32), stated
+    finally:
+        subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
