@@ -24,6 +24,8 @@ from protoduino._generated import protoduino_pb2 as pb
 from protoduino.errors import NotSupportedError, TimerInUseError
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard
+from protoduino_dev import build, rambudget
+from protoduino_dev.runnerstats import snapshot
 from simfixtures import PULSE_TOLERANCE_US, wait_for_pin, wait_until
 
 pytestmark = pytest.mark.avr
@@ -223,3 +225,37 @@ def test_protoduino_sim_starts_the_emulated_mega(tmp_path: Path) -> None:
         assert (stated["board"], stated["num_pins"]) == ("mega", 32), stated
     finally:
         subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
+
+
+#: The Mega 2560's RAM (0x200 .. RAMEND = 0x21FF).
+MEGA_RAM = 8_192
+
+
+def test_the_mega_ram_budget_holds(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The Uno's deepest-stack scenario (rambudget.exercise: every command at its largest, four
+    in flight, counters and digital inputs reporting; no analog input on this build) on the
+    emulated Mega, whose runner records the lowest stack pointer: static data + the deepest
+    stack + 256 B free fit the Mega's 8,192 B."""
+    _need_tools()
+    stats = tmp_path / "stats.jsonl"
+    sim = SimBoard(
+        "avr", board="mega", options=("--stats", str(stats), "--stack", str(tmp_path / "stack"))
+    )
+    sim.start()
+    try:
+        with Board.open(sim.port, window=4) as board:
+            rambudget.exercise(board, sim.control, analog_pins=())
+        row = snapshot(sim.pid, stats)
+    finally:
+        sim.stop()
+    sections = rambudget.sections(build.build_firmware_board("mega"))
+    static = sections.get(".data", 0) + sections.get(".bss", 0) + sections.get(".noinit", 0)
+    assert row["ramend"] == MEGA_RAM + 0x200 - 1 and row["sp_min"] < row["ramend"], row
+    stack = int(row["ramend"]) - int(row["sp_min"])
+    free = MEGA_RAM - static - stack
+    with capsys.disabled():
+        sys.stdout.write(
+            f"\nMega RAM: static {static} B + deepest stack {stack} B; "
+            f"{free} B free of {MEGA_RAM}\n"
+        )
+    assert free >= rambudget.FREE_BYTES
