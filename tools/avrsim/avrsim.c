@@ -1,5 +1,6 @@
 /*
- * avrsim.c: an emulated Arduino Uno (ATmega328P, simavr) on a pseudo-terminal.
+ * avrsim.c: an emulated Arduino Uno (ATmega328P, simavr) on a pseudo-terminal; with
+ * --mcu atmega2560 a Mega 2560 (its pins: pd_boards).
  *
  *   avrsim [--trace FILE] [--link PATH] [--control PATH] [--hex FILE]...
  *          [--boot ADDR] [--auto-reset] [--glitch PIN] [--stats FILE]
@@ -122,7 +123,7 @@
 #define PD_MIN_WAIT_NS 20000ULL
 /* A stream with no pause goes to the host in chunks of at most this much. */
 #define PD_STREAM_NS 1000000ULL
-#define PD_MCUSR_ADDR 0x54     /* ATmega328P MCUSR in data space */
+#define PD_MCUSR_ADDR 0x54     /* ATmega328P MCUSR in data space (the ATmega2560's too) */
 #define PD_MCUSR_EXTRF 0x02
 /* ATmega328P external interrupts in data space: EIFR, EIMSK, EICRA (ISCn1:ISCn0 per INTn). */
 #define PD_EIFR_ADDR 0x3C
