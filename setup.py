@@ -71,6 +71,7 @@ class StrictBuildExt(build_ext):
 PROGRAMS = {
     "protoduino.hex": ("firmware", ["avr"], "avr/protoduino.hex"),
     "protoduino.elf": ("firmware", ["avr"], "avr/protoduino.elf"),
+    "protoduino-mega.elf": ("firmware", ["avr", "BOARD=mega"], "avr-mega/protoduino.elf"),
     "pd_sim": ("firmware", ["sim", "SIM_CFLAGS=-O2"], "sim/pd_sim"),
     "avrsim": ("tools/avrsim", ["runner"], "avrsim/avrsim"),
 }

@@ -133,8 +133,8 @@ def build_firmware_features(features: Iterable[str]) -> Path:
 
 
 def build_firmware_board(board: str) -> Path:
-    """Build the firmware for a board profile of the ATmega328P build (``make avr
-    BOARD=...``: "uno", "nano"); its ELF."""
+    """Build the firmware for a board (``make avr BOARD=...``: "uno", "nano", "mega");
+    its ELF."""
     make(FIRMWARE_DIR, "avr", f"BOARD={board}")
     return BUILD / ("avr" if board == "uno" else f"avr-{board}") / "protoduino.elf"
 
@@ -151,6 +151,7 @@ PROGRAMS: dict[str, Callable[[], Path]] = {
     programs.RUNNER: build_runner,
     programs.FIRMWARE_ELF: build_firmware,
     programs.FIRMWARE_HEX: build_firmware_hex,
+    programs.MEGA_FIRMWARE_ELF: lambda: build_firmware_board("mega"),
 }
 
 

@@ -18,6 +18,7 @@ and for ``python -m bench`` part 5 (which reports it), so both judge the same th
 from __future__ import annotations
 
 import subprocess
+from collections.abc import Iterable
 from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
@@ -81,9 +82,15 @@ def _oversized_pose(*, full_decode: bool = False) -> ArduinoIn:
     return msg
 
 
-def exercise(board: Board, control: SimControl, rounds: int = ROUNDS) -> int:
+def exercise(
+    board: Board,
+    control: SimControl,
+    rounds: int = ROUNDS,
+    analog_pins: Iterable[int] = ANALOG_PINS,
+) -> int:
     """Drive the deepest-stack scenario on an emulated Uno (``board`` opened with window 4,
     ``control`` its input-control socket); returns the InputReports the host received.
+    ``analog_pins``: the analog inputs it samples (none on the Mega's build).
 
     Raises AssertionError if the device does not answer as it must (an oversized Pose that
     decodes, inputs that never report).
@@ -93,10 +100,11 @@ def exercise(board: Board, control: SimControl, rounds: int = ROUNDS) -> int:
         board.counter(pin, edge="both", rate_hz=1000)
         control.pulses(pin, 100_000, 5_000)  # 10,000 edges a second each, the whole run
     inputs = [board.digital_input(pin) for pin in DIGITAL_INPUT_PINS]
-    for pin in ANALOG_PINS:
+    analog_pins = tuple(analog_pins)
+    for pin in analog_pins:
         board.analog_input(pin, rate_hz=1000, threshold=0)
     for round_ in range(rounds):
-        for pin in ANALOG_PINS:
+        for pin in analog_pins:
             control.analog(pin, (round_ * 97 + pin * 31) % 1024)
         for pin in DIGITAL_INPUT_PINS:
             control.level(pin, (round_ + pin) & 1)
@@ -126,7 +134,7 @@ def exercise(board: Board, control: SimControl, rounds: int = ROUNDS) -> int:
         each.release()
     outputs = [board.digital_output(pin) for pin in DIGITAL_INPUT_PINS]
     for round_ in range(rounds):
-        for pin in ANALOG_PINS:
+        for pin in analog_pins:
             control.analog(pin, (round_ * 89 + pin * 37) % 1024)
         level = bool(round_ & 1)
         calls = [

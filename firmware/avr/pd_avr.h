@@ -9,6 +9,21 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#if PD_BOARD_MEGA
+#include "pd_avr_mega.h" /* the Mega 2560's pin map and vector names */
+#define PD_AVR_FIRST_ANALOG 54u /* A0 */
+#else
+#define PD_AVR_FIRST_ANALOG 14u /* A0 */
+/* The Uno's pins of the timer outputs the PWM driver runs (pd_avr_pwm.c). */
+#define PD_AVR_PIN_OC2B 3u
+#define PD_AVR_PIN_OC2A 11u
+#define PD_AVR_PIN_OC1A 9u
+#define PD_AVR_PIN_OC1B 10u
+/* The counters' external interrupts: INT0 on pin 2, INT1 on pin 3 (pd_avr_inputs.c). */
+#define PD_AVR_COUNTERS 2u
+#define PD_AVR_INT_OF(pin) ((pin) == 3u ? 1u : 0u)
+#endif
+
 /* UART receive ring: 8 ms of line time at 115200 baud, five servo commands
  * in flight (DeviceInfo.rx_buffer: the host keeps its frames in flight within
  * it, and a single frame of any length still streams through, the core taking

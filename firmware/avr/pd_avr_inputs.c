@@ -27,6 +27,7 @@
 #include "pd_avr.h"
 #include "pd_avr_pins.h"
 #include "pd_features.h"
+#include "pd_hal.h"
 
 volatile uint8_t pd_avr_wake;
 
@@ -36,6 +37,25 @@ volatile uint8_t pd_avr_wake;
 static volatile uint8_t *pcmsk(uint8_t pin, uint8_t *bit, uint8_t *group)
 {
     volatile uint8_t *port = pd_avr_port(pin, bit);
+#if PD_BOARD_MEGA
+    /* The Mega's pin changes: port B (PCINT0..7: pins 10-13, 50-53) and K (PCINT16..23:
+     * A8-A15); of the rest only PE0 and PJ0..6 (PCINT8..15, pins 0, 15, 14), and pin 0
+     * is the link. A pin without one is read at the next 1 ms clock tick: no wake-up. */
+    if (port == &PORTJ) {
+        *bit = (uint8_t)(*bit << 1);
+        *group = _BV(PCIE1);
+        return &PCMSK1;
+    }
+    if (port == &PORTK) {
+        *group = _BV(PCIE2);
+        return &PCMSK2;
+    }
+    if (port != &PORTB) {
+        static uint8_t none; /* a mask no interrupt reads */
+        *group = 0;
+        return &none;
+    }
+#endif
     if (port == &PORTB) {
         *group = _BV(PCIE0);
         return &PCMSK0;
@@ -61,7 +81,7 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
     pd_avr_pin_set(pin, false, pull_up); /* an input; PORT's bit is the pull-up */
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
-        if (pin >= 14u) {
+        if (pin >= PD_AVR_FIRST_ANALOG) {
             /* Its digital input buffer back on (an analog input's conversions turn it off). */
             DIDR0 &= (uint8_t)~bit;
         }
@@ -74,11 +94,28 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
     }
 }
 
+#if PD_BOARD_MEGA
+uint32_t pd_avr_pins_read(void)
+{
+    /* The Mega's pins are spread over eight ports: each read at its PIN register (its
+     * PORT's address less 2, pd_avr_pins.h). */
+    uint32_t levels = 0;
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        uint8_t bit;
+        volatile uint8_t *port = pd_avr_port(pin, &bit);
+        if (*(port - 2) & bit) {
+            levels |= 1UL << pin;
+        }
+    }
+    return levels;
+}
+#else
 uint32_t pd_avr_pins_read(void)
 {
     /* Uno pins: D0..D7 = PIND, D8..D13 = PINB0..5, A0..A5 (14..19) = PINC0..5. */
     return (uint32_t)PIND | (uint32_t)(PINB & 0x3Fu) << 8 | (uint32_t)(PINC & 0x3Fu) << 14;
 }
+#endif
 
 /* pd_avr_wake = 1, touching no flag of SREG: 4 B of stack, 9 cycles. */
 #define PD_WAKE_ISR(vector)                                                  \
@@ -126,7 +163,7 @@ PD_WAKE_ISR(ADC_vect)
 
 #if PD_FEATURE_COUNTER
 
-volatile uint32_t pd_avr_counts[2]; /* INT0 (pin 2), INT1 (pin 3) */
+volatile uint32_t pd_avr_counts[PD_AVR_COUNTERS]; /* per INTn (PD_AVR_INT_OF: pd_avr.h) */
 #define counts pd_avr_counts
 
 /*
@@ -168,21 +205,35 @@ volatile uint32_t pd_avr_counts[2]; /* INT0 (pin 2), INT1 (pin 3) */
 
 PD_COUNT_ISR(INT0_vect, 0)
 PD_COUNT_ISR(INT1_vect, 1)
+#if PD_BOARD_MEGA
+PD_COUNT_ISR(INT2_vect, 2)
+PD_COUNT_ISR(INT3_vect, 3)
+PD_COUNT_ISR(INT4_vect, 4)
+PD_COUNT_ISR(INT5_vect, 5)
+#endif
 
 /* EICRA's ISCn1:ISCn0 for an Edge (protoduino.proto): rising 11, falling 10, both 01. */
 static const uint8_t sense[3] = {3u, 2u, 1u};
 
 void pd_avr_counter_start(uint8_t pin, uint8_t edge)
 {
-    uint8_t n = pin == 3u ? 1u : 0u;
+    uint8_t n = PD_AVR_INT_OF(pin);
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
         /* No wake-up per edge (pd_avr_input_config gave it one): the loop reads the
          * count once per report interval, and at 40,000 edges a second a loop pass
          * per edge would take the whole CPU. PD2, PD3 are PCINT18, PCINT19. */
+#if PD_BOARD_MEGA
+        /* The Mega's INTn pins have no pin-change interrupt; INT4..INT7 sense in EICRB. */
+        volatile uint8_t *eicr = n < 4u ? &EICRA : &EICRB;
+        uint8_t at = (uint8_t)(2u * (n & 3u));
+        EIMSK &= (uint8_t)~_BV(n);
+        *eicr = (uint8_t)((*eicr & ~(3u << at)) | (sense[edge < 3u ? edge : 2u] << at));
+#else
         PCMSK2 &= (uint8_t)~_BV(pin);
         EIMSK &= (uint8_t)~_BV(n);
         EICRA = (uint8_t)((EICRA & ~(3u << (2u * n))) | (sense[edge < 3u ? edge : 2u] << (2u * n)));
+#endif
         EIFR = _BV(n); /* an edge from before does not count */
         counts[n] = 0;
         EIMSK |= _BV(n);
@@ -194,14 +245,14 @@ uint32_t pd_avr_counter_read(uint8_t pin)
     uint32_t n;
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
-        n = counts[pin == 3u ? 1u : 0u];
+        n = counts[PD_AVR_INT_OF(pin)];
     }
     return n;
 }
 
 void pd_avr_counter_stop(uint8_t pin)
 {
-    EIMSK &= (uint8_t)~_BV(pin == 3u ? 1u : 0u);
+    EIMSK &= (uint8_t)~_BV(PD_AVR_INT_OF(pin));
 }
 
 #endif

@@ -28,6 +28,9 @@ static pd_core_t core;
 #if PD_BOARD_NANO
 typedef char pd_assert_nano_pins[PD_MAX_PINS >= 22 ? 1 : -1];
 #endif
+#if PD_BOARD_MEGA
+#define uno pd_avr_mega_info /* the Mega's table: pd_avr_mega.c */
+#else
 static const pd_board_info_t uno = {
 #if PD_BOARD_NANO
     .board = "nano",
@@ -49,6 +52,7 @@ static const pd_board_info_t uno = {
     .servo_timer = 1,
     .clock_timer = 0,
 };
+#endif
 
 uint16_t pd_hal_tx_room(void *hal)
 {

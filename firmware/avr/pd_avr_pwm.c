@@ -39,19 +39,19 @@ static volatile uint8_t pd_avr_pwm_pins[3]; /* pin n: bit n % 8 of byte n / 8 */
 static volatile uint8_t *pwm_ocr(uint8_t pin, volatile uint8_t **tccra, uint8_t *com)
 {
     switch (pin) {
-    case 3:
+    case PD_AVR_PIN_OC2B:
         *tccra = &TCCR2A;
         *com = _BV(COM2B1);
         return &OCR2B;
-    case 11:
+    case PD_AVR_PIN_OC2A:
         *tccra = &TCCR2A;
         *com = _BV(COM2A1);
         return &OCR2A;
-    case 9:
+    case PD_AVR_PIN_OC1A:
         *tccra = &TCCR1A;
         *com = _BV(COM1A1);
         return (volatile uint8_t *)&OCR1AL;
-    case 10:
+    case PD_AVR_PIN_OC1B:
         *tccra = &TCCR1A;
         *com = _BV(COM1B1);
         return (volatile uint8_t *)&OCR1BL;

@@ -31,10 +31,10 @@
  * never copied into the message's struct, so it costs the Uno's RAM nothing
  * but the callbacks' pointers. The schema bounds them (max_size in
  * protoduino.options, which nanopb's DeviceInfo size counts: PD_INFO_PINS_MAX,
- * PD_INFO_TIMERS_MAX); a build's own bound is its PD_MAX_PINS (20 on the Uno,
+ * PD_INFO_TIMERS_MAX); a build's own bound is its PD_MAX_PINS (20 on the Uno, 32 on the Mega,
  * whose DeviceInfo is sized by it: PD_ENCODE_INFO_MAX).
  */
-#define PD_INFO_PINS_MAX 22u
+#define PD_INFO_PINS_MAX 32u
 #define PD_INFO_TIMERS_MAX 3u
 typedef char pd_assert_info_pins[(PD_MAX_PINS <= PD_INFO_PINS_MAX) ? 1 : -1];
 /* Pin `pin`'s byte of DeviceInfo.pins: its PinBit flags and, in bits 5-7, 1 +

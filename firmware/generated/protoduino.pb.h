@@ -1028,9 +1028,9 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_DeviceInfo_size               98 /* callbacks at their max_size */
-#define protoduino_Ack_size                      127 /* callbacks at their max_size */
-#define protoduino_ArduinoOut_size               129 /* callbacks at their max_size */
+#define protoduino_DeviceInfo_size               108 /* callbacks at their max_size */
+#define protoduino_Ack_size                      137 /* callbacks at their max_size */
+#define protoduino_ArduinoOut_size               140 /* callbacks at their max_size */
 #define protoduino_AnalogInputInit_size          19
 #define protoduino_ArduinoIn_size                108
 #define protoduino_ClearInterlock_size           3

@@ -1,8 +1,9 @@
 """Where the programs that protoduino runs or flashes come from.
 
-Four programs: the simulated board (``pd_sim``, the firmware core on this machine), the
-emulated Uno's runner (``avrsim``, simavr) with the firmware's ELF, and the firmware's hex
-that ``protoduino flash`` uploads.
+Five programs: the simulated board (``pd_sim``, the firmware core on this machine), the
+emulated Uno's runner (``avrsim``, simavr) with the firmware's ELF (and the Mega 2560's,
+``protoduino-mega.elf``, which the same runner emulates), and the firmware's hex that
+``protoduino flash`` uploads.
 
 * An installed wheel carries them, built when the wheel was built, as package data in
   ``protoduino/_programs/``, so ``pip install protoduino`` is all a user needs.
@@ -27,8 +28,10 @@ NATIVE_SIM = "pd_sim"
 RUNNER = "avrsim"
 FIRMWARE_ELF = "protoduino.elf"
 FIRMWARE_HEX = "protoduino.hex"
+#: The firmware built for the Mega 2560 (``make avr BOARD=mega``).
+MEGA_FIRMWARE_ELF = "protoduino-mega.elf"
 #: Every program name :func:`locate` knows.
-NAMES = (NATIVE_SIM, RUNNER, FIRMWARE_ELF, FIRMWARE_HEX)
+NAMES = (NATIVE_SIM, RUNNER, FIRMWARE_ELF, FIRMWARE_HEX, MEGA_FIRMWARE_ELF)
 #: Folder of the bundled programs inside the package.
 BUNDLE_DIR = "_programs"
 

@@ -6,7 +6,8 @@ Backends:
   POSIX HAL (the program ``pd_sim``).
 * ``avr``: the firmware's Uno build on an emulated ATmega328P at 16 MHz (simavr,
   the runner ``avrsim``), paced to real time; its trace is measured at the
-  emulated pins. Reboot = reset of the emulated MCU.
+  emulated pins. Reboot = reset of the emulated MCU. ``board="mega"``: the
+  firmware's Mega 2560 build on an emulated ATmega2560 instead (:data:`AVR_BOARDS`).
 
 Where the programs come from (a wheel's bundled copies, or built from the
 sources in a checkout) is :mod:`protoduino.programs`' business.
@@ -174,17 +175,32 @@ def _native_command(
     return cmd
 
 
-def _build_avr() -> Path:
-    # The emulated Uno: the simavr runner and the real firmware ELF.
-    programs.locate(programs.FIRMWARE_ELF)
-    return check_loadable(programs.locate(programs.RUNNER), "the emulated Uno (backend avr)")
+#: The boards the ``avr`` backend emulates: board -> (its firmware's program, its MCU). The
+#: runner takes each board's pins from the MCU (tools/avrsim/avrsim.c), the host its pin
+#: table from the firmware's DeviceInfo: a board is one line here.
+AVR_BOARDS: dict[str, tuple[str, str]] = {
+    "uno": (programs.FIRMWARE_ELF, MCU),
+    "mega": (programs.MEGA_FIRMWARE_ELF, "atmega2560"),
+}
 
 
-def _avr_command(
-    trace: Path | None, link: Path | None, control: Path | None, program: Path | None = None
-) -> list[str]:
-    firmware = program if program is not None else programs.locate(programs.FIRMWARE_ELF)
-    return runner_command(firmware, trace=trace, link=link, control=control)
+def _avr_backend(board: str) -> Backend:
+    """The emulated ``board``: the simavr runner and the real firmware ELF built for it."""
+    elf, mcu = AVR_BOARDS[board]
+
+    def build_avr() -> Path:
+        programs.locate(elf)
+        return check_loadable(
+            programs.locate(programs.RUNNER), f"the emulated {board} (backend avr)"
+        )
+
+    def avr_command(
+        trace: Path | None, link: Path | None, control: Path | None, program: Path | None = None
+    ) -> list[str]:
+        firmware = program if program is not None else programs.locate(elf)
+        return runner_command(firmware, trace=trace, link=link, control=control, mcu=mcu)
+
+    return Backend(build=build_avr, command=avr_command)
 
 
 def runner_command(
@@ -197,17 +213,19 @@ def runner_command(
     hex_files: Sequence[Path] = (),
     boot_address: int | None = None,
     auto_reset: bool = False,
+    mcu: str = MCU,
 ) -> list[str]:
     """The runner's command line (same options as the native board, plus flashing ones).
 
     ``boot_address`` starts the MCU there (BOOTRST) with the external-reset
     flag set, as after pressing reset; ``auto_reset`` resets it whenever a
     client opens the port, as a real Uno's DTR line does. ``runner`` defaults
-    to the located (in a checkout: freshly built) ``avrsim``.
+    to the located (in a checkout: freshly built) ``avrsim``; ``mcu`` is the emulated MCU
+    (the Uno's by default; :data:`AVR_BOARDS`).
     """
     if runner is None:
         runner = programs.locate(programs.RUNNER)
-    cmd = [str(runner), "--mcu", MCU, "--freq", "16000000"]
+    cmd = [str(runner), "--mcu", mcu, "--freq", "16000000"]
     if trace is not None:
         cmd += ["--trace", str(trace)]
     if link is not None:
@@ -228,7 +246,7 @@ def runner_command(
 #: Backend name -> how to build and run it.
 BACKENDS: dict[str, Backend] = {
     "native": Backend(build=_build_native, command=_native_command),
-    "avr": Backend(build=_build_avr, command=_avr_command),
+    "avr": _avr_backend("uno"),
 }
 
 
@@ -247,18 +265,26 @@ def _command(
     return cmd
 
 
-def _backend(name: str) -> Backend:
+def _backend(name: str, board: str = "uno") -> Backend:
     try:
-        return BACKENDS[name]
+        backend = BACKENDS[name]
     except KeyError:
         raise ArgumentError(
             f"unknown simulated board backend {name!r}; choose from {', '.join(BACKENDS)}"
         ) from None
+    if board == "uno":
+        return backend
+    if name != "avr" or board not in AVR_BOARDS:
+        raise ArgumentError(
+            f"unknown board {board!r} for backend {name!r}: the native board is an Uno; the avr "
+            f"backend emulates {', '.join(AVR_BOARDS)}"
+        )
+    return _avr_backend(board)
 
 
-def build(backend: str = "native") -> Path:
+def build(backend: str = "native", board: str = "uno") -> Path:
     """The board's program (in a checkout: built first, make caches it)."""
-    return _backend(backend).build()
+    return _backend(backend, board).build()
 
 
 def command(
@@ -268,12 +294,18 @@ def command(
     link: Path | None = None,
     control: Path | None = None,
     firmware: Path | None = None,
+    board: str = "uno",
 ) -> list[str]:
     """The command line that runs an already built board (``firmware``: another build
-    of its program, as :class:`SimBoard` takes it); :class:`BuildError` if its program
-    lacks a shared library (:func:`check_loadable`)."""
+    of its program, as :class:`SimBoard` takes it; ``board``: as SimBoard's);
+    :class:`BuildError` if its program lacks a shared library (:func:`check_loadable`)."""
     return _command(
-        _backend(backend), backend, trace=trace, link=link, control=control, firmware=firmware
+        _backend(backend, board),
+        backend,
+        trace=trace,
+        link=link,
+        control=control,
+        firmware=firmware,
     )
 
 
@@ -352,8 +384,12 @@ class SimBoard(ClosedOnExit):
         control: str | os.PathLike[str] | None = None,
         firmware: str | os.PathLike[str] | None = None,
         options: Sequence[str] = (),
+        board: str = "uno",
     ) -> None:
-        self._backend = _backend(backend)
+        #: The board it is: "uno", or with backend "avr" another of :data:`AVR_BOARDS`
+        #: ("mega": the emulated Mega 2560 running the firmware's Mega build).
+        self.board = board
+        self._backend = _backend(backend, board)
         #: Another build of the board's program (a user service's, docs/services.md): the
         #: simulated board's binary (native), or the firmware's ELF (avr). None: the default.
         self.firmware = None if firmware is None else Path(firmware)

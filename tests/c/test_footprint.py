@@ -121,3 +121,35 @@ def test_nano_profile_within_the_budgets(capsys: pytest.CaptureFixture[str]) -> 
         sys.stdout.write(f"\nNano firmware: flash {flash} B, static RAM {ram} B\n")
     assert flash <= FLASH_BUDGET
     assert ram == uno_ram + 2
+
+
+#: The Mega 2560's flash less its stk500v2 bootloader's 8 KB, and its RAM.
+MEGA_FLASH = 253_952
+MEGA_RAM = 8_192
+
+
+def test_mega_build_within_the_budgets(capsys: pytest.CaptureFixture[str]) -> None:
+    """The Mega 2560's build (``make avr BOARD=mega``, the ATmega2560) keeps the Uno's flash
+    budget (the same core and drivers, a pin map lookup instead of the Uno's compares) and
+    static RAM within the Uno's 2,048 B: of the Mega's 8,192 B that leaves over 6 KB for the
+    stack, whose deepest point the Uno's own stack test bounds for the same code."""
+    for tool in ("make", "avr-gcc", "avr-size"):
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} is not installed (Debian packages gcc-avr, binutils-avr)")
+    build = subprocess.run(
+        ["make", "-s", "-C", str(ROOT / "firmware"), "avr", "BOARD=mega"],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=300,
+    )
+    assert build.returncode == 0, (build.stdout + build.stderr)[-4000:]
+    sections = rambudget.sections(ROOT / "build" / "avr-mega" / "protoduino.elf")
+    flash = sections[".text"] + sections.get(".data", 0)
+    ram = sections.get(".data", 0) + sections.get(".bss", 0) + sections.get(".noinit", 0)
+    with capsys.disabled():
+        sys.stdout.write(
+            f"\nMega firmware: flash {flash} B of {MEGA_FLASH}, static RAM {ram} B of {MEGA_RAM}\n"
+        )
+    assert flash <= FLASH_BUDGET <= MEGA_FLASH
+    assert ram <= RAM_BYTES

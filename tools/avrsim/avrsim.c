@@ -1,5 +1,6 @@
 /*
- * avrsim.c: an emulated Arduino Uno (ATmega328P, simavr) on a pseudo-terminal.
+ * avrsim.c: an emulated Arduino Uno (ATmega328P, simavr) on a pseudo-terminal; with
+ * --mcu atmega2560 a Mega 2560 (its pins: pd_boards).
  *
  *   avrsim [--trace FILE] [--link PATH] [--control PATH] [--hex FILE]...
  *          [--boot ADDR] [--auto-reset] [--glitch PIN] [--stats FILE]
@@ -122,7 +123,7 @@
 #define PD_MIN_WAIT_NS 20000ULL
 /* A stream with no pause goes to the host in chunks of at most this much. */
 #define PD_STREAM_NS 1000000ULL
-#define PD_MCUSR_ADDR 0x54     /* ATmega328P MCUSR in data space */
+#define PD_MCUSR_ADDR 0x54     /* ATmega328P MCUSR in data space (the ATmega2560's too) */
 #define PD_MCUSR_EXTRF 0x02
 /* ATmega328P external interrupts in data space: EIFR, EIMSK, EICRA (ISCn1:ISCn0 per INTn). */
 #define PD_EIFR_ADDR 0x3C
@@ -135,16 +136,52 @@
  * by an open() that lands while it is being sent. */
 #define PD_ANNOUNCE_MS 50U
 #define PD_VCC_MV 5000U /* VCC, AVCC and AREF of the emulated Uno */
-#define PD_FIRST_ANALOG 14 /* A0 */
 /* The ATmega328P's ADC6 and ADC7, a Nano's A6 and A7 (pins 20, 21): inputs of the ADC with
  * no port behind them, so they take analog values and nothing else. */
 #define PD_ADC_ONLY_PINS 2
+#define PD_MAX_PORTS 11 /* the ATmega2560's A..L (no I) */
 
-/* Uno pin numbering: D0..D7 = PD0..7, D8..D13 = PB0..5, A0..A5 = PC0..5. */
+/*
+ * A board's pins as Arduino numbers them, chosen by the MCU (--mcu or the ELF's .mmcu):
+ * pin N is bit map[N][1] of port map[N][0]; the analog inputs are pins first_analog ..
+ * first_analog + analog_count - 1 (ADC0 ..). The Uno: D0..D7 = PD0..7, D8..D13 = PB0..5,
+ * A0..A5 = PC0..5. The Mega 2560: its pins_arduino.h (firmware/avr/pd_avr_mega.c has the
+ * same map).
+ */
+typedef struct {
+    const char *mcu;
+    const char *name;
+    int num_pins;
+    int first_analog;
+    int analog_count;
+    const char (*map)[2];
+} pd_board_t;
+
+static const char pd_uno_map[][2] = {
+    {'D', 0}, {'D', 1}, {'D', 2}, {'D', 3}, {'D', 4}, {'D', 5}, {'D', 6}, {'D', 7},
+    {'B', 0}, {'B', 1}, {'B', 2}, {'B', 3}, {'B', 4}, {'B', 5},
+    {'C', 0}, {'C', 1}, {'C', 2}, {'C', 3}, {'C', 4}, {'C', 5},
+};
+static const char pd_mega_map[][2] = {
+    {'E', 0}, {'E', 1}, {'E', 4}, {'E', 5}, {'G', 5}, {'E', 3}, {'H', 3}, {'H', 4}, /* 0-7 */
+    {'H', 5}, {'H', 6}, {'B', 4}, {'B', 5}, {'B', 6}, {'B', 7}, {'J', 1}, {'J', 0}, /* 8-15 */
+    {'H', 1}, {'H', 0}, {'D', 3}, {'D', 2}, {'D', 1}, {'D', 0}, {'A', 0}, {'A', 1}, /* 16-23 */
+    {'A', 2}, {'A', 3}, {'A', 4}, {'A', 5}, {'A', 6}, {'A', 7}, {'C', 7}, {'C', 6}, /* 24-31 */
+    {'C', 5}, {'C', 4}, {'C', 3}, {'C', 2}, {'C', 1}, {'C', 0}, {'D', 7}, {'G', 2}, /* 32-39 */
+    {'G', 1}, {'G', 0}, {'L', 7}, {'L', 6}, {'L', 5}, {'L', 4}, {'L', 3}, {'L', 2}, /* 40-47 */
+    {'L', 1}, {'L', 0}, {'B', 3}, {'B', 2}, {'B', 1}, {'B', 0},                     /* 48-53 */
+    {'F', 0}, {'F', 1}, {'F', 2}, {'F', 3}, {'F', 4}, {'F', 5}, {'F', 6}, {'F', 7}, /* A0-A7 */
+    {'K', 0}, {'K', 1}, {'K', 2}, {'K', 3}, {'K', 4}, {'K', 5}, {'K', 6}, {'K', 7}, /* A8-A15 */
+};
+static const pd_board_t pd_boards[] = {
+    {"atmega2560", "mega", 70, 54, 16, pd_mega_map},
+    {NULL, "uno", 20, 14, 6, pd_uno_map}, /* every other MCU: the Uno's pins */
+};
+
+/* A port of the board: the pin of each of its bits (-1: none). */
 typedef struct {
     char name;
-    int first_pin; /* Uno pin of bit 0 */
-    int bits;
+    int8_t pin[8];
     avr_ioport_t *io;
 } pd_port_t;
 
@@ -175,6 +212,9 @@ static pd_pwm_pin_t g_pwm_pins[] = {
     {11, '2', AVR_TIMER_COMPA, NULL, 0}, {3, '2', AVR_TIMER_COMPB, NULL, 0},
 };
 #define PD_PWM_PINS (sizeof g_pwm_pins / sizeof g_pwm_pins[0])
+/* The Mega's pins of the same timer outputs, in g_pwm_pins' order: OC0A 13, OC0B 4, OC1A 11,
+ * OC1B 12, OC2A 10, OC2B 9 (Timers 3, 4 and 5 run no driver of the firmware's). */
+static const int g_mega_pwm_pins[PD_PWM_PINS] = {13, 4, 11, 12, 10, 9};
 
 typedef struct {
     uint8_t data[PD_BUF_SIZE];
@@ -221,7 +261,10 @@ typedef struct {
 typedef struct {
     avr_t *avr;
     avr_uart_t *uart;
-    pd_port_t ports[3];
+    const pd_board_t *board;
+    pd_port_t ports[PD_MAX_PORTS];
+    int port_count;
+    int8_t port_of[PD_PINS_COUNT]; /* pin -> its index in ports */
     pd_pins_t pins;
     FILE *trace;
     uint16_t servo_table;    /* data address of the firmware's servo channels; 0: none */
@@ -281,8 +324,8 @@ typedef struct {
     pd_control_t control;
     pd_input_t input[PD_PINS_COUNT];
     pd_extint_t extint[PD_EXTINTS];
-    uint8_t ext_mask[3]; /* per port: pins held by the control socket */
-    uint8_t ext_value[3];
+    uint8_t ext_mask[PD_MAX_PORTS]; /* per port: pins held by the control socket */
+    uint8_t ext_value[PD_MAX_PORTS];
     int owner_fd; /* --owner-fd: the owner's pipe, or -1 */
     pd_line_t line; /* --line-check, --line-max, --line-max-out (pd_linerate.h) */
 } pd_sim_t;
@@ -430,9 +473,9 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
     uint8_t out = sim->avr->data[port->io->r_port];
     uint8_t servo_bits = sim->servo_table ? pd_servo_bits(sim, port) : 0;
     uint64_t now = pd_cycles(sim);
-    for (int b = 0; b < port->bits; b++) {
-        int pin = port->first_pin + b;
-        if (pin < 2) {
+    for (int b = 0; b < 8; b++) {
+        int pin = port->pin[b];
+        if (pin < 2) { /* no pin, or D0/D1 */
             continue; /* D0/D1 are the UART */
         }
         int level = (out >> b) & 1;
@@ -467,7 +510,13 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
 
 static pd_port_t *pd_port_of(pd_sim_t *sim, int pin)
 {
-    return &sim->ports[pin < 8 ? 0 : (pin < 14 ? 1 : 2)];
+    return &sim->ports[sim->port_of[pin]];
+}
+
+/* The pin's bit in its port. */
+static int pd_bit_of(const pd_sim_t *sim, int pin)
+{
+    return sim->board->map[pin][1];
 }
 
 /* A timer's compare output changed (its IRQ carries the new level). */
@@ -530,12 +579,12 @@ static void pd_extint_check(pd_sim_t *sim, avr_flashaddr_t pc)
 /* Hold `pin` at `level` as the outside world would. */
 static void pd_drive(pd_sim_t *sim, int pin, uint8_t level)
 {
-    int idx = pin < 8 ? 0 : (pin < 14 ? 1 : 2);
+    int idx = sim->port_of[pin];
     pd_port_t *port = &sim->ports[idx];
     if (!port->io) {
         return;
     }
-    int bit = pin - port->first_pin;
+    int bit = pd_bit_of(sim, pin);
     uint8_t mask = (uint8_t)(1U << bit);
     sim->ext_mask[idx] |= mask;
     sim->ext_value[idx] = (uint8_t)((sim->ext_value[idx] & ~mask) | (level ? mask : 0U));
@@ -547,7 +596,7 @@ static void pd_drive(pd_sim_t *sim, int pin, uint8_t level)
     sim->input[pin].driven = 1;
     sim->input[pin].level = level;
     avr_raise_irq(avr_io_getirq(sim->avr, AVR_IOCTL_IOPORT_GETIRQ(port->name), bit), level);
-    if (pin == 2 || pin == 3) {
+    if ((pin == 2 || pin == 3) && sim->board->map == pd_uno_map) { /* INT0, INT1 */
         pd_extint_edge(sim, pin - 2, was, level);
     }
 }
@@ -563,7 +612,7 @@ static uint8_t pd_pin_reads(pd_sim_t *sim, int pin)
     if (avr_ioctl(sim->avr, AVR_IOCTL_IOPORT_GETSTATE(port->name), &st) != 0) {
         return 0;
     }
-    int bit = pin - port->first_pin;
+    int bit = pd_bit_of(sim, pin);
     uint8_t pull = (uint8_t)((st.port & ~st.ddr) >> bit) & 1U; /* pull-up of an input */
     return sim->input[pin].driven ? sim->input[pin].level : (uint8_t)(((st.pin >> bit) & 1U) | pull);
 }
@@ -614,21 +663,25 @@ static void pd_set_analog(pd_sim_t *sim, int pin, unsigned counts)
     /* simavr converts mV * 1023 / AVCC, truncating: the smallest mV that
      * gives `counts` is ceil(counts * AVCC / 1023). */
     uint32_t mv = (counts * PD_VCC_MV + 1022U) / 1023U;
-    avr_raise_irq(avr_io_getirq(sim->avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + (pin - PD_FIRST_ANALOG)),
-                  mv);
+    avr_raise_irq(
+        avr_io_getirq(sim->avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + (pin - sim->board->first_analog)),
+        mv);
 }
 
 static const char *pd_control_apply(void *ctx, const pd_control_cmd_t *cmd, double *t)
 {
     pd_sim_t *sim = ctx;
-    if (cmd->pin >= PD_PINS_COUNT && cmd->pin < PD_PINS_COUNT + PD_ADC_ONLY_PINS &&
-        cmd->kind == PD_CONTROL_ANALOG) {
+    const pd_board_t *board = sim->board;
+    if (board->map == pd_uno_map && cmd->pin >= board->num_pins &&
+        cmd->pin < board->num_pins + PD_ADC_ONLY_PINS && cmd->kind == PD_CONTROL_ANALOG) {
         pd_set_analog(sim, cmd->pin, (unsigned)cmd->value); /* ADC6, ADC7 */
         *t = (double)pd_cycles(sim) / (double)sim->avr->frequency;
         return NULL;
     }
-    if (cmd->pin >= PD_PINS_COUNT) {
-        return "no such pin on this board (pins 2..19; 20 and 21, A6 and A7, take only analog values)";
+    if (cmd->pin >= board->num_pins) {
+        return board->map == pd_uno_map
+                   ? "no such pin on this board (pins 2..19; 20 and 21, A6 and A7, take only analog values)"
+                   : "no such pin on this board (pins 2..69)";
     }
     if (cmd->pin < 2) {
         return "pins 0 and 1 carry the serial link";
@@ -642,8 +695,9 @@ static const char *pd_control_apply(void *ctx, const pd_control_cmd_t *cmd, doub
         pd_drive(sim, cmd->pin, (uint8_t)cmd->value);
         break;
     case PD_CONTROL_ANALOG:
-        if (cmd->pin < PD_FIRST_ANALOG) {
-            return "analog inputs are pins 14..19 (A0..A5)";
+        if (cmd->pin < board->first_analog) {
+            return board->map == pd_uno_map ? "analog inputs are pins 14..19 (A0..A5)"
+                                            : "analog inputs are pins 54..69 (A0..A15)";
         }
         pd_set_analog(sim, cmd->pin, (unsigned)cmd->value);
         break;
@@ -665,12 +719,12 @@ static const char *pd_control_apply(void *ctx, const pd_control_cmd_t *cmd, doub
  * the outside world still drives its pins. */
 static void pd_restore_inputs(pd_sim_t *sim)
 {
-    for (int pin = 2; pin < PD_PINS_COUNT; pin++) {
+    for (int pin = 2; pin < sim->board->num_pins; pin++) {
         pd_input_t *in = &sim->input[pin];
         if (in->driven) {
             pd_port_t *port = pd_port_of(sim, pin);
             if (port->io) {
-                uint8_t mask = (uint8_t)(1U << (pin - port->first_pin));
+                uint8_t mask = (uint8_t)(1U << pd_bit_of(sim, pin));
                 sim->avr->data[port->io->r_pin] =
                     (uint8_t)((sim->avr->data[port->io->r_pin] & ~mask) | (in->level ? mask : 0U));
             }
@@ -965,7 +1019,7 @@ static void pd_after_reset(pd_sim_t *sim)
     }
     sim->last_cycle = sim->avr->cycle;
     pd_restore_inputs(sim);
-    for (int i = 0; i < 3; i++) {
+    for (int i = 0; i < sim->port_count; i++) {
         if (sim->ports[i].io) {
             pd_port_sample(sim, &sim->ports[i], sim->avr->data[sim->ports[i].io->r_ddr]);
         }
@@ -1038,21 +1092,36 @@ static avr_io_t *pd_find_io(avr_t *avr, const char *kind, char name)
 static void pd_connect(pd_sim_t *sim)
 {
     avr_t *avr = sim->avr;
-    static const struct {
-        char name;
-        int first_pin;
-        int bits;
-    } layout[3] = {{'D', 0, 8}, {'B', 8, 6}, {'C', 14, 6}};
-    for (int i = 0; i < 3; i++) {
+    sim->board = &pd_boards[0];
+    while (sim->board->mcu && strcmp(sim->board->mcu, avr->mmcu) != 0) {
+        sim->board++;
+    }
+    /* The board's ports, in the order its pins first name them. */
+    sim->port_count = 0;
+    for (int pin = 0; pin < sim->board->num_pins; pin++) {
+        char name = sim->board->map[pin][0];
+        int i = 0;
+        while (i < sim->port_count && sim->ports[i].name != name) {
+            i++;
+        }
+        if (i == sim->port_count) {
+            sim->ports[i].name = name;
+            memset(sim->ports[i].pin, -1, sizeof sim->ports[i].pin);
+            sim->port_count++;
+        }
+        sim->ports[i].pin[(int)sim->board->map[pin][1]] = (int8_t)pin;
+        sim->port_of[pin] = (int8_t)i;
+    }
+    for (int i = 0; i < sim->port_count; i++) {
         pd_port_t *port = &sim->ports[i];
-        port->name = layout[i].name;
-        port->first_pin = layout[i].first_pin;
-        port->bits = layout[i].bits;
         port->io = (avr_ioport_t *)pd_find_io(avr, "port", port->name);
         if (!port->io) {
             continue;
         }
-        for (int b = 0; b < port->bits; b++) {
+        for (int b = 0; b < 8; b++) {
+            if (port->pin[b] < 0) {
+                continue;
+            }
             avr_irq_t *irq = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(port->name), b);
             if (irq) {
                 avr_irq_register_notify(irq, pd_pin_hook, port);
@@ -1067,6 +1136,9 @@ static void pd_connect(pd_sim_t *sim)
 
     for (size_t i = 0; i < PD_PWM_PINS; i++) {
         pd_pwm_pin_t *w = &g_pwm_pins[i];
+        if (sim->board->map == pd_mega_map) {
+            w->pin = g_mega_pwm_pins[i];
+        }
         w->timer = (avr_timer_t *)pd_find_io(avr, "timer", w->timer_name);
         avr_irq_t *oc =
             avr_io_getirq(avr, AVR_IOCTL_TIMER_GETIRQ(w->timer_name), TIMER_IRQ_OUT_COMP + w->comp);
@@ -1295,12 +1367,11 @@ static void pd_check_opens(pd_sim_t *sim)
 static void pd_glitch(pd_sim_t *sim)
 {
     int pin = sim->glitch_pin;
-    int port_index = pin < 8 ? 0 : (pin < 14 ? 1 : 2);
-    pd_port_t *port = &sim->ports[port_index];
+    pd_port_t *port = pd_port_of(sim, pin);
     if (!port->io) {
         return;
     }
-    int bit = pin - port->first_pin;
+    int bit = pd_bit_of(sim, pin);
     avr_irq_t *irq = avr_io_getirq(sim->avr, AVR_IOCTL_IOPORT_GETIRQ(port->name), bit);
     if (irq) {
         uint32_t level = (sim->avr->data[port->io->r_port] >> bit) & 1U;
@@ -1429,7 +1500,7 @@ static void pd_run(pd_sim_t *sim)
             sim->cycle_base = target > sim->avr->cycle ? target - sim->avr->cycle : 0;
         }
         /* A timer switched on or off with no IRQ (TCCRnA/B writes): resample. */
-        for (int i = 0; i < 3; i++) {
+        for (int i = 0; i < sim->port_count; i++) {
             if (sim->ports[i].io) {
                 pd_port_sample(sim, &sim->ports[i], sim->avr->data[sim->ports[i].io->r_ddr]);
             }
@@ -1563,7 +1634,7 @@ int main(int argc, char **argv)
         case 'g':
             sim->glitch_pin = atoi(optarg);
             if (sim->glitch_pin < 2 || sim->glitch_pin >= PD_PINS_COUNT) {
-                fprintf(stderr, "avrsim: --glitch takes an output pin 2..19\n");
+                fprintf(stderr, "avrsim: --glitch takes an output pin 2..19 (2..69 on the Mega)\n");
                 return 2;
             }
             break;
@@ -1699,6 +1770,12 @@ int main(int argc, char **argv)
         }
     }
     pd_connect(sim);
+    if (sim->glitch_pin >= sim->board->num_pins) {
+        fprintf(stderr, "avrsim: --glitch: the %s has pins 2..%d\n", sim->board->name,
+                sim->board->num_pins - 1);
+        pd_cleanup(sim);
+        return 2;
+    }
     if (control_path && pd_control_open(&sim->control, control_path, pd_control_apply, sim) != 0) {
         pd_cleanup(sim);
         return 1;

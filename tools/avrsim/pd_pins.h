@@ -21,7 +21,7 @@
 
 #include <stdint.h>
 
-#define PD_PINS_COUNT 20 /* Uno: D0..D13, A0..A5 = 14..19 */
+#define PD_PINS_COUNT 70 /* the most a board has: the Mega's (the Uno's 20: D0..D13, A0..A5) */
 
 /*
  * What the trace can show, in emulated microseconds: the one place these numbers are

@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from ..errors import ProtoduinoError
-from ..simboard import BACKENDS, STOP_TIMEOUT, build, command, read_port
+from ..simboard import AVR_BOARDS, BACKENDS, STOP_TIMEOUT, build, command, read_port
 from .options import error
 
 HELP = "run a simulated board; prints the port to connect to first"
@@ -43,6 +43,12 @@ def register(parser: argparse.ArgumentParser) -> None:
         choices=sorted(BACKENDS),
         default="native",
         help="native: the firmware core on this machine (default); avr: the emulated Uno",
+    )
+    parser.add_argument(
+        "--board",
+        choices=sorted(AVR_BOARDS),
+        default="uno",
+        help="the board the avr backend emulates: uno (default) or mega (the Mega 2560)",
     )
     parser.add_argument(
         "--trace",
@@ -94,6 +100,8 @@ def check(args: argparse.Namespace) -> str | None:
         args.detach or args.trace or args.link or args.control or args.backend != "native"
     ):
         return "--stop PIDFILE takes no other option"
+    if args.board != "uno" and args.backend != "avr":
+        return f"--board {args.board} goes with --backend avr (the native board is an Uno)"
     return None
 
 
@@ -101,13 +109,14 @@ def run(args: argparse.Namespace) -> int:
     if args.stop is not None:
         return stop(args.stop)
     try:
-        build(args.backend)
+        build(args.backend, args.board)
         cmd = command(
             args.backend,
             trace=args.trace,
             link=args.link,
             control=args.control,
             firmware=args.firmware,
+            board=args.board,
         )
     except ProtoduinoError as exc:
         return error("sim", exc)

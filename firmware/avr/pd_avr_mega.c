@@ -1,0 +1,56 @@
+/*
+ * The Mega 2560's pin map (pd_avr_mega.h): Arduino's numbering of the ATmega2560's
+ * ports, as the Mega's pins_arduino.h has it. Built only for make avr BOARD=mega.
+ */
+#include "pd_avr.h"
+
+#if PD_BOARD_MEGA
+
+#define P(port, bit) (uint8_t)((PD_##port) << 3 | (bit))
+
+const uint8_t pd_avr_mega_pins[PD_AVR_MEGA_PINS] PROGMEM = {
+    P(PE, 0), P(PE, 1), P(PE, 4), P(PE, 5), P(PG, 5), P(PE, 3), P(PH, 3), P(PH, 4), /* 0-7 */
+    P(PH, 5), P(PH, 6), P(PB, 4), P(PB, 5), P(PB, 6), P(PB, 7), P(PJ, 1), P(PJ, 0), /* 8-15 */
+    P(PH, 1), P(PH, 0), P(PD, 3), P(PD, 2), P(PD, 1), P(PD, 0), P(PA, 0), P(PA, 1), /* 16-23 */
+    P(PA, 2), P(PA, 3), P(PA, 4), P(PA, 5), P(PA, 6), P(PA, 7), P(PC, 7), P(PC, 6), /* 24-31 */
+    P(PC, 5), P(PC, 4), P(PC, 3), P(PC, 2), P(PC, 1), P(PC, 0), P(PD, 7), P(PG, 2), /* 32-39 */
+    P(PG, 1), P(PG, 0), P(PL, 7), P(PL, 6), P(PL, 5), P(PL, 4), P(PL, 3), P(PL, 2), /* 40-47 */
+    P(PL, 1), P(PL, 0), P(PB, 3), P(PB, 2), P(PB, 1), P(PB, 0),                     /* 48-53 */
+    P(PF, 0), P(PF, 1), P(PF, 2), P(PF, 3), P(PF, 4), P(PF, 5), P(PF, 6), P(PF, 7), /* A0-A7 */
+    P(PK, 0), P(PK, 1), P(PK, 2), P(PK, 3), P(PK, 4), P(PK, 5), P(PK, 6), P(PK, 7), /* A8-A15 */
+};
+
+volatile uint8_t *const pd_avr_mega_ports[11] = {
+    &PORTA, &PORTB, &PORTC, &PORTD, &PORTE, &PORTF, &PORTG, &PORTH, &PORTJ, &PORTK, &PORTL,
+};
+
+/*
+ * The board's one declaration of its pins (pd_hal.h): DeviceInfo's pin table is written
+ * from it, and the host refuses from that. Pins 0 .. 31 (PD_MAX_PINS, pd_avr_mega.h).
+ * - PWM: Timer2 on pins 9 (OC2B) and 10 (OC2A); Timer1 on 11 (OC1A) and 12 (OC1B), the
+ *   servo timer (as the Uno's 9 and 10). Timer0 runs the clock: 4 (OC0B) and 13 (OC0A,
+ *   also OC1C) are refused with TIMER_IN_USE. The PWM pins of Timers 3, 4 and 5 (2, 3,
+ *   5-8, 44-46) are digital pins here: no driver runs those timers yet.
+ * - Servos: Timer1's compare interrupt writes the pulses through the port, on any
+ *   digital pin; 8 of them (PD_MAX_SERVOS, the Uno's).
+ * - Counters on the six external interrupts: pins 21, 20, 19, 18 (INT0..INT3), 2 and 3
+ *   (INT4, INT5).
+ * - No analog input yet: A0..A15 are pins 54..69.
+ */
+const pd_board_info_t pd_avr_mega_info = {
+    .board = "mega",
+    .num_pins = PD_MAX_PINS,
+    .max_servos = 8,
+    .reserved_pins = (1UL << 0) | (1UL << 1), /* RX0, TX0: the link itself */
+    .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
+    .pwm_pins = (1UL << 9) | (1UL << 10) | (1UL << 11) | (1UL << 12),
+    .analog_pins = 0,
+    .counter_pins = (1UL << 2) | (1UL << 3) | (0xFUL << 18), /* INT4, INT5; INT3..INT0 */
+    .servo_timer_pins = (1UL << 11) | (1UL << 12),
+    .clock_timer_pins = (1UL << 4) | (1UL << 13),
+    .servo_timer = 1,
+    .clock_timer = 0,
+};
+typedef char pd_assert_mega_pins[PD_MAX_PINS == 32 ? 1 : -1];
+
+#endif /* PD_BOARD_MEGA */

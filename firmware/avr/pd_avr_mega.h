@@ -1,0 +1,48 @@
+/*
+ * The Arduino Mega 2560 (ATmega2560, make avr BOARD=mega): its pin map, the one
+ * declaration of which Arduino pin is which port bit (pd_avr_mega.c), and the names
+ * its vectors have where the ATmega328P's differ. Everything else the Uno's drivers
+ * do the same on the Mega: UART0 is the link (pins 0, 1), Timer0 the clock, Timer1
+ * the servo pulses (on any pin: they are written through the port), Timer2 PWM.
+ *
+ * The build serves pins 0 .. PD_MAX_PINS - 1 (32: 0 .. 31): the core's pin masks and
+ * the wire's (Pose, Readback, InputReport: fixed32) hold 32 pins; the map below has
+ * all 70 for the day they are wider (firmware/README.md, The Mega 2560).
+ */
+#ifndef PD_AVR_MEGA_H
+#define PD_AVR_MEGA_H
+
+#include <avr/io.h>
+#include <avr/pgmspace.h>
+#include <stdint.h>
+
+#include "pd_hal.h"
+
+#define PD_AVR_MEGA_PINS 70u
+
+/* The board's table (pd_hal.h), pd_avr_mega.c. */
+extern const pd_board_info_t pd_avr_mega_info;
+
+/* The ports by index (pd_avr_mega_ports): A=0 .. H=7, J=8, K=9, L=10. */
+enum { PD_PA, PD_PB, PD_PC, PD_PD, PD_PE, PD_PF, PD_PG, PD_PH, PD_PJ, PD_PK, PD_PL };
+
+/* Pin N's port index << 3 | its bit there (PROGMEM); the ports' PORT registers. */
+extern const uint8_t pd_avr_mega_pins[PD_AVR_MEGA_PINS] PROGMEM;
+extern volatile uint8_t *const pd_avr_mega_ports[11];
+
+/* The pins of the timer outputs the drivers use (pd_avr_pwm.c): Timer2 and Timer1. */
+#define PD_AVR_PIN_OC2B 9u
+#define PD_AVR_PIN_OC2A 10u
+#define PD_AVR_PIN_OC1A 11u
+#define PD_AVR_PIN_OC1B 12u
+
+/* The counters' external interrupts (pd_avr_inputs.c): INT0..INT3 on pins 21..18, INT4 and
+ * INT5 on pins 2 and 3 (INT6, INT7 have no pin on the Mega). */
+#define PD_AVR_COUNTERS 6u
+#define PD_AVR_INT_OF(pin) ((pin) >= 18u ? (uint8_t)(21u - (pin)) : (uint8_t)((pin) + 2u))
+
+/* The ATmega2560 has four USARTs: the link is USART0 (pins 0, 1, the USB bridge). */
+#define USART_RX_vect USART0_RX_vect
+#define USART_UDRE_vect USART0_UDRE_vect
+
+#endif /* PD_AVR_MEGA_H */

@@ -1,0 +1,261 @@
+"""The Mega 2560 (issue 36 items 1 and 2): the firmware's ``make avr BOARD=mega`` build on the
+emulated ATmega2560 (``SimBoard("avr", board="mega")``), judged at its pins through the trace.
+
+The build serves pins 0..31 (firmware/README.md, The Mega 2560): the Mega's own ports A and C
+(pins 22..31) carry digital outputs and servos (Timer1's interrupt writes the pulses through
+the port), Timer2 makes PWM on pins 9 and 10 and Timer1 on 11 and 12 while no servo runs,
+Timer0 keeps the clock (pins 4 and 13 refused), the six external interrupts count. The host
+has no table of the Mega's: every refusal here comes from the pin table of its DeviceInfo.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from boardprocess import missing_tool
+from protoduino import Board, EventKind
+from protoduino._generated import protoduino_pb2 as pb
+from protoduino.errors import NotSupportedError, TimerInUseError
+from protoduino.messages import ArduinoIn, Status
+from protoduino.simboard import SimBoard
+from protoduino_dev import build, rambudget
+from protoduino_dev.runnerstats import snapshot
+from simfixtures import PULSE_TOLERANCE_US, wait_for_pin, wait_until
+
+pytestmark = pytest.mark.avr
+
+#: Bounds a failing test's wait only; the verdicts are the trace's.
+BOUND = 30.0
+
+
+def _need_tools() -> None:
+    missing = missing_tool("make", "cc", "avr-gcc", simavr=True)
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+
+
+@pytest.fixture
+def mega(tmp_path: Path) -> Iterator[SimBoard]:
+    _need_tools()
+    sim = SimBoard("avr", board="mega", trace=tmp_path / "trace.jsonl")
+    sim.start()
+    try:
+        yield sim
+    finally:
+        sim.stop()
+
+
+def _values(sim: SimBoard, pin: int, mode: str) -> list[int]:
+    return [int(e["value"]) for e in sim.trace() if e["pin"] == pin and e["mode"] == mode]
+
+
+def _wait(sim: SimBoard, pin: int, mode: str, ok: Callable[[list[int]], bool]) -> list[int]:
+    assert wait_until(lambda: ok(_values(sim, pin, mode)), BOUND), _values(sim, pin, mode)
+    return _values(sim, pin, mode)
+
+
+def _last(value: int) -> Callable[[list[int]], bool]:
+    """The pin's last value is ``value``."""
+    return lambda values: values[-1:] == [value]
+
+
+def _equals(value: int) -> Callable[[int], bool]:
+    return lambda count: count == value
+
+
+def test_the_mega_states_its_pins_and_the_host_refuses_from_them(mega: SimBoard) -> None:
+    """Its DeviceInfo names the board and its pin table; the host, which has no Mega table,
+    refuses from that table what the device would refuse, for the table's reason."""
+    with Board.open(mega.port) as board:
+        info = board.info
+        assert (info.board, info.num_pins, info.max_servos) == ("mega", 32, 8)
+        assert info.pwm_pins == (9, 10, 11, 12)
+        assert info.analog_pins == () and info.counter_pins == (2, 3, 18, 19, 20, 21)
+        pins = info.pins
+        assert pins[0] == pins[1] == 0  # the link: UART0
+        assert pins[22:32] == bytes([pb.PIN_DIGITAL] * 10)
+        assert all(pins[p] & pb.PIN_PWM for p in (9, 10, 11, 12))
+        assert not pins[2] & pb.PIN_PWM  # Timer3's OC3B: no driver runs Timer3
+        with pytest.raises(TimerInUseError) as clock:
+            board.pwm_output(13)  # OC0A: Timer0 is the clock
+        assert not clock.value.sent
+        with pytest.raises(NotSupportedError) as no_pwm:
+            board.pwm_output(2)
+        assert not no_pwm.value.sent
+        msg = ArduinoIn()
+        msg.pwm_init.pin = 13
+        with pytest.raises(TimerInUseError) as device:
+            board.request(msg)  # no host check on the way: the device's own answer
+        assert device.value.status == Status.STATUS_TIMER_IN_USE
+        board.servo(30)
+        with pytest.raises(TimerInUseError):
+            board.pwm_output(11)  # OC1A: Timer1 makes the servo pulses now
+
+
+def test_digital_outputs_on_the_mega_ports_at_the_pins(mega: SimBoard) -> None:
+    """Pins 22..31 (ports A and C) in one pose: each pin shows its level in the trace."""
+    with Board.open(mega.port) as board:
+        outs = {pin: board.digital_output(pin) for pin in range(22, 32)}
+        board.pose({out: pin % 2 == 1 for pin, out in outs.items()})
+        for pin in range(22, 32):
+            wait_for_pin(mega, pin, _last(pin % 2), BOUND)
+        board.pose({out: pin % 2 == 0 for pin, out in outs.items()})
+        for pin in range(22, 32):
+            wait_for_pin(mega, pin, _last(1 - pin % 2), BOUND)
+
+
+def test_eight_servos_on_ports_a_and_c_in_one_pose(mega: SimBoard) -> None:
+    """Eight servos on pins 24..31 (PA2..PA7, PC7, PC6): the widths of one pose at the pins."""
+    with Board.open(mega.port) as board:
+        servos = {pin: board.servo(pin) for pin in range(24, 32)}
+        degrees = {pin: 20 * (pin - 24) + 10 for pin in servos}  # 10..150
+        widths = {pin: servos[pin].to_us(deg) for pin, deg in degrees.items()}
+        board.pose({servos[pin]: deg for pin, deg in degrees.items()})
+
+        def at(pin: int) -> Callable[[list[int]], bool]:
+            return lambda v: bool(v) and abs(v[-1] - widths[pin]) <= PULSE_TOLERANCE_US
+
+        for pin in servos:
+            _wait(mega, pin, "servo", at(pin))
+
+
+def test_pwm_on_timer2_and_timer1_pins(mega: SimBoard) -> None:
+    """Pins 9 and 10 (Timer2's OC2B, OC2A) and 11, 12 (Timer1's OC1A, OC1B): the duty
+    measured at each pin is the one written."""
+    duties = {9: 60, 10: 200, 11: 128, 12: 30}
+    with Board.open(mega.port) as board:
+        for pin, duty in duties.items():
+            board.pwm_output(pin).write(duty)
+        for pin, duty in duties.items():
+            _wait(mega, pin, "pwm", _last(duty))
+
+
+def test_digital_inputs_on_the_mega(mega: SimBoard) -> None:
+    """Pin 10 (PB4, a pin-change interrupt) and pin 30 (PC7, none: read at the clock tick)
+    read the levels the control socket holds there."""
+    with Board.open(mega.port) as board:
+        for pin in (10, 30):
+            mega.control.level(pin, 1)
+            switch = board.digital_input(pin)
+            assert switch.wait_for(True, timeout=BOUND) is True  # the bound only ends a failure
+            mega.control.level(pin, 0)
+            assert switch.wait_for(False, timeout=BOUND) is False
+            assert switch.read() is False
+
+
+def test_counters_on_the_six_external_interrupts(mega: SimBoard) -> None:
+    """Pins 2, 3 (INT4, INT5: senses in EICRB) and 18..21 (INT3..INT0: EICRA), two at a
+    time (the core's counter slots): each counts the pulses the control socket makes on it."""
+    with Board.open(mega.port) as board:
+        for pins in ((2, 3), (18, 19), (20, 21)):
+            counters = {pin: board.counter(pin) for pin in pins}
+            for pin in pins:
+                mega.control.pulses(pin, pin + 10, 2000)
+            for pin, counter in counters.items():
+                assert counter.wait_for(_equals(pin + 10), timeout=BOUND) == pin + 10
+            for pin in pins:
+                board.release(pin)
+
+
+def test_the_failsafe_drives_the_mega_outputs_safe(mega: SimBoard) -> None:
+    """A Ping-fed failsafe timing out: the digital output, the PWM output and the servo go
+    to their safe values at the pins."""
+    with Board.open(mega.port, failsafe_timeout=0.3) as board:
+        seen: list[Any] = []
+        board.on_event(seen.append)
+        lamp = board.digital_output(25, safe=False)
+        motor = board.pwm_output(9, safe=7)
+        arm = board.servo(31, safe_us=1500)
+        board.pose({lamp: True, motor: 200, arm: 160})
+        wait_for_pin(mega, 25, lambda v: v[-1:] == [1], BOUND)
+        _wait(mega, 9, "pwm", lambda v: v[-1:] == [200])
+        moved = arm.to_us(160)
+        _wait(mega, 31, "servo", lambda v: bool(v) and abs(v[-1] - moved) <= PULSE_TOLERANCE_US)
+        board.pinging = False  # the device hears nothing more: its failsafe fires
+        assert wait_until(lambda: any(e.kind == EventKind.FAILSAFE for e in seen), BOUND)
+        wait_for_pin(mega, 25, lambda v: v[-1:] == [0], BOUND)
+        _wait(mega, 9, "pwm", lambda v: v[-1:] == [7])
+        _wait(mega, 31, "servo", lambda v: abs(v[-1] - 1500) <= PULSE_TOLERANCE_US)
+
+
+def test_protoduino_sim_starts_the_emulated_mega(tmp_path: Path) -> None:
+    """`protoduino sim --backend avr --board mega` (the one documented option) runs the Mega:
+    `protoduino info` reads its board and pins; a Mega with the native backend is refused."""
+    _need_tools()
+    cli = [sys.executable, "-m", "protoduino.cli.main"]
+    refused = subprocess.run(
+        [*cli, "sim", "--board", "mega"], capture_output=True, text=True, check=False, timeout=60
+    )
+    assert refused.returncode != 0 and "--board mega goes with --backend avr" in refused.stderr
+    pid_file = tmp_path / "sim.pid"
+    started = subprocess.run(
+        [
+            *cli,
+            "sim",
+            "--backend",
+            "avr",
+            "--board",
+            "mega",
+            "--detach",
+            "--pid-file",
+            str(pid_file),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=60,
+    )
+    assert started.returncode == 0, started.stderr
+    try:
+        info = subprocess.run(
+            [*cli, "info", started.stdout.strip(), "--json", "--new-session"],
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=60,
+        )
+        assert info.returncode == 0, info.stderr
+        stated = json.loads(info.stdout)["info"]
+        assert (stated["board"], stated["num_pins"]) == ("mega", 32), stated
+    finally:
+        subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
+
+
+#: The Mega 2560's RAM (0x200 .. RAMEND = 0x21FF).
+MEGA_RAM = 8_192
+
+
+def test_the_mega_ram_budget_holds(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The Uno's deepest-stack scenario (rambudget.exercise: every command at its largest, four
+    in flight, counters and digital inputs reporting; no analog input on this build) on the
+    emulated Mega, whose runner records the lowest stack pointer: static data + the deepest
+    stack + 256 B free fit the Mega's 8,192 B."""
+    _need_tools()
+    stats = tmp_path / "stats.jsonl"
+    sim = SimBoard(
+        "avr", board="mega", options=("--stats", str(stats), "--stack", str(tmp_path / "stack"))
+    )
+    sim.start()
+    try:
+        with Board.open(sim.port, window=4) as board:
+            rambudget.exercise(board, sim.control, analog_pins=())
+        row = snapshot(sim.pid, stats)
+    finally:
+        sim.stop()
+    sections = rambudget.sections(build.build_firmware_board("mega"))
+    static = sections.get(".data", 0) + sections.get(".bss", 0) + sections.get(".noinit", 0)
+    assert row["ramend"] == MEGA_RAM + 0x200 - 1 and row["sp_min"] < row["ramend"], row
+    stack = int(row["ramend"]) - int(row["sp_min"])
+    free = MEGA_RAM - static - stack
+    with capsys.disabled():
+        sys.stdout.write(
+            f"\nMega RAM: static {static} B + deepest stack {stack} B; "
+            f"{free} B free of {MEGA_RAM}\n"
+        )
+    assert free >= rambudget.FREE_BYTES
