@@ -36,11 +36,12 @@ RAM_START = 0x100
 #: low-water mark can miss: an interrupt landing at that point with a frame of its own.
 FREE_BYTES = 256
 
-#: The Uno firmware's pins in the scenario: counters on 2 and 3 (INT0, INT1), servos on 4..11
-#: (its eight channels), digital inputs on 12 and 13, analog inputs on 14..19 (A0..A5).
-COUNTER_PINS = (2, 3)
+#: The Uno firmware's pins in the scenario: counters on 2 (INT0) and 13 (a pin-change
+#: interrupt's, PORTB's), servos on 4..11 (its eight channels), digital inputs on 3 (PORTD's
+#: pin-change interrupt) and 12 (PORTB's, beside the counter), analog inputs on 14..19 (A0..A5).
+COUNTER_PINS = (2, 13)
 SERVO_PINS = range(4, 12)
-DIGITAL_INPUT_PINS = (12, 13)
+DIGITAL_INPUT_PINS = (3, 12)
 ANALOG_PINS = range(14, 20)
 ROUNDS = 20
 #: Bounds a failing call only.

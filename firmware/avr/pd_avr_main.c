@@ -3,8 +3,8 @@
  *
  * The main loop offers every received byte to the core, lets it check the
  * failsafe, and sleeps (idle mode) until the next interrupt: a received byte,
- * a transmitted one or the 1 kHz clock tick, so the failsafe is checked at
- * least every 1 ms. It never waits for the UART: frames go into a transmit
+ * a transmitted one or the clock tick (Timer0's overflow, every 1,024 us), so
+ * the failsafe is checked at least that often. It never waits for the UART: frames go into a transmit
  * ring that an interrupt drains.
  */
 #include <avr/eeprom.h>
@@ -28,11 +28,10 @@ static const pd_board_info_t uno = {
     .max_servos = 8,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* RX, TX: the link itself */
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
-    .pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11),
+    .pwm_pins = (1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11),
     .analog_pins = 0x3FUL << 14,              /* A0..A5 */
-    .counter_pins = (1UL << 2) | (1UL << 3),  /* INT0, INT1 */
+    .counter_pins = 0x3FFCUL, /* 2..13: INT0, INT1, pin-change interrupts */
     .servo_timer_pins = (1UL << 9) | (1UL << 10),
-    .clock_timer_pins = (1UL << 5) | (1UL << 6),
 };
 
 uint16_t pd_hal_tx_room(void *hal)

@@ -31,9 +31,6 @@ typedef struct pd_board_info {
     /* PWM pins whose timer drives the servos (the Uno's Timer1: 9, 10): no PWM
      * there while a servo runs, no servo while one of them does PWM. */
     uint32_t servo_timer_pins;
-    /* Pins with a timer output whose timer runs the millisecond clock (the
-     * Uno's Timer0: 5, 6): refused with STATUS_TIMER_IN_USE, never in pwm_pins. */
-    uint32_t clock_timer_pins;
 } pd_board_info_t;
 
 /*

@@ -499,9 +499,6 @@ protoduino_Status pd_outputs_pwm_init(pd_outputs_t *out, void *hal, const protod
     uint8_t pin = (uint8_t)msg->pin;
     uint32_t bit = 1UL << pin;
     uint8_t was = out->owner[pin];
-    if (info->clock_timer_pins & bit) {
-        return protoduino_Status_STATUS_TIMER_IN_USE; /* its timer runs the clock */
-    }
     if (!(info->pwm_pins & bit)) {
         return protoduino_Status_STATUS_NOT_SUPPORTED; /* no timer output there */
     }

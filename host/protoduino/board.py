@@ -234,12 +234,6 @@ TIMER1_PWM_PINS: dict[str, frozenset[int]] = {
     "uno": frozenset({9, 10}),
     "sim": frozenset({9, 10}),
 }
-#: Timer0 runs the device's millisecond clock (failsafe, debounce, reports), which
-#: PWM on pins 5 and 6 would have to share: never PWM there (docs/protocol.md).
-TIMER0_PWM_PINS: dict[str, frozenset[int]] = {
-    "uno": frozenset({5, 6}),
-    "sim": frozenset({5, 6}),
-}
 
 
 def conflict(
@@ -680,8 +674,9 @@ class Board(ClosedOnExit):
 
         The failsafe, :meth:`stop` and an interlock drive it back to ``safe`` (0,
         off, suits a motor). Again with the same ``safe`` duty it changes nothing at
-        the pin. Only the pins in ``info.pwm_pins`` can do PWM; on the Uno pins 9
-        and 10 share Timer1 with the servos (:class:`TimerInUseError` while one runs).
+        the pin. Only the pins in ``info.pwm_pins`` can do PWM (the Uno's 3, 5, 6, 9,
+        10, 11, at 976 Hz); pins 9 and 10 share Timer1 with the servos
+        (:class:`TimerInUseError` while one runs).
         """
         msg, on_ok, output = self._pwm_init(pin, safe)
         self._send(msg, on_ok)
@@ -695,12 +690,6 @@ class Board(ClosedOnExit):
     def _pwm_init(self, pin: Pin, safe: object) -> tuple[ArduinoIn, Callable[[], None], PwmOutput]:
         # The device's order (docs/protocol.md section 7, rule 13).
         pin = self._check_pin(pin, PWM)
-        if pin in TIMER0_PWM_PINS.get(self.info.board, ()):
-            raise refused(
-                Status.STATUS_TIMER_IN_USE,
-                f"pin {pin}'s PWM timer (Timer0) runs the device's millisecond clock "
-                f"(PWM pins: {', '.join(map(str, self.info.pwm_pins))})",
-            )
         self._check_capable(pin, PWM)
         duty = whole_number("safe", safe)
         with self._lock:
@@ -835,7 +824,7 @@ class Board(ClosedOnExit):
         """Count ``edge`` edges on ``pin`` (``info.counter_pins``) in an interrupt.
 
         The count (since this Init; wraps at 2**32) is reported when it changed,
-        at most ``rate_hz`` times a second. At most 4 counters run at once.
+        at most ``rate_hz`` times a second (the Uno: pins 2..13, two counters at once).
         Returns once its first count (0) is known.
         """
         msg, on_ok, make = self._counter_init(pin, edge, pull_up, rate_hz)

@@ -41,8 +41,8 @@ ids as the firmware keeps them (:class:`DedupeWindow`: a retransmitted id is ack
 again and not executed again), Ping echo, a DeviceInfo with an Uno's pins, EVENT BOOT on
 :meth:`~VirtualDevice.reboot`, the pin table with the firmware's checks (a pin mode left
 out of its ``features``, a pin it does not have, a reserved one, one another mode holds, a
-mode the pin cannot do, the servos' Timer1 shared with PWM on pins 9 and 10, Timer0's pins 5
-and 6, servo and counter slots), an input's
+mode the pin cannot do, the servos' Timer1 shared with PWM on pins 9 and 10, servo and counter
+slots), an input's
 value in an InputReport right after its Init's Ack and after each change the test makes
 (:meth:`~VirtualDevice.set_level`, :meth:`~VirtualDevice.set_analog`,
 :meth:`~VirtualDevice.pulses`), interlocks (an input at its trip level drives every output
@@ -128,8 +128,6 @@ __all__ = [
 
 #: DeviceInfo.features with every pin mode built in.
 ALL_FEATURES = sum(mode.feature_bit for mode in PIN_MODES)
-#: At most this many counters at once (the Uno's firmware: PD_MAX_COUNTERS).
-MAX_COUNTERS = 4
 #: The schema's FailsafeCause values.
 PING_TIMEOUT = pb.FAILSAFE_CAUSE_PING_TIMEOUT
 STOP = pb.FAILSAFE_CAUSE_STOP
@@ -308,11 +306,10 @@ class VirtualDevice:
         self.max_servos = 8
         self.reserved_pins = [0, 1]
         self.features = ALL_FEATURES
-        self.pwm_pins = [3, 9, 10, 11]
+        self.pwm_pins = [3, 5, 6, 9, 10, 11]
         self.analog_pins = list(range(14, 20))
-        self.counter_pins = [2, 3]
+        self.counter_pins = list(range(2, 14))
         self.servo_timer_pins = [9, 10]
-        self.clock_timer_pins = [5, 6]
         #: DeviceInfo.rx_buffer (0: not stated) and user_fingerprint (0: no user service).
         self.rx_buffer = 0
         self.user_fingerprint = 0
@@ -805,9 +802,7 @@ class VirtualDevice:
         status = self._check_pin(pin)
         capable = getattr(self, mode.pins) if mode.pins else None
         if status == Status.STATUS_OK and mode.name == "pwm":
-            if pin in self.clock_timer_pins:
-                status = Status.STATUS_TIMER_IN_USE  # its timer runs the clock
-            elif pin not in self.pwm_pins:
+            if pin not in self.pwm_pins:
                 status = Status.STATUS_NOT_SUPPORTED  # no timer output there
             elif self.pins.get(pin, "pwm") != "pwm":
                 status = Status.STATUS_PIN_IN_USE

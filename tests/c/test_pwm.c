@@ -55,10 +55,13 @@ static void test_pwm_refusals(void)
     t_active(&d);
     protoduino_ArduinoIn in = m_pwm_init(1, 4, 0); /* no timer output on pin 4 */
     CHECK_EQ(t_cmd(&d, &in), S(NOT_SUPPORTED));
-    in = m_pwm_init(2, 5, 0); /* Timer0: the clock */
-    CHECK_EQ(t_cmd(&d, &in), S(TIMER_IN_USE));
-    in = m_pwm_init(3, 6, 0);
-    CHECK_EQ(t_cmd(&d, &in), S(TIMER_IN_USE));
+    /* Timer0's pins do PWM (its overflow keeps the clock, as Arduino's wiring.c does it). */
+    in = m_pwm_init(2, 5, 7);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.pwm[5], 7);
+    in = m_pwm_init(3, 6, 9);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.pwm[6], 9);
     in = m_pwm_init(4, 20, 0);
     CHECK_EQ(t_cmd(&d, &in), S(INVALID_PIN));
     in = m_pwm_init(5, 1, 0);
@@ -239,7 +242,7 @@ static void test_device_info_lists_capabilities_and_features(void)
     CHECK_EQ(info->features, PD_FEATURES);
     CHECK((info->features >> protoduino_Feature_FEATURE_PWM) & 1u);
     CHECK((info->features >> protoduino_Feature_FEATURE_SERVO) & 1u);
-    CHECK_EQ(info->pwm_pins, (1u << 3) | (1u << 9) | (1u << 10) | (1u << 11));
+    CHECK_EQ(info->pwm_pins, (1u << 3) | (1u << 5) | (1u << 6) | (1u << 9) | (1u << 10) | (1u << 11));
     /* A mode the firmware does not have lists no pins. */
     CHECK_EQ(info->analog_pins, PD_FEATURE_ANALOG_INPUT ? 0x3Fu << 14 : 0u);
 }

@@ -177,8 +177,6 @@ def _request(board: Board, msg: ArduinoIn) -> int:
 def test_host_refusals_are_the_devices(board: Board) -> None:
     """Each PWM refusal the host makes before sending is the one the device makes."""
     cases: list[tuple[int, type[protoduino.CommandRejectedError], int]] = [
-        (5, TimerInUseError, Status.STATUS_TIMER_IN_USE),  # Timer0: the clock
-        (6, TimerInUseError, Status.STATUS_TIMER_IN_USE),
         (4, NotSupportedError, Status.STATUS_NOT_SUPPORTED),  # no PWM there
     ]
     board.servo(2)
