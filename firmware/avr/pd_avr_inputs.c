@@ -50,6 +50,18 @@ static volatile uint8_t *pcmsk(uint8_t pin, uint8_t *bit, uint8_t *group)
     return &PCMSK2;
 }
 
+#if PD_FEATURE_COUNTER
+/* Each port's pins as its pin-change handler last read them (PINB, PINC, PIND), and as
+ * pd_avr_input_config read a pin when its interrupt went on. */
+static volatile uint8_t pc_last[3];
+
+/* The PINx register of the port whose pin-change mask register is `mask`. */
+static volatile uint8_t *pc_pins(const volatile uint8_t *mask)
+{
+    return mask == &PCMSK0 ? &PINB : mask == &PCMSK1 ? &PINC : &PIND;
+}
+#endif
+
 void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
 {
     uint8_t bit;
@@ -65,6 +77,14 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
         if (wake) {
             *mask |= bit;
             PCICR |= group;
+#if PD_FEATURE_COUNTER
+            /* The handler wakes the loop for a pin whose level differs from its last
+             * reading of the port, which did not see this pin while its interrupt was off:
+             * the pin's level now goes into it, or an edge back to the level of that
+             * reading would wake nothing (the loop would see it at the next clock tick). */
+            uint8_t g = (uint8_t)(group >> 1); /* PCIE0..2 -> 0..2 */
+            pc_last[g] = (uint8_t)((pc_last[g] & (uint8_t)~bit) | (*pc_pins(mask) & bit));
+#endif
         } else {
             *mask &= (uint8_t)~bit;
         }
@@ -133,8 +153,6 @@ volatile uint32_t pd_avr_counts[2];
  * (bits 2-3) and the pin's last level (bit 7). */
 static volatile uint8_t pc_mask[2];
 static volatile uint8_t pc_mode[2];
-/* Each port's pins as its pin-change handler last read them (PINB, PINC, PIND). */
-static volatile uint8_t pc_last[3];
 
 /*
  * One counter slot in a pin-change handler (r23: the port's pins now, r22: the
@@ -323,7 +341,7 @@ static void pc_start(uint8_t pin, uint8_t edge)
         if (s == 2u) { /* a slot neither the other counter nor INT0/INT1 counts in */
             s = (pc_mask[0] != 0u || (EIMSK & _BV(INT0))) ? 1u : 0u;
         }
-        uint8_t level = (uint8_t)(*(mask == &PCMSK0 ? &PINB : mask == &PCMSK1 ? &PINC : &PIND) & bit);
+        uint8_t level = (uint8_t)(*pc_pins(mask) & bit);
         pc_mask[s] = bit;
         pc_mode[s] = (uint8_t)(g | (uint8_t)((edge < 3u ? edge : 2u) << 2) | (level ? 0x80u : 0u));
         counts[s] = 0;

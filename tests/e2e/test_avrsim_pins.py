@@ -19,13 +19,13 @@ from typing import Any
 
 import pytest
 from boardprocess import BoardProcess, missing_tool
-from protoduino import Board, CommandRejectedError
+from protoduino import Board, CommandRejectedError, Event, EventKind
 from protoduino.board import Edge
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard, runner_command
 from protoduino.simcontrol import SimControl
 from protoduino_dev import build
-from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
+from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin, wait_until
 
 pytestmark = pytest.mark.avr
 
@@ -431,3 +431,75 @@ def test_pin_change_counters_lose_no_edge_at_the_documented_rate(
             assert (both.read(), rising.read()) == expected
     finally:
         runner.stop(strict=False)
+
+
+#: Trips in the wake-up test, each at another phase of the clock tick (1.024 ms).
+WAKE_TRIALS = 80
+#: An interlock reacts within a pass of the loop (firmware/README.md, *PWM and inputs on the
+#: Uno*: the input's pin-change interrupt wakes the sleeping loop), not at the next clock tick.
+WAKE_REACTION = 0.0005
+
+
+def test_an_input_set_up_at_a_level_its_port_never_showed_still_wakes_the_loop(
+    tools: None, tmp_path: Path
+) -> None:
+    """A bumper's pin is at its level before it is an input (no interrupt watches it then),
+    alone on its port (PORTB) with the output it stops on another (PORTD); it trips, trial
+    after trial, at every phase of the clock tick, and each trip reaches the pin within a
+    pass. The pin-change handler wakes the loop for a pin whose level differs from its last
+    reading of the port, which did not see the pin before it was an input: on the chip the
+    first edge back to the level of that reading would wake nothing and the trip would wait
+    for the next tick; on the emulated Uno, where simavr's re-raised pin levels refresh the
+    reading now and then, 3 to 7 trips of 80 took 1,063 to 1,075 us (four runs).
+
+    Only the emulated Uno: the native board has no pin-change interrupt (it reads its virtual
+    pins every pass), and its clock is the host's."""
+    sim = SimBoard("avr", trace=tmp_path / "trace.jsonl")
+    sim.start()
+    reactions: list[float] = []
+    try:
+        with Board.open(sim.port) as board:
+            seen: list[Event] = []
+            board.on_event(seen.append)
+            lamp = board.digital_output(4, safe=False)
+            for trial in range(WAKE_TRIALS):
+                sim.set_level(8, 1)  # not an input yet: no pin-change interrupt sees this
+                bumper = board.digital_input(8, interlock="low")
+                mark = len(sim.trace())
+                lamp.write(True)
+                wait_for_pin(sim, 4, _went(sim, 4, 1, since=mark))
+                running = len(sim.trace())
+                time.sleep(trial % 7 * 0.0003)  # only moves the phase; the verdict is the trace's
+                hit = sim.set_level(8, 0)
+                wait_for_pin(sim, 4, _went(sim, 4, 0, since=running))
+                after = sim.trace()[running:]
+                low = next(e["t"] for e in after if e["pin"] == 4 and e["value"] == 0)
+                reactions.append(max(0.0, low - hit))
+                assert wait_until(_tripped(seen, trial + 1), TRACE_TIMEOUT)
+                bumper.release()  # its interrupt off again before the level goes back up
+                board.clear_interlock()
+    finally:
+        sim.stop()
+    slow = [f"{r * 1e6:.0f} us" for r in reactions if r > WAKE_REACTION]
+    assert not slow, f"{len(slow)} of {WAKE_TRIALS} trips took over 500 us: {slow}"
+
+
+def _went(sim: SimBoard, pin: int, level: int, *, since: int) -> Callable[[list[int]], bool]:
+    """For wait_for_pin: ``pin`` took ``level`` in the trace from line ``since``."""
+    return lambda _values: level in pin_values(sim.trace()[since:], pin)
+
+
+def _tripped(seen: list[Event], trips: int) -> Callable[[], bool]:
+    """The board has reported ``trips`` interlock trips."""
+
+    def done() -> bool:
+        found = [
+            e
+            for e in list(seen)
+            if e.kind is EventKind.FAILSAFE
+            and bool(e.details["active"])
+            and e.details["cause"] == "interlock"
+        ]
+        return len(found) >= trips
+
+    return done
