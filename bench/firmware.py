@@ -13,7 +13,7 @@ The Uno firmware's flash and static RAM, and its cycles per command.
 * Cycles per command: the emulated Uno runs with the runner's ``--stats`` and ``--profile``
   (tools/avrsim). The firmware sleeps whenever it has nothing to do, so its awake cycles are
   its CPU use; between two snapshots, ``N`` commands are sent one at a time through the public
-  API, and the awake cycles the idle board spends in the same emulated time (its 1 kHz clock and
+  API, and the awake cycles the idle board spends in the same emulated time (its clock and
   servo interrupts, measured first) are subtracted. The profile of the servo-write block, mapped
   to the ELF's symbols with ``avr-nm``, says where those cycles go.
 * The same write on StandardFirmata (issue 35: the device judged in cycles, beside Firmata's):
@@ -121,7 +121,7 @@ PROFILE_ROWS = 14
 #: ATmega328P interrupt vectors the firmware uses.
 VECTORS = {
     "__vector_11": "TIMER1_COMPA: servo pulse edges",
-    "__vector_14": "TIMER0_COMPA: 1 kHz clock",
+    "__vector_16": "TIMER0_OVF: millisecond clock (every 1,024 us)",
     "__vector_18": "USART_RX: byte into the receive ring",
     "__vector_19": "USART_UDRE: byte out of the transmit ring",
 }

@@ -37,11 +37,12 @@ RAM_START = 0x100
 #: low-water mark can miss: an interrupt landing at that point with a frame of its own.
 FREE_BYTES = 256
 
-#: The Uno firmware's pins in the scenario: counters on 2 and 3 (INT0, INT1), servos on 4..11
-#: (its eight channels), digital inputs on 12 and 13, analog inputs on 14..19 (A0..A5).
-COUNTER_PINS = (2, 3)
+#: The Uno firmware's pins in the scenario: counters on 2 (INT0) and 13 (a pin-change
+#: interrupt's, PORTB's), servos on 4..11 (its eight channels), digital inputs on 3 (PORTD's
+#: pin-change interrupt) and 12 (PORTB's, beside the counter), analog inputs on 14..19 (A0..A5).
+COUNTER_PINS = (2, 13)
 SERVO_PINS = range(4, 12)
-DIGITAL_INPUT_PINS = (12, 13)
+DIGITAL_INPUT_PINS = (3, 12)
 ANALOG_PINS = range(14, 20)
 ROUNDS = 20
 #: Bounds a failing call only.
@@ -87,16 +88,18 @@ def exercise(
     control: SimControl,
     rounds: int = ROUNDS,
     analog_pins: Iterable[int] = ANALOG_PINS,
+    counter_pins: Iterable[int] = COUNTER_PINS,
 ) -> int:
     """Drive the deepest-stack scenario on an emulated Uno (``board`` opened with window 4,
     ``control`` its input-control socket); returns the InputReports the host received.
-    ``analog_pins``: the analog inputs it samples (none on the Mega's build).
+    ``analog_pins``: the analog inputs it samples (none on the Mega's build); ``counter_pins``
+    its counters (the Mega counts on its external interrupts only).
 
     Raises AssertionError if the device does not answer as it must (an oversized Pose that
     decodes, inputs that never report).
     """
     servos: list[Servo] = [board.servo(pin, safe=90) for pin in SERVO_PINS]
-    for pin in COUNTER_PINS:
+    for pin in counter_pins:
         board.counter(pin, edge="both", rate_hz=1000)
         control.pulses(pin, 100_000, 5_000)  # 10,000 edges a second each, the whole run
     inputs = [board.digital_input(pin) for pin in DIGITAL_INPUT_PINS]

@@ -1,6 +1,6 @@
 /*
  * ATmega328P (Arduino Uno) drivers behind the core's HAL: an interrupt-driven
- * UART, a 1 kHz millisecond clock on Timer0, servo pulses from Timer1 compare
+ * UART, a millisecond clock on Timer0's overflow (its outputs do PWM), servo pulses from Timer1 compare
  * interrupts, and the Uno's pin numbering. Plain avr-libc, no Arduino core.
  */
 #ifndef PD_AVR_H
@@ -19,6 +19,8 @@
 #define PD_AVR_PIN_OC2A 11u
 #define PD_AVR_PIN_OC1A 9u
 #define PD_AVR_PIN_OC1B 10u
+#define PD_AVR_PIN_OC0B 5u
+#define PD_AVR_PIN_OC0A 6u
 /* The counters' external interrupts: INT0 on pin 2, INT1 on pin 3 (pd_avr_inputs.c). */
 #define PD_AVR_COUNTERS 2u
 #define PD_AVR_INT_OF(pin) ((pin) == 3u ? 1u : 0u)
@@ -56,9 +58,9 @@ uint8_t pd_avr_uart_tx_room(void);
 /* Queue `len` bytes for transmission, all or none (false: no room); never waits. */
 bool pd_avr_uart_write(const uint8_t *data, uint16_t len);
 
-/* Timer0 in CTC mode at 1 kHz. Not used inside the Arduino IDE build, whose
- * core owns Timer0 and provides millis(). */
-#define PD_AVR_T0_TOP ((uint8_t)(F_CPU / 64u / 1000u - 1u)) /* 249: 1 kHz */
+/* Timer0 in fast PWM at 976 Hz, its overflow counting the milliseconds as
+ * Arduino's wiring.c does (pd_avr_clock.c). Not used inside the Arduino IDE
+ * build, whose core owns Timer0 and provides millis() the same way. */
 void pd_avr_clock_init(void);
 uint32_t pd_avr_millis(void);
 /* The clock's low byte: one load, no interrupt lock (the main loop's tick test). */
@@ -75,7 +77,7 @@ void pd_avr_servo_detach(uint8_t channel);
 /* Start the next servo frame as soon as possible (failsafe, Stop). */
 void pd_avr_servo_expedite(void);
 
-/* PWM (pd_avr_pwm.c): duty 0..255 on pins 3, 9, 10, 11; release: an input again. */
+/* PWM (pd_avr_pwm.c): duty 0..255 on pins 3, 5, 6, 9, 10, 11; release: an input again. */
 void pd_avr_pwm_write(uint8_t pin, uint8_t duty);
 void pd_avr_pwm_release(uint8_t pin);
 

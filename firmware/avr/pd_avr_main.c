@@ -3,8 +3,8 @@
  *
  * The main loop offers every received byte to the core, lets it check the
  * failsafe, and sleeps (idle mode) until the next interrupt: a received byte,
- * a transmitted one or the 1 kHz clock tick, so the failsafe is checked at
- * least every 1 ms. It never waits for the UART: frames go into a transmit
+ * a transmitted one or the clock tick (Timer0's overflow, every 1,024 us), so
+ * the failsafe is checked at least that often. It never waits for the UART: frames go into a transmit
  * ring that an interrupt drains.
  */
 #include <avr/eeprom.h>
@@ -45,10 +45,11 @@ static const pd_board_info_t uno = {
     .max_servos = 8,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* RX, TX: the link itself */
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
-    .pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11),
-    .counter_pins = (1UL << 2) | (1UL << 3),  /* INT0, INT1 */
+    /* PWM on 5 and 6 too: Timer0 runs the clock in fast PWM, as wiring.c does. */
+    .pwm_pins = (1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11),
+    .counter_pins = 0x3FFCUL,                 /* 2..13 */
+    .pin_change_pins = 0x3FF0UL,              /* 4..13: pin-change interrupts; 2, 3: INT0, INT1 */
     .servo_timer_pins = (1UL << 9) | (1UL << 10),
-    .clock_timer_pins = (1UL << 5) | (1UL << 6),
     .servo_timer = 1,
     .clock_timer = 0,
 };

@@ -30,11 +30,14 @@ enum { PD_PA, PD_PB, PD_PC, PD_PD, PD_PE, PD_PF, PD_PG, PD_PH, PD_PJ, PD_PK, PD_
 extern const uint8_t pd_avr_mega_pins[PD_AVR_MEGA_PINS] PROGMEM;
 extern volatile uint8_t *const pd_avr_mega_ports[11];
 
-/* The pins of the timer outputs the drivers use (pd_avr_pwm.c): Timer2 and Timer1. */
+/* The pins of the timer outputs the drivers use (pd_avr_pwm.c): Timer2, Timer1 and Timer0. */
 #define PD_AVR_PIN_OC2B 9u
 #define PD_AVR_PIN_OC2A 10u
 #define PD_AVR_PIN_OC1A 11u
 #define PD_AVR_PIN_OC1B 12u
+/* Timer0's: the clock's timer; the Mega's board table keeps them from PWM (clock_timer_pins). */
+#define PD_AVR_PIN_OC0B 4u
+#define PD_AVR_PIN_OC0A 13u
 
 /* The counters' external interrupts (pd_avr_inputs.c): INT0..INT3 on pins 21..18, INT4 and
  * INT5 on pins 2 and 3 (INT6, INT7 have no pin on the Mega). */

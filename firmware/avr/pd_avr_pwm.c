@@ -14,9 +14,9 @@
  *     pulses. The core lets them do PWM only while no servo is configured
  *     (pd_board_info_t.servo_timer_pins): the first takes the timer over from
  *     the servo driver, and the last one released gives it back.
- *   pins 5 and 6: Timer0 runs the millisecond clock (CTC, TOP = OCR0A = 249 for
- *     exact 1 ms ticks), so OC0A has no duty of its own to give: refused
- *     (pd_board_info_t.clock_timer_pins).
+ *   pins 6 (OC0A) and 5 (OC0B): Timer0, which also keeps the millisecond
+ *     clock from its overflow as Arduino's wiring.c does (pd_avr_clock.c): it
+ *     runs in this same mode from power-up, so its outputs only connect.
  */
 #include <avr/io.h>
 #include <stdbool.h>
@@ -47,6 +47,14 @@ static volatile uint8_t *pwm_ocr(uint8_t pin, volatile uint8_t **tccra, uint8_t 
         *tccra = &TCCR2A;
         *com = _BV(COM2A1);
         return &OCR2A;
+    case PD_AVR_PIN_OC0B:
+        *tccra = &TCCR0A;
+        *com = _BV(COM0B1);
+        return &OCR0B;
+    case PD_AVR_PIN_OC0A:
+        *tccra = &TCCR0A;
+        *com = _BV(COM0A1);
+        return &OCR0A;
     case PD_AVR_PIN_OC1A:
         *tccra = &TCCR1A;
         *com = _BV(COM1A1);
@@ -75,10 +83,14 @@ void pd_avr_pwm_write(uint8_t pin, uint8_t duty)
             /* Timer1 leaves the servos (none is configured: the core checked), or
              * starts from its power-up state in a build without servos. */
             TIMSK1 &= (uint8_t)~_BV(OCIE1A);
+            /* Compares and count below TOP, written while the mode has no double
+             * buffer: a compare time the servos left above 255 (up to 0xFFFF) stayed
+             * in simavr's OCR1A, and a count above TOP would first run to 0xFFFF. */
+            OCR1A = 0;
+            OCR1B = 0;
+            TCNT1 = 0;
             TCCR1A = _BV(WGM10); /* fast PWM, 8-bit (mode 5) */
             TCCR1B = _BV(WGM12) | _BV(CS11) | _BV(CS10);
-            OCR1AH = 0;
-            OCR1BH = 0;
         } else if (tccra == &TCCR2A && !(TCCR2A & _BV(WGM20))) {
             TCCR2A = _BV(WGM21) | _BV(WGM20); /* fast PWM, TOP 255 */
             TCCR2B = _BV(CS22); /* clk / 64 on Timer2 */

@@ -28,9 +28,11 @@
 /* The ISR makes an end edge 10 cycles before a start edge (-O s code,
  * avr-gcc 5.4): one tick (8 cycles) gives most of it back. */
 #define PULSE_TRIM_TICKS 1u
-/* One period of the 1 kHz clock interrupt in Timer1 ticks: frames start at a
- * fixed phase to it (see pd_avr_servo_init), so an expedited frame starts a
- * whole number of these after the current frame's start. */
+/* An expedited frame starts a whole number of these (1 ms) after the current
+ * frame's start. The clock interrupt (Timer0's overflow, every 1,024 us: the
+ * timer also does PWM on pins 5 and 6) has no fixed phase to the frames; its
+ * handler turns interrupts back on at its first instruction, so an edge waits
+ * for it only its entry (a few cycles). */
 #define CLOCK_TICKS 2000u
 
 typedef struct servo_channel {
@@ -66,9 +68,8 @@ static volatile bool expedite; /* start the next frame right after this one */
 static volatile bool held;
 
 /*
- * The soonest frame start after `now` that keeps the frames' phase to the
- * clock interrupt: frame_start plus a whole number of clock periods, at least
- * MIN_GAP_TICKS away. Used when a safe state must reach the pins at once.
+ * The soonest frame start after `now`: frame_start plus a whole number of
+ * CLOCK_TICKS, at least MIN_GAP_TICKS away. Used when a safe state must reach the pins at once.
  */
 static uint16_t soonest_start(uint16_t now)
 {
@@ -82,23 +83,9 @@ static uint16_t soonest_start(uint16_t now)
 
 void pd_avr_servo_init(void)
 {
-    uint16_t first = FRAME_TICKS;
-
     TCCR1A = 0; /* normal mode: the counter runs free over 16 bits */
     TCCR1B = _BV(CS11);
-#ifndef ARDUINO
-    /*
-     * A frame is exactly 20 clock ticks of Timer0 on the same crystal, so the
-     * two stay in phase for good. Left to chance, the 1 kHz clock interrupt
-     * could fall on every frame's first edge and shorten channel 0's pulses by
-     * its 2.5 us. Start the frames half a millisecond away from the clock's
-     * ticks instead (Timer0 counts 4 us, i.e. 8 Timer1 ticks, per step).
-     */
-    uint8_t t0 = TCNT0;
-    first = (uint16_t)(((PD_AVR_T0_TOP + 1u) * 3u / 2u - t0) % (PD_AVR_T0_TOP + 1u) * 8u +
-                       (PD_AVR_T0_TOP + 1u) * 8u);
-#endif
-    OCR1A = (uint16_t)(TCNT1 + first);
+    OCR1A = (uint16_t)(TCNT1 + FRAME_TICKS);
     TIFR1 = _BV(OCF1A);
     TIMSK1 |= _BV(OCIE1A);
 }

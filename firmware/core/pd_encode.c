@@ -182,6 +182,9 @@ uint8_t pd_encode_pin(const pd_board_info_t *board, uint8_t pin)
     if (board->counter_pins & bit) {
         v |= protoduino_PinBit_PIN_COUNTER;
     }
+    if (board->pin_change_pins & bit) {
+        v |= protoduino_PinBit_PIN_PIN_CHANGE;
+    }
     if (board->servo_timer_pins & bit) {
         v |= (uint8_t)((board->servo_timer + 1u) << 5);
     } else if (board->clock_timer_pins & bit) {

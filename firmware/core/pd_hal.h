@@ -34,14 +34,19 @@ typedef struct pd_board_info {
     uint32_t pwm_pins;            /* bit N: pin N can do PWM (DeviceInfo.pwm_pins) */
     uint32_t analog_pins;         /* bit N: pin N is an analog input */
     uint32_t counter_pins;        /* bit N: pin N can count pulses */
+    /* Counter pins whose counter is a pin-change interrupt, not an external one
+     * (the Uno's 4..13): DeviceInfo's PIN_PIN_CHANGE, a lower lossless edge rate. */
+    uint32_t pin_change_pins;
     /* Analog inputs and nothing else (the Nano's A6, A7: the ADC's inputs, no port
      * behind them): every other mode is refused with STATUS_NOT_SUPPORTED. */
     uint32_t analog_only_pins;
     /* PWM pins whose timer drives the servos (the Uno's Timer1: 9, 10): no PWM
      * there while a servo runs, no servo while one of them does PWM. */
     uint32_t servo_timer_pins;
-    /* Pins with a timer output whose timer runs the millisecond clock (the
-     * Uno's Timer0: 5, 6): refused with STATUS_TIMER_IN_USE, never in pwm_pins. */
+    /* Pins with a timer output whose timer runs the millisecond clock in a mode
+     * that leaves no PWM (the Mega's Timer0: 4, 13): refused with
+     * STATUS_TIMER_IN_USE, never in pwm_pins. The Uno's Timer0 runs the clock
+     * in fast PWM, as wiring.c does, so its 5 and 6 are PWM pins and none of these. */
     uint32_t clock_timer_pins;
     /* The numbers of those two timers (the Uno's 1 and 0), at most
      * PD_INFO_TIMERS_MAX - 1: DeviceInfo.timers names them to the host. */

@@ -92,11 +92,11 @@ static const pd_board_info_t sim_board = {
     .rx_buffer = 512,                         /* one read() of the pty; the pty holds more */
     /* The Uno's pin capabilities and timer rules, so that a program tested here
      * meets the same refusals on the board. */
-    .pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11),
+    .pwm_pins = (1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11),
     .analog_pins = 0x3FUL << 14,
-    .counter_pins = (1UL << 2) | (1UL << 3),
+    .counter_pins = 0x3FFCUL,    /* 2..13, as the Uno */
+    .pin_change_pins = 0x3FF0UL, /* 4..13: the Uno's pin-change interrupts */
     .servo_timer_pins = (1UL << 9) | (1UL << 10),
-    .clock_timer_pins = (1UL << 5) | (1UL << 6),
     .servo_timer = 1,
     .clock_timer = 0,
 };

@@ -686,8 +686,9 @@ class Board(ClosedOnExit):
 
         The failsafe, :meth:`stop` and an interlock drive it back to ``safe`` (0,
         off, suits a motor). Again with the same ``safe`` duty it changes nothing at
-        the pin. Only the pins in ``info.pwm_pins`` can do PWM; on the Uno pins 9
-        and 10 share Timer1 with the servos (:class:`TimerInUseError` while one runs).
+        the pin. Only the pins in ``info.pwm_pins`` can do PWM (the Uno's 3, 5, 6, 9,
+        10, 11, at 976 Hz); pins 9 and 10 share Timer1 with the servos
+        (:class:`TimerInUseError` while one runs).
         """
         msg, on_ok, output = self._pwm_init(pin, safe)
         self._send(msg, on_ok)
@@ -845,7 +846,7 @@ class Board(ClosedOnExit):
         """Count ``edge`` edges on ``pin`` (``info.counter_pins``) in an interrupt.
 
         The count (since this Init; wraps at 2**32) is reported when it changed,
-        at most ``rate_hz`` times a second. At most 4 counters run at once.
+        at most ``rate_hz`` times a second (the Uno: pins 2..13, two counters at once).
         Returns once its first count (0) is known.
         """
         msg, on_ok, make = self._counter_init(pin, edge, pull_up, rate_hz)

@@ -41,8 +41,8 @@ ids as the firmware keeps them (:class:`DedupeWindow`: a retransmitted id is ack
 again and not executed again), Ping echo, a DeviceInfo with an Uno's pins, EVENT BOOT on
 :meth:`~VirtualDevice.reboot`, the pin table with the firmware's checks (a pin mode left
 out of its ``features``, a pin it does not have, a reserved one, one another mode holds, a
-mode the pin cannot do, the servos' Timer1 shared with PWM on pins 9 and 10, Timer0's pins 5
-and 6, servo and counter slots), an input's
+mode the pin cannot do, the servos' Timer1 shared with PWM on pins 9 and 10, servo and counter
+slots), an input's
 value in an InputReport right after its Init's Ack and after each change the test makes
 (:meth:`~VirtualDevice.set_level`, :meth:`~VirtualDevice.set_analog`,
 :meth:`~VirtualDevice.pulses`), interlocks (an input at its trip level drives every output
@@ -128,8 +128,6 @@ __all__ = [
 
 #: DeviceInfo.features with every pin mode built in.
 ALL_FEATURES = sum(mode.feature_bit for mode in PIN_MODES)
-#: At most this many counters at once (the Uno's firmware: PD_MAX_COUNTERS).
-MAX_COUNTERS = 4
 #: The schema's FailsafeCause values.
 PING_TIMEOUT = pb.FAILSAFE_CAUSE_PING_TIMEOUT
 STOP = pb.FAILSAFE_CAUSE_STOP
@@ -309,14 +307,18 @@ class VirtualDevice:
         self.max_servos = 8
         self.reserved_pins = [0, 1]
         self.features = ALL_FEATURES
-        self.pwm_pins = [3, 9, 10, 11]
+        self.pwm_pins = [3, 5, 6, 9, 10, 11]
         self.analog_pins = list(range(14, 20))
-        self.counter_pins = [2, 3]
+        self.counter_pins = list(range(2, 14))
+        #: Counter pins on a pin-change interrupt (the Uno's 4..13), not an external one.
+        self.pin_change_pins = list(range(4, 14))
         #: Analog inputs and nothing else (a Nano's A6 and A7: 20, 21): no digital I/O.
         self.analog_only_pins: list[int] = []
         self.servo_timer_pins = [9, 10]
-        self.clock_timer_pins = [5, 6]
-        #: The numbers of those pins' timers (the Uno's Timer1 and Timer0).
+        #: Pins whose timer runs the clock in a mode without PWM (none on the Uno: its
+        #: Timer0 keeps the clock in fast PWM, so 5 and 6 are PWM pins).
+        self.clock_timer_pins: list[int] = []
+        #: The numbers of those pins' timers (the Uno's Timer1; its clock's Timer0).
         self.servo_timer = 1
         self.clock_timer = 0
         #: DeviceInfo.rx_buffer (0: not stated) and user_fingerprint (0: no user service).
@@ -755,6 +757,7 @@ class VirtualDevice:
             pb.PIN_PWM: pin in self.pwm_pins,
             pb.PIN_ANALOG: pin in self.analog_pins,
             pb.PIN_COUNTER: pin in self.counter_pins,
+            pb.PIN_PIN_CHANGE: pin in self.pin_change_pins,
         }
         byte: int = sum(flag for flag, has in flags.items() if has)
         if pin in self.servo_timer_pins:
@@ -831,9 +834,7 @@ class VirtualDevice:
         flag = pb.PinBit.Value(mode.pins or "PIN_DIGITAL")
         capable = [p for p in range(self.num_pins) if self._pin_byte(p) & flag]
         if status == Status.STATUS_OK and mode.name == "pwm":
-            if pin in self.clock_timer_pins:
-                status = Status.STATUS_TIMER_IN_USE  # its timer runs the clock
-            elif pin not in self.pwm_pins:
+            if pin not in self.pwm_pins:
                 status = Status.STATUS_NOT_SUPPORTED  # no timer output there
             elif self.pins.get(pin, "pwm") != "pwm":
                 status = Status.STATUS_PIN_IN_USE

@@ -35,13 +35,13 @@ void fake_init(fake_hal_t *hal)
     hal->adc_polls = 1;
     hal->info.board = "fake";
     /* The Uno's (pd_avr_main.c). */
-    hal->info.pwm_pins = (1UL << 3) | (1UL << 9) | (1UL << 10) | (1UL << 11);
+    hal->info.pwm_pins = (1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11);
     hal->info.analog_pins = 0x3FUL << 14;
     hal->info.servo_timer_pins = (1UL << 9) | (1UL << 10);
-    hal->info.clock_timer_pins = (1UL << 5) | (1UL << 6);
     hal->info.servo_timer = 1;
     hal->info.clock_timer = 0;
-    hal->info.counter_pins = (1UL << 2) | (1UL << 3);
+    hal->info.counter_pins = 0x3FFCUL;    /* 2..13, as the Uno */
+    hal->info.pin_change_pins = 0x3FF0UL; /* 4..13: pin-change interrupts */
     hal->info.num_pins = 20;
     hal->info.max_servos = 8;
     hal->info.reserved_pins = 0x3;

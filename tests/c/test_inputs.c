@@ -430,8 +430,8 @@ static void test_counter_reports_at_most_each_interval(void)
     CHECK_EQ(r.counter_counts[0], 9); /* the newest count */
     poll_at(&d, t + 60);
     CHECK_EQ(reports(&d, NULL), 1); /* unchanged: nothing */
-    in = m_counter(2, 4, protoduino_Edge_EDGE_RISING, 20);
-    CHECK_EQ(t_cmd(&d, &in), S(NOT_SUPPORTED)); /* no interrupt there on the Uno */
+    in = m_counter(2, 14, protoduino_Edge_EDGE_RISING, 20);
+    CHECK_EQ(t_cmd(&d, &in), S(NOT_SUPPORTED)); /* counters on the digital pins 2..13 */
     /* Released: the counting stops, the pin is free. */
     protoduino_ArduinoIn rel = m_simple(3, protoduino_ArduinoIn_release_tag);
     rel.data.release.pin = 3;

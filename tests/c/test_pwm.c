@@ -56,10 +56,13 @@ static void test_pwm_refusals(void)
     t_active(&d);
     protoduino_ArduinoIn in = m_pwm_init(1, 4, 0); /* no timer output on pin 4 */
     CHECK_EQ(t_cmd(&d, &in), S(NOT_SUPPORTED));
-    in = m_pwm_init(2, 5, 0); /* Timer0: the clock */
-    CHECK_EQ(t_cmd(&d, &in), S(TIMER_IN_USE));
-    in = m_pwm_init(3, 6, 0);
-    CHECK_EQ(t_cmd(&d, &in), S(TIMER_IN_USE));
+    /* Timer0's pins do PWM (its overflow keeps the clock, as Arduino's wiring.c does it). */
+    in = m_pwm_init(2, 5, 7);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.pwm[5], 7);
+    in = m_pwm_init(3, 6, 9);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    CHECK_EQ(d.hal.pwm[6], 9);
     in = m_pwm_init(4, 20, 0);
     CHECK_EQ(t_cmd(&d, &in), S(INVALID_PIN));
     in = m_pwm_init(5, 1, 0);
@@ -241,18 +244,21 @@ static void test_device_info_lists_capabilities_and_features(void)
     CHECK((info->features >> protoduino_Feature_FEATURE_PWM) & 1u);
     CHECK((info->features >> protoduino_Feature_FEATURE_SERVO) & 1u);
     /* The pin table (DeviceInfo.pins, timers), from the board's (fake_hal.c: the
-     * Uno's): UART 0, 1 nothing; counters on 2, 3; PWM on 3, 11 (a free timer) and
-     * 9, 10 (Timer1, the servos'); 5, 6 on Timer0 (the clock's), without PWM;
-     * A0..A5 analog. Then the timers: Timer0 the clock's, Timer1 the servos'. */
+     * Uno's): UART 0, 1 nothing; counters on 2..13 (INT0, INT1 on 2, 3; pin-change
+     * interrupts on 4..13); PWM on 3, 11 (a free timer), 5, 6 (Timer0, which keeps
+     * the clock in the same mode) and 9, 10 (Timer1, the servos'); A0..A5 analog.
+     * Then the timers it holds: Timer1 the servos'. */
     const fake_frame_t *f = &d.hal.frames[(d.hal.n_frames - 1u) % FAKE_MAX_FRAMES];
     const uint8_t table[] = {
-        0x72, 20, 0x00, 0x00, 0x09, 0x0B, 0x01, 0x21, 0x21, 0x01, 0x01, 0x43, 0x43, 0x03,
-        0x01, 0x01, 0x05, 0x05, 0x05, 0x05, 0x05, 0x05, 0x7A, 2, 0x01, 0x02};
+        0x72, 20, 0x00, 0x00, 0x09, 0x0B, 0x19, 0x1B, 0x1B, 0x19, 0x19, 0x5B, 0x5B, 0x1B,
+        0x19, 0x19, 0x05, 0x05, 0x05, 0x05, 0x05, 0x05, 0x7A, 2, 0x00, 0x02};
     CHECK(f->len >= sizeof(table));
     CHECK(memcmp(f->payload + f->len - sizeof(table), table, sizeof(table)) == 0);
     /* A board with other pins says so, from its table alone. */
     d.hal.info.pwm_pins = 1u << 4;
     d.hal.info.servo_timer_pins = 0;
+    d.hal.info.counter_pins = 0;
+    d.hal.info.pin_change_pins = 0;
     d.hal.info.clock_timer_pins = 1u << 4;
     d.hal.info.clock_timer = 2;
     CHECK_EQ(pd_encode_pin(&d.hal.info, 4), 0x01 | 0x02 | (3u << 5));

@@ -19,13 +19,14 @@ from typing import Any
 
 import pytest
 from boardprocess import BoardProcess, missing_tool
-from protoduino import Board, CommandRejectedError
+from protoduino import Board, CommandRejectedError, Event, EventKind
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.board import Edge
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard, runner_command
 from protoduino.simcontrol import SimControl
 from protoduino_dev import build
+from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin, wait_until
 
 pytestmark = pytest.mark.avr
 
@@ -82,7 +83,14 @@ def test_a_build_without_servo_refuses_servos(tools: None) -> None:
             info = board.request(_info()).info
             assert not (info.features >> 1) & 1  # FEATURE_SERVO
             assert (info.features >> 5) & 1  # FEATURE_PWM
-            assert [p for p, byte in enumerate(info.pins) if byte & pb.PIN_PWM] == [3, 9, 10, 11]
+            assert [p for p, byte in enumerate(info.pins) if byte & pb.PIN_PWM] == [
+                3,
+                5,
+                6,
+                9,
+                10,
+                11,
+            ]
             with pytest.raises(CommandRejectedError) as refused:
                 board.request(_servo_init(9))
             assert refused.value.status == Status.STATUS_NOT_SUPPORTED
@@ -111,7 +119,7 @@ def _is_pwm(pin: int, duty: int) -> Callable[[dict[str, Any]], bool]:
     return match
 
 
-@pytest.mark.parametrize("pin", [3, 9, 10, 11])
+@pytest.mark.parametrize("pin", [3, 5, 6, 9, 10, 11])
 def test_pwm_duty_measured_at_the_pin(tools: None, tmp_path: Path, pin: int) -> None:
     elf = build.build_firmware()
     trace = tmp_path / "trace.jsonl"
@@ -143,9 +151,7 @@ def test_pwm_on_9_refused_while_a_servo_runs(tools: None) -> None:
             with pytest.raises(CommandRejectedError) as refused:
                 board.request(_pwm_init(9, 0))
             assert refused.value.status == Status.STATUS_TIMER_IN_USE
-            with pytest.raises(CommandRejectedError) as refused:
-                board.request(_pwm_init(5, 0))
-            assert refused.value.status == Status.STATUS_TIMER_IN_USE
+            board.request(_pwm_init(5, 0))  # Timer0's PWM is the servos' neighbour
     finally:
         runner.stop(strict=False)
 
@@ -324,3 +330,227 @@ def test_the_nano_profile_states_a6_and_a7_analog_only(tools: None, tmp_path: Pa
             board.digital_output("A5", True)  # pin 19 has its port, as on the Uno
     finally:
         sim.stop()
+
+
+#: The failsafe timeout the clock is judged by: a millisecond counted per 1,024 us
+#: overflow of Timer0 (without wiring.c's fraction) would make it 72 ms late.
+CLOCK_TIMEOUT_S = 3.0
+#: The clock's own resolution, and the loop pass that notices the timeout.
+CLOCK_SLACK_S = 0.002
+
+
+def test_pwm_on_timer0_beside_the_clock_on_both_boards(sim_board: SimBoard) -> None:
+    """Issue 33 item 6: PWM on pins 5 and 6 (the Uno's Timer0, 976 Hz, as the Arduino core
+    does it), measured at the pins on both boards, while the millisecond clock the same
+    timer keeps still keeps time: one Ping starts the failsafe's timeout, which ends on the
+    board's clock (the trace's t) exactly that long after the Ping, dated between two
+    level changes made just before and just after it."""
+    with Board.open(sim_board.port, failsafe_timeout=CLOCK_TIMEOUT_S, ping=False) as board:
+        board.ping()  # the failsafe waits for none of the set-up
+        motors = board.pwm_output(5), board.pwm_output(6)
+        motors[0].write(64)
+        motors[1].write(191)
+        wait_for_pin(sim_board, 5, lambda v: v[-1:] == [64], timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 6, lambda v: v[-1:] == [191], timeout=TRACE_TIMEOUT)
+        before, after = board.digital_output(12), board.digital_output(13)
+        before.write(True)
+        board.ping()
+        after.write(True)
+        wait_for_pin(sim_board, 13, lambda v: v[-2:] == [1, 0], timeout=TRACE_TIMEOUT * 2)
+    trace = sim_board.trace()
+    rows = [(e["pin"], e["value"], float(e["t"])) for e in trace]
+    t_before = next(t for pin, value, t in rows if pin == 12 and value == 1)
+    t_after = next(t for pin, value, t in rows if pin == 13 and value == 1)
+    t_trip = next(t for pin, value, t in rows if pin == 13 and value == 0 and t > t_after)
+    assert (
+        t_before + CLOCK_TIMEOUT_S - CLOCK_SLACK_S
+        <= t_trip
+        <= t_after + CLOCK_TIMEOUT_S + CLOCK_SLACK_S
+    ), (t_before, t_after, t_trip)
+    for pin in (5, 6):  # the failsafe made the motors safe too
+        assert pin_values(trace, pin)[-1] == 0, pin
+
+
+def _near(want: int) -> Callable[[list[int]], bool]:
+    return lambda values: bool(values) and abs(values[-1] - want) <= PULSE_TOLERANCE_US
+
+
+def test_the_notes_robot_on_one_uno_on_both_boards(sim_board: SimBoard) -> None:
+    """Issue 33 item 6: the design notes' robot configured all at once on one Uno's pins (and
+    the simulated board's, which offers the same): two PWM motors on Timer0's 5 and 6 with
+    their direction pins, two encoders on 2 and 3, two servos on Timer1's 9 and 10, a bumper
+    interlock, a battery on A0 and an LED. Judged at the pins (the trace) and by the counts
+    and the battery value the device reports; the bumper, pressed, stops the motors on the
+    device itself."""
+    with Board.open(sim_board.port) as board:
+        sim_board.set_level(4, 1)  # the bumper released (its switch pulls to ground)
+        motors = board.pwm_output(5), board.pwm_output(6)
+        directions = board.digital_output(7), board.digital_output(8)
+        encoders = board.counter(2, rate_hz=50), board.counter(3, rate_hz=50)
+        board.servo(9, safe_us=1200)
+        board.servo(10, safe_us=1800)
+        board.digital_input(4, pull_up=True, interlock="low")
+        battery = board.analog_input(14)
+        led = board.digital_output(13)
+        motors[0].write(100)
+        motors[1].write(150)
+        directions[1].write(True)
+        led.write(True)
+        wait_for_pin(sim_board, 5, lambda v: v[-1:] == [100], timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 6, lambda v: v[-1:] == [150], timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 8, lambda v: v[-1:] == [1], timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 13, lambda v: v[-1:] == [1], timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 9, _near(1200), timeout=TRACE_TIMEOUT)
+        wait_for_pin(sim_board, 10, _near(1800), timeout=TRACE_TIMEOUT)
+        sim_board.pulses(2, 200, 2_000)
+        sim_board.pulses(3, 300, 3_000)
+        assert encoders[0].wait_for(lambda n: n >= 200, timeout=TRACE_TIMEOUT) == 200
+        assert encoders[1].wait_for(lambda n: n >= 300, timeout=TRACE_TIMEOUT) == 300
+        sim_board.set_analog(14, 700)
+        assert battery.wait_for(lambda v: v == 700, timeout=TRACE_TIMEOUT) == 700
+        sim_board.set_level(4, 0)  # the bumper pressed: every output safe, on the device
+        for pin in (5, 6, 8, 13):
+            wait_for_pin(sim_board, pin, lambda v: v[-1:] == [0], timeout=TRACE_TIMEOUT)
+        # The servos held their safe widths throughout (they are at them already).
+        for pin, us in ((9, 1200), (10, 1800)):
+            assert _near(us)(pin_values(sim_board.trace(), pin)), pin
+
+
+def test_pin_change_counters_on_both_boards(sim_board: SimBoard) -> None:
+    """Issue 33 item 6: counters on pins other than INT0/INT1's 2 and 3 (the Uno's pin-change
+    interrupts: here PORTD's 7 and PORTB's 12), each counting its own edges exactly, while a
+    digital input on 4 (PORTD, the same interrupt as 7) still reads its changes; the
+    emulated Uno counts in the pin-change handler, the native board from its clock."""
+    with Board.open(sim_board.port) as board:
+        rising = board.counter(7, edge="rising", rate_hz=50)
+        both = board.counter(12, edge="both", rate_hz=50)
+        button = board.digital_input(4, pull_up=True)
+        assert button.wait_for(True, timeout=TRACE_TIMEOUT) is True
+        sim_board.pulses(7, 300, 3_000)
+        sim_board.pulses(12, 200, 2_000)
+        assert rising.wait_for(lambda n: n >= 300, timeout=TRACE_TIMEOUT) == 300
+        assert both.wait_for(lambda n: n >= 400, timeout=TRACE_TIMEOUT) == 400
+        sim_board.set_level(4, 0)
+        assert button.wait_for(False, timeout=TRACE_TIMEOUT) is False
+        sim_board.set_level(7, 1)  # one rising edge more on 7, none on 12
+        assert rising.wait_for(lambda n: n >= 301, timeout=TRACE_TIMEOUT) == 301
+        board.ping()
+        assert (rising.read(), both.read()) == (301, 400)
+
+
+#: The pin-change counters' documented lossless rate (docs/protocol.md, Counters): counted
+#: edges per second per counter, two counters on one port (one interrupt for both), with
+#: eight servos, six analog inputs at 1 kHz and commands running. A pin's level must be read
+#: by its handler before it changes again: a rising counter at this rate sees twice as many
+#: changes (40,000 a second). Twice the rate lost edges (measured).
+PIN_CHANGE_EDGES_PER_S = 20_000
+
+
+def test_pin_change_counters_lose_no_edge_at_the_documented_rate(
+    tools: None, tmp_path: Path
+) -> None:
+    """Pins 12 and 13 (PORTB: one pin-change interrupt for both) counting 'both' edges of a
+    10 kHz square wave and the rising edges of a 20 kHz one (40,000 changes a second on that
+    pin) for two seconds, while eight servos pulse, poses keep coming and six analog inputs
+    report moving values: every edge the control socket made is counted, to the edge."""
+    control = tmp_path / "control.sock"
+    command = runner_command(build.build_firmware(), control=control)
+    runner = BoardProcess(command, startup=STARTUP_TIMEOUT)
+    try:
+        with Board.open(runner.port) as board, SimControl(control) as sim:
+            servos = [board.servo(pin, safe=90) for pin in range(4, 12)]
+            pots = range(14, 20)
+            for pin in pots:
+                board.analog_input(pin, rate_hz=1000)
+            both = board.counter(12, edge="both", rate_hz=100)
+            rising = board.counter(13, edge="rising", rate_hz=100)
+            square_hz, rising_hz = 9_973, 19_937  # every phase against the 20 ms frames
+            assert 2 * square_hz <= PIN_CHANGE_EDGES_PER_S and rising_hz <= PIN_CHANGE_EDGES_PER_S
+            sim.pulses(12, 2 * square_hz, square_hz)
+            sim.pulses(13, 2 * rising_hz, rising_hz)
+            expected = (4 * square_hz, 2 * rising_hz)
+            step = 0
+            while (both.read(), rising.read()) != expected and step < 8000:
+                for pin in pots:
+                    sim.analog(pin, (step * 37 + pin * 101) % 1024)
+                board.pose({s: (step * 7 + i) % 180 for i, s in enumerate(servos)})
+                step += 1
+            assert step >= 10  # commands flowed while the pulses came
+            assert both.wait_for(lambda n: n >= expected[0], timeout=TRACE_TIMEOUT) == expected[0]
+            assert rising.wait_for(lambda n: n >= expected[1], timeout=TRACE_TIMEOUT) == expected[1]
+            board.ping()
+            assert (both.read(), rising.read()) == expected
+    finally:
+        runner.stop(strict=False)
+
+
+#: Trips in the wake-up test, each at another phase of the clock tick (1.024 ms).
+WAKE_TRIALS = 80
+#: An interlock reacts within a pass of the loop (firmware/README.md, *PWM and inputs on the
+#: Uno*: the input's pin-change interrupt wakes the sleeping loop), not at the next clock tick.
+WAKE_REACTION = 0.0005
+
+
+def test_an_input_set_up_at_a_level_its_port_never_showed_still_wakes_the_loop(
+    tools: None, tmp_path: Path
+) -> None:
+    """A bumper's pin is at its level before it is an input (no interrupt watches it then),
+    alone on its port (PORTB) with the output it stops on another (PORTD); it trips, trial
+    after trial, at every phase of the clock tick, and each trip reaches the pin within a
+    pass. The pin-change handler wakes the loop for a pin whose level differs from its last
+    reading of the port, which did not see the pin before it was an input: on the chip the
+    first edge back to the level of that reading would wake nothing and the trip would wait
+    for the next tick; on the emulated Uno, where simavr's re-raised pin levels refresh the
+    reading now and then, 3 to 7 trips of 80 took 1,063 to 1,075 us (four runs).
+
+    Only the emulated Uno: the native board has no pin-change interrupt (it reads its virtual
+    pins every pass), and its clock is the host's."""
+    sim = SimBoard("avr", trace=tmp_path / "trace.jsonl")
+    sim.start()
+    reactions: list[float] = []
+    try:
+        with Board.open(sim.port) as board:
+            seen: list[Event] = []
+            board.on_event(seen.append)
+            lamp = board.digital_output(4, safe=False)
+            for trial in range(WAKE_TRIALS):
+                sim.set_level(8, 1)  # not an input yet: no pin-change interrupt sees this
+                bumper = board.digital_input(8, interlock="low")
+                mark = len(sim.trace())
+                lamp.write(True)
+                wait_for_pin(sim, 4, _went(sim, 4, 1, since=mark))
+                running = len(sim.trace())
+                time.sleep(trial % 7 * 0.0003)  # only moves the phase; the verdict is the trace's
+                hit = sim.set_level(8, 0)
+                wait_for_pin(sim, 4, _went(sim, 4, 0, since=running))
+                after = sim.trace()[running:]
+                low = next(e["t"] for e in after if e["pin"] == 4 and e["value"] == 0)
+                reactions.append(max(0.0, low - hit))
+                assert wait_until(_tripped(seen, trial + 1), TRACE_TIMEOUT)
+                bumper.release()  # its interrupt off again before the level goes back up
+                board.clear_interlock()
+    finally:
+        sim.stop()
+    slow = [f"{r * 1e6:.0f} us" for r in reactions if r > WAKE_REACTION]
+    assert not slow, f"{len(slow)} of {WAKE_TRIALS} trips took over 500 us: {slow}"
+
+
+def _went(sim: SimBoard, pin: int, level: int, *, since: int) -> Callable[[list[int]], bool]:
+    """For wait_for_pin: ``pin`` took ``level`` in the trace from line ``since``."""
+    return lambda _values: level in pin_values(sim.trace()[since:], pin)
+
+
+def _tripped(seen: list[Event], trips: int) -> Callable[[], bool]:
+    """The board has reported ``trips`` interlock trips."""
+
+    def done() -> bool:
+        found = [
+            e
+            for e in list(seen)
+            if e.kind is EventKind.FAILSAFE
+            and bool(e.details["active"])
+            and e.details["cause"] == "interlock"
+        ]
+        return len(found) >= trips
+
+    return done

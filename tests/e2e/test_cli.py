@@ -51,8 +51,8 @@ def test_info(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["info", fake.port]) == 0
     out = capsys.readouterr().out
     assert "board             virtual" in out
-    assert "pwm_pins          [3, 9, 10, 11]" in out
-    assert "timers            ['clock', 'servos']" in out
+    assert "pwm_pins          [3, 5, 6, 9, 10, 11]" in out
+    assert "timers            ['free', 'servos']" in out
     # The link counters, as README and --help promise.
     assert "link counters" in out
     counters = dict(line.split(maxsplit=1) for line in out.splitlines() if " " in line)
@@ -62,7 +62,7 @@ def test_info(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     obj = json.loads(capsys.readouterr().out)
     assert obj["info"]["num_pins"] == 20
     assert obj["stats"]["handshakes"] == 1
-    assert obj["info"]["pwm_pins"] == [3, 9, 10, 11]
+    assert obj["info"]["pwm_pins"] == [3, 5, 6, 9, 10, 11]
     assert obj["info"]["features"] == sorted(
         ["servo", "digital_output", "digital_input", "analog_input", "pwm", "counter"]
     )

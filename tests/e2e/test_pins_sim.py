@@ -176,29 +176,28 @@ def _request(board: Board, msg: ArduinoIn) -> int:
 
 
 #: The Uno's pin table as its DeviceInfo states it (docs/protocol.md section 7, *The pin table*).
-UNO_PINS = bytes([0, 0, 0x09, 0x0B, 0x01, 0x21, 0x21, 0x01, 0x01, 0x43, 0x43, 0x03, 1, 1] + [5] * 6)
+UNO_PINS = bytes(
+    [0, 0, 0x09, 0x0B, 0x19, 0x1B, 0x1B, 0x19, 0x19, 0x5B, 0x5B, 0x1B, 0x19, 0x19] + [5] * 6
+)
 
 
 def test_the_board_states_its_pin_table(board: Board) -> None:
     """Both boards state the Uno's pins and timers (DeviceInfo.pins, timers): what the host
     knows of the board's pins it has from there."""
     info = board.info
-    assert (info.pins, info.timers) == (UNO_PINS, bytes([pb.TIMER_CLOCK, pb.TIMER_SERVOS]))
+    assert (info.pins, info.timers) == (UNO_PINS, bytes([pb.TIMER_FREE, pb.TIMER_SERVOS]))
     assert (info.pwm_pins, info.analog_pins, info.counter_pins) == (
-        (3, 9, 10, 11),
+        (3, 5, 6, 9, 10, 11),
         (14, 15, 16, 17, 18, 19),
-        (2, 3),
+        tuple(range(2, 14)),
     )
-    assert [info.timer(p) for p in (3, 5, 9)] == [None, 0, 1]
+    assert [info.timer(p) for p in (3, 5, 9)] == [None, None, 1]
 
 
 def test_host_refusals_are_the_devices(board: Board) -> None:
     """Each PWM refusal the host makes before sending is the one the device makes, and says
     which pin, what it cannot do and why, from the device's pin table."""
-    clock = "PWM needs Timer0, which runs the device's millisecond clock"
     cases: list[tuple[int, type[protoduino.CommandRejectedError], int, str]] = [
-        (5, TimerInUseError, Status.STATUS_TIMER_IN_USE, f"pin 5's {clock}"),
-        (6, TimerInUseError, Status.STATUS_TIMER_IN_USE, f"pin 6's {clock}"),
         (4, NotSupportedError, Status.STATUS_NOT_SUPPORTED, "pin 4 cannot be a pwm pin on this"),
     ]
     board.servo(2)

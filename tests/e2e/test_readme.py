@@ -259,7 +259,7 @@ def test_the_ros2_example(workdir: Path, monkeypatch: pytest.MonkeyPatch) -> Non
         pan(ros.ros("std_msgs/msg/Float64", data=45.0))
         ros._until(lambda: pin(9)[-1:] == [1008], "the servo at 45 degrees")
         cmd_vel(ros._twist(0.25, 0.0))  # both wheels ahead at half their top speed
-        ros._until(lambda: pin(3)[-1:] == [128] and pin(11)[-1:] == [128], "the motors")
+        ros._until(lambda: pin(5)[-1:] == [128] and pin(6)[-1:] == [128], "the motors")
         proc.send_signal(signal.SIGINT)  # Ctrl-C
         assert proc.wait(30) == 130, out.read_text()  # interrupted, as README's table says
     finally:
@@ -267,7 +267,7 @@ def test_the_ros2_example(workdir: Path, monkeypatch: pytest.MonkeyPatch) -> Non
             proc.kill()
             proc.wait()
     assert "protoduino ros2: stopped" in out.read_text()
-    assert pin(3)[-1] == 0 and pin(11)[-1] == 0  # the device's Stop: the motors safe
+    assert pin(5)[-1] == 0 and pin(6)[-1] == 0  # the device's Stop: the motors safe
     assert 1472 in pin(9)[pin(9).index(1008) :]  # the servo back at its safe 90 degrees
 
 

@@ -1049,10 +1049,10 @@ def test_ros2_sim_control_presses_the_example_robots_bumper(
         diag = graph.subscriber("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
         cmd_vel = graph.publisher("/robot1/cmd_vel", "geometry_msgs/msg/Twist")
         cmd_vel(_twist(0.25, 0.0))
-        _until(lambda: pin(3)[-1:] == [128] and pin(11)[-1:] == [128], "the motors")
+        _until(lambda: pin(5)[-1:] == [128] and pin(6)[-1:] == [128], "the motors")
         with SimControl(control) as sim:
             sim.level(7, 0)  # the bumper hits something
-        _until(lambda: pin(3)[-1:] == [0] and pin(11)[-1:] == [0], "the motors stopped")
+        _until(lambda: pin(5)[-1:] == [0] and pin(6)[-1:] == [0], "the motors stopped")
         tripped = _wait_diag(diag, "robot1", "failsafe", lambda s: s["cause"] == "interlock")
         assert tripped["active"] == "true", tripped
     finally:

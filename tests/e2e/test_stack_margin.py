@@ -15,6 +15,7 @@ import subprocess
 import sys
 from collections.abc import Iterator
 from concurrent.futures import Future
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,7 @@ from boardprocess import BoardProcess, missing_tool
 from protoduino import Board, servicegen
 from protoduino.simboard import runner_command
 from protoduino.simcontrol import SimControl
-from protoduino_dev import build
+from protoduino_dev import build, stackwalk
 from protoduino_dev.rambudget import ANALOG_PINS, CALL_TIMEOUT, COUNTER_PINS, RamBudget, exercise
 from protoduino_dev.runnerstats import snapshot
 from userbuilds import ROOT, nested_proto
@@ -76,6 +77,27 @@ def test_every_command_at_its_largest_leaves_the_ram_budget(
     with capsys.disabled():  # the figures belong in every test log, not only on failure
         sys.stdout.write(f"\nUno RAM: {ram.describe()}\n")
     assert ram.holds, f"the RAM budget does not hold: {ram.describe()}"
+
+
+#: The most stack one level of a nested decode takes in nanopb (the frames of pb_decode_inner,
+#: decode_field and decode_basic_field): 125 B with its extension and callback decoders out of
+#: line (firmware/avr/pd_avr_pb_decode.c), 163 B when the compiler inlined them and their locals
+#: sat in every level's frames.
+NANOPB_LEVEL_BYTES = 128
+
+
+def test_a_level_of_a_nested_decode_takes_at_most_128_bytes(uno: tuple[StatsRunner, Path]) -> None:
+    """The deepest point's chain (a Pose decoded in full: four levels) as the runner kept it:
+    the bytes from one pb_decode_inner's return address to the next."""
+    runner, elf = uno
+    with Board.open(runner.port, window=4) as board, SimControl(runner.control) as control:
+        exercise(board, control)
+    runner.snapshot()  # the runner writes its --stack file with its counters
+    frames = stackwalk.walk(elf, runner.stack.read_bytes())
+    levels = [frame.depth for frame in frames if frame.function == "pb_decode_inner"]
+    assert len(levels) == 4, stackwalk.describe(frames)
+    steps = [deeper - outer for outer, deeper in pairwise(levels)]
+    assert max(steps) <= NANOPB_LEVEL_BYTES, (steps, stackwalk.describe(frames))
 
 
 #: The deepest service a user may have: its one rpc takes and returns a message of

@@ -17,7 +17,8 @@ def test_pwm(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:
     assert init.msg.pwm_init.safe_duty == 4 and fake.values[3] == 128
     assert main(["pwm", fake.port, "4", "10"]) == 2  # refused before anything is sent
     err = capsys.readouterr().err
-    assert "protoduino pwm:" in err and "STATUS_NOT_SUPPORTED" in err and "3, 9, 10, 11" in err
+    assert "protoduino pwm:" in err and "STATUS_NOT_SUPPORTED" in err
+    assert "3, 5, 6, 9, 10, 11" in err
 
 
 def test_read_once(fake: PtyDevice, capsys: pytest.CaptureFixture[str]) -> None:

@@ -82,7 +82,7 @@ def test_pwm_on_a_pin_without_pwm_is_not_supported(board: Board, fake: PtyDevice
     with pytest.raises(NotSupportedError) as info:
         board.pwm_output(4)
     assert info.value.status == Status.STATUS_NOT_SUPPORTED and not info.value.sent
-    assert "3, 9, 10, 11" in str(info.value)
+    assert "3, 5, 6, 9, 10, 11" in str(info.value)
     assert not isinstance(info.value, FeatureMissingError)
     assert sent(fake, "pwm_init") == []
 
@@ -121,7 +121,7 @@ def test_device_info_lists_features_and_pins(board: Board) -> None:
     assert info.features == {
         "servo", "digital_output", "digital_input", "analog_input", "pwm", "counter"
     }  # fmt: skip
-    assert info.pwm_pins == (3, 9, 10, 11)
+    assert info.pwm_pins == (3, 5, 6, 9, 10, 11)
     assert info.analog_pins == (14, 15, 16, 17, 18, 19)
     assert 2 in info.counter_pins
 
@@ -134,14 +134,13 @@ def test_timer1_is_shared_by_servos_and_pwm_on_9_and_10(fake: PtyDevice) -> None
                 board.pwm_output(pin)
             assert info.value.status == Status.STATUS_TIMER_IN_USE and not info.value.sent
         board.pwm_output(3)  # Timer2: free
-        for pin in (5, 6):  # Timer0 runs the clock: never
-            with pytest.raises(TimerInUseError):
-                board.pwm_output(pin)
+        for pin in (5, 6):  # Timer0: PWM beside the clock, as the Arduino core does it
+            board.pwm_output(pin)
         servo.release()
         board.pwm_output(10)
         with pytest.raises(TimerInUseError):
             board.servo(4)
-        assert sorted(fake.pins) == [3, 10]
+        assert sorted(fake.pins) == [3, 5, 6, 10]
 
 
 def test_a_board_with_another_pin_table_is_served_with_no_host_edit(fake: PtyDevice) -> None:

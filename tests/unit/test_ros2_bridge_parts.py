@@ -103,9 +103,9 @@ def test_the_example_robot_is_the_one_docs_show() -> None:
     docs = (Path(__file__).resolve().parents[2] / "docs" / "ros2.md").read_text()
     assert f"```yaml\n{ROBOT_YAML}```" in docs
     config = example_config()
-    assert config.drive is not None and config.counters[0].pins == (2,)
+    assert config.drive is not None and config.counters[0].pins == (2, 3)  # left, right
     assert {s.pin for s in config.servos} == {9, 10}  # Timer1: no PWM on 9 and 10, so
-    assert {config.drive.left.pwm, config.drive.right.pwm} == {3, 11}  # the drive is on Timer2
+    assert {config.drive.left.pwm, config.drive.right.pwm} == {5, 6}  # the drive is on Timer0
     # A copied robot stops on its bumper, on the device (issue 33).
     assert [(d.topic, d.interlock) for d in config.digital_inputs] == [("bumper", "low")]
 

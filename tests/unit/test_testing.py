@@ -239,7 +239,6 @@ def test_the_device_refuses_what_it_would_refuse_after_the_boards_checks(
 
         assert refusal(lambda m: m.counter_init.SetInParent()) == Status.STATUS_NOT_SUPPORTED
         assert refusal(lambda m: setattr(m.pwm_init, "pin", 10)) == Status.STATUS_TIMER_IN_USE
-        assert refusal(lambda m: setattr(m.pwm_init, "pin", 5)) == Status.STATUS_TIMER_IN_USE
         assert refusal(lambda m: setattr(m.pwm_init, "pin", 4)) == Status.STATUS_NOT_SUPPORTED
         assert refusal(lambda m: setattr(m.digital_init, "pin", 9)) == Status.STATUS_PIN_IN_USE
         assert refusal(lambda m: setattr(m.digital_init, "pin", 1)) == Status.STATUS_RESERVED_PIN

@@ -68,15 +68,15 @@ def test_battery_and_encoder_logic_on_the_fake_and_its_manual_clock() -> None:
     assert device.clock() == start
 
 
-def test_an_encoder_on_a_pin_without_an_interrupt_is_refused_as_the_uno_refuses() -> None:
+def test_an_encoder_on_a_pin_without_a_counter_is_refused_as_the_uno_refuses() -> None:
     device = VirtualDevice()
     with device.open_board(ping=False) as board:
         with pytest.raises(CommandRejectedError) as refused:
-            board.counter(4)  # the Uno counts on INT0/INT1 (pins 2 and 3) only
+            board.counter(14)  # the Uno counts on the digital pins 2..13 only
         assert refused.value.status == Status.STATUS_NOT_SUPPORTED
         board.counter(2)
-        board.counter(3)
-        assert [pin for pin, mode in device.pins.items() if mode == "counter"] == [2, 3]
+        board.counter(7)  # a pin-change interrupt's
+        assert [pin for pin, mode in device.pins.items() if mode == "counter"] == [2, 7]
 
 
 def test_a_bumper_interlock_stops_the_drive_on_the_device() -> None:

@@ -203,13 +203,14 @@ typedef struct {
     char timer_name;
     int comp;
     avr_timer_t *timer;
-    uint8_t oc_level; /* the compare output's last level */
+    uint8_t oc_level;  /* the compare output's last level */
+    uint8_t connected; /* its compare output was connected since the pin last was an input */
 } pd_pwm_pin_t;
 
 static pd_pwm_pin_t g_pwm_pins[] = {
-    {6, '0', AVR_TIMER_COMPA, NULL, 0},  {5, '0', AVR_TIMER_COMPB, NULL, 0},
-    {9, '1', AVR_TIMER_COMPA, NULL, 0},  {10, '1', AVR_TIMER_COMPB, NULL, 0},
-    {11, '2', AVR_TIMER_COMPA, NULL, 0}, {3, '2', AVR_TIMER_COMPB, NULL, 0},
+    {6, '0', AVR_TIMER_COMPA, NULL, 0, 0},  {5, '0', AVR_TIMER_COMPB, NULL, 0, 0},
+    {9, '1', AVR_TIMER_COMPA, NULL, 0, 0},  {10, '1', AVR_TIMER_COMPB, NULL, 0, 0},
+    {11, '2', AVR_TIMER_COMPA, NULL, 0, 0}, {3, '2', AVR_TIMER_COMPB, NULL, 0, 0},
 };
 #define PD_PWM_PINS (sizeof g_pwm_pins / sizeof g_pwm_pins[0])
 /* The Mega's pins of the same timer outputs, in g_pwm_pins' order: OC0A 13, OC0B 4, OC1A 11,
@@ -482,24 +483,34 @@ static void pd_port_sample(pd_sim_t *sim, pd_port_t *port, uint8_t ddr)
         uint32_t pwm_tick = 0;
         pd_pwm_pin_t *w = pd_pwm_pin(pin);
         if (w && w->timer) {
+            if (!((ddr >> b) & 1)) {
+                w->connected = 0; /* an input: whatever the pin did has ended */
+            }
             int kind = w->timer->wgm_op_mode_kind;
-            int pwm = kind == avr_timer_wgm_pwm || kind == avr_timer_wgm_fast_pwm ||
-                      kind == avr_timer_wgm_fc_pwm;
+            int pwm_mode = kind == avr_timer_wgm_pwm || kind == avr_timer_wgm_fast_pwm ||
+                           kind == avr_timer_wgm_fc_pwm;
             int connected = avr_regbit_get(sim->avr, w->timer->comp[w->comp].com) != 0;
+            /* A connected compare output overrides the PORT bit. */
+            if (connected) {
+                level = w->oc_level;
+                w->connected = 1;
+            }
+            int pwm;
             if (sim->pwm_table) {
                 /* The firmware says which pins it runs as PWM: a digital output on the
                  * other pin of a timer that makes PWM (or keeps the clock) is digital. */
                 pwm = (sim->avr->data[sim->pwm_table + pin / 8] >> (pin % 8)) & 1U;
+            } else {
+                /* A program without that record: PWM once its compare output drove the
+                 * pin (duties 0 and 255 disconnect it and drive the level), since Timer0
+                 * runs fast PWM for the clock from power-up. */
+                pwm = w->connected && pwm_mode;
             }
             if (pwm) {
                 pwm_tick = w->timer->cs_div_value ? w->timer->cs_div_value : 1U; /* prescaler */
                 if (sim->pwm_table && !connected) {
                     pwm_tick = PD_PINS_PWM_LEVEL; /* duty 0 or 255: the port drives it */
                 }
-            }
-            /* A connected compare output overrides the PORT bit. */
-            if (connected) {
-                level = w->oc_level;
             }
         }
         /* 1 while a servo channel drives the pin, 0 while none does, -1: no table. */

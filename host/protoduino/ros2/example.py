@@ -1,9 +1,9 @@
 """The example robot: what ``protoduino ros2 --sim`` bridges when no ``--config`` is given.
 
-It is the robot.yaml of docs/ros2.md (a test holds the two equal), on pins an Uno can do all
-at once: the two servos on Timer1's pins 9 and 10, so the drive's PWM is on Timer2's pins 3
-and 11 (Timer0's 5 and 6 run the device's clock); the encoder on pin 2, the one counter pin
-left (pin 3 drives the left motor).
+It is the robot.yaml of docs/ros2.md (a test holds the two equal): the design notes' robot,
+on pins an Uno can do all at once. The two servos take Timer1's pins 9 and 10, so the drive's
+PWM is on Timer0's pins 5 and 6 (976 Hz, beside the device's clock), and the two encoders
+have the counter pins 2 and 3.
 """
 
 from __future__ import annotations
@@ -27,14 +27,14 @@ drive:                       # /cmd_vel (geometry_msgs/Twist) to a differential 
   wheel_base: 0.20           # m between the wheels
   max_speed: 0.50            # m/s of a wheel at duty 255
   timeout: 0.5               # s without a Twist: motors stopped
-  left: {pwm: 3, direction: 4}
-  right: {pwm: 11, direction: 12, invert: true}
+  left: {pwm: 5, direction: 4}
+  right: {pwm: 6, direction: 12, invert: true}
 digital_inputs:              # std_msgs/Bool; interlock: low (or high) trips every output
   - {pin: 7, topic: bumper, pull_up: true, debounce_ms: 10, interlock: low}  # on the device
 analog_inputs:               # std_msgs/Float32: counts * scale + offset, on each change
   - {pin: A0, topic: battery, scale: 0.0147, offset: 0.0, rate_hz: 10, threshold: 2}
 counters:                    # std_msgs/Int32MultiArray, one value per pin in this order
-  - {pins: [2], topic: sensors/encoders}
+  - {pins: [2, 3], topic: sensors/encoders}   # left, right
 """
 
 
