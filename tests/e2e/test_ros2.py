@@ -290,8 +290,14 @@ class BridgeProcess:
             stderr=subprocess.STDOUT,
             env=env,
         )
-        _until(lambda: "topics:" in self.output() or self.proc.poll() is not None, "bridge up")
-        assert self.proc.poll() is None, self.output()
+        try:
+            _until(lambda: "topics:" in self.output() or self.proc.poll() is not None, "bridge up")
+            assert self.proc.poll() is None, self.output()
+        except BaseException:
+            # Never left running: a bridge outliving its test reopens its port by path, and
+            # a later test's board may get that pty's number.
+            self.stop()
+            raise
 
     def output(self) -> str:
         return self.log.read_text()
