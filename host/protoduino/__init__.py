@@ -53,7 +53,10 @@ from .errors import (
     VersionMismatchError,
 )
 from .events import Event, EventKind, Stats
-from .inputs import AnalogInput, Counter, DigitalInput, Reading
+from .inputs import Reading
+from .modes.analog_input import AnalogInput
+from .modes.counter import Counter
+from .modes.digital_input import DigitalInput
 from .outputs import DigitalOutput, PwmOutput, Servo
 from .readback import DeviceInfo, OutputState
 

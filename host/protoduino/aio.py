@@ -310,7 +310,7 @@ class _Input:
 class DigitalInput(_Input):
     """An awaitable digital input; get one from :meth:`Board.digital_input`."""
 
-    def __init__(self, board: Board, sync: _inputs.DigitalInput) -> None:
+    def __init__(self, board: Board, sync: _board.DigitalInput) -> None:
         super().__init__(board, sync)
         self.sync = sync
         self.interlock = sync.interlock
@@ -340,7 +340,7 @@ class _ValueInput(_Input):
 class AnalogInput(_ValueInput):
     """An awaitable analog input; get one from :meth:`Board.analog_input`."""
 
-    def __init__(self, board: Board, sync: _inputs.AnalogInput) -> None:
+    def __init__(self, board: Board, sync: _board.AnalogInput) -> None:
         super().__init__(board, sync)
         self.sync = sync
 
@@ -348,7 +348,7 @@ class AnalogInput(_ValueInput):
 class Counter(_ValueInput):
     """An awaitable pulse counter; get one from :meth:`Board.counter`."""
 
-    def __init__(self, board: Board, sync: _inputs.Counter) -> None:
+    def __init__(self, board: Board, sync: _board.Counter) -> None:
         super().__init__(board, sync)
         self.sync = sync
 

@@ -52,7 +52,6 @@ import logging
 import threading
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal, SupportsFloat, TypeVar
 
 from ._generated import protoduino_pb2 as pb
@@ -60,14 +59,9 @@ from .arguments import (
     Pin,
     RealNumber,
     check_failsafe_ms,
-    check_int,
-    check_level,
     check_session,
-    interval_ms,
-    period_ms,
     pin_number,
     refused,
-    whole_number,
 )
 from .boardoptions import BoardOptions, Liveness, RestorePolicy, resolved
 
@@ -75,29 +69,8 @@ from .boardoptions import BoardOptions, Liveness, RestorePolicy, resolved
 from .boardoptions import OpenCancel as OpenCancel  # noqa: PLC0414
 from .capture import CaptureWriter
 from .closing import ClosedOnExit
-from .commands import (
-    ANALOG_INPUT,
-    COUNTER,
-    DIGITAL,
-    DIGITAL_INPUT,
-    PWM,
-    SERVO,
-    PinMode,
-    feature_hint,
-)
-from .constants import (
-    ANALOG_MAX,
-    DEBOUNCE_MAX_MS,
-    PING_INTERVAL,
-    PWM_MAX_DUTY,
-    SERVO_DEFAULT_MAX_US,
-    SERVO_DEFAULT_MIN_US,
-    SERVO_FRAME,
-    SERVO_LIMIT_MAX_US,
-    SERVO_LIMIT_MIN_US,
-    SERVO_MAX_DEGREES,
-    SERVO_MAX_SPEED,
-)
+from .commands import DIGITAL_INPUT, PWM, SERVO, PinMode, feature_hint
+from .constants import PING_INTERVAL, SERVO_DEFAULT_MAX_US, SERVO_DEFAULT_MIN_US
 from .errors import (
     ArgumentError,
     ArgumentTypeError,
@@ -111,14 +84,25 @@ from .errors import (
     UserReplyLostError,
 )
 from .events import Event, EventCallback, EventDispatcher, EventKind, EventThreadFuture, Stats
-from .inputs import AnalogInput, Counter, DigitalInput, InputTable
+from .inputs import InputTable
 from .link import Link
 from .messages import ArduinoIn, ArduinoOut, InputKind, Status, status_name
 
-# The outputs and the readback live in modules of their own; public here too, as before.
-from .outputs import DigitalOutput as DigitalOutput  # noqa: PLC0414
-from .outputs import PwmOutput as PwmOutput  # noqa: PLC0414
-from .outputs import Servo as Servo  # noqa: PLC0414
+# Each pin mode's host code is a module of its own (protoduino.modes), which the board
+# composes; its names are public here too, as before (explicit re-exports).
+from .modes import analog_input, counter, digital, digital_input, pwm, servo
+from .modes.analog_input import AnalogInput as AnalogInput  # noqa: PLC0414
+from .modes.base import PinRecord
+from .modes.counter import Counter as Counter  # noqa: PLC0414
+from .modes.counter import Edge as Edge  # noqa: PLC0414
+from .modes.digital import DigitalOutput as DigitalOutput  # noqa: PLC0414
+from .modes.digital_input import DigitalInput as DigitalInput  # noqa: PLC0414
+from .modes.digital_input import Interlock as Interlock  # noqa: PLC0414
+from .modes.pwm import PwmOutput as PwmOutput  # noqa: PLC0414
+from .modes.servo import FRAMES_PER_SECOND as FRAMES_PER_SECOND  # noqa: PLC0414
+from .modes.servo import MAX_SPEED_US as MAX_SPEED_US  # noqa: PLC0414
+from .modes.servo import Servo as Servo  # noqa: PLC0414
+from .modes.servo import effective_speed as effective_speed  # noqa: PLC0414
 from .readback import DeviceInfo as DeviceInfo  # noqa: PLC0414
 from .readback import OutputState as OutputState  # noqa: PLC0414
 from .readback import decode_device_info, failsafe_cause
@@ -140,20 +124,6 @@ MAX_PING_PAYLOAD = 64
 MAX_POSE_ITEMS = 8
 #: Pins a Pose's digital masks hold (Pose.digital_pins, a uint32: bit P for pin P).
 POSE_MASK_PINS = 32
-
-#: Servo speed limits step once per 20 ms servo frame: a limit is a whole
-#: number of us per frame, 1 .. 255 (ServoInit.max_speed, docs/protocol.md).
-FRAMES_PER_SECOND = round(1 / SERVO_FRAME)
-MAX_SPEED_US = SERVO_MAX_SPEED
-
-
-def effective_speed(us_per_second: int) -> int:
-    """The speed the device keeps for a requested ``max_speed`` (us/s): whole us per frame."""
-    if us_per_second <= 0:
-        return 0
-    step = max(1, (us_per_second + FRAMES_PER_SECOND // 2) // FRAMES_PER_SECOND)
-    return step * FRAMES_PER_SECOND
-
 
 T = TypeVar("T")
 
@@ -207,23 +177,6 @@ def _output_states(call: Call) -> dict[int, OutputState]:
 
 #: The automatic Ping comes at least this many times per failsafe timeout.
 PINGS_PER_TIMEOUT = 4
-
-
-@dataclass(slots=True)
-class _Output:
-    """What the host knows of one configured pin, for checks and session restore."""
-
-    mode: PinMode
-    init: bytes  # the Init as sent, without its message_id
-    safe: int  # the safe value: a pulse width (us) or a level (0, 1)
-    min_us: int = 0
-    max_us: int = 0
-    last: bytes | None = None  # the last acknowledged Control, if any since init/stop/failsafe
-    #: The value last acknowledged (us or level); an Init, a Stop and a failsafe make it safe.
-    value: int = 0
-
-    def __post_init__(self) -> None:
-        self.value = self.safe
 
 
 def incapable(info: DeviceInfo, pin: int, mode: PinMode) -> CommandRejectedError | None:
@@ -284,20 +237,6 @@ def conflict(
 #: What a pose sets.
 PoseOutput = Servo | DigitalOutput | PwmOutput
 
-#: An interlock's trip level, as ``digital_input(interlock=...)`` takes it.
-Interlock = Literal["low", "high"]
-#: Which edges a counter counts.
-Edge = Literal["rising", "falling", "both"]
-
-_TRIPS = {None: pb.TRIP_NONE, "low": pb.TRIP_LOW, "high": pb.TRIP_HIGH}
-_EDGES = {"rising": pb.EDGE_RISING, "falling": pb.EDGE_FALLING, "both": pb.EDGE_BOTH}
-#: Input pin modes -> the kind of value their reports carry.
-_INPUT_KINDS: dict[str, InputKind] = {
-    DIGITAL_INPUT.name: "digital",
-    ANALOG_INPUT.name: "analog",
-    COUNTER.name: "counter",
-}
-
 
 class Board(ClosedOnExit):
     """A connected device. Use :meth:`open`; close it (or use ``with``) when done."""
@@ -335,7 +274,7 @@ class Board(ClosedOnExit):
         self.restore: RestorePolicy = restore
         self.url = url
         self._lock = threading.Lock()
-        self._outputs: dict[int, _Output] = {}
+        self._outputs: dict[int, PinRecord] = {}
         #: The failsafe as last reported to the application: whether a safe state
         #: holds, and the device's epoch for it (each is reported once, whether its
         #: event arrived or a liveness Ack told of it).
@@ -547,11 +486,11 @@ class Board(ClosedOnExit):
         a whole number of us per frame (:func:`effective_speed`, in
         ``Servo.max_speed_us``), at most 12750 us/s.
         """
-        msg, on_ok, servo = self._servo_init(
-            pin, safe, safe_us, min_us, max_us, max_speed, max_speed_us
+        msg, on_ok, made = servo.init(
+            self, pin, safe, safe_us, min_us, max_us, max_speed, max_speed_us
         )
         self._send(msg, on_ok)
-        return servo
+        return made
 
     def submit_servo(
         self,
@@ -565,121 +504,24 @@ class Board(ClosedOnExit):
         max_speed_us: int | None = None,
     ) -> Future[Servo]:
         """:meth:`servo` without waiting: a future of the :class:`Servo`, resolved by the Ack."""
-        msg, on_ok, servo = self._servo_init(
-            pin, safe, safe_us, min_us, max_us, max_speed, max_speed_us
+        msg, on_ok, made = servo.init(
+            self, pin, safe, safe_us, min_us, max_us, max_speed, max_speed_us
         )
-        return self._future(msg, on_ok, _returning(servo))
-
-    def _servo_init(  # noqa: PLR0917  (servo()'s arguments, checked in one place)
-        self,
-        pin: Pin,
-        safe: int | Literal["detach"] | None,
-        safe_us: int | None,
-        min_us: int,
-        max_us: int,
-        max_speed: float | None,
-        max_speed_us: int | None,
-    ) -> tuple[ArduinoIn, Callable[[], None], Servo]:
-        """Check a servo's configuration; its ServoInit, what to record at the Ack, its object."""
-        pin = self._check_pin(pin, SERVO)
-        min_us = check_int("min_us", min_us) or SERVO_DEFAULT_MIN_US
-        max_us = check_int("max_us", max_us) or SERVO_DEFAULT_MAX_US
-        if safe is not None and safe_us is not None:
-            raise ArgumentTypeError("give safe (degrees) or safe_us, not both")
-        if min_us < SERVO_LIMIT_MIN_US or max_us > SERVO_LIMIT_MAX_US or min_us >= max_us:
-            raise refused(
-                Status.STATUS_INVALID_ARGUMENT,
-                f"servo limits [{min_us}, {max_us}] us must satisfy "
-                f"{SERVO_LIMIT_MIN_US} <= min_us < max_us <= {SERVO_LIMIT_MAX_US}",
-            )
-        speed = self._speed(max_speed, max_speed_us, max_us - min_us)
-        msg = ArduinoIn()
-        init = msg.servo_init
-        init.pin, init.min_us, init.max_us, init.max_speed = pin, min_us, max_us, speed
-        if safe_us is not None:
-            safe_us = check_int("safe_us", safe_us)
-            if not min_us <= safe_us <= max_us:
-                raise refused(
-                    Status.STATUS_OUT_OF_RANGE, f"safe_us {safe_us} is outside [{min_us}, {max_us}]"
-                )
-            init.safe_us = safe_us
-        elif safe == "detach":
-            init.safe_detach = True
-        else:
-            safe = 90 if safe is None else check_int("safe", safe)
-            if not 0 <= safe <= SERVO_MAX_DEGREES:
-                raise refused(Status.STATUS_OUT_OF_RANGE, f"safe {safe} degrees is outside 0..180")
-            init.safe_degrees = safe
-        with self._lock:
-            self._check_free(pin, SERVO)
-            current = self._outputs.get(pin)
-            servos = sum(1 for o in self._outputs.values() if o.mode is SERVO)
-            if current is None and servos >= self.info.max_servos:
-                raise refused(
-                    Status.STATUS_NO_FREE_RESOURCE,
-                    f"all {self.info.max_servos} servo slots are in use",
-                )
-        servo = Servo(self, pin, min_us, max_us, effective_speed(speed))
-        which = init.WhichOneof("safe")
-        if which == "safe_detach":
-            width = 0  # no pulses
-        else:
-            width = init.safe_us if which == "safe_us" else servo.to_us(init.safe_degrees)
-        state = _Output(SERVO, msg.SerializeToString(), width, min_us, max_us)
-        return msg, lambda: self._set_output(pin, state), servo
-
-    @staticmethod
-    def _speed(degrees_per_s: float | None, us_per_s: int | None, span_us: int) -> int:
-        """A speed limit as ServoInit.max_speed (us per second, 0: none), checked."""
-        if degrees_per_s is not None and us_per_s is not None:
-            raise ArgumentTypeError("give max_speed (degrees/s) or max_speed_us, not both")
-        if degrees_per_s is not None:
-            if isinstance(degrees_per_s, bool) or not isinstance(degrees_per_s, int | float):
-                raise ArgumentTypeError(
-                    f"max_speed must be a number, not {type(degrees_per_s).__name__}"
-                )
-            if not degrees_per_s > 0:  # also NaN
-                raise refused(Status.STATUS_INVALID_ARGUMENT, "max_speed must be above 0")
-            us_per_s = max(1, round(degrees_per_s * span_us / SERVO_MAX_DEGREES))
-        elif us_per_s is None:
-            return 0
-        else:
-            us_per_s = check_int("max_speed_us", us_per_s)
-            if us_per_s <= 0:
-                raise refused(Status.STATUS_INVALID_ARGUMENT, "max_speed_us must be above 0")
-        if us_per_s > MAX_SPEED_US:
-            raise refused(
-                Status.STATUS_INVALID_ARGUMENT,
-                f"a speed limit of {us_per_s} us/s is above the device's {MAX_SPEED_US}",
-            )
-        return us_per_s
+        return self._future(msg, on_ok, _returning(made))
 
     def digital_output(self, pin: Pin, safe: bool = False) -> DigitalOutput:
         """Configure ``pin`` as a digital output; it takes its ``safe`` level at once.
 
         Again with the same ``safe`` level, it changes nothing at the pin.
         """
-        msg, on_ok, output = self._digital_init(pin, safe)
+        msg, on_ok, output = digital.init(self, pin, safe)
         self._send(msg, on_ok)
         return output
 
     def submit_digital_output(self, pin: Pin, safe: bool = False) -> Future[DigitalOutput]:
         """:meth:`digital_output` without waiting: a future of the output, resolved by the Ack."""
-        msg, on_ok, output = self._digital_init(pin, safe)
+        msg, on_ok, output = digital.init(self, pin, safe)
         return self._future(msg, on_ok, _returning(output))
-
-    def _digital_init(
-        self, pin: Pin, safe: bool
-    ) -> tuple[ArduinoIn, Callable[[], None], DigitalOutput]:
-        pin = self._check_pin(pin, DIGITAL)
-        safe = check_level("safe", safe)  # bool("no") and bool(2) are True: no guessing
-        with self._lock:
-            self._check_free(pin, DIGITAL)
-        msg = ArduinoIn()
-        msg.digital_init.pin = pin
-        msg.digital_init.safe_level = safe
-        state = _Output(DIGITAL, msg.SerializeToString(), int(safe))
-        return msg, lambda: self._set_output(pin, state), DigitalOutput(self, pin)
 
     def pwm_output(self, pin: Pin, safe: RealNumber = 0) -> PwmOutput:
         """Configure ``pin`` as a PWM output (duty 0..255); it takes its ``safe`` duty at once.
@@ -690,40 +532,14 @@ class Board(ClosedOnExit):
         10, 11, at 976 Hz); pins 9 and 10 share Timer1 with the servos
         (:class:`TimerInUseError` while one runs).
         """
-        msg, on_ok, output = self._pwm_init(pin, safe)
+        msg, on_ok, output = pwm.init(self, pin, safe)
         self._send(msg, on_ok)
         return output
 
     def submit_pwm_output(self, pin: Pin, safe: RealNumber = 0) -> Future[PwmOutput]:
         """:meth:`pwm_output` without waiting: a future of the output, resolved by the Ack."""
-        msg, on_ok, output = self._pwm_init(pin, safe)
+        msg, on_ok, output = pwm.init(self, pin, safe)
         return self._future(msg, on_ok, _returning(output))
-
-    def _pwm_init(self, pin: Pin, safe: object) -> tuple[ArduinoIn, Callable[[], None], PwmOutput]:
-        # The device's order (docs/protocol.md section 7, rule 13).
-        pin = self._check_pin(pin, PWM)
-        timer = self.info.timer(pin)
-        use = "free" if timer is None else self.info.timer_use(timer)
-        if use not in ("free", "servos"):  # the servos' timer: conflict(), by what runs
-            held = "runs the device's millisecond clock" if use == "clock" else f"is the {use}'"
-            raise refused(
-                Status.STATUS_TIMER_IN_USE,
-                f"pin {pin}'s PWM needs Timer{timer}, which {held} "
-                f"(PWM pins: {', '.join(map(str, self.info.pwm_pins))})",
-            )
-        self._check_capable(pin, PWM)
-        duty = whole_number("safe", safe)
-        with self._lock:
-            self._check_free(pin, PWM)
-        if not 0 <= duty <= PWM_MAX_DUTY:
-            raise refused(
-                Status.STATUS_OUT_OF_RANGE, f"safe duty {duty} is outside 0..{PWM_MAX_DUTY}"
-            )
-        msg = ArduinoIn()
-        msg.pwm_init.pin = pin
-        msg.pwm_init.safe_duty = duty
-        state = _Output(PWM, msg.SerializeToString(), duty)
-        return msg, lambda: self._set_output(pin, state), PwmOutput(self, pin, duty)
 
     # --- inputs ----------------------------------------------------------------------
 
@@ -746,7 +562,7 @@ class Board(ClosedOnExit):
         :class:`InterlockActiveError` until the input is back at its other level
         and :meth:`clear_interlock` was called.
         """
-        msg, on_ok, make = self._digital_input_init(pin, pull_up, debounce_ms, interlock)
+        msg, on_ok, make = digital_input.init(self, pin, pull_up, debounce_ms, interlock)
         return self._input(msg, on_ok, make)
 
     def submit_digital_input(
@@ -759,41 +575,8 @@ class Board(ClosedOnExit):
     ) -> Future[DigitalInput]:
         """:meth:`digital_input` without waiting, resolved by the Ack (before the first level:
         ``read()`` is None until it arrives, right after)."""
-        msg, on_ok, make = self._digital_input_init(pin, pull_up, debounce_ms, interlock)
+        msg, on_ok, make = digital_input.init(self, pin, pull_up, debounce_ms, interlock)
         return self._future(msg, on_ok, _returning(make()))
-
-    def _digital_input_init(
-        self, pin: Pin, pull_up: object, debounce_ms: object, interlock: object
-    ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], DigitalInput]]:
-        # The device's order (docs/protocol.md section 7, rules 11 and 14): the feature,
-        # the arguments, the pin, then whether it is free.
-        if not isinstance(pull_up, bool):
-            raise ArgumentTypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
-        pin = self.pin_number(pin)
-        self._check_feature(DIGITAL_INPUT)
-        debounce = check_int("debounce_ms", debounce_ms)
-        if not 0 <= debounce <= DEBOUNCE_MAX_MS:
-            raise refused(
-                Status.STATUS_INVALID_ARGUMENT,
-                f"debounce_ms {debounce} is outside 0..{DEBOUNCE_MAX_MS}",
-            )
-        if interlock not in _TRIPS:
-            raise refused(
-                Status.STATUS_INVALID_ARGUMENT,
-                f"interlock must be None, 'low' or 'high', not {interlock!r}",
-            )
-        pin = self._check_pin(pin)
-        self._check_capable(pin, DIGITAL_INPUT)
-        msg = ArduinoIn()
-        init = msg.digital_input_init
-        init.pin, init.pull_up, init.debounce_ms = pin, pull_up, debounce
-        init.interlock = _TRIPS[interlock]
-        trip: Interlock | None = interlock  # type: ignore[assignment]
-
-        def make() -> DigitalInput:
-            return DigitalInput(self._inputs, pin, self.release, self.call_timeout, trip)
-
-        return msg, self._input_recorder(pin, DIGITAL_INPUT, msg), make
 
     def analog_input(
         self, pin: Pin, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
@@ -806,39 +589,15 @@ class Board(ClosedOnExit):
         ``heartbeat`` seconds passed without a report (so silence still says the
         device is alive). Returns once its first value is known.
         """
-        msg, on_ok, make = self._analog_input_init(pin, rate_hz, threshold, heartbeat)
+        msg, on_ok, make = analog_input.init(self, pin, rate_hz, threshold, heartbeat)
         return self._input(msg, on_ok, make)
 
     def submit_analog_input(
         self, pin: Pin, *, rate_hz: float = 100.0, threshold: int = 0, heartbeat: float = 1.0
     ) -> Future[AnalogInput]:
         """:meth:`analog_input` without waiting, resolved by the Ack."""
-        msg, on_ok, make = self._analog_input_init(pin, rate_hz, threshold, heartbeat)
+        msg, on_ok, make = analog_input.init(self, pin, rate_hz, threshold, heartbeat)
         return self._future(msg, on_ok, _returning(make()))
-
-    def _analog_input_init(
-        self, pin: Pin, rate_hz: object, threshold: object, heartbeat: object
-    ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], AnalogInput]]:
-        # The device's order (rules 11 and 14): the feature, the pin's number, the
-        # arguments, a reserved pin, the pin's ADC, then whether it is free.
-        pin = self._check_pin(pin, ANALOG_INPUT, reserved=False)
-        interval = period_ms("rate_hz", rate_hz)
-        beat = interval_ms("heartbeat", heartbeat)
-        counts = check_int("threshold", threshold)
-        if not 0 <= counts <= ANALOG_MAX:
-            raise refused(
-                Status.STATUS_INVALID_ARGUMENT, f"threshold {counts} is outside 0..{ANALOG_MAX}"
-            )
-        self._check_reserved(pin)
-        self._check_capable(pin, ANALOG_INPUT)
-        msg = ArduinoIn()
-        init = msg.analog_input_init
-        init.pin, init.threshold, init.interval_ms, init.heartbeat_ms = pin, counts, interval, beat
-
-        def make() -> AnalogInput:
-            return AnalogInput(self._inputs, pin, self.release, self.call_timeout)
-
-        return msg, self._input_recorder(pin, ANALOG_INPUT, msg), make
 
     def counter(
         self, pin: Pin, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
@@ -849,47 +608,24 @@ class Board(ClosedOnExit):
         at most ``rate_hz`` times a second (the Uno: pins 2..13, two counters at once).
         Returns once its first count (0) is known.
         """
-        msg, on_ok, make = self._counter_init(pin, edge, pull_up, rate_hz)
+        msg, on_ok, make = counter.init(self, pin, edge, pull_up, rate_hz)
         return self._input(msg, on_ok, make)
 
     def submit_counter(
         self, pin: Pin, *, edge: Edge = "rising", pull_up: bool = False, rate_hz: float = 50.0
     ) -> Future[Counter]:
         """:meth:`counter` without waiting, resolved by the Ack."""
-        msg, on_ok, make = self._counter_init(pin, edge, pull_up, rate_hz)
+        msg, on_ok, make = counter.init(self, pin, edge, pull_up, rate_hz)
         return self._future(msg, on_ok, _returning(make()))
 
-    def _counter_init(
-        self, pin: Pin, edge: object, pull_up: object, rate_hz: object
-    ) -> tuple[ArduinoIn, Callable[[], None], Callable[[], Counter]]:
-        # As an analog input's (rule 14), with the pin's interrupt.
-        if not isinstance(pull_up, bool):
-            raise ArgumentTypeError(f"pull_up must be a bool, not {type(pull_up).__name__}")
-        pin = self._check_pin(pin, COUNTER, reserved=False)
-        if edge not in _EDGES:
-            raise refused(
-                Status.STATUS_INVALID_ARGUMENT,
-                f"edge must be 'rising', 'falling' or 'both', not {edge!r}",
-            )
-        interval = period_ms("rate_hz", rate_hz)
-        self._check_reserved(pin)
-        self._check_capable(pin, COUNTER)
-        msg = ArduinoIn()
-        init = msg.counter_init
-        init.pin, init.pull_up, init.interval_ms = pin, pull_up, interval
-        init.edge = _EDGES[edge]
-
-        def make() -> Counter:
-            return Counter(self._inputs, pin, self.release, self.call_timeout)
-
-        return msg, self._input_recorder(pin, COUNTER, msg), make
-
-    def _input_recorder(self, pin: int, mode: PinMode, msg: ArduinoIn) -> Callable[[], None]:
-        """Check the pin is free for ``mode``; what to record at the Init's Ack."""
+    def _input_recorder(
+        self, pin: int, mode: PinMode, msg: ArduinoIn, kind: InputKind
+    ) -> Callable[[], None]:
+        """Check the pin is free for input ``mode``; what to record at the Init's Ack (its
+        reports carry ``kind`` values)."""
         with self._lock:
             self._check_free(pin, mode)
-        state = _Output(mode, msg.SerializeToString(), 0)
-        kind = _INPUT_KINDS[mode.name]
+        state = PinRecord(mode, msg.SerializeToString(), 0)
 
         def on_ok() -> None:
             self._set_output(pin, state)
@@ -1433,7 +1169,7 @@ class Board(ClosedOnExit):
 
         return self._rpc.submit(msg, on_done=done)
 
-    def _set_output(self, pin: int, state: _Output) -> None:
+    def _set_output(self, pin: int, state: PinRecord) -> None:
         self._outputs[pin] = state  # an Init drives the safe value: no value to restore
 
     def _set_value(self, pin: int, control: bytes, value: int) -> None:

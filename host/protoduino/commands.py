@@ -22,8 +22,9 @@ How to add a pin mode (4 files by hand, and the 2 tests that list the default
 firmware's features; before, 8 and the same 2): its Init and Control and a
 ``Feature`` value with a ``(pin_mode)`` option in the schema, then the firmware's
 functions (firmware/core/pd_outputs.h has the exact recipe). Here, only a named
-constant (``SERVO`` and the others below) if the host's code refers to the mode.
-docs/architecture.md lists both counts, file by file.
+constant (``SERVO`` and the others below) if the host's code refers to the mode; the
+host's code for the mode is its module ``protoduino.modes.<name>``, which ``Board``
+composes. docs/architecture.md lists the counts, file by file.
 """
 
 from __future__ import annotations

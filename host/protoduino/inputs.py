@@ -1,4 +1,6 @@
-"""Inputs: digital inputs, analog inputs and pulse counters, fed by the device's InputReports.
+"""Inputs: what digital inputs, analog inputs and pulse counters share, fed by the device's
+InputReports (each mode's own class, with its Init, is in :mod:`protoduino.modes`:
+``digital_input``, ``analog_input``, ``counter``).
 
 The device reports "freshness over completeness" (docs/protocol.md section 7): when an
 input changed it sends one InputReport with the current values, and a report it could
@@ -31,7 +33,6 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
 
 from ._generated import protoduino_pb2 as pb
 from .clock import Clock
@@ -390,68 +391,6 @@ class Input:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(pin={self.pin})"
-
-
-class DigitalInput(Input):
-    """A digital input (debounced on the device); get one from ``board.digital_input``."""
-
-    kind: InputKind = "digital"
-
-    def __init__(
-        self,
-        table: InputTable,
-        pin: int,
-        release: Callable[[int], None],
-        timeout: float,
-        interlock: Literal["low", "high"] | None = None,
-    ) -> None:
-        super().__init__(table, pin, release, timeout)
-        #: The level that trips this input's interlock (None: not an interlock).
-        self.interlock = interlock
-
-    def read(self) -> bool | None:
-        """The latest debounced level (None before the first report)."""
-        reading = self.reading()
-        return None if reading is None else bool(reading.value)
-
-    def wait_for(self, level: LevelCondition, timeout: float | None = None) -> bool:
-        """Wait until the level is ``level`` (or ``level(value)`` holds); return it.
-
-        Returns at once if it already is. Raises :class:`InputTimeoutError` after
-        ``timeout`` seconds (default: the board's call timeout).
-        """
-        test = _level_test(level)
-        return bool(self._wait(lambda r: test(bool(r.value)), timeout).value)
-
-
-class AnalogInput(Input):
-    """An analog input in 10-bit counts; get one from ``board.analog_input``."""
-
-    kind: InputKind = "analog"
-
-    def read(self) -> int | None:
-        """The latest counts, 0..1023 (None before the first report)."""
-        reading = self.reading()
-        return None if reading is None else reading.value
-
-    def wait_for(self, condition: ValueCondition, timeout: float | None = None) -> int:
-        """Wait until ``condition(counts)`` holds (at once if it does now); return the counts."""
-        return self._wait(lambda r: condition(r.value), timeout).value
-
-
-class Counter(Input):
-    """A pulse counter (a wheel encoder); get one from ``board.counter``."""
-
-    kind: InputKind = "counter"
-
-    def read(self) -> int | None:
-        """Edges counted since the counter's Init (wraps at 2**32; None before the first report)."""
-        reading = self.reading()
-        return None if reading is None else reading.value
-
-    def wait_for(self, condition: ValueCondition, timeout: float | None = None) -> int:
-        """Wait until ``condition(count)`` holds (at once if it does now); return the count."""
-        return self._wait(lambda r: condition(r.value), timeout).value
 
 
 def _level_test(level: LevelCondition) -> Callable[[bool], bool]:

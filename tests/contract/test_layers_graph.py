@@ -17,6 +17,8 @@ import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
+from protoduino.commands import PIN_MODES
+
 ROOT = Path(__file__).resolve().parents[2]
 
 #: Python, bottom first: (layer, module patterns). dev/ sits above the whole runtime: the
@@ -62,6 +64,8 @@ PYTHON_LAYERS: Sequence[tuple[str, Sequence[str]]] = (
     ("session", ("protoduino.session",)),
     ("values", ("protoduino.arguments", "protoduino.readback")),
     ("requests", ("protoduino.rpc", "protoduino.inputs", "protoduino.userreports")),
+    # Each pin mode's host code; the board composes them (none imports it).
+    ("modes", ("protoduino.modes", "protoduino.modes.*")),
     (
         "api",
         (
@@ -222,3 +226,26 @@ def test_the_checker_sees_an_upward_use_and_a_cycle() -> None:
     problems = violations({"a": set(), "b": {"c"}, "c": {"b"}}, layers)
     assert len(problems) == 1 and problems[0].startswith("cycle: ")
     assert violations({"a": set(), "x": set()}, layers)[0].startswith("x is in no layer")
+
+
+def _init_members_used(path: Path) -> set[str]:
+    """The pin modes' Init members (``msg.servo_init``, ...) that ``path``'s code touches."""
+    inits = {mode.init for mode in PIN_MODES}
+    tree = ast.parse(path.read_text(), str(path))
+    return {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute) and n.attr in inits}
+
+
+def test_each_pin_mode_is_one_module_that_the_board_composes() -> None:
+    """Issue 36, item 5: each pin mode's host code (its Init's checks and message, the record
+    a restore resends, its handle) is a module of its own, named as the schema declares the
+    mode (``commands.PIN_MODES``); the board builds no mode's Init itself, and no mode module
+    uses the board (the modes layer sits below it)."""
+    modules = python_modules()
+    graph = python_graph()
+    for mode in PIN_MODES:
+        name = f"protoduino.modes.{mode.name}"
+        assert name in modules, f"pin mode {mode.name!r} has no module {name}"
+        assert _init_members_used(modules[name]) == {mode.init}, name
+        assert not any(used == "protoduino.board" for used in graph[name]), name
+        assert "protoduino.modes." + mode.name in graph["protoduino.board"]
+    assert _init_members_used(modules["protoduino.board"]) == set()

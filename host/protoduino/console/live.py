@@ -21,10 +21,10 @@ from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any, Literal, cast
 
-from ..board import Board, DigitalOutput, PwmOutput, Servo
+from ..board import AnalogInput, Board, Counter, DigitalInput, DigitalOutput, PwmOutput, Servo
 from ..errors import ArgumentError
 from ..events import Event, EventKind
-from ..inputs import AnalogInput, Counter, DigitalInput, Reading
+from ..inputs import Reading
 from ..readback import OutputState
 
 Mode = Literal["servo", "digital", "pwm", "input", "analog", "counter"]
