@@ -14,14 +14,6 @@ typedef char pd_assert_pwm_fit_read[(PD_MAX_PWM <= sizeof(((protoduino_OutputSta
 /* A servo's settings (min_us .. step) are compared as bytes: no padding among them. */
 #define PD_SERVO_SETTINGS (offsetof(pd_servo_t, step) + 1u)
 typedef char pd_assert_servo_settings_packed[(PD_SERVO_SETTINGS == 7) ? 1 : -1];
-typedef char pd_assert_modes_fit_owner[(PD_MODE_COUNT <= 16) ? 1 : -1];
-
-static uint8_t by_pin(void *hal)
-{
-    (void)hal;
-    return 0;
-}
-
 static uint8_t servo_slots(void *hal)
 {
     uint8_t n = pd_hal_board_info(hal)->max_servos;
@@ -73,12 +65,6 @@ static void digital_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot
     drive_digital(out, hal, pin, (out->digital_safe >> pin) & 1u);
 }
 
-static uint8_t pwm_slots(void *hal)
-{
-    (void)hal;
-    return PD_MAX_PWM;
-}
-
 static void drive_pwm(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot, uint8_t duty)
 {
     out->pwm[slot].duty = duty;
@@ -105,24 +91,6 @@ static void input_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
     (void)hal;
     (void)pin;
     (void)slot;
-}
-
-static uint8_t dinput_slots(void *hal)
-{
-    (void)hal;
-    return PD_MAX_DIGITAL_INPUTS;
-}
-
-static uint8_t ainput_slots(void *hal)
-{
-    (void)hal;
-    return PD_MAX_ANALOG_INPUTS;
-}
-
-static uint8_t counter_slots(void *hal)
-{
-    (void)hal;
-    return PD_MAX_COUNTERS;
 }
 
 static void dinput_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
@@ -160,9 +128,7 @@ static void digital_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t s
 
 /*
  * The pin-mode table: one entry per PD_MODE_x but PD_MODE_FREE (which owns no pin),
- *   X(mode, slots, safe, release)
- *   slots:   slots(hal), how many slots of per-slot state the mode has on this
- *            board (0: its state is kept by pin, any number of its pins may be claimed);
+ *   X(mode, safe, release)
  *   safe:    safe(out, hal, pin, slot), drive one of its pins to the safe value
  *            given at its Init;
  *   release: release(out, hal, pin, slot), let go of one of its pins (the owner
@@ -174,12 +140,12 @@ static void digital_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t s
  * (pd_dispatch.c): the compiler cannot inline through a pointer.
  */
 #define PD_MODES(X)                                                          \
-    X(PD_MODE_DIGITAL, by_pin, digital_safe, digital_release)                \
-    X(PD_MODE_SERVO, servo_slots, servo_safe, servo_release)                 \
-    X(PD_MODE_PWM, pwm_slots, pwm_safe, pwm_release)                         \
-    X(PD_MODE_DIGITAL_INPUT, dinput_slots, input_safe, dinput_release)       \
-    X(PD_MODE_ANALOG_INPUT, ainput_slots, input_safe, ainput_release)        \
-    X(PD_MODE_COUNTER, counter_slots, input_safe, counter_release)           \
+    X(PD_MODE_DIGITAL, digital_safe, digital_release)                        \
+    X(PD_MODE_SERVO, servo_safe, servo_release)                              \
+    X(PD_MODE_PWM, pwm_safe, pwm_release)                                    \
+    X(PD_MODE_DIGITAL_INPUT, input_safe, dinput_release)                     \
+    X(PD_MODE_ANALOG_INPUT, input_safe, ainput_release)                      \
+    X(PD_MODE_COUNTER, input_safe, counter_release)                          \
     PD_MODES_USER(X)
 
 /* A user service's pins (pd_user.h), by pin, like digital outputs. */
@@ -193,35 +159,21 @@ static void user_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 static void user_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
     (void)slot;
-    out->owner[pin] = 0; /* the service's no longer, in its hook already (pd_user_release) */
-    pd_user_pin_release(out->core, hal, pin);
+    pd_user_pin_release(out->core, out->owner, hal, pin);
 }
-#define PD_MODES_USER(X) X(PD_MODE_USER, by_pin, user_safe, user_release)
+#define PD_MODES_USER(X) X(PD_MODE_USER, user_safe, user_release)
 #else
 #define PD_MODES_USER(X)
 #endif
 
-#define PD_MODE_ONE(mode, slots_, safe_, release_) +1
+#define PD_MODE_ONE(mode, safe_, release_) +1
 typedef char pd_assert_every_mode_listed[(0 PD_MODES(PD_MODE_ONE)) == PD_MODE_COUNT - 1 ? 1 : -1];
 #undef PD_MODE_ONE
-
-static uint8_t mode_slots(uint8_t mode, void *hal)
-{
-    switch (mode) {
-#define PD_MODE_SLOTS(mode_, slots_, safe_, release_)                        \
-    case mode_:                                                              \
-        return slots_(hal);
-        PD_MODES(PD_MODE_SLOTS)
-#undef PD_MODE_SLOTS
-    default:
-        return 0;
-    }
-}
 
 static void mode_safe(uint8_t mode, pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
     switch (mode) {
-#define PD_MODE_SAFE(mode_, slots_, safe_, release_)                         \
+#define PD_MODE_SAFE(mode_, safe_, release_)                                 \
     case mode_:                                                              \
         safe_(out, hal, pin, slot);                                          \
         break;
@@ -235,7 +187,7 @@ static void mode_safe(uint8_t mode, pd_outputs_t *out, void *hal, uint8_t pin, u
 static void mode_release(uint8_t mode, pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
     switch (mode) {
-#define PD_MODE_RELEASE(mode_, slots_, safe_, release_)                      \
+#define PD_MODE_RELEASE(mode_, safe_, release_)                              \
     case mode_:                                                              \
         release_(out, hal, pin, slot);                                       \
         break;
@@ -250,91 +202,6 @@ void pd_outputs_init(pd_outputs_t *out)
 {
     memset(out, 0, sizeof(*out));
     pd_inputs_init(&out->inputs);
-}
-
-/* Pin checks shared by every Init and Control, in the contract's order. */
-static protoduino_Status check_pin(void *hal, uint32_t pin)
-{
-    const pd_board_info_t *info = pd_hal_board_info(hal);
-    uint8_t num_pins = info->num_pins < PD_MAX_PINS ? info->num_pins : PD_MAX_PINS;
-
-    if (pin >= num_pins) {
-        return protoduino_Status_STATUS_INVALID_PIN;
-    }
-    if (info->reserved_pins & (1UL << pin)) {
-        return protoduino_Status_STATUS_RESERVED_PIN;
-    }
-    return protoduino_Status_STATUS_OK;
-}
-
-protoduino_Status pd_pins_claim(pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
-                                uint8_t *slot)
-{
-    protoduino_Status status = check_pin(hal, pin);
-    if (status != protoduino_Status_STATUS_OK) {
-        return status;
-    }
-    if (mode != PD_MODE_ANALOG_INPUT && (pd_hal_board_info(hal)->analog_only_pins >> pin) & 1u) {
-        return protoduino_Status_STATUS_NOT_SUPPORTED; /* no digital I/O at the pin */
-    }
-    uint8_t owner = out->owner[pin];
-    if (owner != 0) {
-        if (PD_OWNER_MODE(owner) != mode) {
-            return protoduino_Status_STATUS_PIN_IN_USE;
-        }
-        *slot = PD_OWNER_SLOT(owner); /* re-init: new settings, same slot */
-        return protoduino_Status_STATUS_OK;
-    }
-    uint8_t slots = mode_slots(mode, hal);
-    uint8_t free_slot = 0;
-    if (slots > 0) {
-        /* The lowest slot no pin of this mode holds. */
-        uint16_t used = 0;
-        for (uint8_t p = 0; p < PD_MAX_PINS; p++) {
-            if (out->owner[p] != 0 && PD_OWNER_MODE(out->owner[p]) == mode) {
-                used |= (uint16_t)(1u << PD_OWNER_SLOT(out->owner[p]));
-            }
-        }
-        while (free_slot < slots && ((used >> free_slot) & 1u)) {
-            free_slot++;
-        }
-        if (free_slot >= slots) {
-            return protoduino_Status_STATUS_NO_FREE_RESOURCE;
-        }
-    }
-    out->owner[pin] = PD_OWNER(mode, free_slot);
-    *slot = free_slot;
-    return protoduino_Status_STATUS_OK;
-}
-
-protoduino_Status pd_pins_owned(const pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
-                                uint8_t *slot)
-{
-    /* The common case first, on the path from a command's last byte to its pin: an
-     * output commanded in the mode it was set up in. Only a pin that passed
-     * check_pin is ever owned (pd_pins_claim), so check_pin (a 32-bit mask shifted
-     * by the pin: a loop on the AVR) only has to name what is wrong otherwise. */
-    if (pin < PD_MAX_PINS) {
-        uint8_t owner = out->owner[pin];
-        if (owner != 0 && PD_OWNER_MODE(owner) == mode) {
-            *slot = PD_OWNER_SLOT(owner);
-            return protoduino_Status_STATUS_OK;
-        }
-    }
-    protoduino_Status status = check_pin(hal, pin);
-    return status != protoduino_Status_STATUS_OK ? status
-                                                 : protoduino_Status_STATUS_NOT_INITIALISED;
-}
-
-uint8_t pd_pins_count(const pd_outputs_t *out, uint8_t mode)
-{
-    uint8_t n = 0;
-    for (uint8_t p = 0; p < PD_MAX_PINS; p++) {
-        if (out->owner[p] != 0 && PD_OWNER_MODE(out->owner[p]) == mode) {
-            n++;
-        }
-    }
-    return n;
 }
 
 /*
@@ -375,7 +242,7 @@ bool pd_outputs_timer_pwm(const pd_outputs_t *out, void *hal)
 __attribute__((noinline)) protoduino_Status
 pd_outputs_servo_init(pd_outputs_t *out, void *hal, const protoduino_ServoInit *msg)
 {
-    protoduino_Status status = check_pin(hal, msg->pin);
+    protoduino_Status status = pd_pins_check(hal, msg->pin);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
@@ -416,7 +283,7 @@ pd_outputs_servo_init(pd_outputs_t *out, void *hal, const protoduino_ServoInit *
     }
     uint8_t was = out->owner[msg->pin];
     uint8_t channel;
-    status = pd_pins_claim(out, hal, msg->pin, PD_MODE_SERVO, &channel);
+    status = pd_pins_claim(out->owner, hal, msg->pin, PD_MODE_SERVO, servo_slots(hal), &channel);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
@@ -442,7 +309,7 @@ static __attribute__((noinline)) protoduino_Status
 servo_control(pd_outputs_t *out, void *hal, const protoduino_ServoControl *msg, bool apply)
 {
     uint8_t channel;
-    protoduino_Status status = pd_pins_owned(out, hal, msg->pin, PD_MODE_SERVO, &channel);
+    protoduino_Status status = pd_pins_owned(out->owner, hal, msg->pin, PD_MODE_SERVO, &channel);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
@@ -479,7 +346,7 @@ static __attribute__((noinline)) protoduino_Status
 digital_control(pd_outputs_t *out, void *hal, const protoduino_DigitalControl *msg, bool apply)
 {
     uint8_t slot;
-    protoduino_Status status = pd_pins_owned(out, hal, msg->pin, PD_MODE_DIGITAL, &slot);
+    protoduino_Status status = pd_pins_owned(out->owner, hal, msg->pin, PD_MODE_DIGITAL, &slot);
     if (status == protoduino_Status_STATUS_OK && apply) {
         drive_digital(out, hal, (uint8_t)msg->pin, msg->level);
     }
@@ -494,7 +361,7 @@ protoduino_Status pd_outputs_digital_control(pd_outputs_t *out, void *hal,
 
 protoduino_Status pd_outputs_pwm_init(pd_outputs_t *out, void *hal, const protoduino_PwmInit *msg)
 {
-    protoduino_Status status = check_pin(hal, msg->pin);
+    protoduino_Status status = pd_pins_check(hal, msg->pin);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
@@ -511,14 +378,14 @@ protoduino_Status pd_outputs_pwm_init(pd_outputs_t *out, void *hal, const protod
     if (was != 0 && PD_OWNER_MODE(was) != PD_MODE_PWM) {
         return protoduino_Status_STATUS_PIN_IN_USE;
     }
-    if ((info->servo_timer_pins & bit) && pd_pins_count(out, PD_MODE_SERVO) > 0) {
+    if ((info->servo_timer_pins & bit) && pd_pins_count(out->owner, PD_MODE_SERVO) > 0) {
         return protoduino_Status_STATUS_TIMER_IN_USE; /* its timer makes the servo pulses */
     }
     if (msg->safe_duty > 255u) {
         return protoduino_Status_STATUS_OUT_OF_RANGE;
     }
     uint8_t slot;
-    status = pd_pins_claim(out, hal, pin, PD_MODE_PWM, &slot);
+    status = pd_pins_claim(out->owner, hal, pin, PD_MODE_PWM, PD_MAX_PWM, &slot);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
@@ -536,7 +403,7 @@ static __attribute__((noinline)) protoduino_Status
 pwm_control(pd_outputs_t *out, void *hal, const protoduino_PwmControl *msg, bool apply)
 {
     uint8_t slot;
-    protoduino_Status status = pd_pins_owned(out, hal, msg->pin, PD_MODE_PWM, &slot);
+    protoduino_Status status = pd_pins_owned(out->owner, hal, msg->pin, PD_MODE_PWM, &slot);
     if (status == protoduino_Status_STATUS_OK && msg->duty > 255u) {
         status = protoduino_Status_STATUS_OUT_OF_RANGE;
     }
@@ -719,7 +586,7 @@ protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
 {
     uint8_t slot;
     bool was = msg->pin < PD_MAX_PINS && out->owner[msg->pin] != 0;
-    protoduino_Status status = pd_pins_claim(out, hal, msg->pin, PD_MODE_DIGITAL, &slot);
+    protoduino_Status status = pd_pins_claim(out->owner, hal, msg->pin, PD_MODE_DIGITAL, 0, &slot);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
@@ -743,7 +610,7 @@ static void release_owned(pd_outputs_t *out, void *hal, uint8_t pin)
 
 protoduino_Status pd_outputs_release(pd_outputs_t *out, void *hal, uint32_t pin)
 {
-    protoduino_Status status = check_pin(hal, pin);
+    protoduino_Status status = pd_pins_check(hal, pin);
     if (status == protoduino_Status_STATUS_OK && out->owner[pin] == 0) {
         status = protoduino_Status_STATUS_NOT_INITIALISED;
     }
@@ -756,7 +623,7 @@ protoduino_Status pd_outputs_release(pd_outputs_t *out, void *hal, uint32_t pin)
 void pd_outputs_release_all(pd_outputs_t *out, void *hal)
 {
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
-        if (out->owner[pin] != 0) { /* an owned pin passed check_pin when it was claimed */
+        if (out->owner[pin] != 0) { /* an owned pin passed pd_pins_check when it was claimed */
             release_owned(out, hal, pin);
         }
     }

@@ -1,18 +1,19 @@
 /*
- * The output registry: which pin belongs to which pin mode, each mode's
- * per-slot state, limits and safe values (docs/protocol.md section 7,
+ * The output modes and the walks over every owned pin: each mode's per-slot
+ * state, limits and safe values (docs/protocol.md section 7,
  * docs/architecture.md "device semantics"). Every check the device makes on
  * an Init or a Control lives here and returns the Ack status; on any status
  * but OK nothing changed.
  *
  * Two tables:
- * - the pin-ownership table, pd_outputs_t.owner[]: one byte per pin, the mode
- *   that owns it and the slot of that mode's state it uses (a servo's channel).
- *   Every mode claims and looks up pins through pd_pins_claim() and
- *   pd_pins_owned(), so "pin in use by another mode", "not initialised" and a
- *   re-init keeping its slot are decided in one place for all of them;
- * - the pin-mode table, PD_MODES in pd_outputs.c: per mode, how many slots it
- *   has, how to drive a pin of it to its safe value and how to release it.
+ * - the pin table (pd_pintable.h), pd_outputs_t.owner[]: one byte per pin, the
+ *   mode that owns it and the slot of that mode's state it uses (a servo's
+ *   channel). Every mode, the inputs' and a user service's too, claims and
+ *   looks up pins through pd_pins_claim() and pd_pins_owned(); the table knows
+ *   no mode and calls none;
+ * - the pin-mode table, PD_MODES in pd_outputs.c: per mode, how to drive a pin
+ *   of it to its safe value and how to release it, for the walks over every
+ *   owned pin (Release, ReleaseAll, the failsafe's safe-all).
  *
  * How to add a pin mode (the files touched by hand, counted by adding a
  * throwaway output mode; docs/architecture.md):
@@ -25,9 +26,10 @@
  *      and the host's declarations (host/protoduino/commands.py reads them);
  *   2. here: its state, if any, in pd_outputs_t (an array indexed by slot, or a
  *      mask by pin), and its Init/Control functions' prototypes;
- *   3. pd_outputs.c: one X(...) entry in PD_MODES (slots, safe and release; the
+ *   3. pd_outputs.c: one X(...) entry in PD_MODES (safe and release; the
  *      compiler checks that every mode has one), and the Init/Control functions,
- *      which call pd_pins_claim()/pd_pins_owned(), under #if PD_FEATURE_<NAME>;
+ *      which call pd_pins_claim() (with the mode's count of slots) and
+ *      pd_pins_owned() of pd_pintable.h, under #if PD_FEATURE_<NAME>;
  *   4. pd_dispatch.c: their handlers cmd_<init>() and cmd_<control>();
  *   5. the tests that list the default firmware's features
  *      (tests/unit/test_pins_fake.py, tests/e2e/test_cli.py), and the switch in
@@ -47,6 +49,7 @@
 #include "pd_features.h"
 #include "pd_hal.h"
 #include "pd_inputs.h"
+#include "pd_pintable.h"
 #include "pd_tables.h"
 #include "protoduino.pb.h"
 
@@ -69,22 +72,6 @@
 #define PD_MAX_PWM 1
 #endif
 
-/* Pin modes: the built-in ones, PD_MODE_<NAME> numbered from 1 up to
- * PD_MODE_BUILTIN_END - 1 (PD_MODE_FREE, 0, owns nothing), are generated into
- * pd_tables.h from the (pin_mode) options on proto/protoduino.proto's enum
- * Feature; a mode the firmware has of its own would follow them. PD_MODES in
- * pd_outputs.c has one entry for each mode. */
-/* A user service's pins (pd_user.h), in a build with one: its hooks drive them safe and
- * release them. */
-#define PD_MODE_USER PD_MODE_BUILTIN_END
-#define PD_MODE_COUNT (PD_MODE_BUILTIN_END + (PD_FEATURE_USER ? 1 : 0))
-
-/* An owner byte: mode in the high nibble, slot in the low one (one byte per pin of RAM). */
-#define PD_OWNER(mode, slot) ((uint8_t)(((mode) << 4) | (slot)))
-#define PD_OWNER_MODE(owner) ((uint8_t)((owner) >> 4))
-#define PD_OWNER_SLOT(owner) ((uint8_t)((owner) & 0x0Fu))
-#define PD_MAX_SLOTS 16u
-
 /* safe_us meaning "the safe state is no pulses at all" (real widths are >= 400). */
 #define PD_SERVO_SAFE_DETACH 0u
 
@@ -105,7 +92,7 @@ typedef struct pd_pwm {
 } pd_pwm_t;
 
 typedef struct pd_outputs {
-    uint8_t owner[PD_MAX_PINS]; /* PD_OWNER(mode, slot); 0 = free */
+    uint8_t owner[PD_MAX_PINS]; /* the pin table (pd_pintable.h): PD_OWNER(mode, slot); 0 = free */
     pd_servo_t servo[PD_MAX_SERVOS];
     pd_pwm_t pwm[PD_MAX_PWM];
     uint32_t digital_safe;  /* bit N: safe level of pin N */
@@ -119,22 +106,6 @@ typedef struct pd_outputs {
 
 
 void pd_outputs_init(pd_outputs_t *out);
-
-/*
- * Claim `pin` for `mode`: checks the pin exists and is not reserved, that no
- * other mode owns it, and finds its slot (the one it has on a re-init, else
- * the lowest free one of the mode). Returns the Ack status; on OK *slot is set
- * and the pin is owned by `mode` (the caller must not fail after this).
- */
-protoduino_Status pd_pins_claim(pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
-                                uint8_t *slot);
-
-/* For a Control: `pin` must exist, not be reserved and be owned by `mode`. */
-protoduino_Status pd_pins_owned(const pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
-                                uint8_t *slot);
-
-/* How many pins `mode` owns. */
-uint8_t pd_pins_count(const pd_outputs_t *out, uint8_t mode);
 
 protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
                                         const protoduino_ServoInit *msg);
