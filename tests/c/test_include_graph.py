@@ -41,6 +41,9 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         (
             "pd_failsafe",
             "pd_pintable",  # the pin table, below every mode (pd_pintable.h)
+            "pd_servo",  # the output modes, each one unit
+            "pd_digital",
+            "pd_pwm",
             "pd_outputs",
             "pd_inputs.h",
             "pd_inputs_state.c",
