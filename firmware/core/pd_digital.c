@@ -1,3 +1,4 @@
+/* Digital outputs, one pin mode (pd_digital.h): a level and a safe level by pin. */
 #include "pd_digital.h"
 
 #include "pd_outputs.h"

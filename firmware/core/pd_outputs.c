@@ -1,3 +1,4 @@
+/* The outputs as a whole (pd_outputs.h): the pin-mode table's walks, Pose, ReadOutputs. */
 #include "pd_outputs.h"
 
 #include <string.h>

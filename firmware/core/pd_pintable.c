@@ -1,3 +1,4 @@
+/* The pin table (pd_pintable.h): which mode owns each pin; it knows no mode. */
 #include "pd_pintable.h"
 
 typedef char pd_assert_modes_fit_owner[(PD_MODE_COUNT <= 16) ? 1 : -1];

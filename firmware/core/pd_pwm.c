@@ -1,3 +1,4 @@
+/* PWM outputs, one pin mode (pd_pwm.h): a duty and a safe duty per slot. */
 #include "pd_pwm.h"
 
 #include "pd_outputs.h"

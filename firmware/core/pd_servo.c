@@ -1,3 +1,4 @@
+/* Servos, one pin mode (pd_servo.h): limits, a safe width, speed limits stepped per frame. */
 #include "pd_servo.h"
 
 #include <stddef.h>
