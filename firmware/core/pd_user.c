@@ -141,7 +141,10 @@ protoduino_Status pd_user_release(pd_user_ctx_t *ctx, uint8_t pin)
     if (!pd_user_owns(ctx, pin)) {
         return protoduino_Status_STATUS_NOT_INITIALISED;
     }
-    pd_user_pin_release(ctx->core, ctx->core->outputs.owner, ctx->hal, pin); /* as Release would */
+    /* As a Release command's walk (pd_outputs.c, release_owned): the hook, then the pin is
+     * free whatever the hook did. */
+    pd_user_pin_release(ctx->core, ctx->core->outputs.owner, ctx->hal, pin);
+    ctx->core->outputs.owner[pin] = 0;
     return protoduino_Status_STATUS_OK;
 }
 
