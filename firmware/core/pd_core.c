@@ -8,6 +8,24 @@
 #include "pd_link.h"
 #include "pd_out.h"
 
+#if PD_FEATURE_USER
+/* The report callbacks with a user service: the user's slot to the service, the others to
+ * the inputs. Here, above both: the service and the inputs know nothing of each other. */
+static bool report_user_or_inputs(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *out)
+{
+    return slot == PD_USER_SLOT ? pd_user_report(core, out) : pd_inputs_report(core, slot, out);
+}
+
+static void sent_user_or_inputs(pd_core_t *core, const protoduino_ArduinoOut *out)
+{
+    if (out->which_data == protoduino_ArduinoOut_user_report_tag) {
+        pd_user_sent(core, out);
+    } else {
+        pd_inputs_sent(core, out);
+    }
+}
+#endif
+
 void pd_core_init(pd_core_t *core, void *hal)
 {
     core->hal = hal;
@@ -18,8 +36,8 @@ void pd_core_init(pd_core_t *core, void *hal)
     core->baud = 0; /* the platform opened the line at PD_BAUD */
     core->baud_unconfirmed = false;
 #if PD_FEATURE_USER
-    core->report = pd_user_report; /* the user's reports, and the inputs' */
-    core->report_sent = pd_user_sent;
+    core->report = report_user_or_inputs;
+    core->report_sent = sent_user_or_inputs;
     pd_user_init(core);
 #endif
     uint32_t boot = pd_hal_boot_id(hal);

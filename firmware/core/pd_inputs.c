@@ -44,8 +44,8 @@ static uint8_t pin_of(const pd_outputs_t *out, uint8_t mode, uint8_t slot)
 #endif
 
 /* The checks an input Init shares: the pin can do `mode` (`capable` is the board's mask). */
-static protoduino_Status claim_input(pd_core_t *core, uint8_t pin, uint8_t mode, uint32_t capable,
-                                     bool *was, uint8_t *slot)
+static protoduino_Status claim_input(pd_core_t *core, uint8_t pin, uint8_t mode, uint8_t slots,
+                                     uint32_t capable, bool *was, uint8_t *slot)
 {
     pd_outputs_t *out = &core->outputs;
     if (pin < PD_MAX_PINS) {
@@ -55,7 +55,7 @@ static protoduino_Status claim_input(pd_core_t *core, uint8_t pin, uint8_t mode,
         !((pd_hal_board_info(core->hal)->reserved_pins >> pin) & 1u)) {
         return protoduino_Status_STATUS_NOT_SUPPORTED;
     }
-    return pd_pins_claim(out, core->hal, pin, mode, slot);
+    return pd_pins_claim(out->owner, core->hal, pin, mode, slots, slot);
 }
 #endif /* PD_ANY_INPUT */
 
@@ -73,7 +73,8 @@ protoduino_Status pd_inputs_digital_init(pd_core_t *core, const protoduino_Digit
     uint8_t slot;
     /* Every pin of the board but the reserved ones reads as a digital input. */
     protoduino_Status status =
-        claim_input(core, msg->pin, PD_MODE_DIGITAL_INPUT, 0xFFFFFFFFUL, &was, &slot);
+        claim_input(core, msg->pin, PD_MODE_DIGITAL_INPUT, PD_MAX_DIGITAL_INPUTS,
+                    0xFFFFFFFFUL, &was, &slot);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
@@ -233,7 +234,7 @@ protoduino_Status pd_inputs_analog_init(pd_core_t *core, const protoduino_Analog
     protoduino_Status status = protoduino_Status_STATUS_INVALID_ARGUMENT;
     if (interval <= PD_ANALOG_MAX_MS && heartbeat <= PD_ANALOG_MAX_MS &&
         msg->threshold <= PD_ANALOG_MAX_COUNTS) {
-        status = claim_input(core, msg->pin, PD_MODE_ANALOG_INPUT,
+        status = claim_input(core, msg->pin, PD_MODE_ANALOG_INPUT, PD_MAX_ANALOG_INPUTS,
                              pd_hal_board_info(core->hal)->analog_pins, &was, &slot);
     } else if (msg->pin >= pd_hal_board_info(core->hal)->num_pins) {
         status = protoduino_Status_STATUS_INVALID_PIN; /* the pin is checked first */
@@ -368,7 +369,7 @@ protoduino_Status pd_inputs_counter_init(pd_core_t *core, const protoduino_Count
     uint8_t slot;
     protoduino_Status status = protoduino_Status_STATUS_INVALID_ARGUMENT;
     if ((uint8_t)msg->edge <= protoduino_Edge_EDGE_BOTH && interval <= PD_ANALOG_MAX_MS) {
-        status = claim_input(core, msg->pin, PD_MODE_COUNTER,
+        status = claim_input(core, msg->pin, PD_MODE_COUNTER, PD_MAX_COUNTERS,
                              pd_hal_board_info(core->hal)->counter_pins, &was, &slot);
     } else if (msg->pin >= pd_hal_board_info(core->hal)->num_pins) {
         status = protoduino_Status_STATUS_INVALID_PIN;

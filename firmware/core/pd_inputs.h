@@ -9,9 +9,9 @@
  * (pd_core.c, send_report), so it always carries the newest values, and every
  * change that joined a report already pending counts as coalesced.
  *
- * The pins belong to the pin registry (pd_outputs.c) like the outputs' pins:
+ * The pins belong to the pin table (pd_pintable.h) like the outputs' pins:
  * an input Init claims its pin with pd_pins_claim(), Release/ReleaseAll let go
- * of it through the pin-mode table. The state lives in pd_outputs_t.inputs so
+ * of it through the pin-mode table (pd_outputs.c). The state lives in pd_outputs_t.inputs so
  * that the table's release functions reach it.
  */
 #ifndef PD_INPUTS_H

@@ -1,18 +1,21 @@
 /*
- * The output registry: which pin belongs to which pin mode, each mode's
- * per-slot state, limits and safe values (docs/protocol.md section 7,
- * docs/architecture.md "device semantics"). Every check the device makes on
- * an Init or a Control lives here and returns the Ack status; on any status
+ * The outputs: their state (each mode's part of it, pd_outputs_t, beside the
+ * pin table) and what acts on all modes at once: the walks over every owned
+ * pin, Pose and ReadOutputs. Each output mode is a file of its own (pd_servo,
+ * pd_digital, pd_pwm): its limits and safe values (docs/protocol.md section 7,
+ * docs/architecture.md "device semantics"); every check the device makes on
+ * its Init or Control lives there and returns the Ack status; on any status
  * but OK nothing changed.
  *
  * Two tables:
- * - the pin-ownership table, pd_outputs_t.owner[]: one byte per pin, the mode
- *   that owns it and the slot of that mode's state it uses (a servo's channel).
- *   Every mode claims and looks up pins through pd_pins_claim() and
- *   pd_pins_owned(), so "pin in use by another mode", "not initialised" and a
- *   re-init keeping its slot are decided in one place for all of them;
- * - the pin-mode table, PD_MODES in pd_outputs.c: per mode, how many slots it
- *   has, how to drive a pin of it to its safe value and how to release it.
+ * - the pin table (pd_pintable.h), pd_outputs_t.owner[]: one byte per pin, the
+ *   mode that owns it and the slot of that mode's state it uses (a servo's
+ *   channel). Every mode, the inputs' and a user service's too, claims and
+ *   looks up pins through pd_pins_claim() and pd_pins_owned(); the table knows
+ *   no mode and calls none;
+ * - the pin-mode table, PD_MODES in pd_outputs.c: per mode, how to drive a pin
+ *   of it to its safe value and how to release it, for the walks over every
+ *   owned pin (Release, ReleaseAll, the failsafe's safe-all).
  *
  * How to add a pin mode (the files touched by hand, counted by adding a
  * throwaway output mode; docs/architecture.md):
@@ -23,11 +26,14 @@
  *      `protoduino gen`, which writes PD_MODE_<NAME>, PD_FEATURE_<NAME> and
  *      PD_FEATURES (pd_tables.h), the Makefile's feature list, the command table
  *      and the host's declarations (host/protoduino/commands.py reads them);
- *   2. here: its state, if any, in pd_outputs_t (an array indexed by slot, or a
- *      mask by pin), and its Init/Control functions' prototypes;
- *   3. pd_outputs.c: one X(...) entry in PD_MODES (slots, safe and release; the
- *      compiler checks that every mode has one), and the Init/Control functions,
- *      which call pd_pins_claim()/pd_pins_owned(), under #if PD_FEATURE_<NAME>;
+ *   2. a file of its own, pd_<mode>.h and pd_<mode>.c (as pd_servo, pd_digital,
+ *      pd_pwm): its state's type, its Init/Control functions, which call
+ *      pd_pins_claim() (with the mode's count of slots) and pd_pins_owned() of
+ *      pd_pintable.h, and its safe and release functions;
+ *   3. here: #include its header, and its state, if any, in pd_outputs_t (an
+ *      array indexed by slot, or a mask by pin); pd_outputs.c: one X(...) entry
+ *      in PD_MODES (its safe and release; the compiler checks that every mode has
+ *      one), and its Pose item and ReadOutputs if it has them;
  *   4. pd_dispatch.c: their handlers cmd_<init>() and cmd_<control>();
  *   5. the tests that list the default firmware's features
  *      (tests/unit/test_pins_fake.py, tests/e2e/test_cli.py), and the switch in
@@ -47,65 +53,15 @@
 #include "pd_features.h"
 #include "pd_hal.h"
 #include "pd_inputs.h"
+#include "pd_digital.h"
+#include "pd_pintable.h"
+#include "pd_pwm.h"
+#include "pd_servo.h"
 #include "pd_tables.h"
 #include "protoduino.pb.h"
 
-/* Compile-time capacity; a board reports its real figures in pd_board_info_t
- * (PD_MAX_PINS: pd_hal.h). */
-#ifndef PD_MAX_SERVOS
-#define PD_MAX_SERVOS 8
-#endif
-/* PWM outputs at once (the Uno has four PWM pins it can give: 3, 9, 10, 11). */
-#ifndef PD_MAX_PWM
-#define PD_MAX_PWM 4
-#endif
-/* A build without servos or PWM keeps one slot of each (the code stays simple), not eight or four. */
-#if !PD_FEATURE_SERVO
-#undef PD_MAX_SERVOS
-#define PD_MAX_SERVOS 1
-#endif
-#if !PD_FEATURE_PWM
-#undef PD_MAX_PWM
-#define PD_MAX_PWM 1
-#endif
-
-/* Pin modes: the built-in ones, PD_MODE_<NAME> numbered from 1 up to
- * PD_MODE_BUILTIN_END - 1 (PD_MODE_FREE, 0, owns nothing), are generated into
- * pd_tables.h from the (pin_mode) options on proto/protoduino.proto's enum
- * Feature; a mode the firmware has of its own would follow them. PD_MODES in
- * pd_outputs.c has one entry for each mode. */
-/* A user service's pins (pd_user.h), in a build with one: its hooks drive them safe and
- * release them. */
-#define PD_MODE_USER PD_MODE_BUILTIN_END
-#define PD_MODE_COUNT (PD_MODE_BUILTIN_END + (PD_FEATURE_USER ? 1 : 0))
-
-/* An owner byte: mode in the high nibble, slot in the low one (one byte per pin of RAM). */
-#define PD_OWNER(mode, slot) ((uint8_t)(((mode) << 4) | (slot)))
-#define PD_OWNER_MODE(owner) ((uint8_t)((owner) >> 4))
-#define PD_OWNER_SLOT(owner) ((uint8_t)((owner) & 0x0Fu))
-#define PD_MAX_SLOTS 16u
-
-/* safe_us meaning "the safe state is no pulses at all" (real widths are >= 400). */
-#define PD_SERVO_SAFE_DETACH 0u
-
-/* A servo channel; its pin is the one the owner table gives the channel (the
- * callers know it: a byte less per channel of the Uno's RAM). */
-typedef struct pd_servo {
-    uint16_t min_us;
-    uint16_t max_us;
-    uint16_t safe_us;   /* PD_SERVO_SAFE_DETACH: limp */
-    uint8_t step;       /* speed limit: most us per servo frame; 0: none */
-    uint16_t us;        /* the width driven now */
-    uint16_t target_us; /* the width it moves to (differs only while speed-limited) */
-} pd_servo_t;
-
-typedef struct pd_pwm {
-    uint8_t safe; /* duty 0..255 the failsafe, Stop and an interlock drive */
-    uint8_t duty; /* the duty driven now */
-} pd_pwm_t;
-
 typedef struct pd_outputs {
-    uint8_t owner[PD_MAX_PINS]; /* PD_OWNER(mode, slot); 0 = free */
+    uint8_t owner[PD_MAX_PINS]; /* the pin table (pd_pintable.h): PD_OWNER(mode, slot); 0 = free */
     pd_servo_t servo[PD_MAX_SERVOS];
     pd_pwm_t pwm[PD_MAX_PWM];
     uint32_t digital_safe;  /* bit N: safe level of pin N */
@@ -119,38 +75,6 @@ typedef struct pd_outputs {
 
 
 void pd_outputs_init(pd_outputs_t *out);
-
-/*
- * Claim `pin` for `mode`: checks the pin exists and is not reserved, that no
- * other mode owns it, and finds its slot (the one it has on a re-init, else
- * the lowest free one of the mode). Returns the Ack status; on OK *slot is set
- * and the pin is owned by `mode` (the caller must not fail after this).
- */
-protoduino_Status pd_pins_claim(pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
-                                uint8_t *slot);
-
-/* For a Control: `pin` must exist, not be reserved and be owned by `mode`. */
-protoduino_Status pd_pins_owned(const pd_outputs_t *out, void *hal, uint32_t pin, uint8_t mode,
-                                uint8_t *slot);
-
-/* How many pins `mode` owns. */
-uint8_t pd_pins_count(const pd_outputs_t *out, uint8_t mode);
-
-protoduino_Status pd_outputs_servo_init(pd_outputs_t *out, void *hal,
-                                        const protoduino_ServoInit *msg);
-protoduino_Status pd_outputs_servo_control(pd_outputs_t *out, void *hal,
-                                           const protoduino_ServoControl *msg);
-protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
-                                          const protoduino_DigitalInit *msg);
-protoduino_Status pd_outputs_digital_control(pd_outputs_t *out, void *hal,
-                                             const protoduino_DigitalControl *msg);
-
-/* Whether a pin of the servos' timer (pd_board_info_t.servo_timer_pins) does PWM. */
-bool pd_outputs_timer_pwm(const pd_outputs_t *out, void *hal);
-
-protoduino_Status pd_outputs_pwm_init(pd_outputs_t *out, void *hal, const protoduino_PwmInit *msg);
-protoduino_Status pd_outputs_pwm_control(pd_outputs_t *out, void *hal,
-                                         const protoduino_PwmControl *msg);
 
 /*
  * Several outputs at once, all or nothing: every item is checked (in order,
@@ -168,12 +92,6 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
 void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states);
 
 /*
- * Speed limits: move every speed-limited servo one step per servo frame
- * (PD_SERVO_FRAME_MS of `now`) toward its target. Called from pd_core_poll.
- */
-void pd_outputs_step(pd_outputs_t *out, void *hal, uint32_t now);
-
-/*
  * Release one output (STATUS_NOT_INITIALISED if the pin is free): the pin is
  * free again for any mode, its slot for another pin. What the pin does then is
  * its mode's release (pd_hal.h: a servo stops pulsing, a digital pin becomes an
@@ -187,19 +105,5 @@ void pd_outputs_release_all(pd_outputs_t *out, void *hal);
 /* Drive every configured output to its safe value (failsafe, Stop); a
  * speed-limited servo moves there at its speed. */
 void pd_outputs_all_safe(pd_outputs_t *out, void *hal);
-
-/*
- * x / 180 for x < 32,400 (180 * 180), without a division: (x * 23,302) >> 22
- * is exact there (23,302 / 2^22 exceeds 1/180 by under 7.4e-8, so the error
- * stays below 0.0024 while the fraction it could push over 1 is at most
- * 179/180; tests/c checks every x). A 16 x 16 -> 32 bit multiply takes a few
- * cycles on the AVR's hardware multiplier; libgcc's __udivmodhi4, about 190,
- * twice per servo write, between the command's delimiter and its Ack.
- */
-static inline uint16_t pd_div180(uint16_t x)
-{
-    /* The high half, then 6 more: a 32-bit shift by 22 is a 22-pass loop at -Os. */
-    return (uint16_t)((uint16_t)(((uint32_t)x * 23302u) >> 16) >> 6);
-}
 
 #endif /* PD_OUTPUTS_H */

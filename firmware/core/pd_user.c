@@ -9,8 +9,7 @@
 #include <pb_decode.h>
 #include <pb_encode.h>
 
-#include "pd_inputs.h"
-#include "pd_outputs.h"
+#include "pd_pintable.h"
 #include "pd_state.h"
 
 /* The method `method` (1..), or NULL. */
@@ -134,7 +133,7 @@ protoduino_Status pd_user_call(pd_core_t *core, const protoduino_UserCall *call,
 protoduino_Status pd_user_claim(pd_user_ctx_t *ctx, uint8_t pin)
 {
     uint8_t slot;
-    return pd_pins_claim(&ctx->core->outputs, ctx->hal, pin, PD_MODE_USER, &slot);
+    return pd_pins_claim(ctx->core->outputs.owner, ctx->hal, pin, PD_MODE_USER, 0, &slot);
 }
 
 protoduino_Status pd_user_release(pd_user_ctx_t *ctx, uint8_t pin)
@@ -142,7 +141,11 @@ protoduino_Status pd_user_release(pd_user_ctx_t *ctx, uint8_t pin)
     if (!pd_user_owns(ctx, pin)) {
         return protoduino_Status_STATUS_NOT_INITIALISED;
     }
-    return pd_outputs_release(&ctx->core->outputs, ctx->hal, pin);
+    /* As a Release command's walk (pd_outputs.c, release_owned): the hook, then the pin is
+     * free whatever the hook did. */
+    pd_user_pin_release(ctx->core, ctx->core->outputs.owner, ctx->hal, pin);
+    ctx->core->outputs.owner[pin] = 0;
+    return protoduino_Status_STATUS_OK;
 }
 
 bool pd_user_owns(const pd_user_ctx_t *ctx, uint8_t pin)
@@ -187,11 +190,8 @@ void pd_user_poll(pd_core_t *core, uint32_t now)
     }
 }
 
-bool pd_user_report(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *out)
+bool pd_user_report(pd_core_t *core, protoduino_ArduinoOut *out)
 {
-    if (slot != PD_USER_SLOT) {
-        return pd_inputs_report(core, slot, out);
-    }
     pd_user_state_t *st = &core->user;
     while (st->pending != 0) {
         uint8_t bit = 0;
@@ -221,10 +221,6 @@ bool pd_user_report(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *out)
 
 void pd_user_sent(pd_core_t *core, const protoduino_ArduinoOut *out)
 {
-    if (out->which_data != protoduino_ArduinoOut_user_report_tag) {
-        pd_inputs_sent(core, out);
-        return;
-    }
     pd_user_state_t *st = &core->user;
     uint8_t bit = report_bit((uint8_t)out->data.user_report.report);
     if (bit < PD_USER_MAX_REPORTS) {

@@ -140,9 +140,11 @@ void pd_user_init(struct pd_core *core);
 void pd_user_poll(struct pd_core *core, uint32_t now);
 
 #if PD_FEATURE_USER
-/* The pin table's user mode (pd_outputs.c): a claimed pin to the service's safe state, or
- * released (by default: an input without pull-up, as at power-up). Inline here, with the
- * table's types: the pin table sits below the modules that act on the whole device. */
+/* The user mode of the pin table (pd_pintable.h): a claimed pin to the service's safe
+ * state, or released: no longer the service's in `owner` (the table) already as its hook
+ * runs, then by default an input without pull-up, as at power-up. Called by the walks over
+ * every owned pin (pd_outputs.c), and by pd_user_release. Inline here, with the service's
+ * types: the walks sit below the modules that act on the whole device. */
 static inline void pd_user_pin_safe(struct pd_core *core, void *hal, uint8_t pin)
 {
     pd_user_ctx_t ctx = {core, hal};
@@ -151,9 +153,11 @@ static inline void pd_user_pin_safe(struct pd_core *core, void *hal, uint8_t pin
     }
 }
 
-static inline void pd_user_pin_release(struct pd_core *core, void *hal, uint8_t pin)
+static inline void pd_user_pin_release(struct pd_core *core, uint8_t *owner, void *hal,
+                                       uint8_t pin)
 {
     pd_user_ctx_t ctx = {core, hal};
+    owner[pin] = 0;
     if (pd_user_service.release != NULL) {
         pd_user_service.release(&ctx, pin);
     } else {
@@ -162,8 +166,10 @@ static inline void pd_user_pin_release(struct pd_core *core, void *hal, uint8_t 
 }
 #endif
 
-/* The core's report callback with a user service: the user's slot, else the inputs'. */
-bool pd_user_report(struct pd_core *core, uint8_t slot, protoduino_ArduinoOut *out);
+/* The user reports' share of the core's report callbacks (pd_core.c gives the other slots
+ * to the inputs): fill `out` with the next pending user report (false: none), and that
+ * UserReport went out. */
+bool pd_user_report(struct pd_core *core, protoduino_ArduinoOut *out);
 void pd_user_sent(struct pd_core *core, const protoduino_ArduinoOut *out);
 
 /* The user reports' slot of the core (pd_core.h; the inputs have slot 0). */

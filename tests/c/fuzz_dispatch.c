@@ -143,7 +143,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         }
     }
     if (core.link.rx_len > PD_MAX_ENCODED_FRAME ||
-        pd_pins_count(&core.outputs, PD_MODE_SERVO) > PD_MAX_SERVOS ||
+        pd_pins_count(core.outputs.owner, PD_MODE_SERVO) > PD_MAX_SERVOS ||
         !dedupe_sane(&core.dedupe)) {
         abort();
     }

@@ -54,7 +54,7 @@ static void feed_packet(pd_core_t *core, uint8_t type, uint8_t seq, const uint8_
 static void check_invariants(const fake_hal_t *hal, const pd_core_t *core)
 {
     if (core->link.rx_len > PD_MAX_ENCODED_FRAME ||
-        pd_pins_count(&core->outputs, PD_MODE_SERVO) > PD_MAX_SERVOS ||
+        pd_pins_count(core->outputs.owner, PD_MODE_SERVO) > PD_MAX_SERVOS ||
         !dedupe_sane(&core->dedupe)) {
         abort();
     }

@@ -164,7 +164,7 @@ static void test_servo_init_invalid_argument(void)
     in.data.servo_init.which_safe = 0; /* no safe value */
     CHECK_EQ(t_cmd(&d, &in), S(INVALID_ARGUMENT));
     CHECK_EQ(d.hal.servo_us[9], -1);
-    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 0);
+    CHECK_EQ(pd_pins_count(d.core.outputs.owner, PD_MODE_SERVO), 0);
     /* The extreme limits themselves are fine. */
     in = m_servo_init_deg(8, 9, 400, 2600, 180);
     CHECK_EQ(t_cmd(&d, &in), S(OK));
@@ -193,7 +193,7 @@ static void test_out_of_range(void)
     CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
     in = m_servo_init_us(3, 9, 1000, 2000, 2001);
     CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
-    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 0);
+    CHECK_EQ(pd_pins_count(d.core.outputs.owner, PD_MODE_SERVO), 0);
     in = m_servo_init_us(4, 9, 1000, 2000, 2000);
     CHECK_EQ(t_cmd(&d, &in), S(OK));
     unsigned writes = d.hal.servo_writes[9];
@@ -227,7 +227,7 @@ static void test_no_free_resource_and_reinit(void)
     in = m_servo_init_us(21, 5, 1000, 2000, 1100);
     CHECK_EQ(t_cmd(&d, &in), S(OK));
     CHECK_EQ(d.hal.servo_us[5], 1100);
-    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 8);
+    CHECK_EQ(pd_pins_count(d.core.outputs.owner, PD_MODE_SERVO), 8);
     in = m_servo_us(22, 5, 2100);
     CHECK_EQ(t_cmd(&d, &in), S(OUT_OF_RANGE));
     /* Digital outputs are not limited by servo slots. */

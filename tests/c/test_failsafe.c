@@ -426,12 +426,12 @@ static void test_release_and_release_all(void)
         in = m_servo_init_deg(30 + pin, pin == 9 ? 10 : pin, 0, 0, 90);
         CHECK_EQ(t_cmd(&d, &in), S(OK));
     }
-    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 8);
+    CHECK_EQ(pd_pins_count(d.core.outputs.owner, PD_MODE_SERVO), 8);
     memset(&in, 0, sizeof(in));
     in.message_id = 50;
     in.which_data = protoduino_ArduinoIn_release_all_tag;
     CHECK_EQ(t_cmd(&d, &in), S(OK));
-    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 0);
+    CHECK_EQ(pd_pins_count(d.core.outputs.owner, PD_MODE_SERVO), 0);
     CHECK_EQ(d.hal.digital[13], -1);
     CHECK_EQ(d.hal.digital[9], -1);
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {

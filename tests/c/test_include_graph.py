@@ -40,6 +40,10 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         "device parts",
         (
             "pd_failsafe",
+            "pd_pintable",  # the pin table, below every mode (pd_pintable.h)
+            "pd_servo",  # the output modes, each one unit
+            "pd_digital",
+            "pd_pwm",
             "pd_outputs",
             "pd_inputs.h",
             "pd_inputs_state.c",
@@ -153,8 +157,11 @@ def include_edges(files: list[str]) -> tuple[list[tuple[str, str, str]], list[st
     return edges, outside
 
 
-def call_edges(tmp: Path, files: list[str]) -> list[tuple[str, str, str]]:
-    """Calls between firmware files, from GCC's call graph of every core translation unit."""
+def call_edges(
+    tmp: Path, files: list[str], defines: tuple[str, ...] = ()
+) -> list[tuple[str, str, str]]:
+    """Calls between firmware files, from GCC's call graph of every core translation unit
+    (built with `defines`, such as a feature's switch: ``-DPD_FEATURE_USER=1``)."""
     sources = [rel for rel in files if rel.startswith("core/") and rel.endswith(".c")]
     defined: dict[str, str] = {}  # node title -> the file that defines it
     graphs: list[str] = []
@@ -164,7 +171,7 @@ def call_edges(tmp: Path, files: list[str]) -> list[tuple[str, str, str]]:
             [
                 "gcc", "-std=c99", "-O0", "-fcallgraph-info", "-c",
                 f"-I{FIRMWARE / 'core'}", f"-I{FIRMWARE / 'generated'}", f"-I{NANOPB}",
-                "-o", str(out), str(FIRMWARE / rel),
+                *defines, "-o", str(out), str(FIRMWARE / rel),
             ],
             check=True, capture_output=True, text=True, timeout=120, cwd=tmp,
         )  # fmt: skip
@@ -223,3 +230,44 @@ def test_calls_go_only_down(tmp_path: Path) -> None:
         "pd_core_rx_byte calls pd_dispatch_command",
     ) in edges
     assert violations(edges, layer_of) == []
+
+
+def module_of(rel: str) -> str:
+    """A file's module: a .c and the .h of its name are one (``core/pd_user``), as a reader
+    and the structure tools (farm-studio) see them; any other file is one of its own."""
+    path = Path(rel)
+    return str(path.with_suffix("")) if path.suffix in (".c", ".h") else rel
+
+
+def module_cycles(edges: Iterable[tuple[str, str, str]]) -> list[str]:
+    """The cycles among modules of the call graph (a call into a header's static inline
+    counts for the header's module)."""
+    merged = [(module_of(src), module_of(dst), what) for src, dst, what in edges]
+    names = {name for src, dst, _what in merged for name in (src, dst)}
+    layer_of = dict.fromkeys(names, 0)  # one layer: only the cycles are found
+    return violations(merged, layer_of)
+
+
+def test_the_module_check_finds_a_cycle_through_a_header() -> None:
+    """The checker can fail: a .c calling the inline of a header whose .c calls back."""
+    edges = [
+        ("core/pd_a.c", "core/pd_b.h", "a calls b's inline"),
+        ("core/pd_b.c", "core/pd_a.c", "b calls a"),
+    ]
+    assert module_cycles(edges) == ["cycle: core/pd_a -> core/pd_b -> core/pd_a"]
+    assert module_cycles(edges[:1]) == []
+
+
+def test_modules_call_in_no_circle(tmp_path: Path) -> None:
+    """A pin mode is one unit (issue 36, item 5): the pin table, the modes, the inputs and
+    the user service call each other in no loop, a module (.c with its .h) taken whole.
+    Before the pin table had a file of its own: pd_inputs -> pd_outputs (the safe-all
+    walk) -> pd_user (the user pins' hooks) -> pd_inputs (the report chain)."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed")
+    if not (NANOPB / "pb.h").is_file():
+        pytest.skip("the nanopb runtime is not fetched (./tools/dev.sh setup)")
+    # With a user service: its pins are in the table too.
+    edges = call_edges(tmp_path, firmware_files(), ("-DPD_FEATURE_USER=1",))
+    assert any(dst == "core/pd_user.h" for _src, dst, _what in edges), "the user's hooks seen"
+    assert module_cycles(edges) == []

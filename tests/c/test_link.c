@@ -110,7 +110,7 @@ static void test_new_session_releases_same_session_resumes(void)
     CHECK_EQ(d.hal.servo_us[9], 0); /* no pulses */
     CHECK_EQ(d.hal.digital[13], -1); /* an input */
     CHECK_EQ(d.core.outputs.owner[9], 0);
-    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 0);
+    CHECK_EQ(pd_pins_count(d.core.outputs.owner, PD_MODE_SERVO), 0);
     in = m_digital_init(4, 9, false);
     CHECK_EQ(t_cmd(&d, &in), protoduino_Status_STATUS_OK);
     /* Session 0 is never resumed (it means "none" on the device). */
@@ -183,7 +183,7 @@ static void test_reset_again_resets_seq_keeps_outputs(void)
     CHECK(fake_frame(&d.hal, 0)->flushed);
     CHECK_EQ(d.hal.servo_us[9], 544);
     CHECK_EQ(d.hal.servo_writes[9], writes); /* outputs untouched */
-    CHECK_EQ(pd_pins_count(&d.core.outputs, PD_MODE_SERVO), 1); /* configuration kept */
+    CHECK_EQ(pd_pins_count(d.core.outputs.owner, PD_MODE_SERVO), 1); /* configuration kept */
     in = m_info(30);
     t_send_in(&d, &in);
     CHECK_EQ(fake_frame(&d.hal, 1)->seq, 1);
