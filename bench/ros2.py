@@ -100,7 +100,7 @@ class Wiring:
 
 #: The Cyclone peer's robot: the drive on Timer2's two PWM pins, the button on pin 2.
 PEER_WIRING = Wiring(left_pwm=3, left_dir=4, right_pwm=11, right_dir=12, button=2)
-#: The real node's: counters exist on pins 2 and 3 only, so the encoders take them and the
+#: The real node's: the encoders on INT0 and INT1's pins 2 and 3 (the external interrupts), so the
 #: left motor moves to pin 9 (Timer1: no servo here), the button to pin 8.
 RCLPY_WIRING = Wiring(9, 4, 11, 12, button=8, encoders=(2, 3))
 #: The pin that ties the clocks.
@@ -819,7 +819,8 @@ def run(ctx: Context) -> SectionResult:
         "middleware Fast DDS (ROS 2 Kilted's wheels from PyPI in `.deps/ros2-venv`, which "
         "`./tools/dev.sh setup` installs; the node is tests/ros2_node.py, the one "
         "tests/e2e/test_ros2_real.py drives, discovering over loopback only), against the "
-        "bridge with odometry: counters exist on pins 2 and 3 only, so the encoders take them, "
+        "bridge with odometry: the encoders on INT0 and INT1's pins 2 and 3 (the external "
+        "interrupts), "
         f"the left motor moves to pin {RCLPY_WIRING.left_pwm} (Timer1; no servo here) and the "
         f"button to pin {RCLPY_WIRING.button}; `ticks_per_metre: {TICKS_PER_METRE}`, the "
         "odometry at its default 50 Hz (the device reports a counter at most that often too). "

@@ -31,7 +31,7 @@ typedef struct pd_board_info {
     uint8_t max_servos;           /* at most PD_MAX_SERVOS */
     uint32_t reserved_pins;       /* bit N set: pin N is reserved (the Uno's UART: 0, 1) */
     uint16_t rx_buffer;           /* bytes of received frames it buffers (DeviceInfo.rx_buffer) */
-    uint32_t pwm_pins;            /* bit N: pin N can do PWM (DeviceInfo.pwm_pins) */
+    uint32_t pwm_pins;            /* bit N: pin N can do PWM (PIN_PWM in DeviceInfo.pins) */
     uint32_t analog_pins;         /* bit N: pin N is an analog input */
     uint32_t counter_pins;        /* bit N: pin N can count pulses */
     /* Counter pins whose counter is a pin-change interrupt, not an external one
