@@ -98,6 +98,8 @@ class EmulatedMega(EmulatedUno):
     bootloader, auto-reset on open; its emulated clock read through ``--stats``."""
 
     def __init__(self, link: Path, stats: Path) -> None:
+        build.build_runner()
+        build.build_stk500v2()
         self.stats = stats
         cmd = runner_command(
             hex_files=[build.STK500V2_HEX],
@@ -129,7 +131,6 @@ STK500V2_QUIET = 2.0
 
 @pytest.fixture
 def blank_mega(tools: None, tmp_path: Path) -> Iterator[EmulatedMega]:
-    build.build_stk500v2()
     board = EmulatedMega(tmp_path / "mega", tmp_path / "stats.jsonl")
     yield board
     board.close()
