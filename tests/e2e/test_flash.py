@@ -8,9 +8,10 @@ a client opens its port while no other holds it, as a real board's DTR auto-rese
 bootloader, and the test then talks to the freshly flashed firmware.
 
 The Mega's stk500v2 bootloader (Debian's Arduino core, the one Mega 2560 boards ship with)
-waits about 0.5 to 1 s after a reset for a byte (measured here on the emulated clock), and a
-byte in that window keeps it in the bootloader until the line has been silent for 4 to 6 s:
-a host that sends as soon as it opens the port keeps it there. So the test holds the port
+waits about 0.7 s after a reset for a byte (the application starts 0.78 s after the reset on
+the emulated clock: the bootloader's LED on pin 13 goes off then), and a byte in that window
+keeps it in the bootloader until the line has been silent for 4 to 6 s: a host that sends as
+soon as it opens the port keeps it there. So the test holds the port
 open, silent, for 2 s of the board's own clock after the reset, then runs ``protoduino info``
 on the port (its open, the port already held, resets nothing: DTR is already asserted).
 """
@@ -125,7 +126,7 @@ class EmulatedMega(EmulatedUno):
 
 
 #: Silence after a reset that takes the stk500v2 bootloader to the application (its wait:
-#: 0.5 to 1 s of the board's clock, measured).
+#: the application starts 0.78 s after the reset on the board's clock, measured).
 STK500V2_QUIET = 2.0
 
 
