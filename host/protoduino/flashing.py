@@ -28,7 +28,6 @@ logger = logging.getLogger(__name__)
 
 #: The Uno's MCU (the emulated Uno's too: protoduino.simboard).
 MCU = "atmega328p"
-DEFAULT_BAUD = 115200
 
 
 @dataclass(frozen=True)
@@ -45,8 +44,6 @@ class FlashTarget:
     bootloader: str
     #: The firmware this installation carries for the board (:mod:`protoduino.programs`).
     firmware: str
-    #: The flash below the bootloader (boards.txt's upload.maximum_size).
-    max_size: int
 
 
 #: Board name -> its upload. The Nano is the "ATmega328P" of the IDE's Nano menu, the one
@@ -56,10 +53,10 @@ class FlashTarget:
 #: bootloaders erase each page as they write it.
 BOARDS: dict[str, FlashTarget] = {
     "uno": FlashTarget(
-        "atmega328p", "ATmega328P", "arduino", 115200, "Optiboot", programs.FIRMWARE_HEX, 32256
+        "atmega328p", "ATmega328P", "arduino", 115200, "Optiboot", programs.FIRMWARE_HEX
     ),
     "nano": FlashTarget(
-        "atmega328p", "ATmega328P", "arduino", 115200, "Optiboot", programs.NANO_FIRMWARE_HEX, 32256
+        "atmega328p", "ATmega328P", "arduino", 115200, "Optiboot", programs.NANO_FIRMWARE_HEX
     ),
     "mega": FlashTarget(
         "atmega2560",
@@ -68,7 +65,6 @@ BOARDS: dict[str, FlashTarget] = {
         115200,
         "the stk500v2 bootloader",
         programs.MEGA_FIRMWARE_HEX,
-        253952,
     ),
 }
 #: Upper bound for one avrdude run (about 1.5 s for 11 KB; avrdude's own
