@@ -217,18 +217,26 @@ def test_sim_runs_the_board_that_user_commands_drive(installed: Installed, sim: 
     assert json.loads(result.stdout)["info"]["schema_id"] == f"0x{protoduino.SCHEMA_ID:08X}"
 
 
-def test_flash_uploads_the_carried_firmware(installed: Installed, tmp_path: Path) -> None:
+@pytest.mark.parametrize("board", ["uno", "nano"])
+def test_flash_uploads_the_carried_firmware(
+    installed: Installed, tmp_path: Path, board: str
+) -> None:
+    """The Uno's firmware, or the Nano's (the emulated Uno has the Nano's chip and Optiboot)."""
     uno = start_blank_uno(tmp_path / "uno")
     try:
-        result = installed.run("protoduino", "flash", uno.port)
+        options = () if board == "uno" else ("--board", board)
+        result = installed.run("protoduino", "flash", uno.port, *options)
         output = result.stdout + result.stderr
         assert result.returncode == 0, output
         assert "bytes of flash verified" in output
         ack = handshake(uno.port, timeout=10.0)
+        info = installed.run("protoduino", "info", uno.port, "--json")
     finally:
         uno.close()
     control = parse_control(ack.payload)
     assert control.schema_id == protoduino.SCHEMA_ID
+    assert info.returncode == 0, info.stderr
+    assert json.loads(info.stdout)["info"]["board"] == board
 
 
 def test_sim_runs_the_emulated_mega(installed: Installed) -> None:
