@@ -9,10 +9,11 @@ pass as a skip). It compiles the firmware's own COBS and CRC (``firmware/core``)
 of the link check frames with the same code. Source paths are relative, as setuptools requires.
 
 The programs (``protoduino/_programs/``, see ``protoduino.programs``): a wheel carries the
-Uno firmware as a ready hex (and its ELF, which the emulated Uno runs), the simulated board
-``pd_sim`` and the emulated Uno's runner ``avrsim``, built here with make, avr-gcc and gcc, so
-that ``pip install protoduino`` is enough to flash an Uno (avrdude then is the only tool) or to
-try a robot on the simulated board. They are not optional: a wheel without the firmware is
+firmware as a ready hex for the Uno, the Nano and the Mega 2560 (and the Uno's and the Mega's
+ELF, which the emulated boards run), the simulated board ``pd_sim`` and the emulated boards'
+runner ``avrsim``, built here with make, avr-gcc and gcc, so that ``pip install protoduino`` is
+enough to flash any of the three (``protoduino flash --board``; avrdude then is the only tool)
+or to try a robot on the simulated board. They are not optional: a wheel without the firmware is
 not protoduino, so a missing tool fails the build with its name. An editable install
 (``pip install -e .``, the checkout's own) skips them: there, ``protoduino_dev`` builds each
 program from the current sources when it is used.
@@ -72,6 +73,8 @@ PROGRAMS = {
     "protoduino.hex": ("firmware", ["avr"], "avr/protoduino.hex"),
     "protoduino.elf": ("firmware", ["avr"], "avr/protoduino.elf"),
     "protoduino-mega.elf": ("firmware", ["avr", "BOARD=mega"], "avr-mega/protoduino.elf"),
+    "protoduino-mega.hex": ("firmware", ["avr", "BOARD=mega"], "avr-mega/protoduino.hex"),
+    "protoduino-nano.hex": ("firmware", ["avr", "BOARD=nano"], "avr-nano/protoduino.hex"),
     "pd_sim": ("firmware", ["sim", "SIM_CFLAGS=-O2"], "sim/pd_sim"),
     "avrsim": ("tools/avrsim", ["runner"], "avrsim/avrsim"),
 }

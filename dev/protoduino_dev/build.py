@@ -5,8 +5,9 @@ Everything goes through ``make`` (so repeated calls cost a few milliseconds) int
 - the simulated board ``build/sim/pd_sim`` (``make -C firmware sim``),
 - the firmware's Uno build (``make -C firmware avr``: ``build/avr/protoduino.{elf,hex}``),
 - the simavr runner ``build/avrsim/avrsim`` and its test program (``tools/avrsim/``),
-- Optiboot in a 1 KB boot section at 0x7C00 (``build/optiboot/optiboot.hex``), for the
-  flashing test.
+- Optiboot in a 1 KB boot section at 0x7C00 (``build/optiboot/optiboot.hex``) and the Mega
+  2560's stk500v2 bootloader at 0x3E000 (``build/stk500v2/stk500v2.hex``), for the flashing
+  tests.
 
 :func:`build_program` is the program source this distribution declares (entry point group
 ``protoduino.programs``, dev/pyproject.toml), which the runtime's
@@ -46,6 +47,10 @@ TEST_PROGRAM = BUILD / "avrsim" / "testprog.elf"
 OPTIBOOT_HEX = BUILD / "optiboot" / "optiboot.hex"
 #: Start of the 1 KB boot section (hfuse BOOTSZ = 10) where Optiboot is linked.
 OPTIBOOT_ADDRESS = 0x7C00
+#: The Mega 2560's stk500v2 bootloader (Debian's Arduino core) and the start of its 8 KB boot
+#: section (hfuse 0xD8: BOOTSZ = 00, BOOTRST).
+STK500V2_HEX = BUILD / "stk500v2" / "stk500v2.hex"
+STK500V2_ADDRESS = 0x3E000
 FIRMWARE_ELF = BUILD / "avr" / "protoduino.elf"
 FIRMWARE_HEX = BUILD / "avr" / "protoduino.hex"
 
@@ -105,6 +110,12 @@ def build_optiboot() -> Path:
     return OPTIBOOT_HEX
 
 
+def build_stk500v2() -> Path:
+    """The Mega 2560's stk500v2 bootloader as simavr reads it; its hex."""
+    make(AVRSIM_DIR, "stk500v2")
+    return STK500V2_HEX
+
+
 def build_firmware() -> Path:
     """Build the firmware's Uno target and return its ELF."""
     make(FIRMWARE_DIR, "avr")
@@ -139,6 +150,11 @@ def build_firmware_board(board: str) -> Path:
     return BUILD / ("avr" if board == "uno" else f"avr-{board}") / "protoduino.elf"
 
 
+def build_firmware_board_hex(board: str) -> Path:
+    """Build the firmware for a board (``make avr BOARD=...``); its flashable hex."""
+    return build_firmware_board(board).with_suffix(".hex")
+
+
 def build_firmware_hex() -> Path:
     """Build the firmware's Uno target and return its flashable hex."""
     make(FIRMWARE_DIR, "avr")
@@ -152,6 +168,8 @@ PROGRAMS: dict[str, Callable[[], Path]] = {
     programs.FIRMWARE_ELF: build_firmware,
     programs.FIRMWARE_HEX: build_firmware_hex,
     programs.MEGA_FIRMWARE_ELF: lambda: build_firmware_board("mega"),
+    programs.MEGA_FIRMWARE_HEX: lambda: build_firmware_board_hex("mega"),
+    programs.NANO_FIRMWARE_HEX: lambda: build_firmware_board_hex("nano"),
 }
 
 

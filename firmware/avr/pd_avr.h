@@ -9,6 +9,8 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "pd_hal.h" /* PD_BOARD_* and PD_MAX_PINS in the Arduino library (its pd_config.h) */
+
 #if PD_BOARD_MEGA
 #include "pd_avr_mega.h" /* the Mega 2560's pin map and vector names */
 #define PD_AVR_FIRST_ANALOG 54u /* A0 */

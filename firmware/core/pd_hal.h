@@ -18,6 +18,12 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+/* The Arduino library's build options (its pd_config.h: the board, from the MCU the IDE
+ * compiles for, and the features), which the Makefile passes as -D flags instead. */
+#if defined(ARDUINO) || defined(PD_CONFIG_H_WANTED)
+#include "pd_config.h"
+#endif
+
 /* The most pins a board of this build has (its num_pins): the pin registry's size, and
  * DeviceInfo's pin table's (pd_encode.h). The Nano's profile has 22 (firmware/Makefile). */
 #ifndef PD_MAX_PINS

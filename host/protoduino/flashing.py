@@ -1,8 +1,12 @@
-"""Flashing the Uno: upload the firmware's Intel hex through its bootloader with avrdude.
+"""Flashing a board: upload the firmware's Intel hex through its bootloader with avrdude.
 
-``flash()`` talks to the bootloader exactly as the Arduino IDE does; against the emulated Uno
-started with Optiboot and auto-reset (``protoduino.simboard.runner_command``) the same code
-path writes and verifies the emulated flash (tests/e2e/test_flash.py).
+``flash()`` talks to the bootloader exactly as the Arduino IDE does (its platform.txt upload
+pattern, with boards.txt's programmer and speed per board, :data:`BOARDS`): the Uno and the
+Nano through Optiboot (``-c arduino``), the Mega 2560 through its stk500v2 bootloader
+(``-c wiring``). Against the emulated Uno started with Optiboot, and the emulated Mega started
+with the stk500v2 bootloader of Debian's Arduino core, both with auto-reset
+(``protoduino.simboard.runner_command``), the same code path writes and verifies the emulated
+flash (tests/e2e/test_flash.py).
 """
 
 from __future__ import annotations
@@ -13,19 +17,70 @@ import select
 import shutil
 import subprocess
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
+from . import programs
 from .errors import BuildError, FlashError
 
 logger = logging.getLogger(__name__)
 
+#: The Uno's MCU (the emulated Uno's too: protoduino.simboard).
 MCU = "atmega328p"
-DEFAULT_BAUD = 115200
+
+
+@dataclass(frozen=True)
+class FlashTarget:
+    """How avrdude reaches one board's bootloader, as the Arduino IDE's boards.txt says."""
+
+    #: avrdude's part (``-p``) and the chip's name for messages.
+    part: str
+    chip: str
+    #: avrdude's programmer (``-c``): the bootloader's protocol.
+    programmer: str
+    #: The bootloader's line rate (``-b``).
+    baud: int
+    bootloader: str
+    #: The firmware this installation carries for the board (:mod:`protoduino.programs`).
+    firmware: str
+
+
+#: Board name -> its upload. The Nano is the "ATmega328P" of the IDE's Nano menu, the one
+#: shipped since 2018 with Optiboot at 115200 (its "Old Bootloader" runs at 57600: ``--baud
+#: 57600``). The Mega 2560's stk500v2 bootloader refuses avrdude's chip erase
+#: (STATUS_CMD_FAILED): the IDE passes ``-D`` to every upload, and so does :func:`flash`; the
+#: bootloaders erase each page as they write it.
+BOARDS: dict[str, FlashTarget] = {
+    "uno": FlashTarget(
+        "atmega328p", "ATmega328P", "arduino", 115200, "Optiboot", programs.FIRMWARE_HEX
+    ),
+    "nano": FlashTarget(
+        "atmega328p", "ATmega328P", "arduino", 115200, "Optiboot", programs.NANO_FIRMWARE_HEX
+    ),
+    "mega": FlashTarget(
+        "atmega2560",
+        "ATmega2560",
+        "wiring",
+        115200,
+        "the stk500v2 bootloader",
+        programs.MEGA_FIRMWARE_HEX,
+    ),
+}
 #: Upper bound for one avrdude run (about 1.5 s for 11 KB; avrdude's own
 #: retries against a silent port take longer, but not this long).
 FLASH_TIMEOUT = 120.0
 _TAIL_CHARS = 4000
+
+
+def board_target(board: str) -> FlashTarget:
+    """The upload of ``board``; FlashError naming the known boards for another name."""
+    try:
+        return BOARDS[board]
+    except KeyError:
+        raise FlashError(
+            f"unknown board {board!r}: protoduino flashes {', '.join(BOARDS)}"
+        ) from None
 
 
 def strip_to_hex(elf: Path, out: Path) -> Path:
@@ -88,7 +143,7 @@ def _hex_record_problem(line: bytes) -> str | None:
     return None
 
 
-def _explain_failure(port: str, output: str) -> str:
+def _explain_failure(port: str, output: str, target: FlashTarget) -> str:
     lowered = output.lower()
     if "can't open device" in lowered or "ser_open" in lowered:
         return f"cannot open serial port {port}: check the port name (protoduino flash PORT)"
@@ -99,13 +154,17 @@ def _explain_failure(port: str, output: str) -> str:
         or "stk500_recv" in lowered
     ):
         return (
-            f"no bootloader answered on {port}: is it an Uno with Optiboot, and is no other "
-            "program holding the port? (press reset just before flashing if auto-reset is off)"
+            f"no bootloader answered on {port}: is it a board with {target.bootloader} (an "
+            f"{target.chip}: --board), and is no other program holding the port? (press reset "
+            "just before flashing if auto-reset is off)"
         )
     if "verification error" in lowered or "mismatch" in lowered:
         return f"the flash on {port} did not verify after writing: try again"
     if "signature" in lowered:
-        return f"the device on {port} is not an ATmega328P (see avrdude's output above)"
+        return (
+            f"the device on {port} is not an {target.chip} (see avrdude's output above; "
+            "--board names the board)"
+        )
     return f"avrdude failed on {port}"
 
 
@@ -113,16 +172,19 @@ def flash(
     port: str,
     hex_file: Path,
     *,
-    baud: int = DEFAULT_BAUD,
+    board: str = "uno",
+    baud: int | None = None,
     progress: TextIO | None = None,
     timeout: float = FLASH_TIMEOUT,
 ) -> None:
-    """Upload ``hex_file`` to the Uno on ``port`` through its bootloader.
+    """Upload ``hex_file`` to the ``board`` (a name of :data:`BOARDS`) on ``port`` through its
+    bootloader, at ``baud`` (default: the board's bootloader's rate).
 
     avrdude's output (its progress bars included) is copied to ``progress`` as
     it comes. Raises FlashError with a plain explanation when the port does not
     exist, no bootloader answers, or the upload fails.
     """
+    target = board_target(board)
     if not os.path.exists(port):
         raise FlashError(f"serial port {port} does not exist: check the port name")
     if not hex_file.is_file():
@@ -137,13 +199,14 @@ def flash(
     cmd = [
         avrdude,
         "-c",
-        "arduino",
+        target.programmer,
         "-p",
-        MCU,
+        target.part,
         "-b",
-        str(baud),
+        str(target.baud if baud is None else baud),
         "-P",
         port,
+        "-D",
         "-U",
         f"flash:w:{hex_file}:i",
     ]
@@ -178,6 +241,6 @@ def flash(
             proc.wait()
         proc.stdout.close()
     if rc != 0:
-        error = FlashError(_explain_failure(port, tail))
+        error = FlashError(_explain_failure(port, tail, target))
         error.add_note("avrdude output (end):\n" + tail.strip()[-1500:])
         raise error

@@ -1,9 +1,9 @@
 """Where the programs that protoduino runs or flashes come from.
 
-Five programs: the simulated board (``pd_sim``, the firmware core on this machine), the
-emulated Uno's runner (``avrsim``, simavr) with the firmware's ELF (and the Mega 2560's,
-``protoduino-mega.elf``, which the same runner emulates), and the firmware's hex that
-``protoduino flash`` uploads.
+The simulated board (``pd_sim``, the firmware core on this machine), the emulated Uno's runner
+(``avrsim``, simavr) with the firmware's ELF (and the Mega 2560's, ``protoduino-mega.elf``,
+which the same runner emulates), and the firmware's hex per board that ``protoduino flash``
+uploads (``protoduino.hex`` for the Uno, ``protoduino-mega.hex``, ``protoduino-nano.hex``).
 
 * An installed wheel carries them, built when the wheel was built, as package data in
   ``protoduino/_programs/``, so ``pip install protoduino`` is all a user needs.
@@ -30,8 +30,19 @@ FIRMWARE_ELF = "protoduino.elf"
 FIRMWARE_HEX = "protoduino.hex"
 #: The firmware built for the Mega 2560 (``make avr BOARD=mega``).
 MEGA_FIRMWARE_ELF = "protoduino-mega.elf"
+#: The hex ``protoduino flash --board mega`` and ``--board nano`` upload.
+MEGA_FIRMWARE_HEX = "protoduino-mega.hex"
+NANO_FIRMWARE_HEX = "protoduino-nano.hex"
 #: Every program name :func:`locate` knows.
-NAMES = (NATIVE_SIM, RUNNER, FIRMWARE_ELF, FIRMWARE_HEX, MEGA_FIRMWARE_ELF)
+NAMES = (
+    NATIVE_SIM,
+    RUNNER,
+    FIRMWARE_ELF,
+    FIRMWARE_HEX,
+    MEGA_FIRMWARE_ELF,
+    MEGA_FIRMWARE_HEX,
+    NANO_FIRMWARE_HEX,
+)
 #: Folder of the bundled programs inside the package.
 BUNDLE_DIR = "_programs"
 

@@ -218,10 +218,10 @@ def runner_command(
     """The runner's command line (same options as the native board, plus flashing ones).
 
     ``boot_address`` starts the MCU there (BOOTRST) with the external-reset
-    flag set, as after pressing reset; ``auto_reset`` resets it whenever a
-    client opens the port, as a real Uno's DTR line does. ``runner`` defaults
-    to the located (in a checkout: freshly built) ``avrsim``; ``mcu`` is the emulated MCU
-    (the Uno's by default; :data:`AVR_BOARDS`).
+    flag set, as after pressing reset; ``auto_reset`` resets it when a client
+    opens the port while no other holds it open, as a real board's DTR line
+    does. ``runner`` defaults to the located (in a checkout: freshly built)
+    ``avrsim``; ``mcu`` is the emulated MCU (the Uno's by default; :data:`AVR_BOARDS`).
     """
     if runner is None:
         runner = programs.locate(programs.RUNNER)

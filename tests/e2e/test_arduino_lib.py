@@ -1,125 +1,108 @@
-"""The Arduino IDE library zip (``make -C firmware arduino-zip``), built as the IDE builds it.
+"""The Arduino IDE library zip (``make -C firmware arduino-zip``), built as the IDE builds it,
+for each board the library serves, then run.
 
 "Add .ZIP Library" unpacks the zip's one top-level folder into the sketchbook's libraries; a
 sketch then compiles against the Arduino core with the library's ``src/`` on the include path.
-The test does the same with the Arduino core of Debian's arduino-core-avr and the compiler
-flags of its platform.txt (the IDE's own recipe for the Uno): the example sketch must compile
-and link into a program that fits the Uno's flash below the bootloader.
+The test does the same with Debian's ``arduino-builder`` (the Arduino IDE 1.8's own builder)
+and the Arduino core of its arduino-core-avr, for the Uno, the Nano and the Mega 2560 (the
+board's FQBN, as the IDE's Tools > Board menu sets it): the example sketch must compile and
+link into a program that fits the board's flash below its bootloader, and run: on the
+emulated board (the Nano's chip is the Uno's) it answers ``protoduino info`` as that board.
+The IDE passes no per-library flags: the library tells the board from the MCU and board
+macros the IDE compiles with (its src/pd_config.h).
 """
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
+import sys
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import protoduino
 import pytest
+from boardprocess import missing_tool
+from protoduino.simboard import SimBoard
 
 pytestmark = pytest.mark.avr
 
 ROOT = Path(__file__).resolve().parents[2]
-AVR_CORE = Path("/usr/share/arduino/hardware/arduino/avr")
-#: The Uno's flash less Optiboot's 512 B (boards.txt: uno.upload.maximum_size).
-UNO_MAX_SIZE = 32256
-#: The parts of the Arduino core this sketch links against (main() calling setup() and loop(),
-#: the Timer0 clock, the interrupt hooks). The IDE compiles the whole core into an archive the
-#: linker picks from; Debian 12's core is newer than its avr-gcc 5.4 in places the sketch never
-#: uses (WString.cpp needs C++ DECIMAL_DIG), so those are not compiled. A part missing from this
-#: list fails the link with its undefined symbol.
-CORE_PARTS = ("main.cpp", "wiring.c", "hooks.c")
-MCU_FLAGS = ["-mmcu=atmega328p", "-DF_CPU=16000000L"]
-# -DARDUINO as an IDE 1.8.19 defines it; the board and architecture as boards.txt says.
-IDE_DEFINES = ["-DARDUINO=10819", "-DARDUINO_AVR_UNO", "-DARDUINO_ARCH_AVR"]
-COMMON = ["-c", "-g", "-Os", "-ffunction-sections", "-fdata-sections", "-flto"]
-C_FLAGS = [*COMMON, "-std=gnu11", "-fno-fat-lto-objects"]
-CPP_FLAGS = [*COMMON, "-std=gnu++11", "-fpermissive", "-fno-exceptions", "-fno-threadsafe-statics"]
+HARDWARE = Path("/usr/share/arduino/hardware")
+BUILDER_DIR = Path("/usr/share/arduino-builder")
+#: Upper bound only (a build, a command): nothing is judged by it.
+TIMEOUT = 300.0
 
 
-def _missing() -> str | None:
-    for tool in ("make", "avr-gcc", "avr-g++", "avr-size"):
-        if shutil.which(tool) is None:
-            return tool
-    if not (AVR_CORE / "cores" / "arduino" / "Arduino.h").exists():
+@dataclass(frozen=True)
+class IdeBoard:
+    """A board as the IDE builds for it, and the emulated board that runs the result."""
+
+    fqbn: str
+    #: boards.txt's upload.maximum_size: the flash below the bootloader.
+    max_size: int
+    emulated: str
+
+
+BOARDS = {
+    "uno": IdeBoard("arduino:avr:uno", 32256, "uno"),
+    # Debian's boards.txt keeps the old bootloader's 30,720 B for the Optiboot Nano too.
+    "nano": IdeBoard("arduino:avr:nano:cpu=atmega328", 30720, "uno"),
+    "mega": IdeBoard("arduino:avr:mega:cpu=atmega2560", 253952, "mega"),
+}
+
+
+def missing_ide() -> str | None:
+    """What building the library as the IDE does needs and this machine lacks."""
+    missing = missing_tool("make", "avr-gcc", "avr-size", "arduino-builder", simavr=True)
+    if missing is not None:
+        return missing
+    if not (HARDWARE / "arduino" / "avr" / "cores" / "arduino" / "Arduino.h").exists():
         return "arduino-core-avr (the Arduino core)"
     if not (ROOT / ".deps" / "nanopb" / "pb_decode.c").exists():
         return "the nanopb C runtime (./tools/dev.sh setup fetches it)"
     return None
 
 
-def _compile(source: Path, out: Path, includes: list[str]) -> Path:
-    obj = out / (source.name + ".o")
-    if source.suffix == ".c":
-        cmd = ["avr-gcc", *C_FLAGS]
-    elif source.suffix == ".S":
-        cmd = ["avr-gcc", "-c", "-g", "-x", "assembler-with-cpp", "-flto"]
-    else:
-        cmd = ["avr-g++", *CPP_FLAGS]
-    cmd += [*MCU_FLAGS, *IDE_DEFINES, *includes, str(source), "-o", str(obj)]
-    result = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=120)
-    assert result.returncode == 0, f"{' '.join(cmd)}\n{result.stderr}"
-    return obj
-
-
-def test_the_zip_installs_and_its_example_builds_as_in_the_ide(tmp_path: Path) -> None:
-    missing = _missing()
-    if missing is not None:
-        pytest.skip(f"{missing} is not installed")
-    build = tmp_path / "build"
-    subprocess.run(
-        ["make", "-s", "-C", str(ROOT / "firmware"), f"BUILD={build}", "arduino-zip"],
-        check=True,
+def arduino_build(sketch: Path, libraries: Path, build: Path, fqbn: str) -> Path:
+    """Compile ``sketch`` (its .ino) with arduino-builder for ``fqbn``; the ELF it made."""
+    build.mkdir(parents=True, exist_ok=True)
+    result = subprocess.run(
+        [
+            "arduino-builder",
+            "-compile",
+            "-fqbn",
+            fqbn,
+            "-hardware",
+            str(HARDWARE),
+            "-hardware",
+            str(BUILDER_DIR),
+            "-tools",
+            str(BUILDER_DIR),
+            "-tools",
+            "/usr/bin",
+            "-libraries",
+            str(libraries),
+            "-build-path",
+            str(build),
+            # Debian's core is newer than its avr-gcc 5.4 (WString.cpp wants DECIMAL_DIG;
+            # AVR doubles are 32-bit): ../shared/TOOLCHAIN.md.
+            "-prefs=compiler.cpp.extra_flags=-DDECIMAL_DIG=9",
+            str(sketch),
+        ],
         capture_output=True,
-        timeout=300,
+        text=True,
+        check=False,
+        timeout=TIMEOUT,
     )
-    with zipfile.ZipFile(build / "arduino" / "Protoduino.zip") as archive:
-        names = archive.namelist()
-        # One top-level folder, with library.properties at its root: what the IDE installs.
-        assert {name.split("/", 1)[0] for name in names} == {"protoduino"}
-        assert "protoduino/library.properties" in names
-        libraries = tmp_path / "sketchbook" / "libraries"
-        archive.extractall(libraries)
-    library = libraries / "protoduino"
-    properties = dict(
-        line.split("=", 1)
-        for line in (library / "library.properties").read_text().splitlines()
-        if "=" in line
-    )
-    assert properties["name"] == "Protoduino"
-    assert properties["architectures"] == "avr"
-    assert properties["version"] == protoduino.__version__  # the one source (_version.py)
+    assert result.returncode == 0, result.stdout + result.stderr
+    return build / f"{sketch.name}.elf"
 
-    # The IDE turns the .ino into C++ with Arduino.h included first.
-    sketch = tmp_path / "sketch" / "Protoduino.ino.cpp"
-    sketch.parent.mkdir()
-    ino = library / "examples" / "Protoduino" / "Protoduino.ino"
-    sketch.write_text('#include <Arduino.h>\n#line 1 "Protoduino.ino"\n' + ino.read_text())
 
-    core = AVR_CORE / "cores" / "arduino"
-    includes = [f"-I{core}", f"-I{AVR_CORE / 'variants' / 'standard'}", f"-I{library / 'src'}"]
-    objects = tmp_path / "objects"
-    objects.mkdir()
-    sources = [sketch, *sorted((library / "src").glob("*.c"))]
-    sources += [core / name for name in CORE_PARTS]
-    objs = [_compile(source, objects, includes) for source in sources]
-
-    elf = tmp_path / "Protoduino.ino.elf"
-    link = [
-        "avr-gcc",
-        "-Os",
-        "-g",
-        "-flto",
-        "-fuse-linker-plugin",
-        "-Wl,--gc-sections",
-        "-mmcu=atmega328p",
-        "-o",
-        str(elf),
-        *map(str, objs),
-        "-lm",
-    ]
-    result = subprocess.run(link, capture_output=True, text=True, check=False, timeout=300)
-    assert result.returncode == 0, result.stderr
+def flash_size(elf: Path) -> int:
+    """.text + .data: what the program takes of the flash."""
     sizes = subprocess.run(
         ["avr-size", "-A", str(elf)], capture_output=True, text=True, check=True, timeout=60
     ).stdout
@@ -128,7 +111,66 @@ def test_the_zip_installs_and_its_example_builds_as_in_the_ide(tmp_path: Path) -
         for parts in (line.split() for line in sizes.splitlines())
         if len(parts) >= 2 and parts[1].isdigit()
     }
-    flash = section[".text"] + section.get(".data", 0)
-    # The firmware is in (about 12 KB; setup() and loop() alone with the core are under 1 KB),
+    return section[".text"] + section.get(".data", 0)
+
+
+@pytest.fixture(scope="module")
+def libraries(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The zip, made and installed into a sketchbook's libraries as "Add .ZIP Library" does."""
+    missing = missing_ide()
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+    tmp = tmp_path_factory.mktemp("arduino")
+    build = tmp / "build"
+    subprocess.run(
+        ["make", "-s", "-C", str(ROOT / "firmware"), f"BUILD={build}", "arduino-zip"],
+        check=True,
+        capture_output=True,
+        timeout=TIMEOUT,
+    )
+    with zipfile.ZipFile(build / "arduino" / "Protoduino.zip") as archive:
+        names = archive.namelist()
+        # One top-level folder, with library.properties at its root: what the IDE installs.
+        assert {name.split("/", 1)[0] for name in names} == {"protoduino"}
+        assert "protoduino/library.properties" in names
+        archive.extractall(tmp / "libraries")
+    return tmp / "libraries"
+
+
+def test_the_zip_is_a_library_the_ide_installs(libraries: Path) -> None:
+    properties = dict(
+        line.split("=", 1)
+        for line in (libraries / "protoduino" / "library.properties").read_text().splitlines()
+        if "=" in line
+    )
+    assert properties["name"] == "Protoduino"
+    assert properties["architectures"] == "avr"
+    assert properties["version"] == protoduino.__version__  # the one source (_version.py)
+
+
+@pytest.mark.parametrize("board", list(BOARDS))
+def test_the_example_builds_as_in_the_ide_and_runs_as_the_board(
+    libraries: Path, tmp_path: Path, board: str
+) -> None:
+    ide = BOARDS[board]
+    sketch = tmp_path / "Protoduino"
+    shutil.copytree(libraries / "protoduino" / "examples" / "Protoduino", sketch)
+    elf = arduino_build(sketch / "Protoduino.ino", libraries, tmp_path / "build", ide.fqbn)
+    # The firmware is in (about 25 KB; setup() and loop() alone with the core are under 1 KB),
     # and the whole fits below the bootloader.
-    assert 8 * 1024 < flash <= UNO_MAX_SIZE, sizes
+    assert 8 * 1024 < flash_size(elf) <= ide.max_size
+
+    with SimBoard("avr", board=ide.emulated, firmware=elf) as sim:
+        sim.start()
+        info = subprocess.run(
+            [sys.executable, "-m", "protoduino.cli.main", "info", sim.port, "--json"],
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=TIMEOUT,
+            stdin=subprocess.DEVNULL,
+        )
+    assert info.returncode == 0, info.stdout + info.stderr
+    found = json.loads(info.stdout)["info"]
+    assert found["board"] == board
+    assert found["schema_id"] == f"0x{protoduino.SCHEMA_ID:08X}"

@@ -23,14 +23,12 @@ import protoduino.cli.main
 import pytest
 from protoduino.simboard import SimBoard
 from simfixtures import wait_for_pin
+from test_arduino_lib import BOARDS, arduino_build, flash_size
 
 pytestmark = pytest.mark.avr
 
 ROOT = Path(__file__).resolve().parents[2]
 HARDWARE = Path("/usr/share/arduino/hardware")
-BUILDER_DIR = Path("/usr/share/arduino-builder")
-#: The Uno's flash below Optiboot (boards.txt: uno.upload.maximum_size).
-UNO_MAX_SIZE = 32256
 
 
 def _missing() -> str | None:
@@ -70,43 +68,10 @@ def test_the_service_sketch_builds_with_arduino_builder_and_runs(
     config.write_text(text)
     sketch = tmp_path / "ProtoduinoService"
     shutil.copytree(libraries / "protoduino" / "examples" / "ProtoduinoService", sketch)
-    build = tmp_path / "build"
-    build.mkdir()
-    result = subprocess.run(
-        [
-            "arduino-builder",
-            "-compile",
-            "-fqbn",
-            "arduino:avr:uno",
-            "-hardware",
-            str(HARDWARE),
-            "-hardware",
-            str(BUILDER_DIR),
-            "-tools",
-            str(BUILDER_DIR),
-            "-tools",
-            "/usr/bin",
-            "-libraries",
-            str(libraries),
-            "-build-path",
-            str(build),
-            # Debian's core is newer than its avr-gcc 5.4 (WString.cpp wants DECIMAL_DIG;
-            # AVR doubles are 32-bit): ../shared/TOOLCHAIN.md.
-            "-prefs=compiler.cpp.extra_flags=-DDECIMAL_DIG=9",
-            str(sketch / "ProtoduinoService.ino"),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-        timeout=300,
+    elf = arduino_build(
+        sketch / "ProtoduinoService.ino", libraries, tmp_path / "build", BOARDS["uno"].fqbn
     )
-    assert result.returncode == 0, result.stdout + result.stderr
-    elf = build / "ProtoduinoService.ino.elf"
-    size = subprocess.run(
-        ["avr-size", "-A", str(elf)], capture_output=True, text=True, check=True
-    ).stdout
-    sections = {line.split()[0]: int(line.split()[1]) for line in size.splitlines()[2:] if line}
-    assert sections[".text"] + sections[".data"] <= UNO_MAX_SIZE
+    assert flash_size(elf) <= BOARDS["uno"].max_size
 
     # The sketch's firmware on the emulated Uno, called through the generated client.
     gen = tmp_path / "gen"

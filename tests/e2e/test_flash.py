@@ -1,15 +1,26 @@
-"""``protoduino flash`` for real: avrdude through Optiboot on the emulated Uno.
+"""``protoduino flash`` for real: avrdude through Optiboot on the emulated Uno, and through the
+stk500v2 bootloader on the emulated Mega 2560.
 
-The runner starts at Optiboot's address (BOOTRST, 1 KB boot section) on an
-otherwise erased flash and resets the MCU whenever a client opens its port, as
-a real Uno's DTR auto-reset does. ``protoduino flash`` builds the firmware,
-avrdude writes and verifies it through the bootloader, and the test then
-handshakes with the freshly flashed firmware using the host codec.
+The runner starts at the bootloader's address (BOOTRST: Optiboot's 1 KB boot section at
+0x7C00, the Mega's 8 KB one at 0x3E000) on an otherwise erased flash and resets the MCU when
+a client opens its port while no other holds it, as a real board's DTR auto-reset does.
+``protoduino flash`` builds the firmware, avrdude writes and verifies it through the
+bootloader, and the test then talks to the freshly flashed firmware.
+
+The Mega's stk500v2 bootloader (Debian's Arduino core, the one Mega 2560 boards ship with)
+waits about 0.7 s after a reset for a byte (the application starts 0.78 s after the reset on
+the emulated clock: the bootloader's LED on pin 13 goes off then), and a byte in that window
+keeps it in the bootloader until the line has been silent for 4 to 6 s: a host that sends as
+soon as it opens the port keeps it there. So the test holds the port
+open, silent, for 2 s of the board's own clock after the reset, then runs ``protoduino info``
+on the port (its open, the port already held, resets nothing: DTR is already asserted).
 """
 
 from __future__ import annotations
 
+import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -26,6 +37,7 @@ from protoduino.framing import StreamDecoder, frame_packet
 from protoduino.packets import Packet, parse_control, reset_payload
 from protoduino.simboard import runner_command
 from protoduino_dev import build
+from simfixtures import wait_until
 
 pytestmark = pytest.mark.avr
 
@@ -80,6 +92,49 @@ def start_blank_uno(link: Path) -> EmulatedUno:
         link=link,
     )
     return EmulatedUno(cmd)
+
+
+class EmulatedMega(EmulatedUno):
+    """The emulated Mega 2560 with its stk500v2 bootloader alone in the flash, started at the
+    bootloader, auto-reset on open; its emulated clock read through ``--stats``."""
+
+    def __init__(self, link: Path, stats: Path) -> None:
+        build.build_runner()
+        build.build_stk500v2()
+        self.stats = stats
+        cmd = runner_command(
+            hex_files=[build.STK500V2_HEX],
+            boot_address=build.STK500V2_ADDRESS,
+            auto_reset=True,
+            link=link,
+            mcu="atmega2560",
+        )
+        super().__init__([*cmd, "--stats", str(stats)])
+
+    def emulated_seconds(self) -> float:
+        """The board's clock: emulated seconds since the runner started (SIGUSR2: a stats line)."""
+        lines = self.stats.read_text().splitlines() if self.stats.exists() else []
+        self.proc.send_signal(signal.SIGUSR2)
+        assert wait_until(
+            lambda: (
+                len(self.stats.read_text().splitlines() if self.stats.exists() else []) > len(lines)
+            ),
+            timeout=10,
+        ), "the runner wrote no stats line"
+        last = json.loads(self.stats.read_text().splitlines()[-1])
+        return float(last["cycles"]) / float(last["freq"])
+
+
+#: Silence after a reset that takes the stk500v2 bootloader to the application (its wait:
+#: the application starts 0.78 s after the reset on the board's clock, measured).
+STK500V2_QUIET = 2.0
+
+
+@pytest.fixture
+def blank_mega(tools: None, tmp_path: Path) -> Iterator[EmulatedMega]:
+    board = EmulatedMega(tmp_path / "mega", tmp_path / "stats.jsonl")
+    yield board
+    board.close()
 
 
 @pytest.fixture
@@ -142,3 +197,43 @@ def test_flash_reports_when_no_bootloader_answers(tools: None, tmp_path: Path) -
     assert result.returncode == 1
     assert f"no bootloader answered on {board.port}" in result.stderr
     assert "not in sync" in result.stderr  # avrdude's own words are shown too
+
+
+def test_flash_a_mega_through_stk500v2_then_info_reads_mega(blank_mega: EmulatedMega) -> None:
+    result = _protoduino("flash", blank_mega.port, "--board", "mega")
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    # avrdude's own report: the ATmega2560's signature, through the stk500v2 ("wiring") protocol.
+    assert "device signature = 0x1e9801" in output
+    assert "bytes of flash verified" in output
+    with serial.Serial(blank_mega.port, 115200, timeout=0.1):
+        # Opened: reset into the bootloader; silent until it has started the application.
+        reset_at = blank_mega.emulated_seconds()
+        assert wait_until(
+            lambda: blank_mega.emulated_seconds() >= reset_at + STK500V2_QUIET, timeout=60
+        )
+        info = _protoduino("info", blank_mega.port, "--json")
+    assert info.returncode == 0, info.stdout + info.stderr
+    found = json.loads(info.stdout)["info"]
+    assert found["board"] == "mega"
+    assert found["schema_id"] == f"0x{protoduino.SCHEMA_ID:08X}"
+
+
+def test_flash_a_nano_through_optiboot_then_info_reads_nano(blank_uno: EmulatedUno) -> None:
+    """The Nano (the IDE's "ATmega328P", Optiboot at 115200) is the Uno's chip and bootloader:
+    the emulated Uno stands for it, and the Nano's firmware says so."""
+    result = _protoduino("flash", blank_uno.port, "--board", "nano")
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    assert "device signature = 0x1e950f" in output
+    assert "bytes of flash verified" in output
+    info = _protoduino("info", blank_uno.port, "--json")  # Optiboot lets go within 5 s
+    assert info.returncode == 0, info.stdout + info.stderr
+    assert json.loads(info.stdout)["info"]["board"] == "nano"
+
+
+def test_flash_refuses_an_elf_built_for_another_chip(tools: None, tmp_path: Path) -> None:
+    elf = build.build_firmware_board("mega")
+    result = _protoduino("flash", str(tmp_path / "ttyACM0"), "--board", "uno", "--hex", str(elf))
+    assert result.returncode == 1
+    assert "is built for the ATmega2560, the uno's chip is the ATmega328P" in result.stderr

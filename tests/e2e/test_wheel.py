@@ -1,10 +1,12 @@
 """protoduino installed like any Python package: the wheel, in a fresh virtual environment.
 
-``python -m build`` makes the sdist and, from it, the wheel, which carries the Uno firmware,
-the simulated board and the emulated Uno's runner (setup.py). The wheel is installed into a new
-venv in a temporary folder, outside the checkout, without the development tools, and the user
-commands run from there: ``demo``, ``sim`` on both backends, and ``flash`` through Optiboot on
-the emulated Uno (the same setup as tests/e2e/test_flash.py). Each is judged by what the board did
+``python -m build`` makes the sdist and, from it, the wheel, which carries the firmware of the
+Uno, the Nano and the Mega 2560, the simulated board and the emulated boards' runner
+(setup.py). The wheel is installed into a new venv in a temporary folder, outside the checkout,
+without the development tools, and the user commands run from there: ``demo``, ``sim`` on both
+backends and as the emulated Mega, and ``flash`` through Optiboot on the emulated Uno and
+through the stk500v2 bootloader on the emulated Mega (the same setups as
+tests/e2e/test_flash.py). Each is judged by what the board did
 (its trace, or the flashed firmware answering the handshake), not by the command's words alone.
 """
 
@@ -21,9 +23,17 @@ from pathlib import Path
 
 import protoduino
 import pytest
+import serial
 from boardprocess import BoardProcess, missing_tool
 from protoduino.packets import parse_control
-from test_flash import handshake, missing_flash_tool, start_blank_uno
+from simfixtures import wait_until
+from test_flash import (
+    STK500V2_QUIET,
+    EmulatedMega,
+    handshake,
+    missing_flash_tool,
+    start_blank_uno,
+)
 
 pytestmark = [pytest.mark.slow, pytest.mark.avr]
 
@@ -128,8 +138,9 @@ def test_the_wheel_carries_the_runtime_and_its_programs_only(installed: Installe
         assert Path(path).parent == package / "_programs", (name, path)
     assert os.access(found["programs"]["pd_sim"], os.X_OK)
     assert os.access(found["programs"]["avrsim"], os.X_OK)
-    hex_lines = Path(found["programs"]["protoduino.hex"]).read_text().splitlines()
-    assert hex_lines[0].startswith(":") and hex_lines[-1] == ":00000001FF"  # Intel hex, EOF
+    for name in ("protoduino.hex", "protoduino-mega.hex", "protoduino-nano.hex"):
+        hex_lines = Path(found["programs"][name]).read_text().splitlines()
+        assert hex_lines[0].startswith(":") and hex_lines[-1] == ":00000001FF", name  # Intel hex
     # The live console works offline: its plotting library is package data (setup.py).
     assert (package / "console" / "static" / "vendor" / "uPlot.iife.min.js").is_file()
 
@@ -154,10 +165,18 @@ def test_demo(installed: Installed) -> None:
 class SimProcess(BoardProcess):
     """``protoduino sim`` from the installed venv, with its trace."""
 
-    def __init__(self, installed: Installed, backend: str, trace: Path) -> None:
+    def __init__(self, installed: Installed, backend: str, trace: Path, *options: str) -> None:
         self.trace_path = trace
         super().__init__(
-            [installed.program("protoduino"), "sim", "--backend", backend, "--trace", str(trace)],
+            [
+                installed.program("protoduino"),
+                "sim",
+                "--backend",
+                backend,
+                "--trace",
+                str(trace),
+                *options,
+            ],
             startup=30.0,
             what="protoduino sim",
             owned=False,  # a board started on purpose has no owner: the fixture stops it
@@ -198,18 +217,56 @@ def test_sim_runs_the_board_that_user_commands_drive(installed: Installed, sim: 
     assert json.loads(result.stdout)["info"]["schema_id"] == f"0x{protoduino.SCHEMA_ID:08X}"
 
 
-def test_flash_uploads_the_carried_firmware(installed: Installed, tmp_path: Path) -> None:
+@pytest.mark.parametrize("board", ["uno", "nano"])
+def test_flash_uploads_the_carried_firmware(
+    installed: Installed, tmp_path: Path, board: str
+) -> None:
+    """The Uno's firmware, or the Nano's (the emulated Uno has the Nano's chip and Optiboot)."""
     uno = start_blank_uno(tmp_path / "uno")
     try:
-        result = installed.run("protoduino", "flash", uno.port)
+        options = () if board == "uno" else ("--board", board)
+        result = installed.run("protoduino", "flash", uno.port, *options)
         output = result.stdout + result.stderr
         assert result.returncode == 0, output
         assert "bytes of flash verified" in output
         ack = handshake(uno.port, timeout=10.0)
+        info = installed.run("protoduino", "info", uno.port, "--json")
     finally:
         uno.close()
     control = parse_control(ack.payload)
     assert control.schema_id == protoduino.SCHEMA_ID
+    assert info.returncode == 0, info.stderr
+    assert json.loads(info.stdout)["info"]["board"] == board
+
+
+def test_sim_runs_the_emulated_mega(installed: Installed) -> None:
+    sim = SimProcess(installed, "avr", installed.cwd / "mega.jsonl", "--board", "mega")
+    try:
+        result = installed.run("protoduino", "info", sim.port, "--json")
+    finally:
+        sim.close()
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["info"]["board"] == "mega"
+
+
+def test_flash_uploads_the_carried_mega_firmware(installed: Installed, tmp_path: Path) -> None:
+    mega = EmulatedMega(tmp_path / "mega", tmp_path / "stats.jsonl")
+    try:
+        result = installed.run("protoduino", "flash", mega.port, "--board", "mega")
+        output = result.stdout + result.stderr
+        assert result.returncode == 0, output
+        assert "protoduino-mega.hex" in output  # the wheel's copy, not the Uno's
+        assert "device signature = 0x1e9801" in output
+        assert "bytes of flash verified" in output
+        # Held open and silent past the stk500v2 bootloader's wait (test_flash.py says why).
+        with serial.Serial(mega.port, 115200):
+            reset_at = mega.emulated_seconds()
+            assert wait_until(lambda: mega.emulated_seconds() >= reset_at + STK500V2_QUIET, 60)
+            info = installed.run("protoduino", "info", mega.port, "--json")
+    finally:
+        mega.close()
+    assert info.returncode == 0, info.stderr
+    assert json.loads(info.stdout)["info"]["board"] == "mega"
 
 
 def test_flash_without_avrdude_says_what_to_install(installed: Installed, tmp_path: Path) -> None:

@@ -65,10 +65,11 @@
  * at each flash address since the previous SIGUSR2 (a flat profile the
  * benchmarks map to the ELF's symbols), written before the --stats line.
  *
- * Flashing flow (--boot, --auto-reset): the Uno's reset vector points into
+ * Flashing flow (--boot, --auto-reset): the reset vector points into
  * the boot section (BOOTRST), power-up shows the external-reset flag so that
- * Optiboot stays in the bootloader, and every open() of the port by a client
- * resets the MCU as the DTR auto-reset of a real Uno does.
+ * the bootloader (Optiboot, or the Mega's stk500v2) stays in it, and a client's
+ * open() of the port while no other holds it resets the MCU as the DTR
+ * auto-reset of a real Uno or Mega does.
  */
 #include <errno.h>
 #include <fcntl.h>
@@ -274,6 +275,7 @@ typedef struct {
     int master;
     int slave;
     int inotify;
+    int clients; /* --auto-reset: clients holding the port open (the DTR line) */
     char slave_path[128];
     const char *link;
     uint32_t boot_addr;
@@ -1345,7 +1347,14 @@ static void pd_pump_pty(pd_sim_t *sim)
     pd_flush_tx(sim);
 }
 
-/* A client opened the port: the Uno's DTR auto-reset. */
+/* A client opened the port while no other held it: the board's DTR auto-reset.
+ * A real USB serial port asserts DTR at the first open and drops it at the last
+ * close (HUPCL), so a second client opening a port already held open resets
+ * nothing; the emulated one counts the clients' opens and closes the same way
+ * (the runner's own descriptor predates the watch). inotify merges two identical
+ * events left unread, so two closes within one pass may count as one: a client
+ * count above 0 then outlasts them until the next close, and the count never goes
+ * below 0. */
 static void pd_check_opens(pd_sim_t *sim)
 {
     if (sim->inotify < 0) {
@@ -1361,7 +1370,13 @@ static void pd_check_opens(pd_sim_t *sim)
         for (char *p = buf; p < buf + n;) {
             struct inotify_event *ev = (struct inotify_event *)p;
             if (ev->mask & IN_OPEN) {
-                opened = 1;
+                if (sim->clients == 0) {
+                    opened = 1;
+                }
+                sim->clients++;
+            }
+            if ((ev->mask & IN_CLOSE) && sim->clients > 0) {
+                sim->clients--;
             }
             p += sizeof *ev + ev->len;
         }
@@ -1746,9 +1761,12 @@ int main(int argc, char **argv)
     sim->core_reset = sim->avr->reset;
     sim->avr->reset = pd_core_reset;
     if (sim->boot) {
-        /* BOOTRST programmed, 1 KB boot section (BOOTSZ = 10): hfuse 0xDC. */
+        /* BOOTRST programmed; the boot section: the Uno's 1 KB (BOOTSZ = 10, hfuse
+         * 0xDC) for Optiboot, the Mega 2560's 8 KB at 0x3E000 for its stk500v2
+         * bootloader (BOOTSZ = 00, hfuse 0xD8 as boards.txt sets it). simavr
+         * starts at reset_pc whatever the fuses say; they are set for the firmware. */
         sim->avr->fuse[AVR_FUSE_LOW] = 0xFF;
-        sim->avr->fuse[AVR_FUSE_HIGH] = 0xDC;
+        sim->avr->fuse[AVR_FUSE_HIGH] = sim->avr->flashend > 0xFFFFU ? 0xD8 : 0xDC;
         sim->avr->fuse[AVR_FUSE_EXT] = 0xFD;
         sim->avr->reset_pc = sim->boot_addr;
         sim->avr->pc = sim->boot_addr;
@@ -1797,7 +1815,7 @@ int main(int argc, char **argv)
     }
     if (auto_reset) {
         sim->inotify = inotify_init1(IN_NONBLOCK | IN_CLOEXEC);
-        if (sim->inotify < 0 || inotify_add_watch(sim->inotify, sim->slave_path, IN_OPEN) < 0) {
+        if (sim->inotify < 0 || inotify_add_watch(sim->inotify, sim->slave_path, IN_OPEN | IN_CLOSE) < 0) {
             perror("avrsim: inotify (--auto-reset)");
             pd_cleanup(sim);
             return 1;

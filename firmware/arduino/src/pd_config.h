@@ -24,4 +24,18 @@
  * faster one. */
 #define PD_BAUD 115200UL
 
+/* The board: the IDE passes no per-library flags, so the library tells it from what the IDE
+ * compiles for, as `make avr BOARD=...` does from its BOARD_FLAGS (firmware/Makefile):
+ * -mmcu=atmega2560 (__AVR_ATmega2560__) is the Mega 2560; the Nano (boards.txt's
+ * build.board, ARDUINO_AVR_NANO) is the Uno's chip with A6 and A7 (pins 20 and 21). */
+#if !defined(PD_BOARD_MEGA) && !defined(PD_BOARD_NANO)
+#if defined(__AVR_ATmega2560__)
+#define PD_BOARD_MEGA 1
+#define PD_MAX_PINS 32
+#elif defined(ARDUINO_AVR_NANO)
+#define PD_BOARD_NANO 1
+#define PD_MAX_PINS 22
+#endif
+#endif
+
 #endif /* PD_CONFIG_H */
