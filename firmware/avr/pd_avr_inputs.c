@@ -121,25 +121,27 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
 }
 
 #if PD_BOARD_MEGA
-uint32_t pd_avr_pins_read(void)
+pd_pinset_t pd_avr_pins_read(void)
 {
-    /* The Mega's pins are spread over eight ports: each read at its PIN register (its
+    /* The Mega's pins are spread over eleven ports: each read at its PIN register (its
      * PORT's address less 2, pd_avr_pins.h). */
-    uint32_t levels = 0;
+    pd_pinset_t levels = {{0}};
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
         uint8_t bit;
         volatile uint8_t *port = pd_avr_port(pin, &bit);
         if (*(port - 2) & bit) {
-            levels |= 1UL << pin;
+            pd_pinset_put(&levels, pin, true);
         }
     }
     return levels;
 }
 #else
-uint32_t pd_avr_pins_read(void)
+pd_pinset_t pd_avr_pins_read(void)
 {
     /* Uno pins: D0..D7 = PIND, D8..D13 = PINB0..5, A0..A5 (14..19) = PINC0..5. */
-    return (uint32_t)PIND | (uint32_t)(PINB & 0x3Fu) << 8 | (uint32_t)(PINC & 0x3Fu) << 14;
+    pd_pinset_t levels = {
+        {(uint32_t)PIND | (uint32_t)(PINB & 0x3Fu) << 8 | (uint32_t)(PINC & 0x3Fu) << 14}};
+    return levels;
 }
 #endif
 

@@ -88,15 +88,16 @@ static const pd_board_info_t sim_board = {
     .board = "sim",
     .num_pins = 20,
     .max_servos = 8,
-    .reserved_pins = (1UL << 0) | (1UL << 1), /* the Uno's UART, for the same semantics */
+    .reserved_pins = PD_PINSET(PD_PIN(0) | PD_PIN(1), 0, 0), /* the Uno's UART, for the same semantics */
     .rx_buffer = 512,                         /* one read() of the pty; the pty holds more */
     /* The Uno's pin capabilities and timer rules, so that a program tested here
      * meets the same refusals on the board. */
-    .pwm_pins = (1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11),
-    .analog_pins = 0x3FUL << 14,
-    .counter_pins = 0x3FFCUL,    /* 2..13, as the Uno */
-    .pin_change_pins = 0x3FF0UL, /* 4..13: the Uno's pin-change interrupts */
-    .servo_timer_pins = (1UL << 9) | (1UL << 10),
+    .pwm_pins = PD_PINSET(PD_PIN(3) | PD_PIN(5) | PD_PIN(6) | PD_PIN(9) | PD_PIN(10) | PD_PIN(11),
+                         0, 0),
+    .analog_pins = PD_PINSET(0x3FUL << 14, 0, 0),
+    .counter_pins = PD_PINSET(0x3FFCUL, 0, 0),    /* 2..13, as the Uno */
+    .pin_change_pins = PD_PINSET(0x3FF0UL, 0, 0), /* 4..13: the Uno's pin-change interrupts */
+    .servo_timer_pins = PD_PINSET(PD_PIN(9) | PD_PIN(10), 0, 0),
     .servo_timer = 1,
     .clock_timer = 0,
 };
@@ -273,7 +274,7 @@ static const char *sim_control_apply(void *ctx, const pd_control_cmd_t *cmd, dou
     if (cmd->pin >= sim_board.num_pins) {
         return "no such pin on this board (pins 2..19)";
     }
-    if (sim_board.reserved_pins & (1UL << cmd->pin)) {
+    if (pd_pinset_has(&sim_board.reserved_pins, cmd->pin)) {
         return "pins 0 and 1 carry the serial link";
     }
     sim_input_t *in = &hal->input[cmd->pin];
@@ -431,13 +432,13 @@ void pd_hal_input_release(void *ctx, uint8_t pin)
     (void)pin;
 }
 
-uint32_t pd_hal_digital_read_all(void *ctx)
+pd_pinset_t pd_hal_digital_read_all(void *ctx)
 {
     sim_hal_t *hal = ctx;
     double now = sim_elapsed(hal);
-    uint32_t levels = 0;
+    pd_pinset_t levels = {{0}};
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
-        levels |= (uint32_t)sim_input_level(&hal->input[pin], now) << pin;
+        pd_pinset_put(&levels, pin, sim_input_level(&hal->input[pin], now));
     }
     return levels;
 }

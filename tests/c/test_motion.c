@@ -121,8 +121,8 @@ static protoduino_ArduinoIn m_pose_masks(uint32_t id, const protoduino_PoseItem 
                                          uint32_t pins, uint32_t levels)
 {
     protoduino_ArduinoIn in = m_pose(id, items, n);
-    in.data.pose.digital_pins = pins;
-    in.data.pose.digital_levels = levels;
+    T_PUT_MASK(in.data.pose.digital_pins, pins);
+    T_PUT_MASK(in.data.pose.digital_levels, levels);
     return in;
 }
 
@@ -256,8 +256,8 @@ static void test_read_outputs(void)
                               5, 1500 & 0xFF,   1500 >> 8,   1500 & 0xFF,   1500 >> 8,
                               6, US(90) & 0xFF, US(90) >> 8, US(90) & 0xFF, US(90) >> 8};
     CHECK_EQ(memcmp(st->servos.bytes, want, 15), 0);
-    CHECK_EQ(st->digital_pins, 1UL << 13);
-    CHECK_EQ(st->digital_levels, 1UL << 13);
+    CHECK_EQ(T_MASK(st->digital_pins), 1UL << 13);
+    CHECK_EQ(T_MASK(st->digital_levels), 1UL << 13);
     /* Idempotent: a repeat is answered in full, not from the dedupe window. */
     CHECK_EQ(t_cmd(&d, &in), S(OK));
     CHECK_EQ(t_acks(&d, 3, &ack), 1); /* t_cmd cleared the log */
