@@ -26,7 +26,8 @@ volatile uint8_t *const pd_avr_mega_ports[11] = {
 
 /*
  * The board's one declaration of its pins (pd_hal.h): DeviceInfo's pin table is written
- * from it, and the host refuses from that. Pins 0 .. 31 (PD_MAX_PINS, pd_avr_mega.h).
+ * from it, and the host refuses from that. Pins 0 .. 69 (PD_MAX_PINS, pd_avr_mega.h); its pin
+ * sets (pd_pinset.h) are three words, pins 0..31, 32..63 and 64..69.
  * - PWM: Timer2 on pins 9 (OC2B) and 10 (OC2A); Timer1 on 11 (OC1A) and 12 (OC1B), the
  *   servo timer (as the Uno's 9 and 10). Timer0 runs the clock: 4 (OC0B) and 13 (OC0A,
  *   also OC1C) are refused with TIMER_IN_USE. The PWM pins of Timers 3, 4 and 5 (2, 3,
@@ -51,6 +52,6 @@ const pd_board_info_t pd_avr_mega_info = {
     .servo_timer = 1,
     .clock_timer = 0,
 };
-typedef char pd_assert_mega_pins[PD_MAX_PINS == 32 ? 1 : -1];
+typedef char pd_assert_mega_pins[PD_MAX_PINS == PD_AVR_MEGA_PINS ? 1 : -1];
 
 #endif /* PD_BOARD_MEGA */

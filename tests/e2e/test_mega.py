@@ -1,8 +1,9 @@
 """The Mega 2560 (issue 36 items 1 and 2): the firmware's ``make avr BOARD=mega`` build on the
 emulated ATmega2560 (``SimBoard("avr", board="mega")``), judged at its pins through the trace.
 
-The build serves pins 0..31 (firmware/README.md, The Mega 2560): the Mega's own ports A and C
-(pins 22..31) carry digital outputs and servos (Timer1's interrupt writes the pulses through
+The build serves every pin, 0..69 (firmware/README.md, The Mega 2560; pin sets of any width
+since protocol version 8): the Mega's own ports A, C, G, L, B and K (pins 22..53, A8..A15 =
+62..69) carry digital outputs, inputs and servos (Timer1's interrupt writes the pulses through
 the port), Timer2 makes PWM on pins 9 and 10 and Timer1 on 11 and 12 while no servo runs,
 Timer0 keeps the clock (pins 4 and 13 refused), the six external interrupts count. The host
 has no table of the Mega's: every refusal here comes from the pin table of its DeviceInfo.
@@ -21,7 +22,7 @@ import pytest
 from boardprocess import missing_tool
 from protoduino import Board, EventKind
 from protoduino._generated import protoduino_pb2 as pb
-from protoduino.errors import NotSupportedError, TimerInUseError
+from protoduino.errors import CommandRejectedError, NotSupportedError, TimerInUseError
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard
 from protoduino_dev import build, rambudget
@@ -74,7 +75,7 @@ def test_the_mega_states_its_pins_and_the_host_refuses_from_them(mega: SimBoard)
     refuses from that table what the device would refuse, for the table's reason."""
     with Board.open(mega.port) as board:
         info = board.info
-        assert (info.board, info.num_pins, info.max_servos) == ("mega", 32, 8)
+        assert (info.board, info.num_pins, info.max_servos) == ("mega", 70, 8)
         assert info.pwm_pins == (9, 10, 11, 12)
         assert info.analog_pins == () and info.counter_pins == (2, 3, 18, 19, 20, 21)
         pins = info.pins
@@ -108,6 +109,71 @@ def test_digital_outputs_on_the_mega_ports_at_the_pins(mega: SimBoard) -> None:
         board.pose({out: pin % 2 == 0 for pin, out in outs.items()})
         for pin in range(22, 32):
             wait_for_pin(mega, pin, _last(1 - pin % 2), BOUND)
+
+
+#: Pins past the 32 a version 7 pin mask held: ports G, L, B (40..53) and K (A8..A15, 62..69).
+HIGH_PINS = (*range(40, 54), *range(62, 70))
+
+
+def test_digital_outputs_past_pin_31_at_the_pins(mega: SimBoard) -> None:
+    """Pins 40..53 and A8..A15 used digitally (62..69), in one pose (the Pose's pin sets reach
+    byte 8): each pin shows its level in the trace, and ReadOutputs reads them back."""
+    with Board.open(mega.port) as board:
+        outs = {pin: board.digital_output(pin) for pin in HIGH_PINS}
+        board.pose({out: pin % 3 == 0 for pin, out in outs.items()})
+        for pin in HIGH_PINS:
+            wait_for_pin(mega, pin, _last(int(pin % 3 == 0)), BOUND)
+        states = board.read_outputs()
+        assert {p: (s.mode, s.value) for p, s in states.items()} == {
+            pin: ("digital", int(pin % 3 == 0)) for pin in HIGH_PINS
+        }
+        outs[69].write(False)
+        outs[68].write(True)
+        wait_for_pin(mega, 69, _last(0), BOUND)
+        wait_for_pin(mega, 68, _last(1), BOUND)
+
+
+def test_servos_past_pin_31_in_one_pose(mega: SimBoard) -> None:
+    """Servos on pins 44, 49, 53 (ports L and B) and A8, A15 (62, 69): the widths of one pose
+    at the pins."""
+    with Board.open(mega.port) as board:
+        servos = {pin: board.servo(pin) for pin in (44, 49, 53, 62, 69)}
+        degrees = {pin: (pin * 7) % 170 + 5 for pin in servos}
+        widths = {pin: servos[pin].to_us(deg) for pin, deg in degrees.items()}
+        board.pose({servos[pin]: deg for pin, deg in degrees.items()})
+
+        def at(pin: int) -> Callable[[list[int]], bool]:
+            return lambda v: bool(v) and abs(v[-1] - widths[pin]) <= PULSE_TOLERANCE_US
+
+        for pin in servos:
+            _wait(mega, pin, "servo", at(pin))
+
+
+def test_digital_inputs_past_pin_31(mega: SimBoard) -> None:
+    """Pins 45 (PL4) and 66 (A12, PK4): the levels the control socket holds there reach the
+    host in the InputReport's pin sets."""
+    with Board.open(mega.port) as board:
+        switches = {pin: board.digital_input(pin) for pin in (45, 66)}
+        for pin, switch in switches.items():
+            mega.control.level(pin, 1)
+            assert switch.wait_for(True, timeout=BOUND) is True  # the bound only ends a failure
+            mega.control.level(pin, 0)
+            assert switch.wait_for(False, timeout=BOUND) is False
+
+
+def test_the_host_refuses_pin_70_from_the_mega_info(mega: SimBoard) -> None:
+    """Pin 70 is past the Mega's num_pins: refused before anything is sent; the device refuses
+    it too, for the same reason."""
+    with Board.open(mega.port) as board:
+        for make in (board.digital_output, board.servo, board.digital_input):
+            with pytest.raises(CommandRejectedError) as host:
+                make(70)
+            assert host.value.status == Status.STATUS_INVALID_PIN and not host.value.sent
+        msg = ArduinoIn()
+        msg.digital_init.pin = 70
+        with pytest.raises(CommandRejectedError) as device:
+            board.request(msg)
+        assert device.value.status == Status.STATUS_INVALID_PIN and device.value.sent
 
 
 def test_eight_servos_on_ports_a_and_c_in_one_pose(mega: SimBoard) -> None:
@@ -222,7 +288,7 @@ def test_protoduino_sim_starts_the_emulated_mega(tmp_path: Path) -> None:
         )
         assert info.returncode == 0, info.stderr
         stated = json.loads(info.stdout)["info"]
-        assert (stated["board"], stated["num_pins"]) == ("mega", 32), stated
+        assert (stated["board"], stated["num_pins"]) == ("mega", 70), stated
     finally:
         subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
 
