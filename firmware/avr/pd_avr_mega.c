@@ -1,11 +1,22 @@
 /*
  * The Mega 2560's pin map (pd_avr_mega.h): Arduino's numbering of the ATmega2560's
- * ports, as the Mega's pins_arduino.h has it. Built only for make avr BOARD=mega.
+ * ports, as the Mega's pins_arduino.h has it. Built for make avr BOARD=mega; its board
+ * table also for the simulated board (make sim: `pd_sim --board mega`, firmware/posix/pd_sim.c),
+ * which serves the Mega's pins from this one declaration of them.
  */
+#ifdef __AVR__
 #include "pd_avr.h"
+#define PD_MEGA_RX_BUFFER (PD_AVR_RX_SIZE - 1u) /* a ring keeps one slot free */
+#else
+#include "pd_hal.h"
+extern const pd_board_info_t pd_avr_mega_info;
+#define PD_BOARD_MEGA 1
+#define PD_MEGA_RX_BUFFER 0u /* the simulated board's link has its own (pd_sim.c) */
+#endif
 
 #if PD_BOARD_MEGA
 
+#ifdef __AVR__
 #define P(port, bit) (uint8_t)((PD_##port) << 3 | (bit))
 
 const uint8_t pd_avr_mega_pins[PD_AVR_MEGA_PINS] PROGMEM = {
@@ -23,6 +34,7 @@ const uint8_t pd_avr_mega_pins[PD_AVR_MEGA_PINS] PROGMEM = {
 volatile uint8_t *const pd_avr_mega_ports[11] = {
     &PORTA, &PORTB, &PORTC, &PORTD, &PORTE, &PORTF, &PORTG, &PORTH, &PORTJ, &PORTK, &PORTL,
 };
+#endif /* __AVR__ */
 
 /*
  * The board's one declaration of its pins (pd_hal.h): DeviceInfo's pin table is written
@@ -43,7 +55,7 @@ const pd_board_info_t pd_avr_mega_info = {
     .num_pins = PD_MAX_PINS,
     .max_servos = 8,
     .reserved_pins = PD_PINSET(PD_PIN(0) | PD_PIN(1), 0, 0), /* RX0, TX0: the link itself */
-    .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
+    .rx_buffer = PD_MEGA_RX_BUFFER,
     .pwm_pins = PD_PINSET(PD_PIN(9) | PD_PIN(10) | PD_PIN(11) | PD_PIN(12), 0, 0),
     .analog_pins = PD_PINSET(0, 0, 0),
     .counter_pins = PD_PINSET(PD_PIN(2) | PD_PIN(3) | (0xFUL << 18), 0, 0), /* INT4, INT5; INT3..INT0 */
@@ -52,6 +64,8 @@ const pd_board_info_t pd_avr_mega_info = {
     .servo_timer = 1,
     .clock_timer = 0,
 };
+#ifdef __AVR__
 typedef char pd_assert_mega_pins[PD_MAX_PINS == PD_AVR_MEGA_PINS ? 1 : -1];
+#endif
 
 #endif /* PD_BOARD_MEGA */

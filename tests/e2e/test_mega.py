@@ -250,22 +250,20 @@ def test_the_failsafe_drives_the_mega_outputs_safe(mega: SimBoard) -> None:
         _wait(mega, 31, "servo", lambda v: abs(v[-1] - 1500) <= PULSE_TOLERANCE_US)
 
 
-def test_protoduino_sim_starts_the_emulated_mega(tmp_path: Path) -> None:
-    """`protoduino sim --backend avr --board mega` (the one documented option) runs the Mega:
-    `protoduino info` reads its board and pins; a Mega with the native backend is refused."""
+@pytest.mark.parametrize("backend", ["avr", "native"])
+def test_protoduino_sim_starts_the_mega(tmp_path: Path, backend: str) -> None:
+    """`protoduino sim --backend avr --board mega` (the one documented option) runs the emulated
+    Mega, `protoduino sim --board mega` the simulated board with its pins: `protoduino info`
+    reads the board and its 70 pins from either."""
     _need_tools()
     cli = [sys.executable, "-m", "protoduino.cli.main"]
-    refused = subprocess.run(
-        [*cli, "sim", "--board", "mega"], capture_output=True, text=True, check=False, timeout=60
-    )
-    assert refused.returncode != 0 and "--board mega goes with --backend avr" in refused.stderr
     pid_file = tmp_path / "sim.pid"
     started = subprocess.run(
         [
             *cli,
             "sim",
             "--backend",
-            "avr",
+            backend,
             "--board",
             "mega",
             "--detach",
@@ -291,6 +289,78 @@ def test_protoduino_sim_starts_the_emulated_mega(tmp_path: Path) -> None:
         assert (stated["board"], stated["num_pins"]) == ("mega", 70), stated
     finally:
         subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
+
+
+@pytest.fixture
+def megas(tmp_path: Path) -> Iterator[dict[str, SimBoard]]:
+    """The emulated Mega and the simulated board with the Mega's pins, side by side."""
+    _need_tools()
+    boards = {
+        backend: SimBoard(backend, board="mega", trace=tmp_path / f"{backend}.jsonl")
+        for backend in ("avr", "native")
+    }
+    try:
+        for sim in boards.values():
+            sim.start()
+        yield boards
+    finally:
+        for sim in boards.values():
+            sim.stop()
+
+
+def test_the_native_mega_states_the_mega_build_s_pins(megas: dict[str, SimBoard]) -> None:
+    """`SimBoard("native", board="mega")` serves the Mega build's own table (one declaration of
+    the Mega's pins, avr/pd_avr_mega.c): its DeviceInfo is the emulated Mega's but for the
+    link's buffer."""
+    infos = {}
+    for backend, sim in megas.items():
+        with Board.open(sim.port) as board:
+            infos[backend] = board.info
+    native, avr = infos["native"], infos["avr"]
+    assert (native.board, native.num_pins) == ("mega", 70)
+    assert (native.pins, native.timers) == (avr.pins, avr.timers)
+    assert (native.reserved_pins, native.max_servos, native.features) == (
+        avr.reserved_pins,
+        avr.max_servos,
+        avr.features,
+    )
+
+
+#: Digital writes on pins of every port past 31 and on A15: levels in the order written.
+MEGA_WRITES = ((22, 1), (40, 1), (53, 1), (69, 1), (40, 0), (62, 1), (69, 0), (53, 0))
+
+
+def test_the_same_mega_writes_give_the_same_trace_lines_on_both(
+    megas: dict[str, SimBoard],
+) -> None:
+    """The same digital writes and servo widths on the emulated Mega and the native one: each
+    pin's trace lines (its mode and values, in order; a servo's width within the emulated
+    pin's measurement) are the same on both."""
+    pins = sorted({pin for pin, _ in MEGA_WRITES})
+    for sim in megas.values():
+        with Board.open(sim.port) as board:
+            outs = {pin: board.digital_output(pin) for pin in pins}
+            arm = board.servo(44)
+            for pin, level in MEGA_WRITES:
+                outs[pin].write(bool(level))
+                wait_for_pin(sim, pin, _last(level), BOUND)
+            arm.write_us(1200)
+            _wait(sim, 44, "servo", lambda v: bool(v) and abs(v[-1] - 1200) <= PULSE_TOLERANCE_US)
+    lines = {
+        backend: {
+            pin: [(e["mode"], int(e["value"])) for e in sim.trace() if e["pin"] == pin]
+            for pin in pins
+        }
+        for backend, sim in megas.items()
+    }
+    assert lines["native"] == lines["avr"]
+    want = {
+        pin: [("digital", 0)] + [("digital", v) for p, v in MEGA_WRITES if p == pin] for pin in pins
+    }
+    assert lines["native"] == want
+    servo = {backend: _values(sim, 44, "servo") for backend, sim in megas.items()}
+    assert servo["native"][-1] == 1200
+    assert abs(servo["avr"][-1] - servo["native"][-1]) <= PULSE_TOLERANCE_US
 
 
 #: The Mega 2560's RAM (0x200 .. RAMEND = 0x21FF).
