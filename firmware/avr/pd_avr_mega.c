@@ -48,7 +48,7 @@ volatile uint8_t *const pd_avr_mega_ports[11] = {
  *   digital pin; 8 of them (PD_MAX_SERVOS, the Uno's).
  * - Counters on the six external interrupts: pins 21, 20, 19, 18 (INT0..INT3), 2 and 3
  *   (INT4, INT5).
- * - No analog input yet: A0..A15 are pins 54..69.
+ * - Analog inputs A0..A15, pins 54..69 (ADC0..ADC15; pd_avr_inputs.c).
  */
 const pd_board_info_t pd_avr_mega_info = {
     .board = "mega",
@@ -57,7 +57,7 @@ const pd_board_info_t pd_avr_mega_info = {
     .reserved_pins = PD_PINSET(PD_PIN(0) | PD_PIN(1), 0, 0), /* RX0, TX0: the link itself */
     .rx_buffer = PD_MEGA_RX_BUFFER,
     .pwm_pins = PD_PINSET(PD_PIN(9) | PD_PIN(10) | PD_PIN(11) | PD_PIN(12), 0, 0),
-    .analog_pins = PD_PINSET(0, 0, 0),
+    .analog_pins = PD_PINSET(0, 0xFFC00000UL, 0x3FUL), /* A0..A15: 54..63, 64..69 */
     .counter_pins = PD_PINSET(PD_PIN(2) | PD_PIN(3) | (0xFUL << 18), 0, 0), /* INT4, INT5; INT3..INT0 */
     .servo_timer_pins = PD_PINSET(PD_PIN(11) | PD_PIN(12), 0, 0),
     .clock_timer_pins = PD_PINSET(PD_PIN(4) | PD_PIN(13), 0, 0),

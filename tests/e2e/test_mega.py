@@ -77,7 +77,8 @@ def test_the_mega_states_its_pins_and_the_host_refuses_from_them(mega: SimBoard)
         info = board.info
         assert (info.board, info.num_pins, info.max_servos) == ("mega", 70, 8)
         assert info.pwm_pins == (9, 10, 11, 12)
-        assert info.analog_pins == () and info.counter_pins == (2, 3, 18, 19, 20, 21)
+        assert info.analog_pins == tuple(range(54, 70))  # A0..A15
+        assert info.counter_pins == (2, 3, 18, 19, 20, 21)
         pins = info.pins
         assert pins[0] == pins[1] == 0  # the link: UART0
         assert pins[22:32] == bytes([pb.PIN_DIGITAL] * 10)
@@ -363,13 +364,39 @@ def test_the_same_mega_writes_give_the_same_trace_lines_on_both(
     assert abs(servo["avr"][-1] - servo["native"][-1]) <= PULSE_TOLERANCE_US
 
 
+#: Analog inputs on both halves of the ADC's multiplexer (A8..A15 need ADCSRB's MUX5): six,
+#: the core's analog slots (PD_MAX_ANALOG_INPUTS) and an InputReport's most values.
+ANALOG = {"A0": 100, "A7": 300, "A8": 555, "A9": 700, "A14": 901, "A15": 1023}
+
+
+@pytest.mark.parametrize("backend", ["avr", "native"])
+def test_analog_inputs_a0_to_a15(tmp_path: Path, backend: str) -> None:
+    """A0..A15 are pins 54..69 in the Mega's DeviceInfo; the control socket's counts on six
+    of them (A0, A7; A8, A9, A14, A15 through MUX5) reach the host's analog inputs, and a new
+    value on A15 follows."""
+    _need_tools()
+    sim = SimBoard(backend, board="mega")
+    sim.start()
+    with sim, Board.open(sim.port) as board:
+        assert board.info.analog_pins == tuple(range(54, 70))
+        assert [board.pin_number(f"A{n}") for n in (0, 8, 15)] == [54, 62, 69]
+        for name, counts in ANALOG.items():
+            sim.control.analog(board.pin_number(name), counts)
+        inputs = {name: board.analog_input(name) for name in ANALOG}
+        for name, counts in ANALOG.items():
+            assert inputs[name].wait_for(_equals(counts), timeout=BOUND) == counts
+        sim.control.analog(69, 42)
+        assert inputs["A15"].wait_for(_equals(42), timeout=BOUND) == 42
+        assert inputs["A14"].read() == 901
+
+
 #: The Mega 2560's RAM (0x200 .. RAMEND = 0x21FF).
 MEGA_RAM = 8_192
 
 
 def test_the_mega_ram_budget_holds(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The Uno's deepest-stack scenario (rambudget.exercise: every command at its largest, four
-    in flight, counters and digital inputs reporting; no analog input on this build) on the
+    in flight, counters, digital and analog inputs (A0, A15) reporting) on the
     emulated Mega, whose runner records the lowest stack pointer: static data + the deepest
     stack + 256 B free fit the Mega's 8,192 B."""
     _need_tools()
@@ -381,7 +408,7 @@ def test_the_mega_ram_budget_holds(tmp_path: Path, capsys: pytest.CaptureFixture
     try:
         with Board.open(sim.port, window=4) as board:
             # Counters on INT4 and INT0 (pins 2 and 21): the Mega has no pin-change counter.
-            rambudget.exercise(board, sim.control, analog_pins=(), counter_pins=(2, 21))
+            rambudget.exercise(board, sim.control, analog_pins=(54, 69), counter_pins=(2, 21))
         row = snapshot(sim.pid, stats)
     finally:
         sim.stop()
