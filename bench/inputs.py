@@ -32,7 +32,7 @@ from protoduino import Board, Event, EventKind
 from protoduino.constants import PacketType
 from protoduino.errors import InterlockActiveError, ProtoduinoError
 from protoduino.inputs import Reading
-from protoduino.messages import parse_out
+from protoduino.messages import parse_out, pins_in
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
 from protoduino.transport import FrameRecord
@@ -175,14 +175,13 @@ class AnalogCounter:
                 report = msg.input_report
                 if report.analog_pins:
                     self.frame_bytes.append(frame_bytes(item))
-                for pin in range(32):
-                    if report.analog_pins >> pin & 1:
-                        self.values[pin] += 1
-                        if pin in self.last_ms:
-                            gap = report.time_ms - self.last_ms[pin]
-                            self.max_gap_ms[pin] = max(self.max_gap_ms[pin], gap)
-                        self.first_ms.setdefault(pin, report.time_ms)
-                        self.last_ms[pin] = report.time_ms
+                for pin in pins_in(report.analog_pins):
+                    self.values[pin] += 1
+                    if pin in self.last_ms:
+                        gap = report.time_ms - self.last_ms[pin]
+                        self.max_gap_ms[pin] = max(self.max_gap_ms[pin], gap)
+                    self.first_ms.setdefault(pin, report.time_ms)
+                    self.last_ms[pin] = report.time_ms
 
 
 def measure_streaming(

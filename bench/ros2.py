@@ -58,7 +58,7 @@ from tempfile import TemporaryDirectory
 from typing import TYPE_CHECKING, Any, Protocol
 
 from protoduino.framing import StreamDecoder
-from protoduino.messages import parse_in, parse_out
+from protoduino.messages import parse_in, parse_out, pins_in
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
 
@@ -596,7 +596,7 @@ def attach_capture(
                 break
     reports = [f for f in frames if not f.tx and f.message.WhichOneof("data") == "input_report"]
     phase.report_bytes = [
-        f.size for f in reports if f.message.input_report.digital_pins >> wiring.button & 1
+        f.size for f in reports if wiring.button in pins_in(f.message.input_report.digital_pins)
     ]
     if window is not None:
         start, end = window
@@ -604,7 +604,7 @@ def attach_capture(
             times = [
                 f.message.input_report.time_ms / 1000
                 for f in reports
-                if start <= f.t <= end and f.message.input_report.analog_pins >> pin & 1
+                if start <= f.t <= end and pin in pins_in(f.message.input_report.analog_pins)
             ]
             span = times[-1] - times[0] if len(times) > 1 else 0.0
             phase.device_rates[pin] = (len(times) - 1) / span if span > 0 else 0.0

@@ -15,7 +15,7 @@ from protoduino._generated import protoduino_pb2 as pb
 from protoduino.constants import MAX_MESSAGE_ID, ControlCode, EventCode, PacketType
 from protoduino.errors import ProtocolError
 from protoduino.framing import COBS_NATIVE, PyStreamDecoder, frame_packet
-from protoduino.messages import parse_out, serialize_out
+from protoduino.messages import parse_out, pin_set, serialize_out
 from protoduino.packets import BadFrame, Packet, event_payload, parse_control
 
 from . import RxCase, Slot, WireSample, chunked
@@ -174,8 +174,8 @@ def mixed_stream(frames: int, seed: int) -> tuple[bytes, list[int]]:
             msg.failsafe.active = rng.random() < 0.5
             msg.failsafe.cause = pb.FAILSAFE_CAUSE_PING_TIMEOUT
         else:
-            msg.input_report.digital_pins = 1 << 7
-            msg.input_report.digital_levels = rng.getrandbits(1) << 7
+            msg.input_report.digital_pins = pin_set(1 << 7)
+            msg.input_report.digital_levels = pin_set(rng.getrandbits(1) << 7)
         # An Ack with only its id and STATUS_OK goes short (ack_ok), as the firmware sends it.
         out.append(frame_packet(PacketType.DATA, seq, serialize_out(msg)))
     return b"".join(out), ids

@@ -92,7 +92,7 @@ def exercise(
 ) -> int:
     """Drive the deepest-stack scenario on an emulated Uno (``board`` opened with window 4,
     ``control`` its input-control socket); returns the InputReports the host received.
-    ``analog_pins``: the analog inputs it samples (none on the Mega's build); ``counter_pins``
+    ``analog_pins``: the analog inputs it samples (the Mega's A0..A15 are 54..69); ``counter_pins``
     its counters (the Mega counts on its external interrupts only).
 
     Raises AssertionError if the device does not answer as it must (an oversized Pose that

@@ -36,7 +36,8 @@ uint8_t presses_watch_button(pd_user_ctx_t *ctx, const presses_Watch *request,
     button.pin = (uint8_t)request->pin;
     button.debounce_ms = (uint8_t)request->debounce_ms;
     pd_hal_input_config(ctx->hal, button.pin, true);
-    button.raw = (pd_hal_digital_read_all(ctx->hal) >> button.pin) & 1u;
+    pd_pinset_t levels = pd_hal_digital_read_all(ctx->hal);
+    button.raw = pd_pinset_has(&levels, button.pin);
     button.level = button.raw;
     button.since = pd_hal_millis(ctx->hal);
     button.time_ms = button.since;
@@ -91,7 +92,8 @@ void presses_poll(pd_user_ctx_t *ctx, uint32_t now_ms)
     if (!button.watching || !pd_user_owns(ctx, button.pin)) {
         return;
     }
-    bool raw = (pd_hal_digital_read_all(ctx->hal) >> button.pin) & 1u;
+    pd_pinset_t levels = pd_hal_digital_read_all(ctx->hal);
+    bool raw = pd_pinset_has(&levels, button.pin);
     if (raw != button.raw) {
         button.raw = raw;
         button.since = now_ms;

@@ -9,7 +9,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-#include "pd_hal.h" /* PD_BOARD_* and PD_MAX_PINS in the Arduino library (its pd_config.h) */
+#include "pd_pinset.h" /* PD_MAX_PINS; PD_BOARD_* in the Arduino library (its pd_config.h) */
 
 #if PD_BOARD_MEGA
 #include "pd_avr_mega.h" /* the Mega 2560's pin map and vector names */
@@ -90,7 +90,7 @@ extern volatile uint8_t pd_avr_wake;
 /* Inputs (pd_avr_inputs.c). wake: a change of the pin wakes the main loop. */
 void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake);
 /* Every pin's level, bit N for Uno pin N. */
-uint32_t pd_avr_pins_read(void);
+pd_pinset_t pd_avr_pins_read(void);
 void pd_avr_analog_start(uint8_t pin);
 bool pd_avr_analog_done(uint16_t *counts);
 void pd_avr_counter_start(uint8_t pin, uint8_t edge);

@@ -39,6 +39,19 @@ volatile uint8_t pd_avr_wake;
 
 #if PD_FEATURE_DIGITAL_INPUT || PD_FEATURE_ANALOG_INPUT || PD_FEATURE_COUNTER
 
+/* An analog pin's digital input disable register (its bit: the channel's of eight): DIDR0 for
+ * A0..A7, and on the Mega DIDR2 for A8..A15 (pins 62..69). */
+static volatile uint8_t *pd_avr_didr(uint8_t pin)
+{
+#if PD_BOARD_MEGA
+    if (pin >= PD_AVR_FIRST_ANALOG + 8u) {
+        return &DIDR2;
+    }
+#endif
+    (void)pin;
+    return &DIDR0;
+}
+
 /* The pin's pin-change mask register and its bit there (PCINT0..23 follow the ports). */
 static volatile uint8_t *pcmsk(uint8_t pin, uint8_t *bit, uint8_t *group)
 {
@@ -101,7 +114,7 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
     {
         if (pin >= PD_AVR_FIRST_ANALOG) {
             /* Its digital input buffer back on (an analog input's conversions turn it off). */
-            DIDR0 &= (uint8_t)~bit;
+            *pd_avr_didr(pin) &= (uint8_t)~bit;
         }
         if (wake) {
             *mask |= bit;
@@ -121,25 +134,27 @@ void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake)
 }
 
 #if PD_BOARD_MEGA
-uint32_t pd_avr_pins_read(void)
+pd_pinset_t pd_avr_pins_read(void)
 {
-    /* The Mega's pins are spread over eight ports: each read at its PIN register (its
+    /* The Mega's pins are spread over eleven ports: each read at its PIN register (its
      * PORT's address less 2, pd_avr_pins.h). */
-    uint32_t levels = 0;
+    pd_pinset_t levels = {{0}};
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
         uint8_t bit;
         volatile uint8_t *port = pd_avr_port(pin, &bit);
         if (*(port - 2) & bit) {
-            levels |= 1UL << pin;
+            pd_pinset_put(&levels, pin, true);
         }
     }
     return levels;
 }
 #else
-uint32_t pd_avr_pins_read(void)
+pd_pinset_t pd_avr_pins_read(void)
 {
     /* Uno pins: D0..D7 = PIND, D8..D13 = PINB0..5, A0..A5 (14..19) = PINC0..5. */
-    return (uint32_t)PIND | (uint32_t)(PINB & 0x3Fu) << 8 | (uint32_t)(PINC & 0x3Fu) << 14;
+    pd_pinset_t levels = {
+        {(uint32_t)PIND | (uint32_t)(PINB & 0x3Fu) << 8 | (uint32_t)(PINC & 0x3Fu) << 14}};
+    return levels;
 }
 #endif
 
@@ -168,11 +183,20 @@ PD_WAKE_ISR(PCINT2_vect)
 
 void pd_avr_analog_start(uint8_t pin)
 {
+#if PD_BOARD_MEGA
+    /* A0..A15 (pins 54..69) are ADC0..ADC15: ADMUX's MUX2:0 name the channel of eight, and
+     * ADCSRB's MUX5 the upper eight (A8..A15, the datasheet's single-ended 0b100xxx). */
+    uint8_t channel = (uint8_t)(pin - PD_AVR_FIRST_ANALOG);
+    ADMUX = (uint8_t)(_BV(REFS0) | (channel & 0x07u)); /* AVCC */
+    ADCSRB = channel >= 8u ? _BV(MUX5) : 0u;
+    *pd_avr_didr(pin) |= (uint8_t)_BV(channel & 0x07u); /* no digital input buffer there */
+#else
     ADMUX = (uint8_t)(_BV(REFS0) | ((pin - 14u) & 0x07u)); /* AVCC, channel A0..A5 (A7) */
 #if PD_BOARD_NANO
     if (pin < 20u) /* A6, A7 have no digital input buffer (DIDR0's bits 6, 7 are reserved) */
 #endif
         DIDR0 |= (uint8_t)_BV((pin - 14u) & 0x07u); /* no digital input buffer there */
+#endif
     ADCSRA = _BV(ADEN) | _BV(ADSC) | _BV(ADIE) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0);
 }
 

@@ -35,21 +35,22 @@ static const pd_board_info_t uno = {
 #if PD_BOARD_NANO
     .board = "nano",
     .num_pins = 22,
-    .analog_pins = 0xFFUL << 14,              /* A0..A7 */
-    .analog_only_pins = 0x3UL << 20,          /* A6, A7 */
+    .analog_pins = PD_PINSET(0xFFUL << 14, 0, 0),     /* A0..A7 */
+    .analog_only_pins = PD_PINSET(0x3UL << 20, 0, 0), /* A6, A7 */
 #else
     .board = "uno",
     .num_pins = 20,
-    .analog_pins = 0x3FUL << 14,              /* A0..A5 */
+    .analog_pins = PD_PINSET(0x3FUL << 14, 0, 0),     /* A0..A5 */
 #endif
     .max_servos = 8,
-    .reserved_pins = (1UL << 0) | (1UL << 1), /* RX, TX: the link itself */
+    .reserved_pins = PD_PINSET(PD_PIN(0) | PD_PIN(1), 0, 0), /* RX, TX: the link itself */
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
     /* PWM on 5 and 6 too: Timer0 runs the clock in fast PWM, as wiring.c does. */
-    .pwm_pins = (1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11),
-    .counter_pins = 0x3FFCUL,                 /* 2..13 */
-    .pin_change_pins = 0x3FF0UL,              /* 4..13: pin-change interrupts; 2, 3: INT0, INT1 */
-    .servo_timer_pins = (1UL << 9) | (1UL << 10),
+    .pwm_pins = PD_PINSET(PD_PIN(3) | PD_PIN(5) | PD_PIN(6) | PD_PIN(9) | PD_PIN(10) | PD_PIN(11),
+                         0, 0),
+    .counter_pins = PD_PINSET(0x3FFCUL, 0, 0),        /* 2..13 */
+    .pin_change_pins = PD_PINSET(0x3FF0UL, 0, 0), /* 4..13: pin-change interrupts; 2, 3: INT0, INT1 */
+    .servo_timer_pins = PD_PINSET(PD_PIN(9) | PD_PIN(10), 0, 0),
     .servo_timer = 1,
     .clock_timer = 0,
 };
@@ -177,13 +178,14 @@ void pd_hal_input_release(void *hal, uint8_t pin)
 #endif
 }
 
-uint32_t pd_hal_digital_read_all(void *hal)
+pd_pinset_t pd_hal_digital_read_all(void *hal)
 {
     (void)hal;
 #if PD_FEATURE_DIGITAL_INPUT
     return pd_avr_pins_read();
 #else
-    return 0;
+    pd_pinset_t none = {{0}};
+    return none;
 #endif
 }
 

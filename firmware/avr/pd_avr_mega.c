@@ -1,11 +1,22 @@
 /*
  * The Mega 2560's pin map (pd_avr_mega.h): Arduino's numbering of the ATmega2560's
- * ports, as the Mega's pins_arduino.h has it. Built only for make avr BOARD=mega.
+ * ports, as the Mega's pins_arduino.h has it. Built for make avr BOARD=mega; its board
+ * table also for the simulated board (make sim: `pd_sim --board mega`, firmware/posix/pd_sim.c),
+ * which serves the Mega's pins from this one declaration of them.
  */
+#ifdef __AVR__
 #include "pd_avr.h"
+#define PD_MEGA_RX_BUFFER (PD_AVR_RX_SIZE - 1u) /* a ring keeps one slot free */
+#else
+#include "pd_hal.h"
+extern const pd_board_info_t pd_avr_mega_info;
+#define PD_BOARD_MEGA 1
+#define PD_MEGA_RX_BUFFER 0u /* the simulated board's link has its own (pd_sim.c) */
+#endif
 
 #if PD_BOARD_MEGA
 
+#ifdef __AVR__
 #define P(port, bit) (uint8_t)((PD_##port) << 3 | (bit))
 
 const uint8_t pd_avr_mega_pins[PD_AVR_MEGA_PINS] PROGMEM = {
@@ -23,10 +34,12 @@ const uint8_t pd_avr_mega_pins[PD_AVR_MEGA_PINS] PROGMEM = {
 volatile uint8_t *const pd_avr_mega_ports[11] = {
     &PORTA, &PORTB, &PORTC, &PORTD, &PORTE, &PORTF, &PORTG, &PORTH, &PORTJ, &PORTK, &PORTL,
 };
+#endif /* __AVR__ */
 
 /*
  * The board's one declaration of its pins (pd_hal.h): DeviceInfo's pin table is written
- * from it, and the host refuses from that. Pins 0 .. 31 (PD_MAX_PINS, pd_avr_mega.h).
+ * from it, and the host refuses from that. Pins 0 .. 69 (PD_MAX_PINS, pd_avr_mega.h); its pin
+ * sets (pd_pinset.h) are three words, pins 0..31, 32..63 and 64..69.
  * - PWM: Timer2 on pins 9 (OC2B) and 10 (OC2A); Timer1 on 11 (OC1A) and 12 (OC1B), the
  *   servo timer (as the Uno's 9 and 10). Timer0 runs the clock: 4 (OC0B) and 13 (OC0A,
  *   also OC1C) are refused with TIMER_IN_USE. The PWM pins of Timers 3, 4 and 5 (2, 3,
@@ -35,22 +48,24 @@ volatile uint8_t *const pd_avr_mega_ports[11] = {
  *   digital pin; 8 of them (PD_MAX_SERVOS, the Uno's).
  * - Counters on the six external interrupts: pins 21, 20, 19, 18 (INT0..INT3), 2 and 3
  *   (INT4, INT5).
- * - No analog input yet: A0..A15 are pins 54..69.
+ * - Analog inputs A0..A15, pins 54..69 (ADC0..ADC15; pd_avr_inputs.c).
  */
 const pd_board_info_t pd_avr_mega_info = {
     .board = "mega",
     .num_pins = PD_MAX_PINS,
     .max_servos = 8,
-    .reserved_pins = (1UL << 0) | (1UL << 1), /* RX0, TX0: the link itself */
-    .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
-    .pwm_pins = (1UL << 9) | (1UL << 10) | (1UL << 11) | (1UL << 12),
-    .analog_pins = 0,
-    .counter_pins = (1UL << 2) | (1UL << 3) | (0xFUL << 18), /* INT4, INT5; INT3..INT0 */
-    .servo_timer_pins = (1UL << 11) | (1UL << 12),
-    .clock_timer_pins = (1UL << 4) | (1UL << 13),
+    .reserved_pins = PD_PINSET(PD_PIN(0) | PD_PIN(1), 0, 0), /* RX0, TX0: the link itself */
+    .rx_buffer = PD_MEGA_RX_BUFFER,
+    .pwm_pins = PD_PINSET(PD_PIN(9) | PD_PIN(10) | PD_PIN(11) | PD_PIN(12), 0, 0),
+    .analog_pins = PD_PINSET(0, 0xFFC00000UL, 0x3FUL), /* A0..A15: 54..63, 64..69 */
+    .counter_pins = PD_PINSET(PD_PIN(2) | PD_PIN(3) | (0xFUL << 18), 0, 0), /* INT4, INT5; INT3..INT0 */
+    .servo_timer_pins = PD_PINSET(PD_PIN(11) | PD_PIN(12), 0, 0),
+    .clock_timer_pins = PD_PINSET(PD_PIN(4) | PD_PIN(13), 0, 0),
     .servo_timer = 1,
     .clock_timer = 0,
 };
-typedef char pd_assert_mega_pins[PD_MAX_PINS == 32 ? 1 : -1];
+#ifdef __AVR__
+typedef char pd_assert_mega_pins[PD_MAX_PINS == PD_AVR_MEGA_PINS ? 1 : -1];
+#endif
 
 #endif /* PD_BOARD_MEGA */

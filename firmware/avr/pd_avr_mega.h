@@ -5,9 +5,8 @@
  * do the same on the Mega: UART0 is the link (pins 0, 1), Timer0 the clock, Timer1
  * the servo pulses (on any pin: they are written through the port), Timer2 PWM.
  *
- * The build serves pins 0 .. PD_MAX_PINS - 1 (32: 0 .. 31): the core's pin masks and
- * the wire's (Pose, Readback, InputReport: fixed32) hold 32 pins; the map below has
- * all 70 for the day they are wider (firmware/README.md, The Mega 2560).
+ * The build serves every pin, 0 .. PD_MAX_PINS - 1 (70: 0 .. 69, A0..A15 being 54..69): the
+ * core's pin sets and the wire's are of any width (pd_pinset.h; protocol version 8).
  */
 #ifndef PD_AVR_MEGA_H
 #define PD_AVR_MEGA_H

@@ -3,12 +3,10 @@
 
 #include "pd_outputs.h"
 
-/* A pin's bit in a mask set to `on`; not inlined: the level's and the safe
- * value's updates share it. */
-static __attribute__((noinline)) void put_bit(uint32_t *mask, uint8_t pin, bool on)
+/* A pin in a set or not; not inlined: the level's and the safe value's updates share it. */
+static __attribute__((noinline)) void put_bit(pd_pinset_t *set, uint8_t pin, bool on)
 {
-    uint32_t bit = 1UL << pin;
-    *mask = on ? (*mask | bit) : (*mask & ~bit);
+    pd_pinset_put(set, pin, on);
 }
 
 /* Not inlined at its three callers (Control, Init, safe value): 58 B of the
@@ -23,7 +21,7 @@ static __attribute__((noinline)) void drive_digital(pd_outputs_t *out, void *hal
 void pd_digital_safe(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
     (void)slot;
-    drive_digital(out, hal, pin, (out->digital_safe >> pin) & 1u);
+    drive_digital(out, hal, pin, pd_pinset_has(&out->digital_safe, pin));
 }
 
 void pd_digital_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
@@ -46,8 +44,7 @@ protoduino_Status pd_outputs_digital_init(pd_outputs_t *out, void *hal,
         return status;
     }
     uint8_t pin = (uint8_t)msg->pin;
-    uint32_t bit = 1UL << pin;
-    if (was && ((out->digital_safe & bit) != 0) == msg->safe_level) {
+    if (was && pd_pinset_has(&out->digital_safe, pin) == msg->safe_level) {
         return protoduino_Status_STATUS_OK; /* the same configuration: the level stays */
     }
     put_bit(&out->digital_safe, pin, msg->safe_level);

@@ -47,11 +47,8 @@ static void fill_info(pd_core_t *core, protoduino_DeviceInfo *info)
     info->user_fingerprint = pd_user_service.fingerprint;
 #endif
     info->reserved_pins_count = 0;
-    /* The mask shifts one place per pin: a 32-bit shift by a variable count is
-     * a loop on the AVR. */
-    uint32_t reserved = board->reserved_pins;
-    for (uint8_t pin = 0; pin < 32u && pin < board->num_pins; pin++, reserved >>= 1) {
-        if (reserved & 1u) {
+    for (uint8_t pin = 0; pin < PD_MAX_PINS && pin < board->num_pins; pin++) {
+        if (pd_pinset_has(&board->reserved_pins, pin)) {
             if (info->reserved_pins_count >= sizeof(info->reserved_pins) / sizeof(info->reserved_pins[0])) {
                 break;
             }

@@ -8,8 +8,9 @@
 #define WT_LEN 2u
 #define WT_FIXED32 5u
 
-/* Every nested message fits a one-byte length: patched in place afterwards. */
-typedef char pd_assert_out_small[(PD_ENCODE_MAX < 128) ? 1 : -1];
+/* Every nested message fits a one-byte length, patched in place afterwards; on a wide build
+ * (PD_ENCODE_WIDE) a two-byte one. */
+typedef char pd_assert_out_small[(PD_ENCODE_MAX < 16384u) ? 1 : -1];
 /* The bound covers every member of ArduinoOut that is not an Ack, and is no larger than nanopb's. */
 typedef char pd_assert_bound[(PD_ENCODE_MAX <= protoduino_ArduinoOut_size &&
                               2u + protoduino_DecodeError_size <= PD_ENCODE_MAX) ? 1 : -1];
@@ -98,11 +99,26 @@ static uint8_t *open_msg(writer_t *w, uint8_t tag)
     return at;
 }
 
-/* Its length fits one byte: the whole ArduinoOut is under 128 (asserted above). */
+#if PD_ENCODE_WIDE
+/* Its length, in one byte under 128 and in two otherwise: the message moves up a byte. */
+static void close_msg(writer_t *w, uint8_t *at)
+{
+    size_t len = (size_t)(w->p - at - 1);
+    if (len >= 128u) {
+        memmove(at + 2, at + 1, len);
+        at[1] = (uint8_t)(len >> 7);
+        len = (len & 0x7Fu) | 0x80u;
+        w->p++;
+    }
+    *at = (uint8_t)len;
+}
+#else
+/* Its length fits one byte: the whole ArduinoOut is under 128 (PD_ENCODE_WIDE). */
 static void close_msg(writer_t *w, uint8_t *at)
 {
     *at = (uint8_t)(w->p - at - 1);
 }
+#endif
 
 static void put_fixed32(writer_t *w, uint8_t tag, uint32_t v)
 {
@@ -114,6 +130,19 @@ static void put_fixed32(writer_t *w, uint8_t tag, uint32_t v)
         put(w, (uint8_t)(v >> 24));
     }
 }
+
+/* A pin set (protocol version 8, pd_pinset.h): bytes, omitted when empty, as pb_encode does;
+ * every pin set's bound is the schema's 9 bytes. Not inlined: seven fields share it. */
+static __attribute__((noinline)) void put_pinset(writer_t *w, uint8_t tag, const uint8_t *bytes,
+                                                 pb_size_t size)
+{
+    if (size > PD_PINSET_WIRE_MAX) {
+        w->ok = false;
+    } else if (size > 0) {
+        put_bytes(w, tag, bytes, size);
+    }
+}
+#define PUT_PINSET(w, tag, field) put_pinset((w), (tag), (field).bytes, (field).size)
 
 static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
 {
@@ -168,26 +197,25 @@ static void put_info(writer_t *w, const protoduino_DeviceInfo *info)
 
 uint8_t pd_encode_pin(const pd_board_info_t *board, uint8_t pin)
 {
-    if (pin >= 32u || pin >= board->num_pins || ((board->reserved_pins >> pin) & 1u)) {
+    if (pin >= PD_MAX_PINS || pin >= board->num_pins || pd_pinset_has(&board->reserved_pins, pin)) {
         return 0;
     }
-    uint32_t bit = 1UL << pin;
-    uint8_t v = (board->analog_only_pins & bit) ? 0u : protoduino_PinBit_PIN_DIGITAL;
-    if (board->pwm_pins & bit) {
+    uint8_t v = pd_pinset_has(&board->analog_only_pins, pin) ? 0u : protoduino_PinBit_PIN_DIGITAL;
+    if (pd_pinset_has(&board->pwm_pins, pin)) {
         v |= protoduino_PinBit_PIN_PWM;
     }
-    if (board->analog_pins & bit) {
+    if (pd_pinset_has(&board->analog_pins, pin)) {
         v |= protoduino_PinBit_PIN_ANALOG;
     }
-    if (board->counter_pins & bit) {
+    if (pd_pinset_has(&board->counter_pins, pin)) {
         v |= protoduino_PinBit_PIN_COUNTER;
     }
-    if (board->pin_change_pins & bit) {
+    if (pd_pinset_has(&board->pin_change_pins, pin)) {
         v |= protoduino_PinBit_PIN_PIN_CHANGE;
     }
-    if (board->servo_timer_pins & bit) {
+    if (pd_pinset_has(&board->servo_timer_pins, pin)) {
         v |= (uint8_t)((board->servo_timer + 1u) << 5);
-    } else if (board->clock_timer_pins & bit) {
+    } else if (pd_pinset_has(&board->clock_timer_pins, pin)) {
         v |= (uint8_t)((board->clock_timer + 1u) << 5);
     }
     return v;
@@ -196,10 +224,10 @@ uint8_t pd_encode_pin(const pd_board_info_t *board, uint8_t pin)
 uint8_t pd_encode_timer_count(const pd_board_info_t *board)
 {
     uint8_t n = 0;
-    if (board->servo_timer_pins != 0) {
+    if (pd_pinset_any(&board->servo_timer_pins)) {
         n = (uint8_t)(board->servo_timer + 1u);
     }
-    if (board->clock_timer_pins != 0 && board->clock_timer + 1u > n) {
+    if (pd_pinset_any(&board->clock_timer_pins) && board->clock_timer + 1u > n) {
         n = (uint8_t)(board->clock_timer + 1u);
     }
     return n;
@@ -207,10 +235,10 @@ uint8_t pd_encode_timer_count(const pd_board_info_t *board)
 
 uint8_t pd_encode_timer(const pd_board_info_t *board, uint8_t timer)
 {
-    if (board->servo_timer_pins != 0 && timer == board->servo_timer) {
+    if (pd_pinset_any(&board->servo_timer_pins) && timer == board->servo_timer) {
         return protoduino_TimerUse_TIMER_SERVOS;
     }
-    if (board->clock_timer_pins != 0 && timer == board->clock_timer) {
+    if (pd_pinset_any(&board->clock_timer_pins) && timer == board->clock_timer) {
         return protoduino_TimerUse_TIMER_CLOCK;
     }
     return protoduino_TimerUse_TIMER_FREE;
@@ -242,12 +270,12 @@ static __attribute__((noinline)) void put_report(writer_t *w, const protoduino_I
                          sizeof(r->counter_counts[0]) == 4u) ? 1 : -1];
     (void)sizeof(widths);
     put_uint(w, protoduino_InputReport_time_ms_tag, r->time_ms);
-    put_fixed32(w, protoduino_InputReport_digital_pins_tag, r->digital_pins);
-    put_fixed32(w, protoduino_InputReport_digital_levels_tag, r->digital_levels);
-    put_fixed32(w, protoduino_InputReport_analog_pins_tag, r->analog_pins);
+    PUT_PINSET(w, protoduino_InputReport_digital_pins_tag, r->digital_pins);
+    PUT_PINSET(w, protoduino_InputReport_digital_levels_tag, r->digital_levels);
+    PUT_PINSET(w, protoduino_InputReport_analog_pins_tag, r->analog_pins);
     put_packed(w, protoduino_InputReport_analog_values_tag, r->analog_values, 2u,
                r->analog_values_count, sizeof(r->analog_values) / sizeof(r->analog_values[0]));
-    put_fixed32(w, protoduino_InputReport_counter_pins_tag, r->counter_pins);
+    PUT_PINSET(w, protoduino_InputReport_counter_pins_tag, r->counter_pins);
     put_packed(w, protoduino_InputReport_counter_counts_tag, r->counter_counts, 4u,
                r->counter_counts_count, sizeof(r->counter_counts) / sizeof(r->counter_counts[0]));
     put_uint(w, protoduino_InputReport_coalesced_tag, r->coalesced);
@@ -275,7 +303,7 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
                    : ack->which_result == protoduino_Ack_user_reply_tag ? PD_ENCODE_USER_ACK_MAX
 #endif
                    : ack->which_result == protoduino_Ack_outputs_tag
-                       ? 2u + protoduino_OutputStates_size
+                       ? 2u + PD_ENCODE_OUTPUTS_MAX
                    : ack->which_result == protoduino_Ack_ping_echo_tag ? 66u
                                                                        : 0u;
     need = (uint8_t)(need + (ack->has_failsafe ? 2u + protoduino_Failsafe_size : 0u) +
@@ -324,9 +352,9 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
         } else if (st->servos.size > 0) {
             put_bytes(w, protoduino_OutputStates_servos_tag, st->servos.bytes, st->servos.size);
         }
-        put_fixed32(w, protoduino_OutputStates_digital_pins_tag, st->digital_pins);
-        put_fixed32(w, protoduino_OutputStates_digital_levels_tag, st->digital_levels);
-        put_fixed32(w, protoduino_OutputStates_pwm_pins_tag, st->pwm_pins);
+        PUT_PINSET(w, protoduino_OutputStates_digital_pins_tag, st->digital_pins);
+        PUT_PINSET(w, protoduino_OutputStates_digital_levels_tag, st->digital_levels);
+        PUT_PINSET(w, protoduino_OutputStates_pwm_pins_tag, st->pwm_pins);
         if (st->pwm_duties_count > sizeof(st->pwm_duties)) {
             w->ok = false;
         } else if (st->pwm_duties_count > 0) {

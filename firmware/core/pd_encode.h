@@ -31,10 +31,10 @@
  * never copied into the message's struct, so it costs the Uno's RAM nothing
  * but the callbacks' pointers. The schema bounds them (max_size in
  * protoduino.options, which nanopb's DeviceInfo size counts: PD_INFO_PINS_MAX,
- * PD_INFO_TIMERS_MAX); a build's own bound is its PD_MAX_PINS (20 on the Uno, 32 on the Mega,
+ * PD_INFO_TIMERS_MAX); a build's own bound is its PD_MAX_PINS (20 on the Uno, 70 on the Mega,
  * whose DeviceInfo is sized by it: PD_ENCODE_INFO_MAX).
  */
-#define PD_INFO_PINS_MAX 32u
+#define PD_INFO_PINS_MAX 70u
 #define PD_INFO_TIMERS_MAX 3u
 typedef char pd_assert_info_pins[(PD_MAX_PINS <= PD_INFO_PINS_MAX) ? 1 : -1];
 /* Pin `pin`'s byte of DeviceInfo.pins: its PinBit flags and, in bits 5-7, 1 +
@@ -44,6 +44,12 @@ uint8_t pd_encode_pin(const pd_board_info_t *board, uint8_t pin);
  * Timer `timer`'s (a TimerUse). */
 uint8_t pd_encode_timer_count(const pd_board_info_t *board);
 uint8_t pd_encode_timer(const pd_board_info_t *board, uint8_t timer);
+
+/* The schema's bound of a pin set (protoduino.options: the Mega's 9 bytes); a build sends
+ * PD_PINSET_BYTES at most, which sizes its messages below. */
+#define PD_PINSET_WIRE_MAX 9u
+typedef char pd_assert_pinset_bytes[(PD_PINSET_BYTES <= PD_PINSET_WIRE_MAX) ? 1 : -1];
+#define PD_PINSET_SPARE (PD_PINSET_WIRE_MAX - PD_PINSET_BYTES)
 
 /*
  * The largest ArduinoOut the device can send, tighter than nanopb's
@@ -61,15 +67,23 @@ uint8_t pd_encode_timer(const pd_board_info_t *board, uint8_t timer);
  * PD_MAX_PINS bytes at most. */
 #define PD_ENCODE_INFO_MAX                                                   \
     (protoduino_DeviceInfo_size - (PD_FEATURE_USER ? 0u : 5u) - (PD_INFO_PINS_MAX - PD_MAX_PINS))
+/* OutputStates and InputReport with this build's pin sets (3 and 4 of them). */
+#define PD_ENCODE_OUTPUTS_MAX (protoduino_OutputStates_size - 3u * PD_PINSET_SPARE)
+#define PD_ENCODE_REPORT_MAX (protoduino_InputReport_size - 4u * PD_PINSET_SPARE)
 /* A UserCall's Ack: its reply (or none) and its handler's code. */
 #define PD_ENCODE_USER_ACK_MAX (2u + 64u + 2u)
 #define PD_ENCODE_ACK_MAX                                                    \
     (8u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(2u + PD_ENCODE_INFO_MAX,             \
-                                        2u + protoduino_OutputStates_size),  \
+                                        2u + PD_ENCODE_OUTPUTS_MAX),         \
                          66u + 2u + protoduino_Failsafe_size))
-#define PD_ENCODE_MAX                                                        \
-    (2u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(PD_ENCODE_ACK_MAX, protoduino_InputReport_size), \
+#define PD_ENCODE_NARROW_MAX                                                 \
+    (2u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(PD_ENCODE_ACK_MAX, PD_ENCODE_REPORT_MAX), \
                          PD_ENCODE_MAX2(protoduino_Failsafe_size, protoduino_UserReport_size)))
+/* A build whose largest message takes 128 B or more (the Mega's DeviceInfo, a byte for each of
+ * its 70 pins): its nested messages' lengths may take two bytes, one more for the Ack and one
+ * for its DeviceInfo. Every other build writes one-byte lengths (pd_encode.c, close_msg). */
+#define PD_ENCODE_WIDE (PD_ENCODE_NARROW_MAX >= 128u)
+#define PD_ENCODE_MAX (PD_ENCODE_NARROW_MAX + (PD_ENCODE_WIDE ? 2u : 0u))
 
 /* Encode `msg` into buf (capacity cap). Returns the length, or 0 if cap is
  * below PD_ENCODE_MAX (the largest message: any message fits a buffer that

@@ -18,42 +18,32 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-/* The Arduino library's build options (its pd_config.h: the board, from the MCU the IDE
- * compiles for, and the features), which the Makefile passes as -D flags instead. */
-#if defined(ARDUINO) || defined(PD_CONFIG_H_WANTED)
-#include "pd_config.h"
-#endif
-
-/* The most pins a board of this build has (its num_pins): the pin registry's size, and
- * DeviceInfo's pin table's (pd_encode.h). The Nano's profile has 22 (firmware/Makefile). */
-#ifndef PD_MAX_PINS
-#define PD_MAX_PINS 20
-#endif
+#include "pd_pinset.h" /* PD_MAX_PINS (and, in the Arduino library, its pd_config.h), the pin sets */
 
 /* What the board is; reported in DeviceInfo and used to validate pins. */
 typedef struct pd_board_info {
     const char *board;            /* "uno", "sim"; at most 11 characters */
     uint8_t num_pins;             /* pins are 0 .. num_pins - 1, at most PD_MAX_PINS */
     uint8_t max_servos;           /* at most PD_MAX_SERVOS */
-    uint32_t reserved_pins;       /* bit N set: pin N is reserved (the Uno's UART: 0, 1) */
+    pd_pinset_t reserved_pins;    /* pin N reserved (the Uno's UART: 0, 1); sets: pd_pinset.h */
     uint16_t rx_buffer;           /* bytes of received frames it buffers (DeviceInfo.rx_buffer) */
-    uint32_t pwm_pins;            /* bit N: pin N can do PWM (PIN_PWM in DeviceInfo.pins) */
-    uint32_t analog_pins;         /* bit N: pin N is an analog input */
-    uint32_t counter_pins;        /* bit N: pin N can count pulses */
+    pd_pinset_t pwm_pins;         /* pin N can do PWM (PIN_PWM in DeviceInfo.pins) */
+    pd_pinset_t analog_pins;      /* pin N is an analog input */
+    pd_pinset_t counter_pins;     /* pin N can count pulses */
     /* Counter pins whose counter is a pin-change interrupt, not an external one
      * (the Uno's 4..13): DeviceInfo's PIN_PIN_CHANGE, a lower lossless edge rate. */
-    uint32_t pin_change_pins;
+    pd_pinset_t pin_change_pins;
     /* Analog inputs and nothing else (the Nano's A6, A7: the ADC's inputs, no port
      * behind them): every other mode is refused with STATUS_NOT_SUPPORTED. */
-    uint32_t analog_only_pins;
+    pd_pinset_t analog_only_pins;
     /* PWM pins whose timer drives the servos (the Uno's Timer1: 9, 10): no PWM
      * there while a servo runs, no servo while one of them does PWM. */
-    uint32_t servo_timer_pins;
+    pd_pinset_t servo_timer_pins;
     /* Pins with a timer output whose timer runs the millisecond clock in a mode
      * that leaves no PWM (the Mega's Timer0: 4, 13): refused with
      * STATUS_TIMER_IN_USE, never in pwm_pins. The Uno's Timer0 runs the clock
      * in fast PWM, as wiring.c does, so its 5 and 6 are PWM pins and none of these. */
-    uint32_t clock_timer_pins;
+    pd_pinset_t clock_timer_pins;
     /* The numbers of those two timers (the Uno's 1 and 0), at most
      * PD_INFO_TIMERS_MAX - 1: DeviceInfo.timers names them to the host. */
     uint8_t servo_timer;
@@ -140,13 +130,13 @@ void pd_hal_pwm_release(void *hal, uint8_t pin);
  * Inputs (pd_inputs.c). pd_hal_input_config makes `pin` an input, with its
  * pull-up if asked, and (where the board can) lets a change of it wake the
  * main loop; pd_hal_input_release: an input without pull-up, as at power-up.
- * pd_hal_digital_read_all: the level at every pin now, bit N for pin N (one
- * read per poll (pd_core_poll), whatever the number of inputs: the Uno reads its
- * three PIN registers).
+ * pd_hal_digital_read_all: the level at every pin now, a pin set (one read per
+ * poll (pd_core_poll), whatever the number of inputs: the Uno reads its three PIN
+ * registers).
  */
 void pd_hal_input_config(void *hal, uint8_t pin, bool pull_up);
 void pd_hal_input_release(void *hal, uint8_t pin);
-uint32_t pd_hal_digital_read_all(void *hal);
+pd_pinset_t pd_hal_digital_read_all(void *hal);
 
 /*
  * Analog inputs (pins in analog_pins), one conversion at a time and never

@@ -43,17 +43,26 @@ static uint8_t pin_of(const pd_outputs_t *out, uint8_t mode, uint8_t slot)
 }
 #endif
 
-/* The checks an input Init shares: the pin can do `mode` (`capable` is the board's mask). */
+/* Whether `pin` is in `set`, a pin past the build's pins counting as in it (refused later, for
+ * what it is): a pin set of the board's table read where it is constant, so that it folds. */
+__attribute__((always_inline)) static inline bool pin_can(const pd_pinset_t *set, uint32_t pin)
+{
+    return pin >= PD_MAX_PINS || pd_pinset_has(set, (uint8_t)pin);
+}
+
+/* The checks an input Init shares: the pin can do `mode` (`capable`: pin_can of the board's
+ * pins for it). */
 static protoduino_Status claim_input(pd_core_t *core, uint8_t pin, uint8_t mode, uint8_t slots,
-                                     uint32_t capable, bool *was, uint8_t *slot)
+                                     bool capable, bool *was, uint8_t *slot)
 {
     pd_outputs_t *out = &core->outputs;
+    const pd_board_info_t *board = pd_hal_board_info(core->hal);
     if (pin < PD_MAX_PINS) {
         *was = out->owner[pin] != 0 && PD_OWNER_MODE(out->owner[pin]) == mode;
-    }
-    if (pin < pd_hal_board_info(core->hal)->num_pins && pin < 32u && !((capable >> pin) & 1u) &&
-        !((pd_hal_board_info(core->hal)->reserved_pins >> pin) & 1u)) {
-        return protoduino_Status_STATUS_NOT_SUPPORTED;
+        if (pin < board->num_pins && !capable &&
+            !pd_pinset_has(&board->reserved_pins, pin)) {
+            return protoduino_Status_STATUS_NOT_SUPPORTED;
+        }
     }
     return pd_pins_claim(out->owner, core->hal, pin, mode, slots, slot);
 }
@@ -73,33 +82,34 @@ protoduino_Status pd_inputs_digital_init(pd_core_t *core, const protoduino_Digit
     uint8_t slot;
     /* Every pin of the board but the reserved ones reads as a digital input. */
     protoduino_Status status =
-        claim_input(core, msg->pin, PD_MODE_DIGITAL_INPUT, PD_MAX_DIGITAL_INPUTS,
-                    0xFFFFFFFFUL, &was, &slot);
+        claim_input(core, msg->pin, PD_MODE_DIGITAL_INPUT, PD_MAX_DIGITAL_INPUTS, true, &was,
+                    &slot);
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
     uint8_t pin = msg->pin;
-    uint32_t bit = 1UL << pin;
+    uint8_t w = PD_PINSET_WORD(pin); /* pin's word and bit in the sets (pd_pinset.h) */
+    uint32_t bit = PD_PINSET_BIT(pin);
     pd_hal_input_config(core->hal, pin, msg->pull_up);
     in->digital[slot].debounce = (uint8_t)msg->debounce_ms;
     /* The level now, as it reads: a host knows it at once (the report after the Ack). */
-    bool level = (pd_hal_digital_read_all(core->hal) & bit) != 0;
-    in->dpins |= bit;
-    in->raw = level ? (in->raw | bit) : (in->raw & ~bit);
-    in->level = level ? (in->level | bit) : (in->level & ~bit);
+    bool level = (pd_hal_digital_read_all(core->hal).w[w] & bit) != 0;
+    in->dpins.w[w] |= bit;
+    in->raw.w[w] = level ? (in->raw.w[w] | bit) : (in->raw.w[w] & ~bit);
+    in->level.w[w] = level ? (in->level.w[w] | bit) : (in->level.w[w] & ~bit);
     in->digital[slot].since = (uint8_t)pd_hal_millis(core->hal);
-    in->trip_mask &= ~bit;
-    in->trip_level &= ~bit;
+    in->trip_mask.w[w] &= ~bit;
+    in->trip_level.w[w] &= ~bit;
     if (msg->interlock != protoduino_Trip_TRIP_NONE) {
-        in->trip_mask |= bit;
+        in->trip_mask.w[w] |= bit;
         if (msg->interlock == protoduino_Trip_TRIP_HIGH) {
-            in->trip_level |= bit;
+            in->trip_level.w[w] |= bit;
         }
         if (level == (msg->interlock == protoduino_Trip_TRIP_HIGH)) {
             /* Already at its trip level (a bumper pressed as it is configured): it
              * trips in the loop's next pass, right after this Init's Ack, without
              * waiting for its debounce (the level has held for who knows how long). */
-            in->level ^= bit;
+            in->level.w[w] ^= bit;
             in->digital[slot].since = (uint8_t)(in->digital[slot].since - in->digital[slot].debounce);
         }
     }
@@ -143,7 +153,11 @@ static __attribute__((noinline)) void send_notice(pd_core_t *core)
 /* Whether an interlock input is at its trip level now (debounced). */
 static bool tripped(const pd_inputs_t *in)
 {
-    return ((in->level ^ ~in->trip_level) & in->trip_mask) != 0;
+    uint32_t at = 0;
+    for (uint8_t w = 0; w < PD_PINSET_WORDS; w++) {
+        at |= (in->level.w[w] ^ ~in->trip_level.w[w]) & in->trip_mask.w[w];
+    }
+    return at != 0;
 }
 
 protoduino_Status pd_inputs_clear_interlock(pd_core_t *core, uint8_t epoch, bool *cleared)
@@ -173,30 +187,33 @@ static void poll_digital(pd_core_t *core, uint32_t now)
 {
     pd_outputs_t *out = &core->outputs;
     pd_inputs_t *in = &out->inputs;
-    uint32_t pins = in->dpins;
-    uint32_t levels = pd_hal_digital_read_all(core->hal) & pins;
-    uint32_t work = ((levels ^ in->raw) | (in->raw ^ in->level)) & pins;
-    if (work == 0) {
-        return;
-    }
+    pd_pinset_t levels = pd_hal_digital_read_all(core->hal);
     uint8_t now8 = (uint8_t)now;
-    uint32_t bit = 1;
-    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++, bit <<= 1) {
-        if (!(work & bit)) {
-            continue;
-        }
-        pd_dinput_t *d = &in->digital[PD_OWNER_SLOT(out->owner[pin])];
-        bool raw = (levels & bit) != 0;
-        if (raw != ((in->raw & bit) != 0)) {
-            in->raw ^= bit;
-            d->since = now8;
-        }
-        if (raw != ((in->level & bit) != 0) && (uint8_t)(now8 - d->since) >= d->debounce) {
-            in->level ^= bit;
-            if ((in->trip_mask & bit) && raw == ((in->trip_level & bit) != 0) && !in->latched) {
-                trip(core, pin);
+    for (uint8_t w = 0; w < PD_PINSET_WORDS; w++) {
+        uint32_t pins = in->dpins.w[w];
+        uint32_t read = levels.w[w] & pins;
+        uint32_t work = ((read ^ in->raw.w[w]) | (in->raw.w[w] ^ in->level.w[w])) & pins;
+        uint32_t bit = 1;
+        for (uint8_t pin = (uint8_t)(w * 32u); work != 0; pin++, bit <<= 1) {
+            if (!(work & bit)) {
+                continue;
             }
-            mark_dirty(core);
+            work &= ~bit;
+            pd_dinput_t *d = &in->digital[PD_OWNER_SLOT(out->owner[pin])];
+            bool raw = (read & bit) != 0;
+            if (raw != ((in->raw.w[w] & bit) != 0)) {
+                in->raw.w[w] ^= bit;
+                d->since = now8;
+            }
+            if (raw != ((in->level.w[w] & bit) != 0) &&
+                (uint8_t)(now8 - d->since) >= d->debounce) {
+                in->level.w[w] ^= bit;
+                if ((in->trip_mask.w[w] & bit) && raw == ((in->trip_level.w[w] & bit) != 0) &&
+                    !in->latched) {
+                    trip(core, pin);
+                }
+                mark_dirty(core);
+            }
         }
     }
 }
@@ -235,7 +252,8 @@ protoduino_Status pd_inputs_analog_init(pd_core_t *core, const protoduino_Analog
     if (interval <= PD_ANALOG_MAX_MS && heartbeat <= PD_ANALOG_MAX_MS &&
         msg->threshold <= PD_ANALOG_MAX_COUNTS) {
         status = claim_input(core, msg->pin, PD_MODE_ANALOG_INPUT, PD_MAX_ANALOG_INPUTS,
-                             pd_hal_board_info(core->hal)->analog_pins, &was, &slot);
+                             pin_can(&pd_hal_board_info(core->hal)->analog_pins, msg->pin), &was,
+                             &slot);
     } else if (msg->pin >= pd_hal_board_info(core->hal)->num_pins) {
         status = protoduino_Status_STATUS_INVALID_PIN; /* the pin is checked first */
     }
@@ -370,7 +388,8 @@ protoduino_Status pd_inputs_counter_init(pd_core_t *core, const protoduino_Count
     protoduino_Status status = protoduino_Status_STATUS_INVALID_ARGUMENT;
     if ((uint8_t)msg->edge <= protoduino_Edge_EDGE_BOTH && interval <= PD_ANALOG_MAX_MS) {
         status = claim_input(core, msg->pin, PD_MODE_COUNTER, PD_MAX_COUNTERS,
-                             pd_hal_board_info(core->hal)->counter_pins, &was, &slot);
+                             pin_can(&pd_hal_board_info(core->hal)->counter_pins, msg->pin), &was,
+                             &slot);
     } else if (msg->pin >= pd_hal_board_info(core->hal)->num_pins) {
         status = protoduino_Status_STATUS_INVALID_PIN;
     }
@@ -432,7 +451,7 @@ __attribute__((noinline)) void pd_inputs_poll(pd_core_t *core, uint32_t now)
     if (in->notice && !((core->report_pending >> PD_INPUTS_SLOT) & 1u)) {
         send_notice(core); /* the report slot emptied without the report */
     }
-    if (in->dpins != 0) {
+    if (pd_pinset_any(&in->dpins)) {
         poll_digital(core, now);
     }
 #endif
@@ -462,8 +481,7 @@ bool pd_inputs_report(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *msg)
     /* When the values were taken: the newest change's time (nothing changed since, or it
      * would be newer), or now if the report carries a count (read now, below). */
     r->time_ms = in->taken;
-    uint32_t bit = 1;
-    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++, bit <<= 1) {
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
         uint8_t owner = out->owner[pin];
         uint8_t mode = PD_OWNER_MODE(owner);
         uint8_t s = PD_OWNER_SLOT(owner);
@@ -471,19 +489,21 @@ bool pd_inputs_report(pd_core_t *core, uint8_t slot, protoduino_ArduinoOut *msg)
             continue;
         }
         if (mode == PD_MODE_DIGITAL_INPUT) {
-            r->digital_pins |= bit;
+            pd_pinbytes_add(r->digital_pins.bytes, &r->digital_pins.size, pin);
+            if (pd_pinset_has(&in->level, pin)) {
+                pd_pinbytes_add(r->digital_levels.bytes, &r->digital_levels.size, pin);
+            }
         } else if (mode == PD_MODE_ANALOG_INPUT && ((in->analog_dirty >> s) & 1u)) {
-            r->analog_pins |= bit;
+            pd_pinbytes_add(r->analog_pins.bytes, &r->analog_pins.size, pin);
             r->analog_values[r->analog_values_count++] = in->analog[s].value;
         } else if (mode == PD_MODE_COUNTER && ((in->counter_dirty >> s) & 1u)) {
-            r->counter_pins |= bit;
+            pd_pinbytes_add(r->counter_pins.bytes, &r->counter_pins.size, pin);
             r->counter_counts[r->counter_counts_count++] = pd_hal_counter_read(core->hal, pin);
             r->time_ms = pd_hal_millis(core->hal);
         }
     }
-    r->digital_levels = in->level & r->digital_pins;
     r->coalesced = in->coalesced;
-    return r->digital_pins != 0 || r->analog_pins != 0 || r->counter_pins != 0;
+    return (r->digital_pins.size | r->analog_pins.size | r->counter_pins.size) != 0;
 }
 
 void pd_inputs_sent(pd_core_t *core, const protoduino_ArduinoOut *msg)
@@ -494,13 +514,12 @@ void pd_inputs_sent(pd_core_t *core, const protoduino_ArduinoOut *msg)
     uint16_t now16 = (uint16_t)pd_hal_millis(core->hal);
     uint8_t a = 0;
     uint8_t c = 0;
-    uint32_t bit = 1;
-    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++, bit <<= 1) {
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
         uint8_t s = PD_OWNER_SLOT(out->owner[pin]);
-        if (r->analog_pins & bit) {
+        if (pd_pinbytes_has(r->analog_pins.bytes, r->analog_pins.size, pin)) {
             in->analog[s].sent = r->analog_values[a++];
             in->analog[s].heartbeat_left = in->analog[s].heartbeat;
-        } else if (r->counter_pins & bit) {
+        } else if (pd_pinbytes_has(r->counter_pins.bytes, r->counter_pins.size, pin)) {
             in->counter[s].sent = r->counter_counts[c++];
             in->counter[s].reported_at = now16;
         }

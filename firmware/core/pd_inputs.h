@@ -21,6 +21,7 @@
 #include <stdint.h>
 
 #include "pd_features.h"
+#include "pd_pinset.h"
 #include "protoduino.pb.h"
 
 struct pd_core;
@@ -74,11 +75,12 @@ typedef struct pd_inputs {
     pd_dinput_t digital[PD_MAX_DIGITAL_INPUTS];
     pd_ainput_t analog[PD_MAX_ANALOG_INPUTS];
     pd_counter_t counter[PD_MAX_COUNTERS];
-    uint32_t dpins;      /* bit N: pin N is a digital input */
-    uint32_t level;      /* bit N: the debounced level of digital input N */
-    uint32_t raw;        /* bit N: the level read last */
-    uint32_t trip_mask;  /* bit N: digital input N is an interlock */
-    uint32_t trip_level; /* bit N: it trips at a high level (else low) */
+    /* Pin sets (pd_pinset.h), pin N for digital input N: */
+    pd_pinset_t dpins;      /* the digital inputs */
+    pd_pinset_t level;      /* its debounced level */
+    pd_pinset_t raw;        /* the level read last */
+    pd_pinset_t trip_mask;  /* it is an interlock */
+    pd_pinset_t trip_level; /* it trips at a high level (else low) */
     uint8_t analog_dirty;  /* bit slot: a value to report */
     uint8_t counter_dirty; /* bit slot: a count to report */
     uint8_t adc_slot;      /* the analog slot being converted; PD_INPUTS_NO_SLOT: none */
@@ -116,7 +118,8 @@ void pd_inputs_poll(struct pd_core *core, uint32_t now);
  */
 static inline bool pd_inputs_active(const pd_inputs_t *in)
 {
-    return (in->dpins | in->analog_on | in->counter_on) != 0 || in->adc_slot != 0xFFu;
+    return pd_pinset_any(&in->dpins) || (in->analog_on | in->counter_on) != 0 ||
+           in->adc_slot != 0xFFu;
 }
 
 /* Fill the InputReport with the newest values (the core's report callback for PD_INPUTS_SLOT). */

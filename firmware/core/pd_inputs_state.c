@@ -19,10 +19,9 @@ void pd_inputs_init(pd_inputs_t *in)
 void pd_inputs_release(pd_outputs_t *outputs, void *hal, uint8_t pin, uint8_t mode, uint8_t slot)
 {
     pd_inputs_t *in = &outputs->inputs;
-    uint32_t bit = 1UL << pin;
     if (mode == PD_MODE_DIGITAL_INPUT) {
-        in->trip_mask &= ~bit;
-        in->dpins &= ~bit;
+        pd_pinset_put(&in->trip_mask, pin, false);
+        pd_pinset_put(&in->dpins, pin, false);
     } else if (mode == PD_MODE_ANALOG_INPUT) {
         in->analog_on = (uint8_t)(in->analog_on & ~(1u << slot));
         /* Interval 0: not sampled; a conversion under way ends unused (poll_analog). */

@@ -6,8 +6,6 @@
 #include "pd_protocol.h"
 #include "pd_user.h"
 
-/* The digital masks hold one bit per pin. */
-typedef char pd_assert_pins_fit_mask[(PD_MAX_PINS <= 32) ? 1 : -1];
 /* Every PWM output's duty fits OutputStates.pwm_duties. */
 typedef char pd_assert_pwm_fit_read[(PD_MAX_PWM <= sizeof(((protoduino_OutputStates *)0)->pwm_duties)) ? 1 : -1];
 
@@ -135,17 +133,30 @@ static uint8_t pose_pass(const protoduino_PoseItem *item)
 protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino_Pose *msg,
                                   uint8_t *bad)
 {
-    uint32_t seen = 0;
+    pd_pinset_t seen = {{0}};
+    uint8_t pins_size = (uint8_t)msg->digital_pins.size;
+    uint8_t levels_size = (uint8_t)msg->digital_levels.size;
 
     *bad = 1;
-    if (msg->items_count == 0 && msg->digital_pins == 0) {
+    if (pins_size > sizeof(msg->digital_pins.bytes) ||
+        levels_size > sizeof(msg->digital_levels.bytes)) {
+        return protoduino_Status_STATUS_INVALID_ARGUMENT; /* not from nanopb's decoder */
+    }
+    uint8_t any = 0;
+    for (uint8_t i = 0; i < pins_size; i++) {
+        any |= msg->digital_pins.bytes[i];
+    }
+    if (msg->items_count == 0 && any == 0) {
         return protoduino_Status_STATUS_INVALID_ARGUMENT; /* sets nothing */
     }
     *bad = 0;
-    if (msg->digital_levels & ~msg->digital_pins) {
-        return protoduino_Status_STATUS_INVALID_ARGUMENT; /* a level for no pin: no output named */
+    for (uint8_t i = 0; i < levels_size; i++) {
+        uint8_t pins = i < pins_size ? msg->digital_pins.bytes[i] : 0u;
+        if (msg->digital_levels.bytes[i] & (uint8_t)~pins) {
+            return protoduino_Status_STATUS_INVALID_ARGUMENT; /* a level for no pin: no output named */
+        }
     }
-    /* Pass 0 checks every item, then every pin of the mask in ascending order (numbered
+    /* Pass 0 checks every item, then every pin of the set in ascending order (numbered
      * after the items); passes 1 to 3 apply them (pose_pass says which goes in which),
      * each in that order, the servos held, so that their new widths start at the same
      * frame. */
@@ -176,39 +187,44 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
                 pin = item->output.pwm.pin;
             }
             if (pass == 0) {
-                /* pin < PD_MAX_PINS <= 32 once the item is valid */
-                if (status == protoduino_Status_STATUS_OK && ((seen >> pin) & 1u)) {
+                /* pin < PD_MAX_PINS once the item is valid */
+                if (status == protoduino_Status_STATUS_OK && pd_pinset_has(&seen, (uint8_t)pin)) {
                     status = protoduino_Status_STATUS_INVALID_ARGUMENT; /* a pin twice */
                 }
                 if (status != protoduino_Status_STATUS_OK) {
                     *bad = (uint8_t)(i + 1u);
                     return status;
                 }
-                seen |= 1UL << pin;
+                pd_pinset_put(&seen, (uint8_t)pin, true);
             }
         }
-        /* The masks, one pin a turn: each exactly as its DigitalControl. The masks
-         * shift one place per pin (a variable 32-bit shift is a loop on the AVR);
-         * at most 32 turns, and none past the highest pin set. */
-        uint32_t pins = pass == 0 || pass == PD_POSE_LEVELS ? msg->digital_pins : 0u;
-        uint32_t levels = msg->digital_levels;
-        uint32_t bit = 1;
-        for (uint8_t pin = 0; pins != 0; pin++, pins >>= 1, levels >>= 1, bit <<= 1) {
-            if (!(pins & 1u)) {
-                continue;
-            }
-            protoduino_DigitalControl control = {pin, (levels & 1u) != 0};
-            protoduino_Status status = PD_FEATURE_DIGITAL_OUTPUT
-                                           ? pd_digital_control(out, hal, &control, apply)
-                                           : protoduino_Status_STATUS_NOT_SUPPORTED;
-            i++;
-            if (pass == 0) {
-                if (status == protoduino_Status_STATUS_OK && (seen & bit)) {
-                    status = protoduino_Status_STATUS_INVALID_ARGUMENT; /* also an item */
+        /* The set, one pin a turn: each exactly as its DigitalControl (a pin the board
+         * does not have is refused there), a byte at a time. */
+        if (pass != 0 && pass != PD_POSE_LEVELS) {
+            pins_size = 0;
+        } else {
+            pins_size = (uint8_t)msg->digital_pins.size;
+        }
+        for (uint8_t at = 0; at < pins_size; at++) {
+            uint8_t pins = msg->digital_pins.bytes[at];
+            uint8_t levels = at < levels_size ? msg->digital_levels.bytes[at] : 0u;
+            for (uint8_t pin = (uint8_t)(at * 8u); pins != 0; pin++, pins >>= 1, levels >>= 1) {
+                if (!(pins & 1u)) {
+                    continue;
                 }
-                if (status != protoduino_Status_STATUS_OK) {
-                    *bad = i;
-                    return status;
+                protoduino_DigitalControl control = {pin, (levels & 1u) != 0};
+                protoduino_Status status = PD_FEATURE_DIGITAL_OUTPUT
+                                               ? pd_digital_control(out, hal, &control, apply)
+                                               : protoduino_Status_STATUS_NOT_SUPPORTED;
+                i++;
+                if (pass == 0) {
+                    if (status == protoduino_Status_STATUS_OK && pd_pinset_has(&seen, pin)) {
+                        status = protoduino_Status_STATUS_INVALID_ARGUMENT; /* also an item */
+                    }
+                    if (status != protoduino_Status_STATUS_OK) {
+                        *bad = i;
+                        return status;
+                    }
                 }
             }
         }
@@ -221,12 +237,11 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
 
 void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
 {
-    typedef char fits[(sizeof(states->servos.bytes) >= 5u * PD_MAX_SERVOS) ? 1 : -1];
+    typedef char fits[(sizeof(states->servos.bytes) >= 5u * PD_MAX_SERVOS &&
+                       sizeof(states->digital_pins.bytes) >= PD_PINSET_BYTES) ? 1 : -1];
     (void)sizeof(fits);
     uint8_t *b = states->servos.bytes;
-    /* `bit` moves one place per pin: a variable 32-bit shift is a loop on the AVR. */
-    uint32_t bit = 1;
-    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++, bit <<= 1) {
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
         uint8_t owner = out->owner[pin];
         if (owner == 0) {
             continue;
@@ -239,14 +254,16 @@ void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
             *b++ = (uint8_t)s->target_us;
             *b++ = (uint8_t)(s->target_us >> 8);
         } else if (PD_OWNER_MODE(owner) == PD_MODE_DIGITAL) {
-            states->digital_pins |= bit;
+            pd_pinbytes_add(states->digital_pins.bytes, &states->digital_pins.size, pin);
+            if (pd_pinset_has(&out->digital_level, pin)) {
+                pd_pinbytes_add(states->digital_levels.bytes, &states->digital_levels.size, pin);
+            }
         } else if (PD_OWNER_MODE(owner) == PD_MODE_PWM) {
-            states->pwm_pins |= bit;
+            pd_pinbytes_add(states->pwm_pins.bytes, &states->pwm_pins.size, pin);
             states->pwm_duties[states->pwm_duties_count++] = out->pwm[PD_OWNER_SLOT(owner)].duty;
         }
     }
     states->servos.size = (pb_size_t)(b - states->servos.bytes);
-    states->digital_levels = out->digital_level & states->digital_pins;
 }
 
 /* Let go of an owned pin through its mode's release; the pin is free again. */

@@ -64,8 +64,8 @@ typedef struct pd_outputs {
     uint8_t owner[PD_MAX_PINS]; /* the pin table (pd_pintable.h): PD_OWNER(mode, slot); 0 = free */
     pd_servo_t servo[PD_MAX_SERVOS];
     pd_pwm_t pwm[PD_MAX_PWM];
-    uint32_t digital_safe;  /* bit N: safe level of pin N */
-    uint32_t digital_level; /* bit N: current level of pin N */
+    pd_pinset_t digital_safe;  /* the safe level of pin N (pd_pinset.h) */
+    pd_pinset_t digital_level; /* the current level of pin N */
     uint32_t stepped_at;    /* pd_hal_millis() of the last speed step */
     pd_inputs_t inputs;     /* the input modes' state (pd_inputs.h) */
 #if PD_FEATURE_USER
@@ -79,11 +79,11 @@ void pd_outputs_init(pd_outputs_t *out);
 /*
  * Several outputs at once, all or nothing: every item is checked (in order,
  * each as its Control would be; a pin twice is STATUS_INVALID_ARGUMENT), then
- * every pin of digital_pins in ascending order (as its DigitalControl; a pin
- * also named by an item is STATUS_INVALID_ARGUMENT), before any is applied.
+ * every pin of the set digital_pins in ascending order (as its DigitalControl; a
+ * pin also named by an item is STATUS_INVALID_ARGUMENT), before any is applied.
  * On a refusal *bad is Ack.refused_item: the offending item's position counted
- * from 1, the mask's pins counted on after the items; 1 for a Pose that sets
- * nothing, 0 for a level bit outside digital_pins (protocol.md section 7, rule 7).
+ * from 1, the set's pins counted on after the items; 1 for a Pose that sets
+ * nothing, 0 for a level outside digital_pins (protocol.md section 7, rule 7).
  */
 protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino_Pose *msg,
                                   uint8_t *bad);

@@ -11,7 +11,7 @@ protoduino_Status pd_pins_check(void *hal, uint32_t pin)
     if (pin >= num_pins) {
         return protoduino_Status_STATUS_INVALID_PIN;
     }
-    if (info->reserved_pins & (1UL << pin)) {
+    if (pd_pinset_has(&info->reserved_pins, (uint8_t)pin)) {
         return protoduino_Status_STATUS_RESERVED_PIN;
     }
     return protoduino_Status_STATUS_OK;
@@ -24,7 +24,8 @@ protoduino_Status pd_pins_claim(uint8_t *owner, void *hal, uint32_t pin, uint8_t
     if (status != protoduino_Status_STATUS_OK) {
         return status;
     }
-    if (mode != PD_MODE_ANALOG_INPUT && (pd_hal_board_info(hal)->analog_only_pins >> pin) & 1u) {
+    if (mode != PD_MODE_ANALOG_INPUT &&
+        pd_pinset_has(&pd_hal_board_info(hal)->analog_only_pins, (uint8_t)pin)) {
         return protoduino_Status_STATUS_NOT_SUPPORTED; /* no digital I/O at the pin */
     }
     uint8_t was = owner[pin];

@@ -23,9 +23,9 @@ void pd_pwm_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 
 bool pd_outputs_timer_pwm(const pd_outputs_t *out, void *hal)
 {
-    uint32_t pins = pd_hal_board_info(hal)->servo_timer_pins;
-    for (uint8_t pin = 0; pins != 0; pin++, pins >>= 1) {
-        if ((pins & 1u) && PD_OWNER_MODE(out->owner[pin]) == PD_MODE_PWM &&
+    const pd_pinset_t *pins = &pd_hal_board_info(hal)->servo_timer_pins;
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        if (pd_pinset_has(pins, pin) && PD_OWNER_MODE(out->owner[pin]) == PD_MODE_PWM &&
             out->owner[pin] != 0) {
             return true;
         }
@@ -41,18 +41,17 @@ protoduino_Status pd_outputs_pwm_init(pd_outputs_t *out, void *hal, const protod
     }
     const pd_board_info_t *info = pd_hal_board_info(hal);
     uint8_t pin = (uint8_t)msg->pin;
-    uint32_t bit = 1UL << pin;
     uint8_t was = out->owner[pin];
-    if (info->clock_timer_pins & bit) {
+    if (pd_pinset_has(&info->clock_timer_pins, pin)) {
         return protoduino_Status_STATUS_TIMER_IN_USE; /* its timer runs the clock */
     }
-    if (!(info->pwm_pins & bit)) {
+    if (!pd_pinset_has(&info->pwm_pins, pin)) {
         return protoduino_Status_STATUS_NOT_SUPPORTED; /* no timer output there */
     }
     if (was != 0 && PD_OWNER_MODE(was) != PD_MODE_PWM) {
         return protoduino_Status_STATUS_PIN_IN_USE;
     }
-    if ((info->servo_timer_pins & bit) && pd_pins_count(out->owner, PD_MODE_SERVO) > 0) {
+    if (pd_pinset_has(&info->servo_timer_pins, pin) && pd_pins_count(out->owner, PD_MODE_SERVO) > 0) {
         return protoduino_Status_STATUS_TIMER_IN_USE; /* its timer makes the servo pulses */
     }
     if (msg->safe_duty > 255u) {

@@ -10,7 +10,7 @@
 /* DeviceInfo.firmware_version: the Python package's version. */
 #define PD_FIRMWARE_VERSION "0.1.0"
 
-#define PD_PROTOCOL_VERSION 7
+#define PD_PROTOCOL_VERSION 8
 #define PD_MAX_PAYLOAD 255
 /* COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter. */
 #define PD_MAX_ENCODED_FRAME 262

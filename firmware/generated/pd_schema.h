@@ -3,6 +3,6 @@
 #define PD_SCHEMA_H
 
 /* CRC-32 of the schema's deterministic FileDescriptorSet (docs/protocol.md 5). */
-#define PD_SCHEMA_ID 0x37D10B13UL
+#define PD_SCHEMA_ID 0xEE51A9E2UL
 
 #endif /* PD_SCHEMA_H */

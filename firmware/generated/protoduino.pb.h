@@ -221,17 +221,20 @@ typedef struct _protoduino_PoseItem {
     } output;
 } protoduino_PoseItem;
 
-/* Digital outputs go in the two masks (protocol version 6), bit P for pin P as in
- OutputStates: a Pose of six digital outputs is 14 to 17 bytes on the wire where
- six DigitalControl items took 47 to 59. A PoseItem.digital still decodes and
- counts as it did. The masks' pins are checked and applied after the items, in
- ascending pin order, and numbered after them (refused_item: items + 1 for the
- lowest pin, and so on). */
+typedef PB_BYTES_ARRAY_T(9) protoduino_Pose_digital_pins_t;
+typedef PB_BYTES_ARRAY_T(9) protoduino_Pose_digital_levels_t;
+/* Digital outputs go in the two pin sets (protocol version 6; pin sets of any width
+ since version 8: bit P % 8 of byte P / 8 for pin P, as every pin set of this
+ schema): a Pose of six digital outputs is 14 to 17 bytes on the wire where six
+ DigitalControl items took 47 to 59. A PoseItem.digital still decodes and counts
+ as it did. The sets' pins are checked and applied after the items, in ascending
+ pin order, and numbered after them (refused_item: items + 1 for the lowest pin,
+ and so on). */
 typedef struct _protoduino_Pose {
     pb_size_t items_count;
     protoduino_PoseItem items[8]; /* 0..8 items, each pin at most once */
-    uint32_t digital_pins; /* bit P: the Pose sets digital output P's level */
-    uint32_t digital_levels; /* bit P: that level is high; only bits of digital_pins */
+    protoduino_Pose_digital_pins_t digital_pins; /* pin set: the Pose sets digital output P's level */
+    protoduino_Pose_digital_levels_t digital_levels; /* pin set: that level is high; only pins of digital_pins */
 } protoduino_Pose;
 
 /* Ask what the device drives now (OutputStates, returned in the Ack). */
@@ -339,15 +342,20 @@ typedef struct _protoduino_DeviceInfo {
 } protoduino_DeviceInfo;
 
 typedef PB_BYTES_ARRAY_T(40) protoduino_OutputStates_servos_t;
+typedef PB_BYTES_ARRAY_T(9) protoduino_OutputStates_digital_pins_t;
+typedef PB_BYTES_ARRAY_T(9) protoduino_OutputStates_digital_levels_t;
+typedef PB_BYTES_ARRAY_T(9) protoduino_OutputStates_pwm_pins_t;
 /* Every configured output and its value now (answer to ReadOutputs). */
 typedef struct _protoduino_OutputStates {
     /* 5 bytes per servo, in pin order: its pin, then the width it drives now and
  the width it moves to (the same unless speed-limited), each in us as a
  little-endian uint16. Bytes, not messages: the Uno's encoder stays small. */
     protoduino_OutputStates_servos_t servos;
-    uint32_t digital_pins; /* bit N: pin N is a digital output */
-    uint32_t digital_levels; /* bit N: the level pin N drives */
-    uint32_t pwm_pins; /* bit N: pin N is a PWM output */
+    /* Pin sets (protocol version 8): pin N is bit N % 8 of byte N / 8; trailing
+ zero bytes are left out (an empty set is an absent field). */
+    protoduino_OutputStates_digital_pins_t digital_pins; /* pin N is a digital output */
+    protoduino_OutputStates_digital_levels_t digital_levels; /* the level pin N drives */
+    protoduino_OutputStates_pwm_pins_t pwm_pins; /* pin N is a PWM output */
     pb_size_t pwm_duties_count;
     uint8_t pwm_duties[6]; /* their duties, in pin order */
 } protoduino_OutputStates;
@@ -388,16 +396,21 @@ typedef struct _protoduino_Ack {
     uint8_t refused_item; /* a refused Pose: its offending item, counted from 1 */
 } protoduino_Ack;
 
+typedef PB_BYTES_ARRAY_T(9) protoduino_InputReport_digital_pins_t;
+typedef PB_BYTES_ARRAY_T(9) protoduino_InputReport_digital_levels_t;
+typedef PB_BYTES_ARRAY_T(9) protoduino_InputReport_analog_pins_t;
+typedef PB_BYTES_ARRAY_T(9) protoduino_InputReport_counter_pins_t;
 /* The inputs' state, sent when something changed ("newest wins": a report not
  yet sent is replaced by a newer one, and `coalesced` counts the replaced). */
 typedef struct _protoduino_InputReport {
     uint32_t time_ms; /* device time (ms, wraps) the values were taken */
-    uint32_t digital_pins; /* bit N: pin N is a digital input (every report) */
-    uint32_t digital_levels; /* bit N: its debounced level */
-    uint32_t analog_pins; /* bit N: pin N's value is in analog_values */
+    /* Pin sets as OutputStates' (protocol version 8): pin N is bit N % 8 of byte N / 8. */
+    protoduino_InputReport_digital_pins_t digital_pins; /* pin N is a digital input (every report) */
+    protoduino_InputReport_digital_levels_t digital_levels; /* its debounced level */
+    protoduino_InputReport_analog_pins_t analog_pins; /* pin N's value is in analog_values */
     pb_size_t analog_values_count;
     uint16_t analog_values[6]; /* 10-bit counts, in pin order */
-    uint32_t counter_pins; /* bit N: pin N's count is in counter_counts */
+    protoduino_InputReport_counter_pins_t counter_pins; /* pin N's count is in counter_counts */
     pb_size_t counter_counts_count;
     uint32_t counter_counts[4]; /* edges since the CounterInit (wraps at 2^32), in pin order */
     uint16_t coalesced; /* reports replaced before they were sent, since the last */
@@ -522,7 +535,7 @@ extern "C" {
 #define protoduino_ClearInterlock_init_default   {0}
 #define protoduino_GetInfo_init_default          {0}
 #define protoduino_PoseItem_init_default         {0, {protoduino_ServoControl_init_default}}
-#define protoduino_Pose_init_default             {0, {protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default}, 0, 0}
+#define protoduino_Pose_init_default             {0, {protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default, protoduino_PoseItem_init_default}, {0, {0}}, {0, {0}}}
 #define protoduino_ReadOutputs_init_default      {0}
 #define protoduino_ConfigureFailsafe_init_default {0, _protoduino_Liveness_MIN}
 #define protoduino_Heartbeat_init_default        {0}
@@ -531,10 +544,10 @@ extern "C" {
 #define protoduino_UserCall_init_default         {{0, {0}}, 0}
 #define protoduino_ArduinoIn_init_default        {0, 0, {protoduino_Ping_init_default}}
 #define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, {{NULL}, NULL}, {{NULL}, NULL}}
-#define protoduino_OutputStates_init_default     {{0, {0}}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
+#define protoduino_OutputStates_init_default     {{0, {0}}, {0, {0}}, {0, {0}}, {0, {0}}, 0, {0, 0, 0, 0, 0, 0}}
 #define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_default, 0, 0}
 #define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN, 0, 0}
-#define protoduino_InputReport_init_default      {0, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}, 0, 0, {0, 0, 0, 0}, 0}
+#define protoduino_InputReport_init_default      {0, {0, {0}}, {0, {0}}, {0, {0}}, 0, {0, 0, 0, 0, 0, 0}, {0, {0}}, 0, {0, 0, 0, 0}, 0}
 #define protoduino_DecodeError_init_default      {0}
 #define protoduino_UserReport_init_default       {0, {0, {0}}, 0}
 #define protoduino_ArduinoOut_init_default       {0, {protoduino_Ack_init_default}}
@@ -552,7 +565,7 @@ extern "C" {
 #define protoduino_ClearInterlock_init_zero      {0}
 #define protoduino_GetInfo_init_zero             {0}
 #define protoduino_PoseItem_init_zero            {0, {protoduino_ServoControl_init_zero}}
-#define protoduino_Pose_init_zero                {0, {protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero}, 0, 0}
+#define protoduino_Pose_init_zero                {0, {protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero, protoduino_PoseItem_init_zero}, {0, {0}}, {0, {0}}}
 #define protoduino_ReadOutputs_init_zero         {0}
 #define protoduino_ConfigureFailsafe_init_zero   {0, _protoduino_Liveness_MIN}
 #define protoduino_Heartbeat_init_zero           {0}
@@ -561,10 +574,10 @@ extern "C" {
 #define protoduino_UserCall_init_zero            {{0, {0}}, 0}
 #define protoduino_ArduinoIn_init_zero           {0, 0, {protoduino_Ping_init_zero}}
 #define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, {{NULL}, NULL}, {{NULL}, NULL}}
-#define protoduino_OutputStates_init_zero        {{0, {0}}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
+#define protoduino_OutputStates_init_zero        {{0, {0}}, {0, {0}}, {0, {0}}, {0, {0}}, 0, {0, 0, 0, 0, 0, 0}}
 #define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_zero, 0, 0}
 #define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN, 0, 0}
-#define protoduino_InputReport_init_zero         {0, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}, 0, 0, {0, 0, 0, 0}, 0}
+#define protoduino_InputReport_init_zero         {0, {0, {0}}, {0, {0}}, {0, {0}}, 0, {0, 0, 0, 0, 0, 0}, {0, {0}}, 0, {0, 0, 0, 0}, 0}
 #define protoduino_DecodeError_init_zero         {0}
 #define protoduino_UserReport_init_zero          {0, {0, {0}}, 0}
 #define protoduino_ArduinoOut_init_zero          {0, {protoduino_Ack_init_zero}}
@@ -785,8 +798,8 @@ X(a, STATIC,   ONEOF,    MESSAGE,  (output,pwm,output.pwm),   3)
 
 #define protoduino_Pose_FIELDLIST(X, a) \
 X(a, STATIC,   REPEATED, MESSAGE,  items,             1) \
-X(a, STATIC,   SINGULAR, UINT32,   digital_pins,      2) \
-X(a, STATIC,   SINGULAR, UINT32,   digital_levels,    3)
+X(a, STATIC,   SINGULAR, BYTES,    digital_pins,      2) \
+X(a, STATIC,   SINGULAR, BYTES,    digital_levels,    3)
 #define protoduino_Pose_CALLBACK NULL
 #define protoduino_Pose_DEFAULT NULL
 #define protoduino_Pose_items_MSGTYPE protoduino_PoseItem
@@ -894,9 +907,9 @@ X(a, CALLBACK, SINGULAR, BYTES,    timers,           15)
 
 #define protoduino_OutputStates_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, BYTES,    servos,            1) \
-X(a, STATIC,   SINGULAR, FIXED32,  digital_pins,      2) \
-X(a, STATIC,   SINGULAR, FIXED32,  digital_levels,    3) \
-X(a, STATIC,   SINGULAR, FIXED32,  pwm_pins,          4) \
+X(a, STATIC,   SINGULAR, BYTES,    digital_pins,      2) \
+X(a, STATIC,   SINGULAR, BYTES,    digital_levels,    3) \
+X(a, STATIC,   SINGULAR, BYTES,    pwm_pins,          4) \
 X(a, STATIC,   REPEATED, UINT32,   pwm_duties,        5)
 #define protoduino_OutputStates_CALLBACK NULL
 #define protoduino_OutputStates_DEFAULT NULL
@@ -927,11 +940,11 @@ X(a, STATIC,   SINGULAR, UINT32,   pin,               4)
 
 #define protoduino_InputReport_FIELDLIST(X, a) \
 X(a, STATIC,   SINGULAR, UINT32,   time_ms,           1) \
-X(a, STATIC,   SINGULAR, FIXED32,  digital_pins,      2) \
-X(a, STATIC,   SINGULAR, FIXED32,  digital_levels,    3) \
-X(a, STATIC,   SINGULAR, FIXED32,  analog_pins,       4) \
+X(a, STATIC,   SINGULAR, BYTES,    digital_pins,      2) \
+X(a, STATIC,   SINGULAR, BYTES,    digital_levels,    3) \
+X(a, STATIC,   SINGULAR, BYTES,    analog_pins,       4) \
 X(a, STATIC,   REPEATED, UINT32,   analog_values,     5) \
-X(a, STATIC,   SINGULAR, FIXED32,  counter_pins,      6) \
+X(a, STATIC,   SINGULAR, BYTES,    counter_pins,      6) \
 X(a, STATIC,   REPEATED, UINT32,   counter_counts,    7) \
 X(a, STATIC,   SINGULAR, UINT32,   coalesced,         8)
 #define protoduino_InputReport_CALLBACK NULL
@@ -1028,11 +1041,11 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_DeviceInfo_size               108 /* callbacks at their max_size */
-#define protoduino_Ack_size                      137 /* callbacks at their max_size */
-#define protoduino_ArduinoOut_size               140 /* callbacks at their max_size */
+#define protoduino_DeviceInfo_size               146 /* callbacks at their max_size */
+#define protoduino_Ack_size                      176 /* callbacks at their max_size */
+#define protoduino_ArduinoOut_size               179 /* callbacks at their max_size */
 #define protoduino_AnalogInputInit_size          19
-#define protoduino_ArduinoIn_size                108
+#define protoduino_ArduinoIn_size                118
 #define protoduino_ClearInterlock_size           3
 #define protoduino_ConfigureFailsafe_size        8
 #define protoduino_CounterInit_size              13
@@ -1043,11 +1056,11 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_Failsafe_size                 10
 #define protoduino_GetInfo_size                  0
 #define protoduino_Heartbeat_size                3
-#define protoduino_InputReport_size              78
-#define protoduino_OutputStates_size             75
+#define protoduino_InputReport_size              102
+#define protoduino_OutputStates_size             93
 #define protoduino_Ping_size                     69
 #define protoduino_PoseItem_size                 9
-#define protoduino_Pose_size                     100
+#define protoduino_Pose_size                     110
 #define protoduino_PwmControl_size               7
 #define protoduino_PwmInit_size                  7
 #define protoduino_ReadOutputs_size              0

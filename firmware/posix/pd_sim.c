@@ -46,11 +46,11 @@
 
 /*
  * The transmit queue, as on the Uno: frames wait here and the loop moves them
- * to the pty when it can take them, never waiting for it. The same size as the
- * Uno's ring, so the core holds back received frames on the same occasions.
+ * to the pty when it can take them, never waiting for it. Sized as the Uno's ring
+ * is (the reserve and a free byte: pd_avr.h), so the core holds back received frames
+ * on the same occasions; the reserve is this build's, whose pins are the Mega's 70.
  */
-#define SIM_TX_SIZE 117u
-typedef char sim_assert_tx_room[SIM_TX_SIZE - 1u >= PD_TX_RESERVE ? 1 : -1];
+#define SIM_TX_SIZE (PD_TX_RESERVE + 1u)
 
 enum { SIM_PIN_UNUSED = 0, SIM_PIN_SERVO, SIM_PIN_DIGITAL, SIM_PIN_PWM };
 
@@ -82,21 +82,26 @@ typedef struct sim_hal {
     bool driven[PD_MAX_PINS];       /* the control socket set the pin's level */
     uint32_t baud;                  /* the device's line rate (pd_hal_set_baud) */
     pd_line_t line;                 /* --line-*: what the line carries (pd_linerate.h) */
+    const pd_board_info_t *info;    /* the pins it serves: sim_board, or the Mega's (--board mega) */
 } sim_hal_t;
+
+/* The Mega 2560's table (avr/pd_avr_mega.c, built into this program too): --board mega. */
+extern const pd_board_info_t pd_avr_mega_info;
 
 static const pd_board_info_t sim_board = {
     .board = "sim",
     .num_pins = 20,
     .max_servos = 8,
-    .reserved_pins = (1UL << 0) | (1UL << 1), /* the Uno's UART, for the same semantics */
+    .reserved_pins = PD_PINSET(PD_PIN(0) | PD_PIN(1), 0, 0), /* the Uno's UART, for the same semantics */
     .rx_buffer = 512,                         /* one read() of the pty; the pty holds more */
     /* The Uno's pin capabilities and timer rules, so that a program tested here
      * meets the same refusals on the board. */
-    .pwm_pins = (1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11),
-    .analog_pins = 0x3FUL << 14,
-    .counter_pins = 0x3FFCUL,    /* 2..13, as the Uno */
-    .pin_change_pins = 0x3FF0UL, /* 4..13: the Uno's pin-change interrupts */
-    .servo_timer_pins = (1UL << 9) | (1UL << 10),
+    .pwm_pins = PD_PINSET(PD_PIN(3) | PD_PIN(5) | PD_PIN(6) | PD_PIN(9) | PD_PIN(10) | PD_PIN(11),
+                         0, 0),
+    .analog_pins = PD_PINSET(0x3FUL << 14, 0, 0),
+    .counter_pins = PD_PINSET(0x3FFCUL, 0, 0),    /* 2..13, as the Uno */
+    .pin_change_pins = PD_PINSET(0x3FF0UL, 0, 0), /* 4..13: the Uno's pin-change interrupts */
+    .servo_timer_pins = PD_PINSET(PD_PIN(9) | PD_PIN(10), 0, 0),
     .servo_timer = 1,
     .clock_timer = 0,
 };
@@ -224,7 +229,21 @@ static void sim_release_all(sim_hal_t *hal)
 
 /* --- the control socket ------------------------------------------------ */
 
-#define SIM_FIRST_ANALOG 14 /* A0, as on the Uno */
+/* Why a pin takes no analog value: the board's analog inputs, from its table. */
+static const char *sim_not_analog(const pd_board_info_t *info)
+{
+    static char why[64];
+    int first = -1, last = -1;
+    for (int pin = 0; pin < info->num_pins && pin < PD_MAX_PINS; pin++) {
+        if (pd_pinset_has(&info->analog_pins, (uint8_t)pin)) {
+            first = first < 0 ? pin : first;
+            last = pin;
+        }
+    }
+    snprintf(why, sizeof(why), "analog inputs are pins %d..%d (A0..A%d)", first, last,
+             last - first);
+    return why;
+}
 
 /* The pin's level at board time `now`: a pulse goes to the opposite of the
  * level before the train for the first half of each period. */
@@ -270,10 +289,10 @@ static uint32_t sim_count(const sim_input_t *in, double now)
 static const char *sim_control_apply(void *ctx, const pd_control_cmd_t *cmd, double *t)
 {
     sim_hal_t *hal = ctx;
-    if (cmd->pin >= sim_board.num_pins) {
-        return "no such pin on this board (pins 2..19)";
+    if (cmd->pin >= hal->info->num_pins) {
+        return "no such pin on this board";
     }
-    if (sim_board.reserved_pins & (1UL << cmd->pin)) {
+    if (pd_pinset_has(&hal->info->reserved_pins, cmd->pin)) {
         return "pins 0 and 1 carry the serial link";
     }
     sim_input_t *in = &hal->input[cmd->pin];
@@ -297,8 +316,8 @@ static const char *sim_control_apply(void *ctx, const pd_control_cmd_t *cmd, dou
         break;
     }
     case PD_CONTROL_ANALOG:
-        if (cmd->pin < SIM_FIRST_ANALOG) {
-            return "analog inputs are pins 14..19 (A0..A5)";
+        if (!pd_pinset_has(&hal->info->analog_pins, cmd->pin)) {
+            return sim_not_analog(hal->info);
         }
         in->analog = (uint16_t)cmd->value;
         break;
@@ -431,13 +450,13 @@ void pd_hal_input_release(void *ctx, uint8_t pin)
     (void)pin;
 }
 
-uint32_t pd_hal_digital_read_all(void *ctx)
+pd_pinset_t pd_hal_digital_read_all(void *ctx)
 {
     sim_hal_t *hal = ctx;
     double now = sim_elapsed(hal);
-    uint32_t levels = 0;
+    pd_pinset_t levels = {{0}};
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
-        levels |= (uint32_t)sim_input_level(&hal->input[pin], now) << pin;
+        pd_pinset_put(&levels, pin, sim_input_level(&hal->input[pin], now));
     }
     return levels;
 }
@@ -519,8 +538,8 @@ void pd_hal_outputs_safe(void *ctx)
 
 const pd_board_info_t *pd_hal_board_info(void *ctx)
 {
-    (void)ctx;
-    return &sim_board;
+    const sim_hal_t *hal = ctx;
+    return hal->info;
 }
 
 /* --- the process --------------------------------------------------------- */
@@ -537,8 +556,8 @@ static void on_signal(int sig)
 static int usage(void)
 {
     fprintf(stderr,
-            "usage: pd_sim [--trace FILE] [--link PATH] [--control PATH] [--owner-fd FD]\n"
-            "              [--line-check] [--line-max BAUD] [--line-max-out BAUD]\n");
+            "usage: pd_sim [--board uno|mega] [--trace FILE] [--link PATH] [--control PATH]\n"
+            "              [--owner-fd FD] [--line-check] [--line-max BAUD] [--line-max-out BAUD]\n");
     return 2;
 }
 
@@ -601,6 +620,10 @@ int main(int argc, char **argv)
         hal.input[pin].edge = -1; /* no counter */
     }
     hal.baud = PD_BAUD;
+    hal.info = &sim_board;
+    /* --board mega: the Mega build's own table (avr/pd_avr_mega.c), the one declaration of
+     * its pins, with this board's link buffer. */
+    static pd_board_info_t mega;
     for (int i = 1; i < argc; i++) {
         int line = pd_line_option(&hal.line, argc, argv, &i);
         if (line < 0) {
@@ -609,7 +632,16 @@ int main(int argc, char **argv)
         if (line > 0) {
             continue;
         }
-        if (strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
+        if (strcmp(argv[i], "--board") == 0 && i + 1 < argc) {
+            const char *name = argv[++i];
+            if (strcmp(name, "mega") == 0) {
+                mega = pd_avr_mega_info;
+                mega.rx_buffer = sim_board.rx_buffer;
+                hal.info = &mega;
+            } else if (strcmp(name, "uno") != 0) {
+                return usage();
+            }
+        } else if (strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
             trace_path = argv[++i];
         } else if (strcmp(argv[i], "--link") == 0 && i + 1 < argc) {
             link_path = argv[++i];

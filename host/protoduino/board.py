@@ -86,7 +86,15 @@ from .errors import (
 from .events import Event, EventCallback, EventDispatcher, EventKind, EventThreadFuture, Stats
 from .inputs import InputTable
 from .link import Link
-from .messages import ArduinoIn, ArduinoOut, InputKind, Status, status_name
+from .messages import (
+    PIN_SET_PINS,
+    ArduinoIn,
+    ArduinoOut,
+    InputKind,
+    Status,
+    pin_set,
+    status_name,
+)
 
 # Each pin mode's host code is a module of its own (protoduino.modes), which the board
 # composes; its names are public here too, as before (explicit re-exports).
@@ -122,8 +130,8 @@ MAX_PING_PAYLOAD = 64
 
 #: A Pose's most items (protoduino.options: Pose.items max_count): its servos and PWM outputs.
 MAX_POSE_ITEMS = 8
-#: Pins a Pose's digital masks hold (Pose.digital_pins, a uint32: bit P for pin P).
-POSE_MASK_PINS = 32
+#: Pins a Pose's digital pin sets hold (Pose.digital_pins: bytes, 9 at most, protocol version 8).
+POSE_MASK_PINS = PIN_SET_PINS
 
 T = TypeVar("T")
 
@@ -790,7 +798,7 @@ class Board(ClosedOnExit):
         (any real number, rounded as :meth:`Servo.write` rounds), a level for a
         :class:`DigitalOutput`, a duty for a :class:`PwmOutput`. At most 8 servos
         and PWM outputs, and any number of digital outputs (they travel as two
-        bit masks, a few bytes for all of them). The device checks every value
+        pin sets, a few bytes for all of them). The device checks every value
         before it applies any; the servos' new widths start at the same servo
         frame (digital levels change at once, as the command runs). Whatever the
         order given, the device sets the PWM duties of 0 first, then the digital
@@ -825,7 +833,7 @@ class Board(ClosedOnExit):
         msg = ArduinoIn()
         pose = msg.pose
         # The device's order (protocol.md section 7, rule 7), which Ack.refused_item counts
-        # in from 1: the items as listed, then the masks' pins upwards.
+        # in from 1: the items as listed, then the pin sets' pins upwards.
         items: list[PoseOutput] = []
         masked: dict[int, DigitalOutput] = {}
         pins = levels = 0
@@ -862,8 +870,8 @@ class Board(ClosedOnExit):
                 raise ArgumentTypeError(f"pose: {output!r}: {error}") from None
             seen.add(output.pin)
             records.append((output.pin, control, width))
-        pose.digital_pins = pins
-        pose.digital_levels = levels
+        pose.digital_pins = pin_set(pins)
+        pose.digital_levels = pin_set(levels)
         outputs = items + [masked[pin] for pin in sorted(masked)]
 
         def on_ok() -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-PROTOCOL_VERSION = 7
+PROTOCOL_VERSION = 8
 MAX_PAYLOAD = 255
 #: COBS-encoded packet of MAX_PAYLOAD bytes, without the 0x00 delimiter.
 MAX_ENCODED_FRAME = 262

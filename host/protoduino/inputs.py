@@ -73,7 +73,7 @@ class Reading:
 def decode_report(report: pb.InputReport, received: float) -> list[tuple[InputKind, Reading]]:
     """Every value an InputReport carries (:func:`protoduino.messages.input_values`) as a
     :class:`Reading` received at host time ``received``; raises :class:`ProtocolError` for a
-    report whose masks and values disagree."""
+    report whose pin sets and values disagree."""
     t = report.time_ms
     return [(kind, Reading(pin, value, t, received)) for kind, pin, value in input_values(report)]
 
@@ -120,7 +120,7 @@ class InputTable:
         self.coalesced = 0
         #: Changes an on_change callback never saw because a newer value came first.
         self.skipped = 0
-        #: Reports whose masks and values disagreed (dropped whole).
+        #: Reports whose pin sets and values disagreed (dropped whole).
         self.malformed = 0
 
     # --- the I/O thread -------------------------------------------------------------

@@ -85,8 +85,33 @@ def serialize_out(msg: pb.ArduinoOut) -> bytes:
 InputKind = Literal["digital", "analog", "counter"]
 
 
+#: The most pins a pin set of the schema holds (protoduino.options: 9 bytes, the Mega's 70 pins).
+PIN_SET_PINS = 72
+
+
+def pin_mask(pin_set: bytes) -> int:
+    """A pin set from the wire as a mask, bit P for pin P.
+
+    The wire's form (protocol version 8, docs/protocol.md section 7, *Pin sets*): pin P is
+    bit P % 8 of byte P // 8, so the bytes are the mask's little-endian digits, and a byte
+    left out is 0.
+    """
+    return int.from_bytes(pin_set, "little")
+
+
+def pin_set(mask: int) -> bytes:
+    """A mask of pins (bit P for pin P) as the wire's pin set: :func:`pin_mask`'s bytes,
+    without trailing zero bytes (an empty set is no bytes: the field left out)."""
+    return mask.to_bytes((mask.bit_length() + 7) // 8, "little")
+
+
+def pins_in(pin_set: bytes) -> list[int]:
+    """The pins of a pin set from the wire (:func:`pin_mask`), lowest first."""
+    return list(_pins(pin_mask(pin_set)))
+
+
 def _pins(mask: int) -> Iterator[int]:
-    """The pins whose bits are set in a DeviceInfo/InputReport mask, lowest first."""
+    """The pins whose bits are set in a mask (:func:`pin_mask`), lowest first."""
     pin = 0
     while mask:
         if mask & 1:
@@ -111,9 +136,10 @@ def pose_refused(pose: pb.Pose, refused_item: int) -> Message | None:
             return None
         control: Message = getattr(item, member)
         return control
-    for n, pin in enumerate(_pins(pose.digital_pins), len(pose.items) + 1):
+    levels = pin_mask(pose.digital_levels)
+    for n, pin in enumerate(pins_in(pose.digital_pins), len(pose.items) + 1):
         if n == refused_item:
-            level = bool(pose.digital_levels >> pin & 1)
+            level = bool(levels >> pin & 1)
             return pb.DigitalControl(pin=pin, level=level)
     return None
 
@@ -122,22 +148,22 @@ def input_values(report: pb.InputReport) -> list[tuple[InputKind, int, int]]:
     """Every value an InputReport carries: (kind, pin, value), a digital level as a bool.
 
     Every digital input's level is in every report; analog values and counts are packed
-    in pin order, one per bit of their mask. Raises :class:`ProtocolError` when a mask and
-    its values disagree.
+    in pin order, one per pin of their pin set. Raises :class:`ProtocolError` when a pin set
+    and its values disagree.
     """
+    levels = pin_mask(report.digital_levels)
     found: list[tuple[InputKind, int, int]] = [
-        ("digital", pin, bool(report.digital_levels >> pin & 1))
-        for pin in _pins(report.digital_pins)
+        ("digital", pin, bool(levels >> pin & 1)) for pin in pins_in(report.digital_pins)
     ]
-    packed: tuple[tuple[InputKind, int, Any], ...] = (
+    packed: tuple[tuple[InputKind, bytes, Any], ...] = (
         ("analog", report.analog_pins, report.analog_values),
         ("counter", report.counter_pins, report.counter_counts),
     )
-    for kind, mask, values in packed:
-        pins = list(_pins(mask))
+    for kind, pin_bytes, values in packed:
+        pins = pins_in(pin_bytes)
         if len(pins) != len(values):
             raise ProtocolError(
-                f"InputReport: {len(pins)} {kind} pins in the mask but {len(values)} values"
+                f"InputReport: {len(pins)} {kind} pins in the pin set but {len(values)} values"
             )
         found += [(kind, pin, int(v)) for pin, v in zip(pins, values, strict=True)]
     return found

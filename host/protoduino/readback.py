@@ -15,6 +15,7 @@ from typing import Any
 from ._generated import protoduino_pb2 as pb
 from .commands import ANALOG_INPUT, COUNTER, PIN_MODES, PWM, PinMode
 from .errors import ProtocolError
+from .messages import pin_mask, pins_in
 
 
 @dataclass(frozen=True, slots=True)
@@ -31,7 +32,7 @@ class OutputState:
 
 def decode_output_states(states: Any) -> dict[int, OutputState]:
     """Decode an ``OutputStates`` readback by pin (docs/protocol.md: 5 bytes per servo,
-    the digital masks, then the PWM pins' mask and their duties in pin order);
+    the digital pin sets, then the PWM pins' set and their duties in pin order);
     :class:`ProtocolError` for fields that do not agree."""
     blob = bytes(states.servos)
     if len(blob) % 5:
@@ -39,11 +40,11 @@ def decode_output_states(states: Any) -> dict[int, OutputState]:
     found: dict[int, OutputState] = {}
     for pin, us, target in struct.iter_unpack("<BHH", blob):
         found[pin] = OutputState(pin, "servo", us, target)
-    for pin in range(32):
-        if states.digital_pins >> pin & 1:
-            level = states.digital_levels >> pin & 1
-            found[pin] = OutputState(pin, "digital", level, level)
-    pwm_pins = [pin for pin in range(32) if states.pwm_pins >> pin & 1]
+    levels = pin_mask(states.digital_levels)
+    for pin in pins_in(states.digital_pins):
+        level = levels >> pin & 1
+        found[pin] = OutputState(pin, "digital", level, level)
+    pwm_pins = pins_in(states.pwm_pins)
     if len(pwm_pins) != len(states.pwm_duties):
         raise ProtocolError(
             f"OutputStates: {len(pwm_pins)} PWM pins but {len(states.pwm_duties)} duties"

@@ -3,7 +3,8 @@
 Backends:
 
 * ``native``: the firmware's portable core compiled for this machine with a
-  POSIX HAL (the program ``pd_sim``).
+  POSIX HAL (the program ``pd_sim``), with the Uno's pins or, ``board="mega"``, the
+  Mega 2560's (the Mega build's own table: ``pd_sim --board mega``).
 * ``avr``: the firmware's Uno build on an emulated ATmega328P at 16 MHz (simavr,
   the runner ``avrsim``), paced to real time; its trace is measured at the
   emulated pins. Reboot = reset of the emulated MCU. ``board="mega"``: the
@@ -53,6 +54,7 @@ Typical use, in tests and in ``protoduino demo``::
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import os
@@ -163,9 +165,16 @@ def check_loadable(program: Path, what: str) -> Path:
 
 
 def _native_command(
-    trace: Path | None, link: Path | None, control: Path | None, program: Path | None = None
+    trace: Path | None,
+    link: Path | None,
+    control: Path | None,
+    program: Path | None = None,
+    *,
+    board: str = "uno",
 ) -> list[str]:
     cmd = [str(program if program is not None else programs.locate(programs.NATIVE_SIM))]
+    if board != "uno":
+        cmd += ["--board", board]
     if trace is not None:
         cmd += ["--trace", str(trace)]
     if link is not None:
@@ -177,7 +186,8 @@ def _native_command(
 
 #: The boards the ``avr`` backend emulates: board -> (its firmware's program, its MCU). The
 #: runner takes each board's pins from the MCU (tools/avrsim/avrsim.c), the host its pin
-#: table from the firmware's DeviceInfo: a board is one line here.
+#: table from the firmware's DeviceInfo: a board is one line here. The native board serves
+#: the same boards' pins (``pd_sim --board``, from the firmware's own tables).
 AVR_BOARDS: dict[str, tuple[str, str]] = {
     "uno": (programs.FIRMWARE_ELF, MCU),
     "mega": (programs.MEGA_FIRMWARE_ELF, "atmega2560"),
@@ -274,12 +284,14 @@ def _backend(name: str, board: str = "uno") -> Backend:
         ) from None
     if board == "uno":
         return backend
-    if name != "avr" or board not in AVR_BOARDS:
-        raise ArgumentError(
-            f"unknown board {board!r} for backend {name!r}: the native board is an Uno; the avr "
-            f"backend emulates {', '.join(AVR_BOARDS)}"
-        )
-    return _avr_backend(board)
+    if board in AVR_BOARDS and name == "native":
+        return Backend(build=_build_native, command=functools.partial(_native_command, board=board))
+    if board in AVR_BOARDS and name == "avr":
+        return _avr_backend(board)
+    raise ArgumentError(
+        f"unknown board {board!r} for backend {name!r}: the native and avr backends serve "
+        f"{', '.join(AVR_BOARDS)}"
+    )
 
 
 def build(backend: str = "native", board: str = "uno") -> Path:
@@ -386,8 +398,9 @@ class SimBoard(ClosedOnExit):
         options: Sequence[str] = (),
         board: str = "uno",
     ) -> None:
-        #: The board it is: "uno", or with backend "avr" another of :data:`AVR_BOARDS`
-        #: ("mega": the emulated Mega 2560 running the firmware's Mega build).
+        #: The board it is: "uno", or another of :data:`AVR_BOARDS` ("mega": with backend
+        #: "avr" the emulated Mega 2560 running the firmware's Mega build, with "native" the
+        #: simulated board with the Mega's pins).
         self.board = board
         self._backend = _backend(backend, board)
         #: Another build of the board's program (a user service's, docs/services.md): the

@@ -107,7 +107,7 @@ from .constants import (
 from .errors import ArgumentError
 from .events import EventDispatcher
 from .framing import StreamDecoder, frame_packet
-from .messages import ArduinoIn, ArduinoOut, Status, serialize_out
+from .messages import ArduinoIn, ArduinoOut, Status, pin_mask, pin_set, pins_in, serialize_out
 from .packets import Packet, event_payload, parse_control, reset_ack_payload
 from .rpc import Done
 from .transport import FrameMonitor, TransportListener
@@ -150,12 +150,12 @@ class Received:
         return str(self.msg.WhichOneof("data"))
 
 
-def mask(pins: Iterable[int]) -> int:
-    """A DeviceInfo/InputReport pin mask."""
+def mask(pins: Iterable[int]) -> bytes:
+    """A pin set as the wire has it (InputReport, OutputStates, Pose: protocol version 8)."""
     bits = 0
     for pin in pins:
         bits |= 1 << pin
-    return bits
+    return pin_set(bits)
 
 
 def ack(message_id: int, status: Status.ValueType = Status.STATUS_OK) -> ArduinoOut:
@@ -898,30 +898,34 @@ class VirtualDevice:
         pin: no speed limit in motion)."""
         states.SetInParent()
         servos = bytearray()
+        digital, levels, pwm = [], [], []
         for pin in sorted(self.pins):
             mode, init = self.pins[pin], self._inits[pin]
             if mode == "servo":
                 us = self._servo_us[pin] if pin in self.values else _servo_safe_us(init)
                 servos += struct.pack("<BHH", pin, us, us)
             elif mode == "digital":
-                states.digital_pins |= 1 << pin
+                digital.append(pin)
                 safe = int(pb.DigitalInit.FromString(init).safe_level)
-                states.digital_levels |= self.values.get(pin, safe) << pin
+                if self.values.get(pin, safe):
+                    levels.append(pin)
             elif mode == "pwm":
-                states.pwm_pins |= 1 << pin
+                pwm.append(pin)
                 safe = pb.PwmInit.FromString(init).safe_duty
                 states.pwm_duties.append(self.values.get(pin, safe))
         states.servos = bytes(servos)
+        states.digital_pins, states.digital_levels = mask(digital), mask(levels)
+        states.pwm_pins = mask(pwm)
 
     def _pose(self, pose: Any, out: ArduinoOut) -> Status.ValueType:
         """All or nothing: every item's pin in its mode, or none is set (refused_item: which)."""
         # A PoseItem's oneof member is named after its pin mode ("servo", "digital"); the
-        # masks' pins follow the items, upwards (protocol version 6), as on the device.
+        # pin sets' pins follow the items, upwards (protocol version 6), as on the device.
         items = [(i.WhichOneof("output"), getattr(i, i.WhichOneof("output"))) for i in pose.items]
+        levels = pin_mask(pose.digital_levels)
         items += [
-            ("digital", pb.DigitalControl(pin=pin, level=bool(pose.digital_levels >> pin & 1)))
-            for pin in range(32)
-            if pose.digital_pins >> pin & 1
+            ("digital", pb.DigitalControl(pin=pin, level=bool(levels >> pin & 1)))
+            for pin in pins_in(pose.digital_pins)
         ]
         if not items:
             return Status.STATUS_INVALID_ARGUMENT  # sets nothing

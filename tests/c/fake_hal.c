@@ -18,6 +18,14 @@ static void fake_abort(const char *why)
     abort();
 }
 
+/* A pin set of pins 0..31 (pd_pinset.h). */
+static pd_pinset_t fake_set(uint32_t mask)
+{
+    pd_pinset_t set = {{0}};
+    set.w[0] = mask;
+    return set;
+}
+
 void fake_init(fake_hal_t *hal)
 {
     /* Everything but the frame log (written before it is read): the fuzzer
@@ -35,16 +43,16 @@ void fake_init(fake_hal_t *hal)
     hal->adc_polls = 1;
     hal->info.board = "fake";
     /* The Uno's (pd_avr_main.c). */
-    hal->info.pwm_pins = (1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11);
-    hal->info.analog_pins = 0x3FUL << 14;
-    hal->info.servo_timer_pins = (1UL << 9) | (1UL << 10);
+    hal->info.pwm_pins = fake_set((1UL << 3) | (1UL << 5) | (1UL << 6) | (1UL << 9) | (1UL << 10) | (1UL << 11));
+    hal->info.analog_pins = fake_set(0x3FUL << 14);
+    hal->info.servo_timer_pins = fake_set((1UL << 9) | (1UL << 10));
     hal->info.servo_timer = 1;
     hal->info.clock_timer = 0;
-    hal->info.counter_pins = 0x3FFCUL;    /* 2..13, as the Uno */
-    hal->info.pin_change_pins = 0x3FF0UL; /* 4..13: pin-change interrupts */
+    hal->info.counter_pins = fake_set(0x3FFCUL);    /* 2..13, as the Uno */
+    hal->info.pin_change_pins = fake_set(0x3FF0UL); /* 4..13: pin-change interrupts */
     hal->info.num_pins = 20;
     hal->info.max_servos = 8;
-    hal->info.reserved_pins = 0x3;
+    hal->info.reserved_pins = fake_set(0x3);
     hal->info.rx_buffer = 127;
     hal->tx_room = UINT16_MAX;
 }
@@ -147,7 +155,7 @@ uint32_t pd_hal_millis(void *ctx)
 void pd_hal_servo_write(void *ctx, uint8_t channel, uint8_t pin, uint16_t us)
 {
     fake_hal_t *hal = ctx;
-    if (pin >= hal->info.num_pins || (hal->info.reserved_pins >> pin) & 1u) {
+    if (pin >= hal->info.num_pins || pd_pinset_has(&hal->info.reserved_pins, pin)) {
         fprintf(stderr, "fake_hal: servo on invalid pin %u\n", pin);
         abort();
     }
@@ -174,7 +182,7 @@ void pd_hal_servo_hold(void *ctx, bool hold)
 void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
 {
     fake_hal_t *hal = ctx;
-    if (pin >= hal->info.num_pins || (hal->info.reserved_pins >> pin) & 1u ||
+    if (pin >= hal->info.num_pins || pd_pinset_has(&hal->info.reserved_pins, pin) ||
         hal->servo_us[pin] > 0) {
         fprintf(stderr, "fake_hal: digital write on invalid pin %u\n", pin);
         abort();
@@ -210,7 +218,7 @@ void pd_hal_digital_release(void *ctx, uint8_t pin)
 void pd_hal_pwm_write(void *ctx, uint8_t pin, uint8_t duty)
 {
     fake_hal_t *hal = ctx;
-    if (pin >= hal->info.num_pins || !((hal->info.pwm_pins >> pin) & 1u) ||
+    if (pin >= hal->info.num_pins || !pd_pinset_has(&hal->info.pwm_pins, pin) ||
         hal->servo_us[pin] >= 0 || hal->digital[pin] >= 0) {
         fprintf(stderr, "fake_hal: PWM write on pin %u, not a free PWM pin\n", pin);
         abort();
@@ -233,7 +241,7 @@ void pd_hal_pwm_release(void *ctx, uint8_t pin)
 
 static void fake_input_pin(const fake_hal_t *hal, uint8_t pin, const char *what)
 {
-    if (pin >= hal->info.num_pins || ((hal->info.reserved_pins >> pin) & 1u) ||
+    if (pin >= hal->info.num_pins || (pd_pinset_has(&hal->info.reserved_pins, pin)) ||
         hal->digital[pin] >= 0 || hal->pwm[pin] >= 0 || hal->servo_us[pin] >= 0) {
         fprintf(stderr, "fake_hal: %s on pin %u, not free for an input\n", what, pin);
         abort();
@@ -257,12 +265,12 @@ void pd_hal_input_release(void *ctx, uint8_t pin)
     hal->input[pin] = -1;
 }
 
-uint32_t pd_hal_digital_read_all(void *ctx)
+pd_pinset_t pd_hal_digital_read_all(void *ctx)
 {
     fake_hal_t *hal = ctx;
-    uint32_t levels = 0;
+    pd_pinset_t levels = {{0}};
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
-        levels |= (uint32_t)(hal->level[pin] ? 1u : 0u) << pin;
+        pd_pinset_put(&levels, pin, hal->level[pin]);
     }
     hal->digital_reads++;
     return levels;
@@ -271,7 +279,7 @@ uint32_t pd_hal_digital_read_all(void *ctx)
 void pd_hal_analog_start(void *ctx, uint8_t pin)
 {
     fake_hal_t *hal = ctx;
-    if (hal->adc_pin >= 0 || pin >= PD_MAX_PINS || !((hal->info.analog_pins >> pin) & 1u) ||
+    if (hal->adc_pin >= 0 || pin >= PD_MAX_PINS || !pd_pinset_has(&hal->info.analog_pins, pin) ||
         hal->input[pin] < 0) {
         fprintf(stderr, "fake_hal: conversion of pin %u (one under way: %d)\n", pin, hal->adc_pin);
         abort();
@@ -300,7 +308,7 @@ bool pd_hal_analog_done(void *ctx, uint16_t *counts)
 void pd_hal_counter_start(void *ctx, uint8_t pin, uint8_t edge)
 {
     fake_hal_t *hal = ctx;
-    if (pin >= PD_MAX_PINS || !((hal->info.counter_pins >> pin) & 1u) || hal->input[pin] < 0) {
+    if (pin >= PD_MAX_PINS || !pd_pinset_has(&hal->info.counter_pins, pin) || hal->input[pin] < 0) {
         fprintf(stderr, "fake_hal: counter on pin %u\n", pin);
         abort();
     }

@@ -413,7 +413,7 @@ static void test_an_analog_only_pin_is_an_analog_input_and_nothing_else(void)
 {
     tdev_t d;
     t_boot(&d);
-    d.hal.info.analog_only_pins = 1UL << 19;
+    d.hal.info.analog_only_pins = T_SET(1UL << 19);
     t_send_reset(&d, PD_PROTOCOL_VERSION);
     CHECK_EQ(pd_encode_pin(&d.hal.info, 19), protoduino_PinBit_PIN_ANALOG);
     CHECK_EQ(pd_encode_pin(&d.hal.info, 18), protoduino_PinBit_PIN_DIGITAL | protoduino_PinBit_PIN_ANALOG);
@@ -800,14 +800,14 @@ static size_t short_bases(protoduino_ArduinoIn *ins, size_t cap)
     in.data.pose.items[2].output.pwm.pin = 11;
     in.data.pose.items[2].output.pwm.duty = 128;
     ins[n++] = in;
-    in.data.pose.digital_pins = (1UL << 2) | (1UL << 7) | (1UL << 19); /* version 6's masks */
-    in.data.pose.digital_levels = 1UL << 7;
+    T_PUT_MASK(in.data.pose.digital_pins, (1UL << 2) | (1UL << 7) | (1UL << 19)); /* the sets */
+    T_PUT_MASK(in.data.pose.digital_levels, 1UL << 7);
     ins[n++] = in;
     in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
     in.message_id = 12;
     in.which_data = protoduino_ArduinoIn_pose_tag;
-    in.data.pose.digital_pins = 0xFCu; /* six digital outputs, masks only */
-    in.data.pose.digital_levels = 0x54u;
+    T_PUT_MASK(in.data.pose.digital_pins, 0xFCu); /* six digital outputs, sets only */
+    T_PUT_MASK(in.data.pose.digital_levels, 0x54u);
     ins[n++] = in;
     in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
     in.message_id = 10;

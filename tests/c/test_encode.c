@@ -8,6 +8,7 @@
 #include "pd_encode.h"
 #include "pd_protocol.h"
 #include "pd_test.h"
+#include "test_util.h"
 
 /* 0 if both encoders agree (and every smaller buffer is refused), else the differing length. */
 static int compare(const protoduino_ArduinoOut *msg)
@@ -133,14 +134,14 @@ static void test_encode_ack_info(void)
     info->features = UINT16_MAX;
     CHECK_EQ(compare(&out), 0);
     /* Another board's table, at its largest (every pin and timer). */
-    board->pwm_pins = 0xFFFFFu;
-    board->reserved_pins = 0;
+    board->pwm_pins = T_SET(0xFFFFFu);
+    board->reserved_pins = T_SET(0);
     board->servo_timer = PD_INFO_TIMERS_MAX - 1u;
     CHECK_EQ(compare(&out), 0);
     info->num_pins = 1;
     CHECK_EQ(compare(&out), 0);
-    board->servo_timer_pins = 0; /* no timer held: no timers */
-    board->clock_timer_pins = 0;
+    board->servo_timer_pins = T_SET(0); /* no timer held: no timers */
+    board->clock_timer_pins = T_SET(0);
     CHECK_EQ(compare(&out), 0);
     info->num_pins = 0; /* no pins: no table */
     CHECK_EQ(compare(&out), 0);
@@ -148,7 +149,7 @@ static void test_encode_ack_info(void)
     info->num_pins = PD_MAX_PINS + 1u; /* past the bounds: refused */
     CHECK_EQ(pd_encode_out(&out, big, sizeof(big)), 0);
     info->num_pins = PD_MAX_PINS;
-    board->servo_timer_pins = 1u << 9;
+    board->servo_timer_pins = T_SET(1u << 9);
     board->servo_timer = PD_INFO_TIMERS_MAX;
     CHECK_EQ(pd_encode_out(&out, big, sizeof(big)), 0);
     board->servo_timer = 1;
@@ -224,10 +225,22 @@ static void test_encode_ack_outputs_and_refused_item(void)
     for (size_t i = 0; i < st->servos.size; i++) {
         st->servos.bytes[i] = (uint8_t)(0xFF - i);
     }
-    st->digital_pins = 0xFFFFFFFFu;
-    st->digital_levels = 0x80000001u;
+    T_PUT_MASK(st->digital_pins, 0xFFFFFFFFu);
+    T_PUT_MASK(st->digital_levels, 0x80000001u);
     CHECK_EQ(compare(&out), 0);
-    st->pwm_pins = 0x00000E08u;
+    /* Pin sets of every width up to the schema's 9 bytes (the Mega's pins 0..69), a zero
+     * byte inside (pins 32..39 unset), as nanopb writes them. */
+    for (pb_size_t n = 0; n <= sizeof(st->digital_pins.bytes); n++) {
+        memset(st->digital_pins.bytes, 0xA5, sizeof(st->digital_pins.bytes));
+        st->digital_pins.bytes[4] = 0;
+        st->digital_pins.size = n;
+        CHECK_EQ(compare(&out), 0);
+    }
+    T_PUT_MASK(st->digital_pins, 0xFFFFFFFFu);
+    st->pwm_pins.size = sizeof(st->pwm_pins.bytes) + 1u; /* corrupt: refused */
+    uint8_t wide[protoduino_ArduinoOut_size + 8];
+    CHECK_EQ(pd_encode_out(&out, wide, sizeof(wide)), 0);
+    T_PUT_MASK(st->pwm_pins, 0x00000E08u);
     for (pb_size_t n = 0; n <= sizeof(st->pwm_duties); n++) {
         st->pwm_duties_count = n;
         for (pb_size_t i = 0; i < n; i++) {
@@ -257,17 +270,17 @@ static void test_encode_input_report(void)
     protoduino_InputReport *r = &out.data.input_report;
     CHECK_EQ(compare(&out), 0); /* all defaults */
     r->time_ms = 0xFFFFFFFFu;
-    r->digital_pins = 0x000FFFFCu;
-    r->digital_levels = 0x00000004u;
+    T_PUT_MASK(r->digital_pins, 0x000FFFFCu);
+    T_PUT_MASK(r->digital_levels, 0x00000004u);
     CHECK_EQ(compare(&out), 0);
-    r->analog_pins = 0x000FC000u;
+    T_PUT_MASK(r->analog_pins, 0x000FC000u);
     const uint16_t values[] = {0, 1, 127, 128, 1023, 0xFFFFu};
     for (pb_size_t n = 0; n <= 6; n++) {
         r->analog_values_count = n;
         memcpy(r->analog_values, values, sizeof(values));
         CHECK_EQ(compare(&out), 0);
     }
-    r->counter_pins = 0x0000000Cu;
+    T_PUT_MASK(r->counter_pins, 0x0000000Cu);
     const uint32_t counts[] = {0, 0xFFFFFFFFu, 16384u, 1u};
     for (pb_size_t n = 0; n <= 4; n++) {
         r->counter_counts_count = n;

@@ -261,8 +261,8 @@ static void test_no_commanded_output_without_a_running_timer(void)
     in = (protoduino_ArduinoIn)protoduino_ArduinoIn_init_zero;
     in.message_id = 40;
     in.which_data = protoduino_ArduinoIn_pose_tag;
-    in.data.pose.digital_pins = 1UL << 13;
-    in.data.pose.digital_levels = 1UL << 13;
+    T_PUT_MASK(in.data.pose.digital_pins, 1UL << 13);
+    T_PUT_MASK(in.data.pose.digital_levels, 1UL << 13);
     CHECK_EQ(t_cmd(&d, &in), S(FAILSAFE_EXPIRED));
     protoduino_Ack ack;
     CHECK_EQ(t_acks(&d, 40, &ack), 1);

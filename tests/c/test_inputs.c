@@ -90,8 +90,8 @@ static void test_digital_input_level_reported_after_its_ack(void)
     poll_at(&d, d.hal.now_ms);
     protoduino_InputReport r;
     CHECK_EQ(reports(&d, &r), 1);
-    CHECK_EQ(r.digital_pins, 1u << 4);
-    CHECK_EQ(r.digital_levels, 1u << 4);
+    CHECK_EQ(T_MASK(r.digital_pins), 1u << 4);
+    CHECK_EQ(T_MASK(r.digital_levels), 1u << 4);
     /* the Ack went first */
     protoduino_ArduinoOut out;
     CHECK(t_out(&d, 0, &out));
@@ -131,7 +131,7 @@ static void test_digital_debounce(void)
     poll_at(&d, t + 120);
     protoduino_InputReport r;
     CHECK_EQ(reports(&d, &r), 1);
-    CHECK_EQ(r.digital_levels, 1u << 7);
+    CHECK_EQ(T_MASK(r.digital_levels), 1u << 7);
     CHECK_EQ(r.time_ms, t + 120);
     in = m_din(2, 7, false, 256, protoduino_Trip_TRIP_NONE);
     CHECK_EQ(t_cmd(&d, &in), S(INVALID_ARGUMENT));
@@ -185,7 +185,7 @@ static void test_interlock_trips_latches_and_clears(void)
     CHECK_EQ(fs.pin, 2);
     protoduino_InputReport r;
     CHECK_EQ(reports(&d, &r), 1);
-    CHECK_EQ(r.digital_levels & (1u << 2), 0);
+    CHECK_EQ(T_MASK(r.digital_levels) & (1u << 2), 0);
 
     /* Latched: new values refused, with no effect; a Stop or an Init still goes. */
     in = m_pwm(6, 3, 200);
@@ -273,8 +273,8 @@ static void test_interlock_is_told_after_the_report_of_its_edge(void)
     CHECK_EQ(fake_count(&d.hal), 2);
     CHECK(t_out(&d, 0, &out));
     CHECK_EQ(out.which_data, protoduino_ArduinoOut_input_report_tag);
-    CHECK_EQ(out.data.input_report.digital_pins, 1u << 2);
-    CHECK_EQ(out.data.input_report.digital_levels, 0);
+    CHECK_EQ(T_MASK(out.data.input_report.digital_pins), 1u << 2);
+    CHECK_EQ(T_MASK(out.data.input_report.digital_levels), 0);
     CHECK(t_out(&d, 1, &out));
     CHECK_EQ(out.which_data, protoduino_ArduinoOut_failsafe_tag);
     CHECK(out.data.failsafe.active);
@@ -306,7 +306,7 @@ static void test_interlock_configured_while_tripped_trips_after_its_ack(void)
     CHECK_EQ(out.which_data, protoduino_ArduinoOut_ack_tag);
     protoduino_InputReport r;
     CHECK_EQ(reports(&d, &r), 1);
-    CHECK_EQ(r.digital_levels & (1u << 6), 0); /* the level it reads */
+    CHECK_EQ(T_MASK(r.digital_levels) & (1u << 6), 0); /* the level it reads */
     in = m_pwm(4, 11, 180);
     CHECK_EQ(t_cmd(&d, &in), S(INTERLOCK_ACTIVE));
 }
@@ -339,7 +339,7 @@ static void test_analog_first_value_threshold_heartbeat(void)
     poll_at(&d, t);
     protoduino_InputReport r;
     CHECK_EQ(reports(&d, &r), 1); /* the first sample, right after the Ack */
-    CHECK_EQ(r.analog_pins, 1u << 14);
+    CHECK_EQ(T_MASK(r.analog_pins), 1u << 14);
     CHECK_EQ(r.analog_values_count, 1);
     CHECK_EQ(r.analog_values[0], 500);
     fake_clear(&d.hal);
@@ -360,7 +360,7 @@ static void test_analog_first_value_threshold_heartbeat(void)
     poll_at(&d, t + 110);
     CHECK_EQ(reports(&d, &r), 1);
     CHECK_EQ(r.analog_values[0], 517);
-    CHECK_EQ(r.digital_pins, 0);
+    CHECK_EQ(T_MASK(r.digital_pins), 0);
     /* Not an analog pin / bad arguments. */
     in = m_ain(2, 2, 10, 8, 100);
     CHECK_EQ(t_cmd(&d, &in), S(NOT_SUPPORTED));
@@ -398,7 +398,7 @@ static void test_six_analog_inputs_share_a_slow_converter(void)
     protoduino_ArduinoOut out;
     for (size_t i = 0; i < fake_count(&d.hal); i++) {
         if (t_out(&d, i, &out) && out.which_data == protoduino_ArduinoOut_input_report_tag) {
-            CHECK_EQ(out.data.input_report.analog_pins, 0x3Fu << 14);
+            CHECK_EQ(T_MASK(out.data.input_report.analog_pins), 0x3Fu << 14);
             CHECK_EQ(out.data.input_report.analog_values_count, 6);
             CHECK_EQ(out.data.input_report.analog_values[5], 600);
             break;
@@ -418,7 +418,7 @@ static void test_counter_reports_at_most_each_interval(void)
     poll_at(&d, t);
     protoduino_InputReport r;
     CHECK_EQ(reports(&d, &r), 1); /* its 0, after the Ack */
-    CHECK_EQ(r.counter_pins, 1u << 3);
+    CHECK_EQ(T_MASK(r.counter_pins), 1u << 3);
     CHECK_EQ(r.counter_counts[0], 0);
     fake_clear(&d.hal);
     d.hal.count[3] = 5;
@@ -462,7 +462,7 @@ static void test_reports_coalesce_while_the_line_is_full(void)
     poll_at(&d, t + 5);
     protoduino_InputReport r;
     CHECK_EQ(reports(&d, &r), 1);
-    CHECK_EQ(r.digital_levels & (1u << 5), 0); /* the newest level */
+    CHECK_EQ(T_MASK(r.digital_levels) & (1u << 5), 0); /* the newest level */
     CHECK_EQ(r.coalesced, 3);                  /* four changes, one report */
     CHECK_EQ(r.time_ms, t + 4);                /* when it was taken, not when it left */
     d.hal.level[5] = true;

@@ -182,11 +182,11 @@ static void test_pwm_in_pose_and_read_outputs(void)
     CHECK_EQ(t_cmd(&d, &in), S(OK));
     CHECK_EQ(t_acks(&d, 6, &ack), 1);
     CHECK_EQ(ack.which_result, protoduino_Ack_outputs_tag);
-    CHECK_EQ(ack.result.outputs.pwm_pins, (1u << 3) | (1u << 11));
+    CHECK_EQ(T_MASK(ack.result.outputs.pwm_pins), (1u << 3) | (1u << 11));
     CHECK_EQ(ack.result.outputs.pwm_duties_count, 2);
     CHECK_EQ(ack.result.outputs.pwm_duties[0], 250); /* pin order: 3, then 11 */
     CHECK_EQ(ack.result.outputs.pwm_duties[1], 77);
-    CHECK_EQ(ack.result.outputs.digital_pins, 1u << 13);
+    CHECK_EQ(T_MASK(ack.result.outputs.digital_pins), 1u << 13);
 }
 
 /* Issue 32: an H-bridge's PWM and direction pins in one Pose, in any order: the duties of
@@ -219,8 +219,8 @@ static void test_pose_stops_then_sets_levels_then_drives(void)
     in.data.pose.items[2].which_output = protoduino_PoseItem_pwm_tag;
     in.data.pose.items[2].output.pwm.pin = 11; /* stops */
     in.data.pose.items[2].output.pwm.duty = 0;
-    in.data.pose.digital_pins = 1u << 4;
-    in.data.pose.digital_levels = 1u << 4;
+    T_PUT_MASK(in.data.pose.digital_pins, 1u << 4);
+    T_PUT_MASK(in.data.pose.digital_levels, 1u << 4);
     CHECK_EQ(t_cmd(&d, &in), S(OK));
     CHECK_EQ(d.hal.pwm[3], 150);
     CHECK_EQ(d.hal.pwm[11], 0);
@@ -255,11 +255,11 @@ static void test_device_info_lists_capabilities_and_features(void)
     CHECK(f->len >= sizeof(table));
     CHECK(memcmp(f->payload + f->len - sizeof(table), table, sizeof(table)) == 0);
     /* A board with other pins says so, from its table alone. */
-    d.hal.info.pwm_pins = 1u << 4;
-    d.hal.info.servo_timer_pins = 0;
-    d.hal.info.counter_pins = 0;
-    d.hal.info.pin_change_pins = 0;
-    d.hal.info.clock_timer_pins = 1u << 4;
+    d.hal.info.pwm_pins = T_SET(1u << 4);
+    d.hal.info.servo_timer_pins = T_SET(0);
+    d.hal.info.counter_pins = T_SET(0);
+    d.hal.info.pin_change_pins = T_SET(0);
+    d.hal.info.clock_timer_pins = T_SET(1u << 4);
     d.hal.info.clock_timer = 2;
     CHECK_EQ(pd_encode_pin(&d.hal.info, 4), 0x01 | 0x02 | (3u << 5));
     CHECK_EQ(pd_encode_pin(&d.hal.info, 9), 0x01);

@@ -57,6 +57,34 @@ int t_failsafes(const tdev_t *d, protoduino_Failsafe *fs);
 /* Send one command and return its Ack status (-1 if not exactly one Ack). */
 int t_cmd(tdev_t *d, const protoduino_ArduinoIn *in);
 
+/* Pin sets (pd_pinset.h) of pins 0..31 as a mask, bit N for pin N: a board table's
+ * (T_SET), and the wire's bytes (protocol version 8) written from and read back to one. */
+static inline pd_pinset_t T_SET(uint32_t mask)
+{
+    pd_pinset_t set = {{0}};
+    set.w[0] = mask;
+    return set;
+}
+#define T_PUT_MASK(field, mask) ((field).size = t_mask_bytes((field).bytes, (mask)))
+#define T_MASK(field) t_bytes_mask((field).bytes, (field).size)
+static inline pb_size_t t_mask_bytes(uint8_t *bytes, uint32_t mask)
+{
+    pb_size_t n = 0;
+    for (pb_size_t i = 0; i < 4u; i++) {
+        bytes[i] = (uint8_t)(mask >> (8u * i));
+        n = bytes[i] != 0 ? (pb_size_t)(i + 1u) : n;
+    }
+    return n;
+}
+static inline uint32_t t_bytes_mask(const uint8_t *bytes, pb_size_t size)
+{
+    uint32_t mask = 0;
+    for (pb_size_t i = 0; i < size && i < 4u; i++) {
+        mask |= (uint32_t)bytes[i] << (8u * i);
+    }
+    return mask;
+}
+
 /* Message builders. */
 protoduino_ArduinoIn m_ping(uint32_t id, const uint8_t *payload, size_t len);
 protoduino_ArduinoIn m_servo_init_deg(uint32_t id, uint32_t pin, uint32_t min_us, uint32_t max_us,

@@ -6,9 +6,9 @@ from typing import Any
 
 import crcmod.predefined
 import pytest
-from protoduino.constants import ControlCode, PacketType
+from protoduino.constants import PROTOCOL_VERSION, ControlCode, PacketType
 from protoduino.framing import StreamDecoder, cobs_decode, cobs_encode, frame_packet
-from protoduino.messages import Status, parse_in, parse_out, serialize_out
+from protoduino.messages import Status, parse_in, parse_out, pins_in, serialize_out
 from protoduino.packets import BadFrame, Packet, build_packet, crc16, parse_control, parse_packet
 from wirevectors import INVALID_FRAME_REASONS, load
 
@@ -123,10 +123,41 @@ def test_version_6_vectors_parse_field_by_field() -> None:
         0x5E551011,
         1,
     )
+    # Its Pose (uint32 masks, fields 2 and 3) is version 6's: version 8's pin sets are bytes,
+    # so only its framing holds (the COBS, CRC and packet tests above); the bytes differ.
     name = "COMMAND version 6: Pose of six digital outputs (pins 2..7; 2, 4, 6 high), message id 3"
-    pose = parse_in(by_name[name])
-    assert pose.message_id == 3
-    assert len(pose.pose.items) == 0
-    assert (pose.pose.digital_pins, pose.pose.digital_levels) == (0xFC, 0x54)
     wire = next(bytes.fromhex(v["wire"]) for v in V["packets"] if v["name"] == name)
     assert len(wire) == 16  # six DigitalControl items in version 5: 47 to 59 B
+    assert bytes.fromhex("10fc01") in by_name[name]  # digital_pins: a varint
+
+
+def test_version_8_vectors_parse_field_by_field() -> None:
+    """Pin sets of any width (protocol version 8): pin P is bit P % 8 of byte P // 8."""
+    by_name = {v["name"]: bytes.fromhex(v["payload"]) for v in V["packets"]}
+    reset = parse_control(by_name["RESET from host, version 8, session 0x5E551011, next id 1"])
+    assert (reset.code, reset.version, reset.session, reset.next_id) == (
+        ControlCode.RESET,
+        8,
+        0x5E551011,
+        1,
+    )
+    assert reset.version == PROTOCOL_VERSION
+    name = "COMMAND version 8: Pose of six digital outputs (pins 2..7; 2, 4, 6 high), message id 3"
+    pose = parse_in(by_name[name])
+    assert (pose.message_id, len(pose.pose.items)) == (3, 0)
+    assert (pose.pose.digital_pins, pose.pose.digital_levels) == (b"\xfc", b"\x54")
+    assert (pins_in(pose.pose.digital_pins), pins_in(pose.pose.digital_levels)) == (
+        [2, 3, 4, 5, 6, 7],
+        [2, 4, 6],
+    )
+    wire = next(bytes.fromhex(v["wire"]) for v in V["packets"] if v["name"] == name)
+    assert len(wire) == 17  # a byte more than version 6's uint32 masks for these pins
+    mega = parse_in(
+        by_name["COMMAND version 8: Pose of a Mega's pins 40 and 69 (69 high), message id 4"]
+    )
+    assert (pins_in(mega.pose.digital_pins), pins_in(mega.pose.digital_levels)) == ([40, 69], [69])
+    assert len(mega.pose.digital_pins) == 9  # the schema's bound: the Mega's 70 pins
+    assert (
+        mega.SerializeToString()
+        == by_name["COMMAND version 8: Pose of a Mega's pins 40 and 69 (69 high), message id 4"]
+    )

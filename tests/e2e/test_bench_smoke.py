@@ -532,7 +532,7 @@ def test_inputs_section_on_both_boards() -> None:
         # Each edge's report was sized on the wire: a header, the masks, a CRC at least.
         assert len(result.report_bytes) >= 4 and min(result.report_bytes) >= 12
     out = pb.ArduinoOut()
-    out.input_report.digital_pins = 1
+    out.input_report.digital_pins = b"\x01"
     assert out.SerializeToString()[:1] == inputs.REPORT_TAG
 
 

@@ -1,8 +1,9 @@
 """The Mega 2560 (issue 36 items 1 and 2): the firmware's ``make avr BOARD=mega`` build on the
 emulated ATmega2560 (``SimBoard("avr", board="mega")``), judged at its pins through the trace.
 
-The build serves pins 0..31 (firmware/README.md, The Mega 2560): the Mega's own ports A and C
-(pins 22..31) carry digital outputs and servos (Timer1's interrupt writes the pulses through
+The build serves every pin, 0..69 (firmware/README.md, The Mega 2560; pin sets of any width
+since protocol version 8): the Mega's own ports A, C, G, L, B and K (pins 22..53, A8..A15 =
+62..69) carry digital outputs, inputs and servos (Timer1's interrupt writes the pulses through
 the port), Timer2 makes PWM on pins 9 and 10 and Timer1 on 11 and 12 while no servo runs,
 Timer0 keeps the clock (pins 4 and 13 refused), the six external interrupts count. The host
 has no table of the Mega's: every refusal here comes from the pin table of its DeviceInfo.
@@ -21,7 +22,7 @@ import pytest
 from boardprocess import missing_tool
 from protoduino import Board, EventKind
 from protoduino._generated import protoduino_pb2 as pb
-from protoduino.errors import NotSupportedError, TimerInUseError
+from protoduino.errors import CommandRejectedError, NotSupportedError, TimerInUseError
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard
 from protoduino_dev import build, rambudget
@@ -74,9 +75,10 @@ def test_the_mega_states_its_pins_and_the_host_refuses_from_them(mega: SimBoard)
     refuses from that table what the device would refuse, for the table's reason."""
     with Board.open(mega.port) as board:
         info = board.info
-        assert (info.board, info.num_pins, info.max_servos) == ("mega", 32, 8)
+        assert (info.board, info.num_pins, info.max_servos) == ("mega", 70, 8)
         assert info.pwm_pins == (9, 10, 11, 12)
-        assert info.analog_pins == () and info.counter_pins == (2, 3, 18, 19, 20, 21)
+        assert info.analog_pins == tuple(range(54, 70))  # A0..A15
+        assert info.counter_pins == (2, 3, 18, 19, 20, 21)
         pins = info.pins
         assert pins[0] == pins[1] == 0  # the link: UART0
         assert pins[22:32] == bytes([pb.PIN_DIGITAL] * 10)
@@ -108,6 +110,71 @@ def test_digital_outputs_on_the_mega_ports_at_the_pins(mega: SimBoard) -> None:
         board.pose({out: pin % 2 == 0 for pin, out in outs.items()})
         for pin in range(22, 32):
             wait_for_pin(mega, pin, _last(1 - pin % 2), BOUND)
+
+
+#: Pins past the 32 a version 7 pin mask held: ports G, L, B (40..53) and K (A8..A15, 62..69).
+HIGH_PINS = (*range(40, 54), *range(62, 70))
+
+
+def test_digital_outputs_past_pin_31_at_the_pins(mega: SimBoard) -> None:
+    """Pins 40..53 and A8..A15 used digitally (62..69), in one pose (the Pose's pin sets reach
+    byte 8): each pin shows its level in the trace, and ReadOutputs reads them back."""
+    with Board.open(mega.port) as board:
+        outs = {pin: board.digital_output(pin) for pin in HIGH_PINS}
+        board.pose({out: pin % 3 == 0 for pin, out in outs.items()})
+        for pin in HIGH_PINS:
+            wait_for_pin(mega, pin, _last(int(pin % 3 == 0)), BOUND)
+        states = board.read_outputs()
+        assert {p: (s.mode, s.value) for p, s in states.items()} == {
+            pin: ("digital", int(pin % 3 == 0)) for pin in HIGH_PINS
+        }
+        outs[69].write(False)
+        outs[68].write(True)
+        wait_for_pin(mega, 69, _last(0), BOUND)
+        wait_for_pin(mega, 68, _last(1), BOUND)
+
+
+def test_servos_past_pin_31_in_one_pose(mega: SimBoard) -> None:
+    """Servos on pins 44, 49, 53 (ports L and B) and A8, A15 (62, 69): the widths of one pose
+    at the pins."""
+    with Board.open(mega.port) as board:
+        servos = {pin: board.servo(pin) for pin in (44, 49, 53, 62, 69)}
+        degrees = {pin: (pin * 7) % 170 + 5 for pin in servos}
+        widths = {pin: servos[pin].to_us(deg) for pin, deg in degrees.items()}
+        board.pose({servos[pin]: deg for pin, deg in degrees.items()})
+
+        def at(pin: int) -> Callable[[list[int]], bool]:
+            return lambda v: bool(v) and abs(v[-1] - widths[pin]) <= PULSE_TOLERANCE_US
+
+        for pin in servos:
+            _wait(mega, pin, "servo", at(pin))
+
+
+def test_digital_inputs_past_pin_31(mega: SimBoard) -> None:
+    """Pins 45 (PL4) and 66 (A12, PK4): the levels the control socket holds there reach the
+    host in the InputReport's pin sets."""
+    with Board.open(mega.port) as board:
+        switches = {pin: board.digital_input(pin) for pin in (45, 66)}
+        for pin, switch in switches.items():
+            mega.control.level(pin, 1)
+            assert switch.wait_for(True, timeout=BOUND) is True  # the bound only ends a failure
+            mega.control.level(pin, 0)
+            assert switch.wait_for(False, timeout=BOUND) is False
+
+
+def test_the_host_refuses_pin_70_from_the_mega_info(mega: SimBoard) -> None:
+    """Pin 70 is past the Mega's num_pins: refused before anything is sent; the device refuses
+    it too, for the same reason."""
+    with Board.open(mega.port) as board:
+        for make in (board.digital_output, board.servo, board.digital_input):
+            with pytest.raises(CommandRejectedError) as host:
+                make(70)
+            assert host.value.status == Status.STATUS_INVALID_PIN and not host.value.sent
+        msg = ArduinoIn()
+        msg.digital_init.pin = 70
+        with pytest.raises(CommandRejectedError) as device:
+            board.request(msg)
+        assert device.value.status == Status.STATUS_INVALID_PIN and device.value.sent
 
 
 def test_eight_servos_on_ports_a_and_c_in_one_pose(mega: SimBoard) -> None:
@@ -184,22 +251,20 @@ def test_the_failsafe_drives_the_mega_outputs_safe(mega: SimBoard) -> None:
         _wait(mega, 31, "servo", lambda v: abs(v[-1] - 1500) <= PULSE_TOLERANCE_US)
 
 
-def test_protoduino_sim_starts_the_emulated_mega(tmp_path: Path) -> None:
-    """`protoduino sim --backend avr --board mega` (the one documented option) runs the Mega:
-    `protoduino info` reads its board and pins; a Mega with the native backend is refused."""
+@pytest.mark.parametrize("backend", ["avr", "native"])
+def test_protoduino_sim_starts_the_mega(tmp_path: Path, backend: str) -> None:
+    """`protoduino sim --backend avr --board mega` (the one documented option) runs the emulated
+    Mega, `protoduino sim --board mega` the simulated board with its pins: `protoduino info`
+    reads the board and its 70 pins from either."""
     _need_tools()
     cli = [sys.executable, "-m", "protoduino.cli.main"]
-    refused = subprocess.run(
-        [*cli, "sim", "--board", "mega"], capture_output=True, text=True, check=False, timeout=60
-    )
-    assert refused.returncode != 0 and "--board mega goes with --backend avr" in refused.stderr
     pid_file = tmp_path / "sim.pid"
     started = subprocess.run(
         [
             *cli,
             "sim",
             "--backend",
-            "avr",
+            backend,
             "--board",
             "mega",
             "--detach",
@@ -222,9 +287,107 @@ def test_protoduino_sim_starts_the_emulated_mega(tmp_path: Path) -> None:
         )
         assert info.returncode == 0, info.stderr
         stated = json.loads(info.stdout)["info"]
-        assert (stated["board"], stated["num_pins"]) == ("mega", 32), stated
+        assert (stated["board"], stated["num_pins"]) == ("mega", 70), stated
     finally:
         subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
+
+
+@pytest.fixture
+def megas(tmp_path: Path) -> Iterator[dict[str, SimBoard]]:
+    """The emulated Mega and the simulated board with the Mega's pins, side by side."""
+    _need_tools()
+    boards = {
+        backend: SimBoard(backend, board="mega", trace=tmp_path / f"{backend}.jsonl")
+        for backend in ("avr", "native")
+    }
+    try:
+        for sim in boards.values():
+            sim.start()
+        yield boards
+    finally:
+        for sim in boards.values():
+            sim.stop()
+
+
+def test_the_native_mega_states_the_mega_build_s_pins(megas: dict[str, SimBoard]) -> None:
+    """`SimBoard("native", board="mega")` serves the Mega build's own table (one declaration of
+    the Mega's pins, avr/pd_avr_mega.c): its DeviceInfo is the emulated Mega's but for the
+    link's buffer."""
+    infos = {}
+    for backend, sim in megas.items():
+        with Board.open(sim.port) as board:
+            infos[backend] = board.info
+    native, avr = infos["native"], infos["avr"]
+    assert (native.board, native.num_pins) == ("mega", 70)
+    assert (native.pins, native.timers) == (avr.pins, avr.timers)
+    assert (native.reserved_pins, native.max_servos, native.features) == (
+        avr.reserved_pins,
+        avr.max_servos,
+        avr.features,
+    )
+
+
+#: Digital writes on pins of every port past 31 and on A15: levels in the order written.
+MEGA_WRITES = ((22, 1), (40, 1), (53, 1), (69, 1), (40, 0), (62, 1), (69, 0), (53, 0))
+
+
+def test_the_same_mega_writes_give_the_same_trace_lines_on_both(
+    megas: dict[str, SimBoard],
+) -> None:
+    """The same digital writes and servo widths on the emulated Mega and the native one: each
+    pin's trace lines (its mode and values, in order; a servo's width within the emulated
+    pin's measurement) are the same on both."""
+    pins = sorted({pin for pin, _ in MEGA_WRITES})
+    for sim in megas.values():
+        with Board.open(sim.port) as board:
+            outs = {pin: board.digital_output(pin) for pin in pins}
+            arm = board.servo(44)
+            for pin, level in MEGA_WRITES:
+                outs[pin].write(bool(level))
+                wait_for_pin(sim, pin, _last(level), BOUND)
+            arm.write_us(1200)
+            _wait(sim, 44, "servo", lambda v: bool(v) and abs(v[-1] - 1200) <= PULSE_TOLERANCE_US)
+    lines = {
+        backend: {
+            pin: [(e["mode"], int(e["value"])) for e in sim.trace() if e["pin"] == pin]
+            for pin in pins
+        }
+        for backend, sim in megas.items()
+    }
+    assert lines["native"] == lines["avr"]
+    want = {
+        pin: [("digital", 0)] + [("digital", v) for p, v in MEGA_WRITES if p == pin] for pin in pins
+    }
+    assert lines["native"] == want
+    servo = {backend: _values(sim, 44, "servo") for backend, sim in megas.items()}
+    assert servo["native"][-1] == 1200
+    assert abs(servo["avr"][-1] - servo["native"][-1]) <= PULSE_TOLERANCE_US
+
+
+#: Analog inputs on both halves of the ADC's multiplexer (A8..A15 need ADCSRB's MUX5): six,
+#: the core's analog slots (PD_MAX_ANALOG_INPUTS) and an InputReport's most values.
+ANALOG = {"A0": 100, "A7": 300, "A8": 555, "A9": 700, "A14": 901, "A15": 1023}
+
+
+@pytest.mark.parametrize("backend", ["avr", "native"])
+def test_analog_inputs_a0_to_a15(tmp_path: Path, backend: str) -> None:
+    """A0..A15 are pins 54..69 in the Mega's DeviceInfo; the control socket's counts on six
+    of them (A0, A7; A8, A9, A14, A15 through MUX5) reach the host's analog inputs, and a new
+    value on A15 follows."""
+    _need_tools()
+    sim = SimBoard(backend, board="mega")
+    sim.start()
+    with sim, Board.open(sim.port) as board:
+        assert board.info.analog_pins == tuple(range(54, 70))
+        assert [board.pin_number(f"A{n}") for n in (0, 8, 15)] == [54, 62, 69]
+        for name, counts in ANALOG.items():
+            sim.control.analog(board.pin_number(name), counts)
+        inputs = {name: board.analog_input(name) for name in ANALOG}
+        for name, counts in ANALOG.items():
+            assert inputs[name].wait_for(_equals(counts), timeout=BOUND) == counts
+        sim.control.analog(69, 42)
+        assert inputs["A15"].wait_for(_equals(42), timeout=BOUND) == 42
+        assert inputs["A14"].read() == 901
 
 
 #: The Mega 2560's RAM (0x200 .. RAMEND = 0x21FF).
@@ -233,7 +396,7 @@ MEGA_RAM = 8_192
 
 def test_the_mega_ram_budget_holds(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The Uno's deepest-stack scenario (rambudget.exercise: every command at its largest, four
-    in flight, counters and digital inputs reporting; no analog input on this build) on the
+    in flight, counters, digital and analog inputs (A0, A15) reporting) on the
     emulated Mega, whose runner records the lowest stack pointer: static data + the deepest
     stack + 256 B free fit the Mega's 8,192 B."""
     _need_tools()
@@ -245,7 +408,7 @@ def test_the_mega_ram_budget_holds(tmp_path: Path, capsys: pytest.CaptureFixture
     try:
         with Board.open(sim.port, window=4) as board:
             # Counters on INT4 and INT0 (pins 2 and 21): the Mega has no pin-change counter.
-            rambudget.exercise(board, sim.control, analog_pins=(), counter_pins=(2, 21))
+            rambudget.exercise(board, sim.control, analog_pins=(54, 69), counter_pins=(2, 21))
         row = snapshot(sim.pid, stats)
     finally:
         sim.stop()

@@ -18,7 +18,7 @@ from typing import Any
 import protoduino
 import pytest
 from protoduino import Board, aio, effective_speed
-from protoduino.messages import Status
+from protoduino.messages import Status, pin_set
 from protoduino.simboard import SimBoard
 from protoduino.testing import PtyDevice, ack
 from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
@@ -42,8 +42,11 @@ def test_pose_message_and_readback(board: Board, fake: PtyDevice) -> None:
     assert [i.WhichOneof("output") for i in items] == ["servo", "servo"]
     assert (items[0].servo.pin, items[0].servo.degrees) == (3, 10)
     assert (items[1].servo.pin, items[1].servo.degrees) == (5, 180)
-    # A digital output travels in the masks (protocol version 6), not as an item.
-    assert (sent.msg.pose.digital_pins, sent.msg.pose.digital_levels) == (1 << 13, 1 << 13)
+    # A digital output travels in the pin sets (protocol version 6), not as an item.
+    assert (sent.msg.pose.digital_pins, sent.msg.pose.digital_levels) == (
+        pin_set(1 << 13),
+        pin_set(1 << 13),
+    )
     assert (a.value, b.value, led.value) == (us(10), 2000, True)
     assert board.submit_pose({a: 20}).result(BOUND) is None
     assert a.value == us(20)
@@ -92,7 +95,10 @@ def test_pose_digital_outputs_in_the_masks(board: Board, fake: PtyDevice) -> Non
     assert [i.servo.pin for i in sent.msg.pose.items] == list(range(2, 10))
     want_pins = sum(1 << p for p in (11, 12, 13, 17))
     want_levels = sum(1 << p for p in (11, 13, 17))
-    assert (sent.msg.pose.digital_pins, sent.msg.pose.digital_levels) == (want_pins, want_levels)
+    assert (sent.msg.pose.digital_pins, sent.msg.pose.digital_levels) == (
+        pin_set(want_pins),
+        pin_set(want_levels),
+    )
     assert [led.value for led in leds] == [True, True, True, False]
     assert fake.values[17] == 1 and fake.values[12] == 0
 

@@ -31,7 +31,7 @@ from protoduino.errors import (
     TimerInUseError,
 )
 from protoduino.inputs import Reading
-from protoduino.messages import ArduinoIn, Status, parse_out
+from protoduino.messages import ArduinoIn, Status, parse_out, pins_in
 from protoduino.packets import Packet
 from protoduino.simboard import SimBoard, runner_command
 from protoduino_dev import build
@@ -527,7 +527,7 @@ def test_reports_keep_flowing_while_commands_flow_back_to_back(sim: SimBoard) ->
             msg = parse_out(item.payload)
             if msg.WhichOneof("data") == "input_report":
                 for pin, seen in times.items():
-                    if msg.input_report.analog_pins >> pin & 1:
+                    if pin in pins_in(msg.input_report.analog_pins):
                         seen.append(msg.input_report.time_ms)
 
         board.add_frame_monitor(record)

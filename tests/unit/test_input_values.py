@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from protoduino.errors import ProtocolError
-from protoduino.messages import ArduinoOut, input_values, parse_out
+from protoduino.messages import ArduinoOut, input_values, parse_out, pin_set
 
 PINS = st.sets(st.integers(0, 31), max_size=8)
 
@@ -24,16 +24,12 @@ def test_every_value_comes_back_by_kind_and_pin(
     out = ArduinoOut()
     rep = out.input_report
     rep.time_ms = time_ms
-    for pin in digital:
-        rep.digital_pins |= 1 << pin
-    for pin in high & digital:
-        rep.digital_levels |= 1 << pin
-    for pin in sorted(analog):
-        rep.analog_pins |= 1 << pin
-        rep.analog_values.append(analog[pin])
-    for pin in sorted(counts):
-        rep.counter_pins |= 1 << pin
-        rep.counter_counts.append(counts[pin])
+    rep.digital_pins = pin_set(sum(1 << pin for pin in digital))
+    rep.digital_levels = pin_set(sum(1 << pin for pin in high & digital))
+    rep.analog_pins = pin_set(sum(1 << pin for pin in analog))
+    rep.analog_values.extend(analog[pin] for pin in sorted(analog))
+    rep.counter_pins = pin_set(sum(1 << pin for pin in counts))
+    rep.counter_counts.extend(counts[pin] for pin in sorted(counts))
     wire = parse_out(out.SerializeToString()).input_report  # through the wire format
     found = input_values(wire)
     assert [(p, v) for k, p, v in found if k == "digital"] == [
@@ -49,10 +45,10 @@ def test_a_mask_that_disagrees_with_its_values_is_refused(field: str) -> None:
     out = ArduinoOut()
     rep = out.input_report
     if field == "analog":
-        rep.analog_pins = 0b11 << 14
+        rep.analog_pins = pin_set(0b11 << 14)
         rep.analog_values.append(5)
     else:
-        rep.counter_pins = 1 << 2
+        rep.counter_pins = pin_set(1 << 2)
         rep.counter_counts.extend([1, 2])
     with pytest.raises(ProtocolError, match=f"2 {field} pins|1 {field} pins"):
         input_values(rep)

@@ -24,7 +24,7 @@ from protoduino.errors import (
 )
 from protoduino.events import Event, EventKind
 from protoduino.link import Link, LinkState
-from protoduino.messages import ArduinoIn, ArduinoOut, parse_in
+from protoduino.messages import ArduinoIn, ArduinoOut, parse_in, pin_set
 from protoduino.packets import Control, parse_control
 from protoduino.rpc import MessageHook, Rpc
 from protoduino.testing import VirtualDevice
@@ -318,11 +318,11 @@ def test_input_reports_reach_the_message_hook_and_are_no_acks() -> None:
     assert stack.device.deliver() == 2  # the Ack, then the level
     assert call.done.is_set() and call.error is None
     assert [r.WhichOneof("data") for r in reports] == ["input_report"]
-    assert reports[0].input_report.digital_pins == 1 << 2
-    assert reports[0].input_report.digital_levels == 1 << 2
+    assert reports[0].input_report.digital_pins == pin_set(1 << 2)
+    assert reports[0].input_report.digital_levels == pin_set(1 << 2)
     stack.device.set_level(2, 0)  # a change, queued before the next command's Ack
     second = stack.rpc.submit(digital_init(13))
     assert stack.device.deliver() == 2
     assert second.done.is_set() and second.error is None
-    assert reports[-1].input_report.digital_levels == 0
+    assert reports[-1].input_report.digital_levels == b""
     assert stack.rpc.acks == 2 and stack.rpc.unknown_acks == 0 and stack.rpc.late_acks == 0

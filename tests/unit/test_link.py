@@ -48,14 +48,17 @@ def test_version_mismatch_names_both_versions(tmp_path: Path) -> None:
     assert isinstance(info.value, protoduino.LinkError)
 
 
-def test_version_6_firmware_without_the_pin_table_is_refused_clearly(tmp_path: Path) -> None:
-    """A version 6 device states its pins in masks the host no longer reads (DeviceInfo.pins
-    came with version 7): the handshake refuses it, naming both versions."""
-    assert protoduino.PROTOCOL_VERSION == 7
-    with PtyDevice(tmp_path, version=6), pytest.raises(protoduino.VersionMismatchError) as info:
+@pytest.mark.parametrize("older", [6, 7])
+def test_firmware_of_32_pin_masks_is_refused_clearly(tmp_path: Path, older: int) -> None:
+    """A version 7 device's pin sets are 32-bit masks (fixed32, uint32) where version 8's are
+    bytes of any width, and a version 6 device states its pins in masks the host no longer
+    reads (DeviceInfo.pins came with version 7): the handshake refuses both, naming both
+    versions."""
+    assert protoduino.PROTOCOL_VERSION == 8
+    with PtyDevice(tmp_path, version=older), pytest.raises(protoduino.VersionMismatchError) as info:
         Board.open(str(tmp_path / "fake-tty"))
-    assert (info.value.host_version, info.value.device_version) == (7, 6)
-    assert "host speaks 7, device speaks 6" in str(info.value)
+    assert (info.value.host_version, info.value.device_version) == (8, older)
+    assert f"host speaks 8, device speaks {older}" in str(info.value)
 
 
 def test_version_1_firmware_gets_the_clear_version_error(tmp_path: Path) -> None:

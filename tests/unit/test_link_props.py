@@ -33,7 +33,7 @@ from protoduino.errors import ProtoduinoError, TransportError
 from protoduino.events import Event
 from protoduino.framing import StreamDecoder, decode_frame
 from protoduino.link import Link, LinkState
-from protoduino.messages import ArduinoIn, ArduinoOut, parse_in, parse_out
+from protoduino.messages import ArduinoIn, ArduinoOut, parse_in, parse_out, pin_set
 from protoduino.packets import BadFrame, Packet, event_payload, parse_control, reset_ack_payload
 from protoduino.rpc import Rpc
 from protoduino.transport import TransportListener
@@ -230,7 +230,7 @@ class LinkMachine(RuleBasedStateMachine):
             out.failsafe.active = True
             out.failsafe.cause = 1  # type: ignore[assignment]
         elif kind == "input_report":
-            out.input_report.digital_pins = 1 << 2
+            out.input_report.digital_pins = pin_set(1 << 2)
         else:
             out.decode_error.count = 3
         self._packet(PacketType.DATA, seq, out.SerializeToString())

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from protoduino._generated import protoduino_pb2 as pb
-from protoduino.messages import parse_in, parse_out, pose_refused, serialize_out
+from protoduino.messages import parse_in, parse_out, pin_set, pose_refused, serialize_out
 
 
 def _long_ack(mid: int) -> pb.ArduinoOut:
@@ -38,7 +38,9 @@ def test_an_ack_with_more_than_its_id_keeps_the_long_form() -> None:
 
 
 def test_pose_refused_counts_the_items_then_the_mask_pins_upwards() -> None:
-    pose = pb.Pose(digital_pins=(1 << 13) | (1 << 4) | (1 << 19), digital_levels=1 << 13)
+    pose = pb.Pose(
+        digital_pins=pin_set((1 << 13) | (1 << 4) | (1 << 19)), digital_levels=pin_set(1 << 13)
+    )
     pose.items.add().servo.pin = 9
     pose.items.add().pwm.pin = 11
     named = [pose_refused(pose, n) for n in range(6)]
@@ -52,13 +54,13 @@ def test_pose_refused_counts_the_items_then_the_mask_pins_upwards() -> None:
 
 
 def test_compact_pose_on_the_wire() -> None:
-    """Six digital outputs in the masks: 9 bytes of payload (16 on the wire), where six
+    """Six digital outputs in the pin sets: 10 bytes of payload (17 on the wire), where six
     DigitalControl items took 40 to 52 (47 to 59)."""
     msg = pb.ArduinoIn(message_id=3)
-    msg.pose.digital_pins = 0xFC
-    msg.pose.digital_levels = 0x54
+    msg.pose.digital_pins = pin_set(0xFC)
+    msg.pose.digital_levels = pin_set(0x54)
     payload = msg.SerializeToString()
-    assert payload == bytes.fromhex("0803320510fc011854")
+    assert payload == bytes.fromhex("080332061201fc1a0154")
     assert parse_in(payload) == msg
     items = pb.ArduinoIn(message_id=3)
     for pin in range(2, 8):

@@ -254,7 +254,8 @@ def test_pose_with_pwm_items(board: Board, fake: PtyDevice) -> None:
     (pose,) = sent(fake, "pose")
     assert [i.WhichOneof("output") for i in pose.pose.items] == ["servo", "pwm"]
     assert pose.pose.items[1].pwm.duty == 100
-    assert (pose.pose.digital_pins, pose.pose.digital_levels) == (1 << 13, 1 << 13)  # version 6
+    # version 6's pin sets, bytes since version 8: pin 13 is bit 5 of byte 1
+    assert (pose.pose.digital_pins, pose.pose.digital_levels) == (b"\x00\x20", b"\x00\x20")
     assert fake.values == {9: 30, 13: 1, 3: 100}
     assert motor.value == 100
     with pytest.raises(protoduino.CommandRejectedError) as info:

@@ -671,11 +671,38 @@ static void pd_arm_pulses(pd_sim_t *sim, pd_input_t *in)
     in->timer = 1;
 }
 
+/*
+ * simavr 1.6 (Debian bookworm's) holds the values of ADC0..ADC7 only (avr_adc_t.adc_values[8];
+ * 1.7 has 16): an ATmega2560's ADC8..ADC15 (the Mega's A8..A15), which the firmware selects
+ * with ADCSRB's MUX5 (mux codes 32..39, single-ended), would read past that array. There the
+ * runner sets the mux code's entry to a fixed voltage (ADC_MUX_REF: the conversion reads its
+ * millivolts, scaled as a pin's), which converts the same as the pin's value would.
+ */
+#define PD_SIMAVR_ADC_VALUES (sizeof(((avr_adc_t *)0)->adc_values) / sizeof(uint16_t))
+#define PD_ADC8_MUX 32 /* MUX5:0 = 100000: ADC8, single-ended (ATmega2560 datasheet, 26.8.1) */
+
+static avr_adc_t *pd_adc(pd_sim_t *sim)
+{
+    for (avr_io_t *io = sim->avr->io_port; io != NULL; io = io->next) {
+        if (io->kind != NULL && strcmp(io->kind, "adc") == 0) {
+            return (avr_adc_t *)io; /* its avr_io_t is its first member */
+        }
+    }
+    return NULL;
+}
+
 static void pd_set_analog(pd_sim_t *sim, int pin, unsigned counts)
 {
     /* simavr converts mV * 1023 / AVCC, truncating: the smallest mV that
      * gives `counts` is ceil(counts * AVCC / 1023). */
     uint32_t mv = (counts * PD_VCC_MV + 1022U) / 1023U;
+    int channel = pin - sim->board->first_analog;
+    avr_adc_t *adc = channel >= (int)PD_SIMAVR_ADC_VALUES ? pd_adc(sim) : NULL;
+    if (adc != NULL) {
+        adc->muxmode[PD_ADC8_MUX + channel - 8] =
+            (avr_adc_mux_t){.kind = ADC_MUX_REF, .src = mv & 0x1FFFU};
+        return;
+    }
     avr_raise_irq(
         avr_io_getirq(sim->avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + (pin - sim->board->first_analog)),
         mv);

@@ -31,7 +31,7 @@
 #if !defined(PD_BOARD_MEGA) && !defined(PD_BOARD_NANO)
 #if defined(__AVR_ATmega2560__)
 #define PD_BOARD_MEGA 1
-#define PD_MAX_PINS 32
+#define PD_MAX_PINS 70
 #elif defined(ARDUINO_AVR_NANO)
 #define PD_BOARD_NANO 1
 #define PD_MAX_PINS 22

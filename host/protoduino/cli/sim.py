@@ -48,7 +48,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--board",
         choices=sorted(AVR_BOARDS),
         default="uno",
-        help="the board the avr backend emulates: uno (default) or mega (the Mega 2560)",
+        help="the board's pins: uno (default) or mega (the Mega 2560: with --backend avr its "
+        "emulated ATmega2560, natively the simulated board with the Mega's pins)",
     )
     parser.add_argument(
         "--trace",
@@ -100,8 +101,6 @@ def check(args: argparse.Namespace) -> str | None:
         args.detach or args.trace or args.link or args.control or args.backend != "native"
     ):
         return "--stop PIDFILE takes no other option"
-    if args.board != "uno" and args.backend != "avr":
-        return f"--board {args.board} goes with --backend avr (the native board is an Uno)"
     return None
 
 

@@ -42,14 +42,14 @@ class DigitalOutput:
         return None if value is None else bool(value)
 
     def _pose_item(self, item: Any, value: object) -> tuple[bytes, int]:
-        """As :meth:`Servo._pose_item` (a pin the Pose's masks cannot hold, 32 or above)."""
+        """As :meth:`Servo._pose_item` (a pin the Pose's pin sets cannot hold, 72 or above)."""
         control, level = self._pose_level(value)
         item.digital.pin = self.pin
         item.digital.level = bool(level)
         return control, level
 
     def _pose_level(self, value: object) -> tuple[bytes, int]:
-        """The level ``value`` sets in a pose's masks, and this output's own Control for it.
+        """The level ``value`` sets in a pose's pin sets, and this output's own Control for it.
         A level has two values: each one's Control is built once (a pose of digital outputs
         is the robot's hot call)."""
         level = int(check_level("level", value))
