@@ -232,7 +232,7 @@ static void sim_release_all(sim_hal_t *hal)
 /* Why a pin takes no analog value: the board's analog inputs, from its table. */
 static const char *sim_not_analog(const pd_board_info_t *info)
 {
-    static char why[80]; /* the longest "%d" three times: 37 + 3 * 11 - 6 B */
+    static char why[80]; /* up to 65 B with three 11-character ints (gcc -O2 checks it) */
     int first = -1, last = -1;
     for (int pin = 0; pin < info->num_pins && pin < PD_MAX_PINS; pin++) {
         if (pd_pinset_has(&info->analog_pins, (uint8_t)pin)) {
