@@ -31,8 +31,11 @@ volatile uint8_t *const pd_avr_mega_ports[11] = {
  *   servo timer (as the Uno's 9 and 10). Timer0 runs the clock: 4 (OC0B) and 13 (OC0A,
  *   also OC1C) are refused with TIMER_IN_USE. The PWM pins of Timers 3, 4 and 5 (2, 3,
  *   5-8, 44-46) are digital pins here: no driver runs those timers yet.
- * - Servos: Timer1's compare interrupt writes the pulses through the port, on any
- *   digital pin; 8 of them (PD_MAX_SERVOS, the Uno's).
+ * - Servos: 24 (PD_MAX_SERVOS, firmware/Makefile), on any digital pin, written through
+ *   the port by two timers' compare interrupts as the Arduino Servo library does:
+ *   channels 0 .. 11 on Timer1, 12 .. 23 on Timer5 (pd_avr_servo.c). While a servo runs
+ *   the servos' timers make no PWM: Timer1's 11 and 12 (servo_timer_pins) and Timer5's
+ *   44 .. 46, beyond the pins served (servo_timer_2_pins, for the day they are).
  * - Counters on the six external interrupts: pins 21, 20, 19, 18 (INT0..INT3), 2 and 3
  *   (INT4, INT5).
  * - No analog input yet: A0..A15 are pins 54..69.
@@ -40,7 +43,7 @@ volatile uint8_t *const pd_avr_mega_ports[11] = {
 const pd_board_info_t pd_avr_mega_info = {
     .board = "mega",
     .num_pins = PD_MAX_PINS,
-    .max_servos = 8,
+    .max_servos = 24,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* RX0, TX0: the link itself */
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
     .pwm_pins = (1UL << 9) | (1UL << 10) | (1UL << 11) | (1UL << 12),
@@ -50,6 +53,8 @@ const pd_board_info_t pd_avr_mega_info = {
     .clock_timer_pins = (1UL << 4) | (1UL << 13),
     .servo_timer = 1,
     .clock_timer = 0,
+    .servo_timer_2 = 5,
+    .servo_timer_2_pins = 0, /* 44, 45, 46 (OC5C, OC5B, OC5A): beyond pin 31 */
 };
 typedef char pd_assert_mega_pins[PD_MAX_PINS == 32 ? 1 : -1];
 

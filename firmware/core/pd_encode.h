@@ -35,7 +35,13 @@
  * whose DeviceInfo is sized by it: PD_ENCODE_INFO_MAX).
  */
 #define PD_INFO_PINS_MAX 32u
-#define PD_INFO_TIMERS_MAX 3u
+#define PD_INFO_TIMERS_MAX 6u
+/* The most timers a board of this build states (DeviceInfo.timers' bytes: up to the highest
+ * it holds): the Uno's 3 bound its Timer0 .. Timer2, the Mega's 6 its Timer5 (firmware/Makefile). */
+#ifndef PD_MAX_TIMERS
+#define PD_MAX_TIMERS 3u
+#endif
+typedef char pd_assert_info_timers[(PD_MAX_TIMERS <= PD_INFO_TIMERS_MAX) ? 1 : -1];
 typedef char pd_assert_info_pins[(PD_MAX_PINS <= PD_INFO_PINS_MAX) ? 1 : -1];
 /* Pin `pin`'s byte of DeviceInfo.pins: its PinBit flags and, in bits 5-7, 1 +
  * the number of the timer the device holds that its PWM output needs. */
@@ -60,16 +66,48 @@ uint8_t pd_encode_timer(const pd_board_info_t *board, uint8_t timer);
  * costs the default build no transmit buffer, and a pin table of this build's
  * PD_MAX_PINS bytes at most. */
 #define PD_ENCODE_INFO_MAX                                                   \
-    (protoduino_DeviceInfo_size - (PD_FEATURE_USER ? 0u : 5u) - (PD_INFO_PINS_MAX - PD_MAX_PINS))
+    (protoduino_DeviceInfo_size - (PD_FEATURE_USER ? 0u : 5u) - (PD_INFO_PINS_MAX - PD_MAX_PINS) - \
+     (PD_INFO_TIMERS_MAX - PD_MAX_TIMERS))
+/*
+ * OutputStates.servos (ReadOutputs): 5 B a servo, written by the outputs' own writer
+ * (pd_outputs_servos) straight into the message, never copied into its struct (a 120 B
+ * field would be the Ack's largest member, and the Uno's stack and code pay for that). The
+ * field's callback holds the writer and its argument (pd_encode_servos_set): a call back
+ * up, as nanopb's callbacks are, so the encoder knows no outputs. The schema's bound
+ * (max_size in protoduino.options) is the largest build's, the Mega's 24 servos; a build's
+ * own is its PD_MAX_SERVOS (PD_ENCODE_OUTPUTS_MAX).
+ */
+#define PD_INFO_SERVOS_MAX 24u
+typedef char pd_assert_info_servos[(PD_MAX_SERVOS <= PD_INFO_SERVOS_MAX) ? 1 : -1];
+/* Writes the servos' bytes of `ctx` at `b` (at most 5 * PD_MAX_SERVOS); returns their end. */
+typedef uint8_t *pd_encode_servos_fn(const void *ctx, uint8_t *b);
+/* The writer in the callback's function slot (a function pointer converted, through
+ * void (*)(void) as GCC's -Wcast-function-type asks, and converted back before the call:
+ * C99 6.3.2.3); nanopb's encoder never meets it. */
+typedef bool pd_encode_cb_fn(pb_ostream_t *, const pb_field_t *, void *const *);
+static inline void pd_encode_servos_set(pb_callback_t *field, pd_encode_servos_fn *write,
+                                        const void *ctx)
+{
+    field->funcs.encode = (pd_encode_cb_fn *)(void (*)(void))write;
+    field->arg = (void *)(uintptr_t)ctx;
+}
+static inline pd_encode_servos_fn *pd_encode_servos_get(const pb_callback_t *field)
+{
+    return (pd_encode_servos_fn *)(void (*)(void))field->funcs.encode;
+}
+#define PD_ENCODE_OUTPUTS_MAX (protoduino_OutputStates_size - 5u * (PD_INFO_SERVOS_MAX - PD_MAX_SERVOS))
 /* A UserCall's Ack: its reply (or none) and its handler's code. */
 #define PD_ENCODE_USER_ACK_MAX (2u + 64u + 2u)
+/* A nested message of `n` bytes with its tag and length (one byte below 128, else two:
+ * only the Mega's ReadOutputs, whose 24 servos take 120 B, is longer). */
+#define PD_ENCODE_NESTED(n) (2u + (n) + ((n) >= 128u ? 1u : 0u))
 #define PD_ENCODE_ACK_MAX                                                    \
     (8u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(2u + PD_ENCODE_INFO_MAX,             \
-                                        2u + protoduino_OutputStates_size),  \
+                                        PD_ENCODE_NESTED(PD_ENCODE_OUTPUTS_MAX)), \
                          66u + 2u + protoduino_Failsafe_size))
 #define PD_ENCODE_MAX                                                        \
-    (2u + PD_ENCODE_MAX2(PD_ENCODE_MAX2(PD_ENCODE_ACK_MAX, protoduino_InputReport_size), \
-                         PD_ENCODE_MAX2(protoduino_Failsafe_size, protoduino_UserReport_size)))
+    PD_ENCODE_NESTED(PD_ENCODE_MAX2(PD_ENCODE_MAX2(PD_ENCODE_ACK_MAX, protoduino_InputReport_size), \
+                                    PD_ENCODE_MAX2(protoduino_Failsafe_size, protoduino_UserReport_size)))
 
 /* Encode `msg` into buf (capacity cap). Returns the length, or 0 if cap is
  * below PD_ENCODE_MAX (the largest message: any message fits a buffer that

@@ -1,8 +1,10 @@
 /* The outputs as a whole (pd_outputs.h): the pin-mode table's walks, Pose, ReadOutputs. */
 #include "pd_outputs.h"
 
+#include <stdint.h>
 #include <string.h>
 
+#include "pd_encode.h"
 #include "pd_protocol.h"
 #include "pd_user.h"
 
@@ -219,11 +221,28 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
     return protoduino_Status_STATUS_OK;
 }
 
+/* OutputStates.servos: 5 B a servo, in pin order (pd_encode_servos_fn). */
+static uint8_t *pd_outputs_servos(const void *outputs, uint8_t *b)
+{
+    const pd_outputs_t *out = outputs;
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        uint8_t owner = out->owner[pin];
+        if (owner != 0 && PD_OWNER_MODE(owner) == PD_MODE_SERVO) {
+            const pd_servo_t *s = &out->servo[PD_OWNER_SLOT(owner)];
+            *b++ = pin;
+            *b++ = (uint8_t)s->us;
+            *b++ = (uint8_t)(s->us >> 8);
+            *b++ = (uint8_t)s->target_us;
+            *b++ = (uint8_t)(s->target_us >> 8);
+        }
+    }
+    return b;
+}
+
 void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
 {
-    typedef char fits[(sizeof(states->servos.bytes) >= 5u * PD_MAX_SERVOS) ? 1 : -1];
-    (void)sizeof(fits);
-    uint8_t *b = states->servos.bytes;
+    /* The servos' bytes: the encoder writes them from the table (pd_outputs_servos). */
+    pd_encode_servos_set(&states->servos, pd_outputs_servos, out);
     /* `bit` moves one place per pin: a variable 32-bit shift is a loop on the AVR. */
     uint32_t bit = 1;
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++, bit <<= 1) {
@@ -231,21 +250,13 @@ void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
         if (owner == 0) {
             continue;
         }
-        if (PD_OWNER_MODE(owner) == PD_MODE_SERVO) {
-            const pd_servo_t *s = &out->servo[PD_OWNER_SLOT(owner)];
-            *b++ = pin;
-            *b++ = (uint8_t)s->us;
-            *b++ = (uint8_t)(s->us >> 8);
-            *b++ = (uint8_t)s->target_us;
-            *b++ = (uint8_t)(s->target_us >> 8);
-        } else if (PD_OWNER_MODE(owner) == PD_MODE_DIGITAL) {
+        if (PD_OWNER_MODE(owner) == PD_MODE_DIGITAL) {
             states->digital_pins |= bit;
         } else if (PD_OWNER_MODE(owner) == PD_MODE_PWM) {
             states->pwm_pins |= bit;
             states->pwm_duties[states->pwm_duties_count++] = out->pwm[PD_OWNER_SLOT(owner)].duty;
         }
     }
-    states->servos.size = (pb_size_t)(b - states->servos.bytes);
     states->digital_levels = out->digital_level & states->digital_pins;
 }
 

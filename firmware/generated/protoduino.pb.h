@@ -338,13 +338,12 @@ typedef struct _protoduino_DeviceInfo {
     pb_callback_t timers;
 } protoduino_DeviceInfo;
 
-typedef PB_BYTES_ARRAY_T(40) protoduino_OutputStates_servos_t;
 /* Every configured output and its value now (answer to ReadOutputs). */
 typedef struct _protoduino_OutputStates {
     /* 5 bytes per servo, in pin order: its pin, then the width it drives now and
  the width it moves to (the same unless speed-limited), each in us as a
  little-endian uint16. Bytes, not messages: the Uno's encoder stays small. */
-    protoduino_OutputStates_servos_t servos;
+    pb_callback_t servos;
     uint32_t digital_pins; /* bit N: pin N is a digital output */
     uint32_t digital_levels; /* bit N: the level pin N drives */
     uint32_t pwm_pins; /* bit N: pin N is a PWM output */
@@ -531,7 +530,7 @@ extern "C" {
 #define protoduino_UserCall_init_default         {{0, {0}}, 0}
 #define protoduino_ArduinoIn_init_default        {0, 0, {protoduino_Ping_init_default}}
 #define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, {{NULL}, NULL}, {{NULL}, NULL}}
-#define protoduino_OutputStates_init_default     {{0, {0}}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
+#define protoduino_OutputStates_init_default     {{{NULL}, NULL}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
 #define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_default, 0, 0}
 #define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN, 0, 0}
 #define protoduino_InputReport_init_default      {0, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}, 0, 0, {0, 0, 0, 0}, 0}
@@ -561,7 +560,7 @@ extern "C" {
 #define protoduino_UserCall_init_zero            {{0, {0}}, 0}
 #define protoduino_ArduinoIn_init_zero           {0, 0, {protoduino_Ping_init_zero}}
 #define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, {{NULL}, NULL}, {{NULL}, NULL}}
-#define protoduino_OutputStates_init_zero        {{0, {0}}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
+#define protoduino_OutputStates_init_zero        {{{NULL}, NULL}, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}}
 #define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_zero, 0, 0}
 #define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN, 0, 0}
 #define protoduino_InputReport_init_zero         {0, 0, 0, 0, 0, {0, 0, 0, 0, 0, 0}, 0, 0, {0, 0, 0, 0}, 0}
@@ -893,12 +892,12 @@ X(a, CALLBACK, SINGULAR, BYTES,    timers,           15)
 #define protoduino_DeviceInfo_DEFAULT NULL
 
 #define protoduino_OutputStates_FIELDLIST(X, a) \
-X(a, STATIC,   SINGULAR, BYTES,    servos,            1) \
+X(a, CALLBACK, SINGULAR, BYTES,    servos,            1) \
 X(a, STATIC,   SINGULAR, FIXED32,  digital_pins,      2) \
 X(a, STATIC,   SINGULAR, FIXED32,  digital_levels,    3) \
 X(a, STATIC,   SINGULAR, FIXED32,  pwm_pins,          4) \
 X(a, STATIC,   REPEATED, UINT32,   pwm_duties,        5)
-#define protoduino_OutputStates_CALLBACK NULL
+#define protoduino_OutputStates_CALLBACK pb_default_field_callback
 #define protoduino_OutputStates_DEFAULT NULL
 
 #define protoduino_Ack_FIELDLIST(X, a) \
@@ -1028,9 +1027,10 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_DeviceInfo_size               108 /* callbacks at their max_size */
-#define protoduino_Ack_size                      137 /* callbacks at their max_size */
-#define protoduino_ArduinoOut_size               140 /* callbacks at their max_size */
+#define protoduino_DeviceInfo_size               111 /* callbacks at their max_size */
+#define protoduino_OutputStates_size             155 /* callbacks at their max_size */
+#define protoduino_Ack_size                      186 /* callbacks at their max_size */
+#define protoduino_ArduinoOut_size               189 /* callbacks at their max_size */
 #define protoduino_AnalogInputInit_size          19
 #define protoduino_ArduinoIn_size                108
 #define protoduino_ClearInterlock_size           3
@@ -1044,7 +1044,6 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_GetInfo_size                  0
 #define protoduino_Heartbeat_size                3
 #define protoduino_InputReport_size              78
-#define protoduino_OutputStates_size             75
 #define protoduino_Ping_size                     69
 #define protoduino_PoseItem_size                 9
 #define protoduino_Pose_size                     100

@@ -21,7 +21,7 @@ import pytest
 from boardprocess import missing_tool
 from protoduino import Board, EventKind
 from protoduino._generated import protoduino_pb2 as pb
-from protoduino.errors import NotSupportedError, TimerInUseError
+from protoduino.errors import CommandRejectedError, NotSupportedError, TimerInUseError
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard
 from protoduino_dev import build, rambudget
@@ -74,7 +74,7 @@ def test_the_mega_states_its_pins_and_the_host_refuses_from_them(mega: SimBoard)
     refuses from that table what the device would refuse, for the table's reason."""
     with Board.open(mega.port) as board:
         info = board.info
-        assert (info.board, info.num_pins, info.max_servos) == ("mega", 32, 8)
+        assert (info.board, info.num_pins, info.max_servos) == ("mega", 32, 24)
         assert info.pwm_pins == (9, 10, 11, 12)
         assert info.analog_pins == () and info.counter_pins == (2, 3, 18, 19, 20, 21)
         pins = info.pins
@@ -123,6 +123,53 @@ def test_eight_servos_on_ports_a_and_c_in_one_pose(mega: SimBoard) -> None:
 
         for pin in servos:
             _wait(mega, pin, "servo", at(pin))
+
+
+def test_the_mega_states_its_two_servo_timers(mega: SimBoard) -> None:
+    """Its DeviceInfo says the servos hold Timer1 and Timer5 (12 channels each) and the clock
+    Timer0, and that Timer1's PWM pins, 11 and 12, need the servos' timer."""
+    with Board.open(mega.port) as board:
+        info = board.info
+        assert info.timers == bytes(
+            [
+                pb.TIMER_CLOCK,
+                pb.TIMER_SERVOS,
+                pb.TIMER_FREE,
+                pb.TIMER_FREE,
+                pb.TIMER_FREE,
+                pb.TIMER_SERVOS,
+            ]
+        )
+        assert [info.timer_use(t) for t in (1, 5)] == ["servos", "servos"]
+        assert info.timer_pins("servos") == (11, 12)
+        assert [info.timer(p) for p in (4, 11, 12, 13)] == [0, 1, 1, 0]
+
+
+def test_twenty_four_servos_from_three_poses(mega: SimBoard) -> None:
+    """24 servos on pins 4..15 and 20..31, both timers' channels, set by three poses of eight
+    (the Pose's most items): every width at its pin is the one posed, and ReadOutputs (120 B
+    of servos, a reply of more than 127 B) says the same of all 24. (Not 16..19: servos there
+    upset the emulated Mega's link at 1,000,000 baud on main's firmware too.)"""
+    pins = [*range(4, 16), *range(20, 32)]
+    with Board.open(mega.port) as board:
+        servos = {pin: board.servo(pin) for pin in pins}
+        degrees = {pin: 5 + 7 * n for n, pin in enumerate(pins)}  # 5 .. 166: 24 widths
+        widths = {pin: servos[pin].to_us(deg) for pin, deg in degrees.items()}
+        for first in range(0, 24, 8):
+            board.pose({servos[pin]: degrees[pin] for pin in pins[first : first + 8]})
+
+        def at(pin: int) -> Callable[[list[int]], bool]:
+            return lambda v: bool(v) and abs(v[-1] - widths[pin]) <= PULSE_TOLERANCE_US
+
+        for pin in pins:
+            _wait(mega, pin, "servo", at(pin))
+        states = board.read_outputs()
+        assert {pin: (s.mode, s.value, s.target) for pin, s in states.items()} == {
+            pin: ("servo", widths[pin], widths[pin]) for pin in pins
+        }
+        with pytest.raises(CommandRejectedError) as full:
+            board.servo(2)  # a 25th: the host refuses from max_servos alone
+        assert full.value.status == Status.STATUS_NO_FREE_RESOURCE and not full.value.sent
 
 
 def test_pwm_on_timer2_and_timer1_pins(mega: SimBoard) -> None:
