@@ -25,12 +25,30 @@ volatile uint8_t *const pd_avr_mega_ports[11] = {
 };
 
 /*
+ * PWM on the 16-bit timers (pd_avr_pwm.c): Timer1's 11, 12 (13, OC1C, is also Timer0's
+ * OC0A: the clock's), Timer3's 5, 2, 3 and Timer4's 6, 7, 8. Timer5's 46, 45, 44 are rows
+ * the day the build serves pins beyond 31 (PD_MAX_PINS): Timer5 makes servo pulses, so
+ * they join servo_timer_2_pins below, as Timer1's 11 and 12 are servo_timer_pins.
+ */
+const pd_avr_pwm16_t pd_avr_mega_pwm16[] = {
+    {11, 1, 0}, {12, 1, 1},            /* OC1A, OC1B */
+    {5, 3, 0},  {2, 3, 1},  {3, 3, 2}, /* OC3A, OC3B, OC3C */
+    {6, 4, 0},  {7, 4, 1},  {8, 4, 2}, /* OC4A, OC4B, OC4C */
+#if PD_MAX_PINS > 46
+    {46, 5, 0}, {45, 5, 1}, {44, 5, 2}, /* OC5A, OC5B, OC5C */
+#endif
+};
+const uint8_t pd_avr_mega_pwm16_count = sizeof pd_avr_mega_pwm16 / sizeof pd_avr_mega_pwm16[0];
+
+/*
  * The board's one declaration of its pins (pd_hal.h): DeviceInfo's pin table is written
  * from it, and the host refuses from that. Pins 0 .. 31 (PD_MAX_PINS, pd_avr_mega.h).
- * - PWM: Timer2 on pins 9 (OC2B) and 10 (OC2A); Timer1 on 11 (OC1A) and 12 (OC1B), the
- *   servo timer (as the Uno's 9 and 10). Timer0 runs the clock: 4 (OC0B) and 13 (OC0A,
- *   also OC1C) are refused with TIMER_IN_USE. The PWM pins of Timers 3, 4 and 5 (2, 3,
- *   5-8, 44-46) are digital pins here: no driver runs those timers yet.
+ * - PWM: Timer2 on pins 9 (OC2B) and 10 (OC2A); Timer3 on 5, 2, 3 (OC3A..C) and Timer4
+ *   on 6, 7, 8 (OC4A..C), free whatever the servos do; Timer1 on 11 (OC1A) and 12 (OC1B),
+ *   a servo timer (as the Uno's 9 and 10): only while no servo runs. Timer0 runs the
+ *   clock: 4 (OC0B) and 13 (OC0A, also OC1C) are refused with TIMER_IN_USE. Timer5's 44..46
+ *   are beyond the pins served (pd_avr_mega_pwm16 above). Six PWM outputs at once
+ *   (PD_MAX_PWM: OutputStates.pwm_duties' bound).
  * - Servos: 24 (PD_MAX_SERVOS, firmware/Makefile), on any digital pin, written through
  *   the port by two timers' compare interrupts as the Arduino Servo library does:
  *   channels 0 .. 11 on Timer1, 12 .. 23 on Timer5 (pd_avr_servo.c). While a servo runs
@@ -46,7 +64,7 @@ const pd_board_info_t pd_avr_mega_info = {
     .max_servos = 24,
     .reserved_pins = (1UL << 0) | (1UL << 1), /* RX0, TX0: the link itself */
     .rx_buffer = PD_AVR_RX_SIZE - 1u,         /* a ring keeps one slot free */
-    .pwm_pins = (1UL << 9) | (1UL << 10) | (1UL << 11) | (1UL << 12),
+    .pwm_pins = (1UL << 2) | (1UL << 3) | (0x3FUL << 5) | (1UL << 11) | (1UL << 12), /* 5..10 */
     .analog_pins = 0,
     .counter_pins = (1UL << 2) | (1UL << 3) | (0xFUL << 18), /* INT4, INT5; INT3..INT0 */
     .servo_timer_pins = (1UL << 11) | (1UL << 12),

@@ -30,11 +30,21 @@ enum { PD_PA, PD_PB, PD_PC, PD_PD, PD_PE, PD_PF, PD_PG, PD_PH, PD_PJ, PD_PK, PD_
 extern const uint8_t pd_avr_mega_pins[PD_AVR_MEGA_PINS] PROGMEM;
 extern volatile uint8_t *const pd_avr_mega_ports[11];
 
-/* The pins of the timer outputs the drivers use (pd_avr_pwm.c): Timer2, Timer1 and Timer0. */
+/* The pins of the 8-bit timers' outputs the PWM driver uses (pd_avr_pwm.c): Timer2's. */
 #define PD_AVR_PIN_OC2B 9u
 #define PD_AVR_PIN_OC2A 10u
-#define PD_AVR_PIN_OC1A 11u
-#define PD_AVR_PIN_OC1B 12u
+/*
+ * The 16-bit timers' outputs it runs (pd_avr_mega.c): a pin, its timer (1, 3, 4, 5) and
+ * the timer's output, 0..2 for A..C. A row is the whole of an output's driver: the four
+ * timers' registers lie alike (pd_avr_pwm.c), so another output is one more row.
+ */
+typedef struct pd_avr_pwm16 {
+    uint8_t pin;
+    uint8_t timer;
+    uint8_t output;
+} pd_avr_pwm16_t;
+extern const pd_avr_pwm16_t pd_avr_mega_pwm16[];
+extern const uint8_t pd_avr_mega_pwm16_count;
 /* Timer0's: the clock's timer; the Mega's board table keeps them from PWM (clock_timer_pins). */
 #define PD_AVR_PIN_OC0B 4u
 #define PD_AVR_PIN_OC0A 13u

@@ -75,18 +75,18 @@ def test_the_mega_states_its_pins_and_the_host_refuses_from_them(mega: SimBoard)
     with Board.open(mega.port) as board:
         info = board.info
         assert (info.board, info.num_pins, info.max_servos) == ("mega", 32, 24)
-        assert info.pwm_pins == (9, 10, 11, 12)
+        assert info.pwm_pins == (2, 3, 5, 6, 7, 8, 9, 10, 11, 12)
         assert info.analog_pins == () and info.counter_pins == (2, 3, 18, 19, 20, 21)
         pins = info.pins
         assert pins[0] == pins[1] == 0  # the link: UART0
         assert pins[22:32] == bytes([pb.PIN_DIGITAL] * 10)
         assert all(pins[p] & pb.PIN_PWM for p in (9, 10, 11, 12))
-        assert not pins[2] & pb.PIN_PWM  # Timer3's OC3B: no driver runs Timer3
+        assert not pins[22] & pb.PIN_PWM  # PA0: no timer output
         with pytest.raises(TimerInUseError) as clock:
             board.pwm_output(13)  # OC0A: Timer0 is the clock
         assert not clock.value.sent
         with pytest.raises(NotSupportedError) as no_pwm:
-            board.pwm_output(2)
+            board.pwm_output(22)
         assert not no_pwm.value.sent
         msg = ArduinoIn()
         msg.pwm_init.pin = 13
@@ -181,6 +181,28 @@ def test_pwm_on_timer2_and_timer1_pins(mega: SimBoard) -> None:
             board.pwm_output(pin).write(duty)
         for pin, duty in duties.items():
             _wait(mega, pin, "pwm", _last(duty))
+
+
+def test_pwm_on_timer3_and_timer4_pins(mega: SimBoard) -> None:
+    """Pins 5, 2, 3 (Timer3's OC3A..C) and 6, 7, 8 (Timer4's): the duty measured at each pin
+    is the one written, and stays so while servos run on both servo timers (Timers 3 and 4
+    make no servo pulses); Timer1's 11 is refused then, by the host from the pin table."""
+    duties = {5: 60, 2: 200, 3: 128, 6: 30, 7: 250, 8: 1}
+    with Board.open(mega.port) as board:
+        outs = {pin: board.pwm_output(pin) for pin in duties}
+        for pin, duty in duties.items():
+            outs[pin].write(duty)
+        for pin, duty in duties.items():
+            _wait(mega, pin, "pwm", _last(duty))
+        servos = [board.servo(pin) for pin in (*range(20, 32), 4, 13)]  # 13, 14: Timer5's
+        with pytest.raises(TimerInUseError) as timer1:
+            board.pwm_output(11)
+        assert not timer1.value.sent
+        board.pose({outs[pin]: 255 - duty for pin, duty in duties.items()})
+        for pin, duty in duties.items():
+            _wait(mega, pin, "pwm", _last(255 - duty))
+        width = servos[-1].to_us(90)
+        _wait(mega, 13, "servo", lambda v: bool(v) and abs(v[-1] - width) <= PULSE_TOLERANCE_US)
 
 
 def test_digital_inputs_on_the_mega(mega: SimBoard) -> None:
