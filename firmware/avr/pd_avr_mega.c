@@ -1,6 +1,9 @@
 /*
  * The Mega 2560's pin map (pd_avr_mega.h): Arduino's numbering of the ATmega2560's
- * ports, as the Mega's pins_arduino.h has it. Built only for make avr BOARD=mega.
+ * ports, as the Mega's pins_arduino.h has it; its 16-bit timers' PWM outputs (a row
+ * each); and its board table, which DeviceInfo states: 24 servos on Timer1 and Timer5,
+ * PWM on Timers 2, 3, 4 (and 1), the clock on Timer0 (firmware/README.md, The Mega 2560).
+ * Built only for make avr BOARD=mega.
  */
 #include "pd_avr.h"
 

@@ -1,9 +1,11 @@
 /*
  * The Arduino Mega 2560 (ATmega2560, make avr BOARD=mega): its pin map, the one
  * declaration of which Arduino pin is which port bit (pd_avr_mega.c), and the names
- * its vectors have where the ATmega328P's differ. Everything else the Uno's drivers
- * do the same on the Mega: UART0 is the link (pins 0, 1), Timer0 the clock, Timer1
- * the servo pulses (on any pin: they are written through the port), Timer2 PWM.
+ * its vectors have where the ATmega328P's differ, and the 16-bit timers' PWM outputs.
+ * The Uno's drivers do the rest: UART0 is the link (pins 0, 1), Timer0 the clock,
+ * Timer1 and Timer5 the servo pulses (12 channels each, on any pin: they are written
+ * through the port; pd_avr_servo.c), Timer2, Timer3 and Timer4 PWM (and Timer1 while no
+ * servo runs; pd_avr_pwm.c).
  *
  * The build serves pins 0 .. PD_MAX_PINS - 1 (32: 0 .. 31): the core's pin masks and
  * the wire's (Pose, Readback, InputReport: fixed32) hold 32 pins; the map below has

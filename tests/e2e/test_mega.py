@@ -2,10 +2,11 @@
 emulated ATmega2560 (``SimBoard("avr", board="mega")``), judged at its pins through the trace.
 
 The build serves pins 0..31 (firmware/README.md, The Mega 2560): the Mega's own ports A and C
-(pins 22..31) carry digital outputs and servos (Timer1's interrupt writes the pulses through
-the port), Timer2 makes PWM on pins 9 and 10 and Timer1 on 11 and 12 while no servo runs,
-Timer0 keeps the clock (pins 4 and 13 refused), the six external interrupts count. The host
-has no table of the Mega's: every refusal here comes from the pin table of its DeviceInfo.
+(pins 22..31) carry digital outputs and servos (24 of them: Timer1's and Timer5's interrupts
+write the pulses through the port), Timer2 makes PWM on pins 9 and 10, Timer3 on 5, 2, 3,
+Timer4 on 6, 7, 8 and Timer1 on 11 and 12 while no servo runs, Timer0 keeps the clock (pins
+4 and 13 refused), the six external interrupts count. The host has no table of the Mega's:
+every refusal here comes from the pin table of its DeviceInfo.
 """
 
 from __future__ import annotations
