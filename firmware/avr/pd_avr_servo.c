@@ -158,9 +158,13 @@ void pd_avr_servo_init(void)
     TIFR1 = _BV(OCF1A);
     TIMSK1 |= _BV(OCIE1A);
 #if SERVO_TIMERS > 1
+    /* Timer5's frames start half a frame and half a clock tick after Timer1's: the two
+     * timers' first edges, which the frame starts make at once, do not fall together (one
+     * interrupt would hold the other's edge off), nor do they after an expedited frame,
+     * which keeps each timer's phase to its clock ticks (soonest_start). */
     TCCR5A = 0;
     TCCR5B = _BV(CS51);
-    OCR5A = (uint16_t)(TCNT5 + FRAME_TICKS);
+    OCR5A = (uint16_t)(TCNT5 + FRAME_TICKS + FRAME_TICKS / 2u + CLOCK_TICKS / 2u);
     TIFR5 = _BV(OCF5A);
     TIMSK5 |= _BV(OCIE5A);
 #endif
