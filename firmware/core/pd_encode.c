@@ -298,7 +298,12 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
                                                                        : 0u;
     need = (uint8_t)(need + (ack->has_failsafe ? 2u + protoduino_Failsafe_size : 0u) +
                      (ack->refused_item ? 4u : 0u));
-    if (8u + need > PD_ENCODE_ACK_MAX) {
+    /* A failsafe state goes only beside a ping echo or nothing (a liveness message's Ack):
+     * refused beside another result, whatever the bound of this build admits (the Mega's,
+     * sized by ReadOutputs' 24 servos, would hold DeviceInfo and a failsafe state). */
+    bool shape = !ack->has_failsafe || ack->which_result == 0 ||
+                 ack->which_result == protoduino_Ack_ping_echo_tag;
+    if (!shape || 8u + need > PD_ENCODE_ACK_MAX) {
         w->ok = false;
         return;
     }
