@@ -14,7 +14,19 @@ while part 1 measures CPU time (``bench.core.measure``).
 
 from __future__ import annotations
 
-from . import firmware, inputs, motion, race, receive, ros2, roundtrip, services, throughput, wire
+from . import (
+    firmware,
+    inputs,
+    mega,
+    motion,
+    race,
+    receive,
+    ros2,
+    roundtrip,
+    services,
+    throughput,
+    wire,
+)
 from .core import Section
 
 SECTIONS: tuple[Section, ...] = (
@@ -28,4 +40,5 @@ SECTIONS: tuple[Section, ...] = (
     ros2.SECTION,
     race.SECTION,
     services.SECTION,
+    mega.SECTION,
 )

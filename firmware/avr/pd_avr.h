@@ -72,14 +72,16 @@ void pd_avr_servo_init(void);
 /* Start or update pulses on `pin` for `channel`; first call attaches the pin. */
 void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us);
 /* Hold servo writes (true) until the release (false), then apply them all at
- * the next frame start (pd_hal_servo_hold). */
+ * the next frame start (pd_hal_servo_hold; on the Mega each servo timer's next frame
+ * start, Timer1's for channels 0..11 and Timer5's for 12..23). */
 void pd_avr_servo_hold(bool hold);
 /* Stop the channel's pulses after the one under way; a later write attaches again. */
 void pd_avr_servo_detach(uint8_t channel);
 /* Start the next servo frame as soon as possible (failsafe, Stop). */
 void pd_avr_servo_expedite(void);
 
-/* PWM (pd_avr_pwm.c): duty 0..255 on pins 3, 5, 6, 9, 10, 11; release: an input again. */
+/* PWM (pd_avr_pwm.c): duty 0..255 on pins 3, 5, 6, 9, 10, 11 (the Mega's: 2, 3, 5..12);
+ * release: an input again. */
 void pd_avr_pwm_write(uint8_t pin, uint8_t duty);
 void pd_avr_pwm_release(uint8_t pin);
 

@@ -1,9 +1,11 @@
 /*
  * The Arduino Mega 2560 (ATmega2560, make avr BOARD=mega): its pin map, the one
  * declaration of which Arduino pin is which port bit (pd_avr_mega.c), and the names
- * its vectors have where the ATmega328P's differ. Everything else the Uno's drivers
- * do the same on the Mega: UART0 is the link (pins 0, 1), Timer0 the clock, Timer1
- * the servo pulses (on any pin: they are written through the port), Timer2 PWM.
+ * its vectors have where the ATmega328P's differ, and the 16-bit timers' PWM outputs.
+ * The Uno's drivers do the rest: UART0 is the link (pins 0, 1), Timer0 the clock,
+ * Timer1 and Timer5 the servo pulses (12 channels each, on any pin: they are written
+ * through the port; pd_avr_servo.c), Timer2, Timer3 and Timer4 PWM (and Timer1 while no
+ * servo runs; pd_avr_pwm.c).
  *
  * The build serves every pin, 0 .. PD_MAX_PINS - 1 (70: 0 .. 69, A0..A15 being 54..69): the
  * core's pin sets and the wire's are of any width (pd_pinset.h; protocol version 8).
@@ -29,11 +31,21 @@ enum { PD_PA, PD_PB, PD_PC, PD_PD, PD_PE, PD_PF, PD_PG, PD_PH, PD_PJ, PD_PK, PD_
 extern const uint8_t pd_avr_mega_pins[PD_AVR_MEGA_PINS] PROGMEM;
 extern volatile uint8_t *const pd_avr_mega_ports[11];
 
-/* The pins of the timer outputs the drivers use (pd_avr_pwm.c): Timer2, Timer1 and Timer0. */
+/* The pins of the 8-bit timers' outputs the PWM driver uses (pd_avr_pwm.c): Timer2's. */
 #define PD_AVR_PIN_OC2B 9u
 #define PD_AVR_PIN_OC2A 10u
-#define PD_AVR_PIN_OC1A 11u
-#define PD_AVR_PIN_OC1B 12u
+/*
+ * The 16-bit timers' outputs it runs (pd_avr_mega.c): a pin, its timer (1, 3, 4, 5) and
+ * the timer's output, 0..2 for A..C. A row is the whole of an output's driver: the four
+ * timers' registers lie alike (pd_avr_pwm.c), so another output is one more row.
+ */
+typedef struct pd_avr_pwm16 {
+    uint8_t pin;
+    uint8_t timer;
+    uint8_t output;
+} pd_avr_pwm16_t;
+extern const pd_avr_pwm16_t pd_avr_mega_pwm16[];
+extern const uint8_t pd_avr_mega_pwm16_count;
 /* Timer0's: the clock's timer; the Mega's board table keeps them from PWM (clock_timer_pins). */
 #define PD_AVR_PIN_OC0B 4u
 #define PD_AVR_PIN_OC0A 13u

@@ -5,6 +5,14 @@
  * out the rest of a 20 ms frame. Not hardware PWM: that serves only pins 9
  * and 10, and simavr does not reflect OCR1A rewrites in PWM mode 14.
  *
+ * The Mega runs 12 channels on each of two 16-bit timers, as the Servo library does:
+ * channels 0 .. 11 on Timer1, 12 .. 23 on Timer5 (SERVO_TIMERS), each timer with its
+ * own sequence and frame (SERVO_TIMER_OF). Timer1 first: its PWM pins within the build's
+ * are two (11, 12; its third output, 13, is also Timer0's, the clock's), Timer5's none
+ * (44 .. 46), so Timers 3 and 4 stay free for PWM (2, 3, 5 .. 8) however many servos
+ * run (firmware/README.md, The Mega 2560). A 12-channel frame outlasts 20 ms once its
+ * widths add up to more (the next starts at once then, as the Servo library's does).
+ *
  * Every compare time is computed from the previous compare time, never from
  * the counter's current value, so interrupt latency shifts both edges of a
  * pulse alike and drops out of its width; it adds jitter only when another
@@ -35,6 +43,17 @@
  * for it only its entry (a few cycles). */
 #define CLOCK_TICKS 2000u
 
+/* The timers making pulses, and the channels each runs: the Uno's one, Timer1, all of
+ * them; the Mega's Timer1 the first 12, Timer5 the next. */
+#if PD_BOARD_MEGA
+#define SERVO_TIMERS 2u
+#define CHANNELS_PER_TIMER 12u
+#else
+#define SERVO_TIMERS 1u
+#define CHANNELS_PER_TIMER PD_MAX_SERVOS
+#endif
+typedef char pd_assert_servo_timers[(SERVO_TIMERS * CHANNELS_PER_TIMER == PD_MAX_SERVOS) ? 1 : -1];
+
 typedef struct servo_channel {
     volatile uint8_t *port; /* NULL: channel never used (not in the sequence) */
     uint8_t mask;           /* 0: detached (no edges) */
@@ -51,19 +70,69 @@ static servo_channel_t pd_avr_servos[PD_MAX_SERVOS];
 typedef char pd_assert_servo_layout[offsetof(servo_channel_t, mask) == 2u &&
                                             sizeof(servo_channel_t) == 7u ? 1 : -1];
 /*
- * The edges the next compare makes, prepared by the previous one. With no
- * edge to make they point at `no_pin`, so that the ISR runs the same
+ * A timer's sequence. The edges its next compare makes, prepared by the previous
+ * one: with no edge to make they point at `no_pin`, so that the ISR runs the same
  * instructions every time: no branch shifts one edge against another.
  */
 static volatile uint8_t no_pin;
-static volatile uint8_t *off_port = &no_pin; /* pulse to end */
-static uint8_t off_mask;
-static volatile uint8_t *on_port = &no_pin; /* pulse to start */
-static uint8_t on_mask;
-static int8_t on_channel = -1; /* the channel on_port belongs to, -1: none */
-static bool in_gap = true;     /* the next compare ends the gap between frames */
-static uint16_t frame_start;   /* compare time at which the current frame began */
-static volatile bool expedite; /* start the next frame right after this one */
+typedef struct servo_timer {
+    volatile uint8_t *off_port; /* pulse to end */
+    uint8_t off_mask;
+    volatile uint8_t *on_port; /* pulse to start */
+    uint8_t on_mask;
+    int8_t on_channel;      /* the channel on_port belongs to, -1: none */
+    bool in_gap;            /* the next compare ends the gap between frames */
+    uint16_t frame_start;   /* compare time at which the current frame began */
+} servo_timer_t;
+#define SERVO_TIMER_INIT {&no_pin, 0, &no_pin, 0, -1, true, 0}
+static servo_timer_t servo_timers[SERVO_TIMERS] = {
+    SERVO_TIMER_INIT,
+#if SERVO_TIMERS > 1
+    SERVO_TIMER_INIT,
+#endif
+};
+/* Start a timer's next frame right after this one (zero at power-up: in .bss). */
+static volatile bool expedite[SERVO_TIMERS];
+/* Channel `ch`'s timer (an index of servo_timers), and a timer's first channel and the one
+ * after its last. */
+#define SERVO_TIMER_OF(ch) (SERVO_TIMERS == 1 ? 0u : (uint8_t)((ch) / CHANNELS_PER_TIMER))
+#define FIRST_CHANNEL(t) ((uint8_t)((t) * CHANNELS_PER_TIMER))
+#define END_CHANNEL(t) ((uint8_t)(((t) + 1u) * CHANNELS_PER_TIMER))
+
+/* A timer's registers: folded into constant addresses wherever `t` is a constant (every
+ * interrupt's, and the loops over the timers, which the compiler unrolls). */
+static inline __attribute__((always_inline)) volatile uint16_t *timer_ocr(uint8_t t)
+{
+#if SERVO_TIMERS > 1
+    if (t == 1) {
+        return &OCR5A;
+    }
+#endif
+    (void)t;
+    return &OCR1A;
+}
+static inline __attribute__((always_inline)) volatile uint16_t *timer_tcnt(uint8_t t)
+{
+#if SERVO_TIMERS > 1
+    if (t == 1) {
+        return &TCNT5;
+    }
+#endif
+    (void)t;
+    return &TCNT1;
+}
+static inline __attribute__((always_inline)) volatile uint8_t *timer_timsk(uint8_t t)
+{
+#if SERVO_TIMERS > 1
+    if (t == 1) {
+        return &TIMSK5;
+    }
+#endif
+    (void)t;
+    return &TIMSK1;
+}
+/* OCIEnA, OCFnA and CSn1 are the same bits on every 16-bit timer. */
+typedef char pd_assert_timer_bits[(OCIE1A == 1 && OCF1A == 1 && CS11 == 1) ? 1 : -1];
 /* Writes are held (pd_avr_servo_hold): frame starts leave `next` alone. */
 static volatile bool held;
 
@@ -71,7 +140,7 @@ static volatile bool held;
  * The soonest frame start after `now`: frame_start plus a whole number of
  * CLOCK_TICKS, at least MIN_GAP_TICKS away. Used when a safe state must reach the pins at once.
  */
-static uint16_t soonest_start(uint16_t now)
+static uint16_t soonest_start(uint16_t frame_start, uint16_t now)
 {
     uint16_t elapsed = (uint16_t)(now + MIN_GAP_TICKS - frame_start);
     uint16_t offset = CLOCK_TICKS;
@@ -88,14 +157,26 @@ void pd_avr_servo_init(void)
     OCR1A = (uint16_t)(TCNT1 + FRAME_TICKS);
     TIFR1 = _BV(OCF1A);
     TIMSK1 |= _BV(OCIE1A);
+#if SERVO_TIMERS > 1
+    /* Timer5's frames start half a frame and half a clock tick after Timer1's: the two
+     * timers' first edges, which the frame starts make at once, do not fall together (one
+     * interrupt would hold the other's edge off), nor do they after an expedited frame,
+     * which keeps each timer's phase to its clock ticks (soonest_start). */
+    TCCR5A = 0;
+    TCCR5B = _BV(CS51);
+    OCR5A = (uint16_t)(TCNT5 + FRAME_TICKS + FRAME_TICKS / 2u + CLOCK_TICKS / 2u);
+    TIFR5 = _BV(OCF5A);
+    TIMSK5 |= _BV(OCIE5A);
+#endif
 }
 
-static int8_t next_attached(int8_t ch)
+/* The first channel from `ch` to `end` (exclusive) in the sequence, or -1. */
+static int8_t next_attached(int8_t ch, uint8_t end)
 {
-    while (ch < (int8_t)PD_MAX_SERVOS && pd_avr_servos[ch].port == NULL) {
+    while (ch < (int8_t)end && pd_avr_servos[ch].port == NULL) {
         ch++;
     }
-    return ch < (int8_t)PD_MAX_SERVOS ? ch : -1;
+    return ch < (int8_t)end ? ch : -1;
 }
 
 /*
@@ -108,69 +189,85 @@ static int8_t next_attached(int8_t ch)
  * "extint", firmware/README.md). MIN_GAP_TICKS keeps the soonest compare it sets
  * further away than the rest takes, nested interrupts included.
  */
-ISR(TIMER1_COMPA_vect)
+/* Timer `t`'s compare (a constant: each interrupt has its own copy, its registers and
+ * its state at fixed addresses). */
+static inline __attribute__((always_inline)) void servo_compare(uint8_t t)
 {
-    uint16_t at = OCR1A; /* when this compare was due */
+    servo_timer_t *tm = &servo_timers[t];
+    volatile uint16_t *ocr = timer_ocr(t);
+    uint16_t at = *ocr; /* when this compare was due */
 
     /* The edges come first, at the same short offset after every compare,
      * so that a pulse's two edges are equally late and its width exact. */
-    *off_port &= (uint8_t)~off_mask;
-    *on_port |= on_mask;
+    *tm->off_port &= (uint8_t)~tm->off_mask;
+    *tm->on_port |= tm->on_mask;
 
-    bool starts = in_gap; /* this compare starts a frame */
+    bool starts = tm->in_gap; /* this compare starts a frame */
     if (starts) {
-        frame_start = at;
-        in_gap = false;
+        tm->frame_start = at;
+        tm->in_gap = false;
     }
     /* Every new width starts at a frame start, so that widths written together (a
      * Pose, a speed step) reach the pins in the same frame: the first channel's is
      * the one written, and the others' are taken below, long before their turn. */
     bool take = starts && !held;
-    int8_t ch = on_channel; /* the channel now high, if any */
+    int8_t ch = tm->on_channel; /* the channel now high, if any */
     if (ch >= 0) {
         /* The end edge is made a few cycles before the start edge in the
          * ISR: PULSE_TRIM_TICKS gives them back. */
         uint16_t ticks = take ? pd_avr_servos[ch].next : pd_avr_servos[ch].ticks;
-        OCR1A = (uint16_t)(at + ticks + PULSE_TRIM_TICKS);
+        *ocr = (uint16_t)(at + ticks + PULSE_TRIM_TICKS);
     } else {
         /* End of the frame: wait out its 20 ms, or start the next at once when
          * eight 2.6 ms pulses have outlasted it. */
-        if ((uint16_t)(at - frame_start) > FRAME_TICKS - MIN_GAP_TICKS) {
-            OCR1A = (uint16_t)(TCNT1 + MIN_GAP_TICKS);
-        } else if (expedite) {
-            OCR1A = soonest_start(TCNT1);
+        if ((uint16_t)(at - tm->frame_start) > FRAME_TICKS - MIN_GAP_TICKS) {
+            *ocr = (uint16_t)(*timer_tcnt(t) + MIN_GAP_TICKS);
+        } else if (expedite[t]) {
+            *ocr = soonest_start(tm->frame_start, *timer_tcnt(t));
         } else {
-            OCR1A = (uint16_t)(frame_start + FRAME_TICKS);
+            *ocr = (uint16_t)(tm->frame_start + FRAME_TICKS);
         }
-        expedite = false;
-        in_gap = true;
+        expedite[t] = false;
+        tm->in_gap = true;
     }
-    TIMSK1 &= (uint8_t)~_BV(OCIE1A);
+    *timer_timsk(t) &= (uint8_t)~_BV(OCIE1A);
     sei();
 
     if (take) {
-        for (uint8_t n = 0; n < PD_MAX_SERVOS; n++) {
+        for (uint8_t n = FIRST_CHANNEL(t); n < END_CHANNEL(t); n++) {
             pd_avr_servos[n].ticks = pd_avr_servos[n].next;
         }
     }
     if (ch >= 0) {
-        off_port = pd_avr_servos[ch].port;
-        off_mask = pd_avr_servos[ch].mask;
-        ch = next_attached((int8_t)(ch + 1));
+        tm->off_port = pd_avr_servos[ch].port;
+        tm->off_mask = pd_avr_servos[ch].mask;
+        ch = next_attached((int8_t)(ch + 1), END_CHANNEL(t));
     } else {
-        off_port = &no_pin;
-        ch = next_attached(0);
+        tm->off_port = &no_pin;
+        ch = next_attached((int8_t)FIRST_CHANNEL(t), END_CHANNEL(t));
     }
-    on_channel = ch;
+    tm->on_channel = ch;
     if (ch >= 0) {
-        on_port = pd_avr_servos[ch].port;
-        on_mask = pd_avr_servos[ch].mask;
+        tm->on_port = pd_avr_servos[ch].port;
+        tm->on_mask = pd_avr_servos[ch].mask;
     } else {
-        on_port = &no_pin;
+        tm->on_port = &no_pin;
     }
     cli();
-    TIMSK1 |= _BV(OCIE1A);
+    *timer_timsk(t) |= _BV(OCIE1A);
 }
+
+ISR(TIMER1_COMPA_vect)
+{
+    servo_compare(0);
+}
+
+#if SERVO_TIMERS > 1
+ISR(TIMER5_COMPA_vect)
+{
+    servo_compare(1);
+}
+#endif
 
 /* A pin's PORT register and bit, not inlined: servo writes and digital pins
  * share one copy of the lookup. */
@@ -197,7 +294,8 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
             c->mask = mask; /* first: the table says servo when the pin turns output */
             c->port = port;
             c->ticks = ticks; /* valid for the next frame, held or not */
-            if (off_port != port || !(off_mask & mask)) {
+            const servo_timer_t *tm = &servo_timers[SERVO_TIMER_OF(channel)];
+            if (tm->off_port != port || !(tm->off_mask & mask)) {
                 *port &= (uint8_t)~mask;
             }
             *pd_avr_ddr(port) |= mask;
@@ -225,8 +323,9 @@ void pd_avr_servo_detach(uint8_t channel)
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
         pd_avr_servos[channel].mask = 0;
-        if (on_channel == (int8_t)channel) {
-            on_mask = 0;
+        servo_timer_t *tm = &servo_timers[SERVO_TIMER_OF(channel)];
+        if (tm->on_channel == (int8_t)channel) {
+            tm->on_mask = 0;
         }
     }
 }
@@ -235,15 +334,18 @@ void pd_avr_servo_expedite(void)
 {
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
-        if (!in_gap) {
-            /* Pulses under way: the frame's end starts the next one early. */
-            expedite = true;
-        } else {
-            /* Waiting out the frame: cut the wait short if that is sooner. */
-            uint16_t now = TCNT1;
-            uint16_t start = soonest_start(now);
-            if ((uint16_t)(start - now) < (uint16_t)(OCR1A - now)) {
-                OCR1A = start;
+        for (uint8_t t = 0; t < SERVO_TIMERS; t++) {
+            servo_timer_t *tm = &servo_timers[t];
+            if (!tm->in_gap) {
+                /* Pulses under way: the frame's end starts the next one early. */
+                expedite[t] = true;
+            } else {
+                /* Waiting out the frame: cut the wait short if that is sooner. */
+                uint16_t now = *timer_tcnt(t);
+                uint16_t start = soonest_start(tm->frame_start, now);
+                if ((uint16_t)(start - now) < (uint16_t)(*timer_ocr(t) - now)) {
+                    *timer_ocr(t) = start;
+                }
             }
         }
     }

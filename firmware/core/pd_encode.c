@@ -8,9 +8,10 @@
 #define WT_LEN 2u
 #define WT_FIXED32 5u
 
-/* Every nested message fits a one-byte length, patched in place afterwards; on a wide build
- * (PD_ENCODE_WIDE) a two-byte one. */
-typedef char pd_assert_out_small[(PD_ENCODE_MAX < 16384u) ? 1 : -1];
+/* A nested message's length is patched in place afterwards: one byte, or in a build
+ * whose largest message is longer (the Mega's, PD_ENCODE_LONG) two where it needs them. */
+#define PD_ENCODE_LONG (PD_ENCODE_MAX >= 128u)
+typedef char pd_assert_out_small[(PD_ENCODE_MAX < 0x4000u) ? 1 : -1];
 /* The bound covers every member of ArduinoOut that is not an Ack, and is no larger than nanopb's. */
 typedef char pd_assert_bound[(PD_ENCODE_MAX <= protoduino_ArduinoOut_size &&
                               2u + protoduino_DecodeError_size <= PD_ENCODE_MAX) ? 1 : -1];
@@ -99,26 +100,22 @@ static uint8_t *open_msg(writer_t *w, uint8_t tag)
     return at;
 }
 
-#if PD_ENCODE_WIDE
-/* Its length, in one byte under 128 and in two otherwise: the message moves up a byte. */
+/* Its length fits one byte where the whole ArduinoOut is under 128 (the Uno); else a
+ * length of 128 or more takes two, the message moving up one byte for the second. */
 static void close_msg(writer_t *w, uint8_t *at)
 {
     size_t len = (size_t)(w->p - at - 1);
-    if (len >= 128u) {
+#if PD_ENCODE_LONG
+    if (len >= 0x80u) {
         memmove(at + 2, at + 1, len);
+        at[0] = (uint8_t)(len | 0x80u);
         at[1] = (uint8_t)(len >> 7);
-        len = (len & 0x7Fu) | 0x80u;
         w->p++;
+        return;
     }
+#endif
     *at = (uint8_t)len;
 }
-#else
-/* Its length fits one byte: the whole ArduinoOut is under 128 (PD_ENCODE_WIDE). */
-static void close_msg(writer_t *w, uint8_t *at)
-{
-    *at = (uint8_t)(w->p - at - 1);
-}
-#endif
 
 static void put_fixed32(writer_t *w, uint8_t tag, uint32_t v)
 {
@@ -214,7 +211,9 @@ uint8_t pd_encode_pin(const pd_board_info_t *board, uint8_t pin)
         v |= protoduino_PinBit_PIN_PIN_CHANGE;
     }
     if (pd_pinset_has(&board->servo_timer_pins, pin)) {
-        v |= (uint8_t)((board->servo_timer + 1u) << 5);
+        uint8_t timer =
+            pd_pinset_has(&board->servo_timer_2_pins, pin) ? board->servo_timer_2 : board->servo_timer;
+        v |= (uint8_t)((timer + 1u) << 5);
     } else if (pd_pinset_has(&board->clock_timer_pins, pin)) {
         v |= (uint8_t)((board->clock_timer + 1u) << 5);
     }
@@ -230,12 +229,16 @@ uint8_t pd_encode_timer_count(const pd_board_info_t *board)
     if (pd_pinset_any(&board->clock_timer_pins) && board->clock_timer + 1u > n) {
         n = (uint8_t)(board->clock_timer + 1u);
     }
+    if (board->servo_timer_2 + 1u > n && board->servo_timer_2 != 0) {
+        n = (uint8_t)(board->servo_timer_2 + 1u);
+    }
     return n;
 }
 
 uint8_t pd_encode_timer(const pd_board_info_t *board, uint8_t timer)
 {
-    if (pd_pinset_any(&board->servo_timer_pins) && timer == board->servo_timer) {
+    if ((pd_pinset_any(&board->servo_timer_pins) && timer == board->servo_timer) ||
+        (board->servo_timer_2 != 0 && timer == board->servo_timer_2)) {
         return protoduino_TimerUse_TIMER_SERVOS;
     }
     if (pd_pinset_any(&board->clock_timer_pins) && timer == board->clock_timer) {
@@ -298,17 +301,22 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
 {
     /* The most this Ack's shape can take, checked before anything is written
      * (PD_ENCODE_ACK_MAX: the shapes the device sends fit). */
-    uint8_t need = ack->which_result == protoduino_Ack_info_tag ? 2u + PD_ENCODE_INFO_MAX
+    uint8_t need = ack->which_result == protoduino_Ack_info_tag ? PD_ENCODE_NESTED(PD_ENCODE_INFO_MAX)
 #if PD_FEATURE_USER
                    : ack->which_result == protoduino_Ack_user_reply_tag ? PD_ENCODE_USER_ACK_MAX
 #endif
                    : ack->which_result == protoduino_Ack_outputs_tag
-                       ? 2u + PD_ENCODE_OUTPUTS_MAX
+                       ? PD_ENCODE_NESTED(PD_ENCODE_OUTPUTS_MAX)
                    : ack->which_result == protoduino_Ack_ping_echo_tag ? 66u
                                                                        : 0u;
     need = (uint8_t)(need + (ack->has_failsafe ? 2u + protoduino_Failsafe_size : 0u) +
                      (ack->refused_item ? 4u : 0u));
-    if (8u + need > PD_ENCODE_ACK_MAX) {
+    /* A failsafe state goes only beside a ping echo or nothing (a liveness message's Ack):
+     * refused beside another result, whatever the bound of this build admits (the Mega's,
+     * sized by ReadOutputs' 24 servos, would hold DeviceInfo and a failsafe state). */
+    bool shape = !ack->has_failsafe || ack->which_result == 0 ||
+                 ack->which_result == protoduino_Ack_ping_echo_tag;
+    if (!shape || 8u + need > PD_ENCODE_ACK_MAX) {
         w->ok = false;
         return;
     }
@@ -347,10 +355,14 @@ static __attribute__((noinline)) void put_ack(writer_t *w, const protoduino_Ack 
     if (ack->which_result == protoduino_Ack_outputs_tag) {
         const protoduino_OutputStates *st = &ack->result.outputs;
         uint8_t *at = open_msg(w, protoduino_Ack_outputs_tag);
-        if (st->servos.size > sizeof(st->servos.bytes)) {
-            w->ok = false;
-        } else if (st->servos.size > 0) {
-            put_bytes(w, protoduino_OutputStates_servos_tag, st->servos.bytes, st->servos.size);
+        if (st->servos.funcs.encode != NULL) { /* omitted when empty, as pb_encode does */
+            pd_encode_servos_fn *write = pd_encode_servos_get(&st->servos);
+            uint8_t *servos = open_msg(w, protoduino_OutputStates_servos_tag);
+            w->p = write(st->servos.arg, w->p);
+            close_msg(w, servos); /* at most 5 * PD_MAX_SERVOS: one length byte */
+            if (*servos == 0) {
+                w->p = servos - 1;
+            }
         }
         PUT_PINSET(w, protoduino_OutputStates_digital_pins_tag, st->digital_pins);
         PUT_PINSET(w, protoduino_OutputStates_digital_levels_tag, st->digital_levels);

@@ -20,4 +20,16 @@
  * generated from the schema by `protoduino gen`. */
 #include "pd_tables.h"
 
+/* The servos' compile-time capacity (8; the Mega's build 24: firmware/Makefile); a board
+ * reports its real figure in pd_board_info_t.max_servos (PD_MAX_PINS: pd_hal.h). Here, below
+ * the encoder, whose bound of a ReadOutputs answer counts them (pd_encode.h). */
+#ifndef PD_MAX_SERVOS
+#define PD_MAX_SERVOS 8
+#endif
+/* A build without servos keeps one slot (the code stays simple), not eight. */
+#if !PD_FEATURE_SERVO
+#undef PD_MAX_SERVOS
+#define PD_MAX_SERVOS 1
+#endif
+
 #endif /* PD_FEATURES_H */

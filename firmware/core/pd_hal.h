@@ -48,6 +48,12 @@ typedef struct pd_board_info {
      * PD_INFO_TIMERS_MAX - 1: DeviceInfo.timers names them to the host. */
     uint8_t servo_timer;
     uint8_t clock_timer;
+    /* A second timer that makes servo pulses, for the channels after the first timer's
+     * (the Mega's Timer5: channels 12 .. 23), 0: none; its PWM pins, also in
+     * servo_timer_pins (the rule is the same: no PWM on any of them while a servo runs),
+     * are these (the Mega's Timer5 outputs 44 .. 46). */
+    uint8_t servo_timer_2;
+    pd_pinset_t servo_timer_2_pins;
 } pd_board_info_t;
 /*
  * This table is the board's one declaration of its pins: the core checks every

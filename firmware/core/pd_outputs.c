@@ -1,8 +1,10 @@
 /* The outputs as a whole (pd_outputs.h): the pin-mode table's walks, Pose, ReadOutputs. */
 #include "pd_outputs.h"
 
+#include <stdint.h>
 #include <string.h>
 
+#include "pd_encode.h"
 #include "pd_protocol.h"
 #include "pd_user.h"
 
@@ -235,25 +237,36 @@ protoduino_Status pd_outputs_pose(pd_outputs_t *out, void *hal, const protoduino
     return protoduino_Status_STATUS_OK;
 }
 
-void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
+/* OutputStates.servos: 5 B a servo, in pin order (pd_encode_servos_fn). */
+static uint8_t *pd_outputs_servos(const void *outputs, uint8_t *b)
 {
-    typedef char fits[(sizeof(states->servos.bytes) >= 5u * PD_MAX_SERVOS &&
-                       sizeof(states->digital_pins.bytes) >= PD_PINSET_BYTES) ? 1 : -1];
-    (void)sizeof(fits);
-    uint8_t *b = states->servos.bytes;
+    const pd_outputs_t *out = outputs;
     for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
         uint8_t owner = out->owner[pin];
-        if (owner == 0) {
-            continue;
-        }
-        if (PD_OWNER_MODE(owner) == PD_MODE_SERVO) {
+        if (owner != 0 && PD_OWNER_MODE(owner) == PD_MODE_SERVO) {
             const pd_servo_t *s = &out->servo[PD_OWNER_SLOT(owner)];
             *b++ = pin;
             *b++ = (uint8_t)s->us;
             *b++ = (uint8_t)(s->us >> 8);
             *b++ = (uint8_t)s->target_us;
             *b++ = (uint8_t)(s->target_us >> 8);
-        } else if (PD_OWNER_MODE(owner) == PD_MODE_DIGITAL) {
+        }
+    }
+    return b;
+}
+
+void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
+{
+    typedef char fits[(sizeof(states->digital_pins.bytes) >= PD_PINSET_BYTES) ? 1 : -1];
+    (void)sizeof(fits);
+    /* The servos' bytes: the encoder writes them from the table (pd_outputs_servos). */
+    pd_encode_servos_set(&states->servos, pd_outputs_servos, out);
+    for (uint8_t pin = 0; pin < PD_MAX_PINS; pin++) {
+        uint8_t owner = out->owner[pin];
+        if (owner == 0) {
+            continue;
+        }
+        if (PD_OWNER_MODE(owner) == PD_MODE_DIGITAL) {
             pd_pinbytes_add(states->digital_pins.bytes, &states->digital_pins.size, pin);
             if (pd_pinset_has(&out->digital_level, pin)) {
                 pd_pinbytes_add(states->digital_levels.bytes, &states->digital_levels.size, pin);
@@ -263,7 +276,6 @@ void pd_outputs_read(const pd_outputs_t *out, protoduino_OutputStates *states)
             states->pwm_duties[states->pwm_duties_count++] = out->pwm[PD_OWNER_SLOT(owner)].duty;
         }
     }
-    states->servos.size = (pb_size_t)(b - states->servos.bytes);
 }
 
 /* Let go of an owned pin through its mode's release; the pin is free again. */

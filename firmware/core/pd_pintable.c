@@ -1,7 +1,7 @@
 /* The pin table (pd_pintable.h): which mode owns each pin; it knows no mode. */
 #include "pd_pintable.h"
 
-typedef char pd_assert_modes_fit_owner[(PD_MODE_COUNT <= 16) ? 1 : -1];
+typedef char pd_assert_modes_fit_owner[(PD_MODE_COUNT <= (1u << (8u - PD_SLOT_BITS))) ? 1 : -1];
 
 protoduino_Status pd_pins_check(void *hal, uint32_t pin)
 {
@@ -39,10 +39,10 @@ protoduino_Status pd_pins_claim(uint8_t *owner, void *hal, uint32_t pin, uint8_t
     uint8_t free_slot = 0;
     if (slots > 0) {
         /* The lowest slot no pin of this mode holds. */
-        uint16_t used = 0;
+        pd_slots_t used = 0;
         for (uint8_t p = 0; p < PD_MAX_PINS; p++) {
             if (owner[p] != 0 && PD_OWNER_MODE(owner[p]) == mode) {
-                used |= (uint16_t)(1u << PD_OWNER_SLOT(owner[p]));
+                used |= (pd_slots_t)((pd_slots_t)1u << PD_OWNER_SLOT(owner[p]));
             }
         }
         while (free_slot < slots && ((used >> free_slot) & 1u)) {

@@ -33,11 +33,22 @@
 #define PD_MODE_USER PD_MODE_BUILTIN_END
 #define PD_MODE_COUNT (PD_MODE_BUILTIN_END + (PD_FEATURE_USER ? 1 : 0))
 
-/* An owner byte: mode in the high nibble, slot in the low one (one byte per pin of RAM). */
-#define PD_OWNER(mode, slot) ((uint8_t)(((mode) << 4) | (slot)))
-#define PD_OWNER_MODE(owner) ((uint8_t)((owner) >> 4))
-#define PD_OWNER_SLOT(owner) ((uint8_t)((owner) & 0x0Fu))
-#define PD_MAX_SLOTS 16u
+/* An owner byte: mode in the high bits, slot in the low PD_SLOT_BITS (one byte per pin of
+ * RAM): 4 and 4, or 3 and 5 in the Mega's build (firmware/Makefile), whose 24 servo
+ * channels need them and whose modes (7 at most) still fit. */
+#ifndef PD_SLOT_BITS
+#define PD_SLOT_BITS 4u
+#endif
+#define PD_OWNER(mode, slot) ((uint8_t)(((mode) << PD_SLOT_BITS) | (slot)))
+#define PD_OWNER_MODE(owner) ((uint8_t)((owner) >> PD_SLOT_BITS))
+#define PD_OWNER_SLOT(owner) ((uint8_t)((owner) & ((1u << PD_SLOT_BITS) - 1u)))
+#define PD_MAX_SLOTS (1u << PD_SLOT_BITS)
+/* A set of a mode's slots, bit S for slot S: wide enough for PD_MAX_SLOTS. */
+#if PD_SLOT_BITS > 4
+typedef uint32_t pd_slots_t;
+#else
+typedef uint16_t pd_slots_t;
+#endif
 
 /* Pin checks shared by every Init and Control, in the contract's order: the
  * pin exists on this board (else STATUS_INVALID_PIN) and is not reserved

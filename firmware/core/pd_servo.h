@@ -19,16 +19,7 @@
 
 struct pd_outputs;
 
-/* Compile-time capacity; a board reports its real figures in pd_board_info_t
- * (PD_MAX_PINS: pd_hal.h). */
-#ifndef PD_MAX_SERVOS
-#define PD_MAX_SERVOS 8
-#endif
-/* A build without servos keeps one slot (the code stays simple), not eight. */
-#if !PD_FEATURE_SERVO
-#undef PD_MAX_SERVOS
-#define PD_MAX_SERVOS 1
-#endif
+/* The servos' compile-time capacity, PD_MAX_SERVOS: pd_features.h. */
 
 /* safe_us meaning "the safe state is no pulses at all" (real widths are >= 400). */
 #define PD_SERVO_SAFE_DETACH 0u

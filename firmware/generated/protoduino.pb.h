@@ -341,7 +341,6 @@ typedef struct _protoduino_DeviceInfo {
     pb_callback_t timers;
 } protoduino_DeviceInfo;
 
-typedef PB_BYTES_ARRAY_T(40) protoduino_OutputStates_servos_t;
 typedef PB_BYTES_ARRAY_T(9) protoduino_OutputStates_digital_pins_t;
 typedef PB_BYTES_ARRAY_T(9) protoduino_OutputStates_digital_levels_t;
 typedef PB_BYTES_ARRAY_T(9) protoduino_OutputStates_pwm_pins_t;
@@ -350,7 +349,7 @@ typedef struct _protoduino_OutputStates {
     /* 5 bytes per servo, in pin order: its pin, then the width it drives now and
  the width it moves to (the same unless speed-limited), each in us as a
  little-endian uint16. Bytes, not messages: the Uno's encoder stays small. */
-    protoduino_OutputStates_servos_t servos;
+    pb_callback_t servos;
     /* Pin sets (protocol version 8): pin N is bit N % 8 of byte N / 8; trailing
  zero bytes are left out (an empty set is an absent field). */
     protoduino_OutputStates_digital_pins_t digital_pins; /* pin N is a digital output */
@@ -544,7 +543,7 @@ extern "C" {
 #define protoduino_UserCall_init_default         {{0, {0}}, 0}
 #define protoduino_ArduinoIn_init_default        {0, 0, {protoduino_Ping_init_default}}
 #define protoduino_DeviceInfo_init_default       {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, {{NULL}, NULL}, {{NULL}, NULL}}
-#define protoduino_OutputStates_init_default     {{0, {0}}, {0, {0}}, {0, {0}}, {0, {0}}, 0, {0, 0, 0, 0, 0, 0}}
+#define protoduino_OutputStates_init_default     {{{NULL}, NULL}, {0, {0}}, {0, {0}}, {0, {0}}, 0, {0, 0, 0, 0, 0, 0}}
 #define protoduino_Ack_init_default              {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_default, 0, 0}
 #define protoduino_Failsafe_init_default         {0, _protoduino_FailsafeCause_MIN, 0, 0}
 #define protoduino_InputReport_init_default      {0, {0, {0}}, {0, {0}}, {0, {0}}, 0, {0, 0, 0, 0, 0, 0}, {0, {0}}, 0, {0, 0, 0, 0}, 0}
@@ -574,7 +573,7 @@ extern "C" {
 #define protoduino_UserCall_init_zero            {{0, {0}}, 0}
 #define protoduino_ArduinoIn_init_zero           {0, 0, {protoduino_Ping_init_zero}}
 #define protoduino_DeviceInfo_init_zero          {"", 0, 0, "", 0, 0, 0, {0, 0, 0, 0}, 0, 0, 0, {{NULL}, NULL}, {{NULL}, NULL}}
-#define protoduino_OutputStates_init_zero        {{0, {0}}, {0, {0}}, {0, {0}}, {0, {0}}, 0, {0, 0, 0, 0, 0, 0}}
+#define protoduino_OutputStates_init_zero        {{{NULL}, NULL}, {0, {0}}, {0, {0}}, {0, {0}}, 0, {0, 0, 0, 0, 0, 0}}
 #define protoduino_Ack_init_zero                 {0, _protoduino_Status_MIN, 0, {{0, {0}}}, false, protoduino_Failsafe_init_zero, 0, 0}
 #define protoduino_Failsafe_init_zero            {0, _protoduino_FailsafeCause_MIN, 0, 0}
 #define protoduino_InputReport_init_zero         {0, {0, {0}}, {0, {0}}, {0, {0}}, 0, {0, 0, 0, 0, 0, 0}, {0, {0}}, 0, {0, 0, 0, 0}, 0}
@@ -906,12 +905,12 @@ X(a, CALLBACK, SINGULAR, BYTES,    timers,           15)
 #define protoduino_DeviceInfo_DEFAULT NULL
 
 #define protoduino_OutputStates_FIELDLIST(X, a) \
-X(a, STATIC,   SINGULAR, BYTES,    servos,            1) \
+X(a, CALLBACK, SINGULAR, BYTES,    servos,            1) \
 X(a, STATIC,   SINGULAR, BYTES,    digital_pins,      2) \
 X(a, STATIC,   SINGULAR, BYTES,    digital_levels,    3) \
 X(a, STATIC,   SINGULAR, BYTES,    pwm_pins,          4) \
 X(a, STATIC,   REPEATED, UINT32,   pwm_duties,        5)
-#define protoduino_OutputStates_CALLBACK NULL
+#define protoduino_OutputStates_CALLBACK pb_default_field_callback
 #define protoduino_OutputStates_DEFAULT NULL
 
 #define protoduino_Ack_FIELDLIST(X, a) \
@@ -1041,9 +1040,10 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_ArduinoOut_fields &protoduino_ArduinoOut_msg
 
 /* Maximum encoded size of messages (where known) */
-#define protoduino_DeviceInfo_size               146 /* callbacks at their max_size */
-#define protoduino_Ack_size                      176 /* callbacks at their max_size */
-#define protoduino_ArduinoOut_size               179 /* callbacks at their max_size */
+#define protoduino_DeviceInfo_size               149 /* callbacks at their max_size */
+#define protoduino_OutputStates_size             173 /* callbacks at their max_size */
+#define protoduino_Ack_size                      204 /* callbacks at their max_size */
+#define protoduino_ArduinoOut_size               207 /* callbacks at their max_size */
 #define protoduino_AnalogInputInit_size          19
 #define protoduino_ArduinoIn_size                118
 #define protoduino_ClearInterlock_size           3
@@ -1057,7 +1057,6 @@ extern const pb_msgdesc_t protoduino_ArduinoOut_msg;
 #define protoduino_GetInfo_size                  0
 #define protoduino_Heartbeat_size                3
 #define protoduino_InputReport_size              102
-#define protoduino_OutputStates_size             93
 #define protoduino_Ping_size                     69
 #define protoduino_PoseItem_size                 9
 #define protoduino_Pose_size                     110

@@ -120,9 +120,9 @@ bool pd_hal_write(void *ctx, const uint8_t *data, uint16_t len)
         /* The core's own encoder must produce exactly what pb_encode would. */
         protoduino_ArduinoOut out = protoduino_ArduinoOut_init_zero;
         uint8_t canon[PD_MAX_PAYLOAD];
-        pb_istream_t is = pb_istream_from_buffer(pkt.payload, pkt.len);
         pb_ostream_t os = pb_ostream_from_buffer(canon, sizeof(canon));
-        bool decoded = pb_decode(&is, protoduino_ArduinoOut_fields, &out);
+        fake_servos_t servos;
+        bool decoded = fake_decode_out(pkt.payload, pkt.len, &out, &servos);
         if (decoded && out.which_data == protoduino_ArduinoOut_ack_tag &&
             out.data.ack.which_result == protoduino_Ack_info_tag) {
             /* The pin table is skipped by the decoder (callbacks): the board's. */
@@ -397,4 +397,65 @@ void fake_info_callbacks(protoduino_DeviceInfo *info, fake_hal_t *hal)
     info->pins.arg = hal;
     info->pins.funcs.encode = encode_pins;
     info->timers.funcs.encode = encode_timers;
+}
+
+static bool decode_servos(pb_istream_t *s, const pb_field_t *field, void **arg)
+{
+    (void)field;
+    fake_servos_t *servos = *arg;
+    servos->size = s->bytes_left;
+    return s->bytes_left <= sizeof(servos->bytes) &&
+           pb_read(s, servos->bytes, s->bytes_left);
+}
+
+static bool encode_servos(pb_ostream_t *s, const pb_field_t *field, void *const *arg)
+{
+    const fake_servos_t *servos = *arg;
+    return servos->size == 0 || (pb_encode_tag_for_field(s, field) &&
+                                 pb_encode_string(s, servos->bytes, servos->size));
+}
+
+static bool encode_outputs_servos(pb_ostream_t *s, const pb_field_t *field, void *const *arg)
+{
+    const protoduino_OutputStates *device = *arg;
+    pd_encode_servos_fn *write = pd_encode_servos_get(&device->servos);
+    uint8_t bytes[5u * PD_MAX_SERVOS];
+    size_t n = write == NULL ? 0 : (size_t)(write(device->servos.arg, bytes) - bytes);
+    return n == 0 || (pb_encode_tag_for_field(s, field) && pb_encode_string(s, bytes, n));
+}
+
+void fake_outputs_callbacks(protoduino_OutputStates *st, const protoduino_OutputStates *device)
+{
+    st->servos.arg = (void *)(uintptr_t)device;
+    st->servos.funcs.encode = encode_outputs_servos;
+}
+
+void fake_servos_callbacks(protoduino_OutputStates *st, fake_servos_t *servos)
+{
+    st->servos.arg = servos;
+    st->servos.funcs.decode = decode_servos;
+}
+
+bool fake_decode_out(const uint8_t *payload, size_t len, protoduino_ArduinoOut *out,
+                     fake_servos_t *servos)
+{
+    servos->size = 0;
+    memset(out, 0, sizeof(*out));
+    pb_istream_t s = pb_istream_from_buffer(payload, len);
+    if (!pb_decode(&s, protoduino_ArduinoOut_fields, out)) {
+        return false;
+    }
+    if (out->which_data == protoduino_ArduinoOut_ack_tag &&
+        out->data.ack.which_result == protoduino_Ack_outputs_tag) {
+        memset(out, 0, sizeof(*out));
+        out->which_data = protoduino_ArduinoOut_ack_tag;
+        out->data.ack.which_result = protoduino_Ack_outputs_tag;
+        fake_servos_callbacks(&out->data.ack.result.outputs, servos);
+        s = pb_istream_from_buffer(payload, len);
+        if (!pb_decode_noinit(&s, protoduino_ArduinoOut_fields, out)) {
+            return false;
+        }
+        out->data.ack.result.outputs.servos.funcs.encode = encode_servos;
+    }
+    return true;
 }

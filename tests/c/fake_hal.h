@@ -72,4 +72,24 @@ size_t fake_count(const fake_hal_t *hal);
  * DeviceInfo of num_pins > 0: for comparing the two encoders on a DeviceInfo. */
 void fake_info_callbacks(protoduino_DeviceInfo *info, fake_hal_t *hal);
 
+/* OutputStates.servos (a callback field: the device writes it from its outputs' table,
+ * pd_outputs_servos) as the tests read and write it: its bytes in a buffer of their own. */
+typedef struct fake_servos {
+    uint8_t bytes[5u * 24u]; /* the schema's bound: PD_INFO_SERVOS_MAX servos */
+    size_t size;
+} fake_servos_t;
+/* pb_decode's and pb_encode's callbacks for `st`'s servos, reading into and writing from
+ * `servos`. */
+void fake_servos_callbacks(protoduino_OutputStates *st, fake_servos_t *servos);
+/* Decode a DATA payload as pb_decode does, an Ack's OutputStates.servos into `servos`
+ * (its size 0 when the message has none): the callback field survives the decoding only
+ * when the oneofs around it are already that member, so a ReadOutputs answer is decoded
+ * twice. */
+/* pb_encode's callback for `st`'s servos, written by the writer the device's OutputStates
+ * `device` holds (pd_outputs_read: pd_encode_servos_set), as the device's encoder calls it:
+ * for comparing the two encoders. */
+void fake_outputs_callbacks(protoduino_OutputStates *st, const protoduino_OutputStates *device);
+bool fake_decode_out(const uint8_t *payload, size_t len, protoduino_ArduinoOut *out,
+                     fake_servos_t *servos);
+
 #endif /* FAKE_HAL_H */

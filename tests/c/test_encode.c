@@ -6,6 +6,7 @@
 
 #include "fake_hal.h"
 #include "pd_encode.h"
+#include "pd_outputs.h"
 #include "pd_protocol.h"
 #include "pd_test.h"
 #include "test_util.h"
@@ -16,7 +17,12 @@ static int compare(const protoduino_ArduinoOut *msg)
     uint8_t ours[protoduino_ArduinoOut_size + 8];
     uint8_t theirs[protoduino_ArduinoOut_size + 8];
     pb_ostream_t s = pb_ostream_from_buffer(theirs, sizeof(theirs));
-    if (!pb_encode(&s, protoduino_ArduinoOut_fields, msg)) {
+    protoduino_ArduinoOut nanopb_msg = *msg; /* the servos' writer as pb_encode's callback */
+    if (msg->which_data == protoduino_ArduinoOut_ack_tag &&
+        msg->data.ack.which_result == protoduino_Ack_outputs_tag) {
+        fake_outputs_callbacks(&nanopb_msg.data.ack.result.outputs, &msg->data.ack.result.outputs);
+    }
+    if (!pb_encode(&s, protoduino_ArduinoOut_fields, &nanopb_msg)) {
         return -1;
     }
     size_t n = pd_encode_out(msg, ours, sizeof(ours));
@@ -221,10 +227,18 @@ static void test_encode_ack_outputs_and_refused_item(void)
     out.data.ack.which_result = protoduino_Ack_outputs_tag;
     CHECK_EQ(compare(&out), 0); /* nothing configured: an empty nested message */
     protoduino_OutputStates *st = &out.data.ack.result.outputs;
-    st->servos.size = sizeof(st->servos.bytes); /* eight servos, the most */
-    for (size_t i = 0; i < st->servos.size; i++) {
-        st->servos.bytes[i] = (uint8_t)(0xFF - i);
+    /* The servos' bytes come from the outputs' table (pd_outputs_servos): none, then every
+     * channel of this build, the most, on the highest pins. */
+    static pd_outputs_t outputs;
+    pd_outputs_init(&outputs);
+    pd_outputs_read(&outputs, st);
+    CHECK_EQ(compare(&out), 0); /* no servo: the field omitted */
+    for (uint8_t ch = 0; ch < PD_MAX_SERVOS; ch++) {
+        outputs.owner[PD_MAX_PINS - 1u - ch] = PD_OWNER(PD_MODE_SERVO, ch);
+        outputs.servo[ch].us = (uint16_t)(0xFFFFu - ch);
+        outputs.servo[ch].target_us = (uint16_t)(0x80u + ch);
     }
+    CHECK_EQ(compare(&out), 0);
     T_PUT_MASK(st->digital_pins, 0xFFFFFFFFu);
     T_PUT_MASK(st->digital_levels, 0x80000001u);
     CHECK_EQ(compare(&out), 0);
@@ -251,10 +265,6 @@ static void test_encode_ack_outputs_and_refused_item(void)
     st->pwm_duties_count = sizeof(st->pwm_duties) + 1u; /* corrupt: refused */
     uint8_t too_many[protoduino_ArduinoOut_size + 8];
     CHECK_EQ(pd_encode_out(&out, too_many, sizeof(too_many)), 0);
-    st->pwm_duties_count = 0;
-    st->servos.size = sizeof(st->servos.bytes) + 1u; /* corrupt: refused */
-    uint8_t buf[protoduino_ArduinoOut_size + 8];
-    CHECK_EQ(pd_encode_out(&out, buf, sizeof(buf)), 0);
     out = ack(0xFFFFFFFFu, protoduino_Status_STATUS_OUT_OF_RANGE);
     const uint32_t items[] = {1, 8, 127, 128, 0xFFFFFFFFu};
     for (size_t i = 0; i < sizeof(items) / sizeof(items[0]); i++) {

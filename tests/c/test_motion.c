@@ -300,11 +300,12 @@ static void test_read_outputs(void)
     CHECK_EQ(t_acks(&d, 3, &ack), 1);
     CHECK_EQ(ack.which_result, protoduino_Ack_outputs_tag);
     const protoduino_OutputStates *st = &ack.result.outputs;
-    CHECK_EQ(st->servos.size, 15);
+    const fake_servos_t *servos = st->servos.arg;
+    CHECK_EQ(servos->size, 15);
     const uint8_t want[15] = {3, US(90) & 0xFF, US(90) >> 8, US(90) & 0xFF, US(90) >> 8,
                               5, 1500 & 0xFF,   1500 >> 8,   1500 & 0xFF,   1500 >> 8,
                               6, US(90) & 0xFF, US(90) >> 8, US(90) & 0xFF, US(90) >> 8};
-    CHECK_EQ(memcmp(st->servos.bytes, want, 15), 0);
+    CHECK_EQ(memcmp(servos->bytes, want, 15), 0);
     CHECK_EQ(T_MASK(st->digital_pins), 1UL << 13);
     CHECK_EQ(T_MASK(st->digital_levels), 1UL << 13);
     /* Idempotent: a repeat is answered in full, not from the dedupe window. */

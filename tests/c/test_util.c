@@ -117,9 +117,9 @@ bool t_out(const tdev_t *d, size_t i, protoduino_ArduinoOut *out)
     if (!f || f->type != PD_PACKET_DATA) {
         return false;
     }
-    memset(out, 0, sizeof(*out));
-    pb_istream_t s = pb_istream_from_buffer(f->payload, f->len);
-    if (!pb_decode(&s, protoduino_ArduinoOut_fields, out)) {
+    /* An Ack's OutputStates.servos: the last decoded (the callback's arg points here). */
+    static fake_servos_t servos;
+    if (!fake_decode_out(f->payload, f->len, out, &servos)) {
         return false;
     }
     if (out->which_data == protoduino_ArduinoOut_ack_ok_tag) {

@@ -77,14 +77,15 @@ def test_a_declaration_changes_both_tables_and_the_schema_id(tmp_path: Path) -> 
         assert (out / rel).read_bytes() == (ROOT / rel).read_bytes()
 
 
-#: The callback fields: the device's encoder writes them from the board's table (pd_encode.h).
-CALLBACK_FIELDS = ("DeviceInfo.pins", "DeviceInfo.timers")
+#: The callback fields: the device's encoder writes them from the board's table and the
+#: outputs' (pd_encode.h).
+CALLBACK_FIELDS = ("DeviceInfo.pins", "DeviceInfo.timers", "OutputStates.servos")
 
 
 def test_nanopb_bounds_every_variable_field() -> None:
     """Every bytes, string and repeated field has a bound; the only callback fields are the
-    pin table's, bounded too (max_size), and every message nanopb could not size for them
-    has its size with them at their bound (codegen.sized_callbacks)."""
+    pin table's and ReadOutputs' servos, bounded too (max_size), and every message nanopb
+    could not size for them has its size with them at their bound (codegen.sized_callbacks)."""
     header = (ROOT / "firmware/generated/protoduino.pb.h").read_text()
     assert header.count("pb_callback_t") == len(CALLBACK_FIELDS)
     assert "depends on runtime parameters" not in header

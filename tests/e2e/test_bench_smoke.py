@@ -512,6 +512,25 @@ def test_motion_section_on_both_boards() -> None:
 
 
 @pytest.mark.avr
+def test_mega_section_drives_24_servos_from_three_poses() -> None:
+    """Part 11, small: two trials on the emulated Mega, none lost; each trial is three poses
+    of eight (six Acks timed), every one of the 24 pins shows servo lines at its new widths
+    (the board's trace), and the report states the line rate it depends on."""
+    _need("avr")
+    from bench import mega
+
+    run = mega.measure(trials=2, seed=SEED)
+    assert run.error is None, run.error
+    assert (run.trials, run.lost) == (2, 0)
+    assert (len(run.pose_s), len(run.poses_s), len(run.spread_s)) == (6, 2, 2)
+    assert len(run.deviations) >= 2 * len(mega.PINS)  # every pin's first new line, each trial
+    assert all(d <= mega.MATCH_US for d in run.deviations)
+    text = mega.report(run)
+    assert "24 servos on the emulated Mega 2560" in text and "11 bits" in text
+    assert "| the three poses, first call to last Ack (host clock) |" in text
+
+
+@pytest.mark.avr
 def test_inputs_section_on_both_boards() -> None:
     """Part 7: every edge reached its callback, every channel streamed, every interlock trial
     stopped the motor at the pin, on both boards; and the avr targets have a verdict."""

@@ -3,10 +3,12 @@ emulated ATmega2560 (``SimBoard("avr", board="mega")``), judged at its pins thro
 
 The build serves every pin, 0..69 (firmware/README.md, The Mega 2560; pin sets of any width
 since protocol version 8): the Mega's own ports A, C, G, L, B and K (pins 22..53, A8..A15 =
-62..69) carry digital outputs, inputs and servos (Timer1's interrupt writes the pulses through
-the port), Timer2 makes PWM on pins 9 and 10 and Timer1 on 11 and 12 while no servo runs,
-Timer0 keeps the clock (pins 4 and 13 refused), the six external interrupts count. The host
-has no table of the Mega's: every refusal here comes from the pin table of its DeviceInfo.
+62..69) carry digital outputs, inputs and servos (24 of them: Timer1's and Timer5's interrupts
+write the pulses through the port), Timer2 makes PWM on pins 9 and 10, Timer3 on 5, 2, 3,
+Timer4 on 6, 7, 8, Timer1 on 11 and 12 and Timer5 on 44..46 while no servo runs on them, Timer0
+keeps the clock (pins 4 and 13 refused), the six external interrupts count, A0..A15 read
+analog. The host has no table of the Mega's: every refusal here comes from the pin table of
+its DeviceInfo.
 """
 
 from __future__ import annotations
@@ -75,20 +77,20 @@ def test_the_mega_states_its_pins_and_the_host_refuses_from_them(mega: SimBoard)
     refuses from that table what the device would refuse, for the table's reason."""
     with Board.open(mega.port) as board:
         info = board.info
-        assert (info.board, info.num_pins, info.max_servos) == ("mega", 70, 8)
-        assert info.pwm_pins == (9, 10, 11, 12)
+        assert (info.board, info.num_pins, info.max_servos) == ("mega", 70, 24)
+        assert info.pwm_pins == (2, 3, 5, 6, 7, 8, 9, 10, 11, 12, 44, 45, 46)
         assert info.analog_pins == tuple(range(54, 70))  # A0..A15
         assert info.counter_pins == (2, 3, 18, 19, 20, 21)
         pins = info.pins
         assert pins[0] == pins[1] == 0  # the link: UART0
         assert pins[22:32] == bytes([pb.PIN_DIGITAL] * 10)
         assert all(pins[p] & pb.PIN_PWM for p in (9, 10, 11, 12))
-        assert not pins[2] & pb.PIN_PWM  # Timer3's OC3B: no driver runs Timer3
+        assert not pins[22] & pb.PIN_PWM  # PA0: no timer output
         with pytest.raises(TimerInUseError) as clock:
             board.pwm_output(13)  # OC0A: Timer0 is the clock
         assert not clock.value.sent
         with pytest.raises(NotSupportedError) as no_pwm:
-            board.pwm_output(2)
+            board.pwm_output(22)
         assert not no_pwm.value.sent
         msg = ArduinoIn()
         msg.pwm_init.pin = 13
@@ -192,6 +194,53 @@ def test_eight_servos_on_ports_a_and_c_in_one_pose(mega: SimBoard) -> None:
             _wait(mega, pin, "servo", at(pin))
 
 
+def test_the_mega_states_its_two_servo_timers(mega: SimBoard) -> None:
+    """Its DeviceInfo says the servos hold Timer1 and Timer5 (12 channels each) and the clock
+    Timer0, and that Timer1's PWM pins, 11 and 12, need the servos' timer."""
+    with Board.open(mega.port) as board:
+        info = board.info
+        assert info.timers == bytes(
+            [
+                pb.TIMER_CLOCK,
+                pb.TIMER_SERVOS,
+                pb.TIMER_FREE,
+                pb.TIMER_FREE,
+                pb.TIMER_FREE,
+                pb.TIMER_SERVOS,
+            ]
+        )
+        assert [info.timer_use(t) for t in (1, 5)] == ["servos", "servos"]
+        assert info.timer_pins("servos") == (11, 12)
+        assert [info.timer(p) for p in (4, 11, 12, 13)] == [0, 1, 1, 0]
+
+
+def test_twenty_four_servos_from_three_poses(mega: SimBoard) -> None:
+    """24 servos on pins 4..15 and 20..31, both timers' channels, set by three poses of eight
+    (the Pose's most items): every width at its pin is the one posed, and ReadOutputs (120 B
+    of servos, a reply of more than 127 B) says the same of all 24. (Not 16..19: servos there
+    upset the emulated Mega's link at 1,000,000 baud on main's firmware too.)"""
+    pins = [*range(4, 16), *range(20, 32)]
+    with Board.open(mega.port) as board:
+        servos = {pin: board.servo(pin) for pin in pins}
+        degrees = {pin: 5 + 7 * n for n, pin in enumerate(pins)}  # 5 .. 166: 24 widths
+        widths = {pin: servos[pin].to_us(deg) for pin, deg in degrees.items()}
+        for first in range(0, 24, 8):
+            board.pose({servos[pin]: degrees[pin] for pin in pins[first : first + 8]})
+
+        def at(pin: int) -> Callable[[list[int]], bool]:
+            return lambda v: bool(v) and abs(v[-1] - widths[pin]) <= PULSE_TOLERANCE_US
+
+        for pin in pins:
+            _wait(mega, pin, "servo", at(pin))
+        states = board.read_outputs()
+        assert {pin: (s.mode, s.value, s.target) for pin, s in states.items()} == {
+            pin: ("servo", widths[pin], widths[pin]) for pin in pins
+        }
+        with pytest.raises(CommandRejectedError) as full:
+            board.servo(2)  # a 25th: the host refuses from max_servos alone
+        assert full.value.status == Status.STATUS_NO_FREE_RESOURCE and not full.value.sent
+
+
 def test_pwm_on_timer2_and_timer1_pins(mega: SimBoard) -> None:
     """Pins 9 and 10 (Timer2's OC2B, OC2A) and 11, 12 (Timer1's OC1A, OC1B): the duty
     measured at each pin is the one written."""
@@ -201,6 +250,28 @@ def test_pwm_on_timer2_and_timer1_pins(mega: SimBoard) -> None:
             board.pwm_output(pin).write(duty)
         for pin, duty in duties.items():
             _wait(mega, pin, "pwm", _last(duty))
+
+
+def test_pwm_on_timer3_and_timer4_pins(mega: SimBoard) -> None:
+    """Pins 5, 2, 3 (Timer3's OC3A..C) and 6, 7, 8 (Timer4's): the duty measured at each pin
+    is the one written, and stays so while servos run on both servo timers (Timers 3 and 4
+    make no servo pulses); Timer1's 11 is refused then, by the host from the pin table."""
+    duties = {5: 60, 2: 200, 3: 128, 6: 30, 7: 250, 8: 1}
+    with Board.open(mega.port) as board:
+        outs = {pin: board.pwm_output(pin) for pin in duties}
+        for pin, duty in duties.items():
+            outs[pin].write(duty)
+        for pin, duty in duties.items():
+            _wait(mega, pin, "pwm", _last(duty))
+        servos = [board.servo(pin) for pin in (*range(20, 32), 4, 13)]  # 13, 14: Timer5's
+        with pytest.raises(TimerInUseError) as timer1:
+            board.pwm_output(11)
+        assert not timer1.value.sent
+        board.pose({outs[pin]: 255 - duty for pin, duty in duties.items()})
+        for pin, duty in duties.items():
+            _wait(mega, pin, "pwm", _last(255 - duty))
+        width = servos[-1].to_us(90)
+        _wait(mega, 13, "servo", lambda v: bool(v) and abs(v[-1] - width) <= PULSE_TOLERANCE_US)
 
 
 def test_digital_inputs_on_the_mega(mega: SimBoard) -> None:

@@ -208,15 +208,28 @@ typedef struct {
     uint8_t connected; /* its compare output was connected since the pin last was an input */
 } pd_pwm_pin_t;
 
-static pd_pwm_pin_t g_pwm_pins[] = {
+static pd_pwm_pin_t g_uno_pwm_pins[] = {
     {6, '0', AVR_TIMER_COMPA, NULL, 0, 0},  {5, '0', AVR_TIMER_COMPB, NULL, 0, 0},
     {9, '1', AVR_TIMER_COMPA, NULL, 0, 0},  {10, '1', AVR_TIMER_COMPB, NULL, 0, 0},
     {11, '2', AVR_TIMER_COMPA, NULL, 0, 0}, {3, '2', AVR_TIMER_COMPB, NULL, 0, 0},
 };
-#define PD_PWM_PINS (sizeof g_pwm_pins / sizeof g_pwm_pins[0])
-/* The Mega's pins of the same timer outputs, in g_pwm_pins' order: OC0A 13, OC0B 4, OC1A 11,
- * OC1B 12, OC2A 10, OC2B 9 (Timers 3, 4 and 5 run no driver of the firmware's). */
-static const int g_mega_pwm_pins[PD_PWM_PINS] = {13, 4, 11, 12, 10, 9};
+/* The Mega's: Timer0's OC0A 13 and OC0B 4 (OC1C, also pin 13, is left out: the clock's
+ * timer holds that pin), Timer1's 11, 12, Timer2's 10, 9, and Timers 3, 4 and 5's A, B, C:
+ * 5, 2, 3; 6, 7, 8; 46, 45, 44 (the firmware's pd_avr_mega_pwm16). */
+static pd_pwm_pin_t g_mega_pwm_pins[] = {
+    {13, '0', AVR_TIMER_COMPA, NULL, 0, 0}, {4, '0', AVR_TIMER_COMPB, NULL, 0, 0},
+    {11, '1', AVR_TIMER_COMPA, NULL, 0, 0}, {12, '1', AVR_TIMER_COMPB, NULL, 0, 0},
+    {10, '2', AVR_TIMER_COMPA, NULL, 0, 0}, {9, '2', AVR_TIMER_COMPB, NULL, 0, 0},
+    {5, '3', AVR_TIMER_COMPA, NULL, 0, 0},  {2, '3', AVR_TIMER_COMPB, NULL, 0, 0},
+    {3, '3', AVR_TIMER_COMPC, NULL, 0, 0},  {6, '4', AVR_TIMER_COMPA, NULL, 0, 0},
+    {7, '4', AVR_TIMER_COMPB, NULL, 0, 0},  {8, '4', AVR_TIMER_COMPC, NULL, 0, 0},
+    {46, '5', AVR_TIMER_COMPA, NULL, 0, 0}, {45, '5', AVR_TIMER_COMPB, NULL, 0, 0},
+    {44, '5', AVR_TIMER_COMPC, NULL, 0, 0},
+};
+/* The board's (the Mega's once the runner knows it runs one: pd_setup). */
+static pd_pwm_pin_t *g_pwm_pins = g_uno_pwm_pins;
+static size_t g_pwm_count = sizeof g_uno_pwm_pins / sizeof g_uno_pwm_pins[0];
+#define PD_PWM_PINS g_pwm_count
 
 typedef struct {
     uint8_t data[PD_BUF_SIZE];
@@ -1174,11 +1187,12 @@ static void pd_connect(pd_sim_t *sim)
         }
     }
 
+    if (sim->board->map == pd_mega_map) {
+        g_pwm_pins = g_mega_pwm_pins;
+        g_pwm_count = sizeof g_mega_pwm_pins / sizeof g_mega_pwm_pins[0];
+    }
     for (size_t i = 0; i < PD_PWM_PINS; i++) {
         pd_pwm_pin_t *w = &g_pwm_pins[i];
-        if (sim->board->map == pd_mega_map) {
-            w->pin = g_mega_pwm_pins[i];
-        }
         w->timer = (avr_timer_t *)pd_find_io(avr, "timer", w->timer_name);
         avr_irq_t *oc =
             avr_io_getirq(avr, AVR_IOCTL_TIMER_GETIRQ(w->timer_name), TIMER_IRQ_OUT_COMP + w->comp);
