@@ -196,7 +196,7 @@ def test_eight_servos_on_ports_a_and_c_in_one_pose(mega: SimBoard) -> None:
 
 def test_the_mega_states_its_two_servo_timers(mega: SimBoard) -> None:
     """Its DeviceInfo says the servos hold Timer1 and Timer5 (12 channels each) and the clock
-    Timer0, and that Timer1's PWM pins, 11 and 12, need the servos' timer."""
+    Timer0, and that Timer1's PWM pins, 11 and 12, and Timer5's, 44..46, need theirs."""
     with Board.open(mega.port) as board:
         info = board.info
         assert info.timers == bytes(
@@ -210,8 +210,8 @@ def test_the_mega_states_its_two_servo_timers(mega: SimBoard) -> None:
             ]
         )
         assert [info.timer_use(t) for t in (1, 5)] == ["servos", "servos"]
-        assert info.timer_pins("servos") == (11, 12)
-        assert [info.timer(p) for p in (4, 11, 12, 13)] == [0, 1, 1, 0]
+        assert info.timer_pins("servos") == (11, 12, 44, 45, 46)
+        assert [info.timer(p) for p in (4, 11, 12, 13, 44, 45, 46)] == [0, 1, 1, 0, 5, 5, 5]
 
 
 def test_twenty_four_servos_from_three_poses(mega: SimBoard) -> None:
@@ -272,6 +272,20 @@ def test_pwm_on_timer3_and_timer4_pins(mega: SimBoard) -> None:
             _wait(mega, pin, "pwm", _last(255 - duty))
         width = servos[-1].to_us(90)
         _wait(mega, 13, "servo", lambda v: bool(v) and abs(v[-1] - width) <= PULSE_TOLERANCE_US)
+
+
+def test_pwm_on_timer5_pins_past_pin_31(mega: SimBoard) -> None:
+    """Pins 46, 45, 44 (Timer5's OC5A..C, a servo timer): the duty measured at each pin is the
+    one written while no servo runs, and a servo is refused then (its timer makes PWM)."""
+    duties = {46: 40, 45: 128, 44: 220}
+    with Board.open(mega.port) as board:
+        outs = {pin: board.pwm_output(pin) for pin in duties}
+        for pin, duty in duties.items():
+            outs[pin].write(duty)
+        for pin, duty in duties.items():
+            _wait(mega, pin, "pwm", _last(duty))
+        with pytest.raises(TimerInUseError):
+            board.servo(30)
 
 
 def test_digital_inputs_on_the_mega(mega: SimBoard) -> None:
