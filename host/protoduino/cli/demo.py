@@ -24,7 +24,7 @@ from ..board import Board
 from ..constants import FAILSAFE_TIMEOUT
 from ..errors import ProtoduinoError
 from ..events import Event, EventKind
-from ..simboard import BACKENDS
+from ..simboard import AVR_BOARDS, BACKENDS
 from .options import add_capture, capture_max_bytes, capture_verdict, error
 
 HELP = "run the demo on the simulated board: sweep a servo, blink a pin, watch the failsafe"
@@ -40,6 +40,12 @@ def register(parser: argparse.ArgumentParser) -> None:
         choices=sorted(BACKENDS),
         default="native",
         help="simulated board: native (default) or avr (the emulated Uno)",
+    )
+    parser.add_argument(
+        "--board",
+        choices=sorted(AVR_BOARDS),
+        default="uno",
+        help="the board the avr backend emulates: uno (default) or mega (the Mega 2560)",
     )
     parser.add_argument("--trace", type=Path, help="keep the board's pin trace in this file")
     add_capture(parser)
@@ -59,9 +65,9 @@ def run(args: argparse.Namespace) -> int:
     clock = _Clock()
     with tempfile.TemporaryDirectory(prefix="protoduino-demo-") as tmp:
         trace_path = args.trace or Path(tmp) / "trace.jsonl"
-        clock.say(f"starting the simulated board ({args.backend}) ...")
+        clock.say(f"starting the simulated board ({args.backend}, {args.board}) ...")
         try:
-            with SimBoard(args.backend, trace=trace_path) as sim:
+            with SimBoard(args.backend, board=args.board, trace=trace_path) as sim:
                 port = sim.start()
                 clock.say(f"simulated board on {port} (pid {sim.pid})")
                 ok = _demo(port, clock, args)
