@@ -1,6 +1,7 @@
 """``protoduino demo``: the whole stack against a simulated board, in about 15 seconds.
 
-Starts the simulated board, sweeps a servo, blinks a pin, then stops pinging
+Starts the simulated board (or, with ``--backend avr``, the emulated Uno; with ``--board
+mega`` too, the emulated Mega 2560), sweeps a servo, blinks a pin, then stops pinging
 and waits for the device's failsafe to put both outputs back to their safe
 values, and finally reads the board's own trace to show what the pins did.
 
