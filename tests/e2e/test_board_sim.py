@@ -393,6 +393,7 @@ def test_failsafe_when_the_host_process_is_killed(sim: SimBoard) -> None:
             child.stdout.close()
 
 
+@pytest.mark.mega
 def test_concurrent_callers(board: Board, sim: SimBoard) -> None:
     # Four servos: thread safety, not servo count, is under test here (the emulated Uno
     # answers slowly with all eight servos running; test_state_dependent_checks uses eight).
