@@ -141,6 +141,7 @@ def test_every_call_on_a_closed_board_raises_board_closed(fake: PtyDevice) -> No
 # --- the device's own refusals through the API ---------------------------------------
 
 
+@pytest.mark.mega
 def test_device_refusals_when_the_hosts_view_is_stale(sim_board: SimBoard) -> None:
     """A resumed session keeps the device's outputs: a new Board resuming it does not know them."""
     with Board.open(sim_board.port) as first:
@@ -162,6 +163,7 @@ def test_device_refusals_when_the_hosts_view_is_stale(sim_board: SimBoard) -> No
         third.servo(10)
 
 
+@pytest.mark.mega
 def test_a_servo_object_outlived_by_a_reinit(sim_board: SimBoard) -> None:
     with Board.open(sim_board.port) as board:
         wide = board.servo(9)  # 544..2400

@@ -121,6 +121,7 @@ def test_every_api_call(board: Board, sim: SimBoard) -> None:
     assert board.stats.timeouts == 0 and board.stats.rejected == 0
 
 
+@pytest.mark.mega
 def test_stop_latches_until_commanded(board: Board, sim: SimBoard) -> None:
     servo = board.servo(9)
     led = board.digital_output(13)
@@ -194,6 +195,7 @@ def test_host_checks_match_the_device(
     assert host.value.status == device.value.status
 
 
+@pytest.mark.mega
 def test_state_dependent_checks_match_the_device(board: Board) -> None:
     board.digital_output(13)
     with pytest.raises(protoduino.CommandRejectedError) as host:
@@ -222,6 +224,7 @@ def _sc(pin: int, *, us_: int) -> Any:
     return ctl
 
 
+@pytest.mark.mega
 def test_device_only_rejections(board: Board) -> None:
     cases: list[tuple[Callable[[Any], None], int]] = [
         (lambda m: m.servo_control.MergeFrom(_sc(12, us_=1500)), Status.STATUS_NOT_INITIALISED),
@@ -235,6 +238,7 @@ def test_device_only_rejections(board: Board) -> None:
         assert info.value.status == status and info.value.sent
 
 
+@pytest.mark.mega
 def test_restore_after_reboot_brings_outputs_up_safe(board: Board, sim: SimBoard) -> None:
     """Defect 3: after a reboot an output comes back at its safe value, not at a stale pose."""
     rec = Recorder(board)
@@ -253,6 +257,7 @@ def test_restore_after_reboot_brings_outputs_up_safe(board: Board, sim: SimBoard
     assert board.stats.reboots == 1
 
 
+@pytest.mark.mega
 def test_restore_last_values_when_opted_in(sim: SimBoard) -> None:
     with Board.open(sim.port, restore="last") as board:
         rec = Recorder(board)
@@ -266,6 +271,7 @@ def test_restore_last_values_when_opted_in(sim: SimBoard) -> None:
         expect_pin(sim, 13, [0, 0, 1], since=before, digital=True)
 
 
+@pytest.mark.mega
 def test_a_reboot_loop_stops_restoring(sim: SimBoard) -> None:
     with Board.open(sim.port, ping=False, reboot_limit=3, reboot_window=60.0) as board:
         rec = Recorder(board)
@@ -352,6 +358,7 @@ CHILD = textwrap.dedent(
 
 
 @pytest.mark.slow
+@pytest.mark.mega
 def test_failsafe_when_the_host_process_is_killed(sim: SimBoard) -> None:
     child = subprocess.Popen(
         [sys.executable, "-c", CHILD, sim.port],
@@ -386,6 +393,7 @@ def test_failsafe_when_the_host_process_is_killed(sim: SimBoard) -> None:
             child.stdout.close()
 
 
+@pytest.mark.mega
 def test_concurrent_callers(board: Board, sim: SimBoard) -> None:
     # Four servos: thread safety, not servo count, is under test here (the emulated Uno
     # answers slowly with all eight servos running; test_state_dependent_checks uses eight).
@@ -423,6 +431,7 @@ def test_concurrent_callers(board: Board, sim: SimBoard) -> None:
     expect_pin(sim, 13, [0, 1] * 20, digital=True)
 
 
+@pytest.mark.mega
 def test_lossy_line_is_repaired(sim: SimBoard) -> None:
     url = f"faulty://{sim.port}?drop=0.002&seed=11"
     with Board.open(url) as board:
@@ -434,6 +443,7 @@ def test_lossy_line_is_repaired(sim: SimBoard) -> None:
     assert stats.retransmits > 0 or stats.seq_lost > 0 or sum(stats.dropped.values()) > 0
 
 
+@pytest.mark.mega
 def test_a_frame_monitor_calling_the_board_is_refused(board: Board, sim: SimBoard) -> None:
     # A monitor runs on the I/O thread; a call from it would wait for an Ack only that
     # thread can read (it stalled the link for 8 s). It is refused at once instead.
@@ -470,6 +480,7 @@ def cli(*args: str) -> subprocess.CompletedProcess[str]:
     )
 
 
+@pytest.mark.mega
 def test_a_second_opener_is_refused_and_the_first_notices_nothing(
     board: Board, sim: SimBoard
 ) -> None:
@@ -577,6 +588,7 @@ class _SocketBridge:
         self.pty.close()
 
 
+@pytest.mark.mega
 def test_a_socket_drop_is_a_reconnect_not_a_reboot(sim: SimBoard) -> None:
     """Same boot id, session resumed: nothing is restored and nothing twitches at the pin
     (before sessions a reopened port counted as a reboot: 1472 -> 2369 us within 0.6 ms)."""
@@ -603,6 +615,7 @@ def test_a_socket_drop_is_a_reconnect_not_a_reboot(sim: SimBoard) -> None:
         bridge.close()
 
 
+@pytest.mark.mega
 def test_detach_safe_state_and_release_at_the_pins(board: Board, sim: SimBoard) -> None:
     limp = board.servo(9, safe="detach")  # no pulses until commanded
     assert limp.value == 0
@@ -633,6 +646,7 @@ def test_detach_safe_state_and_release_at_the_pins(board: Board, sim: SimBoard) 
     expect_pin(sim, 9, [SAFE_90_US, us(60)], since=since)
 
 
+@pytest.mark.mega
 def test_a_call_in_flight_at_a_reboot_fails_and_never_reaches_the_new_boot(sim: SimBoard) -> None:
     """Defect 3 at the pins: the command that (say) browned the board out runs on the old
     boot only; the call fails with DeviceRebootedError, the servo comes back at its safe

@@ -142,6 +142,7 @@ def test_monitor_readable_and_json(fake: PtyDevice, capsys: pytest.CaptureFixtur
 # --- against the simulated board (the shared sim_board fixture, one per backend) -------------
 
 
+@pytest.mark.mega
 def test_board_commands_against_the_sim(
     sim_board: SimBoard, capsys: pytest.CaptureFixture[str]
 ) -> None:

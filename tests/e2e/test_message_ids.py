@@ -18,6 +18,9 @@ from protoduino import Board
 from protoduino.simboard import SimBoard
 from simfixtures import pin_values, wait_until
 
+#: Runs on the emulated Mega too: the ids across wraps on its build (tests/README.md).
+pytestmark = pytest.mark.mega
+
 #: The outputs of the lossy session (2..19: every pin but the serial ones). A write may run
 #: after a later one when its first transmission is lost (the host keeps several in
 #: flight), but never more than DEDUPE_WINDOW - 1 ids later: so consecutive writes to one

@@ -23,6 +23,9 @@ from protoduino.simboard import SimBoard
 from protoduino.testing import PtyDevice, ack
 from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
 
+#: Runs on the emulated Mega too: its servos and poses at its pins (tests/README.md).
+pytestmark = pytest.mark.mega
+
 BOUND = 10.0
 
 

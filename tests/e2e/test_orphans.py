@@ -22,7 +22,10 @@ from pathlib import Path
 
 import pytest
 from protoduino import Board
-from simfixtures import SIM_BACKENDS
+from simfixtures import SIM_BOARDS, sim_args
+
+#: Each test runs on the emulated Mega too: its runner is another MCU's (tests/README.md).
+pytestmark = pytest.mark.mega
 
 #: Bounds a failing wait only: the board checks for its owner on every pass of
 #: its main loop (at least every millisecond).
@@ -31,7 +34,7 @@ EXIT_TIMEOUT = 30.0
 OWNER = """
 import sys, time
 from protoduino.simboard import SimBoard
-board = SimBoard(sys.argv[1])
+board = SimBoard(sys.argv[1], board=sys.argv[2])
 board.start()
 print(board.pid, flush=True)
 time.sleep(600)
@@ -47,10 +50,9 @@ def _gone(pid: int) -> bool:
     return state in ("Z", "X")
 
 
-@pytest.mark.parametrize("backend", SIM_BACKENDS)
-def test_a_board_exits_when_its_owner_is_killed(backend: str) -> None:
+def test_a_board_exits_when_its_owner_is_killed(board_id: str) -> None:
     owner = subprocess.Popen(
-        [sys.executable, "-c", OWNER, backend],
+        [sys.executable, "-c", OWNER, *SIM_BOARDS[board_id]],
         stdout=subprocess.PIPE,
         stdin=subprocess.DEVNULL,
         text=True,
@@ -68,7 +70,7 @@ def test_a_board_exits_when_its_owner_is_killed(backend: str) -> None:
             time.sleep(0.02)
         if not _gone(board):
             os.kill(board, signal.SIGKILL)
-            pytest.fail(f"the {backend} board (pid {board}) outlived its killed owner")
+            pytest.fail(f"the {board_id} board (pid {board}) outlived its killed owner")
     finally:
         if owner.poll() is None:
             owner.kill()
@@ -80,7 +82,7 @@ def test_a_board_exits_when_its_owner_is_killed(backend: str) -> None:
 OWNER_EXITS = """
 import os, sys
 from protoduino.simboard import SimBoard
-board = SimBoard(sys.argv[1])
+board = SimBoard(sys.argv[1], board=sys.argv[2])
 board.start()
 print(board.pid, flush=True)
 os._exit(0)  # no stop(), no cleanup at all: a script that forgot the board
@@ -106,10 +108,9 @@ def _serves(port: str) -> None:
         assert board.ping() > 0
 
 
-@pytest.mark.parametrize("backend", SIM_BACKENDS)
-def test_an_owned_board_ends_when_its_owner_exits_without_stopping_it(backend: str) -> None:
+def test_an_owned_board_ends_when_its_owner_exits_without_stopping_it(board_id: str) -> None:
     done = subprocess.run(
-        [sys.executable, "-c", OWNER_EXITS, backend],
+        [sys.executable, "-c", OWNER_EXITS, *SIM_BOARDS[board_id]],
         capture_output=True,
         text=True,
         timeout=EXIT_TIMEOUT,
@@ -118,7 +119,7 @@ def test_an_owned_board_ends_when_its_owner_exits_without_stopping_it(backend: s
     )
     board = int(done.stdout)
     try:
-        assert _wait_gone(board), f"the {backend} board (pid {board}) outlived its owner"
+        assert _wait_gone(board), f"the {board_id} board (pid {board}) outlived its owner"
     finally:
         _kill(board)
 
@@ -127,12 +128,11 @@ def _protoduino() -> list[str]:
     return [sys.executable, "-m", "protoduino.cli.main"]
 
 
-@pytest.mark.parametrize("backend", SIM_BACKENDS)
 def test_a_detached_board_survives_its_shell_and_stops_by_its_pid_file(
-    backend: str, tmp_path: Path
+    board_id: str, tmp_path: Path
 ) -> None:
     pid_file = tmp_path / "board.pid"
-    cli = shlex.join([*_protoduino(), "sim", "--backend", backend])
+    cli = shlex.join([*_protoduino(), "sim", *sim_args(board_id)])
     # The shell exits right after; run() returning at all shows the board holds none of
     # the caller's pipes (a daemon that kept stdout would make it wait forever).
     done = subprocess.run(
@@ -174,14 +174,13 @@ def test_a_detached_board_survives_its_shell_and_stops_by_its_pid_file(
 
 
 @pytest.mark.skipif(shutil.which("nohup") is None, reason="nohup is not installed")
-@pytest.mark.parametrize("backend", SIM_BACKENDS)
 def test_a_board_started_under_nohup_outlives_the_script_that_started_it(
-    backend: str, tmp_path: Path
+    board_id: str, tmp_path: Path
 ) -> None:
     """``nohup protoduino sim &`` in a script: the board was started on purpose, so it
     stays after the script exits (it used to exit silently with status 0 then)."""
     out = tmp_path / "sim.out"
-    cli = shlex.join([*_protoduino(), "sim", "--backend", backend])
+    cli = shlex.join([*_protoduino(), "sim", *sim_args(board_id)])
     # The script stays until the board printed its port, then exits: its child is orphaned
     # while it runs (the old rule ended a board whose parent went away).
     script = (

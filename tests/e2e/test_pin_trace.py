@@ -17,8 +17,9 @@ from typing import Any
 
 import protoduino
 import pytest
+from protoduino.commands import PWM
 from protoduino.simboard import SimBoard
-from simfixtures import PULSE_TOLERANCE_US, wait_for_pin
+from simfixtures import PULSE_TOLERANCE_US, pins_for, wait_for_pin
 from userbuilds import client, need, program
 
 BACKENDS = ["native", "avr"]
@@ -72,6 +73,7 @@ def test_a_pin_toggled_every_few_milliseconds_shows_every_edge_as_digital(
         assert short <= 1 + sum(gaps[1:]) / TICK_S // 41, (short, gaps)
 
 
+@pytest.mark.mega
 def test_a_servo_released_then_a_digital_output_on_its_pin_gives_the_same_lines_on_both_boards(
     sim_board: SimBoard,
 ) -> None:
@@ -119,19 +121,21 @@ def test_a_digital_output_beside_a_pwm_pin_of_its_timer_is_digital_on_both_board
     assert [value for _, value in motor_rows][-2:] == [100, 255], motor_rows
 
 
+@pytest.mark.mega
 def test_a_pwm_duty_of_0_held_for_a_moment_shows_on_both_boards(sim_board: SimBoard) -> None:
     """Duty 0 disconnects the timer and holds the pin low. The emulated Uno showed it only
     after 5 ms without an edge, so a 0 written between two other duties (two commands in
     one burst, a millisecond or two apart on the board) was dropped. The runner reads that
     the PWM driver holds the level: the 0 is a line at once, as on the native board."""
     with protoduino.Board.open(sim_board.port) as board:
-        motor = board.pwm_output(3)
-        wait_for_pin(sim_board, 3, lambda v: v == [0])
+        (pin,) = pins_for(board, PWM)
+        motor = board.pwm_output(pin)
+        wait_for_pin(sim_board, pin, lambda v: v == [0])
         motor.write(100)
-        wait_for_pin(sim_board, 3, lambda v: v[-1:] == [100])
+        wait_for_pin(sim_board, pin, lambda v: v[-1:] == [100])
         brief = motor.submit(0)
         motor.write(100)
         brief.result(timeout=10)
-        wait_for_pin(sim_board, 3, lambda v: len(v) >= 4)
-    rows = [(e["mode"], e["value"]) for e in sim_board.trace() if e["pin"] == 3]
+        wait_for_pin(sim_board, pin, lambda v: len(v) >= 4)
+    rows = [(e["mode"], e["value"]) for e in sim_board.trace() if e["pin"] == pin]
     assert rows == [("pwm", 0), ("pwm", 100), ("pwm", 0), ("pwm", 100)], rows

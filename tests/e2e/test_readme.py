@@ -22,8 +22,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from boardprocess import missing_tool
 from protoduino import Board
 from protoduino.cli.main import COMMANDS, build_parser, main
+from protoduino.readback import DeviceInfo
 from protoduino.simboard import SimBoard, runner_command
 from protoduino_dev import build
 from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
@@ -37,13 +39,15 @@ pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning:serial.rfc22
 README = Path(__file__).resolve().parents[2] / "README.md"
 UNO_PORT = "/dev/ttyACM0"
 
-#: Each example block, named by a line only it contains.
+#: Each example block, named by a line only it contains (a part of it; the whole line where
+#: another block's line holds it too: :func:`holds`).
 BLOCKS = {
-    "install": "protoduino demo",
+    "install": "protoduino demo\n",
     "uno": "protoduino ports",
     "capture": "--capture robot.jsonl",
     "remote": "rfc2217://raspberrypi.local:7000",
     "ros2": "protoduino ros2 --sim",
+    "mega": "--board mega",
 }
 
 
@@ -62,8 +66,13 @@ def example_blocks() -> list[list[str]]:
     return out
 
 
+def holds(lines: list[str], marker: str) -> bool:
+    """One of ``lines`` holds ``marker`` (its end, if the marker ends in a newline)."""
+    return any(marker in f"{line}\n" for line in lines)
+
+
 def block(name: str) -> list[str]:
-    found = [b for b in example_blocks() if any(BLOCKS[name] in line for line in b)]
+    found = [b for b in example_blocks() if holds(b, BLOCKS[name])]
     assert len(found) == 1, f"README: {len(found)} example blocks contain {BLOCKS[name]!r}"
     return found[0]
 
@@ -78,7 +87,7 @@ def run(line: str, replace: dict[str, str]) -> int:
 
 def test_every_example_block_is_run() -> None:
     for lines in example_blocks():
-        owners = [n for n, marker in BLOCKS.items() if any(marker in line for line in lines)]
+        owners = [n for n, marker in BLOCKS.items() if holds(lines, marker)]
         assert len(owners) == 1, f"README example block run by no test (or two): {lines}"
 
 
@@ -171,8 +180,16 @@ def test_the_install_examples(
     assert run(lines[1], {UNO_PORT: uno.port}) == 0
     with Board.open(uno.port) as board:  # the flashed firmware answers
         assert board.info.num_pins == 20
+    assert started(lines[2]).board == "sim"
+    assert run(lines[3], {}) == 0
+    assert "demo done" in capsys.readouterr().out
+
+
+def started(line: str) -> DeviceInfo:
+    """A README ``protoduino sim`` line run as a process, until the board on the port it
+    prints first answered a ping: what that board says of itself."""
     sim = subprocess.Popen(
-        [sys.executable, "-m", "protoduino.cli.main", *shlex.split(lines[2])[1:]],
+        [sys.executable, "-m", "protoduino.cli.main", *shlex.split(line)[1:]],
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,
@@ -182,13 +199,28 @@ def test_the_install_examples(
         port = sim.stdout.readline().strip()  # the port comes first
         with Board.open(port) as board:
             assert board.ping() > 0
+            return board.info
     finally:
         sim.terminate()
         sim.wait(10)
         assert sim.stdout is not None
         sim.stdout.close()
-    assert run(lines[3], {}) == 0
-    assert "demo done" in capsys.readouterr().out
+
+
+@pytest.mark.avr
+@pytest.mark.slow
+def test_the_emulated_mega_examples(capsys: pytest.CaptureFixture[str]) -> None:
+    """sim (the board on its port says it is a Mega), demo (passes on the Mega: connected to
+    its firmware, the failsafe in its trace)."""
+    missing = missing_tool("make", "cc", "avr-gcc", simavr=True)
+    if missing is not None:
+        pytest.skip(f"{missing} is not installed")
+    lines = block("mega")
+    assert [shlex.split(x)[1] for x in lines] == ["sim", "demo"]
+    assert started(lines[0]).board == "mega"
+    assert run(lines[1], {}) == 0
+    out = capsys.readouterr().out
+    assert "connected: mega firmware" in out and "demo done" in out, out
 
 
 def test_the_capture_examples(

@@ -299,6 +299,7 @@ def _ping(mid: int, payload: bytes = b"") -> pb.ArduinoIn:
 # --- link ---------------------------------------------------------------------
 
 
+@pytest.mark.mega
 def test_handshake_bytes_and_schema_id(host: RawHost) -> None:
     host.write(b"\0" + frame_packet(PacketType.CONTROL, 0, reset_payload(PROTOCOL_VERSION, 77)))
     # A board that boots while the port is being opened (an emulator) may have
@@ -342,6 +343,7 @@ def test_handshake_bytes_and_schema_id(host: RawHost) -> None:
     )
 
 
+@pytest.mark.mega
 def test_version_1_host_gets_the_short_answer_and_its_version_error(
     sim_board: SimBoard, host: RawHost
 ) -> None:
@@ -361,6 +363,7 @@ def test_version_1_host_gets_the_short_answer_and_its_version_error(
     assert sim_board.trace() == []
 
 
+@pytest.mark.mega
 def test_boot_event_and_reboot(sim_board: SimBoard, active: RawHost) -> None:
     assert active.command(_digital_init(1, 13, True)).status == Status.STATUS_OK
     assert active.command(_servo_init(2, 9, safe_us=1500)).status == Status.STATUS_OK
@@ -378,6 +381,7 @@ def test_boot_event_and_reboot(sim_board: SimBoard, active: RawHost) -> None:
     assert active.command(_digital(4, 13, True)).status == Status.STATUS_NOT_INITIALISED
 
 
+@pytest.mark.mega
 def test_command_before_reset_is_not_active(sim_board: SimBoard, host: RawHost) -> None:
     host.send(_digital_init(7, 13, True))
     host.event(EventCode.NOT_ACTIVE)
@@ -389,6 +393,7 @@ def test_command_before_reset_is_not_active(sim_board: SimBoard, host: RawHost) 
     _expect(sim_board, 13, [1])
 
 
+@pytest.mark.mega
 def test_port_closed_and_reopened(sim_board: SimBoard, active: RawHost) -> None:
     """The board holds its own end of the pty: a host may go away and come back."""
     assert active.command(_digital_init(1, 13, True)).status == Status.STATUS_OK
@@ -443,6 +448,7 @@ def test_protoduino_sim_command(backend: str, tmp_path: Path) -> None:
             proc.stdout.close()
 
 
+@pytest.mark.mega
 def test_reset_again_keeps_outputs(sim_board: SimBoard, active: RawHost) -> None:
     assert active.command(_servo_init(1, 9, safe_degrees=0)).status == Status.STATUS_OK
     ack = active.reset()
@@ -525,6 +531,7 @@ def test_get_info(sim_board: SimBoard, active: RawHost) -> None:
     assert (info.num_pins, info.max_servos, list(info.reserved_pins)) == (20, 8, [0, 1])
 
 
+@pytest.mark.mega
 def test_decode_error(active: RawHost) -> None:
     # message_id 7, then a ServoInit claiming 10 bytes but carrying 2.
     active.write(active.frame(PacketType.COMMAND, bytes.fromhex("08071a0a0809")))
@@ -533,6 +540,7 @@ def test_decode_error(active: RawHost) -> None:
     assert active.ack(7).status == Status.STATUS_DECODE_ERROR
 
 
+@pytest.mark.mega
 def test_repeated_id_acked_twice_executed_once(sim_board: SimBoard, active: RawHost) -> None:
     # Ids as a session gives them after its RESET (NEXT_ID 1): 1, 2, 3.
     assert active.command(_digital_init(1, 13, False)).status == Status.STATUS_OK
@@ -546,6 +554,7 @@ def test_repeated_id_acked_twice_executed_once(sim_board: SimBoard, active: RawH
     _expect(sim_board, 13, [0, 1, 0])
 
 
+@pytest.mark.mega
 def test_noise_and_invalid_frames_between_commands_ignored(
     sim_board: SimBoard, active: RawHost
 ) -> None:
@@ -574,6 +583,7 @@ def test_noise_and_invalid_frames_between_commands_ignored(
     assert {c["pin"] for c in sim_board.trace()} == {9}
 
 
+@pytest.mark.mega
 def test_ping_payload_every_byte_value(active: RawHost) -> None:
     everything = bytes(range(256))
     echoed = b""
@@ -660,6 +670,7 @@ def test_failsafe_after_ping_silence(sim_board: SimBoard, active: RawHost) -> No
     _expect_last(sim_board, 9, 544)
 
 
+@pytest.mark.mega
 def test_stop_is_immediate_and_latched(sim_board: SimBoard, active: RawHost) -> None:
     assert active.command(_servo_init(1, 9, safe_us=1500)).status == Status.STATUS_OK
     assert active.command(_digital_init(2, 13, False)).status == Status.STATUS_OK

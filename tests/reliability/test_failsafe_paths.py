@@ -1,4 +1,5 @@
-"""The failsafe in every path (issue 10), on both backends, judged at the pins on the board's clock.
+"""The failsafe in every path (issue 10), on every board (the Mega too), judged at the pins on
+the board's clock.
 
 Each test configures a short failsafe timeout T, so that the suite stays fast
 (the 10 s default is covered by the slow tests in test_sim_e2e and
@@ -33,6 +34,9 @@ from protoduino.packets import Packet, parse_control, reset_payload
 from protoduino.simboard import SimBoard
 from protoduino_dev import faults
 from simfixtures import PULSE_TOLERANCE_US, pin_values
+
+#: The safety tests run on the emulated Mega too (tests/README.md).
+pytestmark = pytest.mark.mega
 
 SAFE_90_US = 1472
 #: The device checks its timer every millisecond; the trace dates edges to the microsecond.
@@ -114,6 +118,7 @@ def _record(
     line = {
         "test": test,
         "backend": sim.backend,
+        "board": sim.board,
         "timeout": timeout,
         "window": alive[1] - alive[0],
         # the failsafe at the pin, from the earliest and the latest the last sign of life was

@@ -28,6 +28,9 @@ from protoduino.simboard import SimBoard
 from protoduino_dev import faults
 from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
 
+#: Runs on the emulated Mega too: the failsafe against late bytes (tests/README.md).
+pytestmark = pytest.mark.mega
+
 SAFE_US = 1472
 BEFORE_US = 647
 LATE_US = 2296

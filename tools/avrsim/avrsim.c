@@ -1045,16 +1045,20 @@ static void pd_set_extrf(pd_sim_t *sim)
     }
 }
 
-/* simavr 1.6 emulates INT0/INT1's low-level trigger by polling the pin on
- * every cycle, through a new cycle timer per falling edge, while D2/D3 are
+/* simavr 1.6 emulates every INTn's low-level trigger by polling the pin on
+ * every cycle, through a new cycle timer per falling edge, while the pin is
  * low, enabled or not: a servo on D2 or D3 (low 90 % of the time) made the
- * emulator slower than real time. Level triggering then acts like a falling
- * edge, which nothing on protoduino's Uno relies on. extint's reset turns the
- * polling back on, so this runs after every reset. */
+ * emulator slower than real time, and on the Mega the same on pins 2 and 3
+ * (INT4, INT5; two outputs there left the board silent to the host after a few
+ * commands). Level triggering then acts like a falling edge, which nothing on
+ * protoduino's boards relies on. Each INTn the MCU has is tamed (simavr skips
+ * the others); extint's reset turns the polling back on, so this runs after
+ * every reset. */
 static void pd_tame_extint(pd_sim_t *sim)
 {
-    avr_extint_set_strict_lvl_trig(sim->avr, 0, 0);
-    avr_extint_set_strict_lvl_trig(sim->avr, 1, 0);
+    for (uint8_t n = 0; n < EXTINT_COUNT; n++) {
+        avr_extint_set_strict_lvl_trig(sim->avr, n, 0);
+    }
 }
 
 static void pd_after_reset(pd_sim_t *sim)

@@ -1,6 +1,7 @@
 """``protoduino demo``: the whole stack against a simulated board, in about 15 seconds.
 
-Starts the simulated board, sweeps a servo, blinks a pin, then stops pinging
+Starts the simulated board (or, with ``--backend avr``, the emulated Uno; with ``--board
+mega`` too, the emulated Mega 2560), sweeps a servo, blinks a pin, then stops pinging
 and waits for the device's failsafe to put both outputs back to their safe
 values, and finally reads the board's own trace to show what the pins did.
 
@@ -18,20 +19,29 @@ import queue
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..board import Board
 from ..constants import FAILSAFE_TIMEOUT
 from ..errors import ProtoduinoError
 from ..events import Event, EventKind
-from ..simboard import BACKENDS
+from ..simboard import AVR_BOARDS, BACKENDS
 from .options import add_capture, capture_max_bytes, capture_verdict, error
+
+if TYPE_CHECKING:
+    from ..simboard import SimBoard
 
 HELP = "run the demo on the simulated board: sweep a servo, blink a pin, watch the failsafe"
 
 SERVO_PIN = 9
 LED_PIN = 13
 SAFE_DEGREES = 90
+#: The servo's safe width, as the trace states it.
+SAFE_US = 544 + SAFE_DEGREES * (2400 - 544) // 180
+#: Seconds the demo waits, once the failsafe's event came, for the trace to show it: an
+#: emulated board writes a servo's new width after measuring it over two 20 ms frames, and
+#: the event can come first. A bound only: it reads on as soon as the trace shows it.
+TRACE_WAIT = 2.0
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -40,6 +50,12 @@ def register(parser: argparse.ArgumentParser) -> None:
         choices=sorted(BACKENDS),
         default="native",
         help="simulated board: native (default) or avr (the emulated Uno)",
+    )
+    parser.add_argument(
+        "--board",
+        choices=sorted(AVR_BOARDS),
+        default="uno",
+        help="the board the avr backend emulates: uno (default) or mega (the Mega 2560)",
     )
     parser.add_argument("--trace", type=Path, help="keep the board's pin trace in this file")
     add_capture(parser)
@@ -59,13 +75,13 @@ def run(args: argparse.Namespace) -> int:
     clock = _Clock()
     with tempfile.TemporaryDirectory(prefix="protoduino-demo-") as tmp:
         trace_path = args.trace or Path(tmp) / "trace.jsonl"
-        clock.say(f"starting the simulated board ({args.backend}) ...")
+        clock.say(f"starting the simulated board ({args.backend}, {args.board}) ...")
         try:
-            with SimBoard(args.backend, trace=trace_path) as sim:
+            with SimBoard(args.backend, board=args.board, trace=trace_path) as sim:
                 port = sim.start()
                 clock.say(f"simulated board on {port} (pid {sim.pid})")
                 ok = _demo(port, clock, args)
-                trace = sim.trace()
+                trace = _trace_with_failsafe(sim)
         except ProtoduinoError as exc:
             return error("demo", exc)
         except KeyboardInterrupt:
@@ -141,10 +157,27 @@ def _wait_for(
     return None
 
 
+def _pin_changes(trace: list[dict[str, Any]], pin: int) -> list[dict[str, Any]]:
+    return [e for e in trace if e.get("pin") == pin]
+
+
+def _shows_failsafe(trace: list[dict[str, Any]]) -> bool:
+    """The failsafe is the last change of each pin: back to the safe values."""
+    servo, led = _pin_changes(trace, SERVO_PIN), _pin_changes(trace, LED_PIN)
+    return bool(servo and led and servo[-1]["value"] == SAFE_US and led[-1]["value"] == 0)
+
+
+def _trace_with_failsafe(sim: SimBoard) -> list[dict[str, Any]]:
+    """The board's trace once it shows the failsafe, or as it is after ``TRACE_WAIT``."""
+    deadline = time.monotonic() + TRACE_WAIT
+    while not _shows_failsafe(trace := sim.trace()) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    return trace
+
+
 def _report(trace: list[dict[str, Any]], clock: _Clock) -> bool:
     """What the board's own trace says the pins did; True if the failsafe shows in it."""
-    servo = [e for e in trace if e.get("pin") == SERVO_PIN]
-    led = [e for e in trace if e.get("pin") == LED_PIN]
+    servo, led = _pin_changes(trace, SERVO_PIN), _pin_changes(trace, LED_PIN)
     clock.say(f"the board's trace: {len(trace)} output changes")
     if servo:
         values = [e["value"] for e in servo]
@@ -157,15 +190,14 @@ def _report(trace: list[dict[str, Any]], clock: _Clock) -> bool:
     if not servo or not led:
         clock.say("  the trace lacks the demo's pins")
         return False
-    # The failsafe is the last change of each pin: back to the safe values, about
-    # FAILSAFE_TIMEOUT after the last command (the LED going on).
-    safe_us = 544 + SAFE_DEGREES * (2400 - 544) // 180
+    # The failsafe: back to the safe values, about FAILSAFE_TIMEOUT after the last command
+    # (the LED going on).
     last_servo, last_led = servo[-1], led[-1]
     gap = last_servo["t"] - led[-2]["t"] if len(led) >= 2 else float("nan")
-    shown = bool(last_servo["value"] == safe_us and last_led["value"] == 0)
+    shown = _shows_failsafe(trace)
     clock.say(
         f"  failsafe in the trace: pin {SERVO_PIN} -> {last_servo['value']} us (safe "
-        f"{safe_us}), pin {LED_PIN} -> {last_led['value']} at t={last_servo['t']:.3f} s, "
+        f"{SAFE_US}), pin {LED_PIN} -> {last_led['value']} at t={last_servo['t']:.3f} s, "
         f"{gap:.2f} s after the last command (the Ping before it counts)"
     )
     clock.say("demo done" if shown else "the trace does not show the failsafe")
