@@ -336,6 +336,12 @@ void pd_avr_servo_expedite(void)
     {
         for (uint8_t t = 0; t < SERVO_TIMERS; t++) {
             servo_timer_t *tm = &servo_timers[t];
+            if (!(*timer_timsk(t) & _BV(OCIE1A))) {
+                /* The timer runs PWM (pd_avr_pwm.c took it over): its OCRnA is a duty,
+                 * never a frame time (written there, the PWM pin showed duty 255 at a
+                 * failsafe instead of its safe duty). */
+                continue;
+            }
             if (!tm->in_gap) {
                 /* Pulses under way: the frame's end starts the next one early. */
                 expedite[t] = true;

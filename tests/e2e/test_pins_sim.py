@@ -137,6 +137,28 @@ def test_pose_sets_pwm_with_the_others_and_the_failsafe_makes_it_safe(sim: SimBo
         assert motor.value == 7
 
 
+@pytest.mark.mega
+def test_the_failsafe_makes_the_servo_timers_pwm_pins_safe(sim: SimBoard) -> None:
+    """PWM on the pins of the timers that otherwise make the servo pulses (the Uno's 9 and 10,
+    the Mega's 11, 12 and 44..46: from DeviceInfo) goes to its safe duty at a failsafe. The
+    failsafe hurries the servos' next frame on; on a timer running PWM that wrote a frame time
+    into OCR1A, and the emulated Uno's pin 9 showed duty 255 where its safe duty was 7."""
+    with Board.open(sim.port, failsafe_timeout=0.3) as board:
+        seen = events(board)
+        pins = [p for p in board.info.timer_pins("servos") if board.info.can(p, PWM)]
+        if not pins:
+            pytest.skip(f"the {board.info.board} board's PWM pins need no servo timer")
+        motors = {pin: board.pwm_output(pin, safe=7 + pin) for pin in pins}
+        board.pose({motor: 200 for motor in motors.values()})
+        for pin in pins:
+            wait_pwm(sim, pin, lambda v: v[-1:] == [200])
+        mark = len(sim.trace())
+        board.pinging = False  # the device hears nothing more: its failsafe fires
+        wait_event(seen, EventKind.FAILSAFE)
+        for pin in pins:
+            wait_pwm(sim, pin, lambda v, safe=7 + pin: v[-1:] == [safe], since=mark)
+
+
 def _first(lines: list[dict[str, Any]], pin: int, ok: Callable[[dict[str, Any]], bool]) -> Any:
     """When ``pin`` first took a value ``ok`` accepts in ``lines``: (board time, line), so
     that changes at one instant keep the order the board wrote them in."""
