@@ -40,8 +40,9 @@ from .wire import BAUD, EMULATED_BYTE_US
 
 log = logging.getLogger(__name__)
 
-#: The 24 servo pins: 4..15 and 20..31 (not 16..19: servos there upset the emulated Mega's
-#: link at its faster rates; pins of 32 and more are beyond the build).
+#: The 24 servo pins: 4..15 and 20..31, as the run in docs/performance.md had them (16..19,
+#: INT3 and INT2 among them, upset the emulated Mega's link until the runner stopped simavr
+#: polling external interrupts' levels: tests/e2e/test_mega.py drives 4..27).
 PINS: tuple[int, ...] = (*range(4, 16), *range(20, 32))
 #: A Pose's most items (host board.MAX_POSE_ITEMS).
 PER_POSE = 8

@@ -17,9 +17,11 @@ import protoduino
 import protoduino_dev  # noqa: F401  (registers faulty://, which the bad-URL cases use)
 import pytest
 from protoduino import Board
+from protoduino.commands import SERVO
 from protoduino.messages import Status
 from protoduino.simboard import SimBoard
 from protoduino.testing import PtyDevice
+from simfixtures import pins_for
 
 WRONG_TYPES: list[tuple[str, Callable[[Board], object]]] = [
     ("servo pin bool", lambda b: b.servo(True)),
@@ -146,15 +148,16 @@ def test_device_refusals_when_the_hosts_view_is_stale(sim_board: SimBoard) -> No
     """A resumed session keeps the device's outputs: a new Board resuming it does not know them."""
     with Board.open(sim_board.port) as first:
         first.digital_output(13)
-        for pin in range(2, 10):  # every servo slot
-            first.servo(pin)
+        first.servo(9)
+        for pin in pins_for(first, SERVO, first.info.max_servos - 1, avoid=(9, 10, 13)):
+            first.servo(pin)  # every servo slot the device states (the Uno's 8, the Mega's 24)
         session = first.session
     with Board.open(sim_board.port, session=session) as second:
         with pytest.raises(protoduino.CommandRejectedError) as info:
             second.servo(13)  # the host sees a free pin; the device a digital output
         assert info.value.status == Status.STATUS_PIN_IN_USE and info.value.sent
         with pytest.raises(protoduino.CommandRejectedError) as info:
-            second.servo(10)  # the host counts no servo; the device has eight
+            second.servo(10)  # the host counts no servo; the device has every slot taken
         assert info.value.status == Status.STATUS_NO_FREE_RESOURCE and info.value.sent
         assert second.stats.rejected == 2
         second.servo(9).write(45)  # re-initialising one of the device's servos is fine

@@ -19,10 +19,11 @@ import protoduino
 import pytest
 import serial
 from protoduino import Board, Event, EventKind
+from protoduino.commands import SERVO
 from protoduino.messages import ArduinoIn, Status
 from protoduino.simboard import SimBoard
 from protoduino.transport import FrameRecord
-from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS, pin_values, wait_until
+from simfixtures import PULSE_TOLERANCE_US, SIM_BACKENDS, pin_values, pins_for, wait_until
 
 SAFE_90_US = 544 + 90 * (2400 - 544) // 180  # 1472
 
@@ -209,8 +210,8 @@ def test_state_dependent_checks_match_the_device(board: Board) -> None:
     with pytest.raises(protoduino.CommandRejectedError) as device:
         board.request(raw(lambda m: m.servo_control.MergeFrom(_sc(9, us_=2001))))
     assert host.value.status == device.value.status == Status.STATUS_OUT_OF_RANGE
-    for pin in (2, 3, 4, 5, 6, 7, 8):
-        board.servo(pin)
+    for pin in pins_for(board, SERVO, board.info.max_servos - 1, avoid=(9, 10, 13)):
+        board.servo(pin)  # every servo slot the device states (the Uno's 8, the Mega's 24)
     with pytest.raises(protoduino.CommandRejectedError) as host:
         board.servo(10)
     with pytest.raises(protoduino.CommandRejectedError) as device:

@@ -156,7 +156,8 @@ def test_the_failsafe_makes_the_servo_timers_pwm_pins_safe(sim: SimBoard) -> Non
         board.pinging = False  # the device hears nothing more: its failsafe fires
         wait_event(seen, EventKind.FAILSAFE)
         for pin in pins:
-            wait_pwm(sim, pin, lambda v, safe=7 + pin: v[-1:] == [safe], since=mark)
+            safe = 7 + pin
+            wait_pwm(sim, pin, lambda v: v[-1:] == [safe], since=mark)  # noqa: B023 (waited here)
 
 
 def _first(lines: list[dict[str, Any]], pin: int, ok: Callable[[dict[str, Any]], bool]) -> Any:
