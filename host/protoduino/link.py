@@ -500,10 +500,19 @@ class Link:
                 f"rates, pin the opening rate (baudrate={self.opening_baudrate}, "
                 f"--baud {self.opening_baudrate})"
             )
+        # A Mega's stk500v2 bootloader, just reset by the open, stays while bytes arrive and
+        # says nothing: the one silent cause the checklist cannot name from what was heard.
+        bootloader = (
+            "; a Mega 2560 just reset by the open may be held in its bootloader by the RESETs "
+            "(docs/api.md, When the device does not answer)"
+            if self.transport.rx_since_open == 0
+            else ""
+        )
         return (
             f"the device on {self.transport.url} did not answer RESET within "
             f"{self.handshake_timeout:g} s ({heard_text}); check that the protoduino firmware is "
             "flashed, the port and baud rate are right, and nothing else holds the port"
+            + bootloader
         )
 
     def _start_handshake(self, now: float) -> None:
