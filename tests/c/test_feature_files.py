@@ -3,9 +3,10 @@ feature (``make -C firmware avr FEATURES=...`` leaves ``PD_FEATURE_<NAME>`` 0), 
 compiles to nothing, and built with it, it defines its mode's functions.
 
 Its callers test the same switch (the pin-mode table in ``pd_outputs.c``, the command table
-in ``pd_dispatch.c``), so a build without the feature links without the file's code; the
-subset builds that prove it: tests/c/test_footprint.py and the e2e tests' ``FEATURES=``
-builds. Here each file alone, compiled natively with the project's warnings.
+in ``pd_dispatch.c``, the inputs' poll in ``pd_inputs.c``), so a build without the feature
+links without the file's code; the subset builds that prove it: tests/c/test_footprint.py and
+the e2e tests' ``FEATURES=`` builds. Here each file alone, compiled natively with the
+project's warnings.
 """
 
 from __future__ import annotations
@@ -26,6 +27,9 @@ MODE_FILES = (
     ("pd_servo.c", "PD_FEATURE_SERVO", "pd_servo_safe"),
     ("pd_digital.c", "PD_FEATURE_DIGITAL_OUTPUT", "pd_digital_safe"),
     ("pd_pwm.c", "PD_FEATURE_PWM", "pd_pwm_safe"),
+    ("pd_digital_input.c", "PD_FEATURE_DIGITAL_INPUT", "pd_inputs_digital_init"),
+    ("pd_analog_input.c", "PD_FEATURE_ANALOG_INPUT", "pd_inputs_analog_init"),
+    ("pd_counter.c", "PD_FEATURE_COUNTER", "pd_inputs_counter_init"),
 )
 
 
