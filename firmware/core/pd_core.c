@@ -201,7 +201,9 @@ void pd_core_poll(pd_core_t *core)
     if (pd_failsafe_due(&core->failsafe, now)) {
         pd_core_enter_safe(core, protoduino_FailsafeCause_FAILSAFE_CAUSE_PING_TIMEOUT);
     }
-    pd_outputs_step(&core->outputs, core->hal, now);
+    if (PD_FEATURE_SERVO) {
+        pd_outputs_step(&core->outputs, core->hal, now);
+    }
     /* Every pass, whether a host is connected or not: an interlock acts on its own. */
     if (pd_inputs_active(&core->outputs.inputs)) {
         pd_inputs_poll(core, now);

@@ -3,6 +3,10 @@
 
 #include "pd_outputs.h"
 
+/* Built only with its feature (pd_features.h): without it, nothing here (its callers test
+ * PD_FEATURE_DIGITAL_OUTPUT too). */
+#if PD_FEATURE_DIGITAL_OUTPUT
+
 /* A pin in a set or not; not inlined: the level's and the safe value's updates share it. */
 static __attribute__((noinline)) void put_bit(pd_pinset_t *set, uint8_t pin, bool on)
 {
@@ -69,3 +73,5 @@ protoduino_Status pd_outputs_digital_control(pd_outputs_t *out, void *hal,
 {
     return pd_digital_control(out, hal, msg, true);
 }
+
+#endif /* PD_FEATURE_DIGITAL_OUTPUT */

@@ -14,6 +14,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "pd_features.h"
 #include "protoduino.pb.h"
 
 struct pd_outputs;

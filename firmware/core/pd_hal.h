@@ -133,7 +133,7 @@ void pd_hal_pwm_write(void *hal, uint8_t pin, uint8_t duty);
 void pd_hal_pwm_release(void *hal, uint8_t pin);
 
 /*
- * Inputs (pd_inputs.c). pd_hal_input_config makes `pin` an input, with its
+ * Inputs (pd_inputs.c and its modes). pd_hal_input_config makes `pin` an input, with its
  * pull-up if asked, and (where the board can) lets a change of it wake the
  * main loop; pd_hal_input_release: an input without pull-up, as at power-up.
  * pd_hal_digital_read_all: the level at every pin now, a pin set (one read per

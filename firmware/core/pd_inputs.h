@@ -88,7 +88,7 @@ typedef struct pd_inputs {
     uint8_t analog_fresh;  /* samples due for a report since the last round's end */
     uint8_t analog_round;  /* bit slot: sampled in this round */
     uint8_t latched;       /* an interlock tripped: its pin + 1; 0: none */
-    uint8_t notice;        /* that trip is not told yet (pd_inputs.c, send_notice) */
+    uint8_t notice;        /* that trip is not told yet (pd_digital_input.c, pd_digital_input_notice) */
     uint8_t analog_on;     /* bit slot: an analog input is configured there */
     uint8_t counter_on;    /* bit slot: a counter is configured there */
     uint8_t tick;          /* low byte of the millisecond the timed work last ran */

@@ -24,7 +24,7 @@ void pd_inputs_release(pd_outputs_t *outputs, void *hal, uint8_t pin, uint8_t mo
         pd_pinset_put(&in->dpins, pin, false);
     } else if (mode == PD_MODE_ANALOG_INPUT) {
         in->analog_on = (uint8_t)(in->analog_on & ~(1u << slot));
-        /* Interval 0: not sampled; a conversion under way ends unused (poll_analog). */
+        /* Interval 0: not sampled; a conversion under way ends unused (pd_analog_input_poll). */
         memset(&in->analog[slot], 0, sizeof(in->analog[slot]));
         in->analog_dirty = (uint8_t)(in->analog_dirty & ~(1u << slot));
     } else if (mode == PD_MODE_COUNTER) {

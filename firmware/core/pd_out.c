@@ -32,7 +32,7 @@ void pd_out_failsafe_state(const pd_core_t *core, protoduino_Failsafe *fs)
 {
     /* An interlock's latch holds the safe state until ClearInterlock, whatever
      * liveness messages came since; one not told yet is in no state sent
-     * (pd_inputs.c, send_notice: the report of its edge goes first). */
+     * (pd_digital_input.c, pd_digital_input_notice: the report of its edge goes first). */
     const pd_inputs_t *in = &core->outputs.inputs;
     fs->active = core->failsafe.active || (in->latched != 0 && !in->notice);
     fs->cause = (protoduino_FailsafeCause)core->failsafe.cause;

@@ -38,7 +38,10 @@ static void counter_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t s
 
 /*
  * The pin-mode table: one entry per PD_MODE_x but PD_MODE_FREE (which owns no pin),
- *   X(mode, safe, release)
+ *   X(mode, feature, safe, release)
+ *   feature: the PD_FEATURE_x switch it is built with (pd_features.h): without it, the mode
+ *            owns no pin and its functions are not built (its file compiles to nothing), so
+ *            the walks never call them;
  *   safe:    safe(out, hal, pin, slot), drive one of its pins to the safe value
  *            given at its Init;
  *   release: release(out, hal, pin, slot), let go of one of its pins (the owner
@@ -49,13 +52,13 @@ static void counter_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t s
  * 90 B more of the Uno's flash, for the same reason as the command table
  * (pd_dispatch.c): the compiler cannot inline through a pointer.
  */
-#define PD_MODES(X)                                                          \
-    X(PD_MODE_DIGITAL, pd_digital_safe, pd_digital_release)                  \
-    X(PD_MODE_SERVO, pd_servo_safe, pd_servo_release)                        \
-    X(PD_MODE_PWM, pd_pwm_safe, pd_pwm_release)                              \
-    X(PD_MODE_DIGITAL_INPUT, input_safe, dinput_release)                     \
-    X(PD_MODE_ANALOG_INPUT, input_safe, ainput_release)                      \
-    X(PD_MODE_COUNTER, input_safe, counter_release)                          \
+#define PD_MODES(X)                                                                    \
+    X(PD_MODE_DIGITAL, PD_FEATURE_DIGITAL_OUTPUT, pd_digital_safe, pd_digital_release) \
+    X(PD_MODE_SERVO, PD_FEATURE_SERVO, pd_servo_safe, pd_servo_release)                \
+    X(PD_MODE_PWM, PD_FEATURE_PWM, pd_pwm_safe, pd_pwm_release)                        \
+    X(PD_MODE_DIGITAL_INPUT, PD_FEATURE_DIGITAL_INPUT, input_safe, dinput_release)     \
+    X(PD_MODE_ANALOG_INPUT, PD_FEATURE_ANALOG_INPUT, input_safe, ainput_release)       \
+    X(PD_MODE_COUNTER, PD_FEATURE_COUNTER, input_safe, counter_release)                \
     PD_MODES_USER(X)
 
 /* A user service's pins (pd_user.h), by pin, like digital outputs. */
@@ -71,21 +74,23 @@ static void user_release(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot
     (void)slot;
     pd_user_pin_release(out->core, out->owner, hal, pin);
 }
-#define PD_MODES_USER(X) X(PD_MODE_USER, user_safe, user_release)
+#define PD_MODES_USER(X) X(PD_MODE_USER, 1, user_safe, user_release)
 #else
 #define PD_MODES_USER(X)
 #endif
 
-#define PD_MODE_ONE(mode, safe_, release_) +1
+#define PD_MODE_ONE(mode, feature_, safe_, release_) +1
 typedef char pd_assert_every_mode_listed[(0 PD_MODES(PD_MODE_ONE)) == PD_MODE_COUNT - 1 ? 1 : -1];
 #undef PD_MODE_ONE
 
 static void mode_safe(uint8_t mode, pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
     switch (mode) {
-#define PD_MODE_SAFE(mode_, safe_, release_)                                 \
+#define PD_MODE_SAFE(mode_, feature_, safe_, release_)                       \
     case mode_:                                                              \
-        safe_(out, hal, pin, slot);                                          \
+        if (feature_) {                                                      \
+            safe_(out, hal, pin, slot);                                      \
+        }                                                                    \
         break;
         PD_MODES(PD_MODE_SAFE)
 #undef PD_MODE_SAFE
@@ -97,9 +102,11 @@ static void mode_safe(uint8_t mode, pd_outputs_t *out, void *hal, uint8_t pin, u
 static void mode_release(uint8_t mode, pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot)
 {
     switch (mode) {
-#define PD_MODE_RELEASE(mode_, safe_, release_)                              \
+#define PD_MODE_RELEASE(mode_, feature_, safe_, release_)                    \
     case mode_:                                                              \
-        release_(out, hal, pin, slot);                                       \
+        if (feature_) {                                                      \
+            release_(out, hal, pin, slot);                                   \
+        }                                                                    \
         break;
         PD_MODES(PD_MODE_RELEASE)
 #undef PD_MODE_RELEASE

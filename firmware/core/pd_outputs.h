@@ -17,8 +17,7 @@
  *   of it to its safe value and how to release it, for the walks over every
  *   owned pin (Release, ReleaseAll, the failsafe's safe-all).
  *
- * How to add a pin mode (the files touched by hand, counted by adding a
- * throwaway output mode; docs/architecture.md):
+ * How to add a pin mode (the files touched by hand; docs/architecture.md counts them):
  *   1. proto/protoduino.proto: its Init and Control messages (each with a `pin`
  *      field; an input has no Control) and their ArduinoIn.data members, and one
  *      Feature value with a (pin_mode) option naming them (and the DeviceInfo
@@ -27,13 +26,20 @@
  *      PD_FEATURES (pd_tables.h), the Makefile's feature list, the command table
  *      and the host's declarations (host/protoduino/commands.py reads them);
  *   2. a file of its own, pd_<mode>.h and pd_<mode>.c (as pd_servo, pd_digital,
- *      pd_pwm): its state's type, its Init/Control functions, which call
+ *      pd_pwm), the .c's code within #if PD_FEATURE_<NAME> (built only with its
+ *      feature): its state's type, its Init/Control functions, which call
  *      pd_pins_claim() (with the mode's count of slots) and pd_pins_owned() of
  *      pd_pintable.h, and its safe and release functions;
  *   3. here: #include its header, and its state, if any, in pd_outputs_t (an
  *      array indexed by slot, or a mask by pin); pd_outputs.c: one X(...) entry
- *      in PD_MODES (its safe and release; the compiler checks that every mode has
- *      one), and its Pose item and ReadOutputs if it has them;
+ *      in PD_MODES (its feature, safe and release; the compiler checks that every
+ *      mode has one), and its Pose item and ReadOutputs if it has them (calling
+ *      into its file only where PD_FEATURE_<NAME> is on);
+ *      an input mode instead: pd_<mode>.c alone (as pd_digital_input.c), its
+ *      state in pd_inputs_t and its Init in pd_inputs.h, its poll in
+ *      pd_input_modes.h and pd_inputs_poll, its values in pd_inputs_report and
+ *      pd_inputs_sent (pd_inputs.c), its release in pd_inputs_state.c, and its
+ *      X(...) entry in PD_MODES;
  *   4. pd_dispatch.c: their handlers cmd_<init>() and cmd_<control>();
  *   5. the tests that list the default firmware's features
  *      (tests/unit/test_pins_fake.py, tests/e2e/test_cli.py), and the switch in

@@ -3,6 +3,10 @@
 
 #include "pd_outputs.h"
 
+/* Built only with its feature (pd_features.h): without it, nothing here (its callers test
+ * PD_FEATURE_PWM too). */
+#if PD_FEATURE_PWM
+
 static void drive_pwm(pd_outputs_t *out, void *hal, uint8_t pin, uint8_t slot, uint8_t duty)
 {
     out->pwm[slot].duty = duty;
@@ -91,3 +95,5 @@ protoduino_Status pd_outputs_pwm_control(pd_outputs_t *out, void *hal,
 {
     return pd_pwm_control(out, hal, msg, true);
 }
+
+#endif /* PD_FEATURE_PWM */

@@ -7,6 +7,10 @@
 #include "pd_outputs.h"
 #include "pd_protocol.h"
 
+/* Built only with its feature (pd_features.h): without it, nothing here (its callers test
+ * PD_FEATURE_SERVO too). */
+#if PD_FEATURE_SERVO
+
 /* A channel fits the owner byte's low nibble. */
 typedef char pd_assert_servos_fit_slot[(PD_MAX_SERVOS <= PD_MAX_SLOTS) ? 1 : -1];
 /* A servo's settings (min_us .. step) are compared as bytes: no padding among them. */
@@ -111,7 +115,7 @@ pd_outputs_servo_init(pd_outputs_t *out, void *hal, const protoduino_ServoInit *
     uint16_t step = (uint16_t)((uint16_t)(msg->max_speed + 25u) / 50u);
     step = msg->max_speed && step == 0 ? 1u : step;
 
-    if (pd_outputs_timer_pwm(out, hal)) {
+    if (PD_FEATURE_PWM && pd_outputs_timer_pwm(out, hal)) {
         return protoduino_Status_STATUS_TIMER_IN_USE; /* the servos' timer makes PWM */
     }
     uint8_t was = out->owner[msg->pin];
@@ -201,3 +205,5 @@ void pd_outputs_step(pd_outputs_t *out, void *hal, uint32_t now)
     }
     pd_hal_servo_hold(hal, false);
 }
+
+#endif /* PD_FEATURE_SERVO */

@@ -53,7 +53,18 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ),
     ("device state", ("pd_state.h",)),
     ("outgoing messages", ("pd_out",)),
-    ("commands and inputs", ("pd_dispatch", "pd_inputs.c", "pd_user.c")),
+    (
+        "commands and inputs",
+        (
+            "pd_dispatch",
+            "pd_inputs.c",  # the inputs' poll and report, above the input modes
+            "pd_input_modes",  # what the input modes share, below them
+            "pd_digital_input.c",  # the input modes, each one file (pd_input_modes.h)
+            "pd_analog_input.c",
+            "pd_counter.c",
+            "pd_user.c",
+        ),
+    ),
     ("core", ("pd_core",)),
     # ramsizes/: not firmware, the Uno build's sizes of the core's parts (firmware/Makefile).
     ("platforms", ("posix/", "simcontrol/", "avr/", "arduino/", "ramsizes/")),
