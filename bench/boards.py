@@ -199,9 +199,11 @@ def started(
     stats: Path | None = None,
     profile: Path | None = None,
     trace: Path | None = None,
+    board: str = "uno",
 ) -> Iterator[SimBoard]:
-    """A started board of ``backend``, stopped on exit. ``stats`` and ``profile`` (avr only)
-    are the runner's --stats and --profile files, ``trace`` its trace file.
+    """A started board of ``backend`` (the emulated ``board``: "uno" or "mega"), stopped on
+    exit. ``stats`` and ``profile`` (avr only) are the runner's --stats and --profile files,
+    ``trace`` its trace file.
 
     Raises :class:`BoardUnavailableError` when a tool is missing or the build fails.
     """
@@ -217,7 +219,7 @@ def started(
         options += ["--stats", str(stats)]
     if profile is not None:
         options += ["--profile", str(profile)]
-    yield from _run(SimBoard(backend, trace=trace, options=options))
+    yield from _run(SimBoard(backend, board=board, trace=trace, options=options))
 
 
 @contextlib.contextmanager

@@ -23,19 +23,16 @@ import logging
 import random
 import statistics
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from tempfile import TemporaryDirectory
 from typing import Any
 
 from protoduino import Board, Servo
-from protoduino.errors import ProtoduinoError
-from protoduino.simboard import SimBoard
 
-from .boards import BoardUnavailableError, Percentiles, Trace, missing_tool
+from .boards import BoardUnavailableError, Percentiles, Trace, started
 from .core import Context, Section, SectionResult, md_table
+from .motion import wait_changes
 from .wire import BAUD, EMULATED_BYTE_US
 
 log = logging.getLogger(__name__)
@@ -68,24 +65,6 @@ class MegaRun:
     error: str | None = None
 
 
-@contextmanager
-def started_mega(trace: Path) -> Iterator[SimBoard]:
-    """The emulated Mega with its trace, stopped on exit."""
-    tool = missing_tool("avr")
-    if tool is not None:
-        raise BoardUnavailableError(f"`{tool}` is not installed")
-    sim = SimBoard("avr", board="mega", trace=trace)
-    try:
-        sim.start()
-    except ProtoduinoError as error:
-        sim.stop()
-        raise BoardUnavailableError(str(error).splitlines()[0]) from error
-    try:
-        yield sim
-    finally:
-        sim.stop()
-
-
 def targets(rng: random.Random, servos: dict[int, Servo], now: dict[int, int]) -> dict[int, int]:
     """New degrees for every servo, each width more than MATCH_US from its current one."""
     out: dict[int, int] = {}
@@ -95,27 +74,6 @@ def targets(rng: random.Random, servos: dict[int, Servo], now: dict[int, int]) -
             degrees = rng.randrange(0, 181)
         out[pin] = degrees
     return out
-
-
-def first_lines(
-    trace: Trace, wants: dict[int, int], after: float, timeout: float = SETTLE
-) -> dict[int, float] | None:
-    """Board-clock time of each pin's first servo line near its wanted width after ``after``."""
-    deadline = time.monotonic() + timeout
-    while True:
-        found: dict[int, float] = {}
-        for e in trace.update():
-            pin = int(e["pin"])
-            want = wants.get(pin)
-            if want is None or pin in found or e["t"] <= after or e["mode"] != "servo":
-                continue
-            if abs(int(e["value"]) - want) <= MATCH_US:
-                found[pin] = float(e["t"])
-        if len(found) == len(wants):
-            return found
-        if time.monotonic() > deadline:
-            return None
-        time.sleep(0.002)
 
 
 def deviations(
@@ -137,7 +95,7 @@ def measure(trials: int, seed: int) -> MegaRun:
     try:
         with (
             TemporaryDirectory(prefix="bench-mega-") as tmp,
-            started_mega(Path(tmp) / "trace.jsonl") as sim,
+            started("avr", board="mega", trace=Path(tmp) / "trace.jsonl") as sim,
             Board.open(sim.port, baudrate=BAUD) as board,
         ):
             if board.info.max_servos < len(PINS):
@@ -163,7 +121,7 @@ def measure(trials: int, seed: int) -> MegaRun:
                     board.pose({servos[pin]: degrees[pin] for pin in pins})
                     run.pose_s.append(time.perf_counter() - t)
                 run.poses_s.append(time.perf_counter() - t0)
-                changed = first_lines(trace, wants, after)
+                changed = wait_changes(trace, wants, after, tolerance=MATCH_US, mode="servo")
                 run.trials += 1
                 if changed is None:
                     run.lost += 1

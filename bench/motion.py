@@ -56,9 +56,16 @@ def us(degrees: int) -> int:
 
 
 def wait_changes(
-    trace: Trace, wants: dict[int, int], after: float, timeout: float = SETTLE
+    trace: Trace,
+    wants: dict[int, int],
+    after: float,
+    timeout: float = SETTLE,
+    *,
+    tolerance: int = TOLERANCE_US,
+    mode: str | None = None,
 ) -> dict[int, float] | None:
-    """Board-clock time at which each pin first showed its wanted value after ``after``."""
+    """Board-clock time at which each pin first showed its wanted value (within ``tolerance``,
+    in a line of ``mode`` if one is named) after ``after``."""
     deadline = time.monotonic() + timeout
     while True:
         found: dict[int, float] = {}
@@ -67,7 +74,9 @@ def wait_changes(
             want = wants.get(pin)
             if want is None or pin in found or e["t"] <= after:
                 continue
-            if abs(int(e["value"]) - want) <= TOLERANCE_US:
+            if mode is not None and e["mode"] != mode:
+                continue
+            if abs(int(e["value"]) - want) <= tolerance:
                 found[pin] = float(e["t"])
         if len(found) == len(wants):
             return found
