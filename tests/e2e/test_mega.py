@@ -136,11 +136,16 @@ def test_digital_outputs_past_pin_31_at_the_pins(mega: SimBoard) -> None:
         wait_for_pin(mega, 68, _last(1), BOUND)
 
 
-def test_servos_past_pin_31_in_one_pose(mega: SimBoard) -> None:
-    """Servos on pins 44, 49, 53 (ports L and B) and A8, A15 (62, 69): the widths of one pose
-    at the pins."""
+@pytest.mark.parametrize(
+    "pins",
+    [tuple(range(24, 32)), (44, 49, 53, 62, 69)],
+    ids=["ports A and C", "past pin 31"],
+)
+def test_servos_in_one_pose_at_the_pins(mega: SimBoard, pins: tuple[int, ...]) -> None:
+    """Servos on pins 24..31 (PA2..PA7, PC7, PC6), and past the 32 pins a version 7 pin mask
+    held: 44, 49, 53 (ports L and B) and A8, A15 (62, 69): the widths of one pose at the pins."""
     with Board.open(mega.port) as board:
-        servos = {pin: board.servo(pin) for pin in (44, 49, 53, 62, 69)}
+        servos = {pin: board.servo(pin) for pin in pins}
         degrees = {pin: (pin * 7) % 170 + 5 for pin in servos}
         widths = {pin: servos[pin].to_us(deg) for pin, deg in degrees.items()}
         board.pose({servos[pin]: deg for pin, deg in degrees.items()})
@@ -177,21 +182,6 @@ def test_the_host_refuses_pin_70_from_the_mega_info(mega: SimBoard) -> None:
         with pytest.raises(CommandRejectedError) as device:
             board.request(msg)
         assert device.value.status == Status.STATUS_INVALID_PIN and device.value.sent
-
-
-def test_eight_servos_on_ports_a_and_c_in_one_pose(mega: SimBoard) -> None:
-    """Eight servos on pins 24..31 (PA2..PA7, PC7, PC6): the widths of one pose at the pins."""
-    with Board.open(mega.port) as board:
-        servos = {pin: board.servo(pin) for pin in range(24, 32)}
-        degrees = {pin: 20 * (pin - 24) + 10 for pin in servos}  # 10..150
-        widths = {pin: servos[pin].to_us(deg) for pin, deg in degrees.items()}
-        board.pose({servos[pin]: deg for pin, deg in degrees.items()})
-
-        def at(pin: int) -> Callable[[list[int]], bool]:
-            return lambda v: bool(v) and abs(v[-1] - widths[pin]) <= PULSE_TOLERANCE_US
-
-        for pin in servos:
-            _wait(mega, pin, "servo", at(pin))
 
 
 def test_the_mega_states_its_two_servo_timers(mega: SimBoard) -> None:
