@@ -42,31 +42,26 @@ def _make(target: str) -> subprocess.CompletedProcess[str]:
     )
 
 
-def test_c_unit_tests_under_sanitizers() -> None:
+@pytest.mark.parametrize(
+    "target",
+    [
+        "unit",
+        # Every C test again with the Mega build's capacities (the Makefile's MEGA_CAPS: 70
+        # pins, 24 servos in 5 bits of owner slot, 6 timers, 6 PWM outputs): a ReadOutputs
+        # answer of 24 servos, past 127 B, byte for byte as pb_encode writes it.
+        "unit-mega",
+    ],
+)
+def test_c_unit_tests_under_sanitizers(target: str) -> None:
     _need("make", "gcc")
-    result = _make("unit")
+    result = _make(target)
     output = result.stdout + result.stderr
     summary = re.findall(r"^(\d+) passed, (\d+) failed$", result.stdout, re.MULTILINE)
-    assert summary, f"no test summary from `make -C firmware unit`:\n{output[-4000:]}"
+    assert summary, f"no test summary from `make -C firmware {target}`:\n{output[-4000:]}"
     passed, failed = (int(n) for n in summary[-1])
     assert result.returncode == 0 and failed == 0, output[-4000:]
     assert passed >= MIN_C_TESTS, output[-4000:]
     assert "runtime error" not in output  # UBSan reports without aborting otherwise
-
-
-def test_c_unit_tests_with_the_mega_capacities() -> None:
-    """Every C test again with the Mega build's capacities (the Makefile's MEGA_CAPS: 32 pins,
-    24 servos in 5 bits of owner slot, 6 timers, 6 PWM outputs): a ReadOutputs answer of 24
-    servos, past 127 B, byte for byte as pb_encode writes it, under the sanitizers."""
-    _need("make", "gcc")
-    result = _make("unit-mega")
-    output = result.stdout + result.stderr
-    summary = re.findall(r"^(\d+) passed, (\d+) failed$", result.stdout, re.MULTILINE)
-    assert summary, f"no test summary from `make -C firmware unit-mega`:\n{output[-4000:]}"
-    passed, failed = (int(n) for n in summary[-1])
-    assert result.returncode == 0 and failed == 0, output[-4000:]
-    assert passed >= MIN_C_TESTS, output[-4000:]
-    assert "runtime error" not in output
 
 
 def test_c_unit_tests_with_a_user_service() -> None:

@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 from boardprocess import missing_tool
-from protoduino import Board, EventKind
+from protoduino import Board, EventKind, PwmOutput
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.errors import CommandRejectedError, NotSupportedError, TimerInUseError
 from protoduino.messages import ArduinoIn, Status
@@ -243,17 +243,23 @@ def test_pwm_on_timer2_and_timer1_pins(mega: SimBoard) -> None:
             _wait(mega, pin, "pwm", _last(duty))
 
 
+def _pwm_at_the_pins(mega: SimBoard, board: Board, duties: dict[int, int]) -> dict[int, PwmOutput]:
+    """PWM outputs on ``duties``' pins, each written its duty and seen at its pin."""
+    outs = {pin: board.pwm_output(pin) for pin in duties}
+    for pin, duty in duties.items():
+        outs[pin].write(duty)
+    for pin, duty in duties.items():
+        _wait(mega, pin, "pwm", _last(duty))
+    return outs
+
+
 def test_pwm_on_timer3_and_timer4_pins(mega: SimBoard) -> None:
     """Pins 5, 2, 3 (Timer3's OC3A..C) and 6, 7, 8 (Timer4's): the duty measured at each pin
     is the one written, and stays so while servos run on both servo timers (Timers 3 and 4
     make no servo pulses); Timer1's 11 is refused then, by the host from the pin table."""
     duties = {5: 60, 2: 200, 3: 128, 6: 30, 7: 250, 8: 1}
     with Board.open(mega.port) as board:
-        outs = {pin: board.pwm_output(pin) for pin in duties}
-        for pin, duty in duties.items():
-            outs[pin].write(duty)
-        for pin, duty in duties.items():
-            _wait(mega, pin, "pwm", _last(duty))
+        outs = _pwm_at_the_pins(mega, board, duties)
         servos = [board.servo(pin) for pin in (*range(20, 32), 4, 13)]  # 13, 14: Timer5's
         with pytest.raises(TimerInUseError) as timer1:
             board.pwm_output(11)
@@ -268,13 +274,8 @@ def test_pwm_on_timer3_and_timer4_pins(mega: SimBoard) -> None:
 def test_pwm_on_timer5_pins_past_pin_31(mega: SimBoard) -> None:
     """Pins 46, 45, 44 (Timer5's OC5A..C, a servo timer): the duty measured at each pin is the
     one written while no servo runs, and a servo is refused then (its timer makes PWM)."""
-    duties = {46: 40, 45: 128, 44: 220}
     with Board.open(mega.port) as board:
-        outs = {pin: board.pwm_output(pin) for pin in duties}
-        for pin, duty in duties.items():
-            outs[pin].write(duty)
-        for pin, duty in duties.items():
-            _wait(mega, pin, "pwm", _last(duty))
+        _pwm_at_the_pins(mega, board, {46: 40, 45: 128, 44: 220})
         with pytest.raises(TimerInUseError):
             board.servo(30)
 
