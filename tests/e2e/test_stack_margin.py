@@ -87,15 +87,18 @@ NANOPB_LEVEL_BYTES = 128
 
 
 def test_a_level_of_a_nested_decode_takes_at_most_128_bytes(uno: tuple[StatsRunner, Path]) -> None:
-    """The deepest point's chain (a Pose decoded in full: four levels) as the runner kept it:
-    the bytes from one pb_decode_inner's return address to the next."""
+    """The deepest point's chain as the runner kept it: the bytes from one pb_decode_inner's
+    return address to the next. The deepest point is mostly a Pose decoded in full (four
+    levels), but interrupts stacked on a three-level decode reach about as deep (CI's run at
+    909cfd1 kept one such, the interrupts' frames unnamed), so any chain of two levels or more
+    is measured."""
     runner, elf = uno
     with Board.open(runner.port, window=4) as board, SimControl(runner.control) as control:
         exercise(board, control)
     runner.snapshot()  # the runner writes its --stack file with its counters
     frames = stackwalk.walk(elf, runner.stack.read_bytes())
     levels = [frame.depth for frame in frames if frame.function == "pb_decode_inner"]
-    assert len(levels) == 4, stackwalk.describe(frames)
+    assert 2 <= len(levels) <= 4, stackwalk.describe(frames)
     steps = [deeper - outer for outer, deeper in pairwise(levels)]
     assert max(steps) <= NANOPB_LEVEL_BYTES, (steps, stackwalk.describe(frames))
 
