@@ -18,6 +18,7 @@ on the port (its open, the port already held, resets nothing: DTR is already ass
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -124,6 +125,16 @@ class EmulatedMega(EmulatedUno):
         last = json.loads(self.stats.read_text().splitlines()[-1])
         return float(last["cycles"]) / float(last["freq"])
 
+    @contextlib.contextmanager
+    def past_the_bootloader(self) -> Iterator[None]:
+        """The port held open (the open's reset into the bootloader) and silent until the
+        bootloader has started the application on the board's clock; a client opening the port
+        meanwhile resets nothing (the runner's auto-reset is the first open's, as DTR)."""
+        with serial.Serial(self.port, 115200, timeout=0.1):
+            reset_at = self.emulated_seconds()
+            assert wait_until(lambda: self.emulated_seconds() >= reset_at + STK500V2_QUIET, 60)
+            yield
+
 
 #: Silence after a reset that takes the stk500v2 bootloader to the application (its wait:
 #: the application starts 0.78 s after the reset on the board's clock, measured).
@@ -206,12 +217,7 @@ def test_flash_a_mega_through_stk500v2_then_info_reads_mega(blank_mega: Emulated
     # avrdude's own report: the ATmega2560's signature, through the stk500v2 ("wiring") protocol.
     assert "device signature = 0x1e9801" in output
     assert "bytes of flash verified" in output
-    with serial.Serial(blank_mega.port, 115200, timeout=0.1):
-        # Opened: reset into the bootloader; silent until it has started the application.
-        reset_at = blank_mega.emulated_seconds()
-        assert wait_until(
-            lambda: blank_mega.emulated_seconds() >= reset_at + STK500V2_QUIET, timeout=60
-        )
+    with blank_mega.past_the_bootloader():
         info = _protoduino("info", blank_mega.port, "--json")
     assert info.returncode == 0, info.stdout + info.stderr
     found = json.loads(info.stdout)["info"]

@@ -23,12 +23,9 @@ from pathlib import Path
 
 import protoduino
 import pytest
-import serial
 from boardprocess import BoardProcess, missing_tool
 from protoduino.packets import parse_control
-from simfixtures import wait_until
 from test_flash import (
-    STK500V2_QUIET,
     EmulatedMega,
     handshake,
     missing_flash_tool,
@@ -258,10 +255,7 @@ def test_flash_uploads_the_carried_mega_firmware(installed: Installed, tmp_path:
         assert "protoduino-mega.hex" in output  # the wheel's copy, not the Uno's
         assert "device signature = 0x1e9801" in output
         assert "bytes of flash verified" in output
-        # Held open and silent past the stk500v2 bootloader's wait (test_flash.py says why).
-        with serial.Serial(mega.port, 115200):
-            reset_at = mega.emulated_seconds()
-            assert wait_until(lambda: mega.emulated_seconds() >= reset_at + STK500V2_QUIET, 60)
+        with mega.past_the_bootloader():  # test_flash.py says why
             info = installed.run("protoduino", "info", mega.port, "--json")
     finally:
         mega.close()
