@@ -1068,13 +1068,14 @@ static void pd_after_reset(pd_sim_t *sim)
     for (int n = 0; n < PD_EXTINTS; n++) {
         sim->extint[n].raised_at = 0; /* a reset clears the flags */
     }
-    sim->rx_timer = 0; /* a reset cancels every cycle timer */
-    sim->pace_at = 0;
-    pd_start_rx(sim);
+    /* The clock first: pd_start_rx places host bytes by it. */
     if (sim->avr->cycle < sim->last_cycle) {
         sim->cycle_base += sim->last_cycle;
     }
     sim->last_cycle = sim->avr->cycle;
+    sim->rx_timer = 0; /* a reset cancels every cycle timer */
+    sim->pace_at = 0;
+    pd_start_rx(sim);
     pd_restore_inputs(sim);
     for (int i = 0; i < sim->port_count; i++) {
         if (sim->ports[i].io) {
@@ -1288,13 +1289,16 @@ static void pd_start_rx(pd_sim_t *sim)
 }
 
 /* Does nothing: it is there so that a sleeping MCU, which simavr skips ahead to
- * its next cycle timer, stops at the pass's target (PD_AHEAD_NS). */
+ * its next cycle timer, stops at the pass's target (PD_AHEAD_NS). Once due it
+ * stays armed a cycle ahead until the next pass moves it: simavr asks the timers
+ * for the next sleep right after the instruction that crossed the target, and a
+ * SLEEP there, with this timer gone, slept to the next tick (up to a millisecond
+ * ahead of the wall clock, and a host byte entered the UART that much late). */
 static avr_cycle_count_t pd_pace_timer(struct avr_t *avr, avr_cycle_count_t when, void *param)
 {
-    (void)avr;
     (void)when;
     ((pd_sim_t *)param)->pace_at = 0;
-    return 0;
+    return avr->cycle + 1U;
 }
 
 static void pd_set_pace(pd_sim_t *sim, uint64_t target)
