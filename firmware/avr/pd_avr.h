@@ -75,6 +75,8 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us);
  * the next frame start (pd_hal_servo_hold; on the Mega each servo timer's next frame
  * start, Timer1's for channels 0..11 and Timer5's for 12..23). */
 void pd_avr_servo_hold(bool hold);
+/* Whether a channel's written width waits for its frame start (pd_hal_servo_pending). */
+bool pd_avr_servo_pending(void);
 /* Stop the channel's pulses after the one under way; a later write attaches again. */
 void pd_avr_servo_detach(uint8_t channel);
 /* Start the next servo frame as soon as possible (failsafe, Stop). */

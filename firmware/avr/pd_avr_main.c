@@ -129,6 +129,12 @@ void pd_hal_servo_hold(void *hal, bool hold)
     pd_avr_servo_hold(hold);
 }
 
+bool pd_hal_servo_pending(void *hal)
+{
+    (void)hal;
+    return pd_avr_servo_pending();
+}
+
 void pd_hal_digital_write(void *hal, uint8_t pin, bool level)
 {
     (void)hal;

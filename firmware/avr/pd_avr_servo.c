@@ -135,6 +135,10 @@ static inline __attribute__((always_inline)) volatile uint8_t *timer_timsk(uint8
 typedef char pd_assert_timer_bits[(OCIE1A == 1 && OCF1A == 1 && CS11 == 1) ? 1 : -1];
 /* Writes are held (pd_avr_servo_hold): frame starts leave `next` alone. */
 static volatile bool held;
+/* Bit t: a width written to one of timer t's channels waits for its frame start
+ * (pd_avr_servo_pending). Cleared with interrupts off: the Mega's other timer's
+ * compare may nest in this one's. */
+static volatile uint8_t unlatched;
 
 /*
  * The soonest frame start after `now`: frame_start plus a whole number of
@@ -211,6 +215,9 @@ static inline __attribute__((always_inline)) void servo_compare(uint8_t t)
      * Pose, a speed step) reach the pins in the same frame: the first channel's is
      * the one written, and the others' are taken below, long before their turn. */
     bool take = starts && !held;
+    if (take) {
+        unlatched &= (uint8_t)~_BV(t);
+    }
     int8_t ch = tm->on_channel; /* the channel now high, if any */
     if (ch >= 0) {
         /* The end edge is made a few cycles before the start edge in the
@@ -301,12 +308,18 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
             *pd_avr_ddr(port) |= mask;
         }
         c->next = ticks;
+        unlatched |= (uint8_t)_BV(SERVO_TIMER_OF(channel));
     }
 }
 
 void pd_avr_servo_hold(bool hold)
 {
     held = hold;
+}
+
+bool pd_avr_servo_pending(void)
+{
+    return unlatched != 0;
 }
 
 /*

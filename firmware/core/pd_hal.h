@@ -108,6 +108,14 @@ void pd_hal_servo_write(void *hal, uint8_t channel, uint8_t pin, uint16_t us);
 void pd_hal_servo_hold(void *hal, bool hold);
 
 /*
+ * Whether a width written to a servo channel has yet to reach its pins (it is
+ * taken at the channel's next frame start). A HAL whose writes take effect at
+ * once returns false. The speed limit's steps ask it so that no frame carries
+ * two steps: the millisecond clock and the servo frames are two clocks.
+ */
+bool pd_hal_servo_pending(void *hal);
+
+/*
  * Stop the pulses of servo channel `channel` on `pin` (a servo whose safe
  * state is "detach", or a released servo): the pulse under way, if any, ends
  * at its normal time (a cut pulse would be a position of its own), then the

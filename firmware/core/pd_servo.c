@@ -181,8 +181,16 @@ protoduino_Status pd_outputs_servo_control(pd_outputs_t *out, void *hal,
 void pd_outputs_step(pd_outputs_t *out, void *hal, uint32_t now)
 {
     /* One step per servo frame; a late call does not make up a missed one
-     * (the speed is a limit: a busy loop may only make a move slower). */
-    if ((uint32_t)(now - out->stepped_at) < PD_SERVO_FRAME_MS) {
+     * (the speed is a limit: a busy loop may only make a move slower). The
+     * millisecond clock is not the frames' (on the Uno its ticks are 1,024 us,
+     * and the loop calls late by its latency): two steps 20 of its ms apart
+     * could fall between two frame starts, and one frame carried both (a jump
+     * of twice the limit at the pin). So a step also waits for the last one to
+     * have reached the pins, but never longer than a frame: a servo timer that
+     * makes no frames (none attached to it) must not stop the others' moves. */
+    uint32_t since = (uint32_t)(now - out->stepped_at);
+    if (since < PD_SERVO_FRAME_MS ||
+        (since < 2u * PD_SERVO_FRAME_MS && pd_hal_servo_pending(hal))) {
         return;
     }
     out->stepped_at = now;

@@ -417,6 +417,12 @@ void pd_hal_servo_hold(void *ctx, bool hold)
     (void)hold;
 }
 
+bool pd_hal_servo_pending(void *ctx)
+{
+    (void)ctx; /* taken at once */
+    return false;
+}
+
 void pd_hal_digital_write(void *ctx, uint8_t pin, bool level)
 {
     sim_trace(ctx, pin, SIM_PIN_DIGITAL, level ? 1u : 0u);

@@ -168,6 +168,12 @@ void pd_hal_servo_write(void *ctx, uint8_t channel, uint8_t pin, uint16_t us)
     hal->written_at[pin] = ++hal->writes;
 }
 
+bool pd_hal_servo_pending(void *ctx)
+{
+    const fake_hal_t *hal = ctx;
+    return hal->servo_pending;
+}
+
 void pd_hal_servo_hold(void *ctx, bool hold)
 {
     fake_hal_t *hal = ctx;

@@ -55,6 +55,7 @@ typedef struct fake_hal {
     uint32_t baud;               /* the last pd_hal_set_baud() rate (0: none since fake_init) */
     unsigned baud_sets;          /* pd_hal_set_baud() calls since fake_init */
     bool servo_held;             /* inside pd_hal_servo_hold(true) .. (false) */
+    bool servo_pending;          /* pd_hal_servo_pending's answer (a width not yet at its pins) */
     unsigned servo_holds;        /* pd_hal_servo_hold(true) calls since fake_init */
     uint32_t boots;              /* pd_hal_boot_id() calls: the boot id */
     pd_board_info_t info;

@@ -352,6 +352,38 @@ static void test_speed_limit_steps_per_frame(void)
     CHECK(!d.hal.servo_held);
 }
 
+static void test_a_step_waits_for_the_last_to_reach_the_pins(void)
+{
+    tdev_t d;
+    t_active(&d);
+    uint32_t t0 = d.hal.now_ms;
+    protoduino_ArduinoIn in = m_servo_init_speed(1, 9, 1500, 500); /* 10 us per frame */
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    in = m_servo_us(2, 9, 1600);
+    CHECK_EQ(t_cmd(&d, &in), S(OK));
+    poll_at(&d, t0 + 20u);
+    CHECK_EQ(d.hal.servo_us[9], 1510);
+    /* The HAL's frame has not taken 1510 yet: a step 20 ms on would share its frame. */
+    d.hal.servo_pending = true;
+    poll_at(&d, t0 + 40u);
+    poll_at(&d, t0 + 50u);
+    CHECK_EQ(d.hal.servo_us[9], 1510);
+    /* Taken: the step goes at once, and the next is 20 ms after it. */
+    d.hal.servo_pending = false;
+    poll_at(&d, t0 + 50u);
+    CHECK_EQ(d.hal.servo_us[9], 1520);
+    poll_at(&d, t0 + 69u);
+    CHECK_EQ(d.hal.servo_us[9], 1520);
+    poll_at(&d, t0 + 70u);
+    CHECK_EQ(d.hal.servo_us[9], 1530);
+    /* A HAL that never takes it (a timer with no frames) holds a step one frame at most. */
+    d.hal.servo_pending = true;
+    poll_at(&d, t0 + 109u);
+    CHECK_EQ(d.hal.servo_us[9], 1530);
+    poll_at(&d, t0 + 110u);
+    CHECK_EQ(d.hal.servo_us[9], 1540);
+}
+
 static void test_speed_limit_bounds(void)
 {
     tdev_t d;
@@ -408,6 +440,7 @@ const pd_test_case_t pd_tests_motion[] = {
     TEST_CASE(test_pose_sets_past_32_pins),
     TEST_CASE(test_read_outputs),
     TEST_CASE(test_speed_limit_steps_per_frame),
+    TEST_CASE(test_a_step_waits_for_the_last_to_reach_the_pins),
     TEST_CASE(test_speed_limit_bounds),
     TEST_CASE(test_pose_with_speed_limits_steps_together),
     {NULL, NULL},
