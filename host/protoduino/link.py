@@ -500,11 +500,11 @@ class Link:
                 f"rates, pin the opening rate (baudrate={self.opening_baudrate}, "
                 f"--baud {self.opening_baudrate})"
             )
-        # A Mega's stk500v2 bootloader, just reset by the open, stays while bytes arrive and
-        # says nothing: the one silent cause the checklist cannot name from what was heard.
+        # A bootloader that waits says nothing: the one silent cause the checklist cannot name
+        # from what was heard (a Mega's stk500v2 one is told to leave: transport.py).
         bootloader = (
-            "; a Mega 2560 just reset by the open may be held in its bootloader by the RESETs "
-            "(docs/api.md, When the device does not answer)"
+            "; a board just reset by the open may still be in a bootloader that does not let "
+            "go (docs/api.md, When the device does not answer)"
             if self.transport.rx_since_open == 0
             else ""
         )

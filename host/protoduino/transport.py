@@ -73,6 +73,26 @@ from .packets import BadFrame, Packet
 
 log = logging.getLogger(__name__)
 
+
+def _stk500v2_message(body: bytes, seq: int = 1) -> bytes:
+    """One message of the stk500v2 protocol (Atmel's AVR068): start, SEQ, size, token,
+    body, and the XOR of every byte before the checksum."""
+    head = bytes([0x1B, seq, len(body) >> 8, len(body) & 0xFF, 0x0E])
+    checksum = 0
+    for byte in head + body:
+        checksum ^= byte
+    return head + body + bytes([checksum])
+
+
+#: stk500v2's CMD_LEAVE_PROGMODE_ISP (0x11, with the two delays avrdude sends): a Mega 2560's
+#: bootloader, just reset by the open, starts the application at once when it reads this.
+#: Otherwise it stays while bytes arrive: a RESET at least once a second kept it there for
+#: good (its wait for a first byte is about 0.7 s, measured on the emulated Mega running
+#: Debian's hex). A RESET goes after it while nothing at all has been heard since the open (a
+#: waiting bootloader says nothing); a protoduino device takes it for two bad frames (it
+#: holds a 0x00), dropped and counted; Optiboot lets go at any stray byte anyway.
+BOOTLOADER_LEAVE = _stk500v2_message(bytes([0x11, 0x01, 0x01]))
+
 #: Longest the I/O thread sleeps between timer ticks (seconds).
 TICK = 0.02
 #: Bytes asked for per read; reads return whatever is there, up to this.
@@ -645,8 +665,12 @@ class Transport:
         for item in items:
             sent = 0 if item.reset_seq else seq
             frame = frame_packet(item.ptype, sent, item.payload)
-            # A RESET flushes the device's receiver first.
-            frames.append(DELIMITER + frame if item.reset_seq else frame)
+            # A RESET flushes the device's receiver first, and takes a silent board out of
+            # a bootloader that waits for bytes (BOOTLOADER_LEAVE).
+            if item.reset_seq:
+                leave = BOOTLOADER_LEAVE if self.rx_since_open == 0 else b""
+                frame = leave + DELIMITER + frame
+            frames.append(frame)
             seqs.append(sent)
             seq = 1 if item.reset_seq else (sent + 1) & 0xFF
         taken = self._write_some(frames[0] if len(frames) == 1 else b"".join(frames))

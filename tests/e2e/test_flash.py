@@ -18,10 +18,8 @@ on the port (its open, the port already held, resets nothing: DTR is already ass
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -38,7 +36,6 @@ from protoduino.framing import StreamDecoder, frame_packet
 from protoduino.packets import Packet, parse_control, reset_payload
 from protoduino.simboard import runner_command
 from protoduino_dev import build
-from simfixtures import wait_until
 
 pytestmark = pytest.mark.avr
 
@@ -96,13 +93,12 @@ def start_blank_uno(link: Path) -> EmulatedUno:
 
 
 class EmulatedMega(EmulatedUno):
-    """The emulated Mega 2560 with its stk500v2 bootloader alone in the flash, started at the
-    bootloader, auto-reset on open; its emulated clock read through ``--stats``."""
+    """The emulated Mega 2560 with its stk500v2 bootloader (Debian's hex) alone in the flash,
+    started at the bootloader, auto-reset on open."""
 
-    def __init__(self, link: Path, stats: Path) -> None:
+    def __init__(self, link: Path) -> None:
         build.build_runner()
         build.build_stk500v2()
-        self.stats = stats
         cmd = runner_command(
             hex_files=[build.STK500V2_HEX],
             boot_address=build.STK500V2_ADDRESS,
@@ -110,40 +106,12 @@ class EmulatedMega(EmulatedUno):
             link=link,
             mcu="atmega2560",
         )
-        super().__init__([*cmd, "--stats", str(stats)])
-
-    def emulated_seconds(self) -> float:
-        """The board's clock: emulated seconds since the runner started (SIGUSR2: a stats line)."""
-        lines = self.stats.read_text().splitlines() if self.stats.exists() else []
-        self.proc.send_signal(signal.SIGUSR2)
-        assert wait_until(
-            lambda: (
-                len(self.stats.read_text().splitlines() if self.stats.exists() else []) > len(lines)
-            ),
-            timeout=10,
-        ), "the runner wrote no stats line"
-        last = json.loads(self.stats.read_text().splitlines()[-1])
-        return float(last["cycles"]) / float(last["freq"])
-
-    @contextlib.contextmanager
-    def past_the_bootloader(self) -> Iterator[None]:
-        """The port held open (the open's reset into the bootloader) and silent until the
-        bootloader has started the application on the board's clock; a client opening the port
-        meanwhile resets nothing (the runner's auto-reset is the first open's, as DTR)."""
-        with serial.Serial(self.port, 115200, timeout=0.1):
-            reset_at = self.emulated_seconds()
-            assert wait_until(lambda: self.emulated_seconds() >= reset_at + STK500V2_QUIET, 60)
-            yield
-
-
-#: Silence after a reset that takes the stk500v2 bootloader to the application (its wait:
-#: the application starts 0.78 s after the reset on the board's clock, measured).
-STK500V2_QUIET = 2.0
+        super().__init__(cmd)
 
 
 @pytest.fixture
 def blank_mega(tools: None, tmp_path: Path) -> Iterator[EmulatedMega]:
-    board = EmulatedMega(tmp_path / "mega", tmp_path / "stats.jsonl")
+    board = EmulatedMega(tmp_path / "mega")
     yield board
     board.close()
 
@@ -217,8 +185,9 @@ def test_flash_a_mega_through_stk500v2_then_info_reads_mega(blank_mega: Emulated
     # avrdude's own report: the ATmega2560's signature, through the stk500v2 ("wiring") protocol.
     assert "device signature = 0x1e9801" in output
     assert "bytes of flash verified" in output
-    with blank_mega.past_the_bootloader():
-        info = _protoduino("info", blank_mega.port, "--json")
+    # At once: the open resets the board into its bootloader, which starts the application
+    # when the handshake's first RESETs tell it to (transport.BOOTLOADER_LEAVE).
+    info = _protoduino("info", blank_mega.port, "--json")
     assert info.returncode == 0, info.stdout + info.stderr
     found = json.loads(info.stdout)["info"]
     assert found["board"] == "mega"
