@@ -20,6 +20,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "pd_caps.h" /* first: a board's PD_MAX_TIMERS before the default below */
 #include "pd_features.h"
 #include "pd_hal.h"
 #include "protoduino.pb.h"

@@ -18,6 +18,7 @@
  * first), and PD_FEATURES is
  * DeviceInfo.features: bit N set for each Feature N built in. Both are
  * generated from the schema by `protoduino gen`. */
+#include "pd_caps.h" /* first: a board's PD_MAX_SERVOS before the default below */
 #include "pd_tables.h"
 
 /* The servos' compile-time capacity (8; the Mega's build 24: firmware/Makefile); a board

@@ -15,16 +15,11 @@
 
 #include "protoduino.pb.h" /* pb_size_t */
 
-/* The Arduino library's build options (its pd_config.h: the board, from the MCU the IDE
- * compiles for, and the features), which the Makefile passes as -D flags instead: first, so
- * that its PD_MAX_PINS is the one below. */
-#if defined(ARDUINO) || defined(PD_CONFIG_H_WANTED)
-#include "pd_config.h"
-#endif
+#include "pd_caps.h" /* first: a board's PD_MAX_PINS before the default below */
 
 /* The most pins a board of this build has (its num_pins): the pin registry's size, and
  * DeviceInfo's pin table's (pd_encode.h). The Nano's profile has 22, the Mega's 70
- * (firmware/Makefile). */
+ * (pd_caps.h). */
 #ifndef PD_MAX_PINS
 #define PD_MAX_PINS 20
 #endif

@@ -18,6 +18,7 @@
 
 #include <stdint.h>
 
+#include "pd_caps.h" /* first: a board's PD_SLOT_BITS before the default below */
 #include "pd_features.h"
 #include "pd_hal.h"
 #include "pd_tables.h"

@@ -14,6 +14,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "pd_caps.h" /* first: a board's PD_MAX_PWM before the default below */
 #include "pd_features.h"
 #include "protoduino.pb.h"
 

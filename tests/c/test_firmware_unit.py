@@ -46,7 +46,7 @@ def _make(target: str) -> subprocess.CompletedProcess[str]:
     "target",
     [
         "unit",
-        # Every C test again with the Mega build's capacities (the Makefile's MEGA_CAPS: 70
+        # Every C test again with the Mega build's capacities (core/pd_caps.h: 70
         # pins, 24 servos in 5 bits of owner slot, 6 timers, 6 PWM outputs): a ReadOutputs
         # answer of 24 servos, past 127 B, byte for byte as pb_encode writes it.
         "unit-mega",

@@ -32,7 +32,15 @@ NANOPB = ROOT / ".deps" / "nanopb"
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     (
         "boundary and generated",
-        ("pd_hal.h", "pd_pinset.h", "pd_rom.h", "pd_features.h", "pd_config.h", "generated/"),
+        (
+            "pd_hal.h",
+            "pd_pinset.h",
+            "pd_rom.h",
+            "pd_features.h",
+            "pd_caps.h",
+            "pd_config.h",
+            "generated/",
+        ),
     ),
     ("codecs", ("pd_crc", "pd_cobs", "pd_packet", "pd_encode")),
     ("link", ("pd_link",)),

@@ -30,16 +30,9 @@
  * build.board, ARDUINO_AVR_NANO) is the Uno's chip with A6 and A7 (pins 20 and 21). */
 #if !defined(PD_BOARD_MEGA) && !defined(PD_BOARD_NANO)
 #if defined(__AVR_ATmega2560__)
-#define PD_BOARD_MEGA 1
-/* The Mega build's capacities, as firmware/Makefile's MEGA_CAPS (keep the two the same). */
-#define PD_MAX_PINS 70
-#define PD_MAX_SERVOS 24
-#define PD_SLOT_BITS 5
-#define PD_MAX_TIMERS 6
-#define PD_MAX_PWM 6
+#define PD_BOARD_MEGA 1 /* its capacities: core/pd_caps.h */
 #elif defined(ARDUINO_AVR_NANO)
 #define PD_BOARD_NANO 1
-#define PD_MAX_PINS 22
 #endif
 #endif
 
