@@ -10,10 +10,12 @@ tools a test needs.
 
 from __future__ import annotations
 
+import json
 import select
 import shutil
 import signal
 import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -91,3 +93,32 @@ class BoardProcess:
             for stream in (self.proc.stdin, self.proc.stdout, self.proc.stderr):
                 if stream is not None:
                     stream.close()
+
+
+def detached_sim_info(pid_file: Path, *sim_args: str) -> dict[str, Any]:
+    """``protoduino sim *sim_args --detach`` (its pid in ``pid_file``), then what
+    ``protoduino info --json --new-session`` reads on the port it printed (its "info"
+    object); the board is stopped with ``protoduino sim --stop`` after, whatever happened.
+    Each command's own failure fails the test with its stderr."""
+    cli = [sys.executable, "-m", "protoduino.cli.main"]
+    started = subprocess.run(
+        [*cli, "sim", *sim_args, "--detach", "--pid-file", str(pid_file)],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=60,
+    )
+    assert started.returncode == 0, started.stderr
+    try:
+        info = subprocess.run(
+            [*cli, "info", started.stdout.strip(), "--json", "--new-session"],
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=60,
+        )
+        assert info.returncode == 0, info.stderr
+        stated: dict[str, Any] = json.loads(info.stdout)["info"]
+        return stated
+    finally:
+        subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)

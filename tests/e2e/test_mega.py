@@ -13,15 +13,13 @@ its DeviceInfo.
 
 from __future__ import annotations
 
-import json
-import subprocess
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-from boardprocess import missing_tool
+from boardprocess import detached_sim_info, missing_tool
 from protoduino import Board, EventKind, PwmOutput
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.errors import CommandRejectedError, NotSupportedError, TimerInUseError
@@ -334,39 +332,8 @@ def test_protoduino_sim_starts_the_mega(tmp_path: Path, backend: str) -> None:
     Mega, `protoduino sim --board mega` the simulated board with its pins: `protoduino info`
     reads the board and its 70 pins from either."""
     _need_tools()
-    cli = [sys.executable, "-m", "protoduino.cli.main"]
-    pid_file = tmp_path / "sim.pid"
-    started = subprocess.run(
-        [
-            *cli,
-            "sim",
-            "--backend",
-            backend,
-            "--board",
-            "mega",
-            "--detach",
-            "--pid-file",
-            str(pid_file),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-        timeout=60,
-    )
-    assert started.returncode == 0, started.stderr
-    try:
-        info = subprocess.run(
-            [*cli, "info", started.stdout.strip(), "--json", "--new-session"],
-            capture_output=True,
-            text=True,
-            check=False,
-            timeout=60,
-        )
-        assert info.returncode == 0, info.stderr
-        stated = json.loads(info.stdout)["info"]
-        assert (stated["board"], stated["num_pins"]) == ("mega", 70), stated
-    finally:
-        subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
+    stated = detached_sim_info(tmp_path / "sim.pid", "--backend", backend, "--board", "mega")
+    assert (stated["board"], stated["num_pins"]) == ("mega", 70), stated
 
 
 @pytest.fixture

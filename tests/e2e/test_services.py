@@ -10,10 +10,8 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-import json
 import re
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -22,6 +20,7 @@ from typing import Any
 
 import protoduino
 import pytest
+from boardprocess import detached_sim_info
 from protoduino import aio
 from protoduino._generated import protoduino_pb2 as pb
 from protoduino.events import Event, EventKind
@@ -297,36 +296,10 @@ def test_the_command_line_runs_a_user_build(
     """`protoduino sim --firmware` runs the user's board; `protoduino info` shows its service."""
     need("native")
     mod = client("blinker", monkeypatch)
-    cli = [sys.executable, "-m", "protoduino.cli.main"]
-    pid_file = tmp_path / "sim.pid"
-    started = subprocess.run(
-        [
-            *cli,
-            "sim",
-            "--firmware",
-            str(program("blinker", "native")),
-            "--detach",
-            "--pid-file",
-            str(pid_file),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-        timeout=60,
+    stated = detached_sim_info(
+        tmp_path / "sim.pid", "--firmware", str(program("blinker", "native"))
     )
-    assert started.returncode == 0, started.stderr
-    try:
-        info = subprocess.run(
-            [*cli, "info", started.stdout.strip(), "--json", "--new-session"],
-            capture_output=True,
-            text=True,
-            check=False,
-            timeout=60,
-        )
-        assert info.returncode == 0, info.stderr
-        assert json.loads(info.stdout)["info"]["user_fingerprint"] == f"0x{mod.FINGERPRINT:08X}"
-    finally:
-        subprocess.run([*cli, "sim", "--stop", str(pid_file)], check=False, timeout=60)
+    assert stated["user_fingerprint"] == f"0x{mod.FINGERPRINT:08X}"
 
 
 def _make(cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
