@@ -99,6 +99,16 @@ void pd_avr_uart_init(uint32_t baud)
  *     if (next == rx_tail) return;   (lost: its frame fails its CRC; the host retries)
  *     rx_head = next; sei(); rx_buf[head] = byte;
  */
+/* Both handlers' end: r31, r30, r25 back, then SREG and r24 as each saved them. */
+#define PD_UART_ISR_RETURN                                                                    \
+    "pop r31\n\t"                                                                            \
+    "pop r30\n\t"                                                                            \
+    "pop r25\n\t"                                                                            \
+    "pop r24\n\t"                                                                            \
+    "out __SREG__, r24\n\t"                                                                  \
+    "pop r24\n\t"                                                                            \
+    "reti\n\t"
+
 ISR(USART_RX_vect, ISR_NAKED)
 {
     __asm__ volatile(
@@ -126,13 +136,7 @@ ISR(USART_RX_vect, ISR_NAKED)
         "sbci r31, hi8(-(%[buf]))\n\t"
         "st Z, r25\n\t"
         "2:\n\t"
-        "pop r31\n\t"
-        "pop r30\n\t"
-        "pop r25\n\t"
-        "pop r24\n\t"
-        "out __SREG__, r24\n\t"
-        "pop r24\n\t"
-        "reti\n\t"
+        PD_UART_ISR_RETURN
         :
         : [udr] "n"(_SFR_MEM_ADDR(UDR0)), [head] "i"(&rx_head), [tail] "i"(&rx_tail),
           [buf] "i"(rx_buf), [size] "M"(PD_AVR_RX_SIZE));
@@ -254,13 +258,7 @@ ISR(USART_UDRE_vect, ISR_NAKED)
         "ldi r24, %[busy]\n\t"
         "sts %[ucsrb], r24\n\t"
         "1:\n\t"
-        "pop r31\n\t"
-        "pop r30\n\t"
-        "pop r25\n\t"
-        "pop r24\n\t"
-        "out __SREG__, r24\n\t"
-        "pop r24\n\t"
-        "reti\n\t"
+        PD_UART_ISR_RETURN
         :
         : [idle] "M"(UCSR0B_TX_IDLE), [busy] "M"(UCSR0B_TX_IDLE | _BV(UDRIE0)),
           [ucsrb] "n"(_SFR_MEM_ADDR(UCSR0B)), [udr] "n"(_SFR_MEM_ADDR(UDR0)),
