@@ -1,4 +1,5 @@
-"""How the I/O thread reports a lost port, and that it never ends silently.
+"""How the I/O thread reports a lost port, that it never ends silently, and what it writes
+before a RESET.
 
 The order in which a lost port is reported (a pty whose other end closes):
 
@@ -14,13 +15,17 @@ from __future__ import annotations
 
 import os
 import queue
+import select
 import threading
+import time
 from typing import Any
 
 import pytest
 import serial
 from protoduino import Board, LinkError
+from protoduino.constants import PacketType
 from protoduino.events import Event, EventKind
+from protoduino.framing import frame_packet
 from protoduino.packets import BadFrame, Packet
 from protoduino.testing import PtyDevice
 from protoduino.transport import Transport
@@ -122,3 +127,40 @@ def test_a_bug_on_the_io_thread_is_a_reported_error(fake: PtyDevice) -> None:
         assert "I/O thread failed" in error.text and "a bug" in error.text
         with pytest.raises(LinkError, match="I/O thread failed"):
             board.ping()
+
+
+#: stk500v2's "leave programming mode" message as docs/protocol.md 2 states it, byte for byte.
+LEAVE = bytes.fromhex("1b 01 00 03 0e 11 01 01 06")
+
+
+def _read(fd: int, count: int) -> bytes:
+    got = b""
+    deadline = time.monotonic() + BOUND
+    while len(got) < count and time.monotonic() < deadline:
+        if select.select([fd], [], [], 0.05)[0]:
+            got += os.read(fd, count - len(got))
+    return got
+
+
+def test_a_reset_leaves_a_bootloader_only_while_the_device_has_said_nothing() -> None:
+    master, slave = os.openpty()
+    transport = Transport(os.ttyname(slave))
+    payload = bytes([0x01, 8])
+    frame = frame_packet(PacketType.CONTROL, 0, payload)
+    try:
+        transport.start(_Listener(transport))
+        assert _read(master, 1) == b"\x00"  # the open's lone delimiter
+        transport.send(PacketType.CONTROL, payload, reset_seq=True)
+        first = LEAVE + b"\x00" + frame
+        assert _read(master, len(first)) == first
+        os.write(master, b"\x00")  # the device said something: no bootloader holds it
+        deadline = time.monotonic() + BOUND
+        while transport.rx_since_open == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        transport.send(PacketType.CONTROL, payload, reset_seq=True)
+        second = b"\x00" + frame
+        assert _read(master, len(second)) == second
+    finally:
+        transport.close()
+        os.close(master)
+        os.close(slave)
