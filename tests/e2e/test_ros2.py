@@ -33,7 +33,7 @@ from typing import Any
 
 import pytest
 from protoduino.simboard import SimBoard
-from simfixtures import pin_values, wait_for_pin
+from simfixtures import PULSE_TOLERANCE_US, pin_values, wait_for_pin
 
 cyclonedds = pytest.importorskip("cyclonedds", reason="cyclonedds (the ros2 extra) is missing")
 rosbags_typesys = pytest.importorskip("rosbags.typesys", reason="rosbags is not installed")
@@ -993,7 +993,10 @@ def test_a_servo_max_speed_from_robot_yaml_moves_it_smoothly(
     widths = [SAFE_90_US] + [int(c["value"]) for c in moves]
     steps = [a - b for a, b in itertools.pairwise(widths)]
     # 90 degrees/s over the 1856 us span: 928 us/s, kept as 19 us per 20 ms frame (950 us/s).
-    assert all(0 < step <= 19 for step in steps), steps
+    # The emulated Uno's widths are measured at its pins, an interrupt's latency off now and
+    # then (test_motion's check_ramp allows the same); two steps in one frame would be 38.
+    near = 0 if sim.backend == "native" else PULSE_TOLERANCE_US
+    assert all(0 < step <= 19 + near for step in steps), steps
     assert len(steps) >= (SAFE_90_US - to_us(0)) // 19, steps
     assert moves[-1]["t"] - moves[0]["t"] >= 0.9, (moves[0], moves[-1])
 
