@@ -17,6 +17,7 @@ from __future__ import annotations
 from . import (
     firmware,
     inputs,
+    loop,
     mega,
     motion,
     race,
@@ -41,4 +42,5 @@ SECTIONS: tuple[Section, ...] = (
     race.SECTION,
     services.SECTION,
     mega.SECTION,
+    loop.SECTION,
 )

@@ -531,6 +531,30 @@ def test_mega_section_drives_24_servos_from_three_poses() -> None:
 
 
 @pytest.mark.avr
+def test_loop_section_runs_a_1khz_loop_on_both_boards() -> None:
+    """Part 12, short: the 1 kHz loop on both boards; every period counted (sent or missed),
+    every pose sent was acknowledged and timed, the six analog channels counted, and the
+    emulated Uno's wire time and awake share measured (the simulated board has neither)."""
+    _need("native")
+    _need("avr")
+    from bench import loop
+
+    runs = [loop.measure(backend, 0.3) for backend, _ in boards.BACKENDS]
+    for run in runs:
+        assert run.error is None, run.error
+        assert run.baud == 1_000_000  # the rate the Board agreed on
+        assert run.periods >= 0.3 / loop.PERIOD - 1
+        assert 0 < len(run.pose_s) == run.periods - run.missed
+        assert sorted(run.rates) == [14, 15, 16, 17, 18, 19]
+    native, avr = runs
+    assert native.wire_s is None and native.awake is None
+    assert avr.wire_s is not None and 0 < avr.wire_s < loop.PERIOD
+    assert avr.awake is not None and 0 < avr.awake <= 1
+    text = loop.report(runs)
+    assert "| emulated Uno (avr), 1,000,000 baud |" in text and "11 bits" in text
+
+
+@pytest.mark.avr
 def test_inputs_section_on_both_boards() -> None:
     """Part 7: every edge reached its callback, every channel streamed, every interlock trial
     stopped the motor at the pin, on both boards; and the avr targets have a verdict."""
