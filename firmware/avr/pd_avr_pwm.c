@@ -141,8 +141,12 @@ void pd_avr_pwm_write(uint8_t pin, uint8_t duty)
             TCCR2B = _BV(CS22); /* clk / 64 on Timer2 */
         }
         if (duty == 0 || duty == 255) {
-            *tccra &= (uint8_t)~com; /* a steady level: the port drives it */
+            /* A steady level: the port drives it. Its bit first, while the compare output
+             * still overrides it: disconnected first, the pin showed the old PORT bit for a
+             * few cycles (a glitch low on the way from a PWM high to 255, seen at the pin by
+             * tools/avrsim once it sampled at each timer register write). */
             pd_avr_pin_set(pin, true, duty != 0);
+            *tccra &= (uint8_t)~com;
         } else {
             if (PWM_WIDE(tccra)) {
                 ocr[1] = 0; /* 16-bit registers: the high byte is written first */
@@ -163,8 +167,10 @@ void pd_avr_pwm_release(uint8_t pin)
     }
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
-        *tccra &= (uint8_t)~com;
+        /* An input first (a compare output reaches only an output pin), then disconnected:
+         * the other order drove the PORT bit for a few cycles (pd_avr_pwm_write). */
         pd_avr_pin_set(pin, false, false);
+        *tccra &= (uint8_t)~com;
         pd_avr_pwm_pins[pin >> 3] &= (uint8_t)~(1u << (pin & 7u)); /* once an input */
         if (PWM_SERVO_TIMER(tccra) && !(*tccra & PWM_COMS)) {
             /* The last PWM pin of a servos' timer: the servos may have it back. */

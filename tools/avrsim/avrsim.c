@@ -294,6 +294,11 @@ typedef struct {
     uint32_t boot_addr;
     int boot;
     uint64_t cycle_base; /* cycles banked across resets that zero avr->cycle */
+    /* The PWM timers' control registers (TCCRnA, TCCRnB: compare outputs, mode, clock) and
+     * their values when last seen: pd_timer_regs_check. */
+    uint16_t tccr_addr[2 * 6];
+    uint8_t tccr_seen[2 * 6];
+    int tccr_count;
     uint64_t last_cycle;
     int reset_seen;
     void (*core_reset)(struct avr_t *avr);
@@ -543,6 +548,50 @@ static pd_port_t *pd_port_of(pd_sim_t *sim, int pin)
 static int pd_bit_of(const pd_sim_t *sim, int pin)
 {
     return sim->board->map[pin][1];
+}
+
+/* Every port sampled now (pd_port_sample). */
+static void pd_ports_sample(pd_sim_t *sim)
+{
+    for (int i = 0; i < sim->port_count; i++) {
+        if (sim->ports[i].io) {
+            pd_port_sample(sim, &sim->ports[i], sim->avr->data[sim->ports[i].io->r_ddr]);
+        }
+    }
+}
+
+/* Note a PWM timer's control register (once). */
+static void pd_timer_reg_add(pd_sim_t *sim, uint16_t addr)
+{
+    for (int i = 0; i < sim->tccr_count; i++) {
+        if (sim->tccr_addr[i] == addr) {
+            return;
+        }
+    }
+    if (addr && sim->tccr_count < (int)(sizeof sim->tccr_addr / sizeof sim->tccr_addr[0])) {
+        sim->tccr_addr[sim->tccr_count] = addr;
+        sim->tccr_seen[sim->tccr_count++] = sim->avr->data[addr];
+    }
+}
+
+/* After each instruction: a write to a PWM timer's control register (a duty of 0 or 255
+ * disconnects the compare output, a timer stops) changes a pin with no port IRQ. The ports
+ * are sampled at that instruction; sampled only at the pass's end, such a change was dated
+ * up to a pass late (PD_BATCH_NS, 1 ms, when the runner is behind the wall clock: a
+ * bumper's trip measured 1,000 us at the pin on a loaded machine, 65 us otherwise). */
+static void pd_timer_regs_check(pd_sim_t *sim)
+{
+    int changed = 0;
+    for (int i = 0; i < sim->tccr_count; i++) {
+        uint8_t v = sim->avr->data[sim->tccr_addr[i]];
+        if (v != sim->tccr_seen[i]) {
+            sim->tccr_seen[i] = v;
+            changed = 1;
+        }
+    }
+    if (changed) {
+        pd_ports_sample(sim);
+    }
 }
 
 /* A timer's compare output changed (its IRQ carries the new level). */
@@ -1077,11 +1126,7 @@ static void pd_after_reset(pd_sim_t *sim)
     sim->pace_at = 0;
     pd_start_rx(sim);
     pd_restore_inputs(sim);
-    for (int i = 0; i < sim->port_count; i++) {
-        if (sim->ports[i].io) {
-            pd_port_sample(sim, &sim->ports[i], sim->avr->data[sim->ports[i].io->r_ddr]);
-        }
-    }
+    pd_ports_sample(sim);
 }
 
 /* Reset as the reset pin does (SIGUSR1, or a client opening the port). */
@@ -1203,6 +1248,10 @@ static void pd_connect(pd_sim_t *sim)
             avr_io_getirq(avr, AVR_IOCTL_TIMER_GETIRQ(w->timer_name), TIMER_IRQ_OUT_COMP + w->comp);
         if (w->timer && oc) {
             avr_irq_register_notify(oc, pd_oc_hook, w);
+            pd_timer_reg_add(sim, w->timer->comp[w->comp].com.reg);
+            pd_timer_reg_add(sim, w->timer->wgm[0].reg);
+            pd_timer_reg_add(sim, w->timer->wgm[2].reg);
+            pd_timer_reg_add(sim, w->timer->cs[0].reg);
         } else {
             w->timer = NULL;
         }
@@ -1557,6 +1606,7 @@ static void pd_run(pd_sim_t *sim)
                 pd_extint_check(sim, pc);
                 int state = pd_run_one(sim);
                 pd_track_sp(sim, pc);
+                pd_timer_regs_check(sim);
                 if (sim->reset_seen) {
                     pd_after_reset(sim);
                 }
@@ -1574,12 +1624,8 @@ static void pd_run(pd_sim_t *sim)
             /* A stopped MCU still lets time pass, so that deadlines resolve. */
             sim->cycle_base = target > sim->avr->cycle ? target - sim->avr->cycle : 0;
         }
-        /* A timer switched on or off with no IRQ (TCCRnA/B writes): resample. */
-        for (int i = 0; i < sim->port_count; i++) {
-            if (sim->ports[i].io) {
-                pd_port_sample(sim, &sim->ports[i], sim->avr->data[sim->ports[i].io->r_ddr]);
-            }
-        }
+        /* Whatever changed with no IRQ and was not seen yet (pd_timer_regs_check). */
+        pd_ports_sample(sim);
         pd_pins_poll(&sim->pins, pd_cycles(sim));
         pd_control_service(&sim->control);
         pd_pump_pty(sim);
