@@ -453,7 +453,7 @@ static inline __attribute__((always_inline)) int16_t fast_byte(pb_istream_t *s)
 }
 
 /* A tag longer than a byte (or none left), by nanopb's reader, as fast_tag returns it. */
-static __attribute__((noinline)) uint8_t long_tag(pb_istream_t *s)
+static __attribute__((noinline)) uint8_t fast_tag_long(pb_istream_t *s)
 {
     uint32_t t;
     if (!pb_decode_varint32(s, &t) || (t >> 3) == 0u) {
@@ -470,14 +470,14 @@ static uint8_t fast_tag(pb_istream_t *s)
 {
     int16_t b = fast_byte(s);
     if (b < 0) {
-        return long_tag(s);
+        return fast_tag_long(s);
     }
     return (uint8_t)b < 8u ? 0 : (uint8_t)b;
 }
 
 /* A uint32 field stored in `size` bytes (the int_size nanopb gave it): stored, then
  * refused if it did not fit, as pb_dec_varint does. */
-static __attribute__((noinline)) bool store_uint(void *field, size_t size, pd_varint_t v)
+static __attribute__((noinline)) bool fast_store(void *field, size_t size, pd_varint_t v)
 {
     pd_varint_t clamped;
     if (size == sizeof(uint8_t)) {
@@ -491,10 +491,10 @@ static __attribute__((noinline)) bool store_uint(void *field, size_t size, pd_va
 }
 
 /* A uint32 field's value longer than a byte (or none left), by nanopb's reader. */
-static __attribute__((noinline)) bool long_uint(pb_istream_t *s, void *field, size_t size)
+static __attribute__((noinline)) bool fast_uint_long(pb_istream_t *s, void *field, size_t size)
 {
     pd_varint_t v;
-    return pb_decode_varint(s, &v) && store_uint(field, size, v);
+    return pb_decode_varint(s, &v) && fast_store(field, size, v);
 }
 
 /* A uint32 field (fast_tag's `tag`) into `field` of `size` bytes. */
@@ -504,11 +504,11 @@ static bool fast_uint(pb_istream_t *s, uint8_t tag, void *field, size_t size)
         return false;
     }
     int16_t b = fast_byte(s);
-    return b < 0 ? long_uint(s, field, size) : store_uint(field, size, (uint8_t)b);
+    return b < 0 ? fast_uint_long(s, field, size) : fast_store(field, size, (uint8_t)b);
 }
 
 /* A bool field's value longer than a byte (or none left), by nanopb's reader. */
-static __attribute__((noinline)) bool long_bool(pb_istream_t *s, bool *field)
+static __attribute__((noinline)) bool fast_bool_long(pb_istream_t *s, bool *field)
 {
     uint32_t v;
     if (!pb_decode_varint32(s, &v)) {
@@ -526,7 +526,7 @@ static bool fast_bool(pb_istream_t *s, uint8_t tag, bool *field)
     }
     int16_t b = fast_byte(s);
     if (b < 0) {
-        return long_bool(s, field);
+        return fast_bool_long(s, field);
     }
     *field = b != 0;
     return true;
