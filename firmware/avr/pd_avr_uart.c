@@ -153,7 +153,8 @@ int16_t pd_avr_uart_peek(void)
 
 void pd_avr_uart_drop(void)
 {
-    rx_tail = (uint8_t)(rx_tail + 1u == PD_AVR_RX_SIZE ? 0u : rx_tail + 1u);
+    uint8_t next = (uint8_t)(rx_tail + 1u); /* one read of the volatile, not two */
+    rx_tail = next == PD_AVR_RX_SIZE ? 0u : next;
 }
 
 bool pd_avr_uart_rx_empty(void)

@@ -79,6 +79,18 @@ def _same(c: _Dedupe, py: DedupeWindow) -> None:
     ]
 
 
+def _step(lib: ctypes.CDLL, rng: random.Random, c: _Dedupe, py: DedupeWindow, mid: int) -> None:
+    """One command with id ``mid`` through both: its lookup, then (unless a repeat) its done."""
+    seen = lib.pd_dedupe_lookup(ctypes.byref(c), mid)
+    mirrored = py.lookup(mid)
+    assert seen == (-1 if mirrored is None else mirrored)
+    if seen < 0:  # a repeat is answered and changes nothing
+        status = -1 if rng.random() < 0.3 else rng.randrange(16)
+        lib.pd_dedupe_done(ctypes.byref(c), mid, status)
+        py.done(mid, None if status < 0 else Status.ValueType(status))
+    _same(c, py)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_the_mirror_keeps_the_firmware_s_window(lib: ctypes.CDLL, seed: int) -> None:
     rng = random.Random(seed)
@@ -92,18 +104,38 @@ def test_the_mirror_keeps_the_firmware_s_window(lib: ctypes.CDLL, seed: int) -> 
             clear = rng.random() < 0.5
             lib.pd_dedupe_sync(ctypes.byref(c), nxt, clear)
             py.sync(nxt, clear)
-        else:
-            if roll < 0.75:
-                mid, nxt = nxt, nxt % MAX_MESSAGE_ID + 1
-            elif roll < 0.95:  # a retransmission, or a first transmission overtaken
-                mid = (nxt - 2 - rng.randrange(24)) % MAX_MESSAGE_ID + 1
-            else:  # anything, far ahead or behind
-                mid = rng.randrange(1, MAX_MESSAGE_ID + 1)
-            seen = lib.pd_dedupe_lookup(ctypes.byref(c), mid)
-            mirrored = py.lookup(mid)
-            assert seen == (-1 if mirrored is None else mirrored)
-            if seen < 0:  # a repeat is answered and changes nothing
-                status = -1 if rng.random() < 0.3 else rng.randrange(16)
-                lib.pd_dedupe_done(ctypes.byref(c), mid, status)
-                py.done(mid, None if status < 0 else Status.ValueType(status))
-        _same(c, py)
+            _same(c, py)
+            continue
+        if roll < 0.75:
+            mid, nxt = nxt, nxt % MAX_MESSAGE_ID + 1
+        elif roll < 0.95:  # a retransmission, or a first transmission overtaken
+            mid = (nxt - 2 - rng.randrange(24)) % MAX_MESSAGE_ID + 1
+        else:  # anything, far ahead or behind
+            mid = rng.randrange(1, MAX_MESSAGE_ID + 1)
+        _step(lib, rng, c, py, mid)
+
+
+#: How far an id is from N (``(Y - N) mod 127``) where the rule changes: newer up to 63,
+#: within reach from 112 (15 behind) on, and the ids between, neither.
+EDGES = (0, 1, 2, 15, 16, 17, 62, 63, 64, 65, 110, 111, 112, 113, 125, 126)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_firmware_s_window_keeps_the_rule_for_any_ids(lib: ctypes.CDLL, seed: int) -> None:
+    """No host sends these: ids at every edge of the rule and anywhere, and RESETs to any
+    id, resumed or not. pd_dedupe.c skips work that its invariants make needless (add()'s
+    search for a stale entry when N moved): the mirror, which does all of it, holds it to
+    the rule step for step."""
+    rng = random.Random(1000 + seed)
+    c, py = _Dedupe(), DedupeWindow()
+    lib.pd_dedupe_init(ctypes.byref(c))
+    for _ in range(STEPS):
+        roll = rng.random()
+        if roll < 0.02:
+            next_id, clear = rng.randrange(1, MAX_MESSAGE_ID + 1), rng.random() < 0.3
+            lib.pd_dedupe_sync(ctypes.byref(c), next_id, clear)
+            py.sync(next_id, clear)
+            _same(c, py)
+            continue
+        ahead = rng.choice(EDGES) if roll < 0.6 else rng.randrange(MAX_MESSAGE_ID)
+        _step(lib, rng, c, py, (py.newest - 1 + ahead) % MAX_MESSAGE_ID + 1)
