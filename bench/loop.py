@@ -30,18 +30,12 @@ from pathlib import Path
 from tempfile import TemporaryDirectory
 
 from protoduino import Board, DigitalOutput
-from protoduino.constants import PacketType
-from protoduino.errors import ProtoduinoError
-from protoduino.messages import ArduinoIn, parse_out
-from protoduino.packets import Packet
 from protoduino.simboard import SimBoard
-from protoduino.transport import FrameRecord
 
 from .boards import BoardUnavailableError, CycleCounter, Percentiles, started
 from .core import Context, Section, SectionResult, Target, md_table
 from .inputs import ANALOG_HZ, AnalogCounter
-from .race import POSE_PINS
-from .wire import frame_bytes
+from .race import POSE_PINS, WireSizes
 
 log = logging.getLogger(__name__)
 
@@ -60,38 +54,6 @@ SETTLE = 30.0
 #: Bits a byte takes on the emulated Uno's line: into the board (the runner feeds a host
 #: byte per 10 bits), out of it (simavr's 11).
 BITS_IN, BITS_OUT = 10, 11
-
-
-class _PoseFrames:
-    """Frame monitor keeping the wire size of every pose command and of its Ack while
-    ``counting`` (the I/O thread appends; the sizes are worked out afterwards)."""
-
-    def __init__(self) -> None:
-        self.counting = False
-        self.records: list[tuple[str, Packet]] = []
-
-    def __call__(self, record: FrameRecord) -> None:  # the I/O thread: quick
-        if self.counting and isinstance(record.item, Packet):
-            self.records.append((record.direction, record.item))
-
-    def sizes(self) -> tuple[list[int], list[int]]:
-        """(the poses' command frames, their Acks' frames), bytes each, in the order seen."""
-        commands: list[int] = []
-        acks: list[int] = []
-        waiting: set[int] = set()
-        for direction, item in list(self.records):
-            if direction == "tx" and item.type is PacketType.COMMAND:
-                msg = ArduinoIn.FromString(item.payload)
-                if msg.WhichOneof("data") == "pose":
-                    commands.append(frame_bytes(item))
-                    waiting.add(msg.message_id)
-            elif direction == "rx" and item.type is PacketType.DATA:
-                with contextlib.suppress(ProtoduinoError):
-                    out = parse_out(item.payload)
-                    if out.WhichOneof("data") == "ack" and out.ack.message_id in waiting:
-                        waiting.discard(out.ack.message_id)
-                        acks.append(frame_bytes(item))
-        return commands, acks
 
 
 @dataclass(slots=True)
@@ -198,7 +160,7 @@ def measure(backend: str, seconds: float) -> LoopRun:
             ):
                 run.baud = board.baudrate
                 outputs = [board.digital_output(pin) for pin in POSE_PINS]
-                frames = _PoseFrames()
+                frames = WireSizes("pose")
                 analog = AnalogCounter()
                 board.add_frame_monitor(frames)
                 board.add_frame_monitor(analog)

@@ -378,10 +378,14 @@ class _Frames:
         return list(self.records)
 
 
-class _WireSizes(_Frames):
-    """The wire size of every digital write the host sends while counting and of its Ack
-    (not the automatic Ping's frames, nor reports); when the last COMMAND other than a
-    Ping was written."""
+class WireSizes(_Frames):
+    """The wire size of every command of one ``kind`` (the ArduinoIn field: digital writes
+    by default) the host sends while counting and of its Ack (not the automatic Ping's
+    frames, nor reports); when the last COMMAND other than a Ping was written."""
+
+    def __init__(self, kind: str = "digital_control") -> None:
+        super().__init__()
+        self.kind = kind
 
     @property
     def last_command(self) -> float:
@@ -398,16 +402,16 @@ class _WireSizes(_Frames):
         return last
 
     def sizes(self) -> tuple[list[int], list[int]]:
-        """(the digital writes' command bytes, their Acks' bytes), in the order seen."""
+        """(the commands' frame bytes, their Acks' frame bytes), in the order seen."""
         commands: list[int] = []
         answers: list[int] = []
-        awaiting: set[int] = set()  # message ids of digital writes not yet answered
+        awaiting: set[int] = set()  # message ids of those commands not yet answered
         for counting, direction, item, _t in self.packets():
             if not counting:
                 continue
             if direction == "tx" and item.type is PacketType.COMMAND:
                 msg = ArduinoIn.FromString(item.payload)
-                if msg.WhichOneof("data") == "digital_control":
+                if msg.WhichOneof("data") == self.kind:
                     commands.append(frame_bytes(item))
                     awaiting.add(msg.message_id)
             elif direction == "rx" and item.type is PacketType.DATA:
@@ -683,7 +687,7 @@ def run_protoduino(
             led = board.digital_output(DIGITAL_PIN)
             servo = board.servo(SERVO_PIN)
             run.line = line = clock.line()
-            sizes = _WireSizes()
+            sizes = WireSizes()
             board.add_frame_monitor(sizes)
             sizes.counting = True
             run.digital = _time_writes(

@@ -544,7 +544,8 @@ def test_loop_section_runs_a_1khz_loop_on_both_boards() -> None:
         assert run.error is None, run.error
         assert run.baud == 1_000_000  # the rate the Board agreed on
         assert run.periods >= 0.3 / loop.PERIOD - 1
-        assert 0 < len(run.pose_s) == run.periods - run.missed == run.periods - run.late - run.behind
+        assert run.missed == run.late + run.behind
+        assert 0 < len(run.pose_s) == run.periods - run.missed
         assert sorted(run.rates) == [14, 15, 16, 17, 18, 19]
     native, avr = runs
     assert native.wire_s is None and native.awake is None
