@@ -31,11 +31,12 @@ from tempfile import TemporaryDirectory
 
 from protoduino import Board, DigitalOutput
 from protoduino.simboard import SimBoard
+from protoduino_dev import runnerstats
 
 from .boards import BoardUnavailableError, CycleCounter, Percentiles, started
 from .core import Context, Section, SectionResult, Target, md_table
 from .inputs import ANALOG_HZ, AnalogCounter
-from .race import POSE_PINS, WireSizes
+from .race import POSE_PINS, Line, WireSizes
 
 log = logging.getLogger(__name__)
 
@@ -51,9 +52,6 @@ GOAL_BEYOND_S = 0.001
 IN_FLIGHT = 4
 #: Upper bound on waiting for the last Acks after the loop (host seconds); not a figure.
 SETTLE = 30.0
-#: Bits a byte takes on the emulated Uno's line: into the board (the runner feeds a host
-#: byte per 10 bits), out of it (simavr's 11).
-BITS_IN, BITS_OUT = 10, 11
 
 
 @dataclass(slots=True)
@@ -64,10 +62,10 @@ class LoopRun:
     baud: int = 0
     seconds: float = 0.0
     periods: int = 0
-    late: int = 0
-    behind: int = 0
+    late: int = 0  # period starts the host slept through
+    behind: int = 0  # periods that found IN_FLIGHT poses unacknowledged
     retransmits: int = 0
-    pose_s: list[float] = field(default_factory=list)
+    pose_s: list[float] = field(default_factory=list)  # each pose's submit to Ack
     wire_s: float | None = None  # a median pose's command and Ack on the line (avr)
     rates: dict[int, float] = field(default_factory=dict)
     awake: float | None = None
@@ -87,24 +85,9 @@ def _timer(acked: list[float], start: float) -> Callable[[Future[None]], None]:
     return done
 
 
-@dataclass(slots=True)
-class LoopCounts:
-    """What :func:`run_loop` counted."""
-
-    periods: int = 0
-    late: int = 0  # period starts the host slept through
-    behind: int = 0  # periods that found IN_FLIGHT poses unacknowledged
-    acked: list[float] = field(default_factory=list)  # each pose's submit to Ack (s)
-
-    @property
-    def missed(self) -> int:
-        return self.late + self.behind
-
-
-def run_loop(board: Board, outputs: list[DigitalOutput], seconds: float) -> LoopCounts:
-    """The loop itself."""
-    counts = LoopCounts()
-    acked = counts.acked
+def run_loop(board: Board, outputs: list[DigitalOutput], seconds: float, run: LoopRun) -> None:
+    """The loop itself: its periods, missed ones and Ack times into ``run``."""
+    acked = run.pose_s
     futures: list[Future[None]] = []
     t0 = time.perf_counter()
     next_start = t0
@@ -117,11 +100,11 @@ def run_loop(board: Board, outputs: list[DigitalOutput], seconds: float) -> Loop
         start = time.perf_counter()
         # Period starts the host slept through had no pose of their own.
         late = int((start - next_start) / PERIOD)
-        counts.periods += late + 1
-        counts.late += late
+        run.periods += late + 1
+        run.late += late
         next_start += (late + 1) * PERIOD
         if sum(1 for f in futures[-IN_FLIGHT:] if not f.done()) >= IN_FLIGHT:
-            counts.behind += 1  # the board has not caught up: no stale pose queued behind
+            run.behind += 1  # the board has not caught up: no stale pose queued behind
             continue
         level = not level
         future = board.submit_pose(dict.fromkeys(outputs, level))
@@ -133,7 +116,6 @@ def run_loop(board: Board, outputs: list[DigitalOutput], seconds: float) -> Loop
     deadline = time.perf_counter() + SETTLE
     while len(acked) < len(futures) and time.perf_counter() < deadline:
         time.sleep(0.001)
-    return counts
 
 
 @contextlib.contextmanager
@@ -172,10 +154,8 @@ def measure(backend: str, seconds: float) -> LoopRun:
                 t = time.perf_counter()
                 retransmits = board.stats.retransmits
                 with _awake_share(backend, stats, sim, run):
-                    counts = run_loop(board, outputs, seconds)
+                    run_loop(board, outputs, seconds, run)
                 run.retransmits = board.stats.retransmits - retransmits
-                run.periods, run.late, run.behind = counts.periods, counts.late, counts.behind
-                run.pose_s = counts.acked
                 run.seconds = time.perf_counter() - t
                 frames.counting = analog.counting = False
                 for pot in pots:
@@ -183,9 +163,10 @@ def measure(backend: str, seconds: float) -> LoopRun:
                 run.rates = {pin: analog.rate(pin) for pin in board.info.analog_pins}
                 commands, acks = frames.sizes()
                 if backend == "avr" and commands and acks:
-                    run.wire_s = (
-                        statistics.median(commands) * BITS_IN + statistics.median(acks) * BITS_OUT
-                    ) / run.baud
+                    line = Line(int(runnerstats.snapshot(sim.pid, stats)["uart_byte_cycles"]))
+                    run.wire_s = line.wire_seconds(
+                        statistics.median(commands), statistics.median(acks)
+                    )
     except BoardUnavailableError as error:
         run.error = str(error)
     return run
