@@ -135,10 +135,10 @@ static inline __attribute__((always_inline)) volatile uint8_t *timer_timsk(uint8
 typedef char pd_assert_timer_bits[(OCIE1A == 1 && OCF1A == 1 && CS11 == 1) ? 1 : -1];
 /* Writes are held (pd_avr_servo_hold): frame starts leave `next` alone. */
 static volatile bool held;
-/* Bit t: a width written to one of timer t's channels waits for its frame start
- * (pd_avr_servo_pending). Cleared with interrupts off: the Mega's other timer's
- * compare may nest in this one's. */
-static volatile uint8_t unlatched;
+/* Not 0: a width written to one of timer t's channels waits for its frame start
+ * (pd_avr_servo_pending). A byte a timer, each written whole: no read-modify-write that
+ * the Mega's other timer's compare, nesting, could cut in two. */
+static volatile uint8_t unlatched[SERVO_TIMERS];
 
 /*
  * The soonest frame start after `now`: frame_start plus a whole number of
@@ -146,13 +146,52 @@ static volatile uint8_t unlatched;
  */
 static uint16_t soonest_start(uint16_t frame_start, uint16_t now)
 {
+    /* The whole CLOCK_TICKS in `elapsed` (under 32 of them: a frame and a bit), taken away
+     * 16, 8, 4, 2 and 1 at a time: five rounds, where counting them one by one took up to
+     * 33 (no 16-bit division on the AVR), with interrupts off in pd_avr_servo_expedite. */
     uint16_t elapsed = (uint16_t)(now + MIN_GAP_TICKS - frame_start);
-    uint16_t offset = CLOCK_TICKS;
-    while (offset <= elapsed) { /* at most 33 rounds; no 16-bit division on the AVR */
-        offset += CLOCK_TICKS;
+    uint16_t rest = elapsed;
+    for (uint16_t step = 16u * CLOCK_TICKS; step >= CLOCK_TICKS; step >>= 1) {
+        if (rest >= step) {
+            rest = (uint16_t)(rest - step);
+        }
     }
-    return (uint16_t)(frame_start + offset);
+    return (uint16_t)(frame_start + (elapsed - rest) + CLOCK_TICKS);
 }
+
+#if SERVO_TIMERS > 1
+/*
+ * Timer5's frames, started when the first of its channels joins the sequence (and not at
+ * power-up: an empty frame's compare still holds interrupts off for its edges, about 80
+ * cycles every 20 ms that a Timer1 edge met now and then). They start half a clock tick
+ * off Timer1's frame starts: the two timers' first edges, which the frame starts make at
+ * once, do not fall together (one interrupt would hold the other's edge off), nor do they
+ * after an expedited frame, which keeps each timer's phase to its clock ticks
+ * (soonest_start). Worked out with interrupts on, between two short atomic reads and
+ * writes; the time that takes is well inside MIN_GAP_TICKS.
+ */
+static void timer5_start(void)
+{
+    uint16_t now;
+    uint16_t phase; /* a Timer1 frame start, on Timer5's count, half a tick back */
+    bool aligned;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        now = TCNT5;
+        phase = (uint16_t)(servo_timers[0].frame_start + (uint16_t)(now - TCNT1) -
+                           CLOCK_TICKS / 2u);
+        aligned = (TIMSK1 & _BV(OCIE1A)) != 0; /* Timer1 makes frames (not PWM) */
+    }
+    uint16_t first = aligned ? soonest_start(phase, now) : (uint16_t)(now + MIN_GAP_TICKS);
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        servo_timers[1].in_gap = true;
+        OCR5A = first;
+        TIFR5 = _BV(OCF5A);
+        TIMSK5 |= _BV(OCIE5A);
+    }
+}
+#endif
 
 void pd_avr_servo_init(void)
 {
@@ -162,15 +201,17 @@ void pd_avr_servo_init(void)
     TIFR1 = _BV(OCF1A);
     TIMSK1 |= _BV(OCIE1A);
 #if SERVO_TIMERS > 1
-    /* Timer5's frames start half a frame and half a clock tick after Timer1's: the two
-     * timers' first edges, which the frame starts make at once, do not fall together (one
-     * interrupt would hold the other's edge off), nor do they after an expedited frame,
-     * which keeps each timer's phase to its clock ticks (soonest_start). */
+    /* Timer5 counts from here, in step with Timer1 (one prescaler), but its frames run
+     * only once one of its channels is in the sequence (timer5_start). */
     TCCR5A = 0;
     TCCR5B = _BV(CS51);
-    OCR5A = (uint16_t)(TCNT5 + FRAME_TICKS + FRAME_TICKS / 2u + CLOCK_TICKS / 2u);
-    TIFR5 = _BV(OCF5A);
-    TIMSK5 |= _BV(OCIE5A);
+    TIMSK5 &= (uint8_t)~_BV(OCIE5A);
+    for (uint8_t ch = FIRST_CHANNEL(1); ch < END_CHANNEL(1); ch++) {
+        if (pd_avr_servos[ch].port != NULL) {
+            timer5_start();
+            break;
+        }
+    }
 #endif
 }
 
@@ -184,14 +225,17 @@ static int8_t next_attached(int8_t ch, uint8_t end)
 }
 
 /*
- * Only the edges and the next compare time are made with interrupts off; the rest (a
+ * Only the edges are made with interrupts off; the rest (the next compare time, a
  * frame's new widths, the next edges' ports) runs with them on and this interrupt
  * masked, so that it cannot nest. The counters' INT0 and INT1 wait behind this handler
  * alone: all of it held them off for up to 290 cycles, and behind a UART handler's
  * first instructions and the other counter's that came to more than the 400 cycles
  * between edges at 40,000 a second, now and then (issue 32: tools/avrsim --stats
- * "extint", firmware/README.md). MIN_GAP_TICKS keeps the soonest compare it sets
- * further away than the rest takes, nested interrupts included.
+ * "extint", firmware/README.md). On the Mega the other servo timer's edges wait
+ * behind it too: with the next compare time made before `sei` as well, that was
+ * about 130 cycles, 8 us off a pulse when the two timers' compares met. MIN_GAP_TICKS
+ * keeps the soonest compare it sets further away than the rest takes, nested
+ * interrupts included.
  */
 /* Timer `t`'s compare (a constant: each interrupt has its own copy, its registers and
  * its state at fixed addresses). */
@@ -205,6 +249,13 @@ static inline __attribute__((always_inline)) void servo_compare(uint8_t t)
      * so that a pulse's two edges are equally late and its width exact. */
     *tm->off_port &= (uint8_t)~tm->off_mask;
     *tm->on_port |= tm->on_mask;
+    /* The rest with interrupts on: the other timer's edges (the Mega's) and the counters'
+     * interrupts wait only for the edges above. This handler cannot nest in itself, and
+     * the main loop, the only other writer of this timer's state, cannot run before it
+     * returns; the compare time it sets below is at least MIN_GAP_TICKS away, further
+     * than any nesting takes. */
+    *timer_timsk(t) &= (uint8_t)~_BV(OCIE1A);
+    sei();
 
     bool starts = tm->in_gap; /* this compare starts a frame */
     if (starts) {
@@ -216,7 +267,7 @@ static inline __attribute__((always_inline)) void servo_compare(uint8_t t)
      * the one written, and the others' are taken below, long before their turn. */
     bool take = starts && !held;
     if (take) {
-        unlatched &= (uint8_t)~_BV(t);
+        unlatched[t] = 0;
     }
     int8_t ch = tm->on_channel; /* the channel now high, if any */
     if (ch >= 0) {
@@ -237,8 +288,6 @@ static inline __attribute__((always_inline)) void servo_compare(uint8_t t)
         expedite[t] = false;
         tm->in_gap = true;
     }
-    *timer_timsk(t) &= (uint8_t)~_BV(OCIE1A);
-    sei();
 
     if (take) {
         for (uint8_t n = FIRST_CHANNEL(t); n < END_CHANNEL(t); n++) {
@@ -283,6 +332,12 @@ static __attribute__((noinline)) volatile uint8_t *pin_port(uint8_t pin, uint8_t
     return pd_avr_port(pin, mask);
 }
 
+/*
+ * Everything that can be is worked out before interrupts go off: they stay off only for
+ * the stores, because a servo edge waits for them (the Mega's channel/12, a division,
+ * inside the block held them off for 135 cycles, 8 us off a pulse: test_board_sim's
+ * concurrent callers on the emulated Mega, tools/avrsim's trace).
+ */
 void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
 {
     if (channel >= PD_MAX_SERVOS) {
@@ -291,9 +346,14 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
     uint16_t ticks = (uint16_t)(us * TICKS_PER_US);
     uint8_t mask;
     volatile uint8_t *port = pin_port(pin, &mask);
+    uint8_t t = SERVO_TIMER_OF(channel);
+    servo_channel_t *c = &pd_avr_servos[channel];
+    const servo_timer_t *tm = &servo_timers[t];
+    /* Opaque from here: the compiler would otherwise work the addresses out again (a
+     * multiply each) inside the block, where they cost interrupts-off time. */
+    __asm__("" : "+r"(c), "+r"(tm));
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
-        servo_channel_t *c = &pd_avr_servos[channel];
         if (c->port != port || c->mask != mask) {
             /* Attach (first use, after a detach, or another pin): output, low,
              * joins the sequence at the channel's next turn. A pulse still under
@@ -301,15 +361,19 @@ void pd_avr_servo_write(uint8_t channel, uint8_t pin, uint16_t us)
             c->mask = mask; /* first: the table says servo when the pin turns output */
             c->port = port;
             c->ticks = ticks; /* valid for the next frame, held or not */
-            const servo_timer_t *tm = &servo_timers[SERVO_TIMER_OF(channel)];
             if (tm->off_port != port || !(tm->off_mask & mask)) {
                 *port &= (uint8_t)~mask;
             }
             *pd_avr_ddr(port) |= mask;
         }
         c->next = ticks;
-        unlatched |= (uint8_t)_BV(SERVO_TIMER_OF(channel));
+        unlatched[t] = 1;
     }
+#if SERVO_TIMERS > 1
+    if (t == 1 && !(TIMSK5 & _BV(OCIE5A)) && !(TCCR5A & _BV(WGM50))) {
+        timer5_start(); /* its first channel (and not PWM's: pd_avr_pwm.c) */
+    }
+#endif
 }
 
 void pd_avr_servo_hold(bool hold)
@@ -319,7 +383,11 @@ void pd_avr_servo_hold(bool hold)
 
 bool pd_avr_servo_pending(void)
 {
-    return unlatched != 0;
+#if SERVO_TIMERS > 1
+    return (unlatched[0] | unlatched[1]) != 0;
+#else
+    return unlatched[0] != 0;
+#endif
 }
 
 /*
@@ -352,7 +420,8 @@ void pd_avr_servo_expedite(void)
             if (!(*timer_timsk(t) & _BV(OCIE1A))) {
                 /* The timer runs PWM (pd_avr_pwm.c took it over): its OCRnA is a duty,
                  * never a frame time (written there, the PWM pin showed duty 255 at a
-                 * failsafe instead of its safe duty). */
+                 * failsafe instead of its safe duty). Or it makes no frames yet (the
+                 * Mega's Timer5 before its first channel: timer5_start). */
                 continue;
             }
             if (!tm->in_gap) {

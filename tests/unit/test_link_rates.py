@@ -166,3 +166,107 @@ def test_a_handshake_that_heard_reset_acks_says_so() -> None:
     assert "received nothing" not in text
     assert "answered RESET" in text and "RESET_ACKs" in text
     assert "1000000" in text  # the rate that failed
+
+
+class Line(SlowLine):
+    """A line that carries every rate, and loses what ``lose`` names: the next RESETs that
+    reach the device at a rate (``("reset", rate)``: lost on the way in, so a switch stays
+    unconfirmed) or their RESET_ACKs (``("ack", rate)``: the device took the RESET)."""
+
+    def __init__(self, clock: Clock) -> None:
+        super().__init__(clock, boot=0.0)
+        self.lose: dict[tuple[str, int], int] = {}
+        self.confirmed = True
+
+    def reset_device(self) -> None:
+        """A reset: back at the opening rate, the link state gone."""
+        self.device_rate = OPENING_BAUDRATE
+        self.confirmed = True
+
+    def _lost(self, what: str) -> bool:
+        left = self.lose.get((what, self.device_rate), 0)
+        if left:
+            self.lose[(what, self.device_rate)] = left - 1
+        return left > 0
+
+    def send(self, ptype: PacketType, payload: bytes, *, reset_seq: bool = False) -> None:
+        now = self.clock.now
+        if not self.confirmed and now >= self.device_back_at:
+            self.device_rate, self.confirmed = OPENING_BAUDRATE, True  # BAUD_CONFIRM ran out
+        if self.baudrate != self.device_rate or ptype is not PacketType.CONTROL:
+            return  # a rate mismatch, or a command the model leaves unanswered
+        ctl = parse_control(payload)
+        if ctl.code is ControlCode.RESET:
+            if self._lost("reset"):
+                return
+            self.confirmed = True
+            if not self._lost("ack"):
+                self._answer(
+                    reset_ack_payload(PROTOCOL_VERSION, SCHEMA_ID, 7, False, FAST_BAUDRATES)
+                )
+        elif ctl.code is ControlCode.BAUD_SET:
+            self._answer(baud_payload(ControlCode.BAUD_ACK, ctl.baudrate or 0))
+            if ctl.baudrate != self.device_rate:
+                self.device_rate = ctl.baudrate or OPENING_BAUDRATE
+                self.confirmed = False
+                self.device_back_at = now + BAUD_CONFIRM
+
+
+def _active_on(line: Line, clock: Clock) -> Link:
+    """A link that agreed the fastest rate and is ACTIVE on ``line``."""
+    link = Link(line, Above(), handshake_timeout=5.0, notify=lambda e: None, clock=clock)
+    line.link = link
+    link.transport_opened(False)
+    _run(link, clock, until=clock.now + 5.0)
+    assert link.state is LinkState.ACTIVE and line.baudrate == max(FAST_BAUDRATES)
+    return link
+
+
+def _rehandshake(link: Link, line: Line, clock: Clock) -> float:
+    """Handshake again (as the silence at an agreed rate does) and return how long the link
+    took to be ACTIVE again."""
+    start = clock.now
+    link.request_handshake()
+    link.transport_tick(clock.now)
+    _run(link, clock, until=start + 10.0)
+    assert link.state is LinkState.ACTIVE
+    return clock.now - start
+
+
+def test_a_device_that_reset_is_found_at_the_opening_rate_though_a_reset_there_is_lost() -> None:
+    clock = Clock()
+    line = Line(clock)
+    link = _active_on(line, clock)
+    line.reset_device()
+    line.lose[("reset", OPENING_BAUDRATE)] = 1
+    took = _rehandshake(link, line, clock)
+    # Retries at 0.1 s (the opening rate: lost), 0.3 (the agreed rate), 0.7 (the opening
+    # rate again): found there, where its next turn came at 4.5 s (the soak's calls timed
+    # out at 6 s when that one was lost too).
+    assert took < 1.0, took
+    assert line.baudrate == max(FAST_BAUDRATES)  # and the rate agreed again
+
+
+def test_a_lost_answer_to_the_reset_confirming_a_rate_is_retried_at_once() -> None:
+    clock = Clock()
+    line = Line(clock)
+    link = _active_on(line, clock)
+    line.reset_device()
+    fast = max(FAST_BAUDRATES)
+    line.lose[("ack", fast)] = 1  # the device confirmed: it stays at the fast rate
+    took = _rehandshake(link, line, clock)
+    # The confirming RESET's retries start from the first delay: its next turn at the
+    # fast rate 0.3 s on, where the grown backoff made it 1.2 s (and then 2 s a turn).
+    assert took < 1.0, took
+    assert line.baudrate == fast
+
+
+def test_a_lost_reset_confirming_a_rate_finds_the_device_back_at_the_opening_rate() -> None:
+    clock = Clock()
+    line = Line(clock)
+    link = _active_on(line, clock)
+    line.reset_device()
+    fast = max(FAST_BAUDRATES)
+    line.lose[("reset", fast)] = 1  # unconfirmed: the device returns after BAUD_CONFIRM
+    took = _rehandshake(link, line, clock)
+    assert took < 1.5, took
