@@ -323,12 +323,12 @@ def test_speed_limit_at_the_pin(sim_board: SimBoard) -> None:
 
 
 def test_failsafe_returns_at_the_speed_limit(sim_board: SimBoard) -> None:
-    with Board.open(sim_board.port) as board:
+    with Board.open(sim_board.port, failsafe_timeout=2.0) as board:
         servo = board.servo(9, safe_us=1500, max_speed_us=1000)  # 20 us per frame
         servo.write_us(1700)
         wait_for_pin(sim_board, 9, functools.partial(ends_near, 1700))
         mark = sim_board.trace()[-1]["t"]
-        board.pinging = False  # the failsafe fires after 10 s of silence
+        board.pinging = False  # the failsafe fires after 2 s of silence (10 s by default)
         wait_for_pin(sim_board, 9, functools.partial(ends_near, 1500), timeout=30)
         check_ramp(ramp(sim_board.trace(), 9, mark), 1700, 1500, 1000)
 
