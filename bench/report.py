@@ -149,17 +149,29 @@ def merge(old: str, new: str, note: str) -> str:
     out_blocks += list(pending.values())
     if not any(b.startswith("## Targets") for b in old_blocks) and fresh_rows:
         out_blocks.insert(0, new_targets)
-    # An earlier merge's note goes when this run replaces every part it named.
     kept = [
-        line
-        for line in old_head.rstrip().split("\n\n")
-        if not (
-            (m := _LATER_RUN.match(line))
-            and {int(n) for n in re.findall(r"\d+", m.group(1))} <= set(new_parts)
-        )
+        paragraph
+        for paragraph in (_drop_notes(p, set(new_parts)) for p in old_head.rstrip().split("\n\n"))
+        if paragraph
     ]
     head = "\n\n".join(kept) + f"\n\n> {note}\n\n"
     return (head + "".join(b.rstrip() + "\n\n" for b in out_blocks)).rstrip() + "\n"
+
+
+def _drop_notes(paragraph: str, parts: set[int | None]) -> str:
+    """``paragraph`` without the earlier merges' notes that this run replaces every part of,
+    each a note's line and the lines after it up to the next note: two notes that share a
+    paragraph (a hand edit) are judged one by one, where the paragraph went whole by its
+    first note's parts."""
+    out: list[str] = []
+    dropping = False
+    for line in paragraph.split("\n"):
+        m = _LATER_RUN.match(line)
+        if m:
+            dropping = {int(n) for n in re.findall(r"\d+", m.group(1))} <= parts
+        if not dropping:
+            out.append(line)
+    return "\n".join(out)
 
 
 def _merge_targets(block: str, parts: set[int | None], fresh: list[str]) -> str:

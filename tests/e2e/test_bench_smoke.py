@@ -872,6 +872,13 @@ def test_report_merge_replaces_only_the_parts_run() -> None:
     fewer = new.replace("| 5. F | f | g | new | met |\n", "").split("## 5. F")[0]
     assert report.merge(merged, fewer + "## 8. R\n\nrace\n", "x").count("> Parts") == 1
     assert "> x" in report.merge(merged, fewer + "## 8. R\n\nrace\n", "x")
+    # Notes that share a paragraph (a hand edit) are judged one by one: part 9's stays.
+    shared = merged.replace(
+        "> Parts 5 and 8 come from a later run.\n",
+        "> Parts 5 and 8 come from a later run.\n> Part 9 comes from a later run still.\n",
+    )
+    rerun = report.merge(shared, new, "w")
+    assert "Parts 5 and 8 come" not in rerun and "> Part 9 comes from a later run still." in rerun
 
 
 @pytest.mark.avr
