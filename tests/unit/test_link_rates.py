@@ -212,34 +212,28 @@ class Line(SlowLine):
                 self.device_back_at = now + BAUD_CONFIRM
 
 
-def _active_on(line: Line, clock: Clock) -> Link:
-    """A link that agreed the fastest rate and is ACTIVE on ``line``."""
+def _recovery(lose: dict[tuple[str, int], int]) -> tuple[float, Line]:
+    """How long a link that agreed the fastest rate takes to be ACTIVE again after its
+    device reset, with ``lose`` (Line's) lost on the way; and the line."""
+    clock = Clock()
+    line = Line(clock)
     link = Link(line, Above(), handshake_timeout=5.0, notify=lambda e: None, clock=clock)
     line.link = link
     link.transport_opened(False)
     _run(link, clock, until=clock.now + 5.0)
     assert link.state is LinkState.ACTIVE and line.baudrate == max(FAST_BAUDRATES)
-    return link
-
-
-def _rehandshake(link: Link, line: Line, clock: Clock) -> float:
-    """Handshake again (as the silence at an agreed rate does) and return how long the link
-    took to be ACTIVE again."""
+    line.reset_device()
+    line.lose = dict(lose)
     start = clock.now
-    link.request_handshake()
+    link.request_handshake()  # as the silence at an agreed rate does
     link.transport_tick(clock.now)
     _run(link, clock, until=start + 10.0)
     assert link.state is LinkState.ACTIVE
-    return clock.now - start
+    return clock.now - start, line
 
 
 def test_a_device_that_reset_is_found_at_the_opening_rate_though_a_reset_there_is_lost() -> None:
-    clock = Clock()
-    line = Line(clock)
-    link = _active_on(line, clock)
-    line.reset_device()
-    line.lose[("reset", OPENING_BAUDRATE)] = 1
-    took = _rehandshake(link, line, clock)
+    took, line = _recovery({("reset", OPENING_BAUDRATE): 1})
     # Retries at 0.1 s (the opening rate: lost), 0.3 (the agreed rate), 0.7 (the opening
     # rate again): found there, where its next turn came at 4.5 s (the soak's calls timed
     # out at 6 s when that one was lost too).
@@ -248,25 +242,15 @@ def test_a_device_that_reset_is_found_at_the_opening_rate_though_a_reset_there_i
 
 
 def test_a_lost_answer_to_the_reset_confirming_a_rate_is_retried_at_once() -> None:
-    clock = Clock()
-    line = Line(clock)
-    link = _active_on(line, clock)
-    line.reset_device()
-    fast = max(FAST_BAUDRATES)
-    line.lose[("ack", fast)] = 1  # the device confirmed: it stays at the fast rate
-    took = _rehandshake(link, line, clock)
+    # The device confirmed the switch (it took the RESET): it stays at the fast rate.
+    took, line = _recovery({("ack", max(FAST_BAUDRATES)): 1})
     # The confirming RESET's retries start from the first delay: its next turn at the
     # fast rate 0.3 s on, where the grown backoff made it 1.2 s (and then 2 s a turn).
     assert took < 1.0, took
-    assert line.baudrate == fast
+    assert line.baudrate == max(FAST_BAUDRATES)
 
 
 def test_a_lost_reset_confirming_a_rate_finds_the_device_back_at_the_opening_rate() -> None:
-    clock = Clock()
-    line = Line(clock)
-    link = _active_on(line, clock)
-    line.reset_device()
-    fast = max(FAST_BAUDRATES)
-    line.lose[("reset", fast)] = 1  # unconfirmed: the device returns after BAUD_CONFIRM
-    took = _rehandshake(link, line, clock)
+    # Unconfirmed, the device returns to the opening rate after BAUD_CONFIRM.
+    took, _ = _recovery({("reset", max(FAST_BAUDRATES)): 1})
     assert took < 1.5, took
