@@ -79,12 +79,15 @@ def targets(rng: random.Random, servos: dict[int, Servo], now: dict[int, int]) -
 def deviations(
     events: list[dict[str, Any]], windows: list[tuple[dict[int, float], dict[int, int], float]]
 ) -> list[int]:
-    """|line - posed| of every servo line from each pin's first new line to the window's end."""
+    """|line - posed| of every servo line from each pin's first new line to the window's end,
+    both included: the end is the last line before the next trial's poses (its time, read
+    from the trace), often the last pin's first new line itself (left out, a trial had 23 of
+    24 pins whenever no latency outlier added a line)."""
     out: list[int] = []
     for starts, wants, end in windows:
         for e in events:
             pin = int(e["pin"])
-            if e["mode"] == "servo" and pin in starts and starts[pin] <= e["t"] < end:
+            if e["mode"] == "servo" and pin in starts and starts[pin] <= e["t"] <= end:
                 out.append(abs(int(e["value"]) - wants[pin]))
     return out
 
