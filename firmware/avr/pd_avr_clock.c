@@ -35,6 +35,7 @@ void pd_avr_clock_init(void)
 ISR(TIMER0_OVF_vect, ISR_NAKED)
 {
     __asm__ volatile("sei\n\t"
+                     "sbi %[pass], %[bit]\n\t" /* a pass is due: the failsafe's check */
                      "push r24\n\t"
                      "in r24, __SREG__\n\t"
                      "push r24\n\t"
@@ -66,7 +67,8 @@ ISR(TIMER0_OVF_vect, ISR_NAKED)
                      "pop r24\n\t"
                      "reti\n\t"
                      :
-                     : [f] "i"(&fract), [fmax] "M"(125),
+                     : [pass] "I"(_SFR_IO_ADDR(PD_AVR_PASS)), [bit] "I"(PD_AVR_PASS_BIT),
+                       [f] "i"(&fract), [fmax] "M"(125),
                        [c0] "i"((uint8_t *)&ms + 0), [c1] "i"((uint8_t *)&ms + 1),
                        [c2] "i"((uint8_t *)&ms + 2), [c3] "i"((uint8_t *)&ms + 3));
 }

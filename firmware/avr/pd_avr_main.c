@@ -2,10 +2,11 @@
  * The Uno firmware: the portable core behind the ATmega328P HAL.
  *
  * The main loop offers every received byte to the core, lets it check the
- * failsafe, and sleeps (idle mode) until the next interrupt: a received byte,
- * a transmitted one or the clock tick (Timer0's overflow, every 1,024 us), so
- * the failsafe is checked at least that often. It never waits for the UART: frames go into a transmit
- * ring that an interrupt drains.
+ * failsafe, and sleeps (idle mode) until a pass is due (PD_AVR_PASS): a frame's
+ * delimiter or every fourth received byte, the transmit ring emptied, an
+ * input's change, the clock tick (Timer0's overflow, every 1,024 us), so the
+ * failsafe is checked at least that often. It never waits for the UART: frames
+ * go into a transmit ring that an interrupt drains.
  */
 #include <avr/eeprom.h>
 #include <avr/interrupt.h>
@@ -331,21 +332,24 @@ static uint8_t millis8(void)
  * One pass: the received bytes into the core, then pd_core_poll when the pass
  * has news for it: a clock tick, an input's interrupt (pd_avr_wake), a frame's
  * delimiter (a command ran, a session opened, a Ping fed the failsafe), or the
- * transmit ring just emptied (a report waits for that). Every received or sent
- * byte wakes the loop, and a poll (the failsafe's, the servo steps' and the
- * inputs' clock tests, the report slots) was about 150 cycles of every such
- * pass: 1,450 of a digital write's 11,300 awake cycles (bench part 5). What the
- * poll reads changes only with those news, so a pass without any skips it. With
- * a user service built in, every pass polls: its poll hook may work in slices,
- * one a pass (docs/services.md).
+ * transmit ring just emptied (a report waits for that). A poll (the failsafe's,
+ * the servo steps' and the inputs' clock tests, the report slots) is about 150
+ * cycles; what it reads changes only with those news, so a pass without any
+ * skips it. With a user service built in, every pass polls: its poll hook may
+ * work in slices, one a pass (docs/services.md).
  */
 void pd_avr_loop(void)
 {
-    int16_t byte;
-    bool news = pd_avr_wake != 0;
+    uint8_t flags;
+    ATOMIC_BLOCK(ATOMIC_FORCEON)
+    {
+        flags = PD_AVR_PASS; /* a flag set from now on makes one more pass */
+        PD_AVR_PASS = 0;
+    }
+    bool news = pd_avr_wake != 0 || (flags & _BV(PD_AVR_FRAME_BIT));
     pd_avr_wake = 0; /* the inputs are read below: a change from now on sets it again */
+    int16_t byte;
     while ((byte = pd_avr_uart_peek()) >= 0 && pd_core_rx_byte(&core, (uint8_t)byte)) {
-        news |= byte == 0;
         pd_avr_uart_drop();
     }
     uint8_t ms = millis8();
@@ -357,26 +361,42 @@ void pd_avr_loop(void)
     }
     WAS_EMPTY = empty;
 
-    /* Sleep unless a byte slipped in; `sei; sleep` cannot miss the wake-up,
-     * because the instruction after sei always runs before any interrupt. A
-     * byte the core left (byte >= 0: its replies need transmit room) waits for
-     * the transmit interrupt, which wakes us as the queue drains. An input's
-     * interrupt since the pass began (pd_avr_wake) means one more pass first. */
+    /* Sleep until a pass is due; `sei; sleep` cannot miss the wake-up,
+     * because the instruction after sei always runs before any interrupt. An
+     * input's interrupt since the pass began (pd_avr_wake) means one more pass
+     * first. A byte the core left (byte >= 0: its replies need transmit room)
+     * waits for the transmit ring to empty, which makes a pass due.
+     *
+     * Our own build sleeps on through every interrupt that makes no pass due
+     * (PD_AVR_PASS): a received byte between two fourth ones, a byte sent, a servo
+     * edge. A pass for each of them (the ring's checks, the clock's, the sleep's:
+     * about 60 cycles) was 23 passes of an acked digital write, the bytes of a
+     * frame taken one a pass; now its bytes come four at a time (bench part 5). The
+     * loop then reads a frame's last bytes when its delimiter is in, where it
+     * decoded the payload 3 byte times before: at 115200 a few tens of us more to
+     * the Ack (part 2). In the Arduino IDE's build the core's clock cannot make a
+     * pass due: every interrupt makes one there, and received bytes are taken as
+     * they come. */
 #ifdef ARDUINO
     set_sleep_mode(SLEEP_MODE_IDLE);
-#endif
     cli();
     if (!pd_avr_wake && (byte >= 0 || pd_avr_uart_rx_empty())) {
-#ifdef ARDUINO
         sleep_enable();
-#endif
         sei();
         sleep_cpu();
-#ifdef ARDUINO
         sleep_disable();
-#endif
     }
     sei();
+#else
+    (void)byte;
+    cli();
+    while (!pd_avr_wake && !(PD_AVR_PASS & _BV(PD_AVR_PASS_BIT))) {
+        sei();
+        sleep_cpu();
+        cli();
+    }
+    sei();
+#endif
 }
 
 #ifndef ARDUINO

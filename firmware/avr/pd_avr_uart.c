@@ -135,11 +135,21 @@ ISR(USART_RX_vect, ISR_NAKED)
         "subi r30, lo8(-(%[buf]))\n\t"
         "sbci r31, hi8(-(%[buf]))\n\t"
         "st Z, r25\n\t"
-        "2:\n\t"
+        "tst r25\n\t"
+        "brne 4f\n\t"
+        "sbi %[pass], %[frame]\n\t" /* a delimiter: a frame ended, a pass is due */
+        "rjmp 2f\n\t"
+        "4:\n\t"
+        "andi r24, 3\n\t"      /* every fourth slot: a pass takes the bytes so far */
+        "brne 3f\n\t"
+        "2:\n\t"               /* (a full ring too: the loop must empty it) */
+        "sbi %[pass], %[bit]\n\t"
+        "3:\n\t"
         PD_UART_ISR_RETURN
         :
         : [udr] "n"(_SFR_MEM_ADDR(UDR0)), [head] "i"(&rx_head), [tail] "i"(&rx_tail),
-          [buf] "i"(rx_buf), [size] "M"(PD_AVR_RX_SIZE));
+          [buf] "i"(rx_buf), [size] "M"(PD_AVR_RX_SIZE), [pass] "I"(_SFR_IO_ADDR(PD_AVR_PASS)),
+          [bit] "I"(PD_AVR_PASS_BIT), [frame] "I"(PD_AVR_FRAME_BIT));
 }
 
 int16_t pd_avr_uart_peek(void)
@@ -258,10 +268,14 @@ ISR(USART_UDRE_vect, ISR_NAKED)
         "sts %[tail], r24\n\t"
         "ldi r24, %[busy]\n\t"
         "sts %[ucsrb], r24\n\t"
+        "rjmp 3f\n\t"
         "1:\n\t"
+        "sbi %[pass], %[bit]\n\t" /* the ring emptied: a report or a held frame may go */
+        "3:\n\t"
         PD_UART_ISR_RETURN
         :
-        : [idle] "M"(UCSR0B_TX_IDLE), [busy] "M"(UCSR0B_TX_IDLE | _BV(UDRIE0)),
+        : [pass] "I"(_SFR_IO_ADDR(PD_AVR_PASS)), [bit] "I"(PD_AVR_PASS_BIT),
+          [idle] "M"(UCSR0B_TX_IDLE), [busy] "M"(UCSR0B_TX_IDLE | _BV(UDRIE0)),
           [ucsrb] "n"(_SFR_MEM_ADDR(UCSR0B)), [udr] "n"(_SFR_MEM_ADDR(UDR0)),
           [tail] "i"(&tx_tail), [head] "i"(&tx_head), [buf] "i"(tx_buf),
           [size] "M"(PD_AVR_TX_SIZE));
