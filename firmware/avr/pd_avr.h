@@ -93,7 +93,7 @@ extern volatile uint8_t pd_avr_wake;
 
 /* A pass of the main loop is due: bit 0 of GPIOR0, set with one `sbi` (no register, no flag
  * of SREG touched) by the interrupts whose news the loop waits for: a received delimiter,
- * every fourth received byte, a byte lost to a full ring, the transmit ring emptied, the
+ * every second received byte, a byte lost to a full ring, the transmit ring emptied, the
  * clock tick. Any other interrupt wakes the MCU, and the loop sleeps again at once
  * (pd_avr_loop). In the Arduino IDE's build the core's own clock interrupt cannot set it:
  * there every interrupt makes a pass, as before. */

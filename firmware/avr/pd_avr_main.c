@@ -3,7 +3,7 @@
  *
  * The main loop offers every received byte to the core, lets it check the
  * failsafe, and sleeps (idle mode) until a pass is due (PD_AVR_PASS): a frame's
- * delimiter or every fourth received byte, the transmit ring emptied, an
+ * delimiter or every second received byte, the transmit ring emptied, an
  * input's change, the clock tick (Timer0's overflow, every 1,024 us), so the
  * failsafe is checked at least that often. It never waits for the UART: frames
  * go into a transmit ring that an interrupt drains.
@@ -368,13 +368,15 @@ void pd_avr_loop(void)
      * waits for the transmit ring to empty, which makes a pass due.
      *
      * Our own build sleeps on through every interrupt that makes no pass due
-     * (PD_AVR_PASS): a received byte between two fourth ones, a byte sent, a servo
-     * edge. A pass for each of them (the ring's checks, the clock's, the sleep's:
-     * about 60 cycles) was 23 passes of an acked digital write, the bytes of a
-     * frame taken one a pass; now its bytes come four at a time (bench part 5). The
-     * loop then reads a frame's last bytes when its delimiter is in, where it
-     * decoded the payload 3 byte times before: at 115200 a few tens of us more to
-     * the Ack (part 2). In the Arduino IDE's build the core's clock cannot make a
+     * (PD_AVR_PASS): every other received byte, a byte sent, a servo edge. A pass
+     * for each of them (the ring's checks, the clock's, the sleep's: about 60
+     * cycles) was 23 passes of an acked digital write, the bytes of a frame taken
+     * one a pass; now its bytes come two at a time (bench part 5). Four at a time
+     * saved 200 cycles more a write, but a command's payload was then decoded
+     * after its delimiter more often: its answer time (delimiter in to the Ack's
+     * first byte out) grew by 313 cycles a servo write where two at a time adds
+     * 82, and the servo round trip at 1,000,000 baud is within 10 us of its target
+     * (bench part 9). In the Arduino IDE's build the core's clock cannot make a
      * pass due: every interrupt makes one there, and received bytes are taken as
      * they come. */
 #ifdef ARDUINO

@@ -140,7 +140,7 @@ ISR(USART_RX_vect, ISR_NAKED)
         "sbi %[pass], %[frame]\n\t" /* a delimiter: a frame ended, a pass is due */
         "rjmp 2f\n\t"
         "4:\n\t"
-        "andi r24, 3\n\t"      /* every fourth slot: a pass takes the bytes so far */
+        "andi r24, 1\n\t"      /* every second slot: a pass takes the bytes so far */
         "brne 3f\n\t"
         "2:\n\t"               /* (a full ring too: the loop must empty it) */
         "sbi %[pass], %[bit]\n\t"
