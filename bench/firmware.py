@@ -856,7 +856,11 @@ def _profile_markdown(c: CycleRun) -> str:
             "longer one out of line: no `__prologue_saves__`; about 290), a pin's bit in a pin "
             "set is built by bytes, not by a 32-bit shift (about 25, 80 a servo write), and "
             "the main loop reads one byte of the clock, keeps sleep enabled and reads the "
-            "receive ring's tail once a byte (about 280).\n",
+            "receive ring's tail once a byte (about 280). Then the main loop sleeps on "
+            "through the interrupts that make no pass due (firmware/avr/pd_avr_main.c): a "
+            "pass only at a received delimiter, every second received byte, the transmit "
+            "ring emptied, the clock tick or an input's change, where every byte received "
+            "or sent made one (about 60 cycles each: about 600 a digital write).\n",
         ]
     )
 
