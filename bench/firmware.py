@@ -859,8 +859,9 @@ def _profile_markdown(c: CycleRun) -> str:
             "receive ring's tail once a byte (about 280). Then the main loop sleeps on "
             "through the interrupts that make no pass due (firmware/avr/pd_avr_main.c): a "
             "pass only at a received delimiter, every second received byte, the transmit "
-            "ring emptied, the clock tick or an input's change, where every byte received "
-            "or sent made one (about 60 cycles each: about 600 a digital write).\n",
+            "ring emptied, the clock tick or an input's change (each handler sets a bit of "
+            "GPIOR0 with one `sbi`), where every byte received or sent made one (about 60 "
+            "cycles each: about 800 a digital write).\n",
         ]
     )
 

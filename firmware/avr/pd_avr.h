@@ -87,21 +87,18 @@ void pd_avr_servo_expedite(void);
 void pd_avr_pwm_write(uint8_t pin, uint8_t duty);
 void pd_avr_pwm_release(uint8_t pin);
 
-/* Set by an input's interrupt (a pin change, an analog conversion done): the
- * main loop makes one more pass before it sleeps (pd_avr_loop). */
-extern volatile uint8_t pd_avr_wake;
-
 /* A pass of the main loop is due: bit 0 of GPIOR0, set with one `sbi` (no register, no flag
  * of SREG touched) by the interrupts whose news the loop waits for: a received delimiter,
  * every second received byte, a byte lost to a full ring, the transmit ring emptied, the
- * clock tick. Any other interrupt wakes the MCU, and the loop sleeps again at once
- * (pd_avr_loop). In the Arduino IDE's build the core's own clock interrupt cannot set it:
- * there every interrupt makes a pass, as before. */
+ * clock tick, an input's (a pin change, an analog conversion done). Any other interrupt
+ * wakes the MCU, and the loop sleeps again at once (pd_avr_loop). In the Arduino IDE's
+ * build the core's own clock interrupt cannot set it: there every interrupt makes a pass,
+ * as before. */
 #define PD_AVR_PASS GPIOR0
 #define PD_AVR_PASS_BIT 0
-/* Bit 1 beside it: a delimiter came in (the receive interrupt sets both); the pass
- * polls the core (pd_avr_loop). */
-#define PD_AVR_FRAME_BIT 1
+/* Bit 1 beside it: news for the core's poll, a delimiter came in (a command ran, a Ping fed
+ * the failsafe) or an input's interrupt (its handler sets both bits). */
+#define PD_AVR_NEWS_BIT 1
 
 /* Inputs (pd_avr_inputs.c). wake: a change of the pin wakes the main loop. */
 void pd_avr_input_config(uint8_t pin, bool pull_up, bool wake);

@@ -10,10 +10,11 @@
  *   interrupt wakes the loop when it is done, so conversions follow each other
  *   at the ADC's pace (13 ADC clocks at 125 kHz: 104 us) rather than the clock
  *   tick's. AVCC reference, 10 bits.
- * Both interrupts only set pd_avr_wake: an interrupt that lands after the
- * loop's pass has read the inputs but before it sleeps must still keep it
- * awake for one more pass (pd_avr_loop checks the flag with interrupts off),
- * or the change would wait for the next clock tick after all.
+ * Both interrupts only make a pass due with news for its poll (PD_AVR_PASS,
+ * both bits): an interrupt that lands after the loop's pass has read the
+ * inputs but before it sleeps must still keep it awake for one more pass
+ * (pd_avr_loop checks the bit with interrupts off), or the change would wait
+ * for the next clock tick after all.
  * - Counters: INT0 (pin 2) and INT1 (pin 3), each edge counted in its
  *   interrupt (rising, falling or both, chosen in EICRA); pins 4..13 in their
  *   port's pin-change interrupt, which compares the pin with its last level.
@@ -30,8 +31,6 @@
 #include "pd_avr_pins.h"
 #include "pd_features.h"
 #include "pd_hal.h"
-
-volatile uint8_t pd_avr_wake;
 
 /* Counters on pin-change interrupts: the Uno's ports B, C and D (pins 4..13). The
  * Mega counts on its six external interrupts only (its pin changes are on other ports). */
@@ -158,17 +157,17 @@ pd_pinset_t pd_avr_pins_read(void)
 }
 #endif
 
-/* pd_avr_wake = 1, touching no flag of SREG: 4 B of stack, 9 cycles. */
+/* A pass due with news (two `sbi`): no register, no flag of SREG, no stack but the return
+ * address; 4 cycles and the return. */
 #define PD_WAKE_ISR(vector)                                                  \
     ISR(vector, ISR_NAKED)                                                   \
     {                                                                        \
-        __asm__ volatile("push r24\n\t"                                      \
-                         "ldi r24, 1\n\t"                                    \
-                         "sts %[wake], r24\n\t"                              \
-                         "pop r24\n\t"                                       \
+        __asm__ volatile("sbi %[pass], %[news]\n\t"                          \
+                         "sbi %[pass], %[bit]\n\t"                           \
                          "reti\n\t"                                          \
                          :                                                   \
-                         : [wake] "i"(&pd_avr_wake));                        \
+                         : [pass] "I"(_SFR_IO_ADDR(PD_AVR_PASS)),            \
+                           [news] "I"(PD_AVR_NEWS_BIT), [bit] "I"(PD_AVR_PASS_BIT)); \
     }
 
 #if !PD_AVR_PC_COUNTERS /* else the counters' pin-change handlers wake the loop too */
@@ -310,8 +309,8 @@ static volatile uint8_t pc_mode[2];
                          "com r22\n\t"                                                   \
                          "and r24, r22\n\t" /* ... and count nothing */                  \
                          "breq 4f\n\t"                                                   \
-                         "ldi r24, 1\n\t"                                                \
-                         "sts %[wake], r24\n\t"                                          \
+                         "sbi %[pass], %[news]\n\t" /* a pass due, with news */          \
+                         "sbi %[pass], %[bit]\n\t"                                       \
                          "4:\n\t"                                                        \
                          "pop r22\n\t"                                                   \
                          "pop r23\n\t"                                                   \
@@ -323,7 +322,9 @@ static volatile uint8_t pc_mode[2];
                          :                                                               \
                          : [port] "I"(_SFR_IO_ADDR(pins)), [group] "M"(g),               \
                            [last] "i"(&pc_last[g]),                                      \
-                           [wake] "i"(&pd_avr_wake), [mode0] "i"(&pc_mode[0]),           \
+                           [pass] "I"(_SFR_IO_ADDR(PD_AVR_PASS)),                        \
+                           [news] "I"(PD_AVR_NEWS_BIT), [bit] "I"(PD_AVR_PASS_BIT),      \
+                           [mode0] "i"(&pc_mode[0]),                                     \
                            [mode1] "i"(&pc_mode[1]), [mask0] "i"(&pc_mask[0]),           \
                            [mask1] "i"(&pc_mask[1]),                                     \
                            [c00] "i"((uint8_t *)&counts[0] + 0),                         \

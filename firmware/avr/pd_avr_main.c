@@ -330,7 +330,7 @@ static uint8_t millis8(void)
 
 /*
  * One pass: the received bytes into the core, then pd_core_poll when the pass
- * has news for it: a clock tick, an input's interrupt (pd_avr_wake), a frame's
+ * has news for it: a clock tick, an input's interrupt (PD_AVR_NEWS_BIT), a frame's
  * delimiter (a command ran, a session opened, a Ping fed the failsafe), or the
  * transmit ring just emptied (a report waits for that). A poll (the failsafe's,
  * the servo steps' and the inputs' clock tests, the report slots) is about 150
@@ -346,8 +346,8 @@ void pd_avr_loop(void)
         flags = PD_AVR_PASS; /* a flag set from now on makes one more pass */
         PD_AVR_PASS = 0;
     }
-    bool news = pd_avr_wake != 0 || (flags & _BV(PD_AVR_FRAME_BIT));
-    pd_avr_wake = 0; /* the inputs are read below: a change from now on sets it again */
+    /* The inputs are read below: a change from now on makes another pass due. */
+    bool news = flags & _BV(PD_AVR_NEWS_BIT);
     int16_t byte;
     while ((byte = pd_avr_uart_peek()) >= 0 && pd_core_rx_byte(&core, (uint8_t)byte)) {
         pd_avr_uart_drop();
@@ -363,9 +363,9 @@ void pd_avr_loop(void)
 
     /* Sleep until a pass is due; `sei; sleep` cannot miss the wake-up,
      * because the instruction after sei always runs before any interrupt. An
-     * input's interrupt since the pass began (pd_avr_wake) means one more pass
-     * first. A byte the core left (byte >= 0: its replies need transmit room)
-     * waits for the transmit ring to empty, which makes a pass due.
+     * input's interrupt since the pass began means one more pass first. A
+     * byte the core left (byte >= 0: its replies need transmit room) waits for
+     * the transmit ring to empty, which makes a pass due.
      *
      * Our own build sleeps on through every interrupt that makes no pass due
      * (PD_AVR_PASS): every other received byte, a byte sent, a servo edge. A pass
@@ -382,7 +382,7 @@ void pd_avr_loop(void)
 #ifdef ARDUINO
     set_sleep_mode(SLEEP_MODE_IDLE);
     cli();
-    if (!pd_avr_wake && (byte >= 0 || pd_avr_uart_rx_empty())) {
+    if (!(PD_AVR_PASS & _BV(PD_AVR_NEWS_BIT)) && (byte >= 0 || pd_avr_uart_rx_empty())) {
         sleep_enable();
         sei();
         sleep_cpu();
@@ -392,7 +392,7 @@ void pd_avr_loop(void)
 #else
     (void)byte;
     cli();
-    while (!pd_avr_wake && !(PD_AVR_PASS & _BV(PD_AVR_PASS_BIT))) {
+    while (!(PD_AVR_PASS & _BV(PD_AVR_PASS_BIT))) {
         sei();
         sleep_cpu();
         cli();

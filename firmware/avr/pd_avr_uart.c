@@ -137,7 +137,7 @@ ISR(USART_RX_vect, ISR_NAKED)
         "st Z, r25\n\t"
         "tst r25\n\t"
         "brne 4f\n\t"
-        "sbi %[pass], %[frame]\n\t" /* a delimiter: a frame ended, a pass is due */
+        "sbi %[pass], %[news]\n\t" /* a delimiter: a frame ended, a pass is due */
         "rjmp 2f\n\t"
         "4:\n\t"
         "andi r24, 1\n\t"      /* every second slot: a pass takes the bytes so far */
@@ -149,7 +149,7 @@ ISR(USART_RX_vect, ISR_NAKED)
         :
         : [udr] "n"(_SFR_MEM_ADDR(UDR0)), [head] "i"(&rx_head), [tail] "i"(&rx_tail),
           [buf] "i"(rx_buf), [size] "M"(PD_AVR_RX_SIZE), [pass] "I"(_SFR_IO_ADDR(PD_AVR_PASS)),
-          [bit] "I"(PD_AVR_PASS_BIT), [frame] "I"(PD_AVR_FRAME_BIT));
+          [bit] "I"(PD_AVR_PASS_BIT), [news] "I"(PD_AVR_NEWS_BIT));
 }
 
 int16_t pd_avr_uart_peek(void)
