@@ -332,7 +332,8 @@ static uint8_t millis8(void)
  * One pass: the received bytes into the core, then pd_core_poll when the pass
  * has news for it: a clock tick, an input's interrupt (PD_AVR_NEWS_BIT), a frame's
  * delimiter (a command ran, a session opened, a Ping fed the failsafe), or the
- * transmit ring just emptied (a report waits for that). A poll (the failsafe's,
+ * transmit ring just emptied while a report waits for that (after every Ack it
+ * emptied: about 140 cycles of every command when no report waited). A poll (the failsafe's,
  * the servo steps' and the inputs' clock tests, the report slots) is about 150
  * cycles; what it reads changes only with those news, so a pass without any
  * skips it. With a user service built in, every pass polls: its poll hook may
@@ -354,7 +355,8 @@ void pd_avr_loop(void)
     }
     uint8_t ms = millis8();
     bool empty = pd_avr_uart_tx_empty();
-    if (PD_FEATURE_USER || news || ms != POLLED_MS || (empty && !WAS_EMPTY)) {
+    if (PD_FEATURE_USER || news || ms != POLLED_MS ||
+        (empty && !WAS_EMPTY && pd_core_report_waiting(&core))) {
         POLLED_MS = ms;
         pd_core_poll(&core);
         empty = pd_avr_uart_tx_empty(); /* a report it sent: the next poll when that is out */

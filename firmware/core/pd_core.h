@@ -44,6 +44,13 @@ size_t pd_core_rx(pd_core_t *core, const uint8_t *data, size_t len);
 /* Periodic work: the failsafe timer, speed steps, the inputs (pd_inputs_poll), at most one report. */
 void pd_core_poll(pd_core_t *core);
 
+/* Whether a report waits for pd_core_poll to send it (when the transmit queue has room): a
+ * platform that polls on news need not poll for a drained queue otherwise (the Uno's loop). */
+static inline bool pd_core_report_waiting(const pd_core_t *core)
+{
+    return core->report_pending != 0;
+}
+
 /*
  * A report gives way to a command frame arriving (its Ack goes first), but not
  * for longer than this: a host that keeps the line busy with commands must still
