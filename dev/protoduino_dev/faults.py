@@ -27,8 +27,8 @@ From code, the port (``line(name)`` for one opened elsewhere, e.g. inside a
 ``Board``) can be cut (``port.cut(seconds)``), paused and resumed
 (``port.pause()``, ``port.resume()``), healed for good (``port.heal()``:
 faults off, cuts cancelled), and held (``port.hold("tx"|"rx"|"both")``: every
-byte kept back until ``port.release()`` delivers them all, late and in order, as
-a stalled ser2net or Wi-Fi link does to a TCP connection). ``port.stats``
+byte kept back until ``port.release()`` delivers them all, late, in order and in one
+write, as a stalled ser2net or Wi-Fi link does to a TCP connection). ``port.stats``
 counts what was injected. The *device reset* fault is not a line fault: the board harness
 (``SimBoard.reboot()``) provides it. The line rate the caller sets reaches the inner port,
 so a simulated board started with ``--line-check`` (as the soak's are) carries bytes only

@@ -25,7 +25,9 @@ retransmission included) and every Ack received. :func:`run` then checks:
   slack);
 * **recovery**: once the faults stop, the next commands all succeed;
 * **failsafe on time**: with the pings stopped, the outputs go safe between 10 s
-  and 10 s + 20 ms after the device received the last Ping.
+  and 10 s + 20 ms after the device received the last Ping, both read on the
+  board's own clock: the last Ping goes out in one write between two digital
+  outputs' rising edges, whose trace lines bracket its arrival.
 
 The fault streams are seeded, so a scenario injects the same damage into the
 same byte positions; thread scheduling still varies from run to run, so the
@@ -94,8 +96,15 @@ SLOP = 0.25
 LATENCY = 1.0
 #: Failsafe timing tolerance: the contract's 20 ms.
 FAILSAFE_TOLERANCE = 0.020
-#: The device's clock ticks in milliseconds.
-MILLIS_TICK = 0.001
+#: Widest board-clock span (s) of the two digital edges written around the last Ping
+#: that still times the failsafe (the Ping's arrival is known to that much). Sent in
+#: one write, the three frames run in one pass of the native board's loop, within
+#: microseconds (a descheduled board adds at most 1.5 ms to its clock per reading of
+#: it), and 0.8 ms apart on the emulated Uno, whose UART takes them at the line rate.
+MARK_SPAN = 0.005
+#: Times the last Ping is sent again when a copy of it went out outside its marks
+#: (retransmitted after its marks: its Ack came late).
+MARK_ATTEMPTS = 3
 #: How far apart (s) the 0 lines of one reboot may be dated, beyond a servo's measuring lag.
 REBOOT_SPREAD = 0.005
 #: Extra time a call may take beyond its documented bound before it counts as hung (s).
@@ -110,12 +119,20 @@ class BackendTraits:
     tolerance_us: int
     #: A measured servo change is dated up to this much after it happened (s).
     servo_lag: float
+    #: The device's millisecond clock may read up to this much behind the trace's (s):
+    #: the failsafe compares two readings, so it may fire that much before its time.
+    millis_lag: float
 
 
 BACKEND_TRAITS = {
-    "native": BackendTraits(tolerance_us=0, servo_lag=0.0),
+    # Whole milliseconds of the board's clock: a Ping at 5.0009 s reads as 5000 ms.
+    "native": BackendTraits(tolerance_us=0, servo_lag=0.0, millis_lag=0.001),
     # The emulated Uno measures pulses at its pins: a few us off, one 20 ms frame late.
-    "avr": BackendTraits(tolerance_us=3, servo_lag=0.06),
+    # Its millis() is Arduino's: Timer0 overflows every 1.024 ms and adds 1 ms each
+    # time, 2 when the 24 us fractions add up to one, so a reading lags by up to the
+    # fraction (< 1 ms) plus one overflow period: 2.024 ms (the soak saw failsafes up
+    # to 1.9 ms early by the trace).
+    "avr": BackendTraits(tolerance_us=3, servo_lag=0.06, millis_lag=0.002024),
 }
 
 
@@ -162,6 +179,9 @@ class Scenario:
             raise ValueError("workers >= 1")
         if self.commands < 1 or self.resets < 0 or self.cuts < 0 or self.recovery_commands < 1:
             raise ValueError("commands and recovery_commands >= 1, resets and cuts >= 0")
+        if self.failsafe and (self.digitals < 2 or self.window < 3):
+            # The last Ping is dated by two digital edges sent with it (LastPing).
+            raise ValueError("the failsafe check needs digitals >= 2 and window >= 3")
         keys = {k for k, _ in parse_qsl(self.faults)}
         if keys & {"seed", "name", "paused"}:
             raise ValueError("seed, name and paused are set by the scenario, not in faults")
@@ -298,6 +318,29 @@ class _Cause:
     hi: float
     what: str  # "command", "init", "stop"
     message_id: int
+
+
+@dataclass(frozen=True)
+class LastPing:
+    """The last Ping before the silence, as :meth:`_Runner.last_ping` sent it.
+
+    The host's clock cannot say when the device received it closely enough: the
+    board's clock may run slower than the host's (a busy machine holds the native
+    board back, whose clock then counts at most 1.5 ms per pass of its loop; the
+    emulated Uno counts emulated cycles), so a host-to-board offset measured only
+    10 ms before the Ping was seen off by 2.8 ms, the failsafe looking early by
+    that. So the Ping is written in one write with the rising edges of the digital
+    outputs ``marks``, the low mark's frame before it, the high mark's after: the
+    device runs the frames in the order they came, so the trace dates the Ping's
+    arrival on the board's own clock between the two edges (:func:`_marked_ping`
+    checks the order on the line's record of writes).
+    """
+
+    #: Host times just before the three were submitted and just after all returned.
+    before: float
+    after: float
+    #: The pins of the low and the high mark.
+    marks: tuple[int, int]
 
 
 @dataclass
@@ -491,6 +534,24 @@ def _write_times(writes: Iterable[tuple[float, bytes]]) -> dict[int, list[float]
     return out
 
 
+def _all_written(
+    writes: Iterable[tuple[float, bytes]], since: float, marks: tuple[int, int]
+) -> bool:
+    """Were a Ping and both marks' rising edges (``marks``: their pins) written since ``since``?"""
+    seen: set[int | None] = set()  # the marks' pins, None for the Ping
+    for t, raw in writes:
+        for chunk in raw.split(b"\x00") if t >= since else ():
+            item = decode_frame(chunk) if chunk else None
+            if isinstance(item, Packet) and item.type is PacketType.COMMAND:
+                with contextlib.suppress(ProtocolError):
+                    msg = parse_in(item.payload)
+                    if msg.WhichOneof("data") == "ping":
+                        seen.add(None)
+                    elif msg.WhichOneof("data") == "digital_control" and msg.digital_control.level:
+                        seen.add(msg.digital_control.pin)
+    return seen >= {None, *marks}
+
+
 def _writes_of(wire: Wire, sent: _Sent) -> list[float]:
     """When ``sent``'s frames were handed to the line: its id's writes while it was open
     (ids wrap, so the same id's writes for other calls are left out)."""
@@ -572,8 +633,20 @@ class _Runner:
             raise ProtoduinoError(f"the faulty line {self.name} is not open")
         return port
 
-    def call(self, kind: str, pin: int, value: int, fn: Callable[[], None], phase: str) -> bool:
-        rec = CallRecord(pin, kind, value, time.monotonic(), phase=phase)
+    def call(
+        self,
+        kind: str,
+        pin: int,
+        value: int,
+        fn: Callable[[], None],
+        phase: str,
+        *,
+        start: float | None = None,
+    ) -> bool:
+        """Make one call (``fn``) and record it; ``start``: when it was submitted, if earlier."""
+        rec = CallRecord(
+            pin, kind, value, time.monotonic() if start is None else start, phase=phase
+        )
         try:
             fn()
             rec.outcome = "ok"
@@ -651,11 +724,13 @@ class _Runner:
                 failed += 1
         return failed
 
-    def last_ping(self, outputs: _Outputs) -> tuple[float, float]:
-        """Stop the automatic Ping, drive every output off its safe value, Ping once more.
+    def last_ping(self, outputs: _Outputs, wire: Wire) -> LastPing:
+        """Stop the automatic Ping, drive every output off its safe value, Ping once more,
+        between two marks (:class:`LastPing`).
 
-        Returns the times just before that last Ping was submitted and just after
-        it returned: the device received it in between, whatever the scheduler did.
+        A copy of the Ping that went out after its high mark (its Ack came so late that
+        it was sent again) would feed the failsafe after the marks: then it is all
+        done again, up to MARK_ATTEMPTS times; the judge finds out if none succeeded.
         """
         self.board.pinging = False
         rpc = self.board._rpc
@@ -668,9 +743,35 @@ class _Runner:
                 self.call(kind, pin, value, fn, "failsafe")
                 kind, pin, value, fn = outputs.next_command(out)
             self.call(kind, pin, value, fn, "failsafe")
+        lo, hi = outputs.digitals[:2]  # Scenario: two at least with the failsafe check
+        for _ in range(MARK_ATTEMPTS):
+            last = self._send_marked_ping(lo, hi)
+            wire.writes = _write_times(self.line().recent_writes())
+            if not isinstance(_marked_ping(wire, last), str):
+                break
+        return last
+
+    def _send_marked_ping(self, lo: DigitalOutput, hi: DigitalOutput) -> LastPing:
+        """Both marks low, then ``lo`` high, a Ping and ``hi`` high in one write."""
+        for mark in (lo, hi):
+            self.call("digital", mark.pin, 0, mark.off, "failsafe")
+        line = self.line()
         before = time.monotonic()
-        self.board.ping()
-        return before, time.monotonic()
+        line.hold("tx")  # until all three frames are written: then they go out as one
+        try:
+            calls = (lo.submit(True), self.board.submit_ping(), hi.submit(True))
+            deadline = before + self.s.ack_timeout
+            while time.monotonic() < deadline and not _all_written(
+                line.recent_writes(), before, (lo.pin, hi.pin)
+            ):
+                time.sleep(0.001)
+        finally:
+            line.release()
+        wait = self.s.call_bound + HUNG_SLACK
+        self.call("digital", lo.pin, 1, lambda: calls[0].result(wait), "failsafe", start=before)
+        calls[1].result(wait)  # raises, as the blocking ping() would
+        self.call("digital", hi.pin, 1, lambda: calls[2].result(wait), "failsafe", start=before)
+        return LastPing(before, time.monotonic(), (lo.pin, hi.pin))
 
 
 def run(
@@ -714,9 +815,9 @@ def run(
             failed = runner.recover(outputs)
             result.recovered = failed == 0
             result.recovery_failures = failed
-            fs_ping = runner.last_ping(outputs) if scenario.failsafe else None
-            if fs_ping is not None:
-                _wait_for_failsafe(sim, outputs, fs_ping[1])
+            last_ping = runner.last_ping(outputs, wire) if scenario.failsafe else None
+            if last_ping is not None:
+                _wait_for_failsafe(sim, outputs, last_ping.after)
             result.faults = dict(runner.line().stats)
             wire.writes = _write_times(runner.line().recent_writes())
             result.link = _link_figures(board, runner)
@@ -727,7 +828,7 @@ def run(
     result.duration = time.monotonic() - t0
     if wire.bad:
         result.violations.append(f"frames the monitor could not parse: {dict(wire.bad)}")
-    judge(result, runner, wire, lines, fs_ping)
+    judge(result, runner, wire, lines, last_ping)
     _dump(trace.with_suffix("").with_suffix(".wire.jsonl"), runner, wire)
     return result
 
@@ -804,7 +905,7 @@ def judge(
     runner: _Runner,
     wire: Wire,
     lines: list[dict[str, Any]],
-    fs_ping: tuple[float, float] | None,
+    last_ping: LastPing | None,
 ) -> None:
     """Fill ``result`` from a run: the calls ``runner`` made, the frames ``wire`` saw and
     the trace ``lines`` (run() calls it; the judge's own tests feed it made-up runs)."""
@@ -956,16 +1057,8 @@ def judge(
     if slow:
         result.violations.append(f"recovery slower than {bound:g} s: {max(slow):.3f} s")
 
-    if fs_ping is not None:
-        _judge_failsafe(
-            result,
-            calls=calls,
-            wire=wire,
-            lines=lines,
-            clock=clock,
-            fs_ping=fs_ping,
-            traits=traits,
-        )
+    if last_ping is not None:
+        _judge_failsafe(result, wire=wire, lines=lines, last_ping=last_ping, traits=traits)
 
 
 def _tx_delay(s: Scenario) -> float:
@@ -1172,75 +1265,83 @@ def _clock_map(
     return _ClockMap(anchors or [(0.0, first)])
 
 
-def _offset_bounds(
-    calls: list[CallRecord], wire: Wire, lines: list[dict[str, Any]], clock: _ClockMap
-) -> tuple[float, float] | None:
-    """Bounds of (host - trace) time from the failsafe phase's digital writes, or None.
+def _marked_ping(wire: Wire, last: LastPing) -> tuple[_Sent, _Sent, _Sent] | str:
+    """The low mark, the last Ping and the high mark as the wire saw them, or why the
+    marks do not bracket the Ping's arrival.
 
-    Each ran after its frame was handed to the line (or at least after its call
-    started) and before its Ack was read; a digital edge is dated exactly. The
-    host's frame records are not used: a busy scheduler may let the device run
-    a frame before the host notes that it wrote it.
+    They do if the line carried the low mark's first frame before every copy of the
+    Ping, and every copy before the high mark's first frame: one thread writes, so
+    the order of the line's record of writes is the order of the bytes (a repeated
+    mark is not run again, a repeated Ping is). Only the order counts here; how far
+    apart the edges are is the trace's to say.
     """
-    lo, hi = float("-inf"), float("inf")
-    for c in calls:
-        if c.phase != "failsafe" or c.kind != "digital" or c.outcome != "ok":
-            continue
-        start, end = c.start, c.end
-        sent = next(
+    sents = list(wire.sent.values())  # one step: the I/O thread may add to it
+
+    def last_sent(kind: str, pin: int | None) -> _Sent | None:
+        return next(
             (
                 x
-                for x in wire.sent.values()
-                if x.kind == "digital_control"
-                and x.pin == c.pin
-                and x.value == c.value
-                and c.start <= x.txs[0] <= c.end
+                for x in reversed(sents)
+                if x.kind == kind
+                and (pin is None or (x.pin, x.value) == (pin, 1))
+                and last.before <= x.txs[0] <= last.after
             ),
             None,
         )
-        if sent is not None and len(sent.txs) == 1 and sent.ack is not None:
-            start = max([start, *_writes_of(wire, sent)])
-            end = sent.ack
-        # Its line is the last such one: an earlier write may have set the same level.
-        line = max(
-            (
-                float(e["t"])
-                for e in lines
-                if int(e["pin"]) == c.pin
-                and int(e["value"]) == c.value
-                and e["mode"] == "digital"
-                and c.start - SLOP <= clock.host(float(e["t"])) <= c.end + SLOP
-            ),
-            default=None,
-        )
-        if line is not None:
-            lo, hi = max(lo, start - line), min(hi, end - line)
-    return (lo, hi) if lo <= hi else None
+
+    lo, ping, hi = (
+        last_sent("digital_control", last.marks[0]),
+        last_sent("ping", None),
+        last_sent("digital_control", last.marks[1]),
+    )
+    if lo is None or ping is None or hi is None:
+        return "the last Ping or a mark is missing from the wire"
+    lo_w, ping_w, hi_w = (_writes_of(wire, x) for x in (lo, ping, hi))
+    if not lo_w or not ping_w or not hi_w:
+        return "the last Ping or a mark is missing from the line's record of writes"
+    if not min(lo_w) < min(ping_w) <= max(ping_w) < min(hi_w):
+        return f"the last Ping went out {len(ping_w)} times, not all between its marks"
+    return lo, ping, hi
 
 
 def _judge_failsafe(
     result: SoakResult,
     *,
-    calls: list[CallRecord],
     wire: Wire,
     lines: list[dict[str, Any]],
-    clock: _ClockMap,
-    fs_ping: tuple[float, float],
+    last_ping: LastPing,
     traits: BackendTraits,
 ) -> None:
-    """The first safe value after the last Ping, against that Ping's reception."""
+    """The first safe value after the last Ping, against that Ping's arrival, both on the
+    board's clock: the arrival lies between the marks' rising edges (:class:`LastPing`).
+    Nothing here reads the host's clock but to pick the Ping among the frames sent."""
     result.failsafe_checked = True
-    rx_lo, rx_hi = fs_ping  # the device received the last Ping in between
-    ping = next(
-        (x for x in wire.sent.values() if x.kind == "ping" and rx_lo <= x.txs[0] <= rx_hi),
-        None,
-    )
-    if ping is not None and len(ping.txs) == 1 and ping.ack is not None:
-        rx_lo = max([rx_lo, *_writes_of(wire, ping)])  # handed to the line
-        rx_hi = ping.ack  # and answered
-    later = [s for s in wire.sent.values() if s.kind == "ping" and s.txs[-1] > rx_hi]
+    marked = _marked_ping(wire, last_ping)
+    if isinstance(marked, str):
+        result.violations.append(f"failsafe check: {marked}")
+        result.failsafe_ok = False
+        return
+    _, ping, _ = marked
+    answered = ping.ack if ping.ack is not None else last_ping.after
+    later = [s for s in wire.sent.values() if s.kind == "ping" and s.txs[-1] > answered]
     if later:
         result.violations.append(f"failsafe check: {len(later)} Pings after the last one")
+    # Each mark's edge is its pin's last rise: the marks were the last commands, and the
+    # failsafe only lowers them (a mark that did not run is a failed call, reported).
+    lo_t, hi_t = (
+        max(
+            (float(e["t"]) for e in lines if int(e["pin"]) == pin and int(e["value"]) == 1),
+            default=None,
+        )
+        for pin in last_ping.marks
+    )
+    if lo_t is None or hi_t is None or not 0 <= hi_t - lo_t <= MARK_SPAN:
+        result.violations.append(
+            f"failsafe check: the last Ping's marks are not in the trace {MARK_SPAN * 1000:g} "
+            f"ms apart at most, in order (low at {lo_t}, high at {hi_t})"
+        )
+        result.failsafe_ok = False
+        return
     digital_pins = {
         s.pin for s in wire.sent.values() if s.kind == "digital_init" and s.pin is not None
     }
@@ -1252,7 +1353,7 @@ def _judge_failsafe(
     safe_lines = [
         e
         for e in lines
-        if clock.host(float(e["t"])) > rx_hi
+        if float(e["t"]) > lo_t
         and (
             (int(e["pin"]) in digital_pins and int(e["value"]) == 0)
             or (
@@ -1265,19 +1366,18 @@ def _judge_failsafe(
         result.violations.append("failsafe never fired after the pings stopped")
         result.failsafe_ok = False
         return
-    fired = min(clock.host(float(e["t"])) for e in safe_lines)
-    low, high = fired - rx_hi - 0.003, fired - rx_lo + 0.003  # the clock map's error
-    bounds = _offset_bounds(calls, wire, lines, clock)
+    # When the outputs went safe: a digital edge is dated exactly, a measured servo
+    # pulse up to servo_lag late (the marks are digital, so there is a digital one).
     digital = [float(e["t"]) for e in safe_lines if e["mode"] == "digital"]
-    if bounds is not None and digital:
-        # A digital edge (dated exactly), the offset bounded by the writes just before.
-        t, (off_lo, off_hi) = min(digital), bounds
-        low, high = t + off_lo - rx_hi, t + off_hi - rx_lo
+    fired_hi = min(digital) if digital else min(float(e["t"]) for e in safe_lines)
+    fired_lo = fired_hi if digital else fired_hi - traits.servo_lag
+    low, high = fired_lo - hi_t, fired_hi - lo_t
     result.failsafe_delay = (round(low, 4), round(high, 4))
     # Due 10 s after the last Ping received, not before, at most 20 ms late: the measured
-    # interval must meet [10 s, 10.02 s], give or take one tick of the device's millisecond
-    # clock (it compares whole milliseconds: a Ping at 5.0009 s reads as 5000 ms).
-    ok = high >= FAILSAFE_TIMEOUT - MILLIS_TICK and low <= FAILSAFE_TIMEOUT + FAILSAFE_TOLERANCE
+    # interval must meet [10 s, 10.02 s], give or take the lag of the device's millisecond
+    # clock, whose readings the failsafe compares.
+    early = FAILSAFE_TIMEOUT - traits.millis_lag
+    ok = high >= early and low <= FAILSAFE_TIMEOUT + FAILSAFE_TOLERANCE
     result.failsafe_ok = ok and not later
     if not ok:
         result.violations.append(

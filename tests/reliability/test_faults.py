@@ -140,6 +140,35 @@ def test_named_line_pause_resume_heal() -> None:
     assert faults.line("test-line-1") is None  # the registry does not keep ports alive
 
 
+def test_held_bytes_go_out_in_one_write(monkeypatch: pytest.MonkeyPatch) -> None:
+    """What hold() kept reaches the far end in order and in one write: frames written
+    apart arrive together (the soak times the failsafe from a Ping sent so, between two
+    digital edges)."""
+    port = serial.serial_for_url("faulty://loop://", timeout=0.05)
+    try:
+        line = cast(FaultySerial, port)
+        inner = line._inner
+        assert inner is not None
+        written: list[bytes] = []
+        real = inner.write
+
+        def write(data: bytes) -> int | None:
+            written.append(bytes(data))
+            return real(data)
+
+        monkeypatch.setattr(inner, "write", write)
+        line.hold("tx")
+        for part in (b"lo\x00", b"ping\x00", b"hi\x00"):
+            port.write(part)
+        assert port.read(100) == b"" and written == []
+        line.release()
+        assert port.read(100) == b"lo\x00ping\x00hi\x00"
+        assert written == [b"lo\x00ping\x00hi\x00"]
+        assert line.stats["held_tx_bytes"] == len(written[0])
+    finally:
+        port.close()
+
+
 def test_tx_delay_is_latency_not_a_blocked_writer() -> None:
     port = serial.serial_for_url("faulty://loop://?delay=1000&dir=tx", timeout=0.05)
     try:

@@ -393,7 +393,7 @@ def test_failsafe_fires_on_time_after_a_faulty_run(backend: str, tmp_path: Path)
     assert result.failsafe_ok is True and result.failsafe_delay is not None
     low, high = result.failsafe_delay
     assert low <= FAILSAFE_TIMEOUT + soak.FAILSAFE_TOLERANCE
-    assert high >= FAILSAFE_TIMEOUT - soak.MILLIS_TICK
+    assert high >= FAILSAFE_TIMEOUT - soak.BACKEND_TRAITS[backend].millis_lag
 
 
 def test_scenario_urls_and_command_lines() -> None:
@@ -407,6 +407,8 @@ def test_scenario_urls_and_command_lines() -> None:
         soak.Scenario("x", faults="bogus=1")
     with pytest.raises(ValueError):
         soak.Scenario("x", servos=0)
+    with pytest.raises(ValueError, match="failsafe check needs"):
+        soak.Scenario("x", failsafe=True, digitals=1)  # the last Ping's two marks
     values = [soak.servo_value(3, k) for k in range(soak.VALUE_COUNT)]
     assert len(set(values)) == soak.VALUE_COUNT  # each value once per cycle
     assert min(values) > max(soak.servo_safe(i) for i in range(len(soak.SERVO_PINS)))
@@ -571,6 +573,148 @@ def test_judge_takes_a_measured_safe_width_within_the_pulse_tolerance() -> None:
     assert (off.corrupted, off.failsafe_lines) == (0, 1)
     beyond = _made_up_run(reboot=True, stray=soak.servo_safe(0) + 4, at=11.0, backend="avr")
     assert (beyond.corrupted, beyond.failsafe_lines) == (1, 0)
+
+
+# --- the judge on a made-up run: the failsafe's timing ------------------------------------
+
+
+def _made_up_failsafe(
+    fires_after: float,
+    *,
+    board_lag: float = 0.0,
+    ping_again: bool = False,
+    backend: str = "native",
+) -> soak.SoakResult:
+    """A servo on pin 3, digital outputs on pins 13 and 12; the last Ping goes out in one
+    write between pin 13's rise and pin 12's (the marks), and the failsafe fires
+    ``fires_after`` s after the marks on the board's clock.
+
+    Host times are trace times + 1000 s until the marks, whose trace times are then
+    ``board_lag`` behind: a busy machine held the board's clock back. With
+    ``ping_again`` the Ping's Ack came late and it went out a second time, after the
+    high mark: its arrival is no longer between the marks.
+    """
+    from types import SimpleNamespace
+
+    scenario = soak.Scenario(
+        "made-up",
+        commands=1,
+        servos=1,
+        digitals=2,
+        recovery_commands=1,
+        failsafe=True,
+        backend=backend,
+    )
+    wire = soak.Wire()
+    lines: list[dict[str, Any]] = []
+    ids = iter(range(1, 100))
+
+    def send(
+        build: Callable[[Any], None],
+        txs: list[float],
+        line: tuple[int, str, int] | None = None,
+        lag: float = 0.0,
+    ) -> None:
+        msg = protoduino.messages.ArduinoIn()
+        build(msg)
+        msg.message_id = next(ids)
+        for t in txs:
+            wire.writes.setdefault(msg.message_id, []).append(t - 0.0001)  # write() entered
+            wire.command(t, msg.SerializeToString())
+        sent = wire.sent_of(msg.message_id)
+        sent.ack, sent.status = txs[-1] + 0.002, 0
+        if line is not None:
+            pin, mode, value = line
+            t = txs[0] + 0.0005 - 1000 - lag
+            lines.append({"t": t, "pin": pin, "mode": mode, "value": value})
+
+    def servo_init(m: Any) -> None:
+        m.servo_init.pin, m.servo_init.min_us, m.servo_init.max_us = 3, 500, 2500
+        m.servo_init.safe_us = soak.servo_safe(0)
+
+    def digital_init(pin: int) -> Callable[[Any], None]:
+        def build(m: Any) -> None:
+            m.digital_init.pin, m.digital_init.safe_level = pin, False
+
+        return build
+
+    def digital(pin: int, level: int) -> Callable[[Any], None]:
+        def build(m: Any) -> None:
+            m.digital_control.pin, m.digital_control.level = pin, bool(level)
+
+        return build
+
+    def servo(k: int) -> Callable[[Any], None]:
+        def build(m: Any) -> None:
+            m.servo_control.pin, m.servo_control.us = 3, soak.servo_value(0, k)
+
+        return build
+
+    send(servo_init, [1000.000], (3, "servo", soak.servo_safe(0)))
+    send(digital_init(13), [1000.001])
+    send(digital_init(12), [1000.002])
+    send(servo(0), [1000.010], (3, "servo", soak.servo_value(0, 0)))  # the clock's anchor
+    send(servo(1), [1000.015], (3, "servo", soak.servo_value(0, 1)))  # the recovery
+    for pin, t in ((13, 1000.020), (12, 1000.021)):
+        send(digital(pin, 1), [t], (pin, "digital", 1))
+    for pin, t in ((13, 1001.000), (12, 1001.001)):
+        send(digital(pin, 0), [t], (pin, "digital", 0))
+    # The marked write: pin 13 up, the Ping, pin 12 up, dated on the lagging board's clock.
+    send(digital(13, 1), [1001.0100], (13, "digital", 1), board_lag)
+    again = [1001.0106] if ping_again else []
+    send(lambda m: m.ping.SetInParent(), [1001.0102, *again])
+    send(digital(12, 1), [1001.0104], (12, "digital", 1), board_lag)
+    marks = 1001.0105 - 1000 - board_lag  # the low mark's board time
+    for pin, mode, value in ((13, "digital", 0), (12, "digital", 0), (3, "servo", 520)):
+        lines.append({"t": marks + fires_after, "pin": pin, "mode": mode, "value": value})
+    calls = [
+        soak.CallRecord(3, "servo", soak.servo_value(0, k), t, t + 0.004, "ok", phase=phase)
+        for k, t, phase in ((0, 1000.009, "setup"), (1, 1000.014, "recovery"))
+    ]
+    runner = SimpleNamespace(s=scenario, calls=calls, reboots=[], cuts=[], heal_at=1000.0)
+    result = soak.SoakResult(scenario, recovered=True)
+    last = soak.LastPing(1001.009, 1001.020, (13, 12))
+    soak.judge(result, runner, wire, sorted(lines, key=lambda e: e["t"]), last)  # type: ignore[arg-type]
+    return result
+
+
+def test_judge_times_the_failsafe_on_the_boards_clock() -> None:
+    """On time by the board's clock is on time, however far the board's clock fell behind
+    the host's just before the last Ping (the host's clock would make it 3 ms early)."""
+    for lag in (0.0, 0.003, -0.003):
+        result = _made_up_failsafe(FAILSAFE_TIMEOUT, board_lag=lag)
+        assert result.violations == [], lag
+        assert result.failsafe_ok is True and result.failsafe_lines == 3
+        low, high = result.failsafe_delay or (0.0, 0.0)
+        assert low == pytest.approx(FAILSAFE_TIMEOUT - 0.0004, abs=1e-6)
+        assert high == pytest.approx(FAILSAFE_TIMEOUT, abs=1e-6)
+
+
+def test_judge_sees_a_failsafe_early_or_late() -> None:
+    """Early by more than the device's millisecond, or late by more than the contract's
+    20 ms: a violation, whatever the clocks did."""
+    for fires_after in (FAILSAFE_TIMEOUT - 0.003, FAILSAFE_TIMEOUT + 0.025):
+        for lag in (0.0, 0.003):
+            result = _made_up_failsafe(fires_after, board_lag=lag)
+            assert result.failsafe_ok is False, (fires_after, lag)
+            assert any("failsafe fired" in v for v in result.violations), result.violations
+
+
+def test_judge_allows_each_boards_millisecond_clock() -> None:
+    """The emulated Uno's millis() (Timer0, 1.024 ms per overflow) reads up to 2.024 ms
+    behind: a failsafe 1.9 ms early by the trace is on time there, not on the native
+    board, whose clock truncates to whole milliseconds; 3 ms early is early on both."""
+    assert _made_up_failsafe(FAILSAFE_TIMEOUT - 0.0019, backend="avr").violations == []
+    assert _made_up_failsafe(FAILSAFE_TIMEOUT - 0.0019).failsafe_ok is False
+    assert _made_up_failsafe(FAILSAFE_TIMEOUT - 0.003, backend="avr").failsafe_ok is False
+
+
+def test_judge_refuses_a_ping_that_went_out_after_its_marks() -> None:
+    """A copy of the Ping written after the high mark fed the failsafe later than the
+    marks say: the failsafe cannot be timed from them."""
+    result = _made_up_failsafe(FAILSAFE_TIMEOUT, ping_again=True)
+    assert result.failsafe_ok is False
+    assert any("not all between its marks" in v for v in result.violations), result.violations
 
 
 # --- the soak command -------------------------------------------------------------------

@@ -144,11 +144,16 @@ class Serial(SerialBase):
                 self._hold_rx = True
 
     def release(self) -> None:
-        """Deliver what :meth:`hold` kept, in order, and stop holding."""
+        """Deliver what :meth:`hold` kept, in order, and stop holding.
+
+        The bytes held for the device go out in one write, as a stalled link's backlog
+        arrives in one burst: frames written apart while held reach the device together
+        (the soak's last Ping arrives between the two digital edges written around it).
+        """
         with self._tx_lock:
             self._hold_tx = False
-            now = time.monotonic()
-            self._tx_delayed.extend((now, chunk) for chunk in self._held_tx)
+            if self._held_tx:
+                self._tx_delayed.append((time.monotonic(), b"".join(self._held_tx)))
             self.stats["held_tx_bytes"] += sum(len(c) for c in self._held_tx)
             self._held_tx.clear()
         with self._lock:
