@@ -377,8 +377,8 @@ void pd_avr_loop(void)
      * saved 200 cycles more a write, but a command's payload was then decoded
      * after its delimiter more often: its answer time (delimiter in to the Ack's
      * first byte out) grew by 313 cycles a servo write where two at a time adds
-     * 82, and the servo round trip at 1,000,000 baud is within 10 us of its target
-     * (bench part 9). In the Arduino IDE's build the core's clock cannot make a
+     * 82, and the round trip beyond the wire is one of issue 35's goals (bench
+     * part 9). In the Arduino IDE's build the core's clock cannot make a
      * pass due: every interrupt makes one there, and received bytes are taken as
      * they come. */
 #ifdef ARDUINO
