@@ -46,7 +46,7 @@ import statistics
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -522,15 +522,21 @@ class Wire:
             self.ping_txs.append(t)
 
 
-def _write_times(writes: Iterable[tuple[float, bytes]]) -> dict[int, list[float]]:
-    """Message id -> the times its COMMAND frames were handed to the line."""
-    out: dict[int, list[float]] = {}
+def _written_commands(writes: Iterable[tuple[float, bytes]]) -> Iterator[tuple[float, ArduinoIn]]:
+    """Each COMMAND frame handed to the line, with the time of its write."""
     for t, raw in writes:
         for chunk in raw.split(b"\x00"):
             item = decode_frame(chunk) if chunk else None
             if isinstance(item, Packet) and item.type is PacketType.COMMAND:
                 with contextlib.suppress(ProtocolError):
-                    out.setdefault(parse_in(item.payload).message_id, []).append(t)
+                    yield t, parse_in(item.payload)
+
+
+def _write_times(writes: Iterable[tuple[float, bytes]]) -> dict[int, list[float]]:
+    """Message id -> the times its COMMAND frames were handed to the line."""
+    out: dict[int, list[float]] = {}
+    for t, msg in _written_commands(writes):
+        out.setdefault(msg.message_id, []).append(t)
     return out
 
 
@@ -539,16 +545,11 @@ def _all_written(
 ) -> bool:
     """Were a Ping and both marks' rising edges (``marks``: their pins) written since ``since``?"""
     seen: set[int | None] = set()  # the marks' pins, None for the Ping
-    for t, raw in writes:
-        for chunk in raw.split(b"\x00") if t >= since else ():
-            item = decode_frame(chunk) if chunk else None
-            if isinstance(item, Packet) and item.type is PacketType.COMMAND:
-                with contextlib.suppress(ProtocolError):
-                    msg = parse_in(item.payload)
-                    if msg.WhichOneof("data") == "ping":
-                        seen.add(None)
-                    elif msg.WhichOneof("data") == "digital_control" and msg.digital_control.level:
-                        seen.add(msg.digital_control.pin)
+    for _t, msg in _written_commands((t, raw) for t, raw in writes if t >= since):
+        if msg.WhichOneof("data") == "ping":
+            seen.add(None)
+        elif msg.WhichOneof("data") == "digital_control" and msg.digital_control.level:
+            seen.add(msg.digital_control.pin)
     return seen >= {None, *marks}
 
 

@@ -332,10 +332,10 @@ static uint8_t millis8(void)
  * One pass: the received bytes into the core, then pd_core_poll when the pass
  * has news for it: a clock tick, an input's interrupt (PD_AVR_NEWS_BIT), a frame's
  * delimiter (a command ran, a session opened, a Ping fed the failsafe), or the
- * transmit ring just emptied while a report waits for that (after every Ack it
- * emptied: about 140 cycles of every command when no report waited). A poll (the failsafe's,
- * the servo steps' and the inputs' clock tests, the report slots) is about 150
- * cycles; what it reads changes only with those news, so a pass without any
+ * transmit ring just emptied while a report waits for that (it empties after
+ * every Ack: a poll there was about 110 cycles of every command). A poll (the
+ * failsafe's, the servo steps' and the inputs' clock tests, the report slots) is
+ * about 150 cycles; what it reads changes only with those news, so a pass without any
  * skips it. With a user service built in, every pass polls: its poll hook may
  * work in slices, one a pass (docs/services.md).
  */

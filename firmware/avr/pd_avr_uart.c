@@ -98,6 +98,8 @@ void pd_avr_uart_init(uint32_t baud)
  *     byte = UDR0; head = rx_head; next = head + 1 == PD_AVR_RX_SIZE ? 0 : head + 1;
  *     if (next == rx_tail) return;   (lost: its frame fails its CRC; the host retries)
  *     rx_head = next; sei(); rx_buf[head] = byte;
+ *     then a pass is due (PD_AVR_PASS) at a delimiter (with news), every second
+ *     slot and a full ring (the return above: the loop must empty it).
  */
 /* Both handlers' end: r31, r30, r25 back, then SREG and r24 as each saved them. */
 #define PD_UART_ISR_RETURN                                                                    \

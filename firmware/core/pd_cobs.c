@@ -1,7 +1,5 @@
 #include "pd_cobs.h"
 
-#include <stdbool.h>
-
 size_t pd_cobs_encode(const uint8_t *src, size_t len, uint8_t *dst, size_t cap)
 {
     /* A block at a time, pointers rather than indexes: on the Uno every Ack goes
